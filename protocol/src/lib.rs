@@ -1,0 +1,1 @@
+//! Message types and services shared by every thrusterd process.

@@ -1,0 +1,1 @@
+//! thruster-sim: a 6-DOF underwater vehicle simulator.
