@@ -1,0 +1,339 @@
+//! What an estimated effectiveness matrix says about the vehicle: how many independent motions
+//! the thrusters can make (rank), which of the six DOFs those are, the allocation that never
+//! commands the others, and the health of each thruster.
+//!
+//! Significance is judged in standard-error units: the matrix is scaled row by row by its
+//! typical standard error, so estimation noise becomes roughly i.i.d. N(0, 1) and a pure-noise
+//! 6 x N matrix has singular values up to about sqrt(6) + sqrt(N). Larger ones are real.
+
+use nalgebra::DMatrix;
+use serde::Serialize;
+
+use super::config::EstimatorConfig;
+use super::dof::{Dof, DofMask};
+use super::linalg::pinv;
+
+/// Singular values below this fraction of the largest are round-off, whatever the noise says.
+const NUMERICAL_REL_TOL: f64 = 1e-9;
+
+/// Rank and DOF report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RankReport {
+    /// Singular values of the effectiveness matrix scaled to standard-error units, descending.
+    pub singular_values: Vec<f64>,
+    /// The noise-derived threshold they are compared with.
+    pub threshold: f64,
+    /// Number of independently actuated motions.
+    pub rank: usize,
+    /// Share (0..1) of each DOF's unit vector inside the actuated subspace, in DOF order.
+    pub dof_share: [f64; 6],
+    /// DOFs whose share reaches the configured minimum.
+    pub actuated: DofMask,
+}
+
+/// Health of one thruster as the data shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ThrusterDiagnosis {
+    pub index: usize,
+    /// Chi-square of the column against zero (6 dof); large = a clear response.
+    pub chi2: f64,
+    pub responds: bool,
+    /// Strongest command this thruster received, |u|.
+    pub max_command: f64,
+    /// No significant response although pulsed at (near) full power.
+    pub dead: bool,
+    /// Pushes against its declared direction (needs a declared nominal model).
+    pub reversed: Option<bool>,
+    /// Projection of the estimate on the declared column, relative (1 = as declared).
+    pub nominal_gain: Option<f64>,
+    /// Reverse gain over forward gain (1 = symmetric), from the split forward/reverse fit.
+    pub reverse_gain_ratio: Option<f64>,
+    /// Standard error of `reverse_gain_ratio`.
+    pub reverse_gain_ratio_se: Option<f64>,
+    /// Forward and reverse gains differ significantly.
+    pub asymmetric: bool,
+}
+
+/// Row scale (typical standard error of an entry in that row), for rank decisions.
+fn row_scales(std_err: &DMatrix<f64>) -> Vec<f64> {
+    (0..std_err.nrows())
+        .map(|j| {
+            let (sum, count) = std_err
+                .row(j)
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold((0.0, 0usize), |(s, c), v| (s + v * v, c + 1));
+            if count == 0 {
+                0.0
+            } else {
+                (sum / count as f64).sqrt()
+            }
+        })
+        .collect()
+}
+
+/// Rank, actuated subspace and DOF report of `b` (6 x N) given its standard errors.
+pub fn rank_report(b: &DMatrix<f64>, std_err: &DMatrix<f64>, cfg: &EstimatorConfig) -> RankReport {
+    let n = b.ncols();
+    let scales = row_scales(std_err);
+    // A row with no noise information (or no noise at all) keeps its physical scale; a tiny floor
+    // avoids dividing by zero in noiseless runs.
+    let floor = b.amax().max(1e-300) * 1e-12;
+    let mut z = b.clone();
+    for (j, s) in scales.iter().enumerate() {
+        let s = if s.is_finite() && *s > floor {
+            *s
+        } else {
+            floor
+        };
+        z.row_mut(j).scale_mut(1.0 / s);
+    }
+    // Unexcited columns (infinite standard error) carry no information: leave them out.
+    for i in 0..n {
+        if std_err.column(i).iter().any(|v| !v.is_finite()) {
+            z.column_mut(i).fill(0.0);
+        }
+    }
+    let threshold = cfg.rank_threshold * (6f64.sqrt() + (n as f64).sqrt());
+    let svd = z.svd(true, false);
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &c| svd.singular_values[c].total_cmp(&svd.singular_values[a]));
+    let singular_values: Vec<f64> = order.iter().map(|&k| svd.singular_values[k]).collect();
+    let top = singular_values.first().copied().unwrap_or(0.0);
+    let significant: Vec<usize> = order
+        .iter()
+        .copied()
+        .filter(|&k| {
+            let s = svd.singular_values[k];
+            s > threshold && s > top * NUMERICAL_REL_TOL
+        })
+        .collect();
+    let mut dof_share = [0.0; 6];
+    if let Some(u) = svd.u.as_ref() {
+        for (j, share) in dof_share.iter_mut().enumerate() {
+            *share = significant.iter().map(|&k| u[(j, k)].powi(2)).sum::<f64>();
+        }
+    }
+    let actuated = DofMask(std::array::from_fn(|j| {
+        dof_share[j] >= cfg.actuation_share
+    }));
+    RankReport {
+        singular_values,
+        threshold,
+        rank: significant.len(),
+        dof_share,
+        actuated,
+    }
+}
+
+/// Allocation (N x 6): thruster commands per unit of desired motion in each DOF.
+///
+/// The rank-`rank` truncated pseudo-inverse of the actuated rows of `b`; the columns of
+/// unactuated DOFs are zero, so whatever a controller asks of those, no thruster is commanded
+/// for it (the paper's all-aligned robot "learned" to heave, sway and roll and oscillated).
+pub fn allocation(b: &DMatrix<f64>, actuated: DofMask, rank: usize) -> DMatrix<f64> {
+    let n = b.ncols();
+    let rows: Vec<usize> = Dof::ALL
+        .iter()
+        .filter(|d| actuated.contains(**d))
+        .map(|d| d.index())
+        .collect();
+    let mut out = DMatrix::zeros(n, 6);
+    if rows.is_empty() || rank == 0 {
+        return out;
+    }
+    let sub = b.select_rows(rows.iter());
+    let keep = rank.min(rows.len()).min(n);
+    let svd = sub.clone().svd(true, true);
+    let mut sv: Vec<f64> = svd.singular_values.iter().cloned().collect();
+    sv.sort_by(|a, c| c.total_cmp(a));
+    // Keep exactly `keep` singular values: everything at or below the keep-th largest's
+    // successor is dropped, independent of absolute scale.
+    let cut = if keep < sv.len() { sv[keep] } else { 0.0 };
+    let rel_tol = if sv[0] > 0.0 { (cut / sv[0]).max(NUMERICAL_REL_TOL) } else { 1.0 };
+    let sub_pinv = pinv(&sub, rel_tol);
+    for (c, &row) in rows.iter().enumerate() {
+        out.set_column(row, &sub_pinv.column(c));
+    }
+    out
+}
+
+/// Per-thruster diagnosis.
+///
+/// `b`/`std_err`: the 6 x N estimate. `split`/`split_se`: the 6 x 2N fit with separate forward
+/// (columns 0..N) and reverse (N..2N) gains, when available. `nominal`: the declared 6 x N
+/// model, when the vehicle file or a reconfiguration event gave one.
+pub fn diagnose(
+    b: &DMatrix<f64>,
+    std_err: &DMatrix<f64>,
+    max_command: &[f64],
+    split: Option<(&DMatrix<f64>, &DMatrix<f64>)>,
+    nominal: Option<&DMatrix<f64>>,
+    cfg: &EstimatorConfig,
+) -> Vec<ThrusterDiagnosis> {
+    let n = b.ncols();
+    (0..n)
+        .map(|i| {
+            let chi2: f64 = (0..6)
+                .map(|j| {
+                    let se = std_err[(j, i)];
+                    if se.is_finite() && se > 0.0 {
+                        (b[(j, i)] / se).powi(2)
+                    } else if se == 0.0 && b[(j, i)] != 0.0 {
+                        f64::INFINITY
+                    } else {
+                        0.0
+                    }
+                })
+                .sum();
+            let responds = chi2 > cfg.response_chi2;
+            let max_cmd = max_command.get(i).copied().unwrap_or(0.0);
+            let dead = !responds && max_cmd >= cfg.dead_min_command;
+
+            let (reversed, nominal_gain) = match nominal {
+                Some(nom) if i < nom.ncols() && nom.column(i).norm() > 0.0 => {
+                    let d = nom.column(i);
+                    let dd = d.norm_squared();
+                    let gain = b.column(i).dot(&d) / dd;
+                    let se = ((0..6)
+                        .map(|j| (d[j] * std_err[(j, i)]).powi(2))
+                        .sum::<f64>())
+                    .sqrt()
+                        / dd;
+                    let se = if se.is_finite() { se } else { f64::INFINITY };
+                    (Some(gain < -cfg.diagnosis_z * se), Some(gain))
+                }
+                _ => (None, None),
+            };
+
+            let (ratio, ratio_se, asymmetric) = match split {
+                Some((sb, sse)) if sb.ncols() == 2 * n => {
+                    let fwd = sb.column(i);
+                    let rev = sb.column(n + i);
+                    let ff = fwd.norm_squared();
+                    if ff > 0.0 && responds {
+                        let g = rev.dot(&fwd) / ff;
+                        let var: f64 = (0..6)
+                            .map(|j| {
+                                (fwd[j] / ff).powi(2)
+                                    * (sse[(j, n + i)].powi(2) + g * g * sse[(j, i)].powi(2))
+                            })
+                            .sum();
+                        let se = var.sqrt();
+                        let asym = se.is_finite() && (g - 1.0).abs() > cfg.diagnosis_z * se;
+                        (Some(g), se.is_finite().then_some(se), asym)
+                    } else {
+                        (None, None, false)
+                    }
+                }
+                _ => (None, None, false),
+            };
+
+            ThrusterDiagnosis {
+                index: i,
+                chi2,
+                responds,
+                max_command: max_cmd,
+                dead,
+                reversed,
+                nominal_gain,
+                reverse_gain_ratio: ratio,
+                reverse_gain_ratio_se: ratio_se,
+                asymmetric,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn aligned_truth() -> DMatrix<f64> {
+        // Three thrusters pushing along x at different y/z: pitch, yaw and surge only.
+        DMatrix::from_row_slice(
+            6,
+            3,
+            &[
+                0.0, 0.0, 0.0, // roll
+                1.0, 1.0, -2.0, // pitch
+                2.0, -2.0, 0.0, // yaw
+                1.0, 1.0, 1.0, // surge
+                0.0, 0.0, 0.0, // sway
+                0.0, 0.0, 0.0, // heave
+            ],
+        )
+    }
+
+    #[test]
+    fn aligned_configuration_actuates_three_dofs() {
+        let b = aligned_truth();
+        let se = DMatrix::from_element(6, 3, 0.01);
+        let r = rank_report(&b, &se, &EstimatorConfig::default());
+        assert_eq!(r.rank, 3);
+        assert_eq!(r.actuated.names(), vec!["pitch", "yaw", "surge"]);
+        let a = allocation(&b, r.actuated, r.rank);
+        for dof in [Dof::Roll, Dof::Sway, Dof::Heave] {
+            assert_eq!(a.column(dof.index()).norm(), 0.0, "{dof:?} commanded");
+        }
+        // Actuated DOFs are reproduced exactly: B A = I on them.
+        let ba = &b * &a;
+        for dof in [Dof::Pitch, Dof::Yaw, Dof::Surge] {
+            let j = dof.index();
+            for k in 0..6 {
+                let want = if k == j { 1.0 } else { 0.0 };
+                assert!((ba[(k, j)] - want).abs() < 1e-9, "BA[{k},{j}]={}", ba[(k, j)]);
+            }
+        }
+    }
+
+    #[test]
+    fn noise_sized_rows_are_not_actuated() {
+        let mut b = aligned_truth();
+        // Roll row holds noise at one standard error: must not count.
+        b[(0, 0)] = 0.01;
+        b[(0, 1)] = -0.012;
+        b[(0, 2)] = 0.008;
+        let se = DMatrix::from_element(6, 3, 0.01);
+        let r = rank_report(&b, &se, &EstimatorConfig::default());
+        assert_eq!(r.rank, 3);
+        assert!(!r.actuated.contains(Dof::Roll), "{:?}", r.dof_share);
+    }
+
+    #[test]
+    fn dead_reversed_and_asymmetric_thrusters_are_found() {
+        let cfg = EstimatorConfig::default();
+        // Three identical declared columns: some yaw, pitch and surge each.
+        let col = [0.0, 0.5, 1.0, 2.0, 0.0, 0.0];
+        let nominal = DMatrix::from_fn(6, 3, |j, _| col[j]);
+        // Thruster 0 as declared, thruster 1 reversed, thruster 2 dead.
+        let mut b = nominal.clone();
+        b.column_mut(1).scale_mut(-1.0);
+        b.column_mut(2).fill(0.001);
+        let se = DMatrix::from_element(6, 3, 0.01);
+        // Split fit: thruster 0 pushes 0.6x as hard in reverse.
+        let mut split = DMatrix::zeros(6, 6);
+        for i in 0..3 {
+            split.set_column(i, &b.column(i));
+            split.set_column(3 + i, &b.column(i));
+        }
+        split.column_mut(3).scale_mut(0.6);
+        let split_se = DMatrix::from_element(6, 6, 0.01);
+        let d = diagnose(
+            &b,
+            &se,
+            &[1.0, 1.0, 1.0],
+            Some((&split, &split_se)),
+            Some(&nominal),
+            &cfg,
+        );
+        assert!(d[0].responds && !d[0].dead && d[0].reversed == Some(false));
+        assert!(d[0].asymmetric);
+        assert!((d[0].reverse_gain_ratio.unwrap() - 0.6).abs() < 1e-12);
+        assert!(d[1].responds && d[1].reversed == Some(true) && !d[1].asymmetric);
+        assert!(!d[2].responds && d[2].dead);
+        // Not pulsed hard enough: silent, but not declared dead yet.
+        let d = diagnose(&b, &se, &[1.0, 1.0, 0.5], None, None, &cfg);
+        assert!(!d[2].responds && !d[2].dead && d[2].reversed.is_none());
+    }
+}

@@ -1,0 +1,210 @@
+//! Estimator settings, as they appear in the `[estimator]` table of thrusterd.toml.
+
+use serde::{Deserialize, Serialize};
+
+use super::excitation::Excitation;
+
+/// Which estimator produces the model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Doniec, Detweiler and Rus, Algorithm 1: k-sigma sample selection and S * A = T.
+    Paper,
+    /// Least squares on y = B u (unbiased), SVD allocation, confidence, automatic stop.
+    Forward,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Paper => "paper",
+            Method::Forward => "forward",
+        }
+    }
+}
+
+/// Every key is optional; the defaults are the documented values below.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EstimatorConfig {
+    /// "forward" (default) or "paper".
+    pub method: Method,
+    /// "round_robin" (the paper's), "pairs" or "orthogonal" (default: the most informative).
+    pub excitation: Excitation,
+    /// Sample selection and significance threshold in noise standard deviations (paper: 3).
+    pub k_sigma: f64,
+    /// First pulse strength as a fraction of full command (paper: 0.5).
+    pub initial_power: f64,
+    /// Increase after a pulse that kept no sample (paper: 0.1).
+    pub power_step: f64,
+    /// Cap on the pulse strength (paper: 1.0; the paper's max() is meant as min()).
+    pub max_power: f64,
+    /// Automatic stop: relative error bound (1 sigma, Frobenius) each of the rotation and
+    /// acceleration models must reach. Forward method only.
+    pub target_rel_err: f64,
+    /// Full excitation cycles before the automatic stop may fire (>= 1: every thruster seen in
+    /// both directions).
+    pub min_cycles: usize,
+    /// Hard stop, pulses. The paper's method, which has no error bound, stops after
+    /// `paper_cycles` full cycles or at this limit.
+    pub max_pulses: usize,
+    /// Full cycles the paper's method runs (1 cycle of round robin = two pulses per thruster,
+    /// what the paper needed).
+    pub paper_cycles: usize,
+    /// Thruster spin-up time constant assumed by the response shape, s.
+    pub spin_up_s: f64,
+    /// A singular value counts when it exceeds this factor times the largest singular value a
+    /// pure-noise matrix of the same size would have (sqrt(6) + sqrt(N) in standard errors).
+    pub rank_threshold: f64,
+    /// A DOF is actuated when this share of its unit vector lies in the actuated subspace.
+    pub actuation_share: f64,
+    /// A thruster "responds" when its column's chi-square (6 dof) exceeds this value
+    /// (22.46 = the 99.9 % quantile).
+    pub response_chi2: f64,
+    /// A thruster that does not respond after a pulse at least this strong is reported dead.
+    pub dead_min_command: f64,
+    /// Forward/reverse gains (and a declared direction) differ when the difference exceeds
+    /// this many standard errors.
+    pub diagnosis_z: f64,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        EstimatorConfig {
+            method: Method::Forward,
+            excitation: Excitation::Orthogonal,
+            k_sigma: 3.0,
+            initial_power: 0.5,
+            power_step: 0.1,
+            max_power: 1.0,
+            target_rel_err: 0.1,
+            min_cycles: 1,
+            max_pulses: 64,
+            paper_cycles: 1,
+            spin_up_s: 0.1,
+            rank_threshold: 1.5,
+            actuation_share: 0.5,
+            response_chi2: 22.46,
+            dead_min_command: 0.95,
+            diagnosis_z: 4.0,
+        }
+    }
+}
+
+/// A setting outside its meaningful range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("estimator.{key} = {value}: {why}")]
+pub struct ConfigError {
+    pub key: &'static str,
+    pub value: String,
+    pub why: &'static str,
+}
+
+impl EstimatorConfig {
+    /// Check ranges that serde cannot express.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let check = |ok: bool, key: &'static str, value: f64, why: &'static str| {
+            if ok {
+                Ok(())
+            } else {
+                Err(ConfigError {
+                    key,
+                    value: value.to_string(),
+                    why,
+                })
+            }
+        };
+        let f = |v: f64| v.is_finite();
+        check(f(self.k_sigma) && self.k_sigma > 0.0, "k_sigma", self.k_sigma, "must be > 0")?;
+        check(
+            f(self.initial_power) && self.initial_power > 0.0 && self.initial_power <= 1.0,
+            "initial_power",
+            self.initial_power,
+            "must be in (0, 1]",
+        )?;
+        check(
+            f(self.max_power) && self.max_power >= self.initial_power && self.max_power <= 1.0,
+            "max_power",
+            self.max_power,
+            "must be in [initial_power, 1]",
+        )?;
+        check(
+            f(self.power_step) && self.power_step >= 0.0,
+            "power_step",
+            self.power_step,
+            "must be >= 0",
+        )?;
+        check(
+            f(self.target_rel_err) && self.target_rel_err > 0.0,
+            "target_rel_err",
+            self.target_rel_err,
+            "must be > 0",
+        )?;
+        check(self.min_cycles >= 1, "min_cycles", self.min_cycles as f64, "must be >= 1")?;
+        check(self.max_pulses >= 1, "max_pulses", self.max_pulses as f64, "must be >= 1")?;
+        check(
+            self.paper_cycles >= 1,
+            "paper_cycles",
+            self.paper_cycles as f64,
+            "must be >= 1",
+        )?;
+        check(
+            f(self.spin_up_s) && (0.0..=2.0).contains(&self.spin_up_s),
+            "spin_up_s",
+            self.spin_up_s,
+            "must be in [0, 2] s",
+        )?;
+        check(
+            f(self.rank_threshold) && self.rank_threshold > 0.0,
+            "rank_threshold",
+            self.rank_threshold,
+            "must be > 0",
+        )?;
+        check(
+            f(self.actuation_share) && self.actuation_share > 0.0 && self.actuation_share < 1.0,
+            "actuation_share",
+            self.actuation_share,
+            "must be in (0, 1)",
+        )?;
+        check(
+            f(self.response_chi2) && self.response_chi2 > 0.0,
+            "response_chi2",
+            self.response_chi2,
+            "must be > 0",
+        )?;
+        check(
+            f(self.dead_min_command) && self.dead_min_command > 0.0 && self.dead_min_command <= 1.0,
+            "dead_min_command",
+            self.dead_min_command,
+            "must be in (0, 1]",
+        )?;
+        check(
+            f(self.diagnosis_z) && self.diagnosis_z > 0.0,
+            "diagnosis_z",
+            self.diagnosis_z,
+            "must be > 0",
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_parse_from_empty_toml() {
+        let c: EstimatorConfig = toml::from_str("").unwrap();
+        assert_eq!(c, EstimatorConfig::default());
+        c.validate().unwrap();
+    }
+
+    #[test]
+    fn unknown_key_and_bad_value_are_named() {
+        let e = toml::from_str::<EstimatorConfig>("k_sigmaa = 3.0").unwrap_err();
+        assert!(e.to_string().contains("k_sigmaa"), "{e}");
+        let c: EstimatorConfig = toml::from_str("method = \"paper\"\ninitial_power = 1.5").unwrap();
+        let e = c.validate().unwrap_err();
+        assert_eq!(e.key, "initial_power");
+        assert!(e.to_string().contains("estimator.initial_power = 1.5"));
+    }
+}

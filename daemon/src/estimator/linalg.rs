@@ -1,0 +1,138 @@
+//! Small dense linear-algebra helpers the estimator needs beyond nalgebra's.
+
+use nalgebra::{DMatrix, SymmetricEigen};
+
+/// Relative eigenvalue floor below which a Gram matrix direction counts as unexcited.
+/// Well above f64 round-off for the matrix sizes here (<= 32), far below any real excitation.
+pub const GRAM_REL_TOL: f64 = 1e-10;
+
+/// Pseudo-inverse of a symmetric positive semi-definite matrix, and its numerical rank.
+///
+/// Cholesky first (the common, full-rank case, and cheap); eigen-decomposition only when the
+/// matrix is singular, so that unexcited directions get a minimum-norm (zero) solution instead
+/// of noise amplified by 1/0.
+pub fn sym_pinv(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+    let n = g.nrows();
+    if n == 0 {
+        return (DMatrix::zeros(0, 0), 0);
+    }
+    let max_diag = (0..n).map(|i| g[(i, i)]).fold(0.0_f64, f64::max);
+    if max_diag <= 0.0 {
+        return (DMatrix::zeros(n, n), 0);
+    }
+    let min_diag = (0..n).map(|i| g[(i, i)]).fold(f64::INFINITY, f64::min);
+    if min_diag > max_diag * 1e-6 {
+        if let Some(ch) = g.clone().cholesky() {
+            let inv = ch.inverse();
+            // Cholesky succeeds on nearly singular matrices too; trust it only when the inverse
+            // is not wildly larger than 1/min_diag would allow.
+            let max_inv_diag = (0..n).map(|i| inv[(i, i)]).fold(0.0_f64, f64::max);
+            if max_inv_diag.is_finite() && max_inv_diag * max_diag < 1.0 / GRAM_REL_TOL {
+                return (inv, n);
+            }
+        }
+    }
+    let eig = SymmetricEigen::new(g.clone());
+    let top = eig.eigenvalues.iter().cloned().fold(0.0_f64, f64::max);
+    let mut inv = DMatrix::zeros(n, n);
+    let mut rank = 0;
+    for (k, &lambda) in eig.eigenvalues.iter().enumerate() {
+        if lambda > top * GRAM_REL_TOL {
+            rank += 1;
+            let v = eig.eigenvectors.column(k);
+            inv += (v * v.transpose()) / lambda;
+        }
+    }
+    (inv, rank)
+}
+
+/// Symmetric square root of a symmetric positive semi-definite matrix (negative round-off
+/// eigenvalues are treated as zero).
+pub fn sym_sqrt(g: &DMatrix<f64>) -> DMatrix<f64> {
+    let eig = SymmetricEigen::new(g.clone());
+    let n = g.nrows();
+    let mut out = DMatrix::zeros(n, n);
+    for (k, &lambda) in eig.eigenvalues.iter().enumerate() {
+        if lambda > 0.0 {
+            let v = eig.eigenvectors.column(k);
+            out += (v * v.transpose()) * lambda.sqrt();
+        }
+    }
+    out
+}
+
+/// Moore-Penrose pseudo-inverse by SVD, dropping singular values at or below `rel_tol` times
+/// the largest. Returns the zero matrix (transposed shape) for an all-zero input.
+pub fn pinv(m: &DMatrix<f64>, rel_tol: f64) -> DMatrix<f64> {
+    let (r, c) = m.shape();
+    if r == 0 || c == 0 {
+        return DMatrix::zeros(c, r);
+    }
+    let svd = m.clone().svd(true, true);
+    let top = svd.singular_values.iter().cloned().fold(0.0_f64, f64::max);
+    if top <= 0.0 || !top.is_finite() {
+        return DMatrix::zeros(c, r);
+    }
+    // u and v_t are always present because we asked for them above.
+    let (Some(u), Some(v_t)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
+        return DMatrix::zeros(c, r);
+    };
+    let mut out = DMatrix::zeros(c, r);
+    for (k, &s) in svd.singular_values.iter().enumerate() {
+        if s > top * rel_tol {
+            out += (v_t.row(k).transpose() * u.column(k).transpose()) / s;
+        }
+    }
+    out
+}
+
+/// Frobenius norm of the difference of two equally shaped matrices, relative to the second.
+pub fn rel_frobenius_err(estimate: &DMatrix<f64>, truth: &DMatrix<f64>) -> f64 {
+    let denom = truth.norm();
+    if denom == 0.0 {
+        return if estimate.norm() == 0.0 { 0.0 } else { f64::INFINITY };
+    }
+    (estimate - truth).norm() / denom
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sym_pinv_of_full_rank_is_inverse() {
+        let g = DMatrix::from_row_slice(2, 2, &[4.0, 1.0, 1.0, 3.0]);
+        let (inv, rank) = sym_pinv(&g);
+        assert_eq!(rank, 2);
+        let id = &g * &inv;
+        assert!((id - DMatrix::identity(2, 2)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn sym_pinv_of_singular_leaves_unexcited_direction_zero() {
+        let g = DMatrix::from_row_slice(3, 3, &[2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0]);
+        let (inv, rank) = sym_pinv(&g);
+        assert_eq!(rank, 2);
+        assert!((inv[(0, 0)] - 0.5).abs() < 1e-12);
+        assert_eq!(inv[(1, 1)], 0.0);
+        assert!((inv[(2, 2)] - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn sym_sqrt_squares_back() {
+        let g = DMatrix::from_row_slice(2, 2, &[4.0, 1.0, 1.0, 3.0]);
+        let s = sym_sqrt(&g);
+        assert!((&s * &s - g).norm() < 1e-12);
+    }
+
+    #[test]
+    fn pinv_matches_inverse_and_truncates() {
+        let m = DMatrix::from_row_slice(2, 3, &[1.0, 0.0, 0.0, 0.0, 2.0, 0.0]);
+        let p = pinv(&m, 1e-12);
+        assert!((&m * &p - DMatrix::identity(2, 2)).norm() < 1e-12);
+        let tiny = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 1e-9]);
+        let p = pinv(&tiny, 1e-6);
+        assert_eq!(p[(1, 1)], 0.0);
+        assert!((p[(0, 0)] - 1.0).abs() < 1e-12);
+    }
+}

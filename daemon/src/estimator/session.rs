@@ -1,0 +1,516 @@
+//! One estimation run: pulse plan, power escalation, both regressions, and the stop rule.
+//!
+//! Pure: the caller feeds at-rest noise levels, then for each pulse the baseline-removed IMU
+//! samples with their time since the pulse started; it gets back the thrust to apply, a fresh
+//! estimate whenever it asks, and a decision to go on or stop. The daemon's state machine, the
+//! simulator experiments, the study and the tests all drive this same code.
+
+use nalgebra::{DMatrix, Vector3};
+
+use super::analysis::{allocation, diagnose, rank_report, RankReport, ThrusterDiagnosis};
+use super::config::{EstimatorConfig, Method};
+use super::dof::DofMask;
+use super::excitation::ExcitationPlan;
+use super::forward::{ForwardLs, ForwardSolution};
+use super::noise::NoiseLevels;
+use super::paper::PaperLs;
+use super::response::PulseShape;
+
+/// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
+const MIN_RESIDUAL_DOF: u64 = 10;
+
+/// Index of the rotation and acceleration sensor groups.
+const ROT: usize = 0;
+const ACC: usize = 1;
+
+/// What happened during one pulse.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PulseSummary {
+    /// 0-based index of the pulse just ended.
+    pub index: usize,
+    pub samples: u32,
+    /// Samples whose rotation response exceeded k * sigma_rot (the paper's selection).
+    pub kept_rot: u32,
+    /// Samples whose acceleration response exceeded k * sigma_acc.
+    pub kept_acc: u32,
+    /// Power used by the pulse.
+    pub power: f64,
+    /// Power for the next pulse (raised when one group kept nothing).
+    pub next_power: f64,
+}
+
+/// Whether to pulse again.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StopDecision {
+    Continue,
+    /// The error bound reached the target (forward method).
+    Converged { rel_err_rot: f64, rel_err_acc: f64 },
+    /// The planned cycles are done (paper method, which has no bound).
+    PlanComplete,
+    /// The hard pulse limit.
+    MaxPulses,
+}
+
+impl StopDecision {
+    pub fn is_stop(self) -> bool {
+        !matches!(self, StopDecision::Continue)
+    }
+}
+
+/// A model and everything known about its quality.
+#[derive(Debug, Clone)]
+pub struct Estimate {
+    pub method: Method,
+    pub thrusters: usize,
+    pub pulses: usize,
+    pub samples: u64,
+    /// 6 x N forward model, DOF rows (rad/s^2 and m/s^2 per unit command for the forward
+    /// method; for the paper's method the response units of its samples).
+    pub effectiveness: DMatrix<f64>,
+    /// 6 x N standard errors (infinite for unexcited columns, NaN for the paper's method).
+    pub std_err: DMatrix<f64>,
+    /// N x 6 allocation: commands per unit desired motion; zero columns for unactuated DOFs.
+    pub allocation: DMatrix<f64>,
+    /// 1-sigma relative error bound (Frobenius) of the rotation rows; NaN for the paper's method.
+    pub rel_err_rot: f64,
+    /// Same for the acceleration rows.
+    pub rel_err_acc: f64,
+    /// Noise standard deviation used per DOF row.
+    pub sigma: [f64; 6],
+    pub rank: RankReport,
+    pub thruster: Vec<ThrusterDiagnosis>,
+    /// Every thruster has been excited (the Gram matrix is full rank).
+    pub excited: bool,
+}
+
+/// Per-pulse bookkeeping, allocated once per pulse (never per sample).
+#[derive(Debug, Clone)]
+struct ActivePulse {
+    u: Vec<f64>,
+    split: Vec<f64>,
+    x: Vec<f64>,
+    xs: Vec<f64>,
+    samples: u32,
+    kept: [u32; 2],
+}
+
+/// An estimation run for a fixed set of thrusters.
+#[derive(Debug, Clone)]
+pub struct Estimator {
+    cfg: EstimatorConfig,
+    plan: ExcitationPlan,
+    noise: NoiseLevels,
+    shape: PulseShape,
+    power: f64,
+    pulses: usize,
+    samples: u64,
+    pulse: Option<ActivePulse>,
+    forward: [ForwardLs; 2],
+    split: [ForwardLs; 2],
+    paper: [PaperLs; 2],
+    max_command: Vec<f64>,
+    nominal: Option<DMatrix<f64>>,
+}
+
+impl Estimator {
+    /// A run for `n` thrusters with the noise levels measured at rest.
+    pub fn new(cfg: EstimatorConfig, n: usize, noise: NoiseLevels) -> Self {
+        let n = n.max(1);
+        Estimator {
+            plan: ExcitationPlan::new(cfg.excitation, n),
+            shape: PulseShape {
+                lag_s: cfg.spin_up_s,
+            },
+            power: cfg.initial_power.min(cfg.max_power),
+            pulses: 0,
+            samples: 0,
+            pulse: None,
+            forward: [ForwardLs::new(n), ForwardLs::new(n)],
+            split: [ForwardLs::new(2 * n), ForwardLs::new(2 * n)],
+            paper: [PaperLs::new(n), PaperLs::new(n)],
+            max_command: vec![0.0; n],
+            nominal: None,
+            noise,
+            cfg,
+        }
+    }
+
+    /// Declared model (6 x N) to check thruster directions against.
+    pub fn with_nominal(mut self, nominal: DMatrix<f64>) -> Self {
+        if nominal.nrows() == 6 && nominal.ncols() == self.thrusters() {
+            self.nominal = Some(nominal);
+        }
+        self
+    }
+
+    pub fn thrusters(&self) -> usize {
+        self.plan.thrusters()
+    }
+
+    pub fn config(&self) -> &EstimatorConfig {
+        &self.cfg
+    }
+
+    pub fn noise(&self) -> &NoiseLevels {
+        &self.noise
+    }
+
+    pub fn plan(&self) -> &ExcitationPlan {
+        &self.plan
+    }
+
+    /// Pulses completed so far.
+    pub fn pulses(&self) -> usize {
+        self.pulses
+    }
+
+    /// Current pulse strength (fraction of full command).
+    pub fn power(&self) -> f64 {
+        self.power
+    }
+
+    /// Pulses the run plans before it may stop: one for the paper method's fixed plan, the
+    /// minimum cycles for the forward method (which then stops on its bound).
+    pub fn planned_pulses(&self) -> usize {
+        let cycles = match self.cfg.method {
+            Method::Paper => self.cfg.paper_cycles,
+            Method::Forward => self.cfg.min_cycles,
+        };
+        (cycles * self.plan.cycle_len()).min(self.cfg.max_pulses)
+    }
+
+    /// The thrust to apply for the next pulse: power times the plan's sign pattern, in [-1, 1].
+    /// Starts the pulse; feed its samples with `push_pulse_sample`, then call `end_pulse`.
+    pub fn begin_pulse(&mut self) -> &[f64] {
+        let n = self.thrusters();
+        let pattern = self.plan.pattern(self.pulses);
+        let u: Vec<f64> = pattern
+            .iter()
+            .map(|s| (s * self.power).clamp(-1.0, 1.0))
+            .collect();
+        let split = split_regressor(&u);
+        for (m, v) in self.max_command.iter_mut().zip(&u) {
+            *m = m.max(v.abs());
+        }
+        self.pulse = Some(ActivePulse {
+            u,
+            split,
+            x: vec![0.0; n],
+            xs: vec![0.0; 2 * n],
+            samples: 0,
+            kept: [0, 0],
+        });
+        &self.pulse.as_ref().map(|p| p.u.as_slice()).unwrap_or(&[])[..]
+    }
+
+    /// Command of the pulse in progress, if any.
+    pub fn current_command(&self) -> Option<&[f64]> {
+        self.pulse.as_ref().map(|p| p.u.as_slice())
+    }
+
+    /// One IMU sample during the pulse: `t_s` since the command was applied, responses with the
+    /// at-rest baseline removed (gyro rad/s; motion acceleration m/s^2, gravity compensated).
+    pub fn push_pulse_sample(&mut self, t_s: f64, gyro: &Vector3<f64>, accel: &Vector3<f64>) {
+        let shape = [self.shape.rate(t_s), self.shape.accel(t_s)];
+        let k_sigma = [
+            self.cfg.k_sigma * self.noise.sigma_rot(),
+            self.cfg.k_sigma * self.noise.sigma_acc(),
+        ];
+        let Some(p) = self.pulse.as_mut() else {
+            return;
+        };
+        p.samples += 1;
+        self.samples += 1;
+        for (g, y) in [(ROT, gyro), (ACC, accel)] {
+            for (x, u) in p.x.iter_mut().zip(&p.u) {
+                *x = u * shape[g];
+            }
+            for (x, u) in p.xs.iter_mut().zip(&p.split) {
+                *x = u * shape[g];
+            }
+            self.forward[g].add(&p.x, y);
+            self.split[g].add(&p.xs, y);
+            if y.norm() > k_sigma[g] {
+                self.paper[g].add(y, &p.u);
+                p.kept[g] += 1;
+            }
+        }
+    }
+
+    /// Close the pulse; raises the power when a sensor group kept no sample (Algorithm 1).
+    pub fn end_pulse(&mut self) -> Option<PulseSummary> {
+        let p = self.pulse.take()?;
+        let used = self.power;
+        if p.kept[ROT] == 0 || p.kept[ACC] == 0 {
+            self.power = (self.power + self.cfg.power_step).min(self.cfg.max_power);
+        }
+        let summary = PulseSummary {
+            index: self.pulses,
+            samples: p.samples,
+            kept_rot: p.kept[ROT],
+            kept_acc: p.kept[ACC],
+            power: used,
+            next_power: self.power,
+        };
+        self.pulses += 1;
+        Some(summary)
+    }
+
+    /// A whole pulse reduced to one measurement (the paper's simulation study): command `u`,
+    /// responses `rot` and `acc`. The same regressions and selection; the power is the caller's.
+    pub fn push_observation(&mut self, u: &[f64], rot: &Vector3<f64>, acc: &Vector3<f64>) {
+        if u.len() != self.thrusters() {
+            return;
+        }
+        let split = split_regressor(u);
+        for (m, v) in self.max_command.iter_mut().zip(u) {
+            *m = m.max(v.abs());
+        }
+        let k_sigma = [
+            self.cfg.k_sigma * self.noise.sigma_rot(),
+            self.cfg.k_sigma * self.noise.sigma_acc(),
+        ];
+        for (g, y) in [(ROT, rot), (ACC, acc)] {
+            self.forward[g].add(u, y);
+            self.split[g].add(&split, y);
+            if y.norm() > k_sigma[g] {
+                self.paper[g].add(y, u);
+            }
+        }
+        self.samples += 1;
+        self.pulses += 1;
+    }
+
+    /// Forward-method effectiveness only (6 x N), without the analysis: the study's hot path.
+    pub fn forward_effectiveness(&self) -> DMatrix<f64> {
+        stack(&self.forward[ROT].solve().b, &self.forward[ACC].solve().b)
+    }
+
+    /// Paper-method effectiveness in forward form (6 x N), the study's other hot path.
+    pub fn paper_effectiveness(&self) -> DMatrix<f64> {
+        stack(
+            &self.paper[ROT].forward_model(),
+            &self.paper[ACC].forward_model(),
+        )
+    }
+
+    /// The current model with its quality report, by the configured method.
+    pub fn estimate(&self) -> Estimate {
+        match self.cfg.method {
+            Method::Forward => self.forward_estimate(),
+            Method::Paper => self.paper_estimate(),
+        }
+    }
+
+    /// Go on pulsing, or stop (and why).
+    pub fn stop_decision(&self) -> StopDecision {
+        if self.pulses >= self.cfg.max_pulses {
+            return StopDecision::MaxPulses;
+        }
+        match self.cfg.method {
+            Method::Paper => {
+                if self.pulses >= self.planned_pulses() {
+                    StopDecision::PlanComplete
+                } else {
+                    StopDecision::Continue
+                }
+            }
+            Method::Forward => {
+                if self.pulses < self.planned_pulses() {
+                    return StopDecision::Continue;
+                }
+                let e = self.forward_estimate();
+                if e.excited
+                    && e.rel_err_rot <= self.cfg.target_rel_err
+                    && e.rel_err_acc <= self.cfg.target_rel_err
+                {
+                    StopDecision::Converged {
+                        rel_err_rot: e.rel_err_rot,
+                        rel_err_acc: e.rel_err_acc,
+                    }
+                } else {
+                    StopDecision::Continue
+                }
+            }
+        }
+    }
+
+    /// Noise standard deviation per axis of a group: the at-rest level, or the residual level
+    /// when that is larger and well determined (in the water, pulses stir up more than rest).
+    fn group_sigma(&self, g: usize, sol: &ForwardSolution) -> [f64; 3] {
+        let rest = if g == ROT {
+            self.noise.gyro_sigma
+        } else {
+            self.noise.accel_sigma
+        };
+        match sol.residual_var {
+            Some(var) if sol.residual_dof >= MIN_RESIDUAL_DOF => {
+                std::array::from_fn(|a| rest[a].max(var[a].sqrt()))
+            }
+            _ => rest,
+        }
+    }
+
+    fn forward_estimate(&self) -> Estimate {
+        let n = self.thrusters();
+        let sols = [self.forward[ROT].solve(), self.forward[ACC].solve()];
+        let sigmas = [self.group_sigma(ROT, &sols[ROT]), self.group_sigma(ACC, &sols[ACC])];
+        let excited = sols.iter().all(|s| s.rank == n);
+        let b = stack(&sols[ROT].b, &sols[ACC].b);
+        let mut std_err = DMatrix::zeros(6, n);
+        let mut rel = [f64::INFINITY; 2];
+        for g in [ROT, ACC] {
+            let sol = &sols[g];
+            let gram = if g == ROT {
+                self.forward[ROT].gram()
+            } else {
+                self.forward[ACC].gram()
+            };
+            for a in 0..3 {
+                for i in 0..n {
+                    std_err[(3 * g + a, i)] = if gram[(i, i)] > 0.0 {
+                        sigmas[g][a] * sol.gram_inv[(i, i)].max(0.0).sqrt()
+                    } else {
+                        f64::INFINITY
+                    };
+                }
+            }
+            if sol.rank == n {
+                let trace = sol.gram_inv.trace();
+                let var: f64 = sigmas[g].iter().map(|s| s * s * trace).sum();
+                let norm = sol.b.norm();
+                rel[g] = if norm > 0.0 {
+                    var.sqrt() / norm
+                } else {
+                    f64::INFINITY
+                };
+            }
+        }
+        let rank = rank_report(&b, &std_err, &self.cfg);
+        let alloc = allocation(&b, rank.actuated, rank.rank);
+        let split = self.split_fit(&sigmas);
+        let thruster = diagnose(
+            &b,
+            &std_err,
+            &self.max_command,
+            split.as_ref().map(|(sb, sse)| (sb, sse)),
+            self.nominal.as_ref(),
+            &self.cfg,
+        );
+        Estimate {
+            method: Method::Forward,
+            thrusters: n,
+            pulses: self.pulses,
+            samples: self.samples,
+            effectiveness: b,
+            std_err,
+            allocation: alloc,
+            rel_err_rot: rel[ROT],
+            rel_err_acc: rel[ACC],
+            sigma: [
+                sigmas[ROT][0],
+                sigmas[ROT][1],
+                sigmas[ROT][2],
+                sigmas[ACC][0],
+                sigmas[ACC][1],
+                sigmas[ACC][2],
+            ],
+            rank,
+            thruster,
+            excited,
+        }
+    }
+
+    /// The forward/reverse split fit (6 x 2N) and its standard errors, once every thruster has
+    /// pushed both ways.
+    fn split_fit(&self, sigmas: &[[f64; 3]; 2]) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
+        let two_n = 2 * self.thrusters();
+        let sols = [self.split[ROT].solve(), self.split[ACC].solve()];
+        if sols.iter().any(|s| s.rank < two_n) {
+            return None;
+        }
+        let b = stack(&sols[ROT].b, &sols[ACC].b);
+        let mut se = DMatrix::zeros(6, two_n);
+        for g in [ROT, ACC] {
+            for a in 0..3 {
+                for i in 0..two_n {
+                    se[(3 * g + a, i)] = sigmas[g][a] * sols[g].gram_inv[(i, i)].max(0.0).sqrt();
+                }
+            }
+        }
+        Some((b, se))
+    }
+
+    fn paper_estimate(&self) -> Estimate {
+        let n = self.thrusters();
+        let a_rot = self.paper[ROT].inverse_model();
+        let a_acc = self.paper[ACC].inverse_model();
+        let b = self.paper_effectiveness();
+        // The paper projects desired motion onto thrusters with A directly: t = x A.
+        let mut alloc = DMatrix::zeros(n, 6);
+        for a in 0..3 {
+            alloc.set_column(a, &a_rot.row(a).transpose());
+            alloc.set_column(3 + a, &a_acc.row(a).transpose());
+        }
+        let nan = DMatrix::from_element(6, n, f64::NAN);
+        let svd = b.clone().svd(false, false);
+        let mut sv: Vec<f64> = svd.singular_values.iter().cloned().collect();
+        sv.sort_by(|a, c| c.total_cmp(a));
+        let top = sv.first().copied().unwrap_or(0.0);
+        let rank = RankReport {
+            rank: sv.iter().filter(|s| **s > top * 1e-9).count(),
+            singular_values: sv,
+            threshold: f64::NAN,
+            dof_share: [1.0; 6],
+            // The paper's method has no notion of a missing DOF: it drives all six.
+            actuated: DofMask::ALL,
+        };
+        let thruster = diagnose(&b, &nan, &self.max_command, None, None, &self.cfg);
+        Estimate {
+            method: Method::Paper,
+            thrusters: n,
+            pulses: self.pulses,
+            samples: self.samples,
+            effectiveness: b,
+            std_err: nan,
+            allocation: alloc,
+            rel_err_rot: f64::NAN,
+            rel_err_acc: f64::NAN,
+            sigma: [
+                self.noise.gyro_sigma[0],
+                self.noise.gyro_sigma[1],
+                self.noise.gyro_sigma[2],
+                self.noise.accel_sigma[0],
+                self.noise.accel_sigma[1],
+                self.noise.accel_sigma[2],
+            ],
+            rank,
+            thruster,
+            excited: self.paper[ROT].rows() > 0 && self.paper[ACC].rows() > 0,
+        }
+    }
+}
+
+/// [u+; u-]: forward and reverse commands as separate regressors (2N), so the fit can tell a
+/// thruster's forward gain from its reverse gain.
+fn split_regressor(u: &[f64]) -> Vec<f64> {
+    let n = u.len();
+    let mut s = vec![0.0; 2 * n];
+    for (i, &v) in u.iter().enumerate() {
+        if v >= 0.0 {
+            s[i] = v;
+        } else {
+            s[n + i] = v;
+        }
+    }
+    s
+}
+
+/// Rotation rows on top of acceleration rows.
+fn stack(rot: &DMatrix<f64>, acc: &DMatrix<f64>) -> DMatrix<f64> {
+    let n = rot.ncols();
+    let mut b = DMatrix::zeros(6, n);
+    b.view_mut((0, 0), (3, n)).copy_from(rot);
+    b.view_mut((3, 0), (3, n)).copy_from(acc);
+    b
+}
