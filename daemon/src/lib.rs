@@ -2,3 +2,4 @@
 //! paper's simulation study. No IPC, no clocks, no files in here: those live in the binaries.
 
 pub mod estimator;
+pub mod study;

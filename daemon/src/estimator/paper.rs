@@ -6,11 +6,39 @@
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
-use super::linalg::pinv;
+/// Relative eigenvalue cut for the 3 x 3 Gram pseudo-inverses (a singular-value ratio of 1e-7):
+/// only round-off is dropped, as a plain Moore-Penrose inverse would (the paper does no rank
+/// truncation).
+const GRAM_TOL: f64 = 1e-14;
 
-/// Relative singular-value cut for the paper's pseudo-inverses; only round-off is dropped, as a
-/// plain Moore-Penrose inverse would (the paper does no rank truncation).
-const PINV_TOL: f64 = 1e-12;
+/// Pseudo-inverse of a symmetric positive semi-definite 3 x 3 matrix.
+fn sym_pinv3(m: &Matrix3<f64>) -> Matrix3<f64> {
+    let eig = m.symmetric_eigen();
+    let top = eig.eigenvalues.iter().cloned().fold(0.0_f64, f64::max);
+    let mut out = Matrix3::zeros();
+    if top <= 0.0 || !top.is_finite() {
+        return out;
+    }
+    for k in 0..3 {
+        let lambda = eig.eigenvalues[k];
+        if lambda > top * GRAM_TOL {
+            let v = eig.eigenvectors.column(k);
+            out += (v * v.transpose()) / lambda;
+        }
+    }
+    out
+}
+
+/// Multiply a 3 x 3 matrix into a 3 x N one.
+fn mul3(m: &Matrix3<f64>, x: &DMatrix<f64>) -> DMatrix<f64> {
+    let mut out = DMatrix::zeros(3, x.ncols());
+    for c in 0..x.ncols() {
+        for r in 0..3 {
+            out[(r, c)] = (0..3).map(|k| m[(r, k)] * x[(k, c)]).sum();
+        }
+    }
+    out
+}
 
 #[derive(Debug, Clone)]
 pub struct PaperLs {
@@ -50,14 +78,16 @@ impl PaperLs {
 
     /// The inverse model A (3 x N): t = x A for a desired motion row x.
     pub fn inverse_model(&self) -> DMatrix<f64> {
-        let sts = DMatrix::from_iterator(3, 3, self.sts.iter().cloned());
-        pinv(&sts, PINV_TOL) * &self.stt
+        mul3(&sym_pinv3(&self.sts), &self.stt)
     }
 
     /// The inverse model turned back into forward form by pseudo-inverse: B = pinv(A)^T, 3 x N,
     /// so it can be compared with the truth (x = B t).
     pub fn forward_model(&self) -> DMatrix<f64> {
-        pinv(&self.inverse_model(), PINV_TOL).transpose()
+        // pinv(A) = A^T pinv(A A^T), so pinv(A)^T = pinv(A A^T) A: only a 3 x 3 inverse.
+        let a = self.inverse_model();
+        let aat = Matrix3::from_fn(|r, c| a.row(r).dot(&a.row(c)));
+        mul3(&sym_pinv3(&aat), &a)
     }
 }
 

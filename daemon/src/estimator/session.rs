@@ -283,7 +283,13 @@ impl Estimator {
 
     /// Forward-method effectiveness only (6 x N), without the analysis: the study's hot path.
     pub fn forward_effectiveness(&self) -> DMatrix<f64> {
-        stack(&self.forward[ROT].solve().b, &self.forward[ACC].solve().b)
+        let [rot, acc] = self.forward_solutions();
+        stack(&rot.b, &acc.b)
+    }
+
+    /// The raw forward regressions of the rotation and acceleration groups.
+    pub fn forward_solutions(&self) -> [ForwardSolution; 2] {
+        [self.forward[ROT].solve(), self.forward[ACC].solve()]
     }
 
     /// Paper-method effectiveness in forward form (6 x N), the study's other hot path.
