@@ -1,1 +1,15 @@
-//! Message types and services shared by every thrusterd process.
+//! Message types, validation and iceoryx2 services shared by every thrusterd process.
+//!
+//! - [`messages`]: `#[repr(C)]` zero-copy payloads in SI units (re-exported at the root).
+//! - [`validate`]: what a reader checks before using a message, and rejection counters.
+//! - [`services`]: namespaced service names, QoS, typed ports, control request/response
+//!   and cleanup of iceoryx2 resources.
+//! - [`wire`]: enums as `u32` fields and fixed-size text, safe for any bit pattern.
+
+pub mod messages;
+pub mod services;
+pub mod validate;
+pub mod wire;
+
+pub use messages::*;
+pub use validate::{sanitize_thrust, RejectReason, Validate};
