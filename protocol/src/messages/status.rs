@@ -1,0 +1,95 @@
+use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize};
+
+use super::Text;
+use crate::wire::{wire_enum, UnknownEnumValue};
+
+wire_enum! {
+    /// The daemon's state machine state.
+    pub enum DaemonState {
+        /// Zero thrust, waiting for a command.
+        #[default]
+        Idle = 0,
+        /// Vehicle at rest; measuring baseline and noise per axis.
+        MeasureNoise = 1,
+        /// Applying excitation pulse `pulse`.
+        Pulse = 2,
+        /// Zero thrust until the vehicle is quiet after pulse `pulse`.
+        Settle = 3,
+        /// Computing the model and checking its quality.
+        Solve = 4,
+        /// Controlling the vehicle with the model.
+        Active = 5,
+        /// Zero thrust after a fault (stale IMU, bad input); `text` says why.
+        Fault = 6,
+    }
+}
+
+/// Daemon progress and health (daemon -> all, service `status`, history 1).
+#[repr(C)]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[type_name("thrusterd.StatusMsg.v1")]
+pub struct StatusMsg {
+    /// Sequence number, +1 per status message.
+    pub seq: u64,
+    /// [`DaemonState`] as `u32`.
+    pub state: u32,
+    /// Current pulse index (0-based) while estimating.
+    pub pulse: u32,
+    /// Pulses planned for this estimation (may grow until the stopping rule is met).
+    pub pulses_planned: u32,
+    /// Written as zero, ignored.
+    pub reserved: u32,
+    /// Current relative error bound of the model being estimated (dimensionless, >= 0;
+    /// 0 when not estimating).
+    pub error_bound: f64,
+    /// Current excitation power, normalised command magnitude in [0, 1].
+    pub power: f64,
+    /// Measured rotation-rate noise, one sigma, rad/s.
+    pub sigma_rot: f64,
+    /// Measured acceleration noise, one sigma, m/s^2.
+    pub sigma_acc: f64,
+    /// IMU samples accepted since start.
+    pub samples: u64,
+    /// Messages rejected because a value was NaN or infinite.
+    pub rejected_nonfinite: u64,
+    /// Messages rejected because a value was outside its physical range (or a vector or
+    /// quaternion was not unit length).
+    pub rejected_range: u64,
+    /// Messages rejected for time or sequence (time backwards, duplicate, jump).
+    pub rejected_time: u64,
+    /// Messages rejected for a bad thruster count or index.
+    pub rejected_count: u64,
+    /// Messages rejected for any other reason (unknown enum or flag value, ...).
+    pub rejected_other: u64,
+    /// `version` of the model in use (0 = none).
+    pub model_version: u64,
+    /// Measured IMU sample rate, Hz.
+    pub imu_rate_hz: f64,
+    /// Time of the latest accepted IMU sample, ns, IMU monotonic clock.
+    pub vehicle_time_ns: u64,
+    /// Short human-readable reason or message (why a fault, why a model was refused).
+    pub text: Text,
+}
+
+impl StatusMsg {
+    /// Decoded `state`.
+    pub fn state(&self) -> Result<DaemonState, UnknownEnumValue> {
+        DaemonState::try_from(self.state)
+    }
+
+    /// Sets `state`.
+    pub fn set_state(&mut self, state: DaemonState) {
+        self.state = state.as_u32();
+    }
+
+    /// Sets the human-readable text, truncated at a character boundary to fit.
+    pub fn set_text(&mut self, s: &str) {
+        self.text.set(s);
+    }
+
+    /// The human-readable text.
+    pub fn text(&self) -> &str {
+        self.text.as_str()
+    }
+}

@@ -1,0 +1,33 @@
+use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize};
+
+use super::{clamp_count, DOF_COUNT, MAX_THRUSTERS};
+
+/// The simulator's true thruster model (simulator -> anyone, service `truth`, history 1),
+/// so tests and the study can score estimates. Never used for control.
+#[repr(C)]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[type_name("thrusterd.TruthMsg.v1")]
+pub struct TruthMsg {
+    /// Sequence number, +1 per message.
+    pub seq: u64,
+    /// Simulation time at which this truth became valid, ns, same clock as the IMU.
+    pub t_ns: u64,
+    /// Number of thrusters, at most [`MAX_THRUSTERS`].
+    pub count: u32,
+    /// Written as zero, ignored.
+    pub reserved: u32,
+    /// True effectiveness for positive commands, rows in [`crate::Dof`] order; rad/s^2
+    /// (rotations) or m/s^2 (translations) per unit command, linearised about rest.
+    pub effectiveness: [[f64; MAX_THRUSTERS]; DOF_COUNT],
+    /// True effectiveness for negative commands (thrusters are weaker in reverse), same
+    /// shape and units: response = reverse_effectiveness * u for u < 0.
+    pub reverse_effectiveness: [[f64; MAX_THRUSTERS]; DOF_COUNT],
+}
+
+impl TruthMsg {
+    /// Thruster count clamped to capacity (safe for slicing).
+    pub fn thruster_count(&self) -> usize {
+        clamp_count(self.count)
+    }
+}

@@ -1,0 +1,100 @@
+use std::path::PathBuf;
+use std::time::Duration;
+
+use crate::validate::RejectReason;
+
+/// Failures of the IPC layer.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcError {
+    /// The namespace string is not usable.
+    #[error("invalid namespace {namespace:?}: {reason}")]
+    InvalidNamespace {
+        /// The rejected namespace.
+        namespace: String,
+        /// Why.
+        reason: &'static str,
+    },
+    /// A path iceoryx2 would create is too long (unix socket paths are limited to 107
+    /// bytes).
+    #[error("iceoryx2 paths under {root} would reach {len} bytes, more than {max}")]
+    PathTooLong {
+        /// The root directory.
+        root: String,
+        /// Longest path iceoryx2 may create there.
+        len: usize,
+        /// Limit.
+        max: usize,
+    },
+    /// An iceoryx2 call failed.
+    #[error("{what} failed for \"{name}\": {source}")]
+    Iceoryx {
+        /// The operation, e.g. "open or create publish-subscribe service".
+        what: &'static str,
+        /// The service, node or path concerned.
+        name: String,
+        /// The iceoryx2 error.
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// A control request found no server (the daemon is not running in this namespace).
+    #[error("no server is connected to \"{service}\"")]
+    NoServer {
+        /// The control service name.
+        service: String,
+    },
+    /// No response arrived in time.
+    #[error("no response on \"{service}\" within {timeout:?}")]
+    Timeout {
+        /// The control service name.
+        service: String,
+        /// How long we waited.
+        timeout: Duration,
+    },
+    /// A response failed validation or answered another request.
+    #[error("invalid response on \"{service}\": {reason}")]
+    InvalidResponse {
+        /// The control service name.
+        service: String,
+        /// What was wrong.
+        reason: RejectReason,
+    },
+    /// The response's sequence number does not match the request's.
+    #[error("response on \"{service}\" answers request {got}, expected {expected}")]
+    ResponseMismatch {
+        /// The control service name.
+        service: String,
+        /// Request seq that was sent.
+        expected: u64,
+        /// Seq in the response.
+        got: u64,
+    },
+    /// Purging a namespace that live processes still use.
+    #[error("namespace \"{namespace}\" is in use by {alive} live node(s)")]
+    NamespaceInUse {
+        /// The namespace.
+        namespace: String,
+        /// Live nodes found.
+        alive: usize,
+    },
+    /// A file system operation failed.
+    #[error("{op} {path}: {source}")]
+    Io {
+        /// The operation, e.g. "remove".
+        op: &'static str,
+        /// The path concerned.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+}
+
+/// `map_err` adapter wrapping an iceoryx2 error with context.
+pub(crate) fn ice<'a, E>(what: &'static str, name: &'a str) -> impl FnOnce(E) -> IpcError + 'a
+where
+    E: std::error::Error + Send + Sync + 'static,
+{
+    move |e| IpcError::Iceoryx {
+        what,
+        name: name.to_string(),
+        source: Box::new(e),
+    }
+}

@@ -1,0 +1,238 @@
+use std::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::{ServiceName, SignalHandlingMode, WaitSet, WaitSetBuilder};
+use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+
+use super::error::{ice, IpcError};
+use super::topics::{
+    TopicMessage, EVENT_SUFFIX, MAX_EVENT_PORTS, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS,
+};
+use super::{Ipc, IpcConfig, IpcNode};
+
+/// Opens (or creates) the pub/sub service of `T`'s topic with the protocol's QoS.
+fn open_pubsub<T: TopicMessage>(
+    node: &IpcNode,
+    ipc: &IpcConfig,
+) -> Result<(String, PubSubFactory<Ipc, T, ()>), IpcError> {
+    let name = ipc.service_name(T::TOPIC.leaf());
+    let qos = T::TOPIC.qos();
+    let service_name = ServiceName::new(&name).map_err(ice("make service name", &name))?;
+    let factory = node
+        .service_builder(&service_name)
+        .publish_subscribe::<T>()
+        // Never block a publisher on a slow reader: a driver must not stall because the
+        // daemon does, and vice versa. The oldest sample is dropped instead.
+        .enable_safe_overflow(true)
+        .history_size(qos.history)
+        .subscriber_max_buffer_size(qos.max_buffer)
+        .max_publishers(MAX_PUBLISHERS)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+        .map_err(ice("open or create publish-subscribe service", &name))?;
+    Ok((name, factory))
+}
+
+/// Opens (or creates) the event service `<service>/event` paired with a service.
+pub(crate) fn open_event(node: &IpcNode, service: &str) -> Result<EventFactory<Ipc>, IpcError> {
+    let name = format!("{service}{EVENT_SUFFIX}");
+    let service_name = ServiceName::new(&name).map_err(ice("make service name", &name))?;
+    node.service_builder(&service_name)
+        .event()
+        .max_notifiers(MAX_EVENT_PORTS)
+        .max_listeners(MAX_EVENT_PORTS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+        .map_err(ice("open or create event service", &name))
+}
+
+/// Creates a wait set with iceoryx2's signal handling disabled (see module docs). Attach
+/// [`Inbox::listener`]s to it; `attach_deadline` on the IMU listener is a sensor-dropout
+/// watchdog.
+pub fn create_waitset() -> Result<WaitSet<Ipc>, IpcError> {
+    WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Ipc>()
+        .map_err(ice("create wait set", "-"))
+}
+
+/// Sending end of a topic: publisher plus notifier of the paired event service. Not
+/// `Send`: keep it on the thread that created it.
+#[derive(Debug)]
+pub struct Port<T: TopicMessage> {
+    publisher: Publisher<Ipc, T, ()>,
+    notifier: Notifier<Ipc>,
+    service: String,
+}
+
+impl<T: TopicMessage> Port<T> {
+    /// Opens or creates `T`'s topic and its event service and creates the ports.
+    pub fn create(node: &IpcNode, ipc: &IpcConfig) -> Result<Self, IpcError> {
+        let (service, factory) = open_pubsub::<T>(node, ipc)?;
+        let publisher = factory
+            .publisher_builder()
+            .create()
+            .map_err(ice("create publisher", &service))?;
+        let notifier = open_event(node, &service)?
+            .notifier_builder()
+            .create()
+            .map_err(ice("create notifier", &service))?;
+        Ok(Self {
+            publisher,
+            notifier,
+            service,
+        })
+    }
+
+    /// Publishes a copy of `msg`, then wakes listeners. Returns how many subscribers
+    /// received it. The notify comes after the publish so a woken reader always finds
+    /// the sample.
+    pub fn send(&self, msg: &T) -> Result<usize, IpcError> {
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(ice("loan sample", &self.service))?;
+        let delivered = sample
+            .write_payload(*msg)
+            .send()
+            .map_err(ice("send sample", &self.service))?;
+        self.notifier
+            .notify()
+            .map_err(ice("notify", &self.service))?;
+        Ok(delivered)
+    }
+
+    /// Connects subscribers that joined since the last send and hands them the history
+    /// (the last model or status). iceoryx2 delivers history only when the publisher
+    /// does this (it happens implicitly on every send), so a publisher of rarely changing
+    /// state (model) must call it periodically, e.g. once per control tick, or late
+    /// joiners wait for the next change.
+    pub fn update_connections(&self) -> Result<(), IpcError> {
+        self.publisher
+            .update_connections()
+            .map_err(ice("update connections", &self.service))
+    }
+
+    /// Full service name, e.g. `veh1/imu`.
+    pub fn service_name(&self) -> &str {
+        &self.service
+    }
+
+    /// The publisher, for zero-copy loans (`loan_uninit`); remember to notify after send.
+    pub fn publisher(&self) -> &Publisher<Ipc, T, ()> {
+        &self.publisher
+    }
+
+    /// The notifier of the paired event service.
+    pub fn notifier(&self) -> &Notifier<Ipc> {
+        &self.notifier
+    }
+}
+
+/// Receiving end of a topic: subscriber plus listener of the paired event service. Not
+/// `Send`: keep it on the thread that created it.
+///
+/// Wake-up loop: when the listener fires (in a wait set or [`Inbox::wait`]), call
+/// [`Inbox::drain_events`] first and then [`Inbox::recv`] until `None`; draining events
+/// after the samples could swallow the notification of a sample that arrived in
+/// between, and not draining them makes a wait set fire again at once (busy loop).
+/// Messages are returned unvalidated: validate them (see [`crate::validate`]).
+#[derive(Debug)]
+pub struct Inbox<T: TopicMessage> {
+    subscriber: Subscriber<Ipc, T, ()>,
+    listener: Listener<Ipc>,
+    service: String,
+}
+
+impl<T: TopicMessage> Inbox<T> {
+    /// Opens or creates `T`'s topic and its event service with the topic's default
+    /// buffer.
+    pub fn create(node: &IpcNode, ipc: &IpcConfig) -> Result<Self, IpcError> {
+        Self::create_with_buffer(node, ipc, T::TOPIC.qos().default_buffer)
+    }
+
+    /// As [`Inbox::create`] with a buffer of `buffer` samples (clamped to
+    /// 1..=the topic's maximum); e.g. 1 to always read only the newest status.
+    pub fn create_with_buffer(
+        node: &IpcNode,
+        ipc: &IpcConfig,
+        buffer: usize,
+    ) -> Result<Self, IpcError> {
+        let (service, factory) = open_pubsub::<T>(node, ipc)?;
+        let qos = T::TOPIC.qos();
+        let buffer = buffer.clamp(1, qos.max_buffer);
+        let subscriber = factory
+            .subscriber_builder()
+            .buffer_size(buffer)
+            // The history request may not exceed the buffer.
+            .history_request(qos.history.min(buffer))
+            .create()
+            .map_err(ice("create subscriber", &service))?;
+        let listener = open_event(node, &service)?
+            .listener_builder()
+            .create()
+            .map_err(ice("create listener", &service))?;
+        Ok(Self {
+            subscriber,
+            listener,
+            service,
+        })
+    }
+
+    /// The next buffered message (oldest first), copied out of shared memory so the
+    /// sample is released at once; `None` when the buffer is empty.
+    pub fn recv(&self) -> Result<Option<T>, IpcError> {
+        let sample = self
+            .subscriber
+            .receive()
+            .map_err(ice("receive", &self.service))?;
+        Ok(sample.map(|s| *s.payload()))
+    }
+
+    /// Drains the buffer and returns the newest message, if any.
+    pub fn recv_latest(&self) -> Result<Option<T>, IpcError> {
+        let mut latest = None;
+        while let Some(msg) = self.recv()? {
+            latest = Some(msg);
+        }
+        Ok(latest)
+    }
+
+    /// Consumes pending notifications without blocking; returns how many there were.
+    pub fn drain_events(&self) -> Result<u64, IpcError> {
+        self.listener
+            .try_wait(|_| {})
+            .map_err(ice("drain listener", &self.service))
+    }
+
+    /// Blocks until notified or `timeout` passes, consuming the notifications; true when
+    /// notified. For simple single-input loops; use a wait set for several inputs.
+    pub fn wait(&self, timeout: Duration) -> Result<bool, IpcError> {
+        let n = self
+            .listener
+            .timed_wait(|_| {}, timeout)
+            .map_err(ice("wait on listener", &self.service))?;
+        Ok(n > 0)
+    }
+
+    /// Full service name, e.g. `veh1/imu`.
+    pub fn service_name(&self) -> &str {
+        &self.service
+    }
+
+    /// The listener to attach to a wait set.
+    pub fn listener(&self) -> &Listener<Ipc> {
+        &self.listener
+    }
+
+    /// The subscriber, for zero-copy reads of large messages.
+    pub fn subscriber(&self) -> &Subscriber<Ipc, T, ()> {
+        &self.subscriber
+    }
+}

@@ -1,0 +1,131 @@
+use std::fmt::Debug;
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::messages::*;
+
+/// Most publishers per pub/sub service: the owner plus operators and tests injecting
+/// messages (iceoryx2's default of 2 is too few).
+pub const MAX_PUBLISHERS: usize = 8;
+/// Most subscribers per pub/sub service.
+pub const MAX_SUBSCRIBERS: usize = 16;
+/// Most nodes (processes, roughly) that may open one service.
+pub const MAX_NODES: usize = 32;
+/// Most notifiers and listeners per event service (one per publisher / subscriber).
+pub const MAX_EVENT_PORTS: usize = MAX_SUBSCRIBERS;
+/// Appended to a topic's service name to name its paired event service.
+pub const EVENT_SUFFIX: &str = "/event";
+
+/// The pub/sub topics of the protocol. Each has a paired event service
+/// `<ns>/<leaf>/event` that is notified after every message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Topic {
+    /// [`ImuSample`], driver -> daemon.
+    Imu,
+    /// [`ThrustCommand`], daemon -> driver.
+    Thrust,
+    /// [`ReconfigEvent`], driver or operator -> daemon.
+    Reconfig,
+    /// [`ModelMsg`], daemon -> all, history 1.
+    Model,
+    /// [`StatusMsg`], daemon -> all, history 1.
+    Status,
+    /// [`TruthMsg`], simulator -> anyone, history 1.
+    Truth,
+    /// [`Setpoint`], operator -> daemon, history 1.
+    Setpoint,
+}
+
+/// Quality-of-service settings of a topic. Every process opens services with the same
+/// settings; iceoryx2 checks them against the existing service (as minimum
+/// requirements), so a process from an incompatible build fails to open instead of
+/// misbehaving.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicQos {
+    /// Samples a late-joining subscriber receives on connection (0 or 1).
+    pub history: usize,
+    /// Largest subscriber buffer the service supports, samples.
+    pub max_buffer: usize,
+    /// Buffer an [`super::Inbox`] requests, samples. With safe overflow the oldest
+    /// sample is dropped when it is full; publishers never block.
+    pub default_buffer: usize,
+}
+
+impl Topic {
+    /// Every topic.
+    pub const ALL: [Topic; 7] = [
+        Topic::Imu,
+        Topic::Thrust,
+        Topic::Reconfig,
+        Topic::Model,
+        Topic::Status,
+        Topic::Truth,
+        Topic::Setpoint,
+    ];
+
+    /// Service name below the namespace, e.g. `imu`.
+    pub const fn leaf(self) -> &'static str {
+        match self {
+            Topic::Imu => "imu",
+            Topic::Thrust => "thrust",
+            Topic::Reconfig => "reconfig",
+            Topic::Model => "model",
+            Topic::Status => "status",
+            Topic::Truth => "truth",
+            Topic::Setpoint => "setpoint",
+        }
+    }
+
+    /// The topic's QoS.
+    pub const fn qos(self) -> TopicQos {
+        match self {
+            // Streams: every sample matters, buffer ~40 ms at 400 Hz so a briefly
+            // descheduled reader loses nothing; no history (stale samples are useless).
+            Topic::Imu | Topic::Thrust => TopicQos {
+                history: 0,
+                max_buffer: 16,
+                default_buffer: 16,
+            },
+            // Discrete events: keep a few, but do not replay old ones to a new reader.
+            Topic::Reconfig => TopicQos {
+                history: 0,
+                max_buffer: 16,
+                default_buffer: 8,
+            },
+            // State: a late joiner gets the latest value; readers want the newest.
+            Topic::Model | Topic::Status | Topic::Truth | Topic::Setpoint => TopicQos {
+                history: 1,
+                max_buffer: 4,
+                default_buffer: 2,
+            },
+        }
+    }
+}
+
+/// A message type bound to its topic, so a port can only carry the right type.
+pub trait TopicMessage: ZeroCopySend + Debug + Copy + 'static {
+    /// The topic that carries this type.
+    const TOPIC: Topic;
+}
+
+impl TopicMessage for ImuSample {
+    const TOPIC: Topic = Topic::Imu;
+}
+impl TopicMessage for ThrustCommand {
+    const TOPIC: Topic = Topic::Thrust;
+}
+impl TopicMessage for ReconfigEvent {
+    const TOPIC: Topic = Topic::Reconfig;
+}
+impl TopicMessage for ModelMsg {
+    const TOPIC: Topic = Topic::Model;
+}
+impl TopicMessage for StatusMsg {
+    const TOPIC: Topic = Topic::Status;
+}
+impl TopicMessage for TruthMsg {
+    const TOPIC: Topic = Topic::Truth;
+}
+impl TopicMessage for Setpoint {
+    const TOPIC: Topic = Topic::Setpoint;
+}

@@ -1,0 +1,405 @@
+//! [`Validate`] for every message type.
+
+use super::limits::*;
+use super::{Field, RejectReason, Validate};
+use crate::messages::*;
+use crate::wire::{FixedText, UnknownEnumValue};
+
+// ---- helpers -------------------------------------------------------------------------
+
+fn finite(field: Field, value: f64) -> Result<(), RejectReason> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(RejectReason::NonFinite { field, value })
+    }
+}
+
+fn in_range(
+    field: Field,
+    value: f64,
+    min: f64,
+    max: f64,
+    unit: &'static str,
+) -> Result<(), RejectReason> {
+    finite(field, value)?;
+    if (min..=max).contains(&value) {
+        Ok(())
+    } else {
+        Err(RejectReason::OutOfRange {
+            field,
+            value,
+            min,
+            max,
+            unit,
+        })
+    }
+}
+
+fn all_in_range(
+    name: &'static str,
+    values: &[f64],
+    max_abs: f64,
+    unit: &'static str,
+) -> Result<(), RejectReason> {
+    for (i, &v) in values.iter().enumerate() {
+        in_range(Field::at(name, i), v, -max_abs, max_abs, unit)?;
+    }
+    Ok(())
+}
+
+/// Checks rows `[..rows]` x columns `[..cols]` of a matrix: finite and |x| <= max_abs
+/// (or 0 <= x <= max_abs when `non_negative`).
+fn matrix_in_range<const C: usize>(
+    name: &'static str,
+    m: &[[f64; C]],
+    cols: usize,
+    max_abs: f64,
+    non_negative: bool,
+    unit: &'static str,
+) -> Result<(), RejectReason> {
+    let min = if non_negative { 0.0 } else { -max_abs };
+    for (i, row) in m.iter().enumerate() {
+        for (j, &v) in row[..cols].iter().enumerate() {
+            in_range(Field::at2(name, i, j), v, min, max_abs, unit)?;
+        }
+    }
+    Ok(())
+}
+
+fn unit_norm(field: Field, v: &[f64], tolerance: f64) -> Result<(), RejectReason> {
+    let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if (norm - 1.0).abs() <= tolerance {
+        Ok(())
+    } else {
+        Err(RejectReason::NotUnit {
+            field,
+            norm,
+            tolerance,
+        })
+    }
+}
+
+/// `count <= MAX_THRUSTERS` (and `> 0` unless `allow_zero`); returns it as usize.
+fn thruster_count(name: &'static str, count: u32, allow_zero: bool) -> Result<usize, RejectReason> {
+    let field = Field::new(name);
+    if count as usize > MAX_THRUSTERS {
+        return Err(RejectReason::CountTooLarge { field, count });
+    }
+    if count == 0 && !allow_zero {
+        return Err(RejectReason::CountZero { field });
+    }
+    Ok(count as usize)
+}
+
+fn known_enum<T>(
+    name: &'static str,
+    decoded: Result<T, UnknownEnumValue>,
+) -> Result<T, RejectReason> {
+    decoded.map_err(|e| RejectReason::UnknownEnum {
+        field: Field::new(name),
+        value: e.value,
+    })
+}
+
+fn known_flags(name: &'static str, flags: u64, known: u64) -> Result<(), RejectReason> {
+    let bits = flags & !known;
+    if bits == 0 {
+        Ok(())
+    } else {
+        Err(RejectReason::UnknownFlags {
+            field: Field::new(name),
+            bits,
+        })
+    }
+}
+
+fn zero_or_one(name: &'static str, value: u32) -> Result<bool, RejectReason> {
+    match value {
+        0 => Ok(false),
+        1 => Ok(true),
+        _ => Err(RejectReason::InvalidBool {
+            field: Field::new(name),
+            value,
+        }),
+    }
+}
+
+fn utf8_text<const N: usize>(name: &'static str, text: &FixedText<N>) -> Result<(), RejectReason> {
+    if text.is_valid_utf8() {
+        Ok(())
+    } else {
+        Err(RejectReason::InvalidText {
+            field: Field::new(name),
+        })
+    }
+}
+
+/// Checks that a received thruster count equals the count this reader is configured
+/// for (e.g. a driver receiving [`ThrustCommand`]s).
+pub fn expect_count(name: &'static str, count: u32, expected: u32) -> Result<(), RejectReason> {
+    if count == expected {
+        Ok(())
+    } else {
+        Err(RejectReason::CountMismatch {
+            field: Field::new(name),
+            count,
+            expected,
+        })
+    }
+}
+
+// ---- messages ------------------------------------------------------------------------
+
+impl Validate for ImuSample {
+    /// All values finite and in range whether or not their `HAS_*` flag is set (drivers
+    /// write zeros for absent sensors), so a validated sample holds no NaN anywhere.
+    fn validate(&self) -> Result<(), RejectReason> {
+        all_in_range("gyro", &self.gyro, MAX_GYRO_RAD_S, "rad/s")?;
+        all_in_range("accel", &self.accel, MAX_ACCEL_M_S2, "m/s^2")?;
+        all_in_range("mag", &self.mag, MAX_MAG_UT, "uT")?;
+        in_range(
+            Field::new("depth"),
+            self.depth,
+            MIN_DEPTH_M,
+            MAX_DEPTH_M,
+            "m",
+        )?;
+        known_flags("flags", self.flags, ImuSample::KNOWN_FLAGS)
+    }
+}
+
+impl Validate for ThrustCommand {
+    /// Count within capacity (0 allowed: no thrusters configured), mode known, commands in
+    /// use finite and within [-1, 1]. Entries beyond `count` are not read, so not checked.
+    fn validate(&self) -> Result<(), RejectReason> {
+        let n = thruster_count("count", self.count, true)?;
+        known_enum("mode", self.mode())?;
+        all_in_range("thrust", &self.thrust[..n], MAX_THRUST, "")
+    }
+}
+
+impl Validate for ReconfigEvent {
+    /// Kind known, count within capacity, thruster index below the count it refers to,
+    /// `has_geometry` 0 or 1, and with geometry: positions finite and within
+    /// [`MAX_POSITION_M`], directions unit length.
+    fn validate(&self) -> Result<(), RejectReason> {
+        let kind = known_enum("kind", self.kind())?;
+        let n = thruster_count("count", self.count, true)?;
+        let index_limit = match kind {
+            ReconfigKind::Unknown => None,
+            // The removed thruster is no longer counted: it was at most index `count`.
+            ReconfigKind::ThrusterRemoved => Some(self.count + 1),
+            ReconfigKind::ThrusterAdded | ReconfigKind::ThrusterMoved => Some(self.count),
+        };
+        if let Some(limit) = index_limit {
+            let limit = limit.min(MAX_THRUSTERS as u32);
+            if self.thruster >= limit {
+                return Err(RejectReason::IndexOutOfRange {
+                    field: Field::new("thruster"),
+                    index: self.thruster,
+                    count: limit,
+                });
+            }
+        }
+        if zero_or_one("has_geometry", self.has_geometry)? {
+            matrix_in_range(
+                "position",
+                &self.position[..n],
+                3,
+                MAX_POSITION_M,
+                false,
+                "m",
+            )?;
+            matrix_in_range(
+                "direction",
+                &self.direction[..n],
+                3,
+                1.0 + DIRECTION_NORM_TOLERANCE,
+                false,
+                "",
+            )?;
+            for (i, d) in self.direction[..n].iter().enumerate() {
+                unit_norm(Field::at("direction", i), d, DIRECTION_NORM_TOLERANCE)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Validate for ModelMsg {
+    /// Count 1..=16, source and method known, only the 6 DOF bits in `actuated`, all
+    /// matrix entries in use finite and bounded, standard errors and error bounds
+    /// non-negative, and the allocation never commands a non-actuated DOF.
+    fn validate(&self) -> Result<(), RejectReason> {
+        let n = thruster_count("count", self.count, false)?;
+        known_enum("source", self.source())?;
+        known_enum("method", self.method())?;
+        known_flags(
+            "actuated",
+            u64::from(self.actuated),
+            u64::from(ALL_DOFS_MASK),
+        )?;
+        matrix_in_range(
+            "effectiveness",
+            &self.effectiveness,
+            n,
+            MAX_EFFECTIVENESS,
+            false,
+            "per unit command",
+        )?;
+        matrix_in_range(
+            "allocation",
+            &self.allocation[..n],
+            DOF_COUNT,
+            MAX_ALLOCATION,
+            false,
+            "per unit motion",
+        )?;
+        matrix_in_range(
+            "std_err",
+            &self.std_err,
+            n,
+            MAX_EFFECTIVENESS,
+            true,
+            "per unit command",
+        )?;
+        in_range(
+            Field::new("rel_err_rot"),
+            self.rel_err_rot,
+            0.0,
+            f64::MAX,
+            "",
+        )?;
+        in_range(
+            Field::new("rel_err_acc"),
+            self.rel_err_acc,
+            0.0,
+            f64::MAX,
+            "",
+        )?;
+        for (i, row) in self.allocation[..n].iter().enumerate() {
+            for dof in Dof::ALL {
+                if !self.is_actuated(*dof) && row[dof.index()] != 0.0 {
+                    return Err(RejectReason::Inconsistent {
+                        field: Field::at2("allocation", i, dof.index()),
+                        detail: "commands a DOF that is not actuated",
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Validate for TruthMsg {
+    /// Count within capacity, matrices in use finite and bounded.
+    fn validate(&self) -> Result<(), RejectReason> {
+        let n = thruster_count("count", self.count, true)?;
+        matrix_in_range(
+            "effectiveness",
+            &self.effectiveness,
+            n,
+            MAX_EFFECTIVENESS,
+            false,
+            "per unit command",
+        )?;
+        matrix_in_range(
+            "reverse_effectiveness",
+            &self.reverse_effectiveness,
+            n,
+            MAX_EFFECTIVENESS,
+            false,
+            "per unit command",
+        )
+    }
+}
+
+impl Validate for StatusMsg {
+    /// State known, pulse within plan, floats finite and non-negative, power in [0, 1],
+    /// text valid UTF-8.
+    fn validate(&self) -> Result<(), RejectReason> {
+        known_enum("state", self.state())?;
+        in_range(
+            Field::new("error_bound"),
+            self.error_bound,
+            0.0,
+            f64::MAX,
+            "",
+        )?;
+        in_range(Field::new("power"), self.power, 0.0, MAX_THRUST, "")?;
+        in_range(
+            Field::new("sigma_rot"),
+            self.sigma_rot,
+            0.0,
+            MAX_GYRO_RAD_S,
+            "rad/s",
+        )?;
+        in_range(
+            Field::new("sigma_acc"),
+            self.sigma_acc,
+            0.0,
+            MAX_ACCEL_M_S2,
+            "m/s^2",
+        )?;
+        in_range(
+            Field::new("imu_rate_hz"),
+            self.imu_rate_hz,
+            0.0,
+            f64::MAX,
+            "Hz",
+        )?;
+        utf8_text("text", &self.text)
+    }
+}
+
+impl Validate for Setpoint {
+    /// Quaternion finite and unit length, depth finite and in range, flags known.
+    fn validate(&self) -> Result<(), RejectReason> {
+        for (i, &q) in self.attitude.iter().enumerate() {
+            finite(Field::at("attitude", i), q)?;
+        }
+        unit_norm(
+            Field::new("attitude"),
+            &self.attitude,
+            QUATERNION_NORM_TOLERANCE,
+        )?;
+        in_range(
+            Field::new("depth"),
+            self.depth,
+            MIN_DEPTH_M,
+            MAX_DEPTH_M,
+            "m",
+        )?;
+        known_flags("flags", self.flags, Setpoint::KNOWN_FLAGS)
+    }
+}
+
+impl Validate for ControlRequest {
+    /// Kind known, flags zero, value finite (and in [0, 1] for Estimate, where it is a
+    /// power), text valid UTF-8.
+    fn validate(&self) -> Result<(), RejectReason> {
+        let kind = known_enum("kind", self.kind())?;
+        known_flags("flags", u64::from(self.flags), 0)?;
+        finite(Field::new("value"), self.value)?;
+        if kind == RequestKind::Estimate {
+            in_range(Field::new("value"), self.value, 0.0, MAX_THRUST, "")?;
+        }
+        utf8_text("text", &self.text)
+    }
+}
+
+impl Validate for ControlResponse {
+    /// Code known, `ok` 0 or 1 and agreeing with the code, text valid UTF-8.
+    fn validate(&self) -> Result<(), RejectReason> {
+        let code = known_enum("code", self.code())?;
+        let ok = zero_or_one("ok", self.ok)?;
+        if ok != (code == ResponseCode::Ok) {
+            return Err(RejectReason::Inconsistent {
+                field: Field::new("ok"),
+                detail: "disagrees with code",
+            });
+        }
+        utf8_text("text", &self.text)
+    }
+}
