@@ -49,7 +49,10 @@ fn gauss(rng: &mut impl Rng, sigma: f64) -> Vector3<f64> {
 
 fn response(b: &DMatrix<f64>, u: &[f64]) -> (Vector3<f64>, Vector3<f64>) {
     let y = b * DVector::from_row_slice(u);
-    (Vector3::new(y[0], y[1], y[2]), Vector3::new(y[3], y[4], y[5]))
+    (
+        Vector3::new(y[0], y[1], y[2]),
+        Vector3::new(y[3], y[4], y[5]),
+    )
 }
 
 /// Drive the live pulse API with a synthetic vehicle whose response follows the assumed shape
@@ -133,7 +136,11 @@ fn paper_method_recovers_exactly_without_noise_on_a_balanced_plan() {
     let e = est.estimate();
     assert!((&e.effectiveness - &truth).norm() / truth.norm() < 1e-9);
     assert_eq!(e.method, Method::Paper);
-    assert_eq!(e.rank.actuated.count(), 6, "the paper's method cannot see missing DOFs");
+    assert_eq!(
+        e.rank.actuated.count(),
+        6,
+        "the paper's method cannot see missing DOFs"
+    );
     assert_eq!(est.stop_decision(), StopDecision::PlanComplete);
 }
 
@@ -167,12 +174,16 @@ fn noisy_estimate_lies_within_its_own_confidence() {
                 }
             }
         }
-        let rot_err = (e.effectiveness.rows(0, 3) - truth.rows(0, 3)).norm() / truth.rows(0, 3).norm();
+        let rot_err =
+            (e.effectiveness.rows(0, 3) - truth.rows(0, 3)).norm() / truth.rows(0, 3).norm();
         bound_ratio += (rot_err / e.rel_err_rot).powi(2);
     }
     let share = inside as f64 / total as f64;
     let mean_z2 = z2 / total as f64;
-    assert!((0.93..=0.975).contains(&share), "share inside 2 se: {share}");
+    assert!(
+        (0.93..=0.975).contains(&share),
+        "share inside 2 se: {share}"
+    );
     assert!((0.9..=1.1).contains(&mean_z2), "mean z^2: {mean_z2}");
     // The 1-sigma relative bound is an RMS prediction of the actual relative error.
     let rms = (bound_ratio / runs as f64).sqrt();
@@ -211,12 +222,23 @@ fn k_sigma_selection_and_power_escalation() {
     );
     let u = est.begin_pulse().to_vec();
     // k * sigma = 0.75 rad/s and 1.5 m/s^2; one sample above both, one below both.
-    est.push_pulse_sample(0.5, &Vector3::new(0.8, 0.0, 0.0), &Vector3::new(0.0, 1.6, 0.0));
-    est.push_pulse_sample(0.6, &Vector3::new(0.7, 0.0, 0.0), &Vector3::new(0.0, 1.4, 0.0));
+    est.push_pulse_sample(
+        0.5,
+        &Vector3::new(0.8, 0.0, 0.0),
+        &Vector3::new(0.0, 1.6, 0.0),
+    );
+    est.push_pulse_sample(
+        0.6,
+        &Vector3::new(0.7, 0.0, 0.0),
+        &Vector3::new(0.0, 1.4, 0.0),
+    );
     let s = est.end_pulse().unwrap();
     assert_eq!((s.kept_rot, s.kept_acc, s.samples), (1, 1, 2));
     assert_eq!(s.next_power, 0.5);
-    assert!(u.iter().all(|v| v.abs() == 0.5), "orthogonal: every thruster at +-power");
+    assert!(
+        u.iter().all(|v| v.abs() == 0.5),
+        "orthogonal: every thruster at +-power"
+    );
     // Only one group silent is enough to escalate (Algorithm 1: flag_acc or flag_rot).
     est.begin_pulse();
     est.push_pulse_sample(0.5, &Vector3::new(0.8, 0.0, 0.0), &Vector3::zeros());
@@ -234,10 +256,18 @@ fn all_parallel_thrusters_report_missing_dofs() {
     );
     run_live(&mut est, &truth, 16, (0.25, 0.5), &mut rng);
     let e = est.estimate();
-    assert_eq!(e.rank.rank, 3, "singular values {:?}", e.rank.singular_values);
+    assert_eq!(
+        e.rank.rank, 3,
+        "singular values {:?}",
+        e.rank.singular_values
+    );
     assert_eq!(e.rank.actuated.names(), vec!["pitch", "yaw", "surge"]);
     for dof in [Dof::Roll, Dof::Sway, Dof::Heave] {
-        assert_eq!(e.allocation.column(dof.index()).norm(), 0.0, "{dof:?} commanded");
+        assert_eq!(
+            e.allocation.column(dof.index()).norm(),
+            0.0,
+            "{dof:?} commanded"
+        );
     }
     // The paper's method, same data, "learns" all six (its Fig. 5b blue bars).
     let paper = Estimator::new(
@@ -269,7 +299,12 @@ fn dead_and_reversed_thrusters_are_diagnosed() {
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     run_live(&mut est, &truth, 16, (0.25, 0.5), &mut rng);
     let e = est.estimate();
-    let dead: Vec<usize> = e.thruster.iter().filter(|t| t.dead).map(|t| t.index).collect();
+    let dead: Vec<usize> = e
+        .thruster
+        .iter()
+        .filter(|t| t.dead)
+        .map(|t| t.index)
+        .collect();
     let reversed: Vec<usize> = e
         .thruster
         .iter()
@@ -317,13 +352,27 @@ fn asymmetric_forward_and_reverse_gains_are_detected() {
     let e = est.estimate();
     let t0 = &e.thruster[0];
     assert!(t0.asymmetric, "{t0:?}");
-    assert!((t0.reverse_gain_ratio.unwrap() - 4.1 / 5.25).abs() < 0.05, "{t0:?}");
-    assert!(e.thruster[1..].iter().all(|t| !t.asymmetric), "{:?}", e.thruster);
+    assert!(
+        (t0.reverse_gain_ratio.unwrap() - 4.1 / 5.25).abs() < 0.05,
+        "{t0:?}"
+    );
+    assert!(
+        e.thruster[1..].iter().all(|t| !t.asymmetric),
+        "{:?}",
+        e.thruster
+    );
 
-    let mut orth = Estimator::new(EstimatorConfig::default(), 5, NoiseLevels::isotropic(0.05, 0.1));
+    let mut orth = Estimator::new(
+        EstimatorConfig::default(),
+        5,
+        NoiseLevels::isotropic(0.05, 0.1),
+    );
     run_live(&mut orth, &truth, 16, (0.05, 0.1), &mut rng);
     let e = orth.estimate();
-    assert!(e.thruster.iter().all(|t| t.reverse_gain_ratio.is_none() && !t.asymmetric));
+    assert!(e
+        .thruster
+        .iter()
+        .all(|t| t.reverse_gain_ratio.is_none() && !t.asymmetric));
 }
 
 #[test]
@@ -343,11 +392,15 @@ fn automatic_stop_fires_at_the_target_and_means_it() {
             stop = est.stop_decision();
         }
         let StopDecision::Converged { rel_err_rot, .. } = stop else {
-            panic!("seed {seed}: stopped with {stop:?} after {} pulses", est.pulses());
+            panic!(
+                "seed {seed}: stopped with {stop:?} after {} pulses",
+                est.pulses()
+            );
         };
         assert!(rel_err_rot <= 0.05);
         let e = est.estimate();
-        let actual = (e.effectiveness.rows(0, 3) - truth.rows(0, 3)).norm() / truth.rows(0, 3).norm();
+        let actual =
+            (e.effectiveness.rows(0, 3) - truth.rows(0, 3)).norm() / truth.rows(0, 3).norm();
         if actual <= 0.1 {
             hits += 1;
         }
@@ -393,7 +446,10 @@ fn forward_error_matches_the_cramer_rao_bound() {
         }
         for g in 0..2 {
             let ratio = (err2[g] / crlb2[g]).sqrt();
-            assert!((0.9..=1.1).contains(&ratio), "{excitation:?} group {g}: RMS error / CRLB = {ratio}");
+            assert!(
+                (0.9..=1.1).contains(&ratio),
+                "{excitation:?} group {g}: RMS error / CRLB = {ratio}"
+            );
         }
     }
 }

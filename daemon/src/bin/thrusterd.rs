@@ -10,7 +10,11 @@ use thrusterd::study::fig2::{run_study, to_csv, StudyParams};
 use thrusterd::study::report::figures;
 
 #[derive(Parser)]
-#[command(name = "thrusterd", version, about = "Learns an underwater robot's thruster configuration and controls it")]
+#[command(
+    name = "thrusterd",
+    version,
+    about = "Learns an underwater robot's thruster configuration and controls it"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -49,12 +53,13 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Study {
-            study: Study::Fig2 {
-                out,
-                seed,
-                configs,
-                pulses,
-            },
+            study:
+                Study::Fig2 {
+                    out,
+                    seed,
+                    configs,
+                    pulses,
+                },
         } => fig2(&out, seed, configs, pulses),
     }
 }
@@ -73,7 +78,8 @@ fn fig2(out: &Path, seed: u64, configs: usize, pulses: usize) -> Result<()> {
     let compute = started.elapsed();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("study.csv");
-    std::fs::write(&csv_path, to_csv(&rows)).with_context(|| format!("writing {}", csv_path.display()))?;
+    std::fs::write(&csv_path, to_csv(&rows))
+        .with_context(|| format!("writing {}", csv_path.display()))?;
     let mut written = vec![csv_path];
     for (name, svg) in figures(&rows) {
         let path = out.join(name);

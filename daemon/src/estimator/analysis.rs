@@ -114,9 +114,7 @@ pub fn rank_report(b: &DMatrix<f64>, std_err: &DMatrix<f64>, cfg: &EstimatorConf
             *share = significant.iter().map(|&k| u[(j, k)].powi(2)).sum::<f64>();
         }
     }
-    let actuated = DofMask(std::array::from_fn(|j| {
-        dof_share[j] >= cfg.actuation_share
-    }));
+    let actuated = DofMask(std::array::from_fn(|j| dof_share[j] >= cfg.actuation_share));
     RankReport {
         singular_values,
         threshold,
@@ -150,7 +148,11 @@ pub fn allocation(b: &DMatrix<f64>, actuated: DofMask, rank: usize) -> DMatrix<f
     // Keep exactly `keep` singular values: everything at or below the keep-th largest's
     // successor is dropped, independent of absolute scale.
     let cut = if keep < sv.len() { sv[keep] } else { 0.0 };
-    let rel_tol = if sv[0] > 0.0 { (cut / sv[0]).max(NUMERICAL_REL_TOL) } else { 1.0 };
+    let rel_tol = if sv[0] > 0.0 {
+        (cut / sv[0]).max(NUMERICAL_REL_TOL)
+    } else {
+        1.0
+    };
     let sub_pinv = pinv(&sub, rel_tol);
     for (c, &row) in rows.iter().enumerate() {
         out.set_column(row, &sub_pinv.column(c));
@@ -282,7 +284,11 @@ mod tests {
             let j = dof.index();
             for k in 0..6 {
                 let want = if k == j { 1.0 } else { 0.0 };
-                assert!((ba[(k, j)] - want).abs() < 1e-9, "BA[{k},{j}]={}", ba[(k, j)]);
+                assert!(
+                    (ba[(k, j)] - want).abs() < 1e-9,
+                    "BA[{k},{j}]={}",
+                    ba[(k, j)]
+                );
             }
         }
     }

@@ -115,7 +115,12 @@ impl EstimatorConfig {
             }
         };
         let f = |v: f64| v.is_finite();
-        check(f(self.k_sigma) && self.k_sigma > 0.0, "k_sigma", self.k_sigma, "must be > 0")?;
+        check(
+            f(self.k_sigma) && self.k_sigma > 0.0,
+            "k_sigma",
+            self.k_sigma,
+            "must be > 0",
+        )?;
         check(
             f(self.initial_power) && self.initial_power > 0.0 && self.initial_power <= 1.0,
             "initial_power",
@@ -140,8 +145,18 @@ impl EstimatorConfig {
             self.target_rel_err,
             "must be > 0",
         )?;
-        check(self.min_cycles >= 1, "min_cycles", self.min_cycles as f64, "must be >= 1")?;
-        check(self.max_pulses >= 1, "max_pulses", self.max_pulses as f64, "must be >= 1")?;
+        check(
+            self.min_cycles >= 1,
+            "min_cycles",
+            self.min_cycles as f64,
+            "must be >= 1",
+        )?;
+        check(
+            self.max_pulses >= 1,
+            "max_pulses",
+            self.max_pulses as f64,
+            "must be >= 1",
+        )?;
         check(
             self.paper_cycles >= 1,
             "paper_cycles",

@@ -123,7 +123,10 @@ fn orthogonal(n: usize) -> Vec<Vec<f64>> {
 
 /// Sylvester construction: H_1 = [1], H_2m = [[H, H], [H, -H]].
 pub fn hadamard(order: usize) -> Vec<Vec<f64>> {
-    assert!(order.is_power_of_two(), "Sylvester Hadamard needs a power of two");
+    assert!(
+        order.is_power_of_two(),
+        "Sylvester Hadamard needs a power of two"
+    );
     let mut h = vec![vec![1.0]];
     while h.len() < order {
         let m = h.len();

@@ -62,8 +62,7 @@ impl ForwardLs {
     pub fn add(&mut self, x: &[f64], y: &Vector3<f64>) {
         let n = self.gram.nrows();
         debug_assert_eq!(x.len(), n);
-        if x.len() != n || !x.iter().all(|v| v.is_finite()) || !y.iter().all(|v| v.is_finite())
-        {
+        if x.len() != n || !x.iter().all(|v| v.is_finite()) || !y.iter().all(|v| v.is_finite()) {
             return;
         }
         for (i, &xi) in x.iter().enumerate() {

@@ -90,7 +90,11 @@ pub fn pinv(m: &DMatrix<f64>, rel_tol: f64) -> DMatrix<f64> {
 pub fn rel_frobenius_err(estimate: &DMatrix<f64>, truth: &DMatrix<f64>) -> f64 {
     let denom = truth.norm();
     if denom == 0.0 {
-        return if estimate.norm() == 0.0 { 0.0 } else { f64::INFINITY };
+        return if estimate.norm() == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
     }
     (estimate - truth).norm() / denom
 }

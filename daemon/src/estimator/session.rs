@@ -44,7 +44,10 @@ pub struct PulseSummary {
 pub enum StopDecision {
     Continue,
     /// The error bound reached the target (forward method).
-    Converged { rel_err_rot: f64, rel_err_acc: f64 },
+    Converged {
+        rel_err_rot: f64,
+        rel_err_acc: f64,
+    },
     /// The planned cycles are done (paper method, which has no bound).
     PlanComplete,
     /// The hard pulse limit.
@@ -200,7 +203,7 @@ impl Estimator {
             samples: 0,
             kept: [0, 0],
         });
-        &self.pulse.as_ref().map(|p| p.u.as_slice()).unwrap_or(&[])[..]
+        self.pulse.as_ref().map(|p| p.u.as_slice()).unwrap_or(&[])
     }
 
     /// Command of the pulse in progress, if any.
@@ -360,7 +363,10 @@ impl Estimator {
     fn forward_estimate(&self) -> Estimate {
         let n = self.thrusters();
         let sols = [self.forward[ROT].solve(), self.forward[ACC].solve()];
-        let sigmas = [self.group_sigma(ROT, &sols[ROT]), self.group_sigma(ACC, &sols[ACC])];
+        let sigmas = [
+            self.group_sigma(ROT, &sols[ROT]),
+            self.group_sigma(ACC, &sols[ACC]),
+        ];
         let excited = sols.iter().all(|s| s.rank == n);
         let b = stack(&sols[ROT].b, &sols[ACC].b);
         let mut std_err = DMatrix::zeros(6, n);

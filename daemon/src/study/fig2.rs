@@ -13,7 +13,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::estimator::linalg::rel_frobenius_err;
-use crate::estimator::{Estimator, EstimatorConfig, Excitation, ExcitationPlan, Method, NoiseLevels};
+use crate::estimator::{
+    Estimator, EstimatorConfig, Excitation, ExcitationPlan, Method, NoiseLevels,
+};
 
 /// The paper's noise on rotation (rad/s) and acceleration (g), per axis.
 pub const SIGMA_ROT: f64 = 0.25;
@@ -133,7 +135,8 @@ pub fn run_configuration(
     let (r, a) = random_configuration(&mut rng, n);
     // Noise streams differ per excitation so plans are compared over independent draws.
     let mut noise_rng = ChaCha8Rng::seed_from_u64(
-        config_seed(seed, n, p, config) ^ (excitation as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407),
+        config_seed(seed, n, p, config)
+            ^ (excitation as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407),
     );
     let cfg = EstimatorConfig {
         excitation,
@@ -147,8 +150,10 @@ pub fn run_configuration(
         let u = DVector::from_iterator(n, plan.pattern(k).iter().map(|s| s * p));
         let rot_true = &r * &u;
         let acc_true = &a * &u;
-        let rot = Vector3::new(rot_true[0], rot_true[1], rot_true[2]) + gaussian3(&mut noise_rng, SIGMA_ROT);
-        let acc = Vector3::new(acc_true[0], acc_true[1], acc_true[2]) + gaussian3(&mut noise_rng, SIGMA_ACC);
+        let rot = Vector3::new(rot_true[0], rot_true[1], rot_true[2])
+            + gaussian3(&mut noise_rng, SIGMA_ROT);
+        let acc = Vector3::new(acc_true[0], acc_true[1], acc_true[2])
+            + gaussian3(&mut noise_rng, SIGMA_ACC);
         est.push_observation(u.as_slice(), &rot, &acc);
 
         let [fwd_rot, fwd_acc] = est.forward_solutions();

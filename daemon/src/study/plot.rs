@@ -70,7 +70,11 @@ pub fn render(grid: &Grid, panels: &[Panel]) -> String {
         let mut x = GAP + MARGIN_L;
         let y = height - 12.0;
         for ser in &first.series {
-            let dash = if ser.dashed { r#" stroke-dasharray="5,3""# } else { "" };
+            let dash = if ser.dashed {
+                r#" stroke-dasharray="5,3""#
+            } else {
+                ""
+            };
             let _ = write!(
                 s,
                 r#"<line x1="{x}" y1="{y}" x2="{}" y2="{y}" stroke="{}" stroke-width="2"{dash}/><text x="{}" y="{}">{}</text>"#,
@@ -133,16 +137,29 @@ fn draw_panel(s: &mut String, grid: &Grid, panel: &Panel, x0: f64, y0: f64) {
     );
     for ser in &panel.series {
         if let Some(band) = &ser.band {
-            let finite: Vec<_> = band.iter().filter(|b| b.1.is_finite() && b.2.is_finite()).collect();
+            let finite: Vec<_> = band
+                .iter()
+                .filter(|b| b.1.is_finite() && b.2.is_finite())
+                .collect();
             if finite.len() > 1 {
                 let mut d = String::new();
                 for (k, b) in finite.iter().enumerate() {
-                    let _ = write!(d, "{}{:.1},{:.1} ", if k == 0 { "M" } else { "L" }, sx(b.0), sy(b.2));
+                    let _ = write!(
+                        d,
+                        "{}{:.1},{:.1} ",
+                        if k == 0 { "M" } else { "L" },
+                        sx(b.0),
+                        sy(b.2)
+                    );
                 }
                 for b in finite.iter().rev() {
                     let _ = write!(d, "L{:.1},{:.1} ", sx(b.0), sy(b.1));
                 }
-                let _ = write!(s, r#"<path d="{d}Z" fill="{}" fill-opacity="0.15" stroke="none"/>"#, ser.color);
+                let _ = write!(
+                    s,
+                    r#"<path d="{d}Z" fill="{}" fill-opacity="0.15" stroke="none"/>"#,
+                    ser.color
+                );
             }
         }
         let pts: Vec<String> = ser
@@ -152,7 +169,11 @@ fn draw_panel(s: &mut String, grid: &Grid, panel: &Panel, x0: f64, y0: f64) {
             .map(|p| format!("{:.1},{:.1}", sx(p.0), sy(p.1)))
             .collect();
         if pts.len() > 1 {
-            let dash = if ser.dashed { r#" stroke-dasharray="5,3""# } else { "" };
+            let dash = if ser.dashed {
+                r#" stroke-dasharray="5,3""#
+            } else {
+                ""
+            };
             let _ = write!(
                 s,
                 r#"<polyline points="{}" fill="none" stroke="{}" stroke-width="1.6"{dash}/>"#,
@@ -169,7 +190,9 @@ fn trim(v: f64) -> String {
 }
 
 fn esc(t: &str) -> String {
-    t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    t.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 #[cfg(test)]

@@ -9,13 +9,13 @@ const RED: &str = "#c8321e";
 const ORANGE: &str = "#e08a00";
 const BLACK: &str = "#222222";
 
-fn select<'a>(
-    rows: &'a [StudyRow],
+fn select(
+    rows: &[StudyRow],
     n: usize,
     p: f64,
     method: Method,
     excitation: Excitation,
-) -> Vec<&'a StudyRow> {
+) -> Vec<&StudyRow> {
     rows.iter()
         .filter(|r| r.n == n && r.p == p && r.method == method && r.excitation == excitation)
         .collect()
@@ -33,7 +33,10 @@ fn series(
         label: label.to_string(),
         color,
         dashed: false,
-        points: rows.iter().map(|r| (r.pulse as f64, stat(r).mean)).collect(),
+        points: rows
+            .iter()
+            .map(|r| (r.pulse as f64, stat(r).mean))
+            .collect(),
         band: with_band.then(|| {
             rows.iter()
                 .map(|r| {
