@@ -6,6 +6,8 @@
 //!   and cleanup of iceoryx2 resources.
 //! - [`wire`]: enums as `u32` fields and fixed-size text, safe for any bit pattern.
 
+#![warn(missing_docs)]
+
 pub mod messages;
 pub mod services;
 pub mod validate;

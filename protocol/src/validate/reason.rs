@@ -56,7 +56,7 @@ impl fmt::Display for Field {
     }
 }
 
-/// Why a message was rejected. The message names the field, e.g. "gyro[1] is NaN".
+/// Why a message was rejected. The message names the field, e.g. `gyro[1] is NaN`.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum RejectReason {
     /// A floating-point value is NaN or infinite.
