@@ -15,8 +15,10 @@ use super::topics::{
 };
 use super::{Ipc, IpcConfig, IpcNode};
 
-/// Opens (or creates) the pub/sub service of `T`'s topic with the protocol's QoS.
-fn open_pubsub<T: TopicMessage>(
+/// Opens (or creates) the pub/sub service of `T`'s topic with the protocol's QoS and
+/// returns its full name and port factory, for callers that need raw iceoryx2 ports
+/// (e.g. custom subscriber settings). [`Port`] and [`Inbox`] cover the common cases.
+pub fn open_topic<T: TopicMessage>(
     node: &IpcNode,
     ipc: &IpcConfig,
 ) -> Result<(String, PubSubFactory<Ipc, T, ()>), IpcError> {
@@ -39,8 +41,9 @@ fn open_pubsub<T: TopicMessage>(
     Ok((name, factory))
 }
 
-/// Opens (or creates) the event service `<service>/event` paired with a service.
-pub(crate) fn open_event(node: &IpcNode, service: &str) -> Result<EventFactory<Ipc>, IpcError> {
+/// Opens (or creates) the event service `<service>/event` paired with the service of
+/// full name `service` (e.g. `veh1/imu`).
+pub fn open_event(node: &IpcNode, service: &str) -> Result<EventFactory<Ipc>, IpcError> {
     let name = format!("{service}{EVENT_SUFFIX}");
     let service_name = ServiceName::new(&name).map_err(ice("make service name", &name))?;
     node.service_builder(&service_name)
@@ -74,7 +77,7 @@ pub struct Port<T: TopicMessage> {
 impl<T: TopicMessage> Port<T> {
     /// Opens or creates `T`'s topic and its event service and creates the ports.
     pub fn create(node: &IpcNode, ipc: &IpcConfig) -> Result<Self, IpcError> {
-        let (service, factory) = open_pubsub::<T>(node, ipc)?;
+        let (service, factory) = open_topic::<T>(node, ipc)?;
         let publisher = factory
             .publisher_builder()
             .create()
@@ -164,7 +167,7 @@ impl<T: TopicMessage> Inbox<T> {
         ipc: &IpcConfig,
         buffer: usize,
     ) -> Result<Self, IpcError> {
-        let (service, factory) = open_pubsub::<T>(node, ipc)?;
+        let (service, factory) = open_topic::<T>(node, ipc)?;
         let qos = T::TOPIC.qos();
         let buffer = buffer.clamp(1, qos.max_buffer);
         let subscriber = factory
