@@ -1,5 +1,9 @@
-//! thrusterd's pure core: the estimator, (later) the controller and the state machine, and the
-//! paper's simulation study. No IPC, no clocks, no files in here: those live in the binaries.
+//! thrusterd's pure core: estimator, attitude filter, controller, model and the state machine,
+//! plus the paper's simulation study. No IPC, no clocks, no files in here except `store`, the
+//! one module that reads and writes the state directory.
 
+pub mod attitude;
+pub mod controller;
 pub mod estimator;
+pub mod model;
 pub mod study;

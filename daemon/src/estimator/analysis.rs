@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use super::config::EstimatorConfig;
 use super::dof::{Dof, DofMask};
-use super::linalg::pinv;
+use super::linalg::{pinv, singular_left, singular_right};
 
 /// Singular values below this fraction of the largest are round-off, whatever the noise says.
 const NUMERICAL_REL_TOL: f64 = 1e-9;
@@ -95,24 +95,19 @@ pub fn rank_report(b: &DMatrix<f64>, std_err: &DMatrix<f64>, cfg: &EstimatorConf
         }
     }
     let threshold = cfg.rank_threshold * (6f64.sqrt() + (n as f64).sqrt());
-    let svd = z.svd(true, false);
-    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
-    order.sort_by(|&a, &c| svd.singular_values[c].total_cmp(&svd.singular_values[a]));
-    let singular_values: Vec<f64> = order.iter().map(|&k| svd.singular_values[k]).collect();
+    // Left singular vectors span the motions the thrusters can make (6-dimensional space).
+    let (mut singular_values, u) = singular_left(&z);
+    singular_values.truncate(n.min(6));
     let top = singular_values.first().copied().unwrap_or(0.0);
-    let significant: Vec<usize> = order
-        .iter()
-        .copied()
+    let significant: Vec<usize> = (0..singular_values.len())
         .filter(|&k| {
-            let s = svd.singular_values[k];
+            let s = singular_values[k];
             s > threshold && s > top * NUMERICAL_REL_TOL
         })
         .collect();
     let mut dof_share = [0.0; 6];
-    if let Some(u) = svd.u.as_ref() {
-        for (j, share) in dof_share.iter_mut().enumerate() {
-            *share = significant.iter().map(|&k| u[(j, k)].powi(2)).sum::<f64>();
-        }
+    for (j, share) in dof_share.iter_mut().enumerate() {
+        *share = significant.iter().map(|&k| u[(j, k)].powi(2)).sum::<f64>();
     }
     let actuated = DofMask(std::array::from_fn(|j| dof_share[j] >= cfg.actuation_share));
     RankReport {
@@ -142,9 +137,7 @@ pub fn allocation(b: &DMatrix<f64>, actuated: DofMask, rank: usize) -> DMatrix<f
     }
     let sub = b.select_rows(rows.iter());
     let keep = rank.min(rows.len()).min(n);
-    let svd = sub.clone().svd(true, true);
-    let mut sv: Vec<f64> = svd.singular_values.iter().cloned().collect();
-    sv.sort_by(|a, c| c.total_cmp(a));
+    let (sv, _) = singular_right(&sub);
     // Keep exactly `keep` singular values: everything at or below the keep-th largest's
     // successor is dropped, independent of absolute scale.
     let cut = if keep < sv.len() { sv[keep] } else { 0.0 };

@@ -61,29 +61,57 @@ pub fn sym_sqrt(g: &DMatrix<f64>) -> DMatrix<f64> {
     out
 }
 
-/// Moore-Penrose pseudo-inverse by SVD, dropping singular values at or below `rel_tol` times
-/// the largest. Returns the zero matrix (transposed shape) for an all-zero input.
+/// Moore-Penrose pseudo-inverse, dropping singular values at or below `rel_tol` times the
+/// largest. Returns the zero matrix (transposed shape) for an all-zero input.
+///
+/// Computed from the symmetric eigen-decomposition of M^T M (singular values s_k = sqrt of its
+/// eigenvalues): pinv(M) = sum_k v_k v_k^T M^T / s_k^2. nalgebra 0.33's general SVD returned
+/// visibly wrong factors (errors of several percent) for effectiveness matrices with zero rows,
+/// while its symmetric eigen-solver is accurate; squaring the condition number is harmless for
+/// these small, truncated problems.
 pub fn pinv(m: &DMatrix<f64>, rel_tol: f64) -> DMatrix<f64> {
     let (r, c) = m.shape();
-    if r == 0 || c == 0 {
+    if r == 0 || c == 0 || !m.iter().all(|v| v.is_finite()) {
         return DMatrix::zeros(c, r);
     }
-    let svd = m.clone().svd(true, true);
-    let top = svd.singular_values.iter().cloned().fold(0.0_f64, f64::max);
-    if top <= 0.0 || !top.is_finite() {
+    let (values, vectors) = singular_right(m);
+    let top = values.first().copied().unwrap_or(0.0);
+    if top <= 0.0 {
         return DMatrix::zeros(c, r);
     }
-    // u and v_t are always present because we asked for them above.
-    let (Some(u), Some(v_t)) = (svd.u.as_ref(), svd.v_t.as_ref()) else {
-        return DMatrix::zeros(c, r);
-    };
     let mut out = DMatrix::zeros(c, r);
-    for (k, &s) in svd.singular_values.iter().enumerate() {
+    for (k, &s) in values.iter().enumerate() {
         if s > top * rel_tol {
-            out += (v_t.row(k).transpose() * u.column(k).transpose()) / s;
+            let v = vectors.column(k);
+            out += (v * (v.transpose() * m.transpose())) / (s * s);
         }
     }
     out
+}
+
+/// Singular values of `m` (descending) and the matching right singular vectors (columns),
+/// from the eigen-decomposition of M^T M.
+pub fn singular_right(m: &DMatrix<f64>) -> (Vec<f64>, DMatrix<f64>) {
+    sorted_eigen(&(m.transpose() * m))
+}
+
+/// Singular values of `m` (descending) and the matching left singular vectors (columns), from
+/// the eigen-decomposition of M M^T.
+pub fn singular_left(m: &DMatrix<f64>) -> (Vec<f64>, DMatrix<f64>) {
+    sorted_eigen(&(m * m.transpose()))
+}
+
+fn sorted_eigen(g: &DMatrix<f64>) -> (Vec<f64>, DMatrix<f64>) {
+    let n = g.nrows();
+    let eig = SymmetricEigen::new(g.clone());
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let values = order
+        .iter()
+        .map(|&k| eig.eigenvalues[k].max(0.0).sqrt())
+        .collect();
+    let vectors = DMatrix::from_fn(n, n, |i, j| eig.eigenvectors[(i, order[j])]);
+    (values, vectors)
 }
 
 /// Frobenius norm of the difference of two equally shaped matrices, relative to the second.
@@ -127,6 +155,26 @@ mod tests {
         let g = DMatrix::from_row_slice(2, 2, &[4.0, 1.0, 1.0, 3.0]);
         let s = sym_sqrt(&g);
         assert!((&s * &s - g).norm() < 1e-12);
+    }
+
+    #[test]
+    fn pinv_is_accurate_with_zero_rows() {
+        // The shape that exposed nalgebra's SVD: 6 x 4 with two zero rows.
+        let b = DMatrix::from_row_slice(
+            6,
+            4,
+            &[
+                0.0, 0.0, -36.8, 36.8, //
+                0.0, 0.0, 0.0, 0.0, //
+                36.8, -36.8, 0.0, 0.0, //
+                3.03, 3.03, 0.0, 0.0, //
+                0.0, 0.0, 0.0, 0.0, //
+                0.0, 0.0, 1.98, 1.98, //
+            ],
+        );
+        let p = pinv(&b, 1e-9);
+        let pb = &p * &b;
+        assert!((pb - DMatrix::identity(4, 4)).norm() < 1e-9);
     }
 
     #[test]

@@ -12,6 +12,7 @@ use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
 use super::excitation::ExcitationPlan;
 use super::forward::{ForwardLs, ForwardSolution};
+use super::linalg::singular_right;
 use super::noise::NoiseLevels;
 use super::paper::PaperLs;
 use super::response::PulseShape;
@@ -465,9 +466,8 @@ impl Estimator {
             alloc.set_column(3 + a, &a_acc.row(a).transpose());
         }
         let nan = DMatrix::from_element(6, n, f64::NAN);
-        let svd = b.clone().svd(false, false);
-        let mut sv: Vec<f64> = svd.singular_values.iter().cloned().collect();
-        sv.sort_by(|a, c| c.total_cmp(a));
+        let (mut sv, _) = singular_right(&b);
+        sv.truncate(6);
         let top = sv.first().copied().unwrap_or(0.0);
         let rank = RankReport {
             rank: sv.iter().filter(|s| **s > top * 1e-9).count(),

@@ -1,0 +1,203 @@
+//! Attitude from gyro, accelerometer and magnetometer: a Mahony complementary filter.
+//!
+//! The gyro is integrated; the accelerometer's gravity direction corrects roll and pitch and the
+//! magnetometer's horizontal field corrects yaw, through a proportional and an integral (gyro
+//! bias) term. Body frame x forward, y starboard, z down; the quaternion maps body to NED.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AttitudeConfig {
+    /// Proportional correction gain, 1/s (default 1.0: tilt errors decay in about a second).
+    pub kp: f64,
+    /// Integral (gyro bias) gain, 1/s^2 (default 0.05).
+    pub ki: f64,
+    /// Accelerometer readings further than this from 1 g (m/s^2) are not trusted for tilt:
+    /// the vehicle is accelerating (default 2.0).
+    pub accel_trust_m_s2: f64,
+}
+
+impl Default for AttitudeConfig {
+    fn default() -> Self {
+        AttitudeConfig {
+            kp: 1.0,
+            ki: 0.05,
+            accel_trust_m_s2: 2.0,
+        }
+    }
+}
+
+const G: f64 = crate::estimator::response::GRAVITY;
+
+#[derive(Debug, Clone)]
+pub struct AttitudeFilter {
+    cfg: AttitudeConfig,
+    q: UnitQuaternion<f64>,
+    bias: Vector3<f64>,
+    initialised: bool,
+}
+
+impl AttitudeFilter {
+    pub fn new(cfg: AttitudeConfig) -> Self {
+        AttitudeFilter {
+            cfg,
+            q: UnitQuaternion::identity(),
+            bias: Vector3::zeros(),
+            initialised: false,
+        }
+    }
+
+    /// Body-to-NED attitude.
+    pub fn attitude(&self) -> UnitQuaternion<f64> {
+        self.q
+    }
+
+    /// Estimated gyro bias, rad/s.
+    pub fn gyro_bias(&self) -> Vector3<f64> {
+        self.bias
+    }
+
+    pub fn is_initialised(&self) -> bool {
+        self.initialised
+    }
+
+    /// Forget everything (after a fault the old attitude may be far off).
+    pub fn reset(&mut self) {
+        self.initialised = false;
+        self.bias = Vector3::zeros();
+        self.q = UnitQuaternion::identity();
+    }
+
+    /// One sample: gyro rad/s, specific force m/s^2, optional magnetometer (any unit), `dt` s.
+    pub fn update(
+        &mut self,
+        gyro: &Vector3<f64>,
+        accel: &Vector3<f64>,
+        mag: Option<&Vector3<f64>>,
+        dt: f64,
+    ) {
+        if !self.initialised {
+            if let Some(q) = attitude_from_vectors(accel, mag) {
+                self.q = q;
+                self.initialised = true;
+            }
+            return;
+        }
+        let dt = if dt.is_finite() {
+            dt.clamp(0.0, 0.1)
+        } else {
+            0.0
+        };
+        let mut err = Vector3::zeros();
+        let norm = accel.norm();
+        if norm > 0.0 && (norm - G).abs() < self.cfg.accel_trust_m_s2 {
+            // Measured and predicted "up" (specific force at rest points up: -z in NED).
+            let measured = accel / norm;
+            let predicted = self
+                .q
+                .inverse_transform_vector(&Vector3::new(0.0, 0.0, -1.0));
+            err += measured.cross(&predicted);
+        }
+        if let Some(m) = mag.filter(|m| m.norm() > 0.0) {
+            // Only the horizontal field direction: the magnetometer must not fight the tilt.
+            let m = m.normalize();
+            let h = self.q.transform_vector(&m);
+            let reference = Vector3::new((h.x * h.x + h.y * h.y).sqrt(), 0.0, h.z);
+            let predicted = self.q.inverse_transform_vector(&reference);
+            let e = m.cross(&predicted);
+            // Project onto the NED down axis in body: heading only.
+            let down = self.q.inverse_transform_vector(&Vector3::z());
+            err += down * down.dot(&e);
+        }
+        self.bias -= err * self.cfg.ki * dt;
+        let omega = gyro - self.bias + err * self.cfg.kp;
+        self.q *= UnitQuaternion::from_scaled_axis(omega * dt);
+        self.q.renormalize();
+    }
+}
+
+/// Attitude from one accelerometer (roll, pitch) and magnetometer (yaw) reading.
+pub fn attitude_from_vectors(
+    accel: &Vector3<f64>,
+    mag: Option<&Vector3<f64>>,
+) -> Option<UnitQuaternion<f64>> {
+    if accel.norm() < 1e-6 || !accel.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    // At rest the specific force is -g in body: f = R^T (0, 0, -g).
+    let f = -accel.normalize();
+    let roll = f.y.atan2(f.z);
+    let pitch = (-f.x).atan2((f.y * f.y + f.z * f.z).sqrt());
+    let tilt = UnitQuaternion::from_euler_angles(roll, pitch, 0.0);
+    let yaw = match mag {
+        Some(m) if m.norm() > 0.0 => {
+            let h = tilt.transform_vector(m);
+            // North is +x in NED: heading is the angle that rotates the field onto north.
+            -h.y.atan2(h.x)
+        }
+        _ => 0.0,
+    };
+    Some(UnitQuaternion::from_euler_angles(roll, pitch, yaw))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reading(q: &UnitQuaternion<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        let accel = q.inverse_transform_vector(&Vector3::new(0.0, 0.0, -G));
+        let mag = q.inverse_transform_vector(&Vector3::new(20.0, 0.0, 45.0));
+        (accel, mag)
+    }
+
+    #[test]
+    fn initial_attitude_from_vectors() {
+        let truth = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
+        let (a, m) = reading(&truth);
+        let q = attitude_from_vectors(&a, Some(&m)).unwrap();
+        assert!(
+            q.angle_to(&truth) < 1e-9,
+            "{:?} vs {:?}",
+            q.euler_angles(),
+            truth.euler_angles()
+        );
+    }
+
+    #[test]
+    fn converges_and_learns_gyro_bias() {
+        let truth = UnitQuaternion::from_euler_angles(0.1, 0.2, -0.5);
+        let (a, m) = reading(&truth);
+        let mut f = AttitudeFilter::new(AttitudeConfig::default());
+        f.update(&Vector3::zeros(), &a, Some(&m), 0.01);
+        assert!(f.is_initialised());
+        // A biased gyro at rest: the filter must learn the bias and hold the attitude.
+        let bias = Vector3::new(0.02, -0.01, 0.015);
+        for _ in 0..20_000 {
+            f.update(&bias, &a, Some(&m), 0.01);
+        }
+        assert!(
+            f.attitude().angle_to(&truth) < 0.01,
+            "angle {}",
+            f.attitude().angle_to(&truth)
+        );
+        assert!((f.gyro_bias() - bias).norm() < 2e-3, "{:?}", f.gyro_bias());
+    }
+
+    #[test]
+    fn tracks_a_rotation_from_the_gyro() {
+        let mut f = AttitudeFilter::new(AttitudeConfig {
+            kp: 0.0,
+            ki: 0.0,
+            ..AttitudeConfig::default()
+        });
+        let (a, m) = reading(&UnitQuaternion::identity());
+        f.update(&Vector3::zeros(), &a, Some(&m), 0.01);
+        for _ in 0..100 {
+            f.update(&Vector3::new(0.0, 0.0, 0.5), &a, Some(&m), 0.01);
+        }
+        let (_, _, yaw) = f.attitude().euler_angles();
+        assert!((yaw - 0.5).abs() < 1e-6, "{yaw}");
+    }
+}

@@ -1,0 +1,289 @@
+//! Attitude and depth control through the current model's allocation.
+//!
+//! Attitude (quaternion) and depth errors become a desired body motion: angular acceleration
+//! (PID on the attitude error, D on the measured rate) and a heave acceleration expressed in the
+//! body frame. The model's allocation turns that into thruster commands. When commands saturate,
+//! the translational part is scaled down first, then the rotational part (attitude keeps
+//! priority, as PX4's sequential desaturation does), and integrators stop winding up.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::model::Model;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerConfig {
+    /// Attitude proportional gain per axis (roll, pitch, yaw), rad/s^2 per rad (default 4).
+    pub kp_att: [f64; 3],
+    /// Rate damping per axis, rad/s^2 per rad/s (default 3).
+    pub kd_att: [f64; 3],
+    /// Attitude integral gain, rad/s^2 per rad s (default 0.5).
+    pub ki_att: [f64; 3],
+    /// Depth proportional gain, m/s^2 per m (default 1.0).
+    pub kp_depth: f64,
+    /// Depth rate damping, m/s^2 per m/s (default 1.5).
+    pub kd_depth: f64,
+    /// Depth integral gain, m/s^2 per m s (default 0.1): cancels buoyancy.
+    pub ki_depth: f64,
+    /// Integrator clamp, in units of desired acceleration (default 2.0).
+    pub integral_limit: f64,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        ControllerConfig {
+            kp_att: [4.0; 3],
+            kd_att: [3.0; 3],
+            ki_att: [0.5; 3],
+            kp_depth: 1.0,
+            kd_depth: 1.5,
+            ki_depth: 0.1,
+            integral_limit: 2.0,
+        }
+    }
+}
+
+/// What the vehicle should hold.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Target {
+    pub attitude: UnitQuaternion<f64>,
+    /// Depth to hold, m (positive down); None = do not control depth.
+    pub depth: Option<f64>,
+}
+
+/// One control tick's measurements.
+#[derive(Debug, Clone, Copy)]
+pub struct Measured {
+    pub attitude: UnitQuaternion<f64>,
+    /// Body rates with the gyro bias removed, rad/s.
+    pub rate: Vector3<f64>,
+    pub depth: Option<f64>,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct Controller {
+    cfg: ControllerConfig,
+    att_integral: Vector3<f64>,
+    depth_integral: f64,
+    last_depth: Option<f64>,
+    depth_rate: f64,
+}
+
+/// Attitude error as a rotation vector in the body frame (rad): the rotation from the current
+/// attitude to the target, shortest way round.
+pub fn attitude_error(current: &UnitQuaternion<f64>, target: &UnitQuaternion<f64>) -> Vector3<f64> {
+    let e = current.inverse() * target;
+    let e = if e.w < 0.0 {
+        UnitQuaternion::new_unchecked(-e.into_inner())
+    } else {
+        e
+    };
+    e.scaled_axis()
+}
+
+impl Controller {
+    pub fn new(cfg: ControllerConfig) -> Self {
+        Controller {
+            cfg,
+            ..Controller::default()
+        }
+    }
+
+    /// Clear integrators and derivative memory (model swap to a different vehicle, fault).
+    pub fn reset(&mut self) {
+        self.att_integral = Vector3::zeros();
+        self.depth_integral = 0.0;
+        self.last_depth = None;
+        self.depth_rate = 0.0;
+    }
+
+    /// Compute thruster commands into `out` (length = the model's thruster count), each in
+    /// [-1, 1]. Returns the desired motion that was requested (DOF order).
+    pub fn update(
+        &mut self,
+        m: &Measured,
+        target: &Target,
+        model: &Model,
+        dt: f64,
+        out: &mut [f64],
+    ) -> [f64; 6] {
+        let dt = if dt.is_finite() {
+            dt.clamp(0.0, 0.1)
+        } else {
+            0.0
+        };
+        let err = attitude_error(&m.attitude, &target.attitude);
+        let c = &self.cfg;
+        let mut alpha = [0.0; 3];
+        for a in 0..3 {
+            alpha[a] =
+                c.kp_att[a] * err[a] - c.kd_att[a] * m.rate[a] + c.ki_att[a] * self.att_integral[a];
+        }
+        let mut lin = [0.0; 3];
+        let mut depth_err = 0.0;
+        if let (Some(depth), Some(want)) = (m.depth, target.depth) {
+            if let Some(last) = self.last_depth {
+                if dt > 0.0 {
+                    // Low-passed depth rate: pressure sensors are noisy.
+                    let raw = (depth - last) / dt;
+                    self.depth_rate += (raw - self.depth_rate) * (dt / 0.2).min(1.0);
+                }
+            }
+            self.last_depth = Some(depth);
+            depth_err = want - depth;
+            let a_down = c.kp_depth * depth_err - c.kd_depth * self.depth_rate
+                + c.ki_depth * self.depth_integral;
+            let body = m
+                .attitude
+                .inverse_transform_vector(&Vector3::new(0.0, 0.0, a_down));
+            lin = [body.x, body.y, body.z];
+        }
+        // Unactuated DOFs are dropped by the allocation (zero columns) and their integrators
+        // are not run, so they cannot wind up against a motion the vehicle cannot make.
+        let mut u_rot = vec![0.0; out.len()];
+        let mut u_lin = vec![0.0; out.len()];
+        model.allocate(&[alpha[0], alpha[1], alpha[2], 0.0, 0.0, 0.0], &mut u_rot);
+        model.allocate(&[0.0, 0.0, 0.0, lin[0], lin[1], lin[2]], &mut u_lin);
+        let (s_rot, s_lin) = desaturate(&u_rot, &u_lin);
+        for (i, o) in out.iter_mut().enumerate() {
+            let v = s_rot * u_rot[i] + s_lin * u_lin[i];
+            *o = if v.is_finite() {
+                v.clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
+        }
+        if s_rot >= 1.0 && s_lin >= 1.0 {
+            for a in 0..3 {
+                if model.actuated.0[a] {
+                    self.att_integral[a] = (self.att_integral[a] + err[a] * dt)
+                        .clamp(-c.integral_limit, c.integral_limit);
+                }
+            }
+            if target.depth.is_some() {
+                self.depth_integral = (self.depth_integral + depth_err * dt)
+                    .clamp(-c.integral_limit, c.integral_limit);
+            }
+        }
+        [
+            alpha[0] * s_rot,
+            alpha[1] * s_rot,
+            alpha[2] * s_rot,
+            lin[0] * s_lin,
+            lin[1] * s_lin,
+            lin[2] * s_lin,
+        ]
+    }
+}
+
+/// Scale factors (rotation, translation) in [0, 1] so that every |s_rot u_rot + s_lin u_lin|
+/// <= 1: translation gives way first; rotation is scaled only if it alone saturates.
+fn desaturate(u_rot: &[f64], u_lin: &[f64]) -> (f64, f64) {
+    let peak = |u: &[f64]| u.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let rot_peak = peak(u_rot);
+    let s_rot = if rot_peak > 1.0 { 1.0 / rot_peak } else { 1.0 };
+    // Largest s_lin in [0, 1] with |s_rot r_i + s_lin l_i| <= 1 for every thruster.
+    let mut s_lin: f64 = 1.0;
+    for (r, l) in u_rot.iter().zip(u_lin) {
+        let r = s_rot * r;
+        if *l > 0.0 {
+            s_lin = s_lin.min(((1.0 - r) / l).max(0.0));
+        } else if *l < 0.0 {
+            s_lin = s_lin.min(((-1.0 - r) / l).max(0.0));
+        }
+    }
+    (s_rot, s_lin)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{nominal_effectiveness, Model, RigidBody};
+
+    fn model() -> Model {
+        // Four thrusters: two forward at +-y (yaw, surge), two vertical at +-y (roll, heave).
+        let pos = [
+            [0.0, -0.2, 0.0],
+            [0.0, 0.2, 0.0],
+            [0.0, -0.2, 0.0],
+            [0.0, 0.2, 0.0],
+        ];
+        let dir = [
+            [1.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+        ];
+        Model::nominal(
+            nominal_effectiveness(&RigidBody::default(), &pos, &dir),
+            None,
+        )
+    }
+
+    #[test]
+    fn attitude_error_is_body_rotation_vector() {
+        let q = UnitQuaternion::identity();
+        let t = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3);
+        let e = attitude_error(&q, &t);
+        assert!((e - Vector3::new(0.0, 0.0, 0.3)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn yaw_error_commands_differential_thrust_and_nothing_for_unactuated_pitch() {
+        let m = model();
+        let mut c = Controller::new(ControllerConfig::default());
+        let meas = Measured {
+            attitude: UnitQuaternion::identity(),
+            rate: Vector3::zeros(),
+            depth: None,
+        };
+        let target = Target {
+            attitude: UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.1, 0.1)),
+            depth: None,
+        };
+        let mut out = [0.0; 4];
+        c.update(&meas, &target, &m, 0.01, &mut out);
+        // +yaw: port thruster forward, starboard back; verticals untouched (pitch unactuated).
+        assert!(out[0] > 0.0 && out[1] < 0.0, "{out:?}");
+        assert!((out[0] + out[1]).abs() < 1e-12, "{out:?}");
+        assert!(out[2].abs() < 1e-12 && out[3].abs() < 1e-12, "{out:?}");
+    }
+
+    #[test]
+    fn saturation_keeps_attitude_priority_and_bounds() {
+        let m = model();
+        let mut c = Controller::new(ControllerConfig::default());
+        let meas = Measured {
+            attitude: UnitQuaternion::identity(),
+            rate: Vector3::zeros(),
+            depth: Some(0.0),
+        };
+        // A huge depth error and a roll error: heave saturates, roll must survive.
+        let target = Target {
+            attitude: UnitQuaternion::from_euler_angles(0.2, 0.0, 0.0),
+            depth: Some(100.0),
+        };
+        let mut out = [0.0; 4];
+        let desired = c.update(&meas, &target, &m, 0.01, &mut out);
+        assert!(out.iter().all(|v| v.abs() <= 1.0 + 1e-12), "{out:?}");
+        // Roll asks for a differential on the verticals, unscaled.
+        let roll_alloc = m.allocation.column(0);
+        let want = 4.0 * 0.2;
+        assert!((desired[0] - want).abs() < 1e-9, "{desired:?}");
+        assert!(
+            (out[2] - out[3] - 2.0 * roll_alloc[2] * want).abs() < 1e-9,
+            "{out:?}"
+        );
+    }
+
+    #[test]
+    fn desaturate_scales_translation_first() {
+        let (r, l) = desaturate(&[0.5, -0.5], &[1.0, 1.0]);
+        assert_eq!(r, 1.0);
+        assert!((l - 0.5).abs() < 1e-12);
+        let (r, l) = desaturate(&[2.0, -2.0], &[0.1, 0.1]);
+        assert!((r - 0.5).abs() < 1e-12);
+        assert_eq!(l, 0.0);
+    }
+}

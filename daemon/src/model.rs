@@ -1,0 +1,279 @@
+//! The model the controller runs on: effectiveness, allocation and their quality, with the
+//! checks a model must pass before it may replace the current one.
+
+use nalgebra::{DMatrix, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::estimator::analysis::{allocation, rank_report};
+use crate::estimator::{Dof, DofMask, Estimate, EstimatorConfig, Method};
+
+/// Where a model came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelSource {
+    /// Computed from declared geometry (a vehicle file or a reconfiguration event).
+    Nominal,
+    /// Learned in the water.
+    Estimated,
+    /// A configuration seen before, swapped back from the cache.
+    Cache,
+    /// Read from the state directory at start.
+    Loaded,
+}
+
+/// A thruster model ready for control.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Model {
+    /// Increases by one with every swap; 0 = no model yet.
+    pub version: u64,
+    pub source: ModelSource,
+    pub method: Method,
+    /// 6 x N, DOF rows (rad/s^2 and m/s^2 per unit command).
+    pub effectiveness: DMatrix<f64>,
+    /// N x 6, commands per unit desired motion; zero columns for unactuated DOFs.
+    pub allocation: DMatrix<f64>,
+    /// 6 x N standard errors; NaN where unknown (nominal models, the paper's method).
+    pub std_err: DMatrix<f64>,
+    pub actuated: DofMask,
+    pub rel_err_rot: f64,
+    pub rel_err_acc: f64,
+    /// Identity of the declared geometry this model belongs to, when known (cache key).
+    pub geometry_key: Option<u64>,
+}
+
+/// Why a candidate model was not swapped in.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SwapRejection {
+    #[error("model has {got} thrusters, the vehicle has {want}")]
+    WrongCount { got: usize, want: usize },
+    #[error("model matrices have inconsistent shapes")]
+    Shape,
+    #[error("model contains a non-finite value in {0}")]
+    NonFinite(&'static str),
+    #[error("model actuates no degree of freedom")]
+    NoDof,
+    #[error("model confidence too low: relative error bound {rel_err:.3} > {limit:.3}")]
+    LowConfidence { rel_err: f64, limit: f64 },
+    #[error("thrusters were never excited in both directions")]
+    NotExcited,
+}
+
+impl Model {
+    pub fn thrusters(&self) -> usize {
+        self.effectiveness.ncols()
+    }
+
+    /// A model from an estimate (version assigned at swap time).
+    pub fn from_estimate(e: &Estimate, geometry_key: Option<u64>) -> Model {
+        Model {
+            version: 0,
+            source: ModelSource::Estimated,
+            method: e.method,
+            effectiveness: e.effectiveness.clone(),
+            allocation: e.allocation.clone(),
+            std_err: e.std_err.clone(),
+            actuated: e.rank.actuated,
+            rel_err_rot: e.rel_err_rot,
+            rel_err_acc: e.rel_err_acc,
+            geometry_key,
+        }
+    }
+
+    /// The nominal (manual) model of a declared effectiveness: what PX4 and ArduSub use.
+    pub fn nominal(effectiveness: DMatrix<f64>, geometry_key: Option<u64>) -> Model {
+        let n = effectiveness.ncols();
+        // Exact geometry: no estimation noise, so only round-off decides the rank.
+        let zeros = DMatrix::zeros(6, n);
+        let rank = rank_report(&effectiveness, &zeros, &EstimatorConfig::default());
+        Model {
+            version: 0,
+            source: ModelSource::Nominal,
+            method: Method::Forward,
+            allocation: allocation(&effectiveness, rank.actuated, rank.rank),
+            std_err: DMatrix::from_element(6, n, f64::NAN),
+            actuated: rank.actuated,
+            rel_err_rot: f64::NAN,
+            rel_err_acc: f64::NAN,
+            effectiveness,
+            geometry_key,
+        }
+    }
+
+    /// Checks before a hot swap: right size, finite, actuates something, confident enough.
+    /// `max_rel_err` applies to estimated models (nominal and paper models carry no bound).
+    pub fn check(&self, thrusters: usize, max_rel_err: f64) -> Result<(), SwapRejection> {
+        let n = self.effectiveness.ncols();
+        if n != thrusters {
+            return Err(SwapRejection::WrongCount {
+                got: n,
+                want: thrusters,
+            });
+        }
+        if self.effectiveness.nrows() != 6
+            || self.allocation.shape() != (n, 6)
+            || self.std_err.shape() != (6, n)
+        {
+            return Err(SwapRejection::Shape);
+        }
+        if !self.effectiveness.iter().all(|v| v.is_finite()) {
+            return Err(SwapRejection::NonFinite("effectiveness"));
+        }
+        if !self.allocation.iter().all(|v| v.is_finite()) {
+            return Err(SwapRejection::NonFinite("allocation"));
+        }
+        if self.actuated.count() == 0 || self.allocation.norm() == 0.0 {
+            return Err(SwapRejection::NoDof);
+        }
+        for rel in [self.rel_err_rot, self.rel_err_acc] {
+            if rel.is_infinite() {
+                return Err(SwapRejection::NotExcited);
+            }
+            if rel.is_finite() && rel > max_rel_err {
+                return Err(SwapRejection::LowConfidence {
+                    rel_err: rel,
+                    limit: max_rel_err,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Thruster commands for a desired motion (6, DOF order). Unactuated DOFs contribute
+    /// nothing because their allocation columns are zero.
+    pub fn allocate(&self, desired: &[f64; 6], out: &mut [f64]) {
+        let n = self.thrusters().min(out.len());
+        for (i, o) in out.iter_mut().enumerate().take(n) {
+            *o = (0..6).map(|j| self.allocation[(i, j)] * desired[j]).sum();
+        }
+    }
+
+    pub fn is_actuated(&self, dof: Dof) -> bool {
+        self.actuated.contains(dof)
+    }
+}
+
+/// Mass properties the daemon needs to turn declared geometry into a nominal model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RigidBody {
+    /// Dry mass, kg (default 11.5, a BlueROV2).
+    pub mass_kg: f64,
+    /// Principal moments of inertia about body x, y, z, kg m^2 (default 0.16 each).
+    pub inertia_kg_m2: [f64; 3],
+    /// Added mass along body x, y, z, kg (default 5.5, 12.7, 14.57; Wu 2018).
+    pub added_mass_kg: [f64; 3],
+    /// Added inertia about body x, y, z, kg m^2 (default 0.12, 0.12, 0.12; Wu 2018).
+    pub added_inertia_kg_m2: [f64; 3],
+    /// Forward thrust of one thruster at full command, N (default 51.5, a T200).
+    pub max_thrust_n: f64,
+}
+
+impl Default for RigidBody {
+    fn default() -> Self {
+        RigidBody {
+            mass_kg: 11.5,
+            inertia_kg_m2: [0.16, 0.16, 0.16],
+            added_mass_kg: [5.5, 12.7, 14.57],
+            added_inertia_kg_m2: [0.12, 0.12, 0.12],
+            max_thrust_n: 51.5,
+        }
+    }
+}
+
+/// Nominal effectiveness (6 x N) of thrusters at `positions` (m, from the centre of mass)
+/// pushing along `directions`, for a body with diagonal mass matrix: the rigid-body-plus-added
+/// inertia divides force and torque axis by axis.
+pub fn nominal_effectiveness(
+    body: &RigidBody,
+    positions: &[[f64; 3]],
+    directions: &[[f64; 3]],
+) -> DMatrix<f64> {
+    let n = positions.len().min(directions.len());
+    let mut b = DMatrix::zeros(6, n);
+    for i in 0..n {
+        let d = Vector3::from(directions[i]);
+        let d = if d.norm() > 0.0 { d.normalize() } else { d };
+        let f = d * body.max_thrust_n;
+        let tau = Vector3::from(positions[i]).cross(&f);
+        for a in 0..3 {
+            b[(a, i)] = tau[a] / (body.inertia_kg_m2[a] + body.added_inertia_kg_m2[a]);
+            b[(3 + a, i)] = f[a] / (body.mass_kg + body.added_mass_kg[a]);
+        }
+    }
+    b
+}
+
+/// A stable key for declared geometry: positions and directions rounded to 1 mm and 0.001,
+/// so the same physical layout maps to the same cache entry despite float noise.
+pub fn geometry_key(positions: &[[f64; 3]], directions: &[[f64; 3]]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut feed = |v: i64| {
+        for byte in v.to_le_bytes() {
+            h ^= byte as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    feed(positions.len() as i64);
+    for (p, d) in positions.iter().zip(directions) {
+        for v in p.iter().chain(d.iter()) {
+            feed((v * 1000.0).round() as i64);
+        }
+    }
+    h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nominal_of_aligned_thrusters_leaves_roll_sway_heave_out() {
+        let body = RigidBody::default();
+        let pos = [[0.0, -0.2, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, -0.15]];
+        let dir = [[1.0, 0.0, 0.0]; 3];
+        let m = Model::nominal(nominal_effectiveness(&body, &pos, &dir), None);
+        assert_eq!(m.actuated.names(), vec!["pitch", "yaw", "surge"]);
+        m.check(3, 0.1).unwrap();
+        // Port thruster (y = -0.2) pushing forward yaws the nose to starboard: +yaw (z down).
+        assert!(m.effectiveness[(Dof::Yaw.index(), 0)] > 0.0);
+        let surge = 51.5 / (11.5 + 5.5);
+        assert!((m.effectiveness[(Dof::Surge.index(), 2)] - surge).abs() < 1e-12);
+    }
+
+    #[test]
+    fn check_rejects_bad_models() {
+        let body = RigidBody::default();
+        let pos = [[0.0, -0.2, 0.0], [0.0, 0.2, 0.0]];
+        let dir = [[1.0, 0.0, 0.0]; 2];
+        let good = Model::nominal(nominal_effectiveness(&body, &pos, &dir), None);
+        assert!(matches!(
+            good.check(3, 0.1),
+            Err(SwapRejection::WrongCount { .. })
+        ));
+        let mut nan = good.clone();
+        nan.allocation[(0, 0)] = f64::NAN;
+        assert_eq!(
+            nan.check(2, 0.1),
+            Err(SwapRejection::NonFinite("allocation"))
+        );
+        let mut vague = good.clone();
+        vague.rel_err_rot = 0.5;
+        assert!(matches!(
+            vague.check(2, 0.1),
+            Err(SwapRejection::LowConfidence { .. })
+        ));
+        let mut unexcited = good;
+        unexcited.rel_err_acc = f64::INFINITY;
+        assert_eq!(unexcited.check(2, 0.1), Err(SwapRejection::NotExcited));
+    }
+
+    #[test]
+    fn geometry_key_ignores_float_noise_but_not_moves() {
+        let pos = [[0.1, 0.2, 0.3]];
+        let dir = [[1.0, 0.0, 0.0]];
+        let k = geometry_key(&pos, &dir);
+        assert_eq!(k, geometry_key(&[[0.1000001, 0.2, 0.3]], &dir));
+        assert_ne!(k, geometry_key(&[[0.11, 0.2, 0.3]], &dir));
+        assert_ne!(k, geometry_key(&pos, &[[0.0, 1.0, 0.0]]));
+    }
+}
