@@ -78,6 +78,20 @@ impl AttitudeFilter {
         mag: Option<&Vector3<f64>>,
         dt: f64,
     ) {
+        self.update_with(gyro, accel, mag, dt, true);
+    }
+
+    /// As `update`, but with `correct = false` the gyro is only integrated: during a thruster
+    /// pulse the accelerometer sees the pulse's own acceleration, and letting it "correct" the
+    /// tilt would leak that acceleration into the gravity compensation.
+    pub fn update_with(
+        &mut self,
+        gyro: &Vector3<f64>,
+        accel: &Vector3<f64>,
+        mag: Option<&Vector3<f64>>,
+        dt: f64,
+        correct: bool,
+    ) {
         if !self.initialised {
             if let Some(q) = attitude_from_vectors(accel, mag) {
                 self.q = q;
@@ -92,7 +106,7 @@ impl AttitudeFilter {
         };
         let mut err = Vector3::zeros();
         let norm = accel.norm();
-        if norm > 0.0 && (norm - G).abs() < self.cfg.accel_trust_m_s2 {
+        if correct && norm > 0.0 && (norm - G).abs() < self.cfg.accel_trust_m_s2 {
             // Measured and predicted "up" (specific force at rest points up: -z in NED).
             let measured = accel / norm;
             let predicted = self
@@ -100,7 +114,7 @@ impl AttitudeFilter {
                 .inverse_transform_vector(&Vector3::new(0.0, 0.0, -1.0));
             err += measured.cross(&predicted);
         }
-        if let Some(m) = mag.filter(|m| m.norm() > 0.0) {
+        if let Some(m) = mag.filter(|m| correct && m.norm() > 0.0) {
             // Only the horizontal field direction: the magnetometer must not fight the tilt.
             let m = m.normalize();
             let h = self.q.transform_vector(&m);

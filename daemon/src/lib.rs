@@ -5,5 +5,6 @@
 pub mod attitude;
 pub mod controller;
 pub mod estimator;
+pub mod machine;
 pub mod model;
 pub mod study;

@@ -53,6 +53,8 @@ pub struct EstimatorConfig {
     pub paper_cycles: usize,
     /// Thruster spin-up time constant assumed by the response shape, s.
     pub spin_up_s: f64,
+    /// Quiet samples just before each pulse that anchor its intercept (default 20).
+    pub baseline_samples: usize,
     /// A singular value counts when it exceeds this factor times the largest singular value a
     /// pure-noise matrix of the same size would have (sqrt(6) + sqrt(N) in standard errors).
     pub rank_threshold: f64,
@@ -82,6 +84,7 @@ impl Default for EstimatorConfig {
             max_pulses: 64,
             paper_cycles: 1,
             spin_up_s: 0.1,
+            baseline_samples: 20,
             rank_threshold: 1.5,
             actuation_share: 0.5,
             response_chi2: 22.46,

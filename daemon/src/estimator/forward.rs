@@ -82,6 +82,47 @@ impl ForwardLs {
         self.rows += 1;
     }
 
+    /// Add a whole pulse at once from its centred moments: every row of the pulse had the
+    /// regressor `dir * s_k` and response `y_k`; `sxx` = sum (s_k - mean s)^2, `sxy` = sum
+    /// (s_k - mean s)(y_k - mean y), `syy` = sum (y_k - mean y)^2, over `samples` rows.
+    ///
+    /// Centring removes a per-pulse constant (the vehicle still turning slowly from the last
+    /// pulse, a drifting bias), which would otherwise leak into B; it costs one degree of freedom
+    /// per pulse.
+    pub fn add_centred(
+        &mut self,
+        dir: &[f64],
+        sxx: f64,
+        sxy: &Vector3<f64>,
+        syy: &Vector3<f64>,
+        samples: u64,
+    ) {
+        let n = self.gram.nrows();
+        if dir.len() != n
+            || samples < 2
+            || !sxx.is_finite()
+            || !dir.iter().all(|v| v.is_finite())
+            || !sxy.iter().chain(syy.iter()).all(|v| v.is_finite())
+        {
+            return;
+        }
+        for (i, &xi) in dir.iter().enumerate() {
+            if xi == 0.0 {
+                continue;
+            }
+            for (j, &xj) in dir.iter().enumerate() {
+                self.gram[(i, j)] += sxx * xi * xj;
+            }
+            for a in 0..3 {
+                self.cross[(i, a)] += xi * sxy[a];
+            }
+        }
+        for a in 0..3 {
+            self.yy[a] += syy[a];
+        }
+        self.rows += samples - 1;
+    }
+
     /// Least-squares solution (minimum-norm where some regressor was never excited).
     pub fn solve(&self) -> ForwardSolution {
         let (gram_inv, rank) = sym_pinv(&self.gram);
@@ -123,6 +164,39 @@ mod tests {
         assert!((s.b - truth).norm() < 1e-12);
         // Only round-off of y^T y (about 10 here) remains.
         assert!(s.residual_var.unwrap().iter().all(|v| *v < 1e-12));
+    }
+
+    #[test]
+    fn centred_pulses_ignore_a_constant_offset() {
+        // y = b * s(t) + c_pulse: the per-pulse constant must not bias b.
+        let b = [2.0, -1.0];
+        let mut ls = ForwardLs::new(2);
+        for (u, offset) in [([1.0, 0.0], 0.7), ([0.0, 1.0], -0.4), ([1.0, 1.0], 0.2)] {
+            let (mut ss, mut s2, mut sy, mut sy2, mut ssy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            let m = 10.0;
+            for k in 0..10 {
+                let s = k as f64 * 0.1;
+                let y = (b[0] * u[0] + b[1] * u[1]) * s + offset;
+                ss += s;
+                s2 += s * s;
+                sy += y;
+                sy2 += y * y;
+                ssy += s * y;
+            }
+            let sxx = s2 - ss * ss / m;
+            let sxy = ssy - ss * sy / m;
+            let syy = sy2 - sy * sy / m;
+            ls.add_centred(
+                &u,
+                sxx,
+                &Vector3::new(sxy, 0.0, 0.0),
+                &Vector3::new(syy, 0.0, 0.0),
+                10,
+            );
+        }
+        let sol = ls.solve();
+        assert!((sol.b[(0, 0)] - 2.0).abs() < 1e-9 && (sol.b[(0, 1)] + 1.0).abs() < 1e-9);
+        assert_eq!(ls.rows(), 27);
     }
 
     #[test]

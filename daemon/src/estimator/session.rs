@@ -87,15 +87,85 @@ pub struct Estimate {
     pub excited: bool,
 }
 
+/// Running sums of one sensor group over a pulse (and the quiet samples just before it, whose
+/// shape value is 0): enough to add the pulse centred, with its own intercept.
+#[derive(Debug, Clone, Copy, Default)]
+struct Moments {
+    n: u64,
+    s: f64,
+    ss: f64,
+    y: Vector3<f64>,
+    yy: Vector3<f64>,
+    sy: Vector3<f64>,
+}
+
+impl Moments {
+    fn push(&mut self, s: f64, y: &Vector3<f64>) {
+        self.n += 1;
+        self.s += s;
+        self.ss += s * s;
+        self.y += y;
+        self.yy += y.component_mul(y);
+        self.sy += y * s;
+    }
+
+    /// (sxx, sxy, syy) about the means.
+    fn centred(&self) -> (f64, Vector3<f64>, Vector3<f64>) {
+        let n = self.n.max(1) as f64;
+        (
+            self.ss - self.s * self.s / n,
+            self.sy - self.y * (self.s / n),
+            self.yy - self.y.component_mul(&self.y) / n,
+        )
+    }
+}
+
 /// Per-pulse bookkeeping, allocated once per pulse (never per sample).
 #[derive(Debug, Clone)]
 struct ActivePulse {
     u: Vec<f64>,
     split: Vec<f64>,
-    x: Vec<f64>,
-    xs: Vec<f64>,
+    moments: [Moments; 2],
     samples: u32,
     kept: [u32; 2],
+}
+
+/// The last few quiet samples before a pulse, kept in a fixed ring: they pin each pulse's
+/// intercept without costing the pulse's own samples.
+#[derive(Debug, Clone)]
+struct PreWindow {
+    ring: Vec<(Vector3<f64>, Vector3<f64>)>,
+    next: usize,
+    len: usize,
+}
+
+impl PreWindow {
+    fn new(capacity: usize) -> Self {
+        PreWindow {
+            ring: vec![(Vector3::zeros(), Vector3::zeros()); capacity],
+            next: 0,
+            len: 0,
+        }
+    }
+
+    fn push(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>) {
+        if self.ring.is_empty() {
+            return;
+        }
+        self.ring[self.next] = (*gyro, *accel);
+        self.next = (self.next + 1) % self.ring.len();
+        self.len = (self.len + 1).min(self.ring.len());
+    }
+
+    fn drain_into(&mut self, moments: &mut [Moments; 2]) {
+        for k in 0..self.len {
+            let (g, a) = &self.ring[k];
+            moments[ROT].push(0.0, g);
+            moments[ACC].push(0.0, a);
+        }
+        self.len = 0;
+        self.next = 0;
+    }
 }
 
 /// An estimation run for a fixed set of thrusters.
@@ -109,6 +179,7 @@ pub struct Estimator {
     pulses: usize,
     samples: u64,
     pulse: Option<ActivePulse>,
+    pre: PreWindow,
     forward: [ForwardLs; 2],
     split: [ForwardLs; 2],
     paper: [PaperLs; 2],
@@ -129,6 +200,7 @@ impl Estimator {
             pulses: 0,
             samples: 0,
             pulse: None,
+            pre: PreWindow::new(cfg.baseline_samples),
             forward: [ForwardLs::new(n), ForwardLs::new(n)],
             split: [ForwardLs::new(2 * n), ForwardLs::new(2 * n)],
             paper: [PaperLs::new(n), PaperLs::new(n)],
@@ -186,7 +258,6 @@ impl Estimator {
     /// The thrust to apply for the next pulse: power times the plan's sign pattern, in [-1, 1].
     /// Starts the pulse; feed its samples with `push_pulse_sample`, then call `end_pulse`.
     pub fn begin_pulse(&mut self) -> &[f64] {
-        let n = self.thrusters();
         let pattern = self.plan.pattern(self.pulses);
         let u: Vec<f64> = pattern
             .iter()
@@ -196,11 +267,12 @@ impl Estimator {
         for (m, v) in self.max_command.iter_mut().zip(&u) {
             *m = m.max(v.abs());
         }
+        let mut moments = [Moments::default(); 2];
+        self.pre.drain_into(&mut moments);
         self.pulse = Some(ActivePulse {
             u,
             split,
-            x: vec![0.0; n],
-            xs: vec![0.0; 2 * n],
+            moments,
             samples: 0,
             kept: [0, 0],
         });
@@ -210,6 +282,14 @@ impl Estimator {
     /// Command of the pulse in progress, if any.
     pub fn current_command(&self) -> Option<&[f64]> {
         self.pulse.as_ref().map(|p| p.u.as_slice())
+    }
+
+    /// A quiet sample between pulses (same units as `push_pulse_sample`); the last
+    /// `baseline_samples` of them anchor the next pulse's intercept.
+    pub fn push_rest_sample(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>) {
+        if gyro.iter().chain(accel.iter()).all(|v| v.is_finite()) {
+            self.pre.push(gyro, accel);
+        }
     }
 
     /// One IMU sample during the pulse: `t_s` since the command was applied, responses with the
@@ -225,15 +305,11 @@ impl Estimator {
         };
         p.samples += 1;
         self.samples += 1;
+        if !gyro.iter().chain(accel.iter()).all(|v| v.is_finite()) {
+            return;
+        }
         for (g, y) in [(ROT, gyro), (ACC, accel)] {
-            for (x, u) in p.x.iter_mut().zip(&p.u) {
-                *x = u * shape[g];
-            }
-            for (x, u) in p.xs.iter_mut().zip(&p.split) {
-                *x = u * shape[g];
-            }
-            self.forward[g].add(&p.x, y);
-            self.split[g].add(&p.xs, y);
+            p.moments[g].push(shape[g], y);
             if y.norm() > k_sigma[g] {
                 self.paper[g].add(y, &p.u);
                 p.kept[g] += 1;
@@ -244,6 +320,12 @@ impl Estimator {
     /// Close the pulse; raises the power when a sensor group kept no sample (Algorithm 1).
     pub fn end_pulse(&mut self) -> Option<PulseSummary> {
         let p = self.pulse.take()?;
+        for g in [ROT, ACC] {
+            let m = &p.moments[g];
+            let (sxx, sxy, syy) = m.centred();
+            self.forward[g].add_centred(&p.u, sxx, &sxy, &syy, m.n);
+            self.split[g].add_centred(&p.split, sxx, &sxy, &syy, m.n);
+        }
         let used = self.power;
         if p.kept[ROT] == 0 || p.kept[ACC] == 0 {
             self.power = (self.power + self.cfg.power_step).min(self.cfg.max_power);

@@ -1,0 +1,258 @@
+//! The state machine closed around the simulator's physics, in one process (no IPC): the
+//! estimation, control, faults and reconfiguration as the daemon runs them, against a 6-DOF
+//! vehicle with thruster lag, drag, buoyancy and gravity.
+
+use std::path::PathBuf;
+
+use nalgebra::{DMatrix, UnitQuaternion};
+use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
+use thrusterd::machine::{
+    Event, Geometry, ImuInput, Machine, MachineSetup, Mode, Reconfig, Request, State,
+};
+use thrusterd::model::ModelSource;
+
+fn vehicle(name: &str) -> Vehicle {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../config/vehicles")
+        .join(format!("{name}.toml"));
+    Vehicle::load(&path).unwrap()
+}
+
+struct Run {
+    machine: Machine,
+    sim: Simulator,
+    last_mode: Mode,
+    max_abs_cmd: f64,
+}
+
+impl Run {
+    fn new(name: &str, noise: NoisePreset, seed: u64) -> Run {
+        let v = vehicle(name);
+        let n = v.thrusters.len();
+        let sensors = SensorConfig {
+            rate_hz: 200.0,
+            noise,
+            ..SensorConfig::default()
+        };
+        let sim = Simulator::new(v, sensors, seed).unwrap();
+        let machine = Machine::new(MachineSetup {
+            thrusters: n,
+            ..MachineSetup::default()
+        });
+        Run {
+            machine,
+            sim,
+            last_mode: Mode::Neutral,
+            max_abs_cmd: 0.0,
+        }
+    }
+
+    fn tick(&mut self) {
+        let r = self.sim.advance_and_sample();
+        let cmd = self.machine.on_imu(&ImuInput {
+            seq: 0,
+            t_ns: r.t_ns,
+            gyro: r.gyro,
+            accel: r.accel,
+            mag: Some(r.mag),
+            depth: Some(r.depth),
+        });
+        assert_eq!(cmd.count, self.sim.thruster_count());
+        for v in &cmd.thrust[..cmd.count] {
+            assert!(v.is_finite() && v.abs() <= 1.0, "command {v}");
+            self.max_abs_cmd = self.max_abs_cmd.max(v.abs());
+        }
+        assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
+        self.last_mode = cmd.mode;
+        self.sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
+    }
+
+    fn run_for(&mut self, s: f64) {
+        self.run_until(s, |_| false);
+    }
+
+    fn run_until(&mut self, max_s: f64, done: impl Fn(&Machine) -> bool) -> f64 {
+        let start = self.sim.time_s();
+        while self.sim.time_s() - start < max_s {
+            self.tick();
+            if done(&self.machine) {
+                break;
+            }
+        }
+        self.sim.time_s() - start
+    }
+
+    /// Symmetric truth: the model is linear, so it learns the mean of forward and reverse gain.
+    fn truth(&self) -> DMatrix<f64> {
+        let (fwd, rev) = self.sim.truth();
+        (fwd + rev) * 0.5
+    }
+
+    fn estimate(&mut self) -> f64 {
+        self.machine.on_request(Request::Estimate).unwrap();
+        self.run_until(120.0, |m| m.state() == State::Active)
+    }
+}
+
+fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
+    (est.rows(rows, 3) - truth.rows(rows, 3)).norm() / truth.rows(rows, 3).norm()
+}
+
+/// AMOUR-5 at the paper's noise (0.25 rad/s, 0.05 g): the learned model is within 25 % of the
+/// truth. The margin: the study puts the noise part of the error at the 10 % target bound; the
+/// rest is the model's known bias from rotational drag during 0.1 s pulses (about 7 % on this
+/// body, measured noise-free), see docs/simulation.md.
+#[test]
+fn amour5_estimation_at_the_papers_noise_matches_truth() {
+    let mut run = Run::new("amour5", NoisePreset::Paper, 1);
+    run.run_for(1.0);
+    let t = run.estimate();
+    let model = run.machine.model().expect("a model").clone();
+    let truth = run.truth();
+    let (e_rot, e_acc) = (
+        rel_err(&model.effectiveness, &truth, 0),
+        rel_err(&model.effectiveness, &truth, 3),
+    );
+    let est = run.machine.last_estimate().unwrap();
+    println!(
+        "amour5/paper: {t:.1} vehicle s, {} pulses, err rot {e_rot:.3} acc {e_acc:.3}",
+        est.pulses
+    );
+    assert_eq!(run.machine.state(), State::Active);
+    assert_eq!(model.source, ModelSource::Estimated);
+    assert!(e_rot < 0.25, "rotation error {e_rot}");
+    assert!(e_acc < 0.25, "acceleration error {e_acc}");
+    assert_eq!(
+        model.actuated.names(),
+        vec!["roll", "pitch", "yaw", "surge", "heave"]
+    );
+    // Then it holds attitude: 5 s of control keep roll and pitch within a few degrees.
+    run.run_for(5.0);
+    assert_eq!(run.last_mode, Mode::Controlling);
+    let [roll, pitch, _] = run.sim.roll_pitch_yaw();
+    assert!(
+        roll.abs().to_degrees() < 5.0 && pitch.abs().to_degrees() < 5.0,
+        "roll {roll} pitch {pitch}"
+    );
+}
+
+#[test]
+fn aligned_thrusters_are_reported_with_heave_sway_roll_unactuated() {
+    let mut run = Run::new("aligned", NoisePreset::Paper, 2);
+    run.run_for(1.0);
+    run.estimate();
+    let model = run.machine.model().expect("a model");
+    assert_eq!(model.actuated.names(), vec!["pitch", "yaw", "surge"]);
+    for dof in [0, 4, 5] {
+        assert_eq!(model.allocation.column(dof).norm(), 0.0);
+    }
+}
+
+#[test]
+fn imu_gap_mid_pulse_faults_to_neutral_and_recovers() {
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 3);
+    run.run_for(1.0);
+    run.machine.on_request(Request::Estimate).unwrap();
+    run.run_until(10.0, |m| m.state() == State::Pulse);
+    assert_eq!(run.machine.state(), State::Pulse);
+    // The driver goes silent: the IO layer's deadline fires.
+    let cmd = run.machine.on_imu_stale("no IMU sample for 100 ms");
+    assert_eq!(cmd.mode, Mode::Neutral);
+    assert!(cmd.thrust.iter().all(|v| *v == 0.0));
+    assert_eq!(run.machine.state(), State::Fault);
+    assert!(
+        run.machine.on_request(Request::Estimate).is_err(),
+        "no estimation while blind"
+    );
+    // Samples return after 0.5 s (a gap in their timestamps too): still neutral for a while...
+    run.sim.set_commands(&[0.0; 5]).unwrap();
+    run.sim.step_secs(0.5);
+    run.tick();
+    assert_eq!(run.machine.state(), State::Fault);
+    assert_eq!(run.last_mode, Mode::Neutral);
+    // ...then the interrupted estimation restarts from the noise measurement.
+    run.run_for(0.2);
+    assert_eq!(run.machine.state(), State::MeasureNoise);
+    let events = run.machine.take_events();
+    assert!(events.iter().any(|e| matches!(
+        e,
+        Event::StateChanged {
+            to: State::Fault,
+            ..
+        }
+    )));
+}
+
+#[test]
+fn reconfiguration_swaps_nominal_at_once_then_refines_and_cache_swaps_back() {
+    let v = vehicle("amour5");
+    let geometry = |v: &Vehicle| Geometry {
+        positions: v.thrusters.iter().map(|t| t.position_m).collect(),
+        directions: v.thrusters.iter().map(|t| t.direction).collect(),
+    };
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 4);
+    run.run_for(1.0);
+    run.machine.on_reconfig(Reconfig {
+        count: 5,
+        geometry: Some(geometry(&v)),
+        what: "declared".into(),
+    });
+    let nominal = run.machine.model().unwrap().clone();
+    assert_eq!(nominal.source, ModelSource::Nominal);
+    assert_eq!(
+        run.machine.state(),
+        State::MeasureNoise,
+        "re-estimation starts at once"
+    );
+    run.run_until(120.0, |m| m.state() == State::Active);
+    let learned = run.machine.model().unwrap().clone();
+    assert_eq!(learned.source, ModelSource::Estimated);
+    assert!(learned.version > nominal.version);
+
+    // Rotate the top thruster 45 degrees (declared): a new nominal, a new estimation.
+    let mut moved = geometry(&v);
+    let r = UnitQuaternion::from_euler_angles(45f64.to_radians(), 0.0, 0.0);
+    moved.directions[0] = (r * nalgebra::Vector3::from(moved.directions[0])).into();
+    run.machine.on_reconfig(Reconfig {
+        count: 5,
+        geometry: Some(moved),
+        what: "top thruster rotated".into(),
+    });
+    assert_eq!(run.machine.model().unwrap().source, ModelSource::Nominal);
+    run.machine.on_request(Request::Abort).unwrap();
+
+    // Back to the original layout: the learned model returns from the cache, no pulses.
+    run.machine.on_reconfig(Reconfig {
+        count: 5,
+        geometry: Some(geometry(&v)),
+        what: "top thruster back".into(),
+    });
+    let back = run.machine.model().unwrap();
+    assert_eq!(back.source, ModelSource::Cache);
+    assert_eq!(back.effectiveness, learned.effectiveness);
+    assert!(!run.machine.state().is_estimating());
+}
+
+#[test]
+fn count_change_without_geometry_drops_the_model_until_estimated() {
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 5);
+    run.run_for(1.0);
+    run.estimate();
+    assert!(run.machine.model().is_some());
+    run.machine.on_reconfig(Reconfig {
+        count: 4,
+        geometry: None,
+        what: "thruster removed".into(),
+    });
+    assert!(
+        run.machine.model().is_none(),
+        "a 5-thruster model cannot drive 4 thrusters"
+    );
+    assert!(run
+        .machine
+        .take_events()
+        .iter()
+        .any(|e| matches!(e, Event::ModelDropped(_))));
+    assert_eq!(run.machine.thrusters(), 4);
+    assert_eq!(run.machine.state(), State::MeasureNoise);
+}
