@@ -3,8 +3,11 @@
 //! one module that reads and writes the state directory.
 
 pub mod attitude;
+pub mod config;
 pub mod controller;
 pub mod estimator;
 pub mod machine;
 pub mod model;
+pub mod store;
 pub mod study;
+pub mod wire;

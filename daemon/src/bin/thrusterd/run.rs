@@ -1,0 +1,460 @@
+//! The daemon's event loop: iceoryx2 in and out around the pure state machine.
+//!
+//! One thread, one WaitSet. IMU samples are validated and answered with a thrust command each;
+//! a deadline on the IMU listener turns a silent driver into Fault with neutral thrust.
+//! Reconfiguration events, setpoints and operator requests feed the machine; model swaps are
+//! published (history 1) and saved; status is published on change and periodically.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use clap::Args;
+use iceoryx2::prelude::CallbackProgression;
+use tracing::{error, info, warn};
+
+use thruster_protocol::services::{
+    cleanup_dead_nodes, create_waitset, ControlServer, Inbox, IpcConfig, Port,
+};
+use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
+use thruster_protocol::{
+    ControlResponse, ImuSample, ModelMsg, ReconfigEvent, RequestKind, ResponseCode, Setpoint,
+    StatusMsg, ThrustCommand,
+};
+use thrusterd::config::DaemonConfig;
+use thrusterd::machine::{Command, Event, Machine, Request};
+use thrusterd::store;
+use thrusterd::wire;
+
+#[derive(Args)]
+pub struct RunArgs {
+    /// Configuration file (see config/thrusterd.toml); defaults apply without one.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Override `ipc.namespace`.
+    #[arg(long)]
+    namespace: Option<String>,
+    /// Override `runtime.state_dir`.
+    #[arg(long)]
+    state_dir: Option<PathBuf>,
+    /// Override `vehicle.thrusters`.
+    #[arg(long)]
+    thrusters: Option<usize>,
+    /// Override `runtime.spin_us` (low-latency polling before blocking).
+    #[arg(long)]
+    spin_us: Option<u64>,
+    /// Start an estimation as soon as the IMU is up.
+    #[arg(long)]
+    estimate: bool,
+}
+
+pub fn run(args: RunArgs) -> Result<()> {
+    init_logging();
+    let mut cfg = match &args.config {
+        Some(path) => DaemonConfig::load(path)?,
+        None => DaemonConfig::default(),
+    };
+    if let Some(ns) = args.namespace {
+        cfg.ipc.namespace = ns;
+    }
+    if let Some(dir) = args.state_dir {
+        cfg.runtime.state_dir = dir;
+    }
+    if let Some(n) = args.thrusters {
+        anyhow::ensure!((1..=16).contains(&n), "--thrusters {n}: must be 1..16");
+        cfg.vehicle.thrusters = n;
+        cfg.vehicle.thruster.clear();
+    }
+    if let Some(spin) = args.spin_us {
+        cfg.runtime.spin_us = spin;
+    }
+
+    let shutdown = Arc::new(AtomicBool::new(false));
+    {
+        let flag = shutdown.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+            .context("installing the SIGINT/SIGTERM handler")?;
+    }
+    let mut daemon = Daemon::new(&cfg, shutdown)?;
+    if args.estimate {
+        daemon.pending_estimate = true;
+    }
+    daemon.serve()
+}
+
+fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+struct Daemon {
+    cfg: DaemonConfig,
+    machine: Machine,
+    shutdown: Arc<AtomicBool>,
+    model_path: PathBuf,
+    ipc: IpcConfig,
+    validator: ImuSampleValidator,
+    rejected: RejectCounters,
+    thrust_seq: u64,
+    status_seq: u64,
+    model_seq: u64,
+    last_imu: Option<(u64, u64)>,
+    pending_estimate: bool,
+    stale_reported: bool,
+}
+
+impl Daemon {
+    fn new(cfg: &DaemonConfig, shutdown: Arc<AtomicBool>) -> Result<Self> {
+        let ipc = match &cfg.ipc.root {
+            Some(root) => IpcConfig::with_root_base(&cfg.ipc.namespace, root),
+            None => IpcConfig::new(&cfg.ipc.namespace),
+        }
+        .with_context(|| format!("ipc.namespace {:?}", cfg.ipc.namespace))?;
+        let mut machine = Machine::new(cfg.machine_setup());
+        let model_path = cfg.runtime.state_dir.join(store::MODEL_FILE);
+        if cfg.runtime.load_model {
+            match store::load(&model_path) {
+                Ok(Some(model)) => match machine.load_model(model) {
+                    Ok(()) => info!(path = %model_path.display(), "loaded the saved model"),
+                    Err(e) => warn!("{e}"),
+                },
+                Ok(None) => info!(path = %model_path.display(), "no saved model yet"),
+                Err(e) => warn!("saved model ignored, starting without it: {e}"),
+            }
+        }
+        Ok(Daemon {
+            cfg: cfg.clone(),
+            machine,
+            shutdown,
+            model_path,
+            ipc,
+            validator: ImuSampleValidator::default(),
+            rejected: RejectCounters::default(),
+            thrust_seq: 0,
+            status_seq: 0,
+            model_seq: 0,
+            last_imu: None,
+            pending_estimate: false,
+            stale_reported: false,
+        })
+    }
+
+    fn serve(&mut self) -> Result<()> {
+        // A crashed predecessor leaves its resources; clean them so it never blocks a restart.
+        match cleanup_dead_nodes(&self.ipc) {
+            Ok(census) => info!(?census, "iceoryx2 namespace {} ready", self.ipc.namespace()),
+            Err(e) => warn!("could not clean up dead nodes: {e}"),
+        }
+        let node = self.ipc.create_node("thrusterd")?;
+        let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
+        let reconfig_in = Inbox::<ReconfigEvent>::create(&node, &self.ipc)?;
+        let setpoint_in = Inbox::<Setpoint>::create(&node, &self.ipc)?;
+        let thrust_out = Port::<ThrustCommand>::create(&node, &self.ipc)?;
+        let model_out = Port::<ModelMsg>::create(&node, &self.ipc)?;
+        let status_out = Port::<StatusMsg>::create(&node, &self.ipc)?;
+        let control = ControlServer::create(&node, &self.ipc)
+            .context("another thrusterd already serves this namespace")?;
+
+        let waitset = create_waitset()?;
+        let imu_timeout = Duration::from_millis(self.cfg.runtime.imu_timeout_ms);
+        let imu_guard = waitset.attach_deadline(imu_in.listener(), imu_timeout)?;
+        let reconfig_guard = waitset.attach_notification(reconfig_in.listener())?;
+        let setpoint_guard = waitset.attach_notification(setpoint_in.listener())?;
+        let control_guard = waitset.attach_notification(control.listener())?;
+        let status_period = Duration::from_millis(self.cfg.runtime.status_period_ms.max(1));
+        let spin = Duration::from_micros(self.cfg.runtime.spin_us);
+
+        if let Some(model) = self.machine.model().cloned() {
+            self.publish_model(&model_out, &model);
+        }
+        info!(thrusters = self.machine.thrusters(), "thrusterd serving");
+        self.publish_status(&status_out);
+        let mut last_status = Instant::now();
+
+        while !self.shutdown.load(Ordering::SeqCst) {
+            // Low-latency mode: poll briefly for the next sample before paying for a wake-up.
+            if !spin.is_zero() {
+                let start = Instant::now();
+                while start.elapsed() < spin {
+                    if let Some(sample) = imu_in.recv()? {
+                        self.on_imu(&sample, &thrust_out);
+                        break;
+                    }
+                    std::hint::spin_loop();
+                }
+            }
+            let (mut imu, mut stale, mut reconf, mut setp, mut ctrl) =
+                (false, false, false, false, false);
+            waitset.wait_and_process_once_with_timeout(
+                |id| {
+                    imu |= id.has_event_from(&imu_guard);
+                    stale |= id.has_missed_deadline(&imu_guard);
+                    reconf |= id.has_event_from(&reconfig_guard);
+                    setp |= id.has_event_from(&setpoint_guard);
+                    ctrl |= id.has_event_from(&control_guard);
+                    CallbackProgression::Continue
+                },
+                status_period,
+            )?;
+            if imu || !spin.is_zero() {
+                imu_in.drain_events()?;
+                let mut got = false;
+                while let Some(sample) = imu_in.recv()? {
+                    self.on_imu(&sample, &thrust_out);
+                    got = true;
+                }
+                if got {
+                    self.stale_reported = false;
+                }
+            }
+            if stale && !self.stale_reported {
+                let cmd = self
+                    .machine
+                    .on_imu_stale(&format!("no IMU sample for {} ms", imu_timeout.as_millis()));
+                self.send_thrust(&thrust_out, &cmd);
+                self.stale_reported = true;
+            }
+            if reconf {
+                reconfig_in.drain_events()?;
+                while let Some(e) = reconfig_in.recv()? {
+                    match e.validate().and_then(|_| check_reconfig(&e)) {
+                        Ok(()) => self.machine.on_reconfig(wire::reconfig(&e)),
+                        Err(reason) => {
+                            self.rejected.record(&reason);
+                            warn!("reconfiguration event rejected: {reason}");
+                        }
+                    }
+                }
+            }
+            if setp {
+                setpoint_in.drain_events()?;
+                while let Some(s) = setpoint_in.recv()? {
+                    match s.validate() {
+                        Ok(()) => {
+                            let (q, depth) = wire::setpoint(&s);
+                            self.machine.on_setpoint(q, depth);
+                        }
+                        Err(reason) => {
+                            self.rejected.record(&reason);
+                            warn!("setpoint rejected: {reason}");
+                        }
+                    }
+                }
+            }
+            if ctrl {
+                control.drain_events()?;
+                control.serve(|kind, req| self.on_request(kind, req))?;
+            }
+            if self.pending_estimate && self.last_imu.is_some() {
+                self.pending_estimate = false;
+                if let Err(e) = self.machine.on_request(Request::Estimate) {
+                    warn!("start-up estimation refused: {e}");
+                }
+            }
+            let changed = self.handle_events(&model_out);
+            if changed || last_status.elapsed() >= status_period {
+                self.publish_status(&status_out);
+                // History-1 services only reach late joiners on a send or this call.
+                let _ = model_out.update_connections();
+                let _ = status_out.update_connections();
+                last_status = Instant::now();
+            }
+        }
+
+        info!("shutting down: thrusters neutral");
+        let neutral = Command {
+            count: self.machine.thrusters(),
+            thrust: [0.0; 16],
+            mode: thrusterd::machine::Mode::Neutral,
+        };
+        self.send_thrust(&thrust_out, &neutral);
+        self.handle_events(&model_out);
+        if let Some(model) = self.machine.model().cloned() {
+            self.save(&model);
+        }
+        let mut status = self.status_msg();
+        status.set_text("thrusterd stopped");
+        let _ = status_out.send(&status);
+        Ok(())
+    }
+
+    fn on_imu(&mut self, sample: &ImuSample, thrust_out: &Port<ThrustCommand>) {
+        match self.validator.check(sample) {
+            Ok(accepted) => {
+                self.last_imu = Some((sample.seq, sample.t_ns));
+                if accepted.resynced {
+                    warn!(
+                        "IMU stream restarted (seq {}): time discontinuity",
+                        sample.seq
+                    );
+                }
+                let cmd = self.machine.on_imu(&wire::imu_input(sample));
+                self.send_thrust(thrust_out, &cmd);
+            }
+            Err(reason) => {
+                self.rejected.record(&reason);
+                if self.rejected.total() < 20 || self.rejected.total().is_power_of_two() {
+                    warn!(
+                        rejected = self.rejected.total(),
+                        "IMU sample rejected: {reason}"
+                    );
+                }
+                // Still answer, with neutral: a driver in lockstep waits for every answer, and
+                // a garbage sample must never keep a pulse running.
+                let neutral = Command {
+                    count: self.machine.thrusters(),
+                    thrust: [0.0; 16],
+                    mode: thrusterd::machine::Mode::Neutral,
+                };
+                let mut msg =
+                    wire::thrust_command(self.thrust_seq, sample.seq, sample.t_ns, &neutral);
+                self.thrust_seq += 1;
+                msg.imu_seq = sample.seq;
+                let _ = thrust_out.send(&msg);
+            }
+        }
+    }
+
+    fn send_thrust(&mut self, thrust_out: &Port<ThrustCommand>, cmd: &Command) {
+        let (imu_seq, t_ns) = self.last_imu.unwrap_or((0, 0));
+        let mut msg = wire::thrust_command(self.thrust_seq, imu_seq, t_ns, cmd);
+        // The machine already sanitises; this is the protocol's own last check before the wire.
+        thruster_protocol::validate::sanitize_thrust(msg.thrusters_mut());
+        self.thrust_seq += 1;
+        if let Err(e) = thrust_out.send(&msg) {
+            error!("thrust command not sent: {e}");
+        }
+    }
+
+    fn on_request(
+        &mut self,
+        kind: RequestKind,
+        req: &thruster_protocol::ControlRequest,
+    ) -> ControlResponse {
+        let machine_req = match kind {
+            RequestKind::Status => {
+                let s = self.machine.status();
+                return ControlResponse::ok(&format!("{}: {}", s.state.name(), s.text));
+            }
+            RequestKind::Estimate => Request::Estimate,
+            RequestKind::Abort => Request::Abort,
+            RequestKind::Hold => Request::Hold,
+            RequestKind::Idle => Request::Idle,
+            RequestKind::Revert => Request::Revert,
+            RequestKind::Save => {
+                let Some(model) = self.machine.model().cloned() else {
+                    return ControlResponse::new(ResponseCode::Rejected, "no model to save");
+                };
+                let path = if req.text.as_str().is_empty() {
+                    self.model_path.clone()
+                } else {
+                    PathBuf::from(req.text.as_str())
+                };
+                return match store::save_atomic(&model, &path) {
+                    Ok(()) => ControlResponse::ok(&format!(
+                        "saved model v{} to {}",
+                        model.version,
+                        path.display()
+                    )),
+                    Err(e) => ControlResponse::new(ResponseCode::Failed, &e.to_string()),
+                };
+            }
+            RequestKind::Load => {
+                let path = PathBuf::from(req.text.as_str());
+                return match store::load(&path) {
+                    Ok(Some(model)) => match self.machine.load_model(model) {
+                        Ok(()) => ControlResponse::ok(&format!("loaded {}", path.display())),
+                        Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.to_string()),
+                    },
+                    Ok(None) => ControlResponse::new(
+                        ResponseCode::Failed,
+                        &format!("{}: no such file", path.display()),
+                    ),
+                    Err(e) => ControlResponse::new(ResponseCode::Failed, &e.to_string()),
+                };
+            }
+            RequestKind::Shutdown => {
+                self.shutdown.store(true, Ordering::SeqCst);
+                return ControlResponse::ok("shutting down");
+            }
+        };
+        match self.machine.on_request(machine_req) {
+            Ok(text) => ControlResponse::ok(&text),
+            Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.0),
+        }
+    }
+
+    /// Publish and persist what the machine did; true when status should go out now.
+    fn handle_events(&mut self, model_out: &Port<ModelMsg>) -> bool {
+        let events = self.machine.take_events();
+        let changed = !events.is_empty();
+        for event in events {
+            match event {
+                Event::ModelSwapped(model) => {
+                    info!(version = model.version, source = ?model.source, actuated = ?model.actuated.names(), "model swapped in");
+                    self.publish_model(model_out, &model);
+                    if model.source == thrusterd::model::ModelSource::Estimated {
+                        self.save(&model);
+                    }
+                }
+                Event::ModelDropped(why) => warn!("model dropped: {why}"),
+                Event::ModelRejected(why) => warn!("model rejected, old one kept: {why}"),
+                Event::StateChanged { from, to, why } => {
+                    info!("{} -> {}: {why}", from.name(), to.name())
+                }
+            }
+        }
+        changed
+    }
+
+    fn save(&self, model: &thrusterd::model::Model) {
+        if let Err(e) = std::fs::create_dir_all(&self.cfg.runtime.state_dir) {
+            warn!(
+                "model not saved: {}: {e}",
+                self.cfg.runtime.state_dir.display()
+            );
+            return;
+        }
+        match store::save_atomic(model, &self.model_path) {
+            Ok(()) => {
+                info!(path = %self.model_path.display(), version = model.version, "model saved")
+            }
+            Err(e) => warn!("model not saved (daemon keeps running): {e}"),
+        }
+    }
+
+    fn publish_model(&mut self, model_out: &Port<ModelMsg>, model: &thrusterd::model::Model) {
+        let t = self.last_imu.map(|(_, t)| t).unwrap_or(0);
+        let msg = wire::model_msg(self.model_seq, t, model);
+        self.model_seq += 1;
+        if let Err(e) = model_out.send(&msg) {
+            error!("model not published: {e}");
+        }
+    }
+
+    fn status_msg(&mut self) -> StatusMsg {
+        let mut msg = wire::status_msg(self.status_seq, &self.machine.status());
+        self.status_seq += 1;
+        self.rejected.write_to(&mut msg);
+        msg
+    }
+
+    fn publish_status(&mut self, status_out: &Port<StatusMsg>) {
+        let msg = self.status_msg();
+        if let Err(e) = status_out.send(&msg) {
+            error!("status not published: {e}");
+        }
+    }
+}
+
+/// Indices and counts the machine must never see out of range.
+fn check_reconfig(e: &ReconfigEvent) -> Result<(), RejectReason> {
+    thruster_protocol::validate::expect_count("count", e.count, e.count.clamp(1, 16))?;
+    Ok(())
+}

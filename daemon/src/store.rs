@@ -1,0 +1,271 @@
+//! The state directory: the current model saved atomically (temp file, fsync, rename, fsync of
+//! the folder) and loaded at start. The one module of the library that touches files.
+
+use std::fs::{self, File};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use crate::estimator::{DofMask, Method};
+use crate::model::{Model, ModelSource};
+
+/// File name of the current model inside the state directory.
+pub const MODEL_FILE: &str = "model.json";
+/// Identifies our files; a different value is someone else's file.
+pub const FORMAT: &str = "thrusterd-model";
+/// Version of the layout below; files from a newer daemon are refused, not guessed at.
+pub const FORMAT_VERSION: u32 = 1;
+
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: not a thrusterd model file: {why}")]
+    Corrupt { path: String, why: String },
+    #[error("{path}: format version {found} is newer than this daemon's {FORMAT_VERSION}")]
+    Incompatible { path: String, found: u32 },
+}
+
+/// On-disk form; NaN (unknown standard error) is stored as null.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelFile {
+    format: String,
+    format_version: u32,
+    thrusters: usize,
+    version: u64,
+    source: ModelSource,
+    method: Method,
+    /// 6 rows (roll, pitch, yaw, surge, sway, heave) of `thrusters` values.
+    effectiveness: Vec<Vec<f64>>,
+    /// `thrusters` rows of 6 values.
+    allocation: Vec<Vec<f64>>,
+    std_err: Vec<Vec<Option<f64>>>,
+    actuated: Vec<String>,
+    rel_err_rot: Option<f64>,
+    rel_err_acc: Option<f64>,
+    geometry_key: Option<u64>,
+}
+
+fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|r| m.row(r).iter().cloned().collect())
+        .collect()
+}
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+/// Serialise a model to the file's JSON text.
+pub fn to_json(model: &Model) -> String {
+    let file = ModelFile {
+        format: FORMAT.into(),
+        format_version: FORMAT_VERSION,
+        thrusters: model.thrusters(),
+        version: model.version,
+        source: model.source,
+        method: model.method,
+        effectiveness: rows(&model.effectiveness),
+        allocation: rows(&model.allocation),
+        std_err: (0..model.std_err.nrows())
+            .map(|r| model.std_err.row(r).iter().map(|v| finite(*v)).collect())
+            .collect(),
+        actuated: model
+            .actuated
+            .names()
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+        rel_err_rot: finite(model.rel_err_rot),
+        rel_err_acc: finite(model.rel_err_acc),
+        geometry_key: model.geometry_key,
+    };
+    // Plain data with string keys: serialisation cannot fail.
+    serde_json::to_string_pretty(&file).unwrap_or_default()
+}
+
+fn matrix(name: &str, rows: &[Vec<f64>], r: usize, c: usize) -> Result<DMatrix<f64>, String> {
+    if rows.len() != r || rows.iter().any(|row| row.len() != c) {
+        return Err(format!("{name} must be {r} x {c}"));
+    }
+    if rows.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(format!("{name} has a non-finite value"));
+    }
+    Ok(DMatrix::from_fn(r, c, |i, j| rows[i][j]))
+}
+
+/// Parse the file's JSON text (`origin` names it in errors).
+pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
+    let corrupt = |why: String| StoreError::Corrupt {
+        path: origin.to_string(),
+        why,
+    };
+    // Look at the header first so a newer file is reported as such, not as garbage.
+    let header: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| corrupt(e.to_string()))?;
+    if header.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
+        return Err(corrupt(format!("missing \"format\": \"{FORMAT}\"")));
+    }
+    let found = header
+        .get("format_version")
+        .and_then(|v| v.as_u64())
+        .unwrap_or(0) as u32;
+    if found > FORMAT_VERSION {
+        return Err(StoreError::Incompatible {
+            path: origin.to_string(),
+            found,
+        });
+    }
+    let f: ModelFile = serde_json::from_value(header).map_err(|e| corrupt(e.to_string()))?;
+    let n = f.thrusters;
+    if !(1..=crate::machine::MAX_THRUSTERS).contains(&n) {
+        return Err(corrupt(format!("thrusters = {n} is not 1..16")));
+    }
+    let effectiveness = matrix("effectiveness", &f.effectiveness, 6, n).map_err(corrupt)?;
+    let allocation = matrix("allocation", &f.allocation, n, 6).map_err(corrupt)?;
+    if f.std_err.len() != 6 || f.std_err.iter().any(|r| r.len() != n) {
+        return Err(corrupt("std_err must be 6 x thrusters".into()));
+    }
+    let std_err = DMatrix::from_fn(6, n, |i, j| f.std_err[i][j].unwrap_or(f64::NAN));
+    let mut actuated = DofMask::NONE;
+    for name in &f.actuated {
+        let dof = crate::estimator::Dof::ALL
+            .iter()
+            .find(|d| d.name() == name)
+            .ok_or_else(|| corrupt(format!("unknown DOF \"{name}\" in actuated")))?;
+        actuated.0[dof.index()] = true;
+    }
+    Ok(Model {
+        version: f.version,
+        source: f.source,
+        method: f.method,
+        effectiveness,
+        allocation,
+        std_err,
+        actuated,
+        rel_err_rot: f.rel_err_rot.unwrap_or(f64::NAN),
+        rel_err_acc: f.rel_err_acc.unwrap_or(f64::NAN),
+        geometry_key: f.geometry_key,
+    })
+}
+
+/// Write `model` to `path` atomically: readers see the old file or the new one, never half.
+pub fn save_atomic(model: &Model, path: &Path) -> Result<(), StoreError> {
+    let io = |source: std::io::Error| StoreError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let tmp: PathBuf = dir.join(format!(
+        ".{}.tmp",
+        path.file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or(MODEL_FILE)
+    ));
+    let result = (|| {
+        let mut f = File::create(&tmp)?;
+        f.write_all(to_json(model).as_bytes())?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&tmp, path)?;
+        // The rename itself must reach the disk before we call the model saved.
+        File::open(dir)?.sync_all()
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result.map_err(io)
+}
+
+/// Load the model at `path`; Ok(None) when there is none yet.
+pub fn load(path: &Path) -> Result<Option<Model>, StoreError> {
+    match fs::read_to_string(path) {
+        Ok(text) => from_json(&text, &path.display().to_string()).map(Some),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(source) => Err(StoreError::Io {
+            path: path.display().to_string(),
+            source,
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{nominal_effectiveness, RigidBody};
+
+    fn model() -> Model {
+        let pos = [[0.0, -0.2, 0.0], [0.0, 0.2, 0.0], [0.1, 0.0, -0.1]];
+        let dir = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]];
+        let mut m = Model::nominal(
+            nominal_effectiveness(&RigidBody::default(), &pos, &dir),
+            Some(42),
+        );
+        m.version = 7;
+        m.std_err[(0, 0)] = 0.01;
+        m
+    }
+
+    #[test]
+    fn round_trip_through_a_real_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(MODEL_FILE);
+        assert!(load(&path).unwrap().is_none());
+        let m = model();
+        save_atomic(&m, &path).unwrap();
+        let back = load(&path).unwrap().unwrap();
+        assert_eq!(back.effectiveness, m.effectiveness);
+        assert_eq!(back.allocation, m.allocation);
+        assert_eq!(back.actuated, m.actuated);
+        assert_eq!(back.version, 7);
+        assert_eq!(back.geometry_key, Some(42));
+        assert_eq!(back.std_err[(0, 0)], 0.01);
+        assert!(back.std_err[(1, 1)].is_nan());
+        // No temp file left behind.
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn corrupt_truncated_and_future_files_are_refused_with_reasons() {
+        let text = to_json(&model());
+        let e = from_json(&text[..text.len() / 2], "m.json").unwrap_err();
+        assert!(
+            matches!(e, StoreError::Corrupt { .. }) && e.to_string().starts_with("m.json"),
+            "{e}"
+        );
+        let e = from_json(
+            &text.replace("\"format_version\": 1", "\"format_version\": 9"),
+            "m.json",
+        )
+        .unwrap_err();
+        assert!(
+            matches!(e, StoreError::Incompatible { found: 9, .. }),
+            "{e}"
+        );
+        let e = from_json(&text.replace("thrusterd-model", "other"), "m.json").unwrap_err();
+        assert!(e.to_string().contains("format"), "{e}");
+        let e = from_json(
+            &text.replace("\"thrusters\": 3", "\"thrusters\": 4"),
+            "m.json",
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("effectiveness must be 6 x 4"), "{e}");
+        let e = from_json(&text.replacen("\"pitch\"", "\"pitchh\"", 1), "m.json");
+        assert!(e.is_err());
+    }
+
+    #[test]
+    fn unwritable_directory_is_an_error_not_a_panic() {
+        let e = save_atomic(&model(), Path::new("/proc/thrusterd-test/model.json")).unwrap_err();
+        assert!(e.to_string().contains("/proc/thrusterd-test"), "{e}");
+    }
+}
