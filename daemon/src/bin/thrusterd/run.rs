@@ -213,7 +213,8 @@ impl Daemon {
                     self.stale_reported = false;
                 }
             }
-            if stale && !self.stale_reported {
+            // Before the first sample there is nothing to go stale: the driver is not up yet.
+            if stale && !self.stale_reported && self.last_imu.is_some() {
                 let cmd = self
                     .machine
                     .on_imu_stale(&format!("no IMU sample for {} ms", imu_timeout.as_millis()));
@@ -251,7 +252,10 @@ impl Daemon {
                 control.drain_events()?;
                 control.serve(|kind, req| self.on_request(kind, req))?;
             }
-            if self.pending_estimate && self.last_imu.is_some() {
+            if self.pending_estimate
+                && self.last_imu.is_some()
+                && self.machine.state() != thrusterd::machine::State::Fault
+            {
                 self.pending_estimate = false;
                 if let Err(e) = self.machine.on_request(Request::Estimate) {
                     warn!("start-up estimation refused: {e}");
