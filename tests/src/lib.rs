@@ -1,1 +1,323 @@
-//! Helpers shared by the system tests: spawning and reaping real processes on a private namespace.
+//! Helpers shared by the system tests: the real binaries started as separate processes on a
+//! private iceoryx2 namespace, always reaped, and the namespace purged afterwards.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::Once;
+use std::time::{Duration, Instant};
+
+use thruster_protocol::services::{ControlClient, Inbox, IpcConfig, IpcNode, NamespaceGuard};
+use thruster_protocol::{
+    ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
+};
+
+/// Workspace root (this crate lives in tests/).
+pub fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// Path of a workspace binary in the same profile as the running test.
+pub fn bin(name: &str) -> PathBuf {
+    static BUILD: Once = Once::new();
+    // target/<profile>/deps/<test-binary> -> target/<profile>/<name>
+    let exe = std::env::current_exe().unwrap();
+    let dir = exe.parent().unwrap().parent().unwrap().to_path_buf();
+    let path = dir.join(name);
+    // `cargo test --workspace` builds every binary first; `cargo test -p system-tests` alone
+    // does not, so build them once here rather than test a stale or missing binary.
+    BUILD.call_once(|| {
+        if !path.exists() || std::env::var_os("SYSTEM_TESTS_BUILD").is_some() {
+            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+            let release = dir.ends_with("release");
+            let mut cmd = Command::new(cargo);
+            cmd.args(["build", "-p", "thrusterd", "-p", "thruster-sim", "--bins"]);
+            if release {
+                cmd.arg("--release");
+            }
+            let status = cmd
+                .current_dir(workspace())
+                .status()
+                .expect("running cargo build");
+            assert!(status.success(), "building the binaries failed");
+        }
+    });
+    assert!(path.exists(), "{} not built", path.display());
+    path
+}
+
+/// A child process that is killed and reaped however the test ends.
+pub struct Proc {
+    pub name: String,
+    child: Option<Child>,
+    pub log: PathBuf,
+}
+
+impl Proc {
+    /// Start `bin(name)` with `args`; stdout and stderr go to a log file in `logs`.
+    pub fn spawn(name: &str, args: &[&str], logs: &Path) -> Proc {
+        let log = logs.join(format!(
+            "{name}-{}.log",
+            Instant::now().elapsed().as_nanos() ^ std::process::id() as u128
+        ));
+        let out = File::create(&log).unwrap();
+        let err = out.try_clone().unwrap();
+        let child = Command::new(bin(name))
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(out)
+            .stderr(err)
+            .env("RUST_LOG", "info")
+            .spawn()
+            .unwrap_or_else(|e| panic!("spawning {name}: {e}"));
+        Proc {
+            name: name.to_string(),
+            child: Some(child),
+            log,
+        }
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.as_ref().map(|c| c.id()).unwrap_or(0)
+    }
+
+    /// Send a signal (e.g. libc SIGTERM = 15) through kill(1), keeping the crate free of libc.
+    pub fn signal(&self, sig: &str) {
+        let _ = Command::new("kill")
+            .args([&format!("-{sig}"), &self.pid().to_string()])
+            .status();
+    }
+
+    /// Wait for exit up to `timeout`; None if still running.
+    pub fn wait_timeout(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        let child = self.child.as_mut()?;
+        let start = Instant::now();
+        loop {
+            if let Ok(Some(status)) = child.try_wait() {
+                self.child = None;
+                return Some(status);
+            }
+            if start.elapsed() > timeout {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// SIGTERM, then wait; the exit status.
+    pub fn stop(&mut self) -> ExitStatus {
+        self.signal("TERM");
+        match self.wait_timeout(Duration::from_secs(5)) {
+            Some(s) => s,
+            None => panic!(
+                "{} did not exit within 5 s of SIGTERM\n{}",
+                self.name,
+                self.log_text()
+            ),
+        }
+    }
+
+    pub fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    pub fn is_running(&mut self) -> bool {
+        match self.child.as_mut() {
+            Some(c) => matches!(c.try_wait(), Ok(None)),
+            None => false,
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// A test's private world: namespace (purged on drop), temp folder for logs and state.
+pub struct World {
+    pub dir: tempfile::TempDir,
+    // Declared before `ns` so nodes drop first; the guard then purges the namespace.
+    pub node: Option<IpcNode>,
+    pub ns: NamespaceGuard,
+}
+
+impl World {
+    pub fn new(tag: &str) -> World {
+        let ns = NamespaceGuard::unique_for_test(tag).unwrap();
+        let node = ns.create_node("system-test").unwrap();
+        World {
+            dir: tempfile::tempdir().unwrap(),
+            node: Some(node),
+            ns,
+        }
+    }
+
+    pub fn node(&self) -> &IpcNode {
+        self.node.as_ref().unwrap()
+    }
+
+    pub fn ipc(&self) -> &IpcConfig {
+        &self.ns
+    }
+
+    pub fn namespace(&self) -> String {
+        self.ns.namespace().to_string()
+    }
+
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    /// `thrusterd run` on this namespace with a state directory in the temp folder.
+    pub fn daemon(&self, extra: &[&str]) -> Proc {
+        let ns = self.namespace();
+        let state = self.path("state");
+        let mut args = vec![
+            "run",
+            "--namespace",
+            &ns,
+            "--state-dir",
+            state.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        Proc::spawn("thrusterd", &args, self.dir.path())
+    }
+
+    /// `thruster-sim run` on this namespace.
+    pub fn sim(&self, vehicle: &str, extra: &[&str]) -> Proc {
+        let ns = self.namespace();
+        let vehicle = workspace()
+            .join("config/vehicles")
+            .join(format!("{vehicle}.toml"));
+        let mut args = vec![
+            "run",
+            "--namespace",
+            &ns,
+            "--vehicle",
+            vehicle.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        Proc::spawn("thruster-sim", &args, self.dir.path())
+    }
+
+    /// Files of this namespace still on disk (after every process has exited).
+    pub fn leftovers(&self) -> Vec<PathBuf> {
+        thruster_protocol::services::purge_namespace(&self.ns).unwrap();
+        thruster_protocol::services::namespace_files(&self.ns).unwrap()
+    }
+}
+
+/// Operator-side view of the daemon, from the test process.
+pub struct Operator {
+    pub client: ControlClient,
+    pub status: Inbox<StatusMsg>,
+    pub model: Inbox<ModelMsg>,
+    pub truth: Inbox<TruthMsg>,
+}
+
+impl Operator {
+    pub fn new(world: &World) -> Operator {
+        Operator {
+            client: ControlClient::create(world.node(), world.ipc()).unwrap(),
+            status: Inbox::create(world.node(), world.ipc()).unwrap(),
+            model: Inbox::create(world.node(), world.ipc()).unwrap(),
+            truth: Inbox::create(world.node(), world.ipc()).unwrap(),
+        }
+    }
+
+    pub fn request(&self, kind: RequestKind) -> ControlResponse {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            match self
+                .client
+                .call(ControlRequest::new(kind), Duration::from_secs(2))
+            {
+                Ok(r) => return r,
+                Err(e) if Instant::now() < deadline => {
+                    let _ = e;
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(e) => panic!("{kind:?}: {e}"),
+            }
+        }
+    }
+
+    /// Newest status satisfying `pred`, waiting up to `timeout`.
+    pub fn wait_status(
+        &self,
+        timeout: Duration,
+        pred: impl Fn(&StatusMsg) -> bool,
+    ) -> Option<StatusMsg> {
+        let start = Instant::now();
+        while start.elapsed() < timeout {
+            while let Some(s) = self.status.recv().unwrap() {
+                if pred(&s) {
+                    return Some(s);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        None
+    }
+
+    /// Next model satisfying `pred`.
+    pub fn wait_model(
+        &self,
+        timeout: Duration,
+        pred: impl Fn(&ModelMsg) -> bool,
+    ) -> Option<ModelMsg> {
+        let start = Instant::now();
+        while start.elapsed() < timeout {
+            while let Some(m) = self.model.recv().unwrap() {
+                if pred(&m) {
+                    return Some(m);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        None
+    }
+
+    /// Latest truth (the simulator publishes it with history 1).
+    pub fn latest_truth(&self, timeout: Duration) -> Option<TruthMsg> {
+        let start = Instant::now();
+        let mut last = None;
+        while start.elapsed() < timeout && last.is_none() {
+            while let Some(t) = self.truth.recv().unwrap() {
+                last = Some(t);
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        while let Some(t) = self.truth.recv().unwrap() {
+            last = Some(t);
+        }
+        last
+    }
+}
+
+pub fn state(s: &StatusMsg) -> DaemonState {
+    s.state().unwrap_or(DaemonState::Fault)
+}
+
+/// Relative Frobenius error of the model's rows [first, first+3) against the symmetric truth
+/// (mean of forward and reverse gains, which is what a linear model learns).
+pub fn model_error(model: &ModelMsg, truth: &TruthMsg, first: usize) -> f64 {
+    let n = model.count as usize;
+    let (mut num, mut den) = (0.0, 0.0);
+    for j in first..first + 3 {
+        for i in 0..n {
+            let t = 0.5 * (truth.effectiveness[j][i] + truth.reverse_effectiveness[j][i]);
+            num += (model.effectiveness[j][i] - t).powi(2);
+            den += t * t;
+        }
+    }
+    (num / den).sqrt()
+}
