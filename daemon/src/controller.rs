@@ -9,6 +9,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
+use crate::machine::MAX_THRUSTERS;
 use crate::model::Model;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -141,11 +142,16 @@ impl Controller {
         }
         // Unactuated DOFs are dropped by the allocation (zero columns) and their integrators
         // are not run, so they cannot wind up against a motion the vehicle cannot make.
-        let mut u_rot = vec![0.0; out.len()];
-        let mut u_lin = vec![0.0; out.len()];
-        model.allocate(&[alpha[0], alpha[1], alpha[2], 0.0, 0.0, 0.0], &mut u_rot);
-        model.allocate(&[0.0, 0.0, 0.0, lin[0], lin[1], lin[2]], &mut u_lin);
-        let (s_rot, s_lin) = desaturate(&u_rot, &u_lin);
+        // Fixed-size scratch: the control tick runs once per IMU sample and must not allocate.
+        let n = out.len().min(MAX_THRUSTERS);
+        let mut u_rot = [0.0; MAX_THRUSTERS];
+        let mut u_lin = [0.0; MAX_THRUSTERS];
+        model.allocate(
+            &[alpha[0], alpha[1], alpha[2], 0.0, 0.0, 0.0],
+            &mut u_rot[..n],
+        );
+        model.allocate(&[0.0, 0.0, 0.0, lin[0], lin[1], lin[2]], &mut u_lin[..n]);
+        let (s_rot, s_lin) = desaturate(&u_rot[..n], &u_lin[..n]);
         for (i, o) in out.iter_mut().enumerate() {
             let v = s_rot * u_rot[i] + s_lin * u_lin[i];
             *o = if v.is_finite() {
