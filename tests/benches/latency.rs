@@ -1,0 +1,199 @@
+//! IMU sample -> thrust command latency through the real daemon, beside a raw iceoryx2
+//! ping-pong of the same payloads (`thruster-sim respond`, which only validates and answers),
+//! measured in the same run, in event mode and in low-latency (spin) mode.
+//!
+//! Run: cargo bench -p system-tests --bench latency [-- ROUND_TRIPS]
+
+use std::time::{Duration, Instant};
+
+use system_tests::{state, Operator, Proc, World};
+use thruster_protocol::services::{Inbox, Port};
+use thruster_protocol::{DaemonState, ImuSample, RequestKind, ThrustCommand};
+
+const WARMUP: usize = 2_000;
+
+struct Stats {
+    p50: f64,
+    p99: f64,
+    p999: f64,
+    mean: f64,
+}
+
+fn stats(mut us: Vec<f64>) -> Stats {
+    us.sort_by(|a, b| a.total_cmp(b));
+    let q = |p: f64| us[((us.len() as f64 - 1.0) * p).round() as usize];
+    Stats {
+        p50: q(0.5),
+        p99: q(0.99),
+        p999: q(0.999),
+        mean: us.iter().sum::<f64>() / us.len() as f64,
+    }
+}
+
+fn sample(seq: u64) -> ImuSample {
+    ImuSample {
+        seq,
+        t_ns: 1_000_000_000 + seq * 1_000_000,
+        gyro: [0.001, -0.002, 0.0005],
+        accel: [0.0, 0.0, -9.80665],
+        mag: [20.0, 0.0, 45.0],
+        depth: 5.0,
+        flags: ImuSample::HAS_MAG | ImuSample::HAS_DEPTH,
+    }
+}
+
+/// One round trip per sample, busy-polling for the answer. Microseconds.
+fn round_trips(
+    imu: &Port<ImuSample>,
+    thrust: &Inbox<ThrustCommand>,
+    seq: &mut u64,
+    count: usize,
+) -> Vec<f64> {
+    let mut out = Vec::with_capacity(count);
+    for _ in 0..count {
+        *seq += 1;
+        let start = Instant::now();
+        imu.send(&sample(*seq)).unwrap();
+        loop {
+            if let Some(c) = thrust.recv().unwrap() {
+                if c.imu_seq == *seq {
+                    break;
+                }
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(5),
+                "no answer to sample {seq}"
+            );
+            std::hint::spin_loop();
+        }
+        out.push(start.elapsed().as_secs_f64() * 1e6);
+    }
+    out
+}
+
+/// Ping-pong `n` samples after a handshake, `setup` and a warm-up.
+fn ping_pong(world: &World, n: usize, setup: impl FnOnce()) -> Vec<f64> {
+    let imu: Port<ImuSample> = Port::create(world.node(), world.ipc()).unwrap();
+    let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
+    let mut seq = 0u64;
+    // Handshake: until the peer answers at all.
+    let start = Instant::now();
+    loop {
+        seq += 1;
+        imu.send(&sample(seq)).unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+        if thrust.recv().unwrap().is_some() {
+            while thrust.recv().unwrap().is_some() {}
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "peer never answered"
+        );
+    }
+    setup();
+    round_trips(&imu, &thrust, &mut seq, WARMUP);
+    round_trips(&imu, &thrust, &mut seq, n)
+}
+
+fn daemon_config(world: &World) -> std::path::PathBuf {
+    // Eight declared thrusters: the daemon starts with a nominal model and can hold attitude.
+    let mut text = String::from("[vehicle]\n");
+    for (p, d) in [
+        ([0.15, -0.1, 0.0], [0.7071, 0.7071, 0.0]),
+        ([0.15, 0.1, 0.0], [0.7071, -0.7071, 0.0]),
+        ([-0.15, -0.1, 0.0], [0.7071, -0.7071, 0.0]),
+        ([-0.15, 0.1, 0.0], [0.7071, 0.7071, 0.0]),
+        ([0.12, -0.22, 0.0], [0.0, 0.0, 1.0]),
+        ([0.12, 0.22, 0.0], [0.0, 0.0, -1.0]),
+        ([-0.12, -0.22, 0.0], [0.0, 0.0, -1.0]),
+        ([-0.12, 0.22, 0.0], [0.0, 0.0, 1.0]),
+    ] {
+        text += &format!("[[vehicle.thruster]]\nposition_m = {p:?}\ndirection = {d:?}\n");
+    }
+    let path = world.path("thrusterd.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn main() {
+    let n: usize = std::env::args()
+        .skip(1)
+        .find_map(|a| a.parse().ok())
+        .unwrap_or(20_000);
+    println!(
+        "IMU sample -> thrust command round trip, {n} samples after {WARMUP} warm-up, microseconds"
+    );
+    println!("| mode | path | p50 | p99 | p99.9 | mean | p50 ratio daemon/raw |");
+    println!("|---|---|---|---|---|---|---|");
+    for (mode, spin) in [
+        ("event (spin 0)", "0"),
+        ("low-latency (spin 1000 us)", "1000"),
+    ] {
+        let raw = {
+            let world = World::new("lat-raw");
+            let ns = world.namespace();
+            let mut peer = Proc::spawn(
+                "thruster-sim",
+                &[
+                    "respond",
+                    "--namespace",
+                    &ns,
+                    "--count",
+                    "8",
+                    "--spin-us",
+                    spin,
+                ],
+                world.dir.path(),
+            );
+            let us = ping_pong(&world, n, || {});
+            peer.stop();
+            stats(us)
+        };
+        let daemon = {
+            let world = World::new("lat-d");
+            let ns = world.namespace();
+            let cfg = daemon_config(&world);
+            let state_dir = world.path("state");
+            let mut peer = Proc::spawn(
+                "thrusterd",
+                &[
+                    "run",
+                    "--config",
+                    cfg.to_str().unwrap(),
+                    "--namespace",
+                    &ns,
+                    "--state-dir",
+                    state_dir.to_str().unwrap(),
+                    "--spin-us",
+                    spin,
+                ],
+                world.dir.path(),
+            );
+            let op = Operator::new(&world);
+            let us = ping_pong(&world, n, || {
+                // Hold attitude, so every sample runs the attitude filter and the controller.
+                let r = op.request(RequestKind::Hold);
+                assert!(r.is_ok(), "{}", r.text());
+                op.wait_status(Duration::from_secs(10), |s| state(s) == DaemonState::Active)
+                    .expect("daemon active");
+            });
+            peer.stop();
+            stats(us)
+        };
+        for (path, s) in [
+            ("raw iceoryx2 ping-pong", &raw),
+            ("through thrusterd (controlling)", &daemon),
+        ] {
+            let ratio = if path.starts_with("through") {
+                format!("{:.2}", daemon.p50 / raw.p50)
+            } else {
+                String::new()
+            };
+            println!(
+                "| {mode} | {path} | {:.1} | {:.1} | {:.1} | {:.1} | {ratio} |",
+                s.p50, s.p99, s.p999, s.mean
+            );
+        }
+    }
+}

@@ -1,0 +1,171 @@
+//! thrusterctl as an operator uses it: the real binary against real `thrusterd run` and
+//! `thruster-sim run --lockstep` processes, checking output, exit codes and effects.
+
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use system_tests::{bin, workspace, World};
+
+const LONG: Duration = Duration::from_secs(60);
+
+fn ctl(world: &World, args: &[&str]) -> Output {
+    Command::new(bin("thrusterctl"))
+        .args(["--namespace", &world.namespace(), "--timeout-ms", "5000"])
+        .args(args)
+        .output()
+        .expect("thrusterctl runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn expect_code(out: &Output, code: i32, what: &str) {
+    assert_eq!(
+        out.status.code(),
+        Some(code),
+        "{what}\nstdout: {}\nstderr: {}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+}
+
+/// Polls `status --json` until `pred` holds; the last status.
+fn wait_status(world: &World, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
+    let deadline = Instant::now() + LONG;
+    loop {
+        let out = ctl(world, &["status", "--json"]);
+        if out.status.success() {
+            let v: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
+            if pred(&v) {
+                return v;
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "timed out waiting for {what}; last: {}{}",
+            text(&out.stdout),
+            text(&out.stderr)
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
+    let world = World::new("ctl");
+    let mut daemon = world.daemon(&[]);
+    let mut sim = world.sim(
+        "amour5",
+        &["--noise", "paper", "--lockstep", "--duration", "100000"],
+    );
+    wait_status(&world, "an idle daemon reading the IMU", |v| {
+        v["state"] == "Idle" && v["samples"].as_u64().unwrap_or(0) > 50
+    });
+
+    // Refused before there is a model: exit 4 with the daemon's reason.
+    let out = ctl(&world, &["save"]);
+    expect_code(&out, 4, "save without a model");
+    assert!(text(&out.stderr).contains("no model to save"));
+
+    let out = ctl(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
+    expect_code(&out, 0, "estimate --wait");
+    let done = text(&out.stdout);
+    assert!(
+        done.starts_with("estimation done: model version 1 (Estimated, "),
+        "{done}\n{}",
+        daemon.log_text()
+    );
+
+    let out = ctl(&world, &["model", "--json"]);
+    expect_code(&out, 0, "model --json");
+    let m: Value = serde_json::from_slice(&out.stdout).expect("model JSON");
+    assert_eq!(m["version"], 1);
+    assert_eq!(m["count"], 5);
+    let eff = m["effectiveness"].as_array().unwrap();
+    assert_eq!(eff.len(), 6);
+    assert!(eff.iter().all(|row| row.as_array().unwrap().len() == 5));
+    assert_eq!(m["allocation"].as_array().unwrap().len(), 5);
+    // AMOUR's five thrusters push along x and z only: no sway.
+    assert_eq!(m["actuated"]["sway"], false, "{m}");
+    assert_eq!(m["actuated"]["yaw"], true, "{m}");
+
+    let out = ctl(&world, &["model"]);
+    expect_code(&out, 0, "model");
+    assert!(text(&out.stdout).contains("NOT actuated:  sway"));
+    assert!(text(&out.stdout).contains("contribution of each thruster"));
+
+    let saved = world.path("saved-model.json");
+    let out = ctl(&world, &["save", saved.to_str().unwrap()]);
+    expect_code(&out, 0, "save PATH");
+    assert!(saved.exists());
+
+    let out = ctl(
+        &world,
+        &["setpoint", "--roll", "0", "--pitch", "10", "--yaw", "0"],
+    );
+    expect_code(&out, 0, "setpoint");
+    assert!(text(&out.stdout).starts_with("setpoint sent to 1 subscriber(s)"));
+
+    // A declared geometry swaps in its nominal model at once: proof the event arrived.
+    let vehicle = workspace().join("config/vehicles/amour5_top45.toml");
+    let out = ctl(
+        &world,
+        &[
+            "reconfigure",
+            "--kind",
+            "moved",
+            "--thruster",
+            "0",
+            "--count",
+            "5",
+            "--geometry",
+            vehicle.to_str().unwrap(),
+        ],
+    );
+    expect_code(&out, 0, "reconfigure");
+    wait_status(&world, "a reaction to the reconfiguration", |v| {
+        v["model_version"].as_u64().unwrap_or(0) > 1 || v["state"] != "Active"
+    });
+
+    let out = ctl(&world, &["shutdown"]);
+    expect_code(&out, 0, "shutdown");
+    let status = daemon
+        .wait_timeout(Duration::from_secs(10))
+        .expect("daemon exits on shutdown");
+    assert!(status.success(), "{}", daemon.log_text());
+
+    let out = ctl(&world, &["status"]);
+    expect_code(&out, 3, "status after shutdown");
+    assert!(sim.stop().success());
+
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+#[test]
+fn load_refuses_a_missing_file_with_exit_4() {
+    let world = World::new("ctlload");
+    let mut daemon = world.daemon(&[]);
+    wait_status(&world, "a daemon", |_| true);
+    let missing = world.path("nope.json");
+    let out = ctl(&world, &["load", missing.to_str().unwrap()]);
+    expect_code(&out, 4, "load of a missing file");
+    assert!(text(&out.stderr).contains("no such file"));
+    // Relative paths are resolved where thrusterctl runs, not where the daemon does.
+    let out = Command::new(bin("thrusterctl"))
+        .args(["--namespace", &world.namespace(), "load", "nope.json"])
+        .current_dir(world.dir.path())
+        .output()
+        .unwrap();
+    expect_code(&out, 4, "load of a relative missing file");
+    assert!(
+        text(&out.stderr).contains(&format!("{}: no such file", missing.display())),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(daemon.stop().success());
+}
