@@ -29,7 +29,7 @@ pub use reconfig::{ReconfigEvent, ReconfigKind};
 pub use setpoint::Setpoint;
 pub use status::{DaemonState, StatusMsg};
 pub use thrust::{ThrustCommand, ThrustMode};
-pub use truth::TruthMsg;
+pub use truth::{TruthMsg, VehicleStateMsg};
 
 use crate::wire::wire_enum;
 

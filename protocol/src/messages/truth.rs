@@ -31,3 +31,24 @@ impl TruthMsg {
         clamp_count(self.count)
     }
 }
+
+/// The simulated vehicle's true state (simulator -> anyone, service `vehicle`), one per IMU
+/// sample, so experiments can score attitude control against the truth rather than against the
+/// daemon's own estimate. Never used for control.
+#[repr(C)]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[type_name("thrusterd.VehicleStateMsg.v1")]
+pub struct VehicleStateMsg {
+    /// Sequence number: the IMU sample's.
+    pub seq: u64,
+    /// Simulation time, ns, same clock as the IMU.
+    pub t_ns: u64,
+    /// Attitude, unit quaternion w, x, y, z, body to NED.
+    pub attitude: [f64; 4],
+    /// Body angular rate, rad/s.
+    pub rate: [f64; 3],
+    /// Position in NED, m (z = depth, positive down).
+    pub position_ned: [f64; 3],
+    /// Body linear velocity, m/s.
+    pub velocity: [f64; 3],
+}

@@ -34,6 +34,8 @@ pub enum Topic {
     Truth,
     /// [`Setpoint`], operator -> daemon, history 1.
     Setpoint,
+    /// [`VehicleStateMsg`], simulator -> anyone: the true vehicle state per sample.
+    Vehicle,
 }
 
 /// Quality-of-service settings of a topic. Every process opens services with the same
@@ -53,7 +55,7 @@ pub struct TopicQos {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 7] = [
+    pub const ALL: [Topic; 8] = [
         Topic::Imu,
         Topic::Thrust,
         Topic::Reconfig,
@@ -61,6 +63,7 @@ impl Topic {
         Topic::Status,
         Topic::Truth,
         Topic::Setpoint,
+        Topic::Vehicle,
     ];
 
     /// Service name below the namespace, e.g. `imu`.
@@ -73,6 +76,7 @@ impl Topic {
             Topic::Status => "status",
             Topic::Truth => "truth",
             Topic::Setpoint => "setpoint",
+            Topic::Vehicle => "vehicle",
         }
     }
 
@@ -81,7 +85,7 @@ impl Topic {
         match self {
             // Streams: every sample matters, buffer ~40 ms at 400 Hz so a briefly
             // descheduled reader loses nothing; no history (stale samples are useless).
-            Topic::Imu | Topic::Thrust => TopicQos {
+            Topic::Imu | Topic::Thrust | Topic::Vehicle => TopicQos {
                 history: 0,
                 max_buffer: 16,
                 default_buffer: 16,
@@ -128,4 +132,7 @@ impl TopicMessage for TruthMsg {
 }
 impl TopicMessage for Setpoint {
     const TOPIC: Topic = Topic::Setpoint;
+}
+impl TopicMessage for VehicleStateMsg {
+    const TOPIC: Topic = Topic::Vehicle;
 }

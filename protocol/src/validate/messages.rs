@@ -403,3 +403,34 @@ impl Validate for ControlResponse {
         utf8_text("text", &self.text)
     }
 }
+
+impl Validate for crate::VehicleStateMsg {
+    /// Every value finite and the attitude a unit quaternion.
+    fn validate(&self) -> Result<(), RejectReason> {
+        for (name, values) in [
+            ("attitude", &self.attitude[..]),
+            ("rate", &self.rate[..]),
+            ("position_ned", &self.position_ned[..]),
+            ("velocity", &self.velocity[..]),
+        ] {
+            for (i, v) in values.iter().enumerate() {
+                if !v.is_finite() {
+                    return Err(RejectReason::NonFinite {
+                        field: Field::at(name, i),
+                        value: *v,
+                    });
+                }
+            }
+        }
+        let norm = self.attitude.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let tolerance = super::limits::QUATERNION_NORM_TOLERANCE;
+        if (norm - 1.0).abs() > tolerance {
+            return Err(RejectReason::NotUnit {
+                field: Field::new("attitude"),
+                norm,
+                tolerance,
+            });
+        }
+        Ok(())
+    }
+}
