@@ -476,6 +476,17 @@ impl Machine {
         }
     }
 
+    /// Pulse strength for the next estimation (a fraction of full command, within the
+    /// configured maximum): the operator's `estimate --power`.
+    pub fn set_estimation_power(&mut self, power: f64) -> Result<(), Refused> {
+        let max = self.setup.estimator.max_power;
+        if !(power.is_finite() && power > 0.0 && power <= max) {
+            return Err(Refused(format!("power {power} is not in (0, {max}]")));
+        }
+        self.setup.estimator.initial_power = power;
+        Ok(())
+    }
+
     /// A new attitude (body to NED) and optional depth to hold.
     pub fn on_setpoint(&mut self, attitude: UnitQuaternion<f64>, depth: Option<f64>) {
         self.target = Some(Target { attitude, depth });
@@ -531,9 +542,11 @@ impl Machine {
     }
 
     pub fn status(&self) -> StatusSnapshot {
-        let (pulse, planned, power) = match &self.est {
-            Some(e) => (e.pulses(), e.planned_pulses(), e.power()),
-            None => (0, 0, 0.0),
+        let (pulse, planned, power) = match (&self.est, &self.last_estimate) {
+            (Some(e), _) => (e.pulses(), e.planned_pulses(), e.power()),
+            // After a run: how many pulses the current model took.
+            (None, Some(e)) => (e.pulses, e.pulses, 0.0),
+            (None, None) => (0, 0, 0.0),
         };
         let error_bound = self
             .last_estimate

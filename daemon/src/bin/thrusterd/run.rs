@@ -346,7 +346,14 @@ impl Daemon {
                 let s = self.machine.status();
                 return ControlResponse::ok(&format!("{}: {}", s.state.name(), s.text));
             }
-            RequestKind::Estimate => Request::Estimate,
+            RequestKind::Estimate => {
+                if req.value != 0.0 {
+                    if let Err(e) = self.machine.set_estimation_power(req.value) {
+                        return ControlResponse::new(ResponseCode::InvalidRequest, &e.0);
+                    }
+                }
+                Request::Estimate
+            }
             RequestKind::Abort => Request::Abort,
             RequestKind::Hold => Request::Hold,
             RequestKind::Idle => Request::Idle,
