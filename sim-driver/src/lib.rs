@@ -6,6 +6,10 @@
 //! seeded noise, disturbances, scripted reconfiguration and the true effectiveness matrices the
 //! estimator is scored against. See `docs/simulation.md` for the model and its sources.
 //!
+//! The driver process (`thruster-sim run`) lives at the edge, in [`driver`] (IPC, clock,
+//! files), [`settings`] and [`cli`]; [`responder`] is a stand-in daemon for tests. Nothing in
+//! the physics modules depends on them.
+//!
 //! Conventions: body x forward, y starboard, z down; world NED; quaternions `[w, x, y, z]`
 //! body-to-NED; commands normalised to [-1, 1] per thruster; effectiveness rows in DOF order
 //! `[roll, pitch, yaw, surge, sway, heave]` (rad/s^2, m/s^2 per unit command).
@@ -22,13 +26,17 @@
 //! assert_eq!(b_fwd.shape(), (6, 4));
 //! ```
 
+pub mod cli;
 pub mod disturbance;
+pub mod driver;
 pub mod dynamics;
 pub mod effectiveness;
 pub mod load;
 pub mod random;
+pub mod responder;
 pub mod scenario;
 pub mod sensors;
+pub mod settings;
 pub mod sim;
 pub mod thruster;
 pub mod vehicle;

@@ -1,0 +1,511 @@
+//! The `thruster-sim run` process: the physics core at the IPC edge.
+//!
+//! The rest of this crate is pure; this module owns the clock, the iceoryx2 ports and the
+//! files. Per sample it publishes an [`ImuSample`] on `<ns>/imu` (+ its event), applies the
+//! [`ThrustCommand`]s that pass the [`gate`], plays the scenario, announces changes on
+//! `<ns>/reconfig`, publishes the true effectiveness on `<ns>/truth` (history 1) at start,
+//! after every change and at the end, and the true vehicle state on `<ns>/vehicle` before
+//! every sample.
+//!
+//! Sample clock: sample `seq` (from 1) is taken at `t_ns = (seq - 1) * period`; seq 1 is the
+//! vehicle at rest at t = 0. Two pacing modes share everything else:
+//! - [`Mode::Realtime`](crate::settings::Mode): see `realtime.rs`.
+//! - [`Mode::Lockstep`](crate::settings::Mode): see `lockstep.rs`.
+
+pub mod convert;
+pub mod gate;
+pub mod shutdown;
+pub mod truth_file;
+pub mod wait;
+
+mod lockstep;
+mod realtime;
+
+use std::time::{Duration, Instant};
+
+use thruster_protocol::services::{Inbox, IpcConfig, IpcError, IpcNode, Port};
+use thruster_protocol::validate::{RejectCounters, RejectReason};
+use thruster_protocol::{
+    ImuSample, ReconfigEvent, ThrustCommand, TruthMsg, Validate, VehicleStateMsg,
+};
+use tracing::{debug, error, info, warn};
+
+use crate::load::LoadError;
+use crate::scenario::{Action, Event, Scenario};
+use crate::settings::{Mode, Settings};
+use crate::sim::{SimError, Simulator};
+use crate::vehicle::Vehicle;
+use gate::CommandGate;
+use shutdown::Shutdown;
+use truth_file::{TruthEntry, TruthFile, TruthFileError};
+
+/// Node name of the driver in iceoryx2 listings.
+pub const NODE_NAME: &str = "thruster-sim";
+
+/// How often the truth port hands its history to late subscribers, wall time.
+const HOUSEKEEPING_PERIOD: Duration = Duration::from_millis(50);
+/// How often progress is logged, wall time.
+const REPORT_PERIOD: Duration = Duration::from_secs(10);
+
+/// Failures of the driver.
+#[derive(Debug, thiserror::Error)]
+pub enum DriverError {
+    /// IPC setup or transfer failed.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// The vehicle or scenario file is invalid.
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// The simulator refused a configuration.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// A scenario event cannot be applied to this vehicle (checked before the run starts).
+    #[error("{origin}: event[{index}] at t = {t_s} s ({action}): {source}")]
+    Scenario {
+        /// The scenario file.
+        origin: String,
+        /// Index of the event in time order.
+        index: usize,
+        /// Its time, s.
+        t_s: f64,
+        /// Its action kind.
+        action: &'static str,
+        /// Why it fails (boxed: keeps every `Result` of the driver small).
+        #[source]
+        source: Box<SimError>,
+    },
+    /// The truth file could not be written.
+    #[error(transparent)]
+    TruthFile(#[from] TruthFileError),
+    /// The integration produced non-finite values.
+    #[error("the simulation diverged at t = {t_s} s (non-finite sensor values)")]
+    Diverged {
+        /// Simulation time, s.
+        t_s: f64,
+    },
+}
+
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// `duration_s` of vehicle time has passed.
+    Duration,
+    /// SIGINT, SIGTERM or SIGHUP.
+    Signal,
+}
+
+/// What a run did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// Why it ended.
+    pub reason: StopReason,
+    /// Vehicle time simulated, s.
+    pub vehicle_s: f64,
+    /// Wall time from the first sample to the end, s.
+    pub wall_s: f64,
+    /// IMU samples published.
+    pub samples: u64,
+    /// Commands applied.
+    pub applied: u64,
+    /// Lockstep samples that got no answer in time.
+    pub timeouts: u64,
+    /// Commands rejected, by category.
+    pub rejected: RejectCounters,
+    /// Late answers dropped.
+    pub stale: u64,
+    /// Sensor values clipped to the protocol's ranges.
+    pub clipped: u64,
+}
+
+impl Summary {
+    /// Vehicle seconds per wall second.
+    pub fn speedup(&self) -> f64 {
+        if self.wall_s > 0.0 {
+            self.vehicle_s / self.wall_s
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The ports of the driver. The node is declared last so it is dropped after its ports.
+struct Ports {
+    thrust: Inbox<ThrustCommand>,
+    imu: Port<ImuSample>,
+    truth: Port<TruthMsg>,
+    reconfig: Port<ReconfigEvent>,
+    vehicle: Port<VehicleStateMsg>,
+    _node: IpcNode,
+}
+
+/// Limits repeated warnings to a few per window, then reports how many were suppressed.
+#[derive(Debug)]
+struct LogLimiter {
+    window_end: Instant,
+    logged: u32,
+    suppressed: u64,
+}
+
+impl LogLimiter {
+    const PER_WINDOW: u32 = 5;
+    const WINDOW: Duration = Duration::from_secs(10);
+
+    fn new() -> Self {
+        LogLimiter {
+            window_end: Instant::now() + Self::WINDOW,
+            logged: 0,
+            suppressed: 0,
+        }
+    }
+
+    /// `Some(suppressed since the last logged one)` when this occurrence may be logged.
+    fn allow(&mut self) -> Option<u64> {
+        let now = Instant::now();
+        if now >= self.window_end {
+            self.window_end = now + Self::WINDOW;
+            self.logged = 0;
+        }
+        if self.logged < Self::PER_WINDOW {
+            self.logged += 1;
+            Some(std::mem::take(&mut self.suppressed))
+        } else {
+            self.suppressed += 1;
+            None
+        }
+    }
+}
+
+/// The simulator process: settings, physics, scenario and ports.
+pub struct Driver {
+    settings: Settings,
+    sim: Simulator,
+    scenario: Scenario,
+    gate: CommandGate,
+    truth_file: Option<TruthFile>,
+    stop: Shutdown,
+    period_ns: u64,
+    /// Seq of the newest sample taken (0 before the first).
+    imu_seq: u64,
+    /// The true state at the newest sample, and whether it was published.
+    state: VehicleStateMsg,
+    state_sent: bool,
+    truth_seq: u64,
+    reconfig_seq: u64,
+    /// The held commands are all zero.
+    neutral: bool,
+    applied: u64,
+    timeouts: u64,
+    clipped: u64,
+    reject_log: LogLimiter,
+    /// Lockstep busy-poll policy.
+    spin: wait::AdaptiveSpin,
+    started: Option<Instant>,
+    next_housekeeping: Instant,
+    next_report: Instant,
+    ports: Ports,
+}
+
+impl Driver {
+    /// Loads the vehicle and scenario, checks that every scenario event applies, builds the
+    /// simulator and opens the ports in `settings.namespace`.
+    pub fn new(settings: Settings, stop: Shutdown) -> Result<Driver, DriverError> {
+        let vehicle = Vehicle::load(&settings.vehicle)?;
+        let sim = Simulator::with_options(
+            vehicle,
+            settings.sensors.clone(),
+            settings.seed,
+            settings.sim.clone(),
+        )?;
+        let scenario = match &settings.scenario {
+            Some(path) => {
+                let s = Scenario::load(path)?;
+                dry_run(&sim, &s, &path.display().to_string())?;
+                s
+            }
+            None => Scenario::default(),
+        };
+        let ipc = IpcConfig::with_root_base(&settings.namespace, &settings.ipc_root)?;
+        let node = ipc.create_node(NODE_NAME)?;
+        // The inbox first: an answer can never arrive before it exists.
+        let ports = Ports {
+            thrust: Inbox::create(&node, &ipc)?,
+            imu: Port::create(&node, &ipc)?,
+            truth: Port::create(&node, &ipc)?,
+            reconfig: Port::create(&node, &ipc)?,
+            vehicle: Port::create(&node, &ipc)?,
+            _node: node,
+        };
+        let truth_file = settings
+            .truth_file
+            .as_ref()
+            .map(|p| TruthFile::new(p, &sim.vehicle().name));
+        let period_ns = settings.sample_period_ns();
+        let now = Instant::now();
+        Ok(Driver {
+            gate: CommandGate::new(sim.thruster_count(), period_ns),
+            sim,
+            scenario,
+            truth_file,
+            stop,
+            period_ns,
+            imu_seq: 0,
+            state: VehicleStateMsg::default(),
+            state_sent: true,
+            truth_seq: 0,
+            reconfig_seq: 0,
+            neutral: true,
+            applied: 0,
+            timeouts: 0,
+            clipped: 0,
+            reject_log: LogLimiter::new(),
+            spin: wait::AdaptiveSpin::new(settings.lockstep.spin()),
+            started: None,
+            next_housekeeping: now,
+            next_report: now + REPORT_PERIOD,
+            ports,
+            settings,
+        })
+    }
+
+    /// Runs until `duration_s` or a signal, then goes neutral, publishes the final truth and
+    /// returns what happened. The ports are closed when the driver is dropped.
+    pub fn run(mut self) -> Result<Summary, DriverError> {
+        let v = self.sim.vehicle();
+        info!(
+            namespace = %self.settings.namespace,
+            vehicle = %v.name,
+            thrusters = v.thrusters.len(),
+            mode = ?self.settings.mode,
+            rate_hz = self.settings.sensors.rate_hz,
+            noise = ?self.settings.sensors.noise,
+            seed = self.settings.seed,
+            scenario_events = self.scenario.events().len(),
+            duration_s = ?self.settings.duration_s,
+            "thruster-sim starting"
+        );
+        let reason = match self.settings.mode {
+            Mode::Lockstep => self.run_lockstep()?,
+            Mode::Realtime => self.run_realtime()?,
+        };
+        self.go_neutral();
+        self.publish_truth("final")?;
+        let summary = self.summary(reason);
+        info!(
+            reason = ?summary.reason,
+            vehicle_s = summary.vehicle_s,
+            wall_s = format!("{:.3}", summary.wall_s),
+            speedup = format!("{:.1}", summary.speedup()),
+            samples = summary.samples,
+            applied = summary.applied,
+            timeouts = summary.timeouts,
+            rejected = summary.rejected.total(),
+            stale = summary.stale,
+            clipped = summary.clipped,
+            "thruster-sim stopped"
+        );
+        Ok(summary)
+    }
+
+    fn summary(&self, reason: StopReason) -> Summary {
+        Summary {
+            reason,
+            vehicle_s: self.sim.time_s(),
+            wall_s: self.started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
+            samples: self.imu_seq,
+            applied: self.applied,
+            timeouts: self.timeouts,
+            rejected: *self.gate.rejected(),
+            stale: self.gate.stale(),
+            clipped: self.clipped,
+        }
+    }
+
+    /// Takes the next sample (seq + 1) at the current simulation time.
+    fn take_sample(&mut self) -> Result<ImuSample, DriverError> {
+        let reading = self.sim.sample();
+        if !convert::reading_is_finite(&reading) {
+            return Err(DriverError::Diverged {
+                t_s: self.sim.time_s(),
+            });
+        }
+        self.imu_seq += 1;
+        self.state = convert::vehicle_state(self.imu_seq, &self.sim);
+        self.state_sent = false;
+        let (sample, clipped) = convert::imu_sample(self.imu_seq, &reading);
+        if clipped > 0 {
+            if self.clipped == 0 {
+                warn!(
+                    t_s = self.sim.time_s(),
+                    depth_m = reading.depth,
+                    "sensor values clipped to the protocol's ranges (the simulator has no free \
+                     surface: a buoyant vehicle left alone rises above it)"
+                );
+            }
+            self.clipped += clipped as u64;
+        }
+        Ok(sample)
+    }
+
+    /// Publishes a sample, preceded by the true state at that instant (once per sample, also
+    /// when the first sample is re-sent); returns how many subscribers got the sample.
+    fn send_sample(&mut self, sample: &ImuSample) -> Result<usize, DriverError> {
+        self.started.get_or_insert_with(Instant::now);
+        if !self.state_sent {
+            // Before the IMU sample, so whoever sees the daemon react to it finds the state.
+            self.ports.vehicle.send(&self.state)?;
+            self.state_sent = true;
+        }
+        Ok(self.ports.imu.send(sample)?)
+    }
+
+    /// Publishes the current truth (and appends it to the truth file).
+    fn publish_truth(&mut self, cause: &str) -> Result<(), DriverError> {
+        let (fwd, rev) = self.sim.truth();
+        self.truth_seq += 1;
+        let msg = convert::truth_msg(self.truth_seq, self.sim.time_ns(), &fwd, &rev);
+        if let Err(reason) = msg.validate() {
+            // Only an absurd vehicle file gets here (effectiveness beyond the protocol's
+            // bound); readers would drop the message, so say why.
+            error!(%reason, "truth message fails protocol validation");
+        }
+        self.ports.truth.send(&msg)?;
+        if let Some(file) = &mut self.truth_file {
+            file.push(TruthEntry::of(&self.sim, cause))?;
+        }
+        Ok(())
+    }
+
+    /// Applies the scenario events due at the current time; announces those that say so.
+    fn apply_due_events(&mut self) -> Result<(), DriverError> {
+        // Copied out: applying an event needs `self` mutably while the scenario is borrowed.
+        let due: Vec<Event> = self.scenario.due(self.sim.time_ns()).to_vec();
+        for event in due {
+            let before = self.sim.thruster_count();
+            let change = self.sim.apply(&event.action)?;
+            info!(
+                t_s = self.sim.time_s(),
+                action = action_name(&event.action),
+                thruster = event.action.thruster(),
+                kind = ?change.kind,
+                index = change.index,
+                count = change.thruster_count,
+                announce = event.announce,
+                "scenario event applied"
+            );
+            if change.thruster_count != before {
+                // Commands for the old thruster list mean nothing now.
+                self.gate.set_count(change.thruster_count);
+                self.go_neutral();
+            }
+            self.publish_truth(action_name(&event.action))?;
+            if event.announce {
+                self.reconfig_seq += 1;
+                let mut ev =
+                    convert::reconfig_event(self.reconfig_seq, &change, self.sim.vehicle());
+                if let Err(reason) = ev.validate() {
+                    error!(%reason, "declared geometry fails protocol validation; announcing without it");
+                    ev.has_geometry = 0;
+                }
+                self.ports.reconfig.send(&ev)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Holds `u` (already validated by the gate) until the next command.
+    fn hold(&mut self, u: &[f64]) -> Result<(), DriverError> {
+        self.sim.set_commands(u)?;
+        self.neutral = u.iter().all(|&x| x == 0.0);
+        self.applied += 1;
+        Ok(())
+    }
+
+    /// All thrust zero.
+    fn go_neutral(&mut self) {
+        let zeros = vec![0.0; self.sim.thruster_count()];
+        // Cannot fail: the length is the simulator's own count.
+        let _ = self.sim.set_commands(&zeros);
+        self.neutral = true;
+    }
+
+    fn log_rejection(&mut self, cmd: &ThrustCommand, reason: &RejectReason) {
+        if let Some(suppressed) = self.reject_log.allow() {
+            warn!(
+                %reason,
+                cmd_seq = cmd.seq,
+                imu_seq = cmd.imu_seq,
+                suppressed,
+                "thrust command rejected; thrust neutral"
+            );
+        }
+    }
+
+    /// True when publishing another sample would pass `duration_s`.
+    fn duration_reached(&self) -> bool {
+        self.settings
+            .duration_ns()
+            .is_some_and(|d| self.sim.time_ns() + self.period_ns > d)
+    }
+
+    /// Once per sample: hands the truth history to late subscribers now and then, and logs
+    /// progress.
+    fn housekeeping(&mut self) -> Result<(), DriverError> {
+        let now = Instant::now();
+        if now < self.next_housekeeping {
+            return Ok(());
+        }
+        self.next_housekeeping = now + HOUSEKEEPING_PERIOD;
+        // iceoryx2 delivers history only when the publisher updates its connections.
+        self.ports.truth.update_connections()?;
+        if now >= self.next_report {
+            self.next_report = now + REPORT_PERIOD;
+            let s = self.summary(StopReason::Signal);
+            info!(
+                t_s = format!("{:.1}", s.vehicle_s),
+                speedup = format!("{:.1}", s.speedup()),
+                samples = s.samples,
+                applied = s.applied,
+                timeouts = s.timeouts,
+                rejected = s.rejected.total(),
+                neutral = self.neutral,
+                "running"
+            );
+        }
+        Ok(())
+    }
+
+    /// The simulator (for inspection in tests).
+    pub fn simulator(&self) -> &Simulator {
+        &self.sim
+    }
+}
+
+/// Applies every event of `scenario` to a copy of `sim`, so a scenario that names a missing
+/// thruster fails at start, not minutes into a run.
+fn dry_run(sim: &Simulator, scenario: &Scenario, origin: &str) -> Result<(), DriverError> {
+    let mut copy = sim.clone();
+    for (index, e) in scenario.events().iter().enumerate() {
+        copy.apply(&e.action)
+            .map_err(|source| DriverError::Scenario {
+                origin: origin.to_string(),
+                index,
+                t_s: e.t_s,
+                action: action_name(&e.action),
+                source: Box::new(source),
+            })?;
+    }
+    debug!(events = scenario.events().len(), "scenario checked");
+    Ok(())
+}
+
+/// The `kind` of an action as written in scenario files.
+pub fn action_name(action: &Action) -> &'static str {
+    match action {
+        Action::Rotate { .. } => "rotate",
+        Action::SetDirection { .. } => "set_direction",
+        Action::Move { .. } => "move",
+        Action::Remove { .. } => "remove",
+        Action::Add { .. } => "add",
+        Action::Kill { .. } => "kill",
+    }
+}
