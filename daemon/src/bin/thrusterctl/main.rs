@@ -1,1 +1,56 @@
-fn main() {}
+//! thrusterctl: the operator's tool for thrusterd.
+//!
+//! It talks to the daemon only through `thruster_protocol` (control requests, published
+//! status and model, reconfiguration events and setpoints). Exit codes are in [`exit`].
+
+mod attitude;
+mod chart;
+mod checks;
+mod cli;
+mod client;
+mod commands;
+mod estimate;
+mod exit;
+mod geometry;
+mod json;
+mod publish;
+mod render;
+mod watch;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    init_logging();
+    let cli = cli::Cli::parse();
+    // `run` returns instead of exiting so every iceoryx2 port and node is dropped
+    // normally: a process::exit would leave the namespace's files behind.
+    match commands::run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        // `thrusterctl watch | head`: the reader is gone, nothing more to say.
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("thrusterctl: {e:#}");
+            ExitCode::from(exit::code_of(&e))
+        }
+    }
+}
+
+/// iceoryx2 logs through `tracing`; show it only when asked (RUST_LOG), since operators
+/// read our own messages on stderr.
+fn init_logging() {
+    if std::env::var_os("RUST_LOG").is_some() {
+        tracing_subscriber::fmt()
+            .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+            .with_writer(std::io::stderr)
+            .init();
+    }
+}
+
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}

@@ -1,0 +1,174 @@
+//! One function per subcommand; `run` dispatches. Commands that only need a control
+//! round trip live here; longer ones have their own modules.
+
+use std::io::Write;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use thruster_protocol::{ControlRequest, ModelMsg, RequestKind, StatusMsg};
+
+use crate::checks::{model_problem, status_problem, Warner};
+use crate::cli::{self, Cli, Command};
+use crate::client::{wait_latest, Daemon, Target};
+use crate::exit::{self, Failure};
+use crate::json::{ModelJson, StatusJson};
+use crate::{estimate, publish, render, watch};
+
+pub fn run(cli: Cli) -> Result<()> {
+    let timeout = cli::timeout(cli.timeout_ms)?;
+    let target = Target {
+        namespace: cli.namespace,
+        root_base: cli.ipc_root,
+    };
+    // Checks that need no daemon come first (inside each command, before connecting),
+    // so bad input is reported even when the daemon is down.
+    match cli.command {
+        Command::Status { json } => status(&Daemon::connect(&target, timeout)?, json),
+        Command::Estimate {
+            wait,
+            power,
+            max_wait_s,
+        } => {
+            let power = cli::estimate_power(power)?;
+            let max_wait = cli::max_wait(max_wait_s)?;
+            let daemon = Daemon::connect(&target, timeout)?;
+            if wait {
+                estimate::run_and_wait(&daemon, power, max_wait)
+            } else {
+                let text =
+                    daemon.command(ControlRequest::with_value(RequestKind::Estimate, power))?;
+                say(&format!("estimation started: {}", or_ok(&text)))
+            }
+        }
+        Command::Abort => simple(&target, timeout, ControlRequest::new(RequestKind::Abort)),
+        Command::Hold => simple(&target, timeout, ControlRequest::new(RequestKind::Hold)),
+        Command::Idle => simple(&target, timeout, ControlRequest::new(RequestKind::Idle)),
+        Command::Revert => simple(&target, timeout, ControlRequest::new(RequestKind::Revert)),
+        Command::Shutdown => simple(&target, timeout, ControlRequest::new(RequestKind::Shutdown)),
+        Command::Save { path } => {
+            let request = match path {
+                Some(p) => cli::path_request(RequestKind::Save, &p)?,
+                None => ControlRequest::new(RequestKind::Save),
+            };
+            simple(&target, timeout, request)
+        }
+        Command::Load { path } => simple(
+            &target,
+            timeout,
+            cli::path_request(RequestKind::Load, &path)?,
+        ),
+        Command::Model { json } => model(&Daemon::connect(&target, timeout)?, json),
+        Command::Watch { json } => {
+            watch::run(&Daemon::connect(&target, timeout)?, json, interrupt_flag()?)
+        }
+        Command::Reconfigure {
+            kind,
+            thruster,
+            count,
+            geometry,
+        } => publish::reconfigure(&target, timeout, kind, thruster, count, geometry.as_deref()),
+        Command::Setpoint {
+            roll,
+            pitch,
+            yaw,
+            depth,
+        } => publish::setpoint(
+            &target,
+            timeout,
+            cli::setpoint_args(roll, pitch, yaw, depth)?,
+        ),
+    }
+}
+
+/// Sends one request and prints the daemon's answer.
+fn simple(target: &Target, timeout: Duration, request: ControlRequest) -> Result<()> {
+    let daemon = Daemon::connect(target, timeout)?;
+    let text = daemon.command(request)?;
+    say(&format!("thrusterd: {}", or_ok(&text)))
+}
+
+fn or_ok(text: &str) -> &str {
+    if text.is_empty() {
+        "ok"
+    } else {
+        text
+    }
+}
+
+fn status(daemon: &Daemon, json: bool) -> Result<()> {
+    // Subscribe first: the history sample is then on its way while we ask the daemon.
+    let inbox = daemon.inbox::<StatusMsg>()?;
+    let reply = daemon.ensure_running()?;
+    let Some(status) = wait_latest(&inbox, daemon.timeout())? else {
+        return Err(Failure::new(
+            exit::TIMEOUT,
+            format!(
+                "thrusterd answered ({}) but published no status within {} ms",
+                reply.text(),
+                daemon.timeout().as_millis()
+            ),
+        )
+        .into());
+    };
+    Warner::default().warn(status_problem(&status));
+    if json {
+        say(&serde_json::to_string(&StatusJson::from(&status))?)
+    } else {
+        say(render::status_report(daemon.namespace(), &status).trim_end())
+    }
+}
+
+fn model(daemon: &Daemon, json: bool) -> Result<()> {
+    let inbox = daemon.inbox::<ModelMsg>()?;
+    daemon.ensure_running()?;
+    let Some(model) = wait_latest(&inbox, daemon.timeout())? else {
+        return Err(Failure::new(
+            exit::TIMEOUT,
+            format!(
+                "thrusterd published no model within {} ms (none estimated or loaded yet?)",
+                daemon.timeout().as_millis()
+            ),
+        )
+        .into());
+    };
+    Warner::default().warn(model_problem(&model));
+    if json {
+        say(&serde_json::to_string(&ModelJson::from(&model))?)
+    } else {
+        say(render::model_report(&model).trim_end())
+    }
+}
+
+/// Prints a line to stdout; a closed pipe (`| head`) surfaces as an error main ignores.
+pub fn say(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{text}").context("writing to stdout")?;
+    out.flush().context("writing to stdout")
+}
+
+/// After a failed blocking wait: true when Ctrl-C caused it. The signal makes the wait
+/// fail (EINTR) at once, but ctrlc sets our flag from its own thread, a moment later.
+pub fn interrupted_during_wait(flag: &AtomicBool) -> bool {
+    let deadline = Instant::now() + Duration::from_millis(200);
+    loop {
+        if flag.load(Ordering::SeqCst) {
+            return true;
+        }
+        if Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Set by Ctrl-C (and SIGTERM). Installed only by commands that wait, so a quick command
+/// killed by Ctrl-C dies at once as usual.
+pub fn interrupt_flag() -> Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    ctrlc::set_handler(move || f.store(true, Ordering::SeqCst))
+        .context("installing the Ctrl-C handler")?;
+    Ok(flag)
+}

@@ -1,0 +1,233 @@
+//! JSON output. These structs are the stable interface scripts rely on: fields are named
+//! here, not derived from the wire structs, so a protocol change cannot silently rename
+//! or drop a key. Non-finite numbers become `null`.
+
+use serde::Serialize;
+use thruster_protocol::{DaemonState, Dof, ModelMsg, StatusMsg, DOF_COUNT, MAX_THRUSTERS};
+
+/// One status message.
+#[derive(Serialize, Debug, PartialEq)]
+pub struct StatusJson {
+    pub seq: u64,
+    /// DaemonState name ("Idle", "MeasureNoise", "Pulse", ...).
+    pub state: String,
+    /// 0-based index of the current pulse.
+    pub pulse: u32,
+    pub pulses_planned: u32,
+    pub error_bound: Option<f64>,
+    pub power: Option<f64>,
+    pub sigma_rot: Option<f64>,
+    pub sigma_acc: Option<f64>,
+    pub samples: u64,
+    pub rejected_nonfinite: u64,
+    pub rejected_range: u64,
+    pub rejected_time: u64,
+    pub rejected_count: u64,
+    pub rejected_other: u64,
+    pub model_version: u64,
+    pub imu_rate_hz: Option<f64>,
+    pub vehicle_time_ns: u64,
+    pub text: String,
+}
+
+impl From<&StatusMsg> for StatusJson {
+    fn from(s: &StatusMsg) -> Self {
+        Self {
+            seq: s.seq,
+            state: state_name(s.state),
+            pulse: s.pulse,
+            pulses_planned: s.pulses_planned,
+            error_bound: finite(s.error_bound),
+            power: finite(s.power),
+            sigma_rot: finite(s.sigma_rot),
+            sigma_acc: finite(s.sigma_acc),
+            samples: s.samples,
+            rejected_nonfinite: s.rejected_nonfinite,
+            rejected_range: s.rejected_range,
+            rejected_time: s.rejected_time,
+            rejected_count: s.rejected_count,
+            rejected_other: s.rejected_other,
+            model_version: s.model_version,
+            imu_rate_hz: finite(s.imu_rate_hz),
+            vehicle_time_ns: s.vehicle_time_ns,
+            text: s.text().to_string(),
+        }
+    }
+}
+
+/// Actuated or not, per DOF, in the protocol's DOF order.
+#[derive(Serialize, Debug, PartialEq)]
+pub struct DofFlags {
+    pub roll: bool,
+    pub pitch: bool,
+    pub yaw: bool,
+    pub surge: bool,
+    pub sway: bool,
+    pub heave: bool,
+}
+
+/// One model message: matrices as arrays of rows, only the `count` thrusters in use.
+#[derive(Serialize, Debug, PartialEq)]
+pub struct ModelJson {
+    pub seq: u64,
+    pub version: u64,
+    pub t_ns: u64,
+    pub count: u32,
+    pub source: String,
+    pub method: String,
+    /// Row order of `effectiveness` and `std_err`, column order of `allocation`.
+    pub dofs: Vec<String>,
+    pub actuated: DofFlags,
+    /// 6 rows (DOFs) x count columns; rad/s^2 or m/s^2 per unit command.
+    pub effectiveness: Vec<Vec<Option<f64>>>,
+    /// Same shape; null where unknown.
+    pub std_err: Vec<Vec<Option<f64>>>,
+    /// count rows (thrusters) x 6 columns; command per unit of DOF motion.
+    pub allocation: Vec<Vec<Option<f64>>>,
+    pub rel_err_rot: Option<f64>,
+    pub rel_err_acc: Option<f64>,
+}
+
+impl From<&ModelMsg> for ModelJson {
+    fn from(m: &ModelMsg) -> Self {
+        let n = m.thruster_count();
+        let rows = |mat: &[[f64; MAX_THRUSTERS]; DOF_COUNT]| -> Vec<Vec<Option<f64>>> {
+            mat.iter()
+                .map(|row| row[..n].iter().copied().map(finite).collect())
+                .collect()
+        };
+        Self {
+            seq: m.seq,
+            version: m.version,
+            t_ns: m.t_ns,
+            count: m.count,
+            source: m
+                .source()
+                .map_or_else(|e| e.to_string(), |s| s.name().into()),
+            method: m
+                .method()
+                .map_or_else(|e| e.to_string(), |s| s.name().into()),
+            dofs: Dof::ALL.iter().map(|d| dof_key(*d)).collect(),
+            actuated: DofFlags {
+                roll: m.is_actuated(Dof::Roll),
+                pitch: m.is_actuated(Dof::Pitch),
+                yaw: m.is_actuated(Dof::Yaw),
+                surge: m.is_actuated(Dof::Surge),
+                sway: m.is_actuated(Dof::Sway),
+                heave: m.is_actuated(Dof::Heave),
+            },
+            effectiveness: rows(&m.effectiveness),
+            std_err: rows(&m.std_err),
+            allocation: m.allocation[..n]
+                .iter()
+                .map(|row| row.iter().copied().map(finite).collect())
+                .collect(),
+            rel_err_rot: finite(m.rel_err_rot),
+            rel_err_acc: finite(m.rel_err_acc),
+        }
+    }
+}
+
+/// Lower-case DOF name, as used in JSON keys and text output.
+pub fn dof_key(dof: Dof) -> String {
+    dof.name().to_ascii_lowercase()
+}
+
+/// The state's name, or a visible marker for a value this build does not know.
+pub fn state_name(state: u32) -> String {
+    DaemonState::try_from(state).map_or_else(|_| format!("Unknown({state})"), |s| s.name().into())
+}
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::{json, Value};
+    use thruster_protocol::{ModelMethod, ModelSource};
+
+    #[test]
+    fn status_has_every_field_and_state_as_string() {
+        let mut s = StatusMsg {
+            seq: 9,
+            pulse: 2,
+            pulses_planned: 8,
+            error_bound: 0.05,
+            power: 0.5,
+            samples: 1234,
+            rejected_range: 3,
+            model_version: 4,
+            imu_rate_hz: 400.0,
+            vehicle_time_ns: 1_500_000_000,
+            ..StatusMsg::default()
+        };
+        s.set_state(DaemonState::Pulse);
+        s.set_text("pulsing");
+        let v = serde_json::to_value(StatusJson::from(&s)).unwrap();
+        assert_eq!(
+            v,
+            json!({
+                "seq": 9, "state": "Pulse", "pulse": 2, "pulses_planned": 8,
+                "error_bound": 0.05, "power": 0.5, "sigma_rot": 0.0, "sigma_acc": 0.0,
+                "samples": 1234, "rejected_nonfinite": 0, "rejected_range": 3,
+                "rejected_time": 0, "rejected_count": 0, "rejected_other": 0,
+                "model_version": 4, "imu_rate_hz": 400.0, "vehicle_time_ns": 1_500_000_000u64,
+                "text": "pulsing"
+            })
+        );
+        // Every wire field except padding is exported.
+        let wire = serde_json::to_value(s).unwrap();
+        for key in wire.as_object().unwrap().keys() {
+            assert!(key == "reserved" || v.get(key).is_some(), "missing {key}");
+        }
+        s.state = 77;
+        assert_eq!(StatusJson::from(&s).state, "Unknown(77)");
+    }
+
+    #[test]
+    fn model_matrices_are_rows_of_count_with_nan_as_null() {
+        let mut m = ModelMsg {
+            version: 3,
+            count: 2,
+            actuated: Dof::Yaw.mask() | Dof::Surge.mask(),
+            rel_err_rot: 0.04,
+            rel_err_acc: 0.2,
+            ..ModelMsg::default()
+        };
+        m.set_source(ModelSource::Estimated);
+        m.set_method(ModelMethod::Forward);
+        m.effectiveness[Dof::Yaw.index()][..2].copy_from_slice(&[1.5, -1.5]);
+        m.effectiveness[Dof::Surge.index()][..2].copy_from_slice(&[0.8, 0.8]);
+        m.effectiveness[0][5] = 9.0; // beyond count: must not appear
+        m.std_err[Dof::Yaw.index()][..2].copy_from_slice(&[0.01, f64::NAN]);
+        m.allocation[0][Dof::Yaw.index()] = 0.3;
+        m.allocation[1][Dof::Surge.index()] = 0.6;
+        let v: Value = serde_json::to_value(ModelJson::from(&m)).unwrap();
+        assert_eq!(v["source"], "Estimated");
+        assert_eq!(v["method"], "Forward");
+        assert_eq!(
+            v["dofs"],
+            json!(["roll", "pitch", "yaw", "surge", "sway", "heave"])
+        );
+        assert_eq!(
+            v["actuated"],
+            json!({"roll": false, "pitch": false, "yaw": true, "surge": true,
+                   "sway": false, "heave": false})
+        );
+        let eff = v["effectiveness"].as_array().unwrap();
+        assert_eq!(eff.len(), 6);
+        assert!(eff.iter().all(|row| row.as_array().unwrap().len() == 2));
+        assert_eq!(eff[0], json!([0.0, 0.0]));
+        assert_eq!(eff[2], json!([1.5, -1.5]));
+        assert_eq!(v["std_err"][2], json!([0.01, null]));
+        let alloc = v["allocation"].as_array().unwrap();
+        assert_eq!(alloc.len(), 2);
+        assert_eq!(alloc[0], json!([0.0, 0.0, 0.3, 0.0, 0.0, 0.0]));
+        assert_eq!(v["rel_err_rot"], 0.04);
+        // The text is valid JSON that round-trips through a parser.
+        let text = serde_json::to_string(&ModelJson::from(&m)).unwrap();
+        assert_eq!(serde_json::from_str::<Value>(&text).unwrap(), v);
+    }
+}
