@@ -47,14 +47,17 @@ pub fn daemon_state(s: State) -> DaemonState {
 }
 
 pub fn status_msg(seq: u64, s: &StatusSnapshot) -> StatusMsg {
+    // The protocol has NaN for "not known yet"; an infinite bound (not every thruster pulsed
+    // yet) is exactly that.
+    let known = |v: f64| if v.is_finite() { v } else { f64::NAN };
     let mut m = StatusMsg {
         seq,
         pulse: s.pulse as u32,
         pulses_planned: s.pulses_planned as u32,
-        error_bound: s.error_bound,
+        error_bound: known(s.error_bound),
         power: s.power,
-        sigma_rot: s.sigma_rot,
-        sigma_acc: s.sigma_acc,
+        sigma_rot: known(s.sigma_rot),
+        sigma_acc: known(s.sigma_acc),
         samples: s.samples,
         model_version: s.model_version,
         imu_rate_hz: s.imu_rate_hz,
@@ -68,14 +71,15 @@ pub fn status_msg(seq: u64, s: &StatusSnapshot) -> StatusMsg {
 
 pub fn model_msg(seq: u64, t_ns: u64, model: &Model) -> ModelMsg {
     let n = model.thrusters().min(MAX_THRUSTERS);
+    let known = |v: f64| if v.is_finite() { v } else { f64::NAN };
     let mut m = ModelMsg {
         seq,
         version: model.version,
         t_ns,
         count: n as u32,
         actuated: model.actuated.bits() as u32,
-        rel_err_rot: model.rel_err_rot,
-        rel_err_acc: model.rel_err_acc,
+        rel_err_rot: known(model.rel_err_rot),
+        rel_err_acc: known(model.rel_err_acc),
         ..ModelMsg::default()
     };
     m.set_source(match model.source {
@@ -91,7 +95,7 @@ pub fn model_msg(seq: u64, t_ns: u64, model: &Model) -> ModelMsg {
     for j in 0..DOF_COUNT {
         for i in 0..n {
             m.effectiveness[j][i] = model.effectiveness[(j, i)];
-            m.std_err[j][i] = model.std_err[(j, i)];
+            m.std_err[j][i] = known(model.std_err[(j, i)]);
             m.allocation[i][j] = model.allocation[(i, j)];
         }
     }
@@ -119,4 +123,36 @@ pub fn setpoint(s: &Setpoint) -> (UnitQuaternion<f64>, Option<f64>) {
     let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
     let depth = (s.flags & Setpoint::HOLD_DEPTH != 0).then_some(s.depth);
     (q, depth)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::{Machine, MachineSetup};
+    use crate::model::{nominal_effectiveness, RigidBody};
+    use thruster_protocol::validate::Validate;
+
+    #[test]
+    fn what_the_daemon_publishes_passes_the_protocols_checks() {
+        // A fresh machine: nothing measured yet (NaN levels, no bound).
+        let m = Machine::new(MachineSetup {
+            thrusters: 3,
+            ..MachineSetup::default()
+        });
+        let status = status_msg(1, &m.status());
+        status.validate().unwrap();
+        assert!(status.error_bound.is_nan() && status.sigma_rot.is_nan());
+        // A nominal model: unknown standard errors and bounds.
+        let pos = [[0.0, -0.2, 0.0], [0.0, 0.2, 0.0], [0.1, 0.0, -0.1]];
+        let dir = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]];
+        let mut model = Model::nominal(
+            nominal_effectiveness(&RigidBody::default(), &pos, &dir),
+            None,
+        );
+        model.rel_err_acc = f64::INFINITY;
+        let msg = model_msg(1, 0, &model);
+        msg.validate().unwrap();
+        assert_eq!(msg.count, 3);
+        assert!(msg.rel_err_acc.is_nan());
+    }
 }

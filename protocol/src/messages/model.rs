@@ -63,11 +63,12 @@ pub struct ModelMsg {
     /// motion, i.e. per rad/s^2 (rotations) or m/s^2 (translations). Columns of
     /// non-actuated DOFs are zero: they are never commanded.
     pub allocation: [[f64; DOF_COUNT]; MAX_THRUSTERS],
-    /// One-sigma standard error of each `effectiveness` entry, same units.
+    /// One-sigma standard error of each `effectiveness` entry, same units; NaN where unknown
+    /// (nominal models, the paper's method).
     pub std_err: [[f64; MAX_THRUSTERS]; DOF_COUNT],
-    /// Relative error bound of the rotational rows (dimensionless, >= 0).
+    /// Relative error bound of the rotational rows (dimensionless, >= 0; NaN if unknown).
     pub rel_err_rot: f64,
-    /// Relative error bound of the translational rows (dimensionless, >= 0).
+    /// Relative error bound of the translational rows (dimensionless, >= 0; NaN if unknown).
     pub rel_err_acc: f64,
 }
 

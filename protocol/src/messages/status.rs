@@ -34,20 +34,21 @@ pub struct StatusMsg {
     pub seq: u64,
     /// [`DaemonState`] as `u32`.
     pub state: u32,
-    /// Current pulse index (0-based) while estimating.
+    /// Pulses completed in the current (or the last) estimation.
     pub pulse: u32,
     /// Pulses planned for this estimation (may grow until the stopping rule is met).
     pub pulses_planned: u32,
     /// Written as zero, ignored.
     pub reserved: u32,
-    /// Current relative error bound of the model being estimated (dimensionless, >= 0;
-    /// 0 when not estimating).
+    /// Relative error bound (1 sigma) of the model being estimated, or of the last estimate
+    /// (dimensionless, >= 0); NaN while not known (before every thruster has been pulsed, or
+    /// for a method without a bound).
     pub error_bound: f64,
     /// Current excitation power, normalised command magnitude in [0, 1].
     pub power: f64,
-    /// Measured rotation-rate noise, one sigma, rad/s.
+    /// Measured rotation-rate noise, one sigma, rad/s; NaN before it was measured.
     pub sigma_rot: f64,
-    /// Measured acceleration noise, one sigma, m/s^2.
+    /// Measured acceleration noise, one sigma, m/s^2; NaN before it was measured.
     pub sigma_acc: f64,
     /// IMU samples accepted since start.
     pub samples: u64,

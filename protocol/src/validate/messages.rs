@@ -36,6 +36,22 @@ fn in_range(
     }
 }
 
+/// As [`in_range`], but NaN passes: it means "not known yet" in the fields that allow it
+/// (status error bound and noise levels, model standard errors). Infinity never does.
+fn in_range_or_unknown(
+    field: Field,
+    value: f64,
+    min: f64,
+    max: f64,
+    unit: &'static str,
+) -> Result<(), RejectReason> {
+    if value.is_nan() {
+        Ok(())
+    } else {
+        in_range(field, value, min, max, unit)
+    }
+}
+
 fn all_in_range(
     name: &'static str,
     values: &[f64],
@@ -256,22 +272,26 @@ impl Validate for ModelMsg {
             false,
             "per unit motion",
         )?;
-        matrix_in_range(
-            "std_err",
-            &self.std_err,
-            n,
-            MAX_EFFECTIVENESS,
-            true,
-            "per unit command",
-        )?;
-        in_range(
+        // NaN = unknown (a nominal model, the paper's method); anything else must be in range.
+        for (i, row) in self.std_err.iter().enumerate() {
+            for (j, &v) in row[..n].iter().enumerate() {
+                in_range_or_unknown(
+                    Field::at2("std_err", i, j),
+                    v,
+                    0.0,
+                    MAX_EFFECTIVENESS,
+                    "per unit command",
+                )?;
+            }
+        }
+        in_range_or_unknown(
             Field::new("rel_err_rot"),
             self.rel_err_rot,
             0.0,
             f64::MAX,
             "",
         )?;
-        in_range(
+        in_range_or_unknown(
             Field::new("rel_err_acc"),
             self.rel_err_acc,
             0.0,
@@ -320,7 +340,7 @@ impl Validate for StatusMsg {
     /// text valid UTF-8.
     fn validate(&self) -> Result<(), RejectReason> {
         known_enum("state", self.state())?;
-        in_range(
+        in_range_or_unknown(
             Field::new("error_bound"),
             self.error_bound,
             0.0,
@@ -328,14 +348,14 @@ impl Validate for StatusMsg {
             "",
         )?;
         in_range(Field::new("power"), self.power, 0.0, MAX_THRUST, "")?;
-        in_range(
+        in_range_or_unknown(
             Field::new("sigma_rot"),
             self.sigma_rot,
             0.0,
             MAX_GYRO_RAD_S,
             "rad/s",
         )?;
-        in_range(
+        in_range_or_unknown(
             Field::new("sigma_acc"),
             self.sigma_acc,
             0.0,

@@ -111,7 +111,7 @@ impl Progress {
     fn update(&mut self, s: &StatusMsg) {
         let done = match s.state() {
             Ok(DaemonState::Pulse) => u64::from(s.pulse),
-            Ok(DaemonState::Settle) => u64::from(s.pulse) + 1,
+            Ok(DaemonState::Settle) => u64::from(s.pulse),
             Ok(DaemonState::Solve) => u64::from(s.pulses_planned),
             _ => self.bar.position(),
         };

@@ -42,7 +42,7 @@ fn seconds(ns: u64) -> String {
 }
 
 /// What the daemon is doing, in words: "pulse 3 of 8", "measuring noise", ...
-/// `pulse` is 0-based on the wire and shown 1-based.
+/// `pulse` counts completed pulses: the one running is `pulse + 1`.
 pub fn progress(s: &StatusMsg) -> String {
     let planned = s.pulses_planned;
     // NaN (no estimate yet) and 0 (not estimating) both mean: nothing to show.
@@ -55,7 +55,7 @@ pub fn progress(s: &StatusMsg) -> String {
         Ok(DaemonState::MeasureNoise) => "measuring noise at rest".to_string(),
         Ok(DaemonState::Pulse) => format!("pulse {} of {planned}{bound}", s.pulse + 1),
         Ok(DaemonState::Settle) => {
-            format!("settling after pulse {} of {planned}{bound}", s.pulse + 1)
+            format!("settling after pulse {} of {planned}{bound}", s.pulse)
         }
         Ok(DaemonState::Solve) => format!("solving after {planned} pulses{bound}"),
         Ok(DaemonState::Active) => format!("controlling with the model{bound}"),
