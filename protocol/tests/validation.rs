@@ -372,8 +372,8 @@ fn model_rejections() {
         "std_err[0][1] = -0.1 per unit command is outside [0, 1000]",
     );
     let mut m = model();
-    m.rel_err_acc = f64::NAN;
-    assert_rejects(&m, RejectCategory::NonFinite, "rel_err_acc is NaN");
+    m.rel_err_acc = f64::INFINITY;
+    assert_rejects(&m, RejectCategory::NonFinite, "rel_err_acc is inf");
 
     // Heave is not actuated: the allocation must never command it.
     let mut m = model();
@@ -426,9 +426,13 @@ fn status_validation() {
         RejectCategory::Range,
         "sigma_rot = -0.1 rad/s is outside [0, 50]",
     );
+    // NaN means "not known yet" and passes; infinity never does.
     let mut s = status();
     s.error_bound = f64::NAN;
-    assert_rejects(&s, RejectCategory::NonFinite, "error_bound is NaN");
+    s.sigma_rot = f64::NAN;
+    s.validate().unwrap();
+    s.error_bound = f64::INFINITY;
+    assert_rejects(&s, RejectCategory::NonFinite, "error_bound is inf");
     let mut s = status();
     s.text.as_bytes_mut()[0] = 0xff;
     assert_rejects(&s, RejectCategory::Other, "text is not valid UTF-8");
