@@ -43,10 +43,11 @@ pub struct Cli {
     pub command: Command,
 }
 
-// Room for `demo` (added later): a variant here, its module, and one arm in
-// `commands::run`. Nothing else depends on the list of variants.
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// The simulated demo: start thrusterd and thruster-sim on a private namespace, learn the
+    /// vehicle's thrusters, hold attitude, report, shut everything down.
+    Demo(crate::demo::DemoArgs),
     /// Show the daemon's state, progress and health.
     Status {
         /// One JSON object instead of text.

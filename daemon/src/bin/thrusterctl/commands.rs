@@ -25,6 +25,8 @@ pub fn run(cli: Cli) -> Result<()> {
     // Checks that need no daemon come first (inside each command, before connecting),
     // so bad input is reported even when the daemon is down.
     match cli.command {
+        // The demo runs its own daemon on a private namespace: no --namespace, no timeout.
+        Command::Demo(args) => crate::demo::run(args),
         Command::Status { json } => status(&Daemon::connect(&target, timeout)?, json),
         Command::Estimate {
             wait,

@@ -9,6 +9,7 @@ mod checks;
 mod cli;
 mod client;
 mod commands;
+mod demo;
 mod estimate;
 mod exit;
 mod geometry;
