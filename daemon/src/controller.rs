@@ -15,17 +15,18 @@ use crate::model::Model;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ControllerConfig {
-    /// Attitude proportional gain per axis (roll, pitch, yaw), rad/s^2 per rad (default 4).
+    /// Attitude proportional gain per axis (roll, pitch, yaw), rad/s^2 per rad (default 16:
+    /// a 4 rad/s natural frequency, stiff enough against a BlueROV2-class righting moment).
     pub kp_att: [f64; 3],
-    /// Rate damping per axis, rad/s^2 per rad/s (default 3).
+    /// Rate damping per axis, rad/s^2 per rad/s (default 6: damping ratio 0.75).
     pub kd_att: [f64; 3],
-    /// Attitude integral gain, rad/s^2 per rad s (default 0.5).
+    /// Attitude integral gain, rad/s^2 per rad s (default 4).
     pub ki_att: [f64; 3],
-    /// Depth proportional gain, m/s^2 per m (default 1.0).
+    /// Depth proportional gain, m/s^2 per m (default 2.0).
     pub kp_depth: f64,
-    /// Depth rate damping, m/s^2 per m/s (default 1.5).
+    /// Depth rate damping, m/s^2 per m/s (default 2.5).
     pub kd_depth: f64,
-    /// Depth integral gain, m/s^2 per m s (default 0.1): cancels buoyancy.
+    /// Depth integral gain, m/s^2 per m s (default 0.5): cancels buoyancy.
     pub ki_depth: f64,
     /// Integrator clamp, in units of desired acceleration (default 2.0).
     pub integral_limit: f64,
@@ -34,12 +35,12 @@ pub struct ControllerConfig {
 impl Default for ControllerConfig {
     fn default() -> Self {
         ControllerConfig {
-            kp_att: [4.0; 3],
-            kd_att: [3.0; 3],
-            ki_att: [0.5; 3],
-            kp_depth: 1.0,
-            kd_depth: 1.5,
-            ki_depth: 0.1,
+            kp_att: [16.0; 3],
+            kd_att: [6.0; 3],
+            ki_att: [4.0; 3],
+            kp_depth: 2.0,
+            kd_depth: 2.5,
+            ki_depth: 0.5,
             integral_limit: 2.0,
         }
     }
@@ -275,7 +276,7 @@ mod tests {
         assert!(out.iter().all(|v| v.abs() <= 1.0 + 1e-12), "{out:?}");
         // Roll asks for a differential on the verticals, unscaled.
         let roll_alloc = m.allocation.column(0);
-        let want = 4.0 * 0.2;
+        let want = 16.0 * 0.2;
         assert!((desired[0] - want).abs() < 1e-9, "{desired:?}");
         assert!(
             (out[2] - out[3] - 2.0 * roll_alloc[2] * want).abs() < 1e-9,

@@ -271,6 +271,7 @@ pub struct Machine {
     imu_rate_hz: f64,
     samples: u64,
     text: String,
+    last_desired: [f64; 6],
 }
 
 impl Machine {
@@ -300,6 +301,7 @@ impl Machine {
             imu_rate_hz: 0.0,
             samples: 0,
             text: "idle: waiting for an estimate request".into(),
+            last_desired: [0.0; 6],
             setup,
         };
         if let Some(g) = m.setup.geometry.clone() {
@@ -326,6 +328,11 @@ impl Machine {
 
     pub fn last_estimate(&self) -> Option<&Estimate> {
         self.last_estimate.as_ref()
+    }
+
+    /// The desired motion (DOF order) of the last control tick.
+    pub fn last_desired(&self) -> [f64; 6] {
+        self.last_desired
     }
 
     pub fn attitude(&self) -> UnitQuaternion<f64> {

@@ -44,7 +44,9 @@ fn default_integration_rate_hz() -> f64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InitialState {
-    /// Position of the CO, NED, m. Default [0, 0, 5] (5 m deep).
+    /// Position of the CO, NED, m. Default [0, 0, 30] (30 m deep): the model has no free
+    /// surface and a BlueROV2 is 2 N buoyant, so an uncontrolled vehicle rises ~0.17 m/s; 30 m
+    /// keeps a few minutes of estimation and drift below the surface.
     pub position_ned_m: [f64; 3],
     /// Roll, pitch, yaw (ZYX Euler), degrees. Default level, heading north.
     pub attitude_rpy_deg: [f64; 3],
@@ -57,7 +59,7 @@ pub struct InitialState {
 impl Default for InitialState {
     fn default() -> Self {
         InitialState {
-            position_ned_m: [0.0, 0.0, 5.0],
+            position_ned_m: [0.0, 0.0, 30.0],
             attitude_rpy_deg: [0.0; 3],
             linear_mps: [0.0; 3],
             angular_radps: [0.0; 3],
@@ -167,7 +169,7 @@ pub struct Simulator {
 }
 
 impl Simulator {
-    /// A simulator with default [`SimOptions`] (1 kHz, 5 m deep, level, at rest, no
+    /// A simulator with default [`SimOptions`] (1 kHz, 30 m deep, level, at rest, no
     /// disturbance). `seed` drives the sensor noise.
     pub fn new(vehicle: Vehicle, sensors: SensorConfig, seed: u64) -> Result<Self, SimError> {
         Simulator::with_options(vehicle, sensors, seed, SimOptions::default())

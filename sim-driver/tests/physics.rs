@@ -264,7 +264,7 @@ fn accelerometer_at_rest_reads_gravity_as_specific_force() {
         r.accel
     );
     assert!(Vector3::from(r.gyro).norm() < 1e-12);
-    assert!((r.depth - 5.0).abs() < 1e-9);
+    assert!((r.depth - 30.0).abs() < 1e-9);
     assert!((Vector3::from(r.mag) - Vector3::new(20.0, 0.0, 45.0)).norm() < 1e-9);
     // Tilted and still, it reads -R^T g.
     let q = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);

@@ -297,7 +297,7 @@ fn samples_at_rest_read_gravity_on_an_exact_clock() {
             assert!(s.accel[0].abs() < 1e-3 && s.accel[1].abs() < 1e-3, "{s:?}");
             assert!((s.accel[2] + 9.81).abs() < 0.1, "{s:?}");
             assert!(s.gyro.iter().all(|g| g.abs() < 1e-4), "{s:?}");
-            assert!((s.depth - 5.0).abs() < 0.05, "{s:?}");
+            assert!((s.depth - 30.0).abs() < 0.05, "{s:?}");
             assert!((s.mag[0] - 20.0).abs() < 1e-6 && (s.mag[2] - 45.0).abs() < 1e-6);
             peer.answer(&s, &[0.0; 5]);
         }

@@ -44,6 +44,10 @@ pub struct DemoArgs {
     /// Print one JSON summary instead of the report.
     #[arg(long)]
     pub json: bool,
+    /// thrusterd configuration file for the demo's daemon (controller gains, estimator, ...);
+    /// its namespace, state directory and thruster count are the demo's own.
+    #[arg(long)]
+    pub daemon_config: Option<PathBuf>,
 }
 
 /// A child process killed and reaped on drop, whatever happens.
@@ -214,6 +218,8 @@ struct Summary {
     attitude_err_deg: Option<f64>,
     attitude_err_level_deg: Option<f64>,
     attitude_err_step_deg: Option<f64>,
+    tilt_err_deg: Option<f64>,
+    yaw_err_deg: Option<f64>,
     clean_exit: bool,
     leftovers: usize,
 }
@@ -458,6 +464,7 @@ fn drive(
     }
 
     // Hold: level first, then a 15 degree pitch step, scored against the simulator's truth.
+    let mut tilt_yaw = None;
     let (level_err, step_err) = if args.hold_s > 0.0 {
         let _ = latest(vehicle_in)?;
         let start = latest_blocking(vehicle_in)?;
@@ -477,7 +484,7 @@ fn drive(
             };
             setpoint_out.send(&sp)?;
             let t_start = latest_blocking(vehicle_in)?.t_ns;
-            let (mut sum, mut count) = (0.0, 0u64);
+            let (mut sum, mut count, mut tilt_sum, mut yaw_sum) = (0.0, 0u64, 0.0, 0.0);
             let timeout = Instant::now();
             loop {
                 let Some(v) = vehicle_in.recv()? else {
@@ -495,16 +502,24 @@ fn drive(
                 };
                 let t = v.t_ns.saturating_sub(t_start) as f64 * 1e-9;
                 if t >= settle {
-                    sum += quat(v.attitude).angle_to(&target).to_degrees();
+                    let q = quat(v.attitude);
+                    sum += q.angle_to(&target).to_degrees();
+                    // Tilt: angle between the body z axes; heading: yaw difference.
+                    let z = nalgebra::Vector3::z();
+                    tilt_sum += (q * z).angle(&(target * z)).to_degrees();
+                    let dyaw = q.euler_angles().2 - target.euler_angles().2;
+                    yaw_sum += dyaw.sin().atan2(dyaw.cos()).abs().to_degrees();
                     count += 1;
                 }
                 if t >= half {
                     break;
                 }
             }
-            errs.push(sum / count.max(1) as f64);
+            let c = count.max(1) as f64;
+            errs.push((sum / c, tilt_sum / c, yaw_sum / c));
         }
-        (Some(errs[0]), Some(errs[1]))
+        tilt_yaw = Some((0.5 * (errs[0].1 + errs[1].1), 0.5 * (errs[0].2 + errs[1].2)));
+        (Some(errs[0].0), Some(errs[1].0))
     } else {
         (None, None)
     };
@@ -523,6 +538,8 @@ fn drive(
         attitude_err_deg: attitude,
         attitude_err_level_deg: level_err,
         attitude_err_step_deg: step_err,
+        tilt_err_deg: tilt_yaw.map(|t| t.0),
+        yaw_err_deg: tilt_yaw.map(|t| t.1),
         clean_exit: false,
         leftovers: 0,
     })
@@ -597,6 +614,8 @@ fn report(args: &DemoArgs, s: &Summary) {
             "attitude_err_deg": s.attitude_err_deg,
             "attitude_err_level_deg": s.attitude_err_level_deg,
             "attitude_err_pitch_step_deg": s.attitude_err_step_deg,
+            "tilt_err_deg": s.tilt_err_deg,
+            "yaw_err_deg": s.yaw_err_deg,
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,
         });
