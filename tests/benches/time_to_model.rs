@@ -53,8 +53,13 @@ fn scale_free_error(m: &ModelMsg, t: &TruthMsg, first: usize) -> f64 {
 }
 
 fn main() {
-    let seeds: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(5);
-    println!("AMOUR-5, paper noise, lockstep over iceoryx2, {seeds} seeds per setting (mean [min-max])");
+    let seeds: u64 = std::env::args()
+        .skip(1)
+        .find_map(|a| a.parse().ok())
+        .unwrap_or(5);
+    println!(
+        "AMOUR-5, paper noise, lockstep over iceoryx2, {seeds} seeds per setting (mean [min-max])"
+    );
     println!("| setting | vehicle s to model | pulses | err rot | err acc | scale-free err rot | wall s | speed-up |");
     println!("|---|---|---|---|---|---|---|---|");
     for setting in SETTINGS {
@@ -67,13 +72,28 @@ fn main() {
             let mut daemon = world.daemon(&["--config", cfg.to_str().unwrap(), "--estimate"]);
             let seed_s = seed.to_string();
             let wall = Instant::now();
-            let mut sim = world.sim("amour5", &["--noise", "paper", "--lockstep", "--seed", &seed_s, "--duration", "100000"]);
+            let mut sim = world.sim(
+                "amour5",
+                &[
+                    "--noise",
+                    "paper",
+                    "--lockstep",
+                    "--seed",
+                    &seed_s,
+                    "--duration",
+                    "100000",
+                ],
+            );
             let done = op
-                .wait_status(Duration::from_secs(120), |s| state(s) == DaemonState::Active && s.model_version >= 1)
+                .wait_status(Duration::from_secs(120), |s| {
+                    state(s) == DaemonState::Active && s.model_version >= 1
+                })
                 .unwrap_or_else(|| panic!("no model\n{}\n{}", daemon.log_text(), sim.log_text()));
             let wall_s = wall.elapsed().as_secs_f64();
             let model = op
-                .wait_model(Duration::from_secs(10), |m| m.source() == Ok(ModelSource::Estimated))
+                .wait_model(Duration::from_secs(10), |m| {
+                    m.source() == Ok(ModelSource::Estimated)
+                })
                 .expect("model");
             let truth = op.latest_truth(Duration::from_secs(10)).expect("truth");
             let vehicle_s = done.vehicle_time_ns as f64 * 1e-9;
