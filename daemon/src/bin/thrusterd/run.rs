@@ -176,6 +176,7 @@ impl Daemon {
         info!(thrusters = self.machine.thrusters(), "thrusterd serving");
         self.publish_status(&status_out);
         let mut last_status = Instant::now();
+        let mut wait_errors = 0u32;
 
         while !self.shutdown.load(Ordering::SeqCst) {
             // Low-latency mode: poll briefly for the next sample before paying for a wake-up.
@@ -191,7 +192,7 @@ impl Daemon {
             }
             let (mut imu, mut stale, mut reconf, mut setp, mut ctrl) =
                 (false, false, false, false, false);
-            waitset.wait_and_process_once_with_timeout(
+            let waited = waitset.wait_and_process_once_with_timeout(
                 |id| {
                     imu |= id.has_event_from(&imu_guard);
                     stale |= id.has_missed_deadline(&imu_guard);
@@ -201,7 +202,19 @@ impl Daemon {
                     CallbackProgression::Continue
                 },
                 status_period,
-            )?;
+            );
+            if let Err(e) = waited {
+                // A signal interrupts the wait (EINTR) before the handler's flag is seen: that
+                // is the shutdown path, not a failure; anything persistent is.
+                if self.shutdown.load(Ordering::SeqCst) {
+                    break;
+                }
+                wait_errors += 1;
+                warn!("waiting for events failed ({wait_errors} in a row): {e:?}");
+                anyhow::ensure!(wait_errors < 100, "the event loop keeps failing: {e:?}");
+                continue;
+            }
+            wait_errors = 0;
             if imu || !spin.is_zero() {
                 imu_in.drain_events()?;
                 let mut got = false;
