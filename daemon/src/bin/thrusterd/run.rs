@@ -50,6 +50,9 @@ pub struct RunArgs {
     estimate: bool,
 }
 
+/// In low-latency mode, other inputs and status are looked at least this often.
+const HOUSEKEEPING: Duration = Duration::from_millis(1);
+
 pub fn run(args: RunArgs) -> Result<()> {
     init_logging();
     let mut cfg = match &args.config {
@@ -179,15 +182,20 @@ impl Daemon {
         let mut wait_errors = 0u32;
 
         while !self.shutdown.load(Ordering::SeqCst) {
-            // Low-latency mode: poll briefly for the next sample before paying for a wake-up.
+            // Low-latency mode: keep polling for samples (answering each at once) until none
+            // came for `spin`, or housekeeping is due; only then pay for the WaitSet (a
+            // syscall, and a wake-up if it blocks). Other inputs wait at most ~1 ms.
             if !spin.is_zero() {
-                let start = Instant::now();
-                while start.elapsed() < spin {
+                let housekeeping = Instant::now();
+                let mut idle_since = Instant::now();
+                while idle_since.elapsed() < spin && housekeeping.elapsed() < HOUSEKEEPING {
                     if let Some(sample) = imu_in.recv()? {
                         self.on_imu(&sample, &thrust_out);
-                        break;
+                        self.stale_reported = false;
+                        idle_since = Instant::now();
+                    } else {
+                        std::hint::spin_loop();
                     }
-                    std::hint::spin_loop();
                 }
             }
             let (mut imu, mut stale, mut reconf, mut setp, mut ctrl) =
@@ -201,7 +209,11 @@ impl Daemon {
                     ctrl |= id.has_event_from(&control_guard);
                     CallbackProgression::Continue
                 },
-                status_period,
+                if spin.is_zero() {
+                    status_period
+                } else {
+                    Duration::from_micros(1)
+                },
             );
             if let Err(e) = waited {
                 // A signal interrupts the wait (EINTR) before the handler's flag is seen: that
