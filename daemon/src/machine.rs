@@ -66,19 +66,21 @@ pub enum ReconfigPolicy {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MachineConfig {
-    /// Rest period for the noise levels, s (default 2.0).
+    /// Rest period for the noise levels, s (default 1.0: 200 samples at 200 Hz put the sigma
+    /// within ~5 %).
     pub noise_s: f64,
     /// Length of one excitation pulse, s (default 0.1; the paper used 1.0). Short pulses keep
     /// the vehicle in the regime where the response is still the thrust's, not the drag's: on a
     /// BlueROV2-class body quadratic roll/yaw damping already takes ~5 % off the rate after
     /// 0.1 s (docs/simulation.md).
     pub pulse_s: f64,
-    /// Minimum pause after a pulse, s (default 0.3).
+    /// Minimum pause after a pulse, s (default 0.15).
     pub settle_min_s: f64,
-    /// Maximum pause after a pulse, s (default 3.0, the paper's fixed pause).
+    /// Maximum pause after a pulse, s (default 1.0; the paper paused a fixed 3 s). The per-pulse
+    /// intercept absorbs what is left of the last pulse's motion.
     pub settle_max_s: f64,
     /// The pause ends once every gyro axis stayed within k sigma of rest for this long, s
-    /// (default 0.2).
+    /// (default 0.1).
     pub settle_quiet_s: f64,
     /// A new estimated model is swapped in only if both relative error bounds are below this
     /// (default 0.25).
@@ -101,11 +103,11 @@ pub struct MachineConfig {
 impl Default for MachineConfig {
     fn default() -> Self {
         MachineConfig {
-            noise_s: 2.0,
+            noise_s: 1.0,
             pulse_s: 0.1,
-            settle_min_s: 0.3,
-            settle_max_s: 3.0,
-            settle_quiet_s: 0.2,
+            settle_min_s: 0.15,
+            settle_max_s: 1.0,
+            settle_quiet_s: 0.1,
             max_swap_rel_err: 0.25,
             on_reconfig: ReconfigPolicy::Estimate,
             control_after_estimate: true,
@@ -644,7 +646,7 @@ impl Machine {
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Estimating;
         if let Some(est) = self.est.as_mut() {
-            let u = est.begin_pulse();
+            let u = est.begin_pulse_at(t_ns as f64 * 1e-9);
             for (o, v) in cmd.thrust.iter_mut().zip(u) {
                 *o = *v;
             }
@@ -709,7 +711,11 @@ impl Machine {
         let d = levels.gyro_delta(&[gyro.x, gyro.y, gyro.z]);
         let motion = motion_accel(accel, &self.attitude.attitude());
         if let Some(est) = self.est.as_mut() {
-            est.push_rest_sample(&d, &levels.accel_delta(&[motion.x, motion.y, motion.z]));
+            est.push_rest_sample(
+                s.t_ns as f64 * 1e-9,
+                &d,
+                &levels.accel_delta(&[motion.x, motion.y, motion.z]),
+            );
         }
         let quiet = (0..3).all(|a| d[a].abs() <= k * levels.gyro_sigma[a].max(1e-6));
         if quiet {
@@ -800,9 +806,10 @@ impl Machine {
             return Command::neutral(self.n);
         };
         let attitude = self.attitude.attitude();
-        // The first tick after entering Active holds where the vehicle is.
-        let target = *self.target.get_or_insert(Target {
-            attitude,
+        // Without a setpoint, hold level at the current heading and depth: a vehicle may enter
+        // Active still swinging from the last pulse, and that tilt is nothing to keep.
+        let target = *self.target.get_or_insert_with(|| Target {
+            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, attitude.euler_angles().2),
             depth: s.depth,
         });
         let meas = Measured {

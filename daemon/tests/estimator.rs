@@ -69,6 +69,11 @@ fn run_live(
     };
     let (rate_hz, pulse_s) = (100.0, 0.5);
     for _ in 0..pulses {
+        // The quiet samples before each pulse anchor its intercept, as in the daemon.
+        for k in 0..est.config().baseline_samples {
+            let t = k as f64 / rate_hz;
+            est.push_rest_sample(t, &gauss(rng, sigma.0), &gauss(rng, sigma.1));
+        }
         let u = est.begin_pulse().to_vec();
         let (rot, acc) = response(truth, &u);
         for k in 1..=((pulse_s * rate_hz) as usize) {
@@ -193,8 +198,10 @@ fn noisy_estimate_lies_within_its_own_confidence() {
 #[test]
 fn k_sigma_selection_and_power_escalation() {
     let truth = five_thruster_truth() * 0.01; // tiny responses: below 3 sigma at any power
+                                              // Algorithm 1's schedule: start at 0.5, +0.1 per silent pulse, capped at 1.0.
     let cfg = EstimatorConfig {
         excitation: Excitation::RoundRobin,
+        initial_power: 0.5,
         ..EstimatorConfig::default()
     };
     let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.25, 0.5));
@@ -215,11 +222,11 @@ fn k_sigma_selection_and_power_escalation() {
     }
 
     // A strong response is kept, and the power stays where it is.
-    let mut est = Estimator::new(
-        EstimatorConfig::default(),
-        5,
-        NoiseLevels::isotropic(0.25, 0.5),
-    );
+    let paper_power = EstimatorConfig {
+        initial_power: 0.5,
+        ..EstimatorConfig::default()
+    };
+    let mut est = Estimator::new(paper_power, 5, NoiseLevels::isotropic(0.25, 0.5));
     let u = est.begin_pulse().to_vec();
     // k * sigma = 0.75 rad/s and 1.5 m/s^2; one sample above both, one below both.
     est.push_pulse_sample(

@@ -18,14 +18,14 @@ struct Setting {
 const SETTINGS: &[Setting] = &[
     Setting {
         name: "paper: Alg. 1, round robin, 1 s pulses, 3 s pauses, 2 pulses/thruster",
-        toml: "[estimator]\nmethod = \"paper\"\nexcitation = \"round_robin\"\npaper_cycles = 1\n[machine]\npulse_s = 1.0\nsettle_min_s = 3.0\nsettle_max_s = 3.0\nmax_swap_rel_err = 10.0\n",
+        toml: "[estimator]\nmethod = \"paper\"\nexcitation = \"round_robin\"\npaper_cycles = 1\ninitial_power = 0.5\n[machine]\nnoise_s = 2.0\npulse_s = 1.0\nsettle_min_s = 3.0\nsettle_max_s = 3.0\nmax_swap_rel_err = 10.0\n",
     },
     Setting {
         name: "forward, round robin, paper timing (1 s / 3 s), auto stop",
-        toml: "[estimator]\nexcitation = \"round_robin\"\n[machine]\npulse_s = 1.0\nsettle_min_s = 3.0\nsettle_max_s = 3.0\n",
+        toml: "[estimator]\nexcitation = \"round_robin\"\ninitial_power = 0.5\n[machine]\nnoise_s = 2.0\npulse_s = 1.0\nsettle_min_s = 3.0\nsettle_max_s = 3.0\n",
     },
     Setting {
-        name: "forward, orthogonal, 0.1 s pulses, adaptive settle, auto stop (defaults)",
+        name: "forward, orthogonal, 0.1 s pulses at 0.8, adaptive pauses, auto stop (defaults)",
         toml: "",
     },
 ];

@@ -88,35 +88,69 @@ pub struct Estimate {
 }
 
 /// Running sums of one sensor group over a pulse (and the quiet samples just before it, whose
-/// shape value is 0): enough to add the pulse centred, with its own intercept.
+/// shape value is 0): enough to add the pulse with its own intercept and, optionally, its own
+/// linear drift removed (Frisch-Waugh: regress [1, t] out of both shape and response).
 #[derive(Debug, Clone, Copy, Default)]
 struct Moments {
     n: u64,
+    t: f64,
+    tt: f64,
     s: f64,
+    ts: f64,
     ss: f64,
     y: Vector3<f64>,
+    ty: Vector3<f64>,
     yy: Vector3<f64>,
     sy: Vector3<f64>,
 }
 
 impl Moments {
-    fn push(&mut self, s: f64, y: &Vector3<f64>) {
+    fn push(&mut self, t: f64, s: f64, y: &Vector3<f64>) {
         self.n += 1;
+        self.t += t;
+        self.tt += t * t;
         self.s += s;
+        self.ts += t * s;
         self.ss += s * s;
         self.y += y;
+        self.ty += y * t;
         self.yy += y.component_mul(y);
         self.sy += y * s;
     }
 
-    /// (sxx, sxy, syy) about the means.
-    fn centred(&self) -> (f64, Vector3<f64>, Vector3<f64>) {
+    /// (sxx, sxy, syy) after removing a per-pulse intercept, and a linear drift too when
+    /// `detrend` (and the times span enough to fit one).
+    fn residual(&self, detrend: bool) -> (f64, Vector3<f64>, Vector3<f64>) {
         let n = self.n.max(1) as f64;
-        (
-            self.ss - self.s * self.s / n,
-            self.sy - self.y * (self.s / n),
-            self.yy - self.y.component_mul(&self.y) / n,
-        )
+        let det = n * self.tt - self.t * self.t;
+        if detrend && self.n >= 3 && det > 1e-12 * n * n {
+            // Project onto span{1, t} with M = [[n, St], [St, Stt]], M^-1 = [[Stt, -St], [-St, n]] / det.
+            let proj = |a0: f64, a1: f64, b0: f64, b1: f64| {
+                (a0 * (self.tt * b0 - self.t * b1) + a1 * (n * b1 - self.t * b0)) / det
+            };
+            let sxx = self.ss - proj(self.s, self.ts, self.s, self.ts);
+            let sxy =
+                Vector3::from_fn(|a, _| self.sy[a] - proj(self.s, self.ts, self.y[a], self.ty[a]));
+            let syy = Vector3::from_fn(|a, _| {
+                self.yy[a] - proj(self.y[a], self.ty[a], self.y[a], self.ty[a])
+            });
+            (sxx, sxy, syy)
+        } else {
+            (
+                self.ss - self.s * self.s / n,
+                self.sy - self.y * (self.s / n),
+                self.yy - self.y.component_mul(&self.y) / n,
+            )
+        }
+    }
+
+    /// Degrees of freedom the nuisance terms took.
+    fn nuisance(&self, detrend: bool) -> u64 {
+        if detrend && self.n >= 3 {
+            2
+        } else {
+            1
+        }
     }
 }
 
@@ -134,7 +168,7 @@ struct ActivePulse {
 /// intercept without costing the pulse's own samples.
 #[derive(Debug, Clone)]
 struct PreWindow {
-    ring: Vec<(Vector3<f64>, Vector3<f64>)>,
+    ring: Vec<(f64, Vector3<f64>, Vector3<f64>)>,
     next: usize,
     len: usize,
 }
@@ -142,26 +176,32 @@ struct PreWindow {
 impl PreWindow {
     fn new(capacity: usize) -> Self {
         PreWindow {
-            ring: vec![(Vector3::zeros(), Vector3::zeros()); capacity],
+            ring: vec![(0.0, Vector3::zeros(), Vector3::zeros()); capacity],
             next: 0,
             len: 0,
         }
     }
 
-    fn push(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>) {
+    fn push(&mut self, t: f64, gyro: &Vector3<f64>, accel: &Vector3<f64>) {
         if self.ring.is_empty() {
             return;
         }
-        self.ring[self.next] = (*gyro, *accel);
+        self.ring[self.next] = (t, *gyro, *accel);
         self.next = (self.next + 1) % self.ring.len();
         self.len = (self.len + 1).min(self.ring.len());
     }
 
-    fn drain_into(&mut self, moments: &mut [Moments; 2]) {
+    /// Latest time pushed, if any.
+    fn last_time(&self) -> Option<f64> {
+        (self.len > 0).then(|| self.ring[(self.next + self.ring.len() - 1) % self.ring.len()].0)
+    }
+
+    /// Move the samples into a pulse's moments, times made relative to the pulse start `t0`.
+    fn drain_into(&mut self, t0: f64, moments: &mut [Moments; 2]) {
         for k in 0..self.len {
-            let (g, a) = &self.ring[k];
-            moments[ROT].push(0.0, g);
-            moments[ACC].push(0.0, a);
+            let (t, g, a) = &self.ring[k];
+            moments[ROT].push(t - t0, 0.0, g);
+            moments[ACC].push(t - t0, 0.0, a);
         }
         self.len = 0;
         self.next = 0;
@@ -257,7 +297,14 @@ impl Estimator {
 
     /// The thrust to apply for the next pulse: power times the plan's sign pattern, in [-1, 1].
     /// Starts the pulse; feed its samples with `push_pulse_sample`, then call `end_pulse`.
+    /// The pulse starts just after the last rest sample.
     pub fn begin_pulse(&mut self) -> &[f64] {
+        let t0 = self.pre.last_time().unwrap_or(0.0);
+        self.begin_pulse_at(t0)
+    }
+
+    /// As `begin_pulse`, with the pulse's start on the clock of `push_rest_sample` (s).
+    pub fn begin_pulse_at(&mut self, t0_s: f64) -> &[f64] {
         let pattern = self.plan.pattern(self.pulses);
         let u: Vec<f64> = pattern
             .iter()
@@ -268,7 +315,7 @@ impl Estimator {
             *m = m.max(v.abs());
         }
         let mut moments = [Moments::default(); 2];
-        self.pre.drain_into(&mut moments);
+        self.pre.drain_into(t0_s, &mut moments);
         self.pulse = Some(ActivePulse {
             u,
             split,
@@ -284,11 +331,12 @@ impl Estimator {
         self.pulse.as_ref().map(|p| p.u.as_slice())
     }
 
-    /// A quiet sample between pulses (same units as `push_pulse_sample`); the last
-    /// `baseline_samples` of them anchor the next pulse's intercept.
-    pub fn push_rest_sample(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>) {
-        if gyro.iter().chain(accel.iter()).all(|v| v.is_finite()) {
-            self.pre.push(gyro, accel);
+    /// A sample between pulses at time `t_s` (any clock in seconds, the one `begin_pulse_at`
+    /// uses; same units as `push_pulse_sample`); the last `baseline_samples` of them anchor the
+    /// next pulse's intercept and drift.
+    pub fn push_rest_sample(&mut self, t_s: f64, gyro: &Vector3<f64>, accel: &Vector3<f64>) {
+        if t_s.is_finite() && gyro.iter().chain(accel.iter()).all(|v| v.is_finite()) {
+            self.pre.push(t_s, gyro, accel);
         }
     }
 
@@ -309,7 +357,7 @@ impl Estimator {
             return;
         }
         for (g, y) in [(ROT, gyro), (ACC, accel)] {
-            p.moments[g].push(shape[g], y);
+            p.moments[g].push(t_s, shape[g], y);
             if y.norm() > k_sigma[g] {
                 self.paper[g].add(y, &p.u);
                 p.kept[g] += 1;
@@ -320,11 +368,14 @@ impl Estimator {
     /// Close the pulse; raises the power when a sensor group kept no sample (Algorithm 1).
     pub fn end_pulse(&mut self) -> Option<PulseSummary> {
         let p = self.pulse.take()?;
+        let detrend = self.cfg.detrend;
         for g in [ROT, ACC] {
             let m = &p.moments[g];
-            let (sxx, sxy, syy) = m.centred();
-            self.forward[g].add_centred(&p.u, sxx, &sxy, &syy, m.n);
-            self.split[g].add_centred(&p.split, sxx, &sxy, &syy, m.n);
+            let (sxx, sxy, syy) = m.residual(detrend);
+            // add_centred charges one degree of freedom per pulse; a drift term costs one more.
+            let rows = m.n.saturating_sub(m.nuisance(detrend) - 1);
+            self.forward[g].add_centred(&p.u, sxx, &sxy, &syy, rows);
+            self.split[g].add_centred(&p.split, sxx, &sxy, &syy, rows);
         }
         let used = self.power;
         if p.kept[ROT] == 0 || p.kept[ACC] == 0 {

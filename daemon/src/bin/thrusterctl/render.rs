@@ -284,14 +284,15 @@ mod tests {
     }
 
     #[test]
-    fn progress_is_one_based_and_says_what_happens() {
+    fn progress_counts_completed_pulses_and_says_what_happens() {
+        // `pulse` = 2 completed: the third is running, or the second just ended.
         assert_eq!(
             progress(&status(DaemonState::Pulse)),
             "pulse 3 of 8, error bound 4.2 %"
         );
         assert_eq!(
             progress(&status(DaemonState::Settle)),
-            "settling after pulse 3 of 8, error bound 4.2 %"
+            "settling after pulse 2 of 8, error bound 4.2 %"
         );
         let mut s = status(DaemonState::Pulse);
         s.error_bound = 0.0;
