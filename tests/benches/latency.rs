@@ -97,13 +97,14 @@ fn ping_pong(world: &World, n: usize, setup: impl FnOnce()) -> Vec<f64> {
 }
 
 fn daemon_config(world: &World) -> std::path::PathBuf {
-    // Eight declared thrusters: the daemon starts with a nominal model and can hold attitude.
+    // Eight declared thrusters (directions need not be unit: the daemon normalises them): the
+    // daemon starts with a nominal model and can hold attitude.
     let mut text = String::from("[vehicle]\n");
     for (p, d) in [
-        ([0.15, -0.1, 0.0], [0.7071, 0.7071, 0.0]),
-        ([0.15, 0.1, 0.0], [0.7071, -0.7071, 0.0]),
-        ([-0.15, -0.1, 0.0], [0.7071, -0.7071, 0.0]),
-        ([-0.15, 0.1, 0.0], [0.7071, 0.7071, 0.0]),
+        ([0.15, -0.1, 0.0], [1.0, 1.0, 0.0]),
+        ([0.15, 0.1, 0.0], [1.0, -1.0, 0.0]),
+        ([-0.15, -0.1, 0.0], [1.0, -1.0, 0.0]),
+        ([-0.15, 0.1, 0.0], [1.0, 1.0, 0.0]),
         ([0.12, -0.22, 0.0], [0.0, 0.0, 1.0]),
         ([0.12, 0.22, 0.0], [0.0, 0.0, -1.0]),
         ([-0.12, -0.22, 0.0], [0.0, 0.0, -1.0]),
