@@ -27,14 +27,15 @@ pub fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().unwrap();
     let dir = exe.parent().unwrap().parent().unwrap().to_path_buf();
     let path = dir.join(name);
-    // `cargo test --workspace` builds every binary first; `cargo test -p system-tests` alone
-    // does not, so build them once here rather than test a stale or missing binary.
+    // `cargo test --workspace` builds every binary first; `cargo test -p system-tests` and
+    // `cargo bench -p system-tests` do not, so under cargo build them once here (a no-op when
+    // they are up to date) rather than run a stale or missing binary.
     BUILD.call_once(|| {
-        if !path.exists() || std::env::var_os("SYSTEM_TESTS_BUILD").is_some() {
+        if !path.exists() || std::env::var_os("CARGO").is_some() {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
             let release = dir.ends_with("release");
             let mut cmd = Command::new(cargo);
-            cmd.args(["build", "-p", "thrusterd", "-p", "thruster-sim", "--bins"]);
+            cmd.args(["build", "-q", "-p", "thrusterd", "-p", "thruster-sim", "--bins"]);
             if release {
                 cmd.arg("--release");
             }
