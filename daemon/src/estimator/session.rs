@@ -459,7 +459,10 @@ impl Estimator {
                 }
             }
             Method::Forward => {
-                if self.pulses < self.planned_pulses() {
+                // Stop only at the end of a cycle: mid-cycle the design is unbalanced (some
+                // thrusters pushed forward more than in reverse), which biases the symmetric model
+                // of a thruster that is weaker in reverse.
+                if self.pulses < self.planned_pulses() || self.pulses % self.plan.cycle_len() != 0 {
                     return StopDecision::Continue;
                 }
                 let e = self.forward_estimate();
