@@ -69,7 +69,14 @@ fn main() {
             let cfg = world.path("thrusterd.toml");
             std::fs::write(&cfg, setting.toml).unwrap();
             let op = Operator::new(&world);
-            let mut daemon = world.daemon(&["--config", cfg.to_str().unwrap(), "--estimate"]);
+            // Low-latency mode: in lockstep every sample waits for its answer.
+            let mut daemon = world.daemon(&[
+                "--config",
+                cfg.to_str().unwrap(),
+                "--estimate",
+                "--spin-us",
+                "500",
+            ]);
             let seed_s = seed.to_string();
             let wall = Instant::now();
             let mut sim = world.sim(

@@ -244,20 +244,25 @@ pub fn run(args: DemoArgs) -> Result<()> {
 
     // The daemon is told only how many thrusters there are, not where: it learns the rest.
     let count = thruster_count(&vehicle)?.to_string();
-    let mut daemon = ChildProc::spawn(
-        "thrusterd",
-        &daemon_exe,
-        &[
-            "run",
-            "--namespace",
-            &ns,
-            "--state-dir",
-            state.to_str().unwrap_or("."),
-            "--thrusters",
-            &count,
-        ],
-        &tmp,
-    )?;
+    let mut daemon_args = vec![
+        "run",
+        "--namespace",
+        &ns,
+        "--state-dir",
+        state.to_str().unwrap_or("."),
+        "--thrusters",
+        &count,
+    ];
+    // In lockstep the simulator waits for every answer: the daemon's low-latency mode (poll
+    // before blocking) saves a wake-up per sample.
+    if !args.realtime {
+        daemon_args.extend(["--spin-us", "500"]);
+    }
+    let cfg = args.daemon_config.as_ref().map(|p| p.display().to_string());
+    if let Some(cfg) = cfg.as_deref() {
+        daemon_args.extend(["--config", cfg]);
+    }
+    let mut daemon = ChildProc::spawn("thrusterd", &daemon_exe, &daemon_args, &tmp)?;
     let seed = args.seed.to_string();
     let mut sim_args = vec![
         "run",
