@@ -633,7 +633,13 @@ fn report(args: &DemoArgs, s: &Summary) {
         s.attitude_err_level_deg,
         s.attitude_err_step_deg,
     ) {
-        println!("attitude hold with the learned model: mean error {a:.2} deg (level {l:.2} deg, 15 deg pitch step {p:.2} deg, after settling)");
+        println!("attitude hold with the learned model, against the simulator's true attitude, after settling:");
+        println!(
+            "  mean angular error {a:.2} deg (level {l:.2} deg, 15 deg pitch step {p:.2} deg)"
+        );
+        if let (Some(t), Some(y)) = (s.tilt_err_deg, s.yaw_err_deg) {
+            println!("  of which tilt (roll/pitch) {t:.2} deg, heading {y:.2} deg (the daemon's heading comes from the magnetometer)");
+        }
     }
     println!(
         "shutdown: {} ({} files of the namespace left)",
