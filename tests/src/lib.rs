@@ -35,7 +35,15 @@ pub fn bin(name: &str) -> PathBuf {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
             let release = dir.ends_with("release");
             let mut cmd = Command::new(cargo);
-            cmd.args(["build", "-q", "-p", "thrusterd", "-p", "thruster-sim", "--bins"]);
+            cmd.args([
+                "build",
+                "-q",
+                "-p",
+                "thrusterd",
+                "-p",
+                "thruster-sim",
+                "--bins",
+            ]);
             if release {
                 cmd.arg("--release");
             }
