@@ -1,0 +1,253 @@
+//! The Linux backend: ESCs on sysfs PWM channels, IMU (and optionally pressure) from IIO.
+//!
+//! Local hardware, no receive thread: the loop calls [`Backend::read_sensors`] at the
+//! deadline this backend gives (one sample per `1 / rate_hz`), and every output change is
+//! one `duty_cycle` write. The sysfs root is configurable so the tests run on fake trees.
+
+pub mod iio;
+pub mod pwm;
+pub mod sysfs;
+
+use std::time::Duration;
+
+use self::iio::{find_device, Pressure, Vector3};
+use self::pwm::PwmChannel;
+use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Waker};
+use crate::clock::monotonic_ns;
+use crate::config::LinuxConfig;
+use crate::core::axes::AxisMap;
+use crate::core::pwm::Pwm;
+use crate::log_limit::LogLimiter;
+
+/// Standard gravity, m/s^2, for pressure -> depth.
+pub const G: f64 = 9.80665;
+
+/// Gauss -> microtesla.
+const UT_PER_GAUSS: f64 = 100.0;
+
+/// Consecutive failed sensor reads tolerated (skipped samples) before the backend fails.
+/// I2C sensors return an occasional EIO; a sensor that is gone fails within this many
+/// periods (0.1 s at 200 Hz), and the daemon's stale-IMU fault sees the gap meanwhile.
+pub const MAX_READ_FAILURES: u32 = 20;
+
+/// The IIO channels of the samples.
+#[derive(Debug)]
+struct Sensors {
+    gyro: Vector3,
+    accel: Vector3,
+    mag: Option<Vector3>,
+    pressure: Option<Pressure>,
+    imu_axes: AxisMap,
+    mag_axes: AxisMap,
+}
+
+/// See the module docs.
+#[derive(Debug)]
+pub struct LinuxBackend {
+    cfg: LinuxConfig,
+    outputs: Vec<OutputSpec>,
+    channels: Vec<PwmChannel>,
+    sensors: Option<Sensors>,
+    period_ns: u64,
+    next_due_ns: u64,
+    read_failures: u32,
+    read_log: LogLimiter,
+    stopped: bool,
+}
+
+impl LinuxBackend {
+    /// A backend for `outputs` (in thruster order). Touches nothing until `start`.
+    pub fn new(cfg: LinuxConfig, outputs: Vec<OutputSpec>) -> Self {
+        let period_ns = (1e9 / cfg.rate_hz).round().max(1.0) as u64;
+        LinuxBackend {
+            cfg,
+            outputs,
+            channels: Vec::new(),
+            sensors: None,
+            period_ns,
+            next_due_ns: 0,
+            read_failures: 0,
+            read_log: LogLimiter::default(),
+            stopped: false,
+        }
+    }
+
+    fn chip_dir(&self) -> std::path::PathBuf {
+        self.cfg
+            .sysfs_root
+            .join(format!("class/pwm/pwmchip{}", self.cfg.pwm_chip))
+    }
+
+    fn open_sensors(&self) -> Result<Sensors, BackendError> {
+        let root = &self.cfg.sysfs_root;
+        let gyro_dev = find_device(root, &self.cfg.gyro_device)?;
+        let accel_dev = find_device(root, self.cfg.accel_device())?;
+        let mag = match &self.cfg.mag_device {
+            Some(spec) => Some(Vector3::open(&find_device(root, spec)?, "magn")?),
+            None => None,
+        };
+        let pressure = match &self.cfg.pressure_device {
+            Some(spec) => Some(Pressure::open(&find_device(root, spec)?)?),
+            None => None,
+        };
+        Ok(Sensors {
+            gyro: Vector3::open(&gyro_dev, "anglvel")?,
+            accel: Vector3::open(&accel_dev, "accel")?,
+            mag,
+            pressure,
+            imu_axes: self.cfg.imu_axes,
+            mag_axes: self.cfg.mag_axes(),
+        })
+    }
+
+    fn read(&self, sensors: &Sensors) -> Result<SensorReading, BackendError> {
+        // Stamped before the first (gyro) read: the gyro is what the controller reacts to.
+        let t_ns = monotonic_ns();
+        let gyro = sensors.imu_axes.apply(sensors.gyro.read()?);
+        let accel = sensors.imu_axes.apply(sensors.accel.read()?);
+        let mag = match &sensors.mag {
+            Some(m) => Some(sensors.mag_axes.apply(m.read()?).map(|g| g * UT_PER_GAUSS)),
+            None => None,
+        };
+        let depth = match &sensors.pressure {
+            Some(p) => Some(depth_m(
+                p.read_kpa()?,
+                self.cfg.surface_pressure_kpa,
+                self.cfg.fluid_density_kg_m3,
+            )),
+            None => None,
+        };
+        Ok(SensorReading {
+            t_ns,
+            gyro,
+            accel,
+            mag,
+            depth,
+        })
+    }
+}
+
+/// Depth below the surface, m, from absolute pressure (kPa).
+pub fn depth_m(pressure_kpa: f64, surface_kpa: f64, density_kg_m3: f64) -> f64 {
+    (pressure_kpa - surface_kpa) * 1000.0 / (density_kg_m3 * G)
+}
+
+impl Backend for LinuxBackend {
+    fn name(&self) -> &'static str {
+        "linux"
+    }
+
+    fn start(&mut self, _waker: Waker, now_ns: u64) -> Result<(), BackendError> {
+        // Sensors first: a wrong device name fails before any output is touched.
+        self.sensors = Some(self.open_sensors()?);
+        let chip = self.chip_dir();
+        let timeout = Duration::from_millis(self.cfg.export_timeout_ms);
+        for o in &self.outputs {
+            let ch =
+                PwmChannel::open(&chip, o.channel, self.cfg.pwm_period_ns, o.neutral, timeout)?;
+            self.channels.push(ch);
+        }
+        self.next_due_ns = now_ns;
+        tracing::info!(
+            chip = %chip.display(),
+            channels = ?self.outputs.iter().map(|o| o.channel).collect::<Vec<_>>(),
+            period_ns = self.cfg.pwm_period_ns,
+            rate_hz = self.cfg.rate_hz,
+            "sysfs PWM enabled at neutral, IIO sensors open"
+        );
+        Ok(())
+    }
+
+    fn read_sensors(&mut self, now_ns: u64) -> Result<Option<SensorReading>, BackendError> {
+        let Some(sensors) = &self.sensors else {
+            return Ok(None);
+        };
+        if now_ns < self.next_due_ns {
+            return Ok(None);
+        }
+        let result = self.read(sensors);
+        self.next_due_ns += self.period_ns;
+        if self.next_due_ns <= now_ns {
+            // Fell behind (the process was descheduled): restart the grid from now rather
+            // than reading a burst of back-to-back samples.
+            self.next_due_ns = now_ns + self.period_ns;
+        }
+        match result {
+            Ok(reading) => {
+                self.read_failures = 0;
+                Ok(Some(reading))
+            }
+            Err(e) => {
+                self.read_failures += 1;
+                if self.read_failures > MAX_READ_FAILURES {
+                    return Err(e);
+                }
+                if let Some(suppressed) = self.read_log.allow() {
+                    tracing::warn!(
+                        suppressed,
+                        failures = self.read_failures,
+                        "sensor read failed, sample skipped: {e}"
+                    );
+                }
+                Ok(None)
+            }
+        }
+    }
+
+    fn write_outputs(&mut self, outputs: &[Pwm], _now_ns: u64) -> Result<(), BackendError> {
+        for (ch, &p) in self.channels.iter_mut().zip(outputs) {
+            ch.set(p)?;
+        }
+        Ok(())
+    }
+
+    fn neutral(&mut self, _now_ns: u64) -> Result<(), BackendError> {
+        // Try every channel even if one fails, then report the first failure.
+        let mut first_err = None;
+        for (ch, o) in self.channels.iter_mut().zip(&self.outputs) {
+            if let Err(e) = ch.set(o.neutral) {
+                first_err.get_or_insert(e);
+            }
+        }
+        first_err.map_or(Ok(()), Err)
+    }
+
+    fn service(&mut self, _now_ns: u64) -> Result<(), BackendError> {
+        Ok(())
+    }
+
+    fn next_deadline_ns(&self) -> Option<u64> {
+        self.sensors.as_ref().map(|_| self.next_due_ns)
+    }
+
+    fn link(&self) -> LinkState {
+        LinkState::Local
+    }
+
+    fn stop(&mut self) -> Result<(), BackendError> {
+        self.stopped = true;
+        self.neutral(monotonic_ns())
+    }
+}
+
+impl Drop for LinuxBackend {
+    /// Safety net for panics and early returns: outputs neutral.
+    fn drop(&mut self) {
+        if !self.stopped && !self.channels.is_empty() {
+            let _ = self.neutral(0);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_from_pressure() {
+        // 10 m of fresh water is about 97.8 kPa above the surface.
+        let p = 101.325 + 10.0 * 997.0 * G / 1000.0;
+        assert!((depth_m(p, 101.325, 997.0) - 10.0).abs() < 1e-9);
+        assert!(depth_m(101.325, 101.325, 997.0).abs() < 1e-12);
+    }
+}

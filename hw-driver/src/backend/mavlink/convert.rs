@@ -1,0 +1,78 @@
+//! MAVLink units to SI, body frame.
+//!
+//! SCALED_IMU / SCALED_IMU2 (and ArduPilot's RAW_IMU, which it fills with the same scaled
+//! values): acceleration in mG, angular rate in mrad/s, magnetic field in mgauss, body
+//! frame FRD (ArduPilot's body frame: x forward, y right, z down), the same axes as the
+//! protocol. ArduPilot sends `accel * 1000 / GRAVITY_MSS` of its INS accelerometer, which
+//! is specific force: level at rest reads z = -1000 mG, i.e. -9.80665 m/s^2, exactly the
+//! protocol's convention. No sign flips are needed.
+//!
+//! SCALED_PRESSURE2 (the Bar30 on ArduSub's second barometer): `press_abs` in hPa.
+
+/// ArduPilot's GRAVITY_MSS, m/s^2 per g.
+pub const GRAVITY_MSS: f64 = 9.80665;
+
+/// mG -> m/s^2.
+pub const MS2_PER_MG: f64 = GRAVITY_MSS / 1000.0;
+
+/// mrad/s -> rad/s.
+pub const RADPS_PER_MRADPS: f64 = 1e-3;
+
+/// mgauss -> uT (1 gauss = 100 uT).
+pub const UT_PER_MGAUSS: f64 = 0.1;
+
+/// One IMU message in SI units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuSi {
+    /// rad/s.
+    pub gyro: [f64; 3],
+    /// m/s^2, specific force.
+    pub accel: [f64; 3],
+    /// uT; `None` when all three are zero (no compass: ArduPilot sends zeros).
+    pub mag: Option<[f64; 3]>,
+}
+
+/// Converts the nine fields of a SCALED_IMU-style message.
+pub fn scaled_imu(acc: [i16; 3], gyro: [i16; 3], mag: [i16; 3]) -> ImuSi {
+    ImuSi {
+        gyro: gyro.map(|v| f64::from(v) * RADPS_PER_MRADPS),
+        accel: acc.map(|v| f64::from(v) * MS2_PER_MG),
+        mag: (mag != [0, 0, 0]).then(|| mag.map(|v| f64::from(v) * UT_PER_MGAUSS)),
+    }
+}
+
+/// Depth below the surface, m, from absolute pressure in hPa.
+pub fn depth_from_hpa(press_abs_hpa: f64, surface_hpa: f64, density_kg_m3: f64) -> f64 {
+    (press_abs_hpa - surface_hpa) * 100.0 / (density_kg_m3 * GRAVITY_MSS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn level_at_rest_is_minus_g_on_z() {
+        let s = scaled_imu([0, 0, -1000], [0, 0, 0], [0, 0, 0]);
+        assert_eq!(s.accel, [0.0, 0.0, -GRAVITY_MSS]);
+        assert_eq!(s.mag, None);
+    }
+
+    #[test]
+    fn units() {
+        let s = scaled_imu([500, -250, -981], [100, -200, 3000], [200, -50, 400]);
+        assert!((s.accel[0] - 4.903325).abs() < 1e-12);
+        assert_eq!(s.gyro, [0.1, -0.2, 3.0]);
+        let m = s.mag.unwrap();
+        for (a, b) in m.iter().zip([20.0, -5.0, 40.0]) {
+            assert!((a - b).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn depth() {
+        // 10 m of sea water (1025 kg/m^3) is 1005.2 hPa above the surface.
+        let p = 1013.25 + 10.0 * 1025.0 * GRAVITY_MSS / 100.0;
+        assert!((depth_from_hpa(p, 1013.25, 1025.0) - 10.0).abs() < 1e-9);
+        assert!(depth_from_hpa(1000.0, 1013.25, 997.0) < 0.0);
+    }
+}

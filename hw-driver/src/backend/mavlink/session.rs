@@ -1,0 +1,980 @@
+//! The MAVLink conversation with ArduSub, without IO: messages and time in, messages out.
+//!
+//! - Link: the autopilot is the first HEARTBEAT sender whose `autopilot` is not
+//!   MAV_AUTOPILOT_INVALID (ground stations and companions send INVALID), unless
+//!   `target_system`/`target_component` name it. The link is up while its HEARTBEATs keep
+//!   coming; after `link_timeout_ms` without one it is down and no reading is produced.
+//! - Set-up, each time the link comes up: MAV_CMD_SET_MESSAGE_INTERVAL for the IMU,
+//!   ATTITUDE and SCALED_PRESSURE2 messages (then MAV_CMD_COMPONENT_ARM_DISARM when `arm`),
+//!   one COMMAND_LONG at a time, because a COMMAND_ACK names the command but not the
+//!   message id; each is retried `command_retries` times without an ACK.
+//! - Readings: one per IMU message from the autopilot, stamped with its receive time, with
+//!   the newest depth (and ATTITUDE rates, with `gyro_source = "attitude"`) if younger than
+//!   `depth_timeout_ms`.
+//! - Thrust: the current pulses go out at once when they change and every `resend_ms`
+//!   otherwise, as DO_MOTOR_TEST per thruster (only while the autopilot reports armed:
+//!   ArduSub refuses motor tests when disarmed and announces each refusal) or as one
+//!   RC_CHANNELS_OVERRIDE.
+//! - Our HEARTBEAT every `heartbeat_ms`, from the start.
+
+use std::collections::VecDeque;
+
+use mavlink::dialects::ardupilotmega::{
+    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType,
+    MotorTestOrder, MotorTestThrottleType, ATTITUDE_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA,
+    HEARTBEAT_DATA, RAW_IMU_DATA, RC_CHANNELS_OVERRIDE_DATA, SCALED_IMU2_DATA, SCALED_IMU_DATA,
+    SCALED_PRESSURE2_DATA,
+};
+use mavlink::{MavHeader, MessageData};
+use tracing::{debug, info, warn};
+
+use super::convert::{depth_from_hpa, scaled_imu, ImuSi};
+use crate::backend::{LinkState, OutputSpec, SensorReading};
+use crate::config::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
+use crate::core::pwm::Pwm;
+use crate::log_limit::LogLimiter;
+
+const MS: u64 = 1_000_000;
+
+/// Readings kept when the loop does not collect them (bounded: stale readings are useless).
+const MAX_PENDING_READINGS: usize = 64;
+
+/// "Ignore this channel" in RC_CHANNELS_OVERRIDE (0 would release it to the radio).
+pub const RC_IGNORE: u16 = u16::MAX;
+
+/// A COMMAND_LONG waiting for its ACK.
+#[derive(Debug, Clone)]
+struct Pending {
+    label: String,
+    command: MavCmd,
+    params: [f32; 7],
+    attempts: u32,
+    sent_ns: Option<u64>,
+}
+
+/// Counters for the status line and tests.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SessionCounters {
+    /// Readings produced.
+    pub readings: u64,
+    /// IMU messages dropped because the link was not up.
+    pub dropped_link_down: u64,
+    /// IMU messages dropped because `gyro_source = "attitude"` had no fresh ATTITUDE.
+    pub dropped_no_attitude: u64,
+    /// Thrust messages sent (one per DO_MOTOR_TEST or RC_CHANNELS_OVERRIDE).
+    pub thrust_sent: u64,
+    /// DO_MOTOR_TEST refused by the autopilot (ACK other than ACCEPTED).
+    pub motor_test_refused: u64,
+    /// Commands that got no ACK after every retry.
+    pub commands_unacked: u64,
+    /// Link losses.
+    pub link_losses: u64,
+}
+
+/// See the module docs.
+#[derive(Debug)]
+pub struct Session {
+    cfg: MavlinkConfig,
+    outputs: Vec<OutputSpec>,
+    started_ns: u64,
+    target: Option<(u8, u8)>,
+    last_heartbeat_ns: Option<u64>,
+    link: LinkState,
+    armed: bool,
+    armed_by_us: bool,
+    commands: VecDeque<Pending>,
+    attitude: Option<(u64, [f64; 3])>,
+    depth: Option<(u64, f64)>,
+    readings: VecDeque<SensorReading>,
+    pwm: Vec<Pwm>,
+    thrust_dirty: bool,
+    last_thrust_ns: Option<u64>,
+    next_heartbeat_ns: u64,
+    outgoing: Vec<MavMessage>,
+    counters: SessionCounters,
+    refusal_log: LogLimiter,
+    text_log: LogLimiter,
+}
+
+impl Session {
+    /// A session for `outputs` (thruster order), started at `now_ns`: outputs neutral,
+    /// our first HEARTBEAT due at once.
+    pub fn new(cfg: MavlinkConfig, outputs: Vec<OutputSpec>, now_ns: u64) -> Self {
+        let pwm = outputs.iter().map(|o| o.neutral).collect();
+        let target = (cfg.target_system != 0 && cfg.target_component != 0)
+            .then_some((cfg.target_system, cfg.target_component));
+        Session {
+            cfg,
+            outputs,
+            started_ns: now_ns,
+            target,
+            last_heartbeat_ns: None,
+            link: LinkState::Connecting,
+            armed: false,
+            armed_by_us: false,
+            commands: VecDeque::new(),
+            attitude: None,
+            depth: None,
+            readings: VecDeque::new(),
+            pwm,
+            thrust_dirty: true,
+            last_thrust_ns: None,
+            next_heartbeat_ns: now_ns,
+            outgoing: Vec::new(),
+            counters: SessionCounters::default(),
+            refusal_log: LogLimiter::default(),
+            text_log: LogLimiter::new(20, std::time::Duration::from_secs(10)),
+        }
+    }
+
+    /// Our header (sequence numbers are filled in by the connection).
+    pub fn header(&self) -> MavHeader {
+        MavHeader {
+            system_id: u32::from(self.cfg.system_id),
+            component_id: self.cfg.component_id,
+            sequence: 0,
+        }
+    }
+
+    /// The link state.
+    pub fn link(&self) -> LinkState {
+        self.link.clone()
+    }
+
+    /// The autopilot's (system, component), once known.
+    pub fn target(&self) -> Option<(u8, u8)> {
+        self.target
+    }
+
+    /// The autopilot reported itself armed in its last HEARTBEAT.
+    pub fn autopilot_armed(&self) -> bool {
+        self.armed
+    }
+
+    /// We armed the vehicle (so we disarm it on exit).
+    pub fn armed_by_us(&self) -> bool {
+        self.armed_by_us
+    }
+
+    /// Counters.
+    pub fn counters(&self) -> SessionCounters {
+        self.counters
+    }
+
+    /// Messages to send now (in order); empties the queue.
+    pub fn drain_outgoing(&mut self) -> Vec<MavMessage> {
+        std::mem::take(&mut self.outgoing)
+    }
+
+    /// The next reading, oldest first.
+    pub fn take_reading(&mut self) -> Option<SensorReading> {
+        self.readings.pop_front()
+    }
+
+    /// Sets the pulses (thruster order); they go out on the next [`Session::service`] if
+    /// they changed.
+    pub fn set_outputs(&mut self, pwm: &[Pwm]) {
+        if self.pwm.as_slice() != pwm {
+            self.pwm.clear();
+            self.pwm.extend_from_slice(pwm);
+            self.thrust_dirty = true;
+        }
+    }
+
+    /// The pulses currently commanded.
+    pub fn outputs(&self) -> &[Pwm] {
+        &self.pwm
+    }
+
+    /// The next time [`Session::service`] has work without a new message.
+    pub fn next_deadline_ns(&self) -> u64 {
+        // Only deadlines that `service` moves forward, or the loop would spin on one that
+        // stays in the past (thrust waits for a target; the link timer only runs while up).
+        let mut d = self.next_heartbeat_ns;
+        if self.target.is_some() {
+            let resend = self
+                .last_thrust_ns
+                .map_or(self.started_ns, |t| t + self.cfg.resend_ms * MS);
+            d = d.min(resend);
+        }
+        let link_timeout = self.cfg.link_timeout_ms * MS;
+        match (&self.link, self.last_heartbeat_ns) {
+            (LinkState::Up, Some(t)) => d = d.min(t + link_timeout),
+            (LinkState::Connecting, _) => d = d.min(self.started_ns + link_timeout),
+            _ => {}
+        }
+        if let Some(sent) = self.commands.front().and_then(|c| c.sent_ns) {
+            d = d.min(sent + self.cfg.command_timeout_ms * MS);
+        }
+        d
+    }
+
+    /// Handles one message received at `t_ns`.
+    pub fn on_message(&mut self, t_ns: u64, header: &MavHeader, msg: &MavMessage) {
+        if let MavMessage::HEARTBEAT(hb) = msg {
+            self.on_heartbeat(t_ns, header, hb);
+            return;
+        }
+        let from_target = self
+            .target
+            .is_some_and(|(s, c)| u32::from(s) == header.system_id && c == header.component_id);
+        if !from_target {
+            return;
+        }
+        let imu = match (msg, self.cfg.imu_message) {
+            (MavMessage::SCALED_IMU2(d), ImuMessage::ScaledImu2) => Some(imu2(d)),
+            (MavMessage::SCALED_IMU(d), ImuMessage::ScaledImu) => Some(imu1(d)),
+            (MavMessage::RAW_IMU(d), ImuMessage::RawImu) => Some(raw(d)),
+            _ => None,
+        };
+        if let Some(imu) = imu {
+            self.on_imu(t_ns, imu);
+            return;
+        }
+        match msg {
+            MavMessage::ATTITUDE(a) => self.attitude = Some((t_ns, attitude_rates(a))),
+            MavMessage::SCALED_PRESSURE2(p) => self.on_pressure(t_ns, p),
+            MavMessage::COMMAND_ACK(ack) => self.on_ack(t_ns, ack),
+            MavMessage::STATUSTEXT(s) => {
+                if let Some(suppressed) = self.text_log.allow() {
+                    let text = s
+                        .text
+                        .to_str()
+                        .unwrap_or("<not UTF-8>")
+                        .trim_end_matches('\0');
+                    let severe = (s.severity as u32) <= (MavSeverity::MAV_SEVERITY_WARNING as u32);
+                    if severe {
+                        warn!(suppressed, "autopilot: {text}");
+                    } else {
+                        info!(suppressed, "autopilot: {text}");
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn on_heartbeat(&mut self, t_ns: u64, header: &MavHeader, hb: &HEARTBEAT_DATA) {
+        if hb.autopilot == MavAutopilot::MAV_AUTOPILOT_INVALID {
+            return;
+        }
+        let Ok(sys) = u8::try_from(header.system_id) else {
+            return;
+        };
+        let comp = header.component_id;
+        let wanted = |want: u8, got: u8| want == 0 || want == got;
+        if !wanted(self.cfg.target_system, sys) || !wanted(self.cfg.target_component, comp) {
+            return;
+        }
+        match self.target {
+            None => {
+                info!(
+                    system = sys,
+                    component = comp,
+                    vehicle = ?hb.mavtype,
+                    autopilot = ?hb.autopilot,
+                    "autopilot found"
+                );
+                if hb.mavtype != MavType::MAV_TYPE_SUBMARINE {
+                    warn!(vehicle = ?hb.mavtype, "the autopilot is not ArduSub (MAV_TYPE_SUBMARINE)");
+                }
+                self.target = Some((sys, comp));
+            }
+            Some(t) if t != (sys, comp) => return,
+            Some(_) => {}
+        }
+        self.last_heartbeat_ns = Some(t_ns);
+        let armed = hb
+            .base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+        if armed != self.armed {
+            if armed {
+                info!("autopilot armed: thrust commands take effect");
+            } else {
+                warn!("autopilot disarmed: thrust commands have no effect until it is armed");
+            }
+            self.armed = armed;
+            // Armed state gates DO_MOTOR_TEST: send the current pulses at once.
+            self.thrust_dirty = true;
+        }
+        if self.link != LinkState::Up {
+            info!(previous = %self.link, "link to the autopilot up; requesting message rates");
+            self.link = LinkState::Up;
+            self.queue_setup();
+        }
+    }
+
+    fn queue_setup(&mut self) {
+        self.commands.clear();
+        let imu_id = match self.cfg.imu_message {
+            ImuMessage::ScaledImu2 => SCALED_IMU2_DATA::ID,
+            ImuMessage::ScaledImu => SCALED_IMU_DATA::ID,
+            ImuMessage::RawImu => RAW_IMU_DATA::ID,
+        };
+        let rates = [
+            ("IMU", imu_id, self.cfg.imu_rate_hz),
+            ("ATTITUDE", ATTITUDE_DATA::ID, self.cfg.attitude_rate_hz),
+            (
+                "SCALED_PRESSURE2",
+                SCALED_PRESSURE2_DATA::ID,
+                self.cfg.pressure_rate_hz,
+            ),
+        ];
+        for (name, id, hz) in rates {
+            if hz > 0.0 {
+                let interval_us = (1e6 / hz).round() as f32;
+                self.commands.push_back(Pending {
+                    label: format!("{name} (id {id}) every {interval_us} us"),
+                    command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                    params: [id as f32, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+                    attempts: 0,
+                    sent_ns: None,
+                });
+            }
+        }
+        if self.cfg.arm && !self.armed {
+            self.commands.push_back(Pending {
+                label: "arm".to_string(),
+                command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                attempts: 0,
+                sent_ns: None,
+            });
+        }
+    }
+
+    fn on_imu(&mut self, t_ns: u64, imu: ImuSi) {
+        if self.link != LinkState::Up {
+            self.counters.dropped_link_down += 1;
+            return;
+        }
+        let fresh = |t: u64| t_ns.saturating_sub(t) < self.cfg.depth_timeout_ms * MS;
+        let gyro = match self.cfg.gyro_source {
+            GyroSource::Imu => imu.gyro,
+            GyroSource::Attitude => match self.attitude {
+                Some((t, rates)) if fresh(t) => rates,
+                _ => {
+                    self.counters.dropped_no_attitude += 1;
+                    return;
+                }
+            },
+        };
+        let depth = self.depth.filter(|&(t, _)| fresh(t)).map(|(_, d)| d);
+        if self.readings.len() >= MAX_PENDING_READINGS {
+            self.readings.pop_front();
+        }
+        self.readings.push_back(SensorReading {
+            t_ns,
+            gyro,
+            accel: imu.accel,
+            mag: imu.mag,
+            depth,
+        });
+        self.counters.readings += 1;
+    }
+
+    fn on_pressure(&mut self, t_ns: u64, p: &SCALED_PRESSURE2_DATA) {
+        let d = depth_from_hpa(
+            f64::from(p.press_abs),
+            self.cfg.surface_pressure_hpa,
+            self.cfg.fluid_density_kg_m3,
+        );
+        if d.is_finite() {
+            self.depth = Some((t_ns, d));
+        }
+    }
+
+    fn on_ack(&mut self, t_ns: u64, ack: &COMMAND_ACK_DATA) {
+        if ack.command == MavCmd::MAV_CMD_DO_MOTOR_TEST {
+            if ack.result != MavResult::MAV_RESULT_ACCEPTED {
+                self.counters.motor_test_refused += 1;
+                if let Some(suppressed) = self.refusal_log.allow() {
+                    warn!(result = ?ack.result, suppressed, "autopilot refused DO_MOTOR_TEST (armed? in a mode that allows motor tests?)");
+                }
+            }
+            return;
+        }
+        let Some(front) = self.commands.front() else {
+            return;
+        };
+        if front.command != ack.command || front.sent_ns.is_none() {
+            return;
+        }
+        let done = self.commands.pop_front().expect("front exists");
+        match ack.result {
+            MavResult::MAV_RESULT_ACCEPTED => {
+                info!(request = %done.label, "autopilot accepted");
+                if done.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM && done.params[0] == 1.0 {
+                    self.armed_by_us = true;
+                }
+            }
+            other => warn!(request = %done.label, result = ?other, "autopilot refused"),
+        }
+        // The next request goes out at once, not at the next deadline.
+        self.service_commands(t_ns);
+    }
+
+    /// Periodic work at `now_ns`: link supervision, our HEARTBEAT, command (re)sends, thrust.
+    pub fn service(&mut self, now_ns: u64) {
+        self.supervise_link(now_ns);
+        if now_ns >= self.next_heartbeat_ns {
+            self.outgoing.push(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            }));
+            self.next_heartbeat_ns = now_ns + self.cfg.heartbeat_ms * MS;
+        }
+        self.service_commands(now_ns);
+        let resend_due = self
+            .last_thrust_ns
+            .is_none_or(|t| now_ns >= t + self.cfg.resend_ms * MS);
+        if self.thrust_dirty || resend_due {
+            self.push_thrust(now_ns);
+        }
+    }
+
+    fn supervise_link(&mut self, now_ns: u64) {
+        let timeout = self.cfg.link_timeout_ms * MS;
+        match (self.last_heartbeat_ns, &self.link) {
+            (Some(t), LinkState::Up) if now_ns >= t + timeout => {
+                warn!(
+                    link_timeout_ms = self.cfg.link_timeout_ms,
+                    "no autopilot HEARTBEAT within the link timeout: link down, IMU samples stop"
+                );
+                self.link =
+                    LinkState::Down(format!("no HEARTBEAT for {} ms", self.cfg.link_timeout_ms));
+                self.counters.link_losses += 1;
+                self.readings.clear();
+                self.commands.clear();
+                self.armed = false;
+            }
+            (None, LinkState::Connecting) if now_ns >= self.started_ns + timeout => {
+                warn!(
+                    address = %self.cfg.address,
+                    "no autopilot HEARTBEAT yet; still waiting"
+                );
+                self.link = LinkState::Down("no autopilot HEARTBEAT yet".to_string());
+            }
+            _ => {}
+        }
+    }
+
+    fn service_commands(&mut self, now_ns: u64) {
+        let Some((sys, comp)) = self.target else {
+            return;
+        };
+        let timeout = self.cfg.command_timeout_ms * MS;
+        let retries = self.cfg.command_retries;
+        let Some(front) = self.commands.front_mut() else {
+            return;
+        };
+        let due = front.sent_ns.is_none_or(|t| now_ns >= t + timeout);
+        if !due {
+            return;
+        }
+        if front.attempts > retries {
+            warn!(request = %front.label, attempts = front.attempts, "no COMMAND_ACK from the autopilot; giving up");
+            self.counters.commands_unacked += 1;
+            self.commands.pop_front();
+            return self.service_commands(now_ns);
+        }
+        debug!(request = %front.label, attempt = front.attempts + 1, "sending command");
+        let p = front.params;
+        let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            command: front.command,
+            target_system: sys,
+            target_component: comp,
+            // MAVLink: 0 for the first transmission, then the retry number.
+            confirmation: front.attempts.min(255) as u8,
+        });
+        front.attempts += 1;
+        front.sent_ns = Some(now_ns);
+        self.outgoing.push(msg);
+    }
+
+    fn push_thrust(&mut self, now_ns: u64) {
+        let Some((sys, comp)) = self.target else {
+            return;
+        };
+        self.thrust_dirty = false;
+        self.last_thrust_ns = Some(now_ns);
+        match self.cfg.output {
+            OutputMode::MotorTest => {
+                if !self.armed {
+                    return;
+                }
+                let timeout_s = self.cfg.motor_test_timeout_ms as f32 / 1000.0;
+                for (o, p) in self.outputs.iter().zip(&self.pwm) {
+                    self.outgoing
+                        .push(motor_test(sys, comp, o.channel, *p, timeout_s));
+                    self.counters.thrust_sent += 1;
+                }
+            }
+            OutputMode::RcOverride => {
+                let mut ch = [RC_IGNORE; 8];
+                for (o, p) in self.outputs.iter().zip(&self.pwm) {
+                    let slot = (o.channel as usize)
+                        .checked_sub(1)
+                        .and_then(|i| ch.get_mut(i));
+                    if let Some(slot) = slot {
+                        *slot = p.us();
+                    }
+                }
+                self.outgoing.push(MavMessage::RC_CHANNELS_OVERRIDE(
+                    RC_CHANNELS_OVERRIDE_DATA {
+                        chan1_raw: ch[0],
+                        chan2_raw: ch[1],
+                        chan3_raw: ch[2],
+                        chan4_raw: ch[3],
+                        chan5_raw: ch[4],
+                        chan6_raw: ch[5],
+                        chan7_raw: ch[6],
+                        chan8_raw: ch[7],
+                        target_system: sys,
+                        target_component: comp,
+                    },
+                ));
+                self.counters.thrust_sent += 1;
+            }
+        }
+    }
+
+    /// Queues the messages that end the session: neutral thrust now (whatever the resend
+    /// timer says) and, if we armed the vehicle, a disarm command.
+    pub fn shutdown(&mut self, now_ns: u64) {
+        let neutral: Vec<Pwm> = self.outputs.iter().map(|o| o.neutral).collect();
+        self.set_outputs(&neutral);
+        self.push_thrust(now_ns);
+        if self.armed_by_us {
+            if let Some((sys, comp)) = self.target {
+                self.outgoing
+                    .push(MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                        param1: 0.0,
+                        command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                        target_system: sys,
+                        target_component: comp,
+                        ..COMMAND_LONG_DATA::DEFAULT
+                    }));
+            }
+        }
+    }
+}
+
+/// One DO_MOTOR_TEST: `channel` is the 1-based board output, the pulse in us.
+pub fn motor_test(sys: u8, comp: u8, channel: u32, pwm: Pwm, timeout_s: f32) -> MavMessage {
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: channel as f32,
+        param2: MotorTestThrottleType::MOTOR_TEST_THROTTLE_PWM as u32 as f32,
+        param3: f32::from(pwm.us()),
+        param4: timeout_s,
+        param5: 0.0,
+        param6: MotorTestOrder::MOTOR_TEST_ORDER_BOARD as u32 as f32,
+        param7: 0.0,
+        command: MavCmd::MAV_CMD_DO_MOTOR_TEST,
+        target_system: sys,
+        target_component: comp,
+        confirmation: 0,
+    })
+}
+
+fn imu2(d: &SCALED_IMU2_DATA) -> ImuSi {
+    scaled_imu(
+        [d.xacc, d.yacc, d.zacc],
+        [d.xgyro, d.ygyro, d.zgyro],
+        [d.xmag, d.ymag, d.zmag],
+    )
+}
+
+fn imu1(d: &SCALED_IMU_DATA) -> ImuSi {
+    scaled_imu(
+        [d.xacc, d.yacc, d.zacc],
+        [d.xgyro, d.ygyro, d.zgyro],
+        [d.xmag, d.ymag, d.zmag],
+    )
+}
+
+fn raw(d: &RAW_IMU_DATA) -> ImuSi {
+    scaled_imu(
+        [d.xacc, d.yacc, d.zacc],
+        [d.xgyro, d.ygyro, d.zgyro],
+        [d.xmag, d.ymag, d.zmag],
+    )
+}
+
+fn attitude_rates(a: &ATTITUDE_DATA) -> [f64; 3] {
+    [
+        f64::from(a.rollspeed),
+        f64::from(a.pitchspeed),
+        f64::from(a.yawspeed),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const AP: (u8, u8) = (1, 1);
+
+    fn specs() -> Vec<OutputSpec> {
+        vec![
+            OutputSpec {
+                channel: 1,
+                neutral: Pwm(1500),
+            },
+            OutputSpec {
+                channel: 4,
+                neutral: Pwm(1510),
+            },
+        ]
+    }
+
+    fn hdr(sys: u8, comp: u8) -> MavHeader {
+        MavHeader {
+            system_id: u32::from(sys),
+            component_id: comp,
+            sequence: 0,
+        }
+    }
+
+    fn heartbeat(autopilot: MavAutopilot, armed: bool) -> MavMessage {
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_SUBMARINE,
+            autopilot,
+            base_mode: if armed {
+                MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+            } else {
+                MavModeFlag::empty()
+            },
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        })
+    }
+
+    fn ap_heartbeat(armed: bool) -> MavMessage {
+        heartbeat(MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA, armed)
+    }
+
+    fn ack(command: MavCmd, result: MavResult) -> MavMessage {
+        MavMessage::COMMAND_ACK(COMMAND_ACK_DATA { command, result })
+    }
+
+    fn imu2(acc: [i16; 3], gyro: [i16; 3]) -> MavMessage {
+        MavMessage::SCALED_IMU2(SCALED_IMU2_DATA {
+            xacc: acc[0],
+            yacc: acc[1],
+            zacc: acc[2],
+            xgyro: gyro[0],
+            ygyro: gyro[1],
+            zgyro: gyro[2],
+            ..SCALED_IMU2_DATA::DEFAULT
+        })
+    }
+
+    fn commands(out: &[MavMessage]) -> Vec<COMMAND_LONG_DATA> {
+        out.iter()
+            .filter_map(|m| match m {
+                MavMessage::COMMAND_LONG(c) => Some(c.clone()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// A session with the link up (armed as given) and the set-up requests acknowledged.
+    fn up(armed: bool) -> Session {
+        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+        s.on_message(1, &hdr(AP.0, AP.1), &ap_heartbeat(armed));
+        s.service(1);
+        for _ in 0..3 {
+            s.on_message(
+                2,
+                &hdr(AP.0, AP.1),
+                &ack(
+                    MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                    MavResult::MAV_RESULT_ACCEPTED,
+                ),
+            );
+        }
+        s.drain_outgoing();
+        s
+    }
+
+    #[test]
+    fn finds_the_autopilot_and_requests_rates_one_at_a_time() {
+        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+        s.service(0);
+        let out = s.drain_outgoing();
+        assert!(
+            matches!(out.as_slice(), [MavMessage::HEARTBEAT(h)] if h.mavtype == MavType::MAV_TYPE_ONBOARD_CONTROLLER)
+        );
+        assert_eq!(s.header().system_id, 255);
+        // A ground station's heartbeat is not the autopilot.
+        s.on_message(
+            1,
+            &hdr(255, 190),
+            &heartbeat(MavAutopilot::MAV_AUTOPILOT_INVALID, false),
+        );
+        assert_eq!((s.target(), s.link()), (None, LinkState::Connecting));
+        s.on_message(2, &hdr(1, 1), &ap_heartbeat(false));
+        assert_eq!((s.target(), s.link()), (Some(AP), LinkState::Up));
+        s.service(3);
+        let c = commands(&s.drain_outgoing());
+        assert_eq!(c.len(), 1, "one request in flight");
+        assert_eq!(c[0].command, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+        assert_eq!((c[0].param1, c[0].param2), (116.0, 10_000.0));
+        assert_eq!(
+            (c[0].target_system, c[0].target_component, c[0].confirmation),
+            (1, 1, 0)
+        );
+        // The ACK sends the next at once: ATTITUDE at 50 Hz, then SCALED_PRESSURE2 at 20 Hz.
+        s.on_message(
+            4,
+            &hdr(1, 1),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        let c = commands(&s.drain_outgoing());
+        assert_eq!((c[0].param1, c[0].param2), (30.0, 20_000.0));
+        s.on_message(
+            5,
+            &hdr(1, 1),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_DENIED,
+            ),
+        );
+        let c = commands(&s.drain_outgoing());
+        assert_eq!((c[0].param1, c[0].param2), (137.0, 50_000.0));
+        s.on_message(
+            6,
+            &hdr(1, 1),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(commands(&s.drain_outgoing()).is_empty());
+    }
+
+    #[test]
+    fn unacknowledged_requests_are_retried_then_given_up() {
+        let cfg = MavlinkConfig {
+            command_retries: 2,
+            // Longer than the retries take: a link loss clears the queue.
+            link_timeout_ms: 60_000,
+            attitude_rate_hz: 0.0,
+            pressure_rate_hz: 0.0,
+            ..MavlinkConfig::default()
+        };
+        let timeout = cfg.command_timeout_ms * MS;
+        let mut s = Session::new(cfg, specs(), 0);
+        s.on_message(0, &hdr(1, 1), &ap_heartbeat(false));
+        let mut confirmations = Vec::new();
+        let mut t = 0;
+        for _ in 0..6 {
+            s.service(t);
+            confirmations.extend(commands(&s.drain_outgoing()).iter().map(|c| c.confirmation));
+            t += timeout;
+        }
+        assert_eq!(confirmations, [0, 1, 2]);
+        assert_eq!(s.counters().commands_unacked, 1);
+    }
+
+    #[test]
+    fn imu_messages_become_si_readings_with_fresh_depth_only_while_up() {
+        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+        // Before the link is up: dropped.
+        s.on_message(1, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+        assert_eq!(s.take_reading(), None);
+        s.on_message(2, &hdr(1, 1), &ap_heartbeat(false));
+        assert_eq!(
+            s.counters().dropped_link_down,
+            0,
+            "before the target is known it is not even ours"
+        );
+        // From another system: ignored.
+        s.on_message(3, &hdr(2, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+        assert_eq!(s.take_reading(), None);
+        let p = 1013.25 + 2.0 * 997.0 * 9.80665 / 100.0;
+        s.on_message(
+            10 * MS,
+            &hdr(1, 1),
+            &MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
+                press_abs: p as f32,
+                ..SCALED_PRESSURE2_DATA::DEFAULT
+            }),
+        );
+        s.on_message(
+            20 * MS,
+            &hdr(1, 1),
+            &imu2([100, -200, -1000], [10, -20, 3000]),
+        );
+        let r = s.take_reading().unwrap();
+        assert_eq!(r.t_ns, 20 * MS);
+        assert_eq!(r.gyro, [0.01, -0.02, 3.0]);
+        assert!((r.accel[2] + 9.80665).abs() < 1e-12);
+        assert!((r.depth.unwrap() - 2.0).abs() < 1e-3, "{:?}", r.depth);
+        assert_eq!(r.mag, None);
+        // 600 ms later the depth is too old to attach.
+        s.on_message(610 * MS, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+        assert_eq!(s.take_reading().unwrap().depth, None);
+    }
+
+    #[test]
+    fn link_loss_stops_readings_and_recovery_requests_rates_again() {
+        let mut s = up(true);
+        let timeout = MavlinkConfig::default().link_timeout_ms * MS;
+        s.on_message(timeout, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+        s.service(timeout + 1);
+        assert!(matches!(s.link(), LinkState::Down(_)));
+        assert_eq!(
+            s.take_reading(),
+            None,
+            "pending readings are dropped with the link"
+        );
+        s.on_message(timeout + 2, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+        assert_eq!(s.take_reading(), None);
+        assert!(
+            s.next_deadline_ns() > timeout + 1,
+            "no deadline stuck in the past"
+        );
+        s.on_message(timeout + 3, &hdr(1, 1), &ap_heartbeat(true));
+        assert_eq!(s.link(), LinkState::Up);
+        s.service(timeout + 4);
+        let c = commands(&s.drain_outgoing());
+        assert!(c
+            .iter()
+            .any(|c| c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL));
+        assert_eq!(s.counters().link_losses, 1);
+    }
+
+    #[test]
+    fn motor_tests_only_while_armed_at_once_on_change_and_resent() {
+        let mut s = up(false);
+        s.set_outputs(&[Pwm(1700), Pwm(1300)]);
+        s.service(10 * MS);
+        assert!(
+            commands(&s.drain_outgoing()).is_empty(),
+            "disarmed: no motor test"
+        );
+        s.on_message(11 * MS, &hdr(1, 1), &ap_heartbeat(true));
+        s.service(12 * MS);
+        let c = commands(&s.drain_outgoing());
+        assert_eq!(c.len(), 2);
+        for (c, (motor, pwm)) in c.iter().zip([(1.0, 1700.0), (4.0, 1300.0)]) {
+            assert_eq!(c.command, MavCmd::MAV_CMD_DO_MOTOR_TEST);
+            assert_eq!(
+                [c.param1, c.param2, c.param3, c.param4, c.param5, c.param6],
+                [motor, 1.0, pwm, 0.5, 0.0, 2.0]
+            );
+        }
+        // Nothing new before the resend period...
+        s.service(50 * MS);
+        assert!(commands(&s.drain_outgoing()).is_empty());
+        // ...a change goes out at once...
+        s.set_outputs(&[Pwm(1500), Pwm(1300)]);
+        s.service(60 * MS);
+        assert_eq!(commands(&s.drain_outgoing())[0].param3, 1500.0);
+        // ...and the same pulses again after resend_ms.
+        assert_eq!(s.next_deadline_ns(), 160 * MS);
+        s.service(160 * MS);
+        assert_eq!(commands(&s.drain_outgoing()).len(), 2);
+        // Refusals are counted.
+        s.on_message(
+            161 * MS,
+            &hdr(1, 1),
+            &ack(MavCmd::MAV_CMD_DO_MOTOR_TEST, MavResult::MAV_RESULT_FAILED),
+        );
+        assert_eq!(s.counters().motor_test_refused, 1);
+        // Shutdown: neutral at once.
+        s.set_outputs(&[Pwm(1900), Pwm(1900)]);
+        s.shutdown(170 * MS);
+        let c = commands(&s.drain_outgoing());
+        assert_eq!(
+            c.iter().map(|c| c.param3).collect::<Vec<_>>(),
+            [1500.0, 1510.0]
+        );
+    }
+
+    #[test]
+    fn rc_override_sets_our_channels_and_ignores_the_rest() {
+        let cfg = MavlinkConfig {
+            output: OutputMode::RcOverride,
+            ..MavlinkConfig::default()
+        };
+        let mut s = Session::new(cfg, specs(), 0);
+        s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+        s.set_outputs(&[Pwm(1600), Pwm(1400)]);
+        s.service(2);
+        let rc: Vec<_> = s
+            .drain_outgoing()
+            .into_iter()
+            .filter_map(|m| match m {
+                MavMessage::RC_CHANNELS_OVERRIDE(r) => Some(r),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(rc.len(), 1, "sent even while disarmed");
+        let r = &rc[0];
+        assert_eq!((r.chan1_raw, r.chan4_raw), (1600, 1400));
+        assert_eq!(
+            (r.chan2_raw, r.chan3_raw, r.chan8_raw),
+            (RC_IGNORE, RC_IGNORE, RC_IGNORE)
+        );
+        assert_eq!((r.target_system, r.target_component), (1, 1));
+    }
+
+    #[test]
+    fn arming_is_requested_and_undone_when_configured() {
+        let cfg = MavlinkConfig {
+            arm: true,
+            attitude_rate_hz: 0.0,
+            pressure_rate_hz: 0.0,
+            ..MavlinkConfig::default()
+        };
+        let mut s = Session::new(cfg, specs(), 0);
+        s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+        s.service(2);
+        s.on_message(
+            3,
+            &hdr(1, 1),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        let c = commands(&s.drain_outgoing());
+        assert_eq!(
+            (c.last().unwrap().command, c.last().unwrap().param1),
+            (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+        );
+        s.on_message(
+            4,
+            &hdr(1, 1),
+            &ack(
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+        assert!(s.armed_by_us());
+        s.shutdown(5);
+        let c = commands(&s.drain_outgoing());
+        assert_eq!(
+            (c.last().unwrap().command, c.last().unwrap().param1),
+            (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0)
+        );
+    }
+}

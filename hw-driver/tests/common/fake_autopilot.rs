@@ -1,0 +1,280 @@
+//! A fake ArduSub on loopback UDP, written with the `mavlink` crate: sends HEARTBEATs
+//! (1 Hz, armed or not), ACKs MAV_CMD_SET_MESSAGE_INTERVAL and streams SCALED_IMU2,
+//! ATTITUDE and SCALED_PRESSURE2 at the requested intervals, ACKs DO_MOTOR_TEST like
+//! ArduSub (FAILED when disarmed), and records everything it receives with the
+//! CLOCK_MONOTONIC time of reception. Bounded: the thread ends after `MAX_LIFETIME`.
+
+use std::collections::HashMap;
+use std::net::UdpSocket;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use mavlink::dialects::ardupilotmega::*;
+use mavlink::{Connectable, ConnectionAddress, MavConnection, MavHeader, UdpConfig, UdpMode};
+use thruster_hw::clock::monotonic_ns;
+
+const MAX_LIFETIME: Duration = Duration::from_secs(120);
+
+/// What the fake does and what it saw.
+#[derive(Debug, Clone)]
+pub struct ApState {
+    /// Send HEARTBEATs.
+    pub heartbeat: bool,
+    /// Report armed (and accept motor tests).
+    pub armed: bool,
+    /// Answer SET_MESSAGE_INTERVAL (with `interval_result`).
+    pub ack_requests: bool,
+    pub interval_result: MavResult,
+    /// Streamed IMU (SCALED_IMU2 units: mG, mrad/s, mgauss) and pressure (hPa).
+    pub acc: [i16; 3],
+    pub gyro: [i16; 3],
+    pub mag: [i16; 3],
+    pub press_hpa: f32,
+    /// Requested intervals by message id, us.
+    pub intervals: HashMap<u32, u64>,
+    /// Received, with reception time (ns, CLOCK_MONOTONIC).
+    pub heartbeats: Vec<(u64, MavHeader, HEARTBEAT_DATA)>,
+    pub commands: Vec<(u64, MavHeader, COMMAND_LONG_DATA)>,
+    pub overrides: Vec<(u64, MavHeader, RC_CHANNELS_OVERRIDE_DATA)>,
+    /// IMU messages sent.
+    pub imu_sent: u64,
+}
+
+impl Default for ApState {
+    fn default() -> Self {
+        ApState {
+            heartbeat: true,
+            armed: true,
+            ack_requests: true,
+            interval_result: MavResult::MAV_RESULT_ACCEPTED,
+            acc: [0, 0, -1000],
+            gyro: [0; 3],
+            mag: [0; 3],
+            press_hpa: 1013.25,
+            intervals: HashMap::new(),
+            heartbeats: Vec::new(),
+            commands: Vec::new(),
+            overrides: Vec::new(),
+            imu_sent: 0,
+        }
+    }
+}
+
+impl ApState {
+    /// DO_MOTOR_TEST commands received.
+    pub fn motor_tests(&self) -> Vec<(u64, COMMAND_LONG_DATA)> {
+        self.commands
+            .iter()
+            .filter(|(_, _, c)| c.command == MavCmd::MAV_CMD_DO_MOTOR_TEST)
+            .map(|(t, _, c)| (*t, c.clone()))
+            .collect()
+    }
+
+    /// SET_MESSAGE_INTERVAL commands received.
+    pub fn interval_requests(&self) -> Vec<(u64, COMMAND_LONG_DATA)> {
+        self.commands
+            .iter()
+            .filter(|(_, _, c)| c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL)
+            .map(|(t, _, c)| (*t, c.clone()))
+            .collect()
+    }
+}
+
+pub struct FakeAutopilot {
+    port: u16,
+    state: Arc<Mutex<ApState>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// The fake's ids.
+pub const AP_SYS: u8 = 1;
+pub const AP_COMP: u8 = 1;
+
+impl FakeAutopilot {
+    pub fn start() -> FakeAutopilot {
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let port = socket.local_addr().unwrap().port();
+        let cfg = UdpConfig::from_socket(socket, UdpMode::Udpin)
+            .unwrap()
+            .read_timeout(Duration::from_millis(1));
+        let conn = ConnectionAddress::Udp(cfg).connect::<MavMessage>().unwrap();
+        let state = Arc::new(Mutex::new(ApState::default()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (state, stop) = (state.clone(), stop.clone());
+            std::thread::spawn(move || run(conn, state, stop))
+        };
+        FakeAutopilot {
+            port,
+            state,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    /// The driver's `mavlink.address` for this fake.
+    pub fn address(&self) -> String {
+        format!("udpout:127.0.0.1:{}", self.port)
+    }
+
+    /// Reads or changes the state.
+    pub fn with<R>(&self, f: impl FnOnce(&mut ApState) -> R) -> R {
+        f(&mut self.state.lock().unwrap())
+    }
+}
+
+impl Drop for FakeAutopilot {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn header() -> MavHeader {
+    MavHeader {
+        system_id: u32::from(AP_SYS),
+        component_id: AP_COMP,
+        sequence: 0,
+    }
+}
+
+fn run(conn: impl MavConnection<MavMessage>, state: Arc<Mutex<ApState>>, stop: Arc<AtomicBool>) {
+    let end = Instant::now() + MAX_LIFETIME;
+    let mut next_hb = monotonic_ns();
+    // Like a router that learns its peer from the first packet: the first HEARTBEAT goes
+    // out as soon as someone talks to us, then every second.
+    let mut peer_seen = false;
+    let mut next_stream: HashMap<u32, u64> = HashMap::new();
+    let send = |m: &MavMessage| {
+        let _ = conn.send(&header(), m);
+    };
+    while !stop.load(Ordering::Relaxed) && Instant::now() < end {
+        if let Ok((h, msg)) = conn.recv() {
+            let t = monotonic_ns();
+            peer_seen = true;
+            let mut s = state.lock().unwrap();
+            match msg {
+                MavMessage::HEARTBEAT(hb) => s.heartbeats.push((t, h, hb)),
+                MavMessage::RC_CHANNELS_OVERRIDE(o) => s.overrides.push((t, h, o)),
+                MavMessage::COMMAND_LONG(c) => {
+                    s.commands.push((t, h, c.clone()));
+                    let result = match c.command {
+                        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL if s.ack_requests => {
+                            if s.interval_result == MavResult::MAV_RESULT_ACCEPTED {
+                                s.intervals.insert(c.param1 as u32, c.param2 as u64);
+                            }
+                            Some(s.interval_result)
+                        }
+                        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => None,
+                        MavCmd::MAV_CMD_DO_MOTOR_TEST if s.armed => {
+                            Some(MavResult::MAV_RESULT_ACCEPTED)
+                        }
+                        MavCmd::MAV_CMD_DO_MOTOR_TEST => Some(MavResult::MAV_RESULT_FAILED),
+                        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => {
+                            s.armed = c.param1 == 1.0;
+                            Some(MavResult::MAV_RESULT_ACCEPTED)
+                        }
+                        _ => Some(MavResult::MAV_RESULT_UNSUPPORTED),
+                    };
+                    drop(s);
+                    if let Some(result) = result {
+                        send(&MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+                            command: c.command,
+                            result,
+                        }));
+                    }
+                }
+                _ => {}
+            }
+        }
+        let now = monotonic_ns();
+        let s = state.lock().unwrap().clone_controls();
+        if now >= next_hb && peer_seen {
+            if s.heartbeat {
+                send(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                    custom_mode: 19, // ArduSub MANUAL
+                    mavtype: MavType::MAV_TYPE_SUBMARINE,
+                    autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    base_mode: if s.armed {
+                        MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+                            | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                    } else {
+                        MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                    },
+                    system_status: MavState::MAV_STATE_ACTIVE,
+                    mavlink_version: 3,
+                }));
+            }
+            next_hb = now + 1_000_000_000;
+        }
+        for (&id, &interval_us) in &s.intervals {
+            let due = next_stream.entry(id).or_insert(now);
+            if now < *due {
+                continue;
+            }
+            *due += interval_us * 1000;
+            if *due <= now {
+                *due = now + interval_us * 1000;
+            }
+            let boot_ms = (now / 1_000_000) as u32;
+            let msg = match id {
+                116 => MavMessage::SCALED_IMU2(SCALED_IMU2_DATA {
+                    time_boot_ms: boot_ms,
+                    xacc: s.acc[0],
+                    yacc: s.acc[1],
+                    zacc: s.acc[2],
+                    xgyro: s.gyro[0],
+                    ygyro: s.gyro[1],
+                    zgyro: s.gyro[2],
+                    xmag: s.mag[0],
+                    ymag: s.mag[1],
+                    zmag: s.mag[2],
+                }),
+                30 => MavMessage::ATTITUDE(ATTITUDE_DATA {
+                    time_boot_ms: boot_ms,
+                    rollspeed: f32::from(s.gyro[0]) / 1000.0,
+                    pitchspeed: f32::from(s.gyro[1]) / 1000.0,
+                    yawspeed: f32::from(s.gyro[2]) / 1000.0,
+                    ..ATTITUDE_DATA::DEFAULT
+                }),
+                137 => MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
+                    time_boot_ms: boot_ms,
+                    press_abs: s.press_hpa,
+                    press_diff: 0.0,
+                    temperature: 2000,
+                }),
+                _ => continue,
+            };
+            send(&msg);
+            if id == 116 {
+                state.lock().unwrap().imu_sent += 1;
+            }
+        }
+    }
+}
+
+impl ApState {
+    /// The controls only (cheap to copy out of the lock each round).
+    fn clone_controls(&self) -> ApState {
+        ApState {
+            heartbeat: self.heartbeat,
+            armed: self.armed,
+            ack_requests: self.ack_requests,
+            interval_result: self.interval_result,
+            acc: self.acc,
+            gyro: self.gyro,
+            mag: self.mag,
+            press_hpa: self.press_hpa,
+            intervals: self.intervals.clone(),
+            heartbeats: Vec::new(),
+            commands: Vec::new(),
+            overrides: Vec::new(),
+            imu_sent: 0,
+        }
+    }
+}

@@ -1,0 +1,491 @@
+//! Shared by the integration tests: the real `thruster-hw` process, the test playing the
+//! daemon over real iceoryx2, fake hardware for each backend, and the backend fixtures the
+//! conformance suite is generic over.
+#![allow(dead_code)] // each test binary uses a different part
+
+pub mod fake_autopilot;
+pub mod fake_sysfs;
+pub mod inotify;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use thruster_hw::clock::monotonic_ns;
+use thruster_protocol::services::{
+    cleanup_dead_nodes, namespace_files, Inbox, IpcConfig, IpcNode, NamespaceGuard, Port, SHM_DIR,
+};
+use thruster_protocol::{ImuSample, ThrustCommand, ThrustMode};
+
+use fake_autopilot::FakeAutopilot;
+use fake_sysfs::FakeSysfs;
+
+pub const BIN: &str = env!("CARGO_BIN_EXE_thruster-hw");
+pub const TIMEOUT: Duration = Duration::from_secs(10);
+pub const MS: u64 = 1_000_000;
+
+// ---- the child process -------------------------------------------------------------------
+
+/// The `thruster-hw` child, always killed and reaped (also when the test panics; its log
+/// is printed then). Its config file and log live in a temp dir removed with it.
+pub struct Proc {
+    child: Child,
+    dir: tempfile::TempDir,
+    status: Option<ExitStatus>,
+}
+
+impl Proc {
+    /// Writes `config` to a file and runs `thruster-hw run --config FILE extra...`.
+    pub fn run(config: &str, extra: &[&str]) -> Proc {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = dir.path().join("thruster-hw.toml");
+        fs::write(&cfg, config).unwrap();
+        // A file, not a pipe: nobody reads during the run and a full pipe would block.
+        let err = fs::File::create(dir.path().join("stderr.log")).unwrap();
+        let child = Command::new(BIN)
+            .args(["run", "--config", cfg.to_str().unwrap()])
+            .args(extra)
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(err)
+            .spawn()
+            .unwrap();
+        Proc {
+            child,
+            dir,
+            status: None,
+        }
+    }
+
+    pub fn pid(&self) -> i32 {
+        self.child.id() as i32
+    }
+
+    pub fn signal(&self, sig: i32) {
+        // SAFETY: plain kill(2) on our own child, which is not reaped yet.
+        let rc = unsafe { libc::kill(self.pid(), sig) };
+        assert_eq!(rc, 0, "kill: {}", std::io::Error::last_os_error());
+    }
+
+    /// Waits for the exit (reaping the child); `None` if still running at `within`.
+    pub fn wait_exit(&mut self, within: Duration) -> Option<ExitStatus> {
+        let end = Instant::now() + within;
+        while Instant::now() < end {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                self.status = Some(s);
+                return Some(s);
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        None
+    }
+
+    /// SIGTERM; asserts a clean exit (code 0) within a second.
+    pub fn terminate(&mut self) {
+        self.signal(libc::SIGTERM);
+        let status = self.wait_exit(Duration::from_secs(1));
+        assert!(
+            status.is_some(),
+            "no exit within 1 s of SIGTERM\n{}",
+            self.log()
+        );
+        assert_eq!(status.unwrap().code(), Some(0), "{}", self.log());
+    }
+
+    pub fn log(&self) -> String {
+        fs::read_to_string(self.dir.path().join("stderr.log")).unwrap_or_default()
+    }
+
+    pub fn dir(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// The value of `key=` in the final summary line.
+    pub fn summary_value(&self, key: &str) -> u64 {
+        let log = self.log();
+        let line = log
+            .lines()
+            .find(|l| l.contains("thruster-hw stopped"))
+            .unwrap_or_else(|| panic!("no summary in log:\n{log}"));
+        let at = line
+            .find(&format!(" {key}="))
+            .unwrap_or_else(|| panic!("no {key} in {line}"));
+        line[at + key.len() + 2..]
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap_or_else(|_| panic!("{key} not a number in {line}"))
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if self.status.is_none() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+        if std::thread::panicking() {
+            eprintln!("---- thruster-hw log ----\n{}", self.log());
+        }
+    }
+}
+
+// ---- the test playing the daemon ---------------------------------------------------------
+
+pub struct Daemon {
+    imu: Inbox<ImuSample>,
+    thrust: Port<ThrustCommand>,
+    seq: u64,
+    _node: IpcNode,
+}
+
+impl Daemon {
+    pub fn new(ns: &IpcConfig) -> Daemon {
+        let node = ns.create_node("test-daemon").unwrap();
+        Daemon {
+            imu: Inbox::create(&node, ns).unwrap(),
+            thrust: Port::create(&node, ns).unwrap(),
+            seq: 0,
+            _node: node,
+        }
+    }
+
+    /// The next sample within `within`, if any.
+    pub fn try_sample(&self, within: Duration) -> Option<ImuSample> {
+        let end = Instant::now() + within;
+        loop {
+            if let Some(s) = self.imu.recv().unwrap() {
+                return Some(s);
+            }
+            let now = Instant::now();
+            if now >= end {
+                return None;
+            }
+            self.imu.drain_events().unwrap();
+            if let Some(s) = self.imu.recv().unwrap() {
+                return Some(s);
+            }
+            let _ = self.imu.wait((end - now).min(Duration::from_millis(20)));
+        }
+    }
+
+    /// Drops buffered samples and returns the next fresh one.
+    pub fn fresh_sample(&self) -> ImuSample {
+        while self.imu.recv().unwrap().is_some() {}
+        self.try_sample(TIMEOUT)
+            .expect("no IMU sample within the timeout")
+    }
+
+    /// A command answering `s`.
+    pub fn command(&mut self, s: &ImuSample, thrust: &[f64]) -> ThrustCommand {
+        self.seq += 1;
+        let mut c = ThrustCommand::neutral(self.seq, s.seq, s.t_ns, thrust.len() as u32);
+        c.set_mode(ThrustMode::Controlling);
+        c.thrusters_mut().copy_from_slice(thrust);
+        c
+    }
+
+    /// Sends `cmd`; returns the CLOCK_MONOTONIC time just before publishing.
+    pub fn send(&self, cmd: &ThrustCommand) -> u64 {
+        let t = monotonic_ns();
+        self.thrust.send(cmd).unwrap();
+        t
+    }
+
+    /// Answers the next fresh sample with `thrust`; returns the sample and the send time.
+    pub fn answer(&mut self, thrust: &[f64]) -> (ImuSample, u64) {
+        let s = self.fresh_sample();
+        let c = self.command(&s, thrust);
+        (s, self.send(&c))
+    }
+
+    /// Answers every sample with `thrust` for `duration`.
+    pub fn hold(&mut self, thrust: &[f64], duration: Duration) {
+        let end = Instant::now() + duration;
+        while Instant::now() < end {
+            if let Some(s) = self.try_sample(Duration::from_millis(50)) {
+                let c = self.command(&s, thrust);
+                self.send(&c);
+            }
+        }
+    }
+}
+
+/// Every process of the namespace has exited and dropped its ports: only iceoryx2's own
+/// residue (the global_mgmt segment and empty directories) is left, which the guard purges.
+pub fn assert_namespace_clean(ns: &IpcConfig) {
+    let census = cleanup_dead_nodes(ns).unwrap();
+    assert_eq!(
+        (census.alive, census.dead_cleaned, census.dead_failed),
+        (0, 0, 0),
+        "nodes left: {census:?}"
+    );
+    let leftovers: Vec<PathBuf> = namespace_files(ns)
+        .unwrap()
+        .into_iter()
+        .filter(|p| !p.is_dir())
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_string_lossy();
+            !(p.starts_with(SHM_DIR) && name.ends_with(".global_mgmt"))
+        })
+        .collect();
+    assert!(leftovers.is_empty(), "files left: {leftovers:#?}");
+}
+
+// ---- backend fixtures ----------------------------------------------------------------------
+
+/// The body-frame IMU state a fixture makes its hardware report.
+#[derive(Debug, Clone, Copy)]
+pub struct Imu {
+    pub gyro: [f64; 3],
+    pub accel: [f64; 3],
+    pub mag_ut: [f64; 3],
+    pub depth_m: f64,
+}
+
+/// Fake hardware for one backend: config section, observed pulses, injected sensor values.
+pub trait Fixture {
+    const BACKEND: &'static str;
+    /// Output channels of the conformance suite's four thrusters.
+    const CHANNELS: [u32; 4];
+    /// Quantisation of the hardware: gyro rad/s, accel m/s^2, mag uT, depth m.
+    const TOLERANCE: [f64; 4];
+
+    fn new() -> Self;
+    /// The backend's config section for this fake, with `extra` lines inside it.
+    fn section(&self, extra: &str) -> String;
+    /// The pulse each thruster's output carries now, us (None until all are seen).
+    fn pulses(&self) -> Option<Vec<u16>>;
+    /// Every pulse the hardware got: (CLOCK_MONOTONIC ns, thruster index, us).
+    fn history(&self) -> Vec<(u64, usize, u16)>;
+    /// Makes the hardware report `imu` from now on.
+    fn set_imu(&self, imu: &Imu);
+}
+
+pub struct Mavlink(pub FakeAutopilot);
+
+impl Fixture for Mavlink {
+    const BACKEND: &'static str = "mavlink";
+    const CHANNELS: [u32; 4] = [1, 2, 3, 4];
+    // 1 mrad/s, 1 mG, 1 mgauss steps; pressure as f32 hPa.
+    const TOLERANCE: [f64; 4] = [0.0006, 0.0060, 0.06, 0.001];
+
+    fn new() -> Self {
+        Mavlink(FakeAutopilot::start())
+    }
+
+    fn section(&self, extra: &str) -> String {
+        format!(
+            "[mavlink]\naddress = \"{}\"\nimu_rate_hz = 100.0\ncommand_timeout_ms = 300\n{extra}\n",
+            self.0.address()
+        )
+    }
+
+    fn pulses(&self) -> Option<Vec<u16>> {
+        let tests = self.0.with(|s| s.motor_tests());
+        Self::CHANNELS
+            .iter()
+            .map(|&ch| {
+                tests
+                    .iter()
+                    .rev()
+                    .find(|(_, c)| c.param1 == ch as f32)
+                    .map(|(_, c)| c.param3 as u16)
+            })
+            .collect()
+    }
+
+    fn history(&self) -> Vec<(u64, usize, u16)> {
+        self.0
+            .with(|s| s.motor_tests())
+            .into_iter()
+            .filter_map(|(t, c)| {
+                let i = Self::CHANNELS
+                    .iter()
+                    .position(|&ch| c.param1 == ch as f32)?;
+                Some((t, i, c.param3 as u16))
+            })
+            .collect()
+    }
+
+    fn set_imu(&self, imu: &Imu) {
+        let mg = |v: f64| (v / 9.80665 * 1000.0).round() as i16;
+        self.0.with(|s| {
+            s.gyro = imu.gyro.map(|v| (v * 1000.0).round() as i16);
+            s.acc = imu.accel.map(mg);
+            s.mag = imu.mag_ut.map(|v| (v * 10.0).round() as i16);
+            s.press_hpa = (1013.25 + imu.depth_m * 997.0 * 9.80665 / 100.0) as f32;
+        });
+    }
+}
+
+pub struct Linux(pub FakeSysfs);
+
+impl Fixture for Linux {
+    const BACKEND: &'static str = "linux";
+    const CHANNELS: [u32; 4] = [0, 1, 2, 5];
+    const TOLERANCE: [f64; 4] = [
+        fake_sysfs::GYRO_SCALE,
+        fake_sysfs::ACCEL_SCALE,
+        fake_sysfs::MAGN_SCALE * 100.0,
+        1e-5,
+    ];
+
+    fn new() -> Self {
+        Linux(FakeSysfs::new(true))
+    }
+
+    fn section(&self, extra: &str) -> String {
+        format!(
+            "[linux]\nsysfs_root = \"{}\"\nrate_hz = 100.0\ngyro_device = \"icm20602\"\n\
+             mag_device = \"iio:device1\"\npressure_device = \"ms5837\"\n\
+             fluid_density_kg_m3 = {}\nsurface_pressure_kpa = {}\n{extra}\n",
+            self.0.root().display(),
+            fake_sysfs::DENSITY,
+            fake_sysfs::SURFACE_KPA,
+        )
+    }
+
+    fn pulses(&self) -> Option<Vec<u16>> {
+        Self::CHANNELS
+            .iter()
+            .map(|&ch| self.0.pulse_us(ch))
+            .collect()
+    }
+
+    fn history(&self) -> Vec<(u64, usize, u16)> {
+        self.0
+            .writes()
+            .into_iter()
+            .filter(|w| w.attr == "duty_cycle")
+            .filter_map(|w| {
+                let i = Self::CHANNELS
+                    .iter()
+                    .position(|&ch| Some(ch) == w.channel)?;
+                let ns: u64 = w.value.parse().ok()?;
+                Some((w.t_ns, i, (ns / 1000) as u16))
+            })
+            .collect()
+    }
+
+    fn set_imu(&self, imu: &Imu) {
+        self.0.set_imu(imu.gyro, imu.accel, imu.mag_ut, imu.depth_m);
+    }
+}
+
+/// The conformance suite's four thrusters on `channels`: plain; reversed; trim +10 us;
+/// range 1200-1800 us.
+pub fn thrusters(channels: [u32; 4]) -> String {
+    format!(
+        "[[thruster]]\nchannel = {}\n\
+         [[thruster]]\nchannel = {}\nreversed = true\n\
+         [[thruster]]\nchannel = {}\ntrim_us = 10\n\
+         [[thruster]]\nchannel = {}\nmin_us = 1200\nmax_us = 1800\n",
+        channels[0], channels[1], channels[2], channels[3]
+    )
+}
+
+/// Neutral of those thrusters.
+pub const NEUTRAL: [u16; 4] = [1500, 1500, 1510, 1500];
+/// Their ranges.
+pub const RANGES: [(u16, u16); 4] = [(1100, 1900), (1100, 1900), (1100, 1900), (1200, 1800)];
+
+/// A running driver on fake hardware with the test as its daemon. Fields drop in order:
+/// process first, then our ports, the fake hardware, and last the namespace (purged).
+pub struct Harness<F: Fixture> {
+    pub proc: Proc,
+    pub daemon: Daemon,
+    pub fx: F,
+    pub ns: NamespaceGuard,
+}
+
+impl<F: Fixture> Harness<F> {
+    /// Starts a driver with `arming_ms` and the fixture's section (plus `extra` TOML lines
+    /// at the top level).
+    pub fn start(arming_ms: u64, extra: &str) -> Harness<F> {
+        Self::start_with(arming_ms, extra, "", |_| {})
+    }
+
+    /// As [`Harness::start`], with `section_extra` lines in the backend's section and
+    /// `setup` applied to the fake hardware before the driver starts.
+    pub fn start_with(
+        arming_ms: u64,
+        extra: &str,
+        section_extra: &str,
+        setup: impl FnOnce(&F),
+    ) -> Harness<F> {
+        let ns = NamespaceGuard::unique_for_test(F::BACKEND).unwrap();
+        let fx = F::new();
+        setup(&fx);
+        let config = format!(
+            "namespace = \"{}\"\nbackend = \"{}\"\nwatchdog_ms = 200\narming_ms = {arming_ms}\n\
+             status_period_ms = 1000\n{extra}\n{}{}",
+            ns.namespace(),
+            F::BACKEND,
+            thrusters(F::CHANNELS),
+            fx.section(section_extra)
+        );
+        let daemon = Daemon::new(&ns);
+        let proc = Proc::run(&config, &[]);
+        Harness {
+            proc,
+            daemon,
+            fx,
+            ns,
+        }
+    }
+
+    /// Waits until the observed pulses satisfy `pred`; returns them.
+    pub fn wait_pulses(&self, within: Duration, pred: impl Fn(&[u16]) -> bool) -> Vec<u16> {
+        let end = Instant::now() + within;
+        loop {
+            let p = self.fx.pulses();
+            if let Some(p) = &p {
+                if pred(p) {
+                    return p.clone();
+                }
+            }
+            assert!(
+                Instant::now() < end,
+                "pulses {p:?} did not reach the expected state within {within:?}\n{}",
+                self.proc.log()
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// Answers samples with `thrust` until the pulses equal `expected`.
+    pub fn drive_to(&mut self, thrust: &[f64], expected: [u16; 4]) {
+        let end = Instant::now() + TIMEOUT;
+        loop {
+            let (_, _) = self.daemon.answer(thrust);
+            if self.fx.pulses().is_some_and(|p| p == expected) {
+                return;
+            }
+            assert!(
+                Instant::now() < end,
+                "pulses {:?}, expected {expected:?}\n{}",
+                self.fx.pulses(),
+                self.proc.log()
+            );
+        }
+    }
+
+    /// SIGTERM, clean exit, our ports dropped, nothing of the namespace left; returns the
+    /// process (for its log) and the fixture (for what the hardware saw).
+    pub fn finish(self) -> (Proc, F) {
+        let Harness {
+            mut proc,
+            daemon,
+            fx,
+            ns,
+        } = self;
+        proc.terminate();
+        drop(daemon);
+        assert_namespace_clean(&ns);
+        (proc, fx)
+    }
+}

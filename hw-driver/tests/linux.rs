@@ -1,0 +1,326 @@
+//! The Linux backend in-process against fake sysfs trees: the nanosecond values and the
+//! order of the PWM set-up writes, channels left by an earlier run, exports that never
+//! appear, IIO scaling, device lookup, axes and polling rate.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::fake_sysfs::{FakeSysfs, Write, SURFACE_KPA};
+use thruster_hw::backend::linux::{LinuxBackend, MAX_READ_FAILURES};
+use thruster_hw::backend::{Backend, BackendError, OutputSpec, Waker};
+use thruster_hw::clock::monotonic_ns;
+use thruster_hw::config::LinuxConfig;
+use thruster_hw::core::axes::AxisMap;
+use thruster_hw::core::pwm::Pwm;
+
+fn config(fake: &FakeSysfs) -> LinuxConfig {
+    LinuxConfig {
+        sysfs_root: fake.root().to_path_buf(),
+        rate_hz: 100.0,
+        gyro_device: "icm20602".into(),
+        mag_device: Some("ak09915".into()),
+        pressure_device: Some("iio:device2".into()),
+        export_timeout_ms: 500,
+        ..LinuxConfig::default()
+    }
+}
+
+fn outputs() -> Vec<OutputSpec> {
+    vec![
+        OutputSpec {
+            channel: 0,
+            neutral: Pwm(1500),
+        },
+        OutputSpec {
+            channel: 3,
+            neutral: Pwm(1510),
+        },
+    ]
+}
+
+/// Writes seen by the fake kernel, once it has caught up with `n` of them.
+fn writes_after(fake: &FakeSysfs, n: usize) -> Vec<Write> {
+    let end = Instant::now() + Duration::from_secs(2);
+    loop {
+        let w = fake.writes();
+        if w.len() >= n || Instant::now() >= end {
+            return w;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+fn of(writes: &[Write], channel: Option<u32>) -> Vec<(String, String)> {
+    writes
+        .iter()
+        .filter(|w| w.channel == channel)
+        .map(|w| (w.attr.clone(), w.value.clone()))
+        .collect()
+}
+
+fn pair(a: &str, v: &str) -> (String, String) {
+    (a.to_string(), v.to_string())
+}
+
+#[test]
+fn export_then_period_neutral_duty_enable_in_ns_and_only_changes_written() {
+    let fake = FakeSysfs::new(true);
+    let mut b = LinuxBackend::new(config(&fake), outputs());
+    b.start(Waker::noop(), monotonic_ns()).unwrap();
+    let w = writes_after(&fake, 8);
+    assert_eq!(of(&w, None), [pair("export", "0"), pair("export", "3")]);
+    assert_eq!(
+        of(&w, Some(0)),
+        [
+            pair("period", "2500000"),
+            pair("duty_cycle", "1500000"),
+            pair("enable", "1")
+        ]
+    );
+    assert_eq!(
+        of(&w, Some(3)),
+        [
+            pair("period", "2500000"),
+            pair("duty_cycle", "1510000"),
+            pair("enable", "1")
+        ]
+    );
+    assert_eq!(
+        (fake.pulse_us(0), fake.pulse_us(3)),
+        (Some(1500), Some(1510))
+    );
+
+    // One change at a time: the fake kernel reads a file when it sees the write, so two
+    // quick writes to one file would both show the second value.
+    b.write_outputs(&[Pwm(1750), Pwm(1400)], monotonic_ns())
+        .unwrap();
+    assert_eq!(writes_after(&fake, 10).len(), 10);
+    b.write_outputs(&[Pwm(1750), Pwm(1400)], monotonic_ns())
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(30));
+    assert_eq!(
+        fake.writes().len(),
+        10,
+        "unchanged pulses are not rewritten"
+    );
+    b.write_outputs(&[Pwm(1750), Pwm(1100)], monotonic_ns())
+        .unwrap();
+    let w = writes_after(&fake, 11);
+    let duty = |ch| -> Vec<String> {
+        of(&w, Some(ch))
+            .into_iter()
+            .filter(|(a, _)| a == "duty_cycle")
+            .map(|(_, v)| v)
+            .collect()
+    };
+    assert_eq!(
+        duty(0),
+        ["1500000", "1750000"],
+        "unchanged pulses are not rewritten"
+    );
+    assert_eq!(duty(3), ["1510000", "1400000", "1100000"]);
+
+    b.stop().unwrap();
+    assert_eq!(
+        (fake.pulse_us(0), fake.pulse_us(3)),
+        (Some(1500), Some(1510))
+    );
+    let enable = std::fs::read_to_string(fake.chip().join("pwm3/enable")).unwrap();
+    assert_eq!(
+        enable.trim(),
+        "1",
+        "the pulse train goes on at neutral after stop"
+    );
+}
+
+#[test]
+fn a_channel_left_with_a_long_duty_gets_neutral_before_the_shorter_period() {
+    let fake = FakeSysfs::new(true);
+    fake.pre_export(0, 20_000_000, 10_000_000, true);
+    fake.pre_export(3, 20_000_000, 1_000_000, true);
+    std::thread::sleep(Duration::from_millis(80)); // the fake kernel picks them up
+    let mut b = LinuxBackend::new(config(&fake), outputs());
+    b.start(Waker::noop(), monotonic_ns()).unwrap();
+    let w = writes_after(&fake, 6);
+    assert!(of(&w, None).is_empty(), "already exported: no export write");
+    // 10 ms duty > 2.5 ms period: the kernel would refuse the period first.
+    assert_eq!(
+        of(&w, Some(0)),
+        [
+            pair("duty_cycle", "1500000"),
+            pair("period", "2500000"),
+            pair("enable", "1")
+        ]
+    );
+    assert_eq!(
+        of(&w, Some(3)),
+        [
+            pair("period", "2500000"),
+            pair("duty_cycle", "1510000"),
+            pair("enable", "1")
+        ]
+    );
+}
+
+#[test]
+fn an_export_that_never_appears_times_out_naming_the_file() {
+    let fake = FakeSysfs::new(false);
+    let cfg = LinuxConfig {
+        export_timeout_ms: 100,
+        ..config(&fake)
+    };
+    let mut b = LinuxBackend::new(cfg, outputs());
+    let t = Instant::now();
+    let e = b.start(Waker::noop(), monotonic_ns()).unwrap_err();
+    assert!(matches!(e, BackendError::Timeout(_)), "{e}");
+    assert!(e.to_string().contains("pwm0/enable"), "{e}");
+    assert!(t.elapsed() < Duration::from_secs(1));
+}
+
+#[test]
+fn missing_chip_or_device_fails_before_any_output_is_touched() {
+    let fake = FakeSysfs::new(true);
+    let cfg = LinuxConfig {
+        pwm_chip: 3,
+        ..config(&fake)
+    };
+    let e = LinuxBackend::new(cfg, outputs())
+        .start(Waker::noop(), monotonic_ns())
+        .unwrap_err();
+    assert!(e.to_string().contains("pwmchip3"), "{e}");
+    let cfg = LinuxConfig {
+        mag_device: Some("hmc5883".into()),
+        ..config(&fake)
+    };
+    let e = LinuxBackend::new(cfg, outputs())
+        .start(Waker::noop(), monotonic_ns())
+        .unwrap_err();
+    assert!(e.to_string().contains("hmc5883"), "{e}");
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(fake.writes().is_empty(), "{:?}", fake.writes());
+}
+
+#[test]
+fn iio_values_are_scaled_rotated_to_frd_and_converted_to_si() {
+    let fake = FakeSysfs::new(true);
+    fake.set_imu(
+        [0.1, -0.2, 0.3],
+        [0.5, -0.3, -9.81],
+        [20.0, -5.0, 40.0],
+        3.0,
+    );
+    let mut b = LinuxBackend::new(config(&fake), outputs());
+    let t0 = monotonic_ns();
+    b.start(Waker::noop(), t0).unwrap();
+    let r = b
+        .read_sensors(t0)
+        .unwrap()
+        .expect("a reading is due at start");
+    assert!(r.t_ns >= t0 && r.t_ns - t0 < 50_000_000);
+    let close = |got: [f64; 3], want: [f64; 3], tol: f64| {
+        for k in 0..3 {
+            assert!((got[k] - want[k]).abs() <= tol, "{got:?} vs {want:?}");
+        }
+    };
+    close(r.gyro, [0.1, -0.2, 0.3], 1e-4);
+    close(r.accel, [0.5, -0.3, -9.81], 6e-4);
+    close(r.mag.unwrap(), [20.0, -5.0, 40.0], 0.15);
+    assert!((r.depth.unwrap() - 3.0).abs() < 1e-5);
+    // The raw files hold the sensor frame (face-up chip: z up), so body z = -raw z.
+    let raw_z: f64 = std::fs::read_to_string(
+        fake.root()
+            .join("bus/iio/devices/iio:device0/in_accel_z_raw"),
+    )
+    .unwrap()
+    .trim()
+    .parse()
+    .unwrap();
+    assert!(raw_z > 0.0, "a face-up accelerometer reads +g on its z");
+    // Not due again before one period (10 ms at 100 Hz).
+    assert_eq!(b.read_sensors(t0 + 5_000_000).unwrap(), None);
+    assert_eq!(b.next_deadline_ns(), Some(t0 + 10_000_000));
+    assert!(b.read_sensors(t0 + 10_000_000).unwrap().is_some());
+    let _ = SURFACE_KPA;
+}
+
+#[test]
+fn configured_axes_and_no_optional_sensors() {
+    let fake = FakeSysfs::new(true);
+    fake.set_imu([0.1, -0.2, 0.3], [0.0, 0.0, -9.81], [0.0; 3], 0.0);
+    let names = ["y".to_string(), "x".to_string(), "-z".to_string()];
+    let cfg = LinuxConfig {
+        imu_axes: AxisMap::parse(&names).unwrap(),
+        mag_device: None,
+        pressure_device: None,
+        ..config(&fake)
+    };
+    let mut b = LinuxBackend::new(cfg, outputs());
+    let t0 = monotonic_ns();
+    b.start(Waker::noop(), t0).unwrap();
+    let r = b.read_sensors(t0).unwrap().unwrap();
+    // Sensor frame holds [0.1, 0.2, -0.3] (x, -y, -z of the body values written).
+    for (g, want) in r.gyro.iter().zip([0.2, 0.1, 0.3]) {
+        assert!((g - want).abs() < 1e-4, "{:?}", r.gyro);
+    }
+    assert_eq!((r.mag, r.depth), (None, None));
+}
+
+#[test]
+fn sensor_read_failures_skip_samples_then_fail_the_backend() {
+    let fake = FakeSysfs::new(true);
+    let mut b = LinuxBackend::new(config(&fake), outputs());
+    let mut t = monotonic_ns();
+    b.start(Waker::noop(), t).unwrap();
+    assert!(b.read_sensors(t).unwrap().is_some());
+    let raw = fake
+        .root()
+        .join("bus/iio/devices/iio:device0/in_anglvel_y_raw");
+    std::fs::write(&raw, "garbage\n").unwrap();
+    for _ in 0..MAX_READ_FAILURES {
+        t += 10_000_000;
+        assert_eq!(
+            b.read_sensors(t).unwrap(),
+            None,
+            "a bad read skips one sample"
+        );
+    }
+    // A good read resets the count...
+    std::fs::write(&raw, "5\n").unwrap();
+    t += 10_000_000;
+    assert!(b.read_sensors(t).unwrap().is_some());
+    // ...and a sensor that stays broken fails the backend.
+    std::fs::remove_file(&raw).unwrap();
+    let mut err = None;
+    for _ in 0..=MAX_READ_FAILURES {
+        t += 10_000_000;
+        if let Err(e) = b.read_sensors(t) {
+            err = Some(e);
+        }
+    }
+    let e = err.expect("fails after MAX_READ_FAILURES").to_string();
+    assert!(e.contains("in_anglvel_y_raw"), "{e}");
+}
+
+#[test]
+fn a_failing_output_ends_the_process_with_the_other_outputs_neutral() {
+    use common::{assert_namespace_clean, Fixture, Harness, Linux, NEUTRAL};
+    let mut h = Harness::<Linux>::start(100, "");
+    h.drive_to(&[1.0; 4], [1900, 1100, 1900, 1800]);
+    // The first thruster's PWM channel disappears (driver unbound, cable to the PCA9685...).
+    std::fs::remove_dir_all(h.fx.0.chip().join(format!("pwm{}", Linux::CHANNELS[0]))).unwrap();
+    let _ = h.daemon.answer(&[0.5; 4]);
+    let status = h
+        .proc
+        .wait_exit(Duration::from_secs(3))
+        .expect("the driver exits");
+    assert_eq!(status.code(), Some(1), "{}", h.proc.log());
+    let log = h.proc.log();
+    assert!(log.contains("pwm0/duty_cycle"), "{log}");
+    for (k, &ch) in Linux::CHANNELS.iter().enumerate().skip(1) {
+        assert_eq!(h.fx.0.pulse_us(ch), Some(NEUTRAL[k]), "thruster {k}\n{log}");
+    }
+    let common::Harness { daemon, ns, .. } = h;
+    drop(daemon);
+    assert_namespace_clean(&ns);
+}
