@@ -93,10 +93,10 @@ pub struct MachineConfig {
     pub max_sample_gap_s: f64,
     /// Consecutive good samples that end a fault (default 20).
     pub recover_samples: u32,
-    /// Thruster deadband the output stage compensates, as a fraction of full command (default
-    /// 0.05, a T200 on a Blue Robotics ESC): a command u != 0 goes out as
-    /// sign(u) (deadband + (1 - deadband) |u|), so thrust stays proportional to what the
-    /// estimator and controller asked for. Set 0 when the driver compensates itself.
+    /// Thruster deadband the daemon compensates, as a fraction of full command (default 0: the
+    /// drivers, thruster-sim and thruster-hw, own their actuators' deadband). For a driver that
+    /// does not, a command u != 0 goes out as sign(u) (deadband + (1 - deadband) |u|), so thrust
+    /// stays proportional to what the estimator and controller asked for.
     pub deadband: f64,
 }
 
@@ -113,7 +113,7 @@ impl Default for MachineConfig {
             control_after_estimate: true,
             max_sample_gap_s: 0.1,
             recover_samples: 20,
-            deadband: 0.05,
+            deadband: 0.0,
         }
     }
 }

@@ -35,10 +35,14 @@ impl Run {
             ..SensorConfig::default()
         };
         let sim = Simulator::new(v, sensors, seed).unwrap();
-        let machine = Machine::new(MachineSetup {
+        let mut setup = MachineSetup {
             thrusters: n,
             ..MachineSetup::default()
-        });
+        };
+        // No driver between machine and physics here: the daemon compensates the T200 deadband
+        // itself, as it would for a driver that does not.
+        setup.machine.deadband = 0.05;
+        let machine = Machine::new(setup);
         Run {
             machine,
             sim,

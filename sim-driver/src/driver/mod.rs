@@ -413,8 +413,28 @@ impl Driver {
     }
 
     /// Holds `u` (already validated by the gate) until the next command.
+    ///
+    /// Like a real driver (thruster-hw jumps the ESC's +-25 us), this one owns the actuator's
+    /// deadband: a command u != 0 goes to the thruster as sign(u) (db + (1 - db) |u|), so thrust
+    /// is proportional to what the daemon asked for.
     fn hold(&mut self, u: &[f64]) -> Result<(), DriverError> {
-        self.sim.set_commands(u)?;
+        let mut out = [0.0; thruster_protocol::MAX_THRUSTERS];
+        let n = u.len().min(out.len());
+        for (i, (o, &v)) in out.iter_mut().zip(u).enumerate().take(n) {
+            let db = self
+                .sim
+                .vehicle()
+                .thrusters
+                .get(i)
+                .map(|t| t.deadband)
+                .unwrap_or(0.0);
+            *o = if v == 0.0 {
+                0.0
+            } else {
+                v.signum() * (db + (1.0 - db) * v.abs()).min(1.0)
+            };
+        }
+        self.sim.set_commands(&out[..n])?;
         self.neutral = u.iter().all(|&x| x == 0.0);
         self.applied += 1;
         Ok(())
