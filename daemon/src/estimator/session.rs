@@ -462,7 +462,9 @@ impl Estimator {
                 // Stop only at the end of a cycle: mid-cycle the design is unbalanced (some
                 // thrusters pushed forward more than in reverse), which biases the symmetric model
                 // of a thruster that is weaker in reverse.
-                if self.pulses < self.planned_pulses() || self.pulses % self.plan.cycle_len() != 0 {
+                if self.pulses < self.planned_pulses()
+                    || !self.pulses.is_multiple_of(self.plan.cycle_len())
+                {
                     return StopDecision::Continue;
                 }
                 let e = self.forward_estimate();
