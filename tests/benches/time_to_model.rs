@@ -37,7 +37,7 @@ fn scale_free_error(m: &ModelMsg, t: &TruthMsg, first: usize) -> f64 {
     let (mut mt, mut mm) = (0.0, 0.0);
     for j in first..first + 3 {
         for i in 0..n {
-            let truth = 0.5 * (t.effectiveness[j][i] + t.reverse_effectiveness[j][i]);
+            let truth = t.symmetric(j, i);
             mt += m.effectiveness[j][i] * truth;
             mm += m.effectiveness[j][i] * m.effectiveness[j][i];
         }

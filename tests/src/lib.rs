@@ -319,14 +319,5 @@ pub fn state(s: &StatusMsg) -> DaemonState {
 /// Relative Frobenius error of the model's rows [first, first+3) against the symmetric truth
 /// (mean of forward and reverse gains, which is what a linear model learns).
 pub fn model_error(model: &ModelMsg, truth: &TruthMsg, first: usize) -> f64 {
-    let n = model.count as usize;
-    let (mut num, mut den) = (0.0, 0.0);
-    for j in first..first + 3 {
-        for i in 0..n {
-            let t = 0.5 * (truth.effectiveness[j][i] + truth.reverse_effectiveness[j][i]);
-            num += (model.effectiveness[j][i] - t).powi(2);
-            den += t * t;
-        }
-    }
-    (num / den).sqrt()
+    truth.relative_error(model, first)
 }

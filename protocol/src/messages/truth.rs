@@ -30,6 +30,27 @@ impl TruthMsg {
     pub fn thruster_count(&self) -> usize {
         clamp_count(self.count)
     }
+
+    /// The symmetric truth: the mean of forward and reverse effectiveness, which is what a
+    /// linear model (one gain per thruster) learns from balanced pulses.
+    pub fn symmetric(&self, dof: usize, thruster: usize) -> f64 {
+        0.5 * (self.effectiveness[dof][thruster] + self.reverse_effectiveness[dof][thruster])
+    }
+
+    /// Relative Frobenius error of `model`'s rows `first..first + 3` (0: rotation, 3:
+    /// translation) against the symmetric truth, over the model's thrusters.
+    pub fn relative_error(&self, model: &super::ModelMsg, first: usize) -> f64 {
+        let n = model.thruster_count().min(self.thruster_count());
+        let (mut num, mut den) = (0.0, 0.0);
+        for j in first..(first + 3).min(DOF_COUNT) {
+            for i in 0..n {
+                let t = self.symmetric(j, i);
+                num += (model.effectiveness[j][i] - t).powi(2);
+                den += t * t;
+            }
+        }
+        (num / den.max(f64::MIN_POSITIVE)).sqrt()
+    }
 }
 
 /// The simulated vehicle's true state (simulator -> anyone, service `vehicle`), one per IMU

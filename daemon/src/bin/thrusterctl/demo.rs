@@ -189,20 +189,6 @@ fn latest<T: thruster_protocol::services::TopicMessage>(inbox: &Inbox<T>) -> Res
     Ok(last)
 }
 
-/// Relative Frobenius error of rows [first, first+3) against the symmetric truth.
-fn rel_err(m: &ModelMsg, t: &TruthMsg, first: usize) -> f64 {
-    let n = m.count as usize;
-    let (mut num, mut den) = (0.0, 0.0);
-    for j in first..first + 3 {
-        for i in 0..n {
-            let truth = 0.5 * (t.effectiveness[j][i] + t.reverse_effectiveness[j][i]);
-            num += (m.effectiveness[j][i] - truth).powi(2);
-            den += truth * truth;
-        }
-    }
-    (num / den.max(f64::MIN_POSITIVE)).sqrt()
-}
-
 fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
@@ -449,8 +435,8 @@ fn drive(
     let vehicle_seconds = done.vehicle_time_ns.saturating_sub(t0) as f64 * 1e-9;
     let model = latest(model_in)?.context("no model published")?;
     let truth = latest(truth_in)?.unwrap_or(truth);
-    let err_rot = rel_err(&model, &truth, 0);
-    let err_acc = rel_err(&model, &truth, 3);
+    let err_rot = truth.relative_error(&model, 0);
+    let err_acc = truth.relative_error(&model, 3);
     let actuated: Vec<&'static str> = (0..6)
         .filter(|j| model.actuated & (1 << j) != 0)
         .map(|j| DOFS[j])
@@ -590,7 +576,7 @@ fn print_model(
         let mark = if m.actuated & (1 << j) != 0 { ' ' } else { '-' };
         print!("{dof:>6}{mark}");
         for i in 0..n {
-            let truth = 0.5 * (t.effectiveness[j][i] + t.reverse_effectiveness[j][i]);
+            let truth = t.symmetric(j, i);
             print!(" {:>8.2}|{:<8.2}", m.effectiveness[j][i], truth);
         }
         println!();
