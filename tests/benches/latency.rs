@@ -118,6 +118,8 @@ fn daemon_config(world: &World) -> std::path::PathBuf {
 }
 
 fn main() {
+    // Never measure a binary left from an older build.
+    system_tests::build_binaries();
     let n: usize = std::env::args()
         .skip(1)
         .find_map(|a| a.parse().ok())

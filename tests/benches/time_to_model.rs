@@ -53,6 +53,8 @@ fn scale_free_error(m: &ModelMsg, t: &TruthMsg, first: usize) -> f64 {
 }
 
 fn main() {
+    // Never measure a binary left from an older build.
+    system_tests::build_binaries();
     let seeds: u64 = std::env::args()
         .skip(1)
         .find_map(|a| a.parse().ok())

@@ -21,41 +21,52 @@ pub fn workspace() -> PathBuf {
 }
 
 /// Path of a workspace binary in the same profile as the running test.
+///
+/// `cargo test --workspace` (what CI runs) builds every binary before any test starts. Run
+/// alone (`cargo test -p system-tests`) a binary may be missing: it is built then. Benches call
+/// [`build_binaries`] first, since a binary left from an older build would measure old code.
 pub fn bin(name: &str) -> PathBuf {
-    static BUILD: Once = Once::new();
-    // target/<profile>/deps/<test-binary> -> target/<profile>/<name>
-    let exe = std::env::current_exe().unwrap();
-    let dir = exe.parent().unwrap().parent().unwrap().to_path_buf();
-    let path = dir.join(name);
-    // `cargo test --workspace` builds every binary first; `cargo test -p system-tests` and
-    // `cargo bench -p system-tests` do not, so under cargo build them once here (a no-op when
-    // they are up to date) rather than run a stale or missing binary.
-    BUILD.call_once(|| {
-        if !path.exists() || std::env::var_os("CARGO").is_some() {
-            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-            let release = dir.ends_with("release");
-            let mut cmd = Command::new(cargo);
-            cmd.args([
-                "build",
-                "-q",
-                "-p",
-                "thrusterd",
-                "-p",
-                "thruster-sim",
-                "--bins",
-            ]);
-            if release {
-                cmd.arg("--release");
-            }
-            let status = cmd
-                .current_dir(workspace())
-                .status()
-                .expect("running cargo build");
-            assert!(status.success(), "building the binaries failed");
-        }
-    });
+    let path = target_dir().join(name);
+    if !path.exists() {
+        build_binaries();
+    }
     assert!(path.exists(), "{} not built", path.display());
     path
+}
+
+/// target/<profile> of the running test or bench.
+fn target_dir() -> PathBuf {
+    // target/<profile>/deps/<test-binary> -> target/<profile>
+    let exe = std::env::current_exe().unwrap();
+    exe.parent().unwrap().parent().unwrap().to_path_buf()
+}
+
+/// Build thrusterd, thrusterctl and thruster-sim in the running profile, once per process.
+/// (`-p` selects a different feature set than the whole workspace, so this can rebuild the
+/// project's own crates: that is why tests do not call it when the binaries exist.)
+pub fn build_binaries() {
+    static BUILD: Once = Once::new();
+    BUILD.call_once(|| {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.args([
+            "build",
+            "-q",
+            "-p",
+            "thrusterd",
+            "-p",
+            "thruster-sim",
+            "--bins",
+        ]);
+        if target_dir().ends_with("release") {
+            cmd.arg("--release");
+        }
+        let status = cmd
+            .current_dir(workspace())
+            .status()
+            .expect("running cargo build");
+        assert!(status.success(), "building the binaries failed");
+    });
 }
 
 /// A child process that is killed and reaped however the test ends.
