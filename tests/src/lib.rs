@@ -79,6 +79,11 @@ pub struct Proc {
 impl Proc {
     /// Start `bin(name)` with `args`; stdout and stderr go to a log file in `logs`.
     pub fn spawn(name: &str, args: &[&str], logs: &Path) -> Proc {
+        Proc::spawn_with_env(name, args, &[], logs)
+    }
+
+    /// As `spawn`, with extra environment variables.
+    pub fn spawn_with_env(name: &str, args: &[&str], env: &[(&str, &str)], logs: &Path) -> Proc {
         let log = logs.join(format!(
             "{name}-{}.log",
             Instant::now().elapsed().as_nanos() ^ std::process::id() as u128
@@ -91,6 +96,7 @@ impl Proc {
             .stdout(out)
             .stderr(err)
             .env("RUST_LOG", "info")
+            .envs(env.iter().copied())
             .spawn()
             .unwrap_or_else(|e| panic!("spawning {name}: {e}"));
         Proc {
@@ -209,6 +215,21 @@ impl World {
         ];
         args.extend_from_slice(extra);
         Proc::spawn("thrusterd", &args, self.dir.path())
+    }
+
+    /// `thrusterd run` with extra environment variables (e.g. systemd's NOTIFY_SOCKET).
+    pub fn daemon_with_env(&self, extra: &[&str], env: &[(&str, &str)]) -> Proc {
+        let ns = self.namespace();
+        let state = self.path("state");
+        let mut args = vec![
+            "run",
+            "--namespace",
+            &ns,
+            "--state-dir",
+            state.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        Proc::spawn_with_env("thrusterd", &args, env, self.dir.path())
     }
 
     /// `thruster-sim run` on this namespace.

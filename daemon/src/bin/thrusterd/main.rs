@@ -2,6 +2,7 @@
 
 mod run;
 mod study;
+mod systemd;
 
 use std::path::PathBuf;
 

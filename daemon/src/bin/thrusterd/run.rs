@@ -177,6 +177,8 @@ impl Daemon {
             self.publish_model(&model_out, &model);
         }
         info!(thrusters = self.machine.thrusters(), "thrusterd serving");
+        let mut systemd = crate::systemd::Systemd::new();
+        systemd.ready();
         self.publish_status(&status_out);
         let mut last_status = Instant::now();
         let mut wait_errors = 0u32;
@@ -287,7 +289,14 @@ impl Daemon {
                 }
             }
             let changed = self.handle_events(&model_out);
+            systemd.tick();
             if changed || last_status.elapsed() >= status_period {
+                let s = self.machine.status();
+                if s.text.starts_with(s.state.name()) {
+                    systemd.status(&s.text);
+                } else {
+                    systemd.status(&format!("{}: {}", s.state.name(), s.text));
+                }
                 self.publish_status(&status_out);
                 // History-1 services only reach late joiners on a send or this call.
                 let _ = model_out.update_connections();
@@ -297,6 +306,7 @@ impl Daemon {
         }
 
         info!("shutting down: thrusters neutral");
+        systemd.stopping();
         let neutral = Command {
             count: self.machine.thrusters(),
             thrust: [0.0; 16],

@@ -1,0 +1,68 @@
+//! thrusterd under systemd's notify protocol: a real daemon process talks to a datagram socket
+//! the test binds in place of systemd (NOTIFY_SOCKET, WATCHDOG_USEC).
+
+use std::os::unix::net::UnixDatagram;
+use std::time::{Duration, Instant};
+
+use system_tests::World;
+
+/// Messages received until `until` returns true or `timeout` passes.
+fn collect(
+    sock: &UnixDatagram,
+    timeout: Duration,
+    until: impl Fn(&[String]) -> bool,
+) -> Vec<String> {
+    let mut got = Vec::new();
+    let start = Instant::now();
+    let mut buf = [0u8; 4096];
+    sock.set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
+    while start.elapsed() < timeout && !until(&got) {
+        if let Ok(n) = sock.recv(&mut buf) {
+            got.push(String::from_utf8_lossy(&buf[..n]).to_string());
+        }
+    }
+    got
+}
+
+#[test]
+fn ready_watchdog_status_and_stopping_reach_systemd() {
+    let world = World::new("sdn");
+    let path = world.path("notify.sock");
+    let sock = UnixDatagram::bind(&path).unwrap();
+    let mut daemon = world.daemon_with_env(
+        &[],
+        &[
+            ("NOTIFY_SOCKET", path.to_str().unwrap()),
+            ("WATCHDOG_USEC", "200000"),
+        ],
+    );
+    let got = collect(&sock, Duration::from_secs(20), |g| {
+        g.iter().any(|m| m.contains("READY=1"))
+    });
+    assert!(
+        got.iter().any(|m| m.contains("READY=1")),
+        "{got:?}\n{}",
+        daemon.log_text()
+    );
+
+    // Pings every 100 ms (half of WatchdogSec) from the main loop, idle or not.
+    let got = collect(&sock, Duration::from_secs(2), |g| {
+        g.iter().filter(|m| m.contains("WATCHDOG=1")).count() >= 5
+    });
+    let pings = got.iter().filter(|m| m.contains("WATCHDOG=1")).count();
+    assert!(pings >= 5, "{pings} watchdog pings in 2 s: {got:?}");
+    let status: Vec<&String> = got.iter().filter(|m| m.starts_with("STATUS=")).collect();
+    assert!(
+        status.is_empty() || status.iter().all(|m| m.contains("idle")),
+        "{status:?}"
+    );
+
+    daemon.signal("TERM");
+    let got = collect(&sock, Duration::from_secs(5), |g| {
+        g.iter().any(|m| m.contains("STOPPING=1"))
+    });
+    assert!(got.iter().any(|m| m.contains("STOPPING=1")), "{got:?}");
+    let status = daemon.wait_timeout(Duration::from_secs(5)).expect("exits");
+    assert!(status.success());
+}
