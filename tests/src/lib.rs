@@ -7,7 +7,9 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::Once;
 use std::time::{Duration, Instant};
 
-use thruster_protocol::services::{ControlClient, Inbox, IpcConfig, IpcNode, NamespaceGuard};
+use thruster_protocol::services::{
+    ControlClient, Inbox, IpcConfig, IpcNode, NamespaceGuard, TopicMessage,
+};
 use thruster_protocol::{
     ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
 };
@@ -291,40 +293,22 @@ impl Operator {
         }
     }
 
-    /// Newest status satisfying `pred`, waiting up to `timeout`.
+    /// First status satisfying `pred`, waiting up to `timeout`.
     pub fn wait_status(
         &self,
         timeout: Duration,
         pred: impl Fn(&StatusMsg) -> bool,
     ) -> Option<StatusMsg> {
-        let start = Instant::now();
-        while start.elapsed() < timeout {
-            while let Some(s) = self.status.recv().unwrap() {
-                if pred(&s) {
-                    return Some(s);
-                }
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-        None
+        wait_for(&self.status, timeout, pred)
     }
 
-    /// Next model satisfying `pred`.
+    /// First model satisfying `pred`, waiting up to `timeout`.
     pub fn wait_model(
         &self,
         timeout: Duration,
         pred: impl Fn(&ModelMsg) -> bool,
     ) -> Option<ModelMsg> {
-        let start = Instant::now();
-        while start.elapsed() < timeout {
-            while let Some(m) = self.model.recv().unwrap() {
-                if pred(&m) {
-                    return Some(m);
-                }
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-        None
+        wait_for(&self.model, timeout, pred)
     }
 
     /// Latest truth (the simulator publishes it with history 1).
@@ -342,6 +326,24 @@ impl Operator {
         }
         last
     }
+}
+
+/// First message on `inbox` satisfying `pred`, polling up to `timeout`.
+pub fn wait_for<T: TopicMessage>(
+    inbox: &Inbox<T>,
+    timeout: Duration,
+    pred: impl Fn(&T) -> bool,
+) -> Option<T> {
+    let start = Instant::now();
+    while start.elapsed() < timeout {
+        while let Some(m) = inbox.recv().unwrap() {
+            if pred(&m) {
+                return Some(m);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    None
 }
 
 pub fn state(s: &StatusMsg) -> DaemonState {
