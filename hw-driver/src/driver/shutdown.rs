@@ -1,35 +1,4 @@
-//! The stop flag set by SIGINT, SIGTERM and SIGHUP.
+//! The stop flag set by SIGINT, SIGTERM and SIGHUP (shared with thruster-sim). The loop looks
+//! at it at least every [`super::MAX_BLOCK`].
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-
-/// A cloneable flag that asks the loop to stop. The loop looks at it at least every
-/// [`super::MAX_BLOCK`], so a signal ends the process within a fraction of a second.
-#[derive(Debug, Clone, Default)]
-pub struct Shutdown(Arc<AtomicBool>);
-
-impl Shutdown {
-    /// A flag that nothing sets yet.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// A flag set by SIGINT, SIGTERM and SIGHUP (ctrlc with its `termination` feature).
-    /// Call once per process.
-    pub fn on_signals() -> Result<Self, ctrlc::Error> {
-        let flag = Shutdown::new();
-        let set = flag.clone();
-        ctrlc::set_handler(move || set.request())?;
-        Ok(flag)
-    }
-
-    /// Asks to stop.
-    pub fn request(&self) {
-        self.0.store(true, Ordering::SeqCst);
-    }
-
-    /// True once stopping was asked for.
-    pub fn requested(&self) -> bool {
-        self.0.load(Ordering::Relaxed)
-    }
-}
+pub use thruster_driver_kit::Shutdown;

@@ -1,0 +1,8 @@
+//! Shared by the driver processes (thruster-sim, thruster-hw): reading TOML configuration
+//! with errors that name the file, line and key, and the stop flag set by signals.
+
+pub mod load;
+pub mod shutdown;
+
+pub use load::{parse_toml, read_text, LoadError};
+pub use shutdown::Shutdown;
