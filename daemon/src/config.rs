@@ -201,6 +201,78 @@ impl DaemonConfig {
                 ));
             }
         }
+        // TOML has `nan` and `inf`: every float the daemon computes with must be finite and in
+        // its range, or a hand-edited file could put NaN into the controller (commands are
+        // sanitised before the wire, but a bad file must be refused, not limped along with).
+        let b = &self.body;
+        let c = &self.controller;
+        let a = &self.attitude;
+        let mut floats: Vec<(String, f64, bool)> = vec![
+            (
+                "machine.settle_min_s".into(),
+                m.settle_min_s,
+                m.settle_min_s >= 0.0,
+            ),
+            (
+                "machine.settle_quiet_s".into(),
+                m.settle_quiet_s,
+                m.settle_quiet_s >= 0.0,
+            ),
+            (
+                "machine.max_sample_gap_s".into(),
+                m.max_sample_gap_s,
+                m.max_sample_gap_s > 0.0,
+            ),
+            ("controller.kp_depth".into(), c.kp_depth, c.kp_depth >= 0.0),
+            ("controller.kd_depth".into(), c.kd_depth, c.kd_depth >= 0.0),
+            ("controller.ki_depth".into(), c.ki_depth, c.ki_depth >= 0.0),
+            (
+                "controller.integral_limit".into(),
+                c.integral_limit,
+                c.integral_limit >= 0.0,
+            ),
+            ("attitude.kp".into(), a.kp, a.kp >= 0.0),
+            ("attitude.ki".into(), a.ki, a.ki >= 0.0),
+            (
+                "attitude.accel_trust_m_s2".into(),
+                a.accel_trust_m_s2,
+                a.accel_trust_m_s2 > 0.0,
+            ),
+        ];
+        for (name, values, positive) in [
+            ("body.inertia_kg_m2", b.inertia_kg_m2, true),
+            ("body.added_mass_kg", b.added_mass_kg, false),
+            ("body.added_inertia_kg_m2", b.added_inertia_kg_m2, false),
+            ("controller.kp_att", c.kp_att, false),
+            ("controller.kd_att", c.kd_att, false),
+            ("controller.ki_att", c.ki_att, false),
+        ] {
+            for (i, v) in values.into_iter().enumerate() {
+                let ok = if positive { v > 0.0 } else { v >= 0.0 };
+                floats.push((format!("{name}[{i}]"), v, ok));
+            }
+        }
+        for (key, v, ok) in floats {
+            if !(v.is_finite() && ok) {
+                return Err(invalid(
+                    &key,
+                    v.to_string(),
+                    "must be finite and not negative (see config/thrusterd.toml)",
+                ));
+            }
+        }
+        let r = &self.runtime;
+        // Upper bounds keep every duration far from overflow in the event loop's arithmetic; a
+        // longer IMU timeout would be no watchdog at all.
+        for (key, v, max) in [
+            ("runtime.imu_timeout_ms", r.imu_timeout_ms, 60_000),
+            ("runtime.status_period_ms", r.status_period_ms, 60_000),
+            ("runtime.spin_us", r.spin_us, 1_000_000),
+        ] {
+            if v > max {
+                return Err(invalid(key, v.to_string(), &format!("must be <= {max}")));
+            }
+        }
         if self.runtime.imu_timeout_ms == 0 {
             return Err(invalid("runtime.imu_timeout_ms", "0".into(), "must be > 0"));
         }
@@ -264,5 +336,55 @@ mod tests {
         assert!(e.to_string().contains("line 2"), "{e}");
         let e = DaemonConfig::from_toml_str("[vehicle]\nthrusters = 17\n", "d.toml").unwrap_err();
         assert!(e.to_string().contains("vehicle.thrusters = 17"), "{e}");
+    }
+
+    #[test]
+    fn non_finite_and_negative_values_are_refused_with_the_key() {
+        for (text, key) in [
+            (
+                "[machine]\nsettle_min_s = -inf\n",
+                "machine.settle_min_s = -inf",
+            ),
+            (
+                "[machine]\nsettle_quiet_s = nan\n",
+                "machine.settle_quiet_s = NaN",
+            ),
+            (
+                "[machine]\nmax_sample_gap_s = 0.0\n",
+                "machine.max_sample_gap_s = 0",
+            ),
+            (
+                "[controller]\nkp_att = [1.0, nan, 1.0]\n",
+                "controller.kp_att[1] = NaN",
+            ),
+            (
+                "[controller]\nki_depth = inf\n",
+                "controller.ki_depth = inf",
+            ),
+            ("[attitude]\nkp = -1.0\n", "attitude.kp = -1"),
+            (
+                "[body]\ninertia_kg_m2 = [0.1, 0.0, 0.1]\n",
+                "body.inertia_kg_m2[1] = 0",
+            ),
+            (
+                "[body]\nadded_mass_kg = [1, 2, nan]\n",
+                "body.added_mass_kg[2] = NaN",
+            ),
+            (
+                "[runtime]\nimu_timeout_ms = 9223372036854775807\n",
+                "runtime.imu_timeout_ms",
+            ),
+            (
+                "[runtime]\nspin_us = 5000000\n",
+                "runtime.spin_us = 5000000",
+            ),
+        ] {
+            let e = DaemonConfig::from_toml_str(text, "d.toml").unwrap_err();
+            let msg = e.to_string();
+            assert!(
+                msg.starts_with("d.toml: ") && msg.contains(key),
+                "{text:?}: {msg}"
+            );
+        }
     }
 }

@@ -28,7 +28,7 @@ pub enum StoreError {
     #[error("{path}: not a thrusterd model file: {why}")]
     Corrupt { path: String, why: String },
     #[error("{path}: format version {found} is newer than this daemon's {FORMAT_VERSION}")]
-    Incompatible { path: String, found: u32 },
+    Incompatible { path: String, found: u64 },
 }
 
 /// On-disk form; NaN (unknown standard error) is stored as null.
@@ -112,11 +112,13 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
     if header.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
         return Err(corrupt(format!("missing \"format\": \"{FORMAT}\"")));
     }
+    // Compared as u64: a cast to u32 first made 2^32 + 1 look like version 1 (found by the
+    // parser tests), reported as a type error instead of as a newer file.
     let found = header
         .get("format_version")
         .and_then(|v| v.as_u64())
-        .unwrap_or(0) as u32;
-    if found > FORMAT_VERSION {
+        .unwrap_or(0);
+    if found > u64::from(FORMAT_VERSION) {
         return Err(StoreError::Incompatible {
             path: origin.to_string(),
             found,
@@ -249,6 +251,21 @@ mod tests {
         .unwrap_err();
         assert!(
             matches!(e, StoreError::Incompatible { found: 9, .. }),
+            "{e}"
+        );
+        let e = from_json(
+            &text.replace("\"format_version\": 1", "\"format_version\": 4294967297"),
+            "m.json",
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                e,
+                StoreError::Incompatible {
+                    found: 4294967297,
+                    ..
+                }
+            ),
             "{e}"
         );
         let e = from_json(&text.replace("thrusterd-model", "other"), "m.json").unwrap_err();

@@ -38,8 +38,12 @@ pub struct StatusMsg {
     pub pulse: u32,
     /// Pulses planned for this estimation (may grow until the stopping rule is met).
     pub pulses_planned: u32,
-    /// Written as zero, ignored.
-    pub reserved: u32,
+    /// Operator requests refused: failed validation (answered `InvalidRequest`), not allowed
+    /// in the current state (`Rejected`), or failed (`Failed`, e.g. an unreadable model
+    /// file); a saved model file refused at start counts too. Saturates. (This was the
+    /// padding field `reserved`, always written as zero: the layout is unchanged, and an
+    /// older daemon simply reports 0.)
+    pub requests_refused: u32,
     /// Relative error bound (1 sigma) of the model being estimated, or of the last estimate
     /// (dimensionless, >= 0); NaN while not known (before every thruster has been pulsed, or
     /// for a method without a bound).

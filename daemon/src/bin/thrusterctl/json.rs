@@ -24,6 +24,8 @@ pub struct StatusJson {
     pub rejected_time: u64,
     pub rejected_count: u64,
     pub rejected_other: u64,
+    /// Operator requests refused (invalid, wrong state or failed).
+    pub requests_refused: u32,
     pub model_version: u64,
     pub imu_rate_hz: Option<f64>,
     pub vehicle_time_ns: u64,
@@ -47,6 +49,7 @@ impl From<&StatusMsg> for StatusJson {
             rejected_time: s.rejected_time,
             rejected_count: s.rejected_count,
             rejected_other: s.rejected_other,
+            requests_refused: s.requests_refused,
             model_version: s.model_version,
             imu_rate_hz: finite(s.imu_rate_hz),
             vehicle_time_ns: s.vehicle_time_ns,
@@ -173,6 +176,7 @@ mod tests {
                 "error_bound": 0.05, "power": 0.5, "sigma_rot": 0.0, "sigma_acc": 0.0,
                 "samples": 1234, "rejected_nonfinite": 0, "rejected_range": 3,
                 "rejected_time": 0, "rejected_count": 0, "rejected_other": 0,
+                "requests_refused": 0,
                 "model_version": 4, "imu_rate_hz": 400.0, "vehicle_time_ns": 1_500_000_000u64,
                 "text": "pulsing"
             })
@@ -180,7 +184,7 @@ mod tests {
         // Every wire field except padding is exported.
         let wire = serde_json::to_value(s).unwrap();
         for key in wire.as_object().unwrap().keys() {
-            assert!(key == "reserved" || v.get(key).is_some(), "missing {key}");
+            assert!(v.get(key).is_some(), "missing {key}");
         }
         s.state = 77;
         assert_eq!(StatusJson::from(&s).state, "Unknown(77)");

@@ -114,6 +114,10 @@ pub fn status_report(namespace: &str, s: &StatusMsg) -> String {
         ),
         ("samples", format!("{} IMU samples accepted", s.samples)),
         ("rejected", rejections(s)),
+        (
+            "refused",
+            format!("{} operator requests refused", s.requests_refused),
+        ),
         ("model", model),
         ("IMU rate", format!("{} Hz", known(s.imu_rate_hz, 1))),
         ("vehicle time", seconds(s.vehicle_time_ns)),
@@ -307,6 +311,7 @@ mod tests {
         let mut s = status(DaemonState::Pulse);
         s.rejected_nonfinite = 2;
         s.rejected_time = 1;
+        s.requests_refused = 4;
         s.set_text("pulsing thruster 2");
         let text = status_report("veh1", &s);
         let expected = "\
@@ -317,6 +322,7 @@ thrusterd on namespace veh1
   noise        rotation 0.0123 rad/s, acceleration 0.0456 m/s^2 (1 sigma)
   samples      5000 IMU samples accepted
   rejected     2 non-finite, 1 time/sequence
+  refused      4 operator requests refused
   model        version 3
   IMU rate     400.0 Hz
   vehicle time 12.345 s

@@ -104,6 +104,9 @@ struct Daemon {
     ipc: IpcConfig,
     validator: ImuSampleValidator,
     rejected: RejectCounters,
+    /// Operator requests refused (invalid, wrong state, failed) and saved model files refused
+    /// at start: status `requests_refused`.
+    refused: u32,
     thrust_seq: u64,
     status_seq: u64,
     model_seq: u64,
@@ -121,14 +124,22 @@ impl Daemon {
         .with_context(|| format!("ipc.namespace {:?}", cfg.ipc.namespace))?;
         let mut machine = Machine::new(cfg.machine_setup());
         let model_path = cfg.runtime.state_dir.join(store::MODEL_FILE);
+        // A refused saved model counts like a refused Load request, so status shows it.
+        let mut refused = 0u32;
         if cfg.runtime.load_model {
             match store::load(&model_path) {
                 Ok(Some(model)) => match machine.load_model(model) {
                     Ok(()) => info!(path = %model_path.display(), "loaded the saved model"),
-                    Err(e) => warn!("{e}"),
+                    Err(e) => {
+                        refused += 1;
+                        warn!("saved model ignored, starting without it: {e}")
+                    }
                 },
                 Ok(None) => info!(path = %model_path.display(), "no saved model yet"),
-                Err(e) => warn!("saved model ignored, starting without it: {e}"),
+                Err(e) => {
+                    refused += 1;
+                    warn!("saved model ignored, starting without it: {e}")
+                }
             }
         }
         Ok(Daemon {
@@ -139,6 +150,7 @@ impl Daemon {
             ipc,
             validator: ImuSampleValidator::default(),
             rejected: RejectCounters::default(),
+            refused,
             thrust_seq: 0,
             status_seq: 0,
             model_seq: 0,
@@ -277,7 +289,23 @@ impl Daemon {
             }
             if ctrl {
                 control.drain_events()?;
-                control.serve(|kind, req| self.on_request(kind, req))?;
+                // Count every refusal (invalid request, wrong state, failure) for status.
+                let mut refused = 0u32;
+                let served = control.serve(|kind, req| {
+                    let response = self.on_request(kind, req);
+                    if !response.is_ok() {
+                        refused += 1;
+                        warn!(?kind, "operator request refused: {}", response.text());
+                    }
+                    response
+                })?;
+                if served.invalid > 0 {
+                    warn!(invalid = served.invalid, "invalid operator request refused");
+                }
+                self.refused = self
+                    .refused
+                    .saturating_add(refused)
+                    .saturating_add(served.invalid as u32);
             }
             if self.pending_estimate
                 && self.last_imu.is_some()
@@ -488,6 +516,7 @@ impl Daemon {
         let mut msg = wire::status_msg(self.status_seq, &self.machine.status());
         self.status_seq += 1;
         self.rejected.write_to(&mut msg);
+        msg.requests_refused = self.refused;
         msg
     }
 
