@@ -5,20 +5,15 @@
 //! process or shared-memory file behind.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Quaternion, UnitQuaternion};
-use thruster_protocol::services::{
-    namespace_files, purge_namespace, ControlClient, Inbox, IpcConfig, Port,
-};
-use thruster_protocol::{
-    ControlRequest, DaemonState, ModelMsg, RequestKind, Setpoint, StatusMsg, TruthMsg,
-    VehicleStateMsg,
-};
+use thruster_protocol::{ModelMsg, TruthMsg};
+
+use crate::session::{config_file, latest, Binaries, DaemonConfig, Session, SessionSpec};
 
 const DOFS: [&str; 6] = ["roll", "pitch", "yaw", "surge", "sway", "heave"];
 
@@ -50,145 +45,6 @@ pub struct DemoArgs {
     pub daemon_config: Option<PathBuf>,
 }
 
-/// A child process killed and reaped on drop, whatever happens.
-struct ChildProc {
-    name: &'static str,
-    child: Option<Child>,
-    log: PathBuf,
-}
-
-impl ChildProc {
-    fn spawn(name: &'static str, exe: &Path, args: &[&str], dir: &Path) -> Result<ChildProc> {
-        let log = dir.join(format!("{name}.log"));
-        let out = std::fs::File::create(&log)?;
-        let child = Command::new(exe)
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(out.try_clone()?)
-            .stderr(out)
-            .spawn()
-            .with_context(|| format!("starting {}", exe.display()))?;
-        Ok(ChildProc {
-            name,
-            child: Some(child),
-            log,
-        })
-    }
-
-    /// SIGTERM and wait (SIGKILL after 5 s); true when it exited cleanly.
-    fn stop(&mut self) -> bool {
-        let Some(mut child) = self.child.take() else {
-            return true;
-        };
-        let _ = Command::new("kill")
-            .args(["-TERM", &child.id().to_string()])
-            .status();
-        let start = Instant::now();
-        while start.elapsed() < Duration::from_secs(5) {
-            if let Ok(Some(status)) = child.try_wait() {
-                return status.success();
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        let _ = child.kill();
-        let _ = child.wait();
-        false
-    }
-
-    fn alive(&mut self) -> bool {
-        self.child
-            .as_mut()
-            .is_some_and(|c| matches!(c.try_wait(), Ok(None)))
-    }
-
-    /// The end of the process's log, for error messages.
-    fn tail(&self) -> String {
-        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
-        let lines: Vec<&str> = text.lines().collect();
-        format!(
-            "--- {} ({}) ---\n{}",
-            self.name,
-            self.log.display(),
-            lines[lines.len().saturating_sub(15)..].join("\n")
-        )
-    }
-}
-
-impl Drop for ChildProc {
-    fn drop(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-/// The daemon and simulator binaries next to this one; under `cargo run` they are built first
-/// (cargo only builds the binary it runs).
-fn sibling_binaries() -> Result<(PathBuf, PathBuf)> {
-    let exe = std::env::current_exe()?;
-    let dir = exe
-        .parent()
-        .context("thrusterctl has no folder")?
-        .to_path_buf();
-    if let (Ok(cargo), Ok(manifest)) = (std::env::var("CARGO"), std::env::var("CARGO_MANIFEST_DIR"))
-    {
-        let mut cmd = Command::new(cargo);
-        cmd.args([
-            "build",
-            "-q",
-            "-p",
-            "thrusterd",
-            "-p",
-            "thruster-sim",
-            "--bins",
-        ]);
-        if dir.ends_with("release") {
-            cmd.arg("--release");
-        }
-        let status = cmd
-            .current_dir(manifest)
-            .status()
-            .context("building thrusterd and thruster-sim")?;
-        if !status.success() {
-            bail!("building thrusterd and thruster-sim failed");
-        }
-    }
-    let (d, s) = (dir.join("thrusterd"), dir.join("thruster-sim"));
-    for p in [&d, &s] {
-        if !p.exists() {
-            bail!(
-                "{} not found: build the workspace (cargo build --release)",
-                p.display()
-            );
-        }
-    }
-    Ok((d, s))
-}
-
-fn default_vehicle() -> PathBuf {
-    let candidates = [
-        std::env::var("CARGO_MANIFEST_DIR")
-            .map(|d| Path::new(&d).join("../config/vehicles/amour5.toml"))
-            .ok(),
-        Some(PathBuf::from("config/vehicles/amour5.toml")),
-        Some(PathBuf::from("/etc/thrusterd/vehicles/amour5.toml")),
-    ];
-    candidates
-        .into_iter()
-        .flatten()
-        .find(|p| p.exists())
-        .unwrap_or_else(|| PathBuf::from("config/vehicles/amour5.toml"))
-}
-
-fn latest<T: thruster_protocol::services::TopicMessage>(inbox: &Inbox<T>) -> Result<Option<T>> {
-    let mut last = None;
-    while let Some(m) = inbox.recv()? {
-        last = Some(m);
-    }
-    Ok(last)
-}
-
 fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
@@ -211,195 +67,45 @@ struct Summary {
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
-    let (daemon_exe, sim_exe) = sibling_binaries()?;
-    let vehicle = args.vehicle.clone().unwrap_or_else(default_vehicle);
-    if !vehicle.exists() {
-        bail!("vehicle file {} not found", vehicle.display());
-    }
-    let ns = format!("demo-{}", std::process::id() % 1_000_000);
-    let ipc = IpcConfig::new(&ns)?;
-    let tmp = tempfile_dir()?;
-    let state = tmp.join("state");
-    let node = ipc.create_node("thrusterctl-demo")?;
-    let status_in = Inbox::<StatusMsg>::create(&node, &ipc)?;
-    let model_in = Inbox::<ModelMsg>::create(&node, &ipc)?;
-    let truth_in = Inbox::<TruthMsg>::create(&node, &ipc)?;
-    let vehicle_in = Inbox::<VehicleStateMsg>::create(&node, &ipc)?;
-    let setpoint_out = Port::<Setpoint>::create(&node, &ipc)?;
-    let client = ControlClient::create(&node, &ipc)?;
-
-    // The daemon is told only how many thrusters there are, not where: it learns the rest.
-    let count = thruster_count(&vehicle)?.to_string();
-    let mut daemon_args = vec![
-        "run",
-        "--namespace",
-        &ns,
-        "--state-dir",
-        state.to_str().unwrap_or("."),
-        "--thrusters",
-        &count,
-    ];
-    // In lockstep the simulator waits for every answer: the daemon's low-latency mode (poll
-    // before blocking) saves a wake-up per sample.
-    if !args.realtime {
-        daemon_args.extend(["--spin-us", "500"]);
-    }
-    let cfg = args.daemon_config.as_ref().map(|p| p.display().to_string());
-    if let Some(cfg) = cfg.as_deref() {
-        daemon_args.extend(["--config", cfg]);
-    }
-    let mut daemon = ChildProc::spawn("thrusterd", &daemon_exe, &daemon_args, &tmp)?;
-    let seed = args.seed.to_string();
-    let mut sim_args = vec![
-        "run",
-        "--namespace",
-        &ns,
-        "--vehicle",
-        vehicle.to_str().unwrap_or(""),
-        "--noise",
-        &args.noise,
-        "--seed",
-        &seed,
-    ];
-    sim_args.push(if args.realtime {
-        "--realtime"
-    } else {
-        "--lockstep"
-    });
-    let mut sim = ChildProc::spawn("thruster-sim", &sim_exe, &sim_args, &tmp)?;
-
-    let result = drive(
-        &args,
-        &client,
-        &status_in,
-        &model_in,
-        &truth_in,
-        &vehicle_in,
-        &setpoint_out,
-        &mut daemon,
-        &mut sim,
-        &vehicle,
-    );
-    let clean = daemon.stop() & sim.stop();
-    drop((
-        status_in,
-        model_in,
-        truth_in,
-        vehicle_in,
-        setpoint_out,
-        client,
-    ));
-    drop(node);
-    let _ = purge_namespace(&ipc);
-    let leftovers = namespace_files(&ipc).map(|f| f.len()).unwrap_or(0);
-    let _ = std::fs::remove_dir_all(&tmp);
+    let bins = Binaries::locate()?;
+    let vehicle = args
+        .vehicle
+        .clone()
+        .unwrap_or_else(|| config_file("vehicles/amour5.toml"));
+    let spec = SessionSpec {
+        tag: "demo",
+        vehicle: vehicle.clone(),
+        noise: args.noise.clone(),
+        seed: args.seed,
+        realtime: args.realtime,
+        pace: None,
+        daemon_config: args
+            .daemon_config
+            .clone()
+            .map_or(DaemonConfig::Defaults, DaemonConfig::File),
+        scenario: None,
+    };
+    let mut session = Session::start(&bins, &spec)?;
+    let result = drive(&args, &mut session, &vehicle);
+    let shutdown = session.finish();
     let mut summary = result?;
-    summary.clean_exit = clean;
-    summary.leftovers = leftovers;
+    summary.clean_exit = shutdown.clean;
+    summary.leftovers = shutdown.leftovers;
     report(&args, &summary);
-    if !clean || leftovers > 0 {
-        bail!("shutdown was not clean (exit ok: {clean}, files left: {leftovers})");
+    if !shutdown.clean || shutdown.leftovers > 0 {
+        bail!(
+            "shutdown was not clean (exit ok: {}, files left: {})",
+            shutdown.clean,
+            shutdown.leftovers
+        );
     }
     Ok(())
 }
 
-/// Number of `[[thruster]]` tables in a vehicle file.
-fn thruster_count(vehicle: &Path) -> Result<usize> {
-    let text = std::fs::read_to_string(vehicle)
-        .with_context(|| format!("reading {}", vehicle.display()))?;
-    let value: toml::Value =
-        toml::from_str(&text).with_context(|| format!("{}", vehicle.display()))?;
-    let n = value
-        .get("thruster")
-        .and_then(|t| t.as_array())
-        .map(|a| a.len())
-        .unwrap_or(0);
-    if !(1..=16).contains(&n) {
-        bail!(
-            "{}: {n} thrusters ([[thruster]] tables), expected 1..16",
-            vehicle.display()
-        );
-    }
-    Ok(n)
-}
-
-fn tempfile_dir() -> Result<PathBuf> {
-    let dir = std::env::temp_dir().join(format!("thrusterd-demo-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
-    Ok(dir)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn drive(
-    args: &DemoArgs,
-    client: &ControlClient,
-    status_in: &Inbox<StatusMsg>,
-    model_in: &Inbox<ModelMsg>,
-    truth_in: &Inbox<TruthMsg>,
-    vehicle_in: &Inbox<VehicleStateMsg>,
-    setpoint_out: &Port<Setpoint>,
-    daemon: &mut ChildProc,
-    sim: &mut ChildProc,
-    vehicle: &Path,
-) -> Result<Summary> {
-    let wait = |what: &str,
-                timeout: Duration,
-                pred: &mut dyn FnMut(&StatusMsg) -> bool,
-                d: &mut ChildProc,
-                s: &mut ChildProc|
-     -> Result<StatusMsg> {
-        let start = Instant::now();
-        loop {
-            while let Some(st) = status_in.recv()? {
-                if pred(&st) {
-                    return Ok(st);
-                }
-            }
-            if !d.alive() {
-                bail!("thrusterd exited while waiting for {what}:\n{}", d.tail());
-            }
-            if !s.alive() {
-                bail!(
-                    "thruster-sim exited while waiting for {what}:\n{}",
-                    s.tail()
-                );
-            }
-            if start.elapsed() > timeout {
-                bail!("timed out waiting for {what}\n{}\n{}", d.tail(), s.tail());
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    };
-    // Both processes up; the daemon answering samples.
-    let first = wait(
-        "the first IMU samples",
-        Duration::from_secs(30),
-        &mut |s| s.samples > 20,
-        daemon,
-        sim,
-    )?;
-    let truth = {
-        let start = Instant::now();
-        // History 1: the simulator's truth reaches us on its next connection update.
-        loop {
-            if let Some(t) = latest(truth_in)? {
-                break t;
-            }
-            if start.elapsed() > Duration::from_secs(10) {
-                bail!("the simulator published no truth");
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    };
+fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summary> {
+    let (first, truth) = session.ready()?;
     let wall = Instant::now();
     let t0 = first.vehicle_time_ns;
-    let r = client.call(
-        ControlRequest::new(RequestKind::Estimate),
-        Duration::from_secs(2),
-    )?;
-    if !r.is_ok() {
-        bail!("estimate refused: {}", r.text());
-    }
     let bar = if args.json {
         ProgressBar::hidden()
     } else {
@@ -409,8 +115,7 @@ fn drive(
         ProgressStyle::with_template("{spinner} estimating {bar:30} {pos}/{len} pulses  {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let done = wait(
-        "the estimated model",
+    let done = session.estimate(
         Duration::from_secs(if args.realtime { 600 } else { 120 }),
         &mut |s| {
             bar.set_length(u64::from(s.pulses_planned.max(s.pulse).max(1)));
@@ -425,16 +130,13 @@ fn drive(
                 s.state().map(|x| x.name()).unwrap_or("?"),
                 bound
             ));
-            s.state() == Ok(DaemonState::Active) && s.model_version >= 1
         },
-        daemon,
-        sim,
     )?;
     bar.finish_and_clear();
     let wall_seconds = wall.elapsed().as_secs_f64();
     let vehicle_seconds = done.vehicle_time_ns.saturating_sub(t0) as f64 * 1e-9;
-    let model = latest(model_in)?.context("no model published")?;
-    let truth = latest(truth_in)?.unwrap_or(truth);
+    let model = session.model()?;
+    let truth = latest(session.truth_inbox())?.unwrap_or(truth);
     let err_rot = truth.relative_error(&model, 0);
     let err_acc = truth.relative_error(&model, 3);
     let actuated: Vec<&'static str> = (0..6)
@@ -457,8 +159,7 @@ fn drive(
     // Hold: level first, then a 15 degree pitch step, scored against the simulator's truth.
     let mut tilt_yaw = None;
     let (level_err, step_err) = if args.hold_s > 0.0 {
-        let _ = latest(vehicle_in)?;
-        let start = latest_blocking(vehicle_in)?;
+        let start = session.vehicle_state()?;
         let (_, _, yaw) = quat(start.attitude).euler_angles();
         let depth = start.position_ned[2];
         let half = args.hold_s / 2.0;
@@ -466,19 +167,12 @@ fn drive(
         let pitched = UnitQuaternion::from_euler_angles(0.0, 15f64.to_radians(), yaw);
         let mut errs = Vec::new();
         for (target, settle) in [(level, 0.3 * half), (pitched, 0.3 * half)] {
-            let q = target.into_inner();
-            let sp = Setpoint {
-                attitude: [q.w, q.i, q.j, q.k],
-                depth,
-                flags: Setpoint::HOLD_DEPTH,
-                ..Setpoint::default()
-            };
-            setpoint_out.send(&sp)?;
-            let t_start = latest_blocking(vehicle_in)?.t_ns;
+            session.send_setpoint(&target, Some(depth))?;
+            let t_start = session.vehicle_state()?.t_ns;
             let (mut sum, mut count, mut tilt_sum, mut yaw_sum) = (0.0, 0u64, 0.0, 0.0);
             let timeout = Instant::now();
             loop {
-                let Some(v) = vehicle_in.recv()? else {
+                let Some(v) = session.vehicle_inbox().recv()? else {
                     if timeout.elapsed()
                         > Duration::from_secs(if args.realtime {
                             (half * 3.0) as u64 + 5
@@ -534,19 +228,6 @@ fn drive(
         clean_exit: false,
         leftovers: 0,
     })
-}
-
-fn latest_blocking(inbox: &Inbox<VehicleStateMsg>) -> Result<VehicleStateMsg> {
-    let start = Instant::now();
-    loop {
-        if let Some(v) = latest(inbox)? {
-            return Ok(v);
-        }
-        if start.elapsed() > Duration::from_secs(10) {
-            bail!("the simulator publishes no vehicle state");
-        }
-        std::thread::sleep(Duration::from_micros(500));
-    }
 }
 
 #[allow(clippy::too_many_arguments)]

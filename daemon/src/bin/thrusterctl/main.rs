@@ -16,6 +16,7 @@ mod geometry;
 mod json;
 mod publish;
 mod render;
+mod session;
 mod watch;
 
 use std::process::ExitCode;
