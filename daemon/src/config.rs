@@ -10,6 +10,7 @@ use crate::controller::ControllerConfig;
 use crate::estimator::EstimatorConfig;
 use crate::machine::{Geometry, MachineConfig, MachineSetup, MAX_THRUSTERS};
 use crate::model::RigidBody;
+use crate::monitor::MonitorConfig;
 
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -23,6 +24,7 @@ pub struct DaemonConfig {
     pub estimator: EstimatorConfig,
     pub controller: ControllerConfig,
     pub attitude: AttitudeConfig,
+    pub monitor: MonitorConfig,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -171,6 +173,12 @@ impl DaemonConfig {
         for (key, v, ok) in [
             ("machine.noise_s", m.noise_s, m.noise_s > 0.0),
             ("machine.pulse_s", m.pulse_s, m.pulse_s > 0.0),
+            // Before settle_max_s, which is compared with it: a NaN here is named here.
+            (
+                "machine.settle_min_s",
+                m.settle_min_s,
+                m.settle_min_s >= 0.0,
+            ),
             (
                 "machine.settle_max_s",
                 m.settle_max_s,
@@ -209,11 +217,6 @@ impl DaemonConfig {
         let a = &self.attitude;
         let mut floats: Vec<(String, f64, bool)> = vec![
             (
-                "machine.settle_min_s".into(),
-                m.settle_min_s,
-                m.settle_min_s >= 0.0,
-            ),
-            (
                 "machine.settle_quiet_s".into(),
                 m.settle_quiet_s,
                 m.settle_quiet_s >= 0.0,
@@ -251,6 +254,9 @@ impl DaemonConfig {
                 let ok = if positive { v > 0.0 } else { v >= 0.0 };
                 floats.push((format!("{name}[{i}]"), v, ok));
             }
+        }
+        for (key, v, ok) in self.monitor.checks() {
+            floats.push((key.into(), v, ok));
         }
         for (key, v, ok) in floats {
             if !(v.is_finite() && ok) {
@@ -298,6 +304,7 @@ impl DaemonConfig {
             estimator: self.estimator.clone(),
             controller: self.controller.clone(),
             attitude: self.attitude.clone(),
+            monitor: self.monitor.clone(),
             body: self.body.clone(),
             thrusters: self.thruster_count(),
             geometry,

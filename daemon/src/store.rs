@@ -114,10 +114,12 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
     }
     // Compared as u64: a cast to u32 first made 2^32 + 1 look like version 1 (found by the
     // parser tests), reported as a type error instead of as a newer file.
-    let found = header
-        .get("format_version")
-        .and_then(|v| v.as_u64())
-        .unwrap_or(0);
+    let found = match header.get("format_version") {
+        Some(v) => v
+            .as_u64()
+            .ok_or_else(|| corrupt(format!("format_version {v} is not a version number")))?,
+        None => return Err(corrupt("missing \"format_version\"".into())),
+    };
     if found > u64::from(FORMAT_VERSION) {
         return Err(StoreError::Incompatible {
             path: origin.to_string(),
