@@ -20,6 +20,9 @@ pub struct Series {
 pub struct Panel {
     pub title: String,
     pub series: Vec<Series>,
+    /// This panel's y axis (low, high) instead of the grid's 0..y_max: signed quantities
+    /// (attitude angles) and panels of different scales in one figure.
+    pub y_range: Option<(f64, f64)>,
 }
 
 /// Layout and axes shared by every panel.
@@ -92,8 +95,9 @@ pub fn render(grid: &Grid, panels: &[Panel]) -> String {
 }
 
 fn draw_panel(s: &mut String, grid: &Grid, panel: &Panel, x0: f64, y0: f64) {
+    let (y_lo, y_hi) = panel.y_range.unwrap_or((0.0, grid.y_max));
     let sx = |x: f64| x0 + (x / grid.x_max).clamp(0.0, 1.0) * PANEL_W;
-    let sy = |y: f64| y0 + PANEL_H - (y / grid.y_max).clamp(0.0, 1.0) * PANEL_H;
+    let sy = |y: f64| y0 + PANEL_H - ((y - y_lo) / (y_hi - y_lo)).clamp(0.0, 1.0) * PANEL_H;
     let _ = write!(
         s,
         r##"<rect x="{x0}" y="{y0}" width="{PANEL_W}" height="{PANEL_H}" fill="none" stroke="#888"/><text x="{}" y="{}" text-anchor="middle" font-size="12">{}</text>"##,
@@ -102,7 +106,7 @@ fn draw_panel(s: &mut String, grid: &Grid, panel: &Panel, x0: f64, y0: f64) {
         esc(&panel.title)
     );
     for k in 0..=5 {
-        let yv = grid.y_max * k as f64 / 5.0;
+        let yv = y_lo + (y_hi - y_lo) * k as f64 / 5.0;
         let y = sy(yv);
         let _ = write!(
             s,
@@ -221,6 +225,7 @@ mod tests {
             &[Panel {
                 title: "n=2".into(),
                 series: vec![series],
+                y_range: None,
             }],
         );
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));

@@ -92,6 +92,7 @@ pub fn figures(rows: &[StudyRow]) -> Vec<(String, String)> {
                     series(&sel, "rotation error", BLUE, false, true),
                     series(&sel, "acceleration error", RED, true, true),
                 ],
+                y_range: None,
             });
         }
     }
@@ -128,6 +129,7 @@ pub fn figures(rows: &[StudyRow]) -> Vec<(String, String)> {
                             series(&fwd, "forward (y = B u)", BLUE, acc, true),
                             crlb_series(&fwd, acc),
                         ],
+                        y_range: None,
                     });
                 }
             }

@@ -48,6 +48,9 @@ pub enum Command {
     /// The simulated demo: start thrusterd and thruster-sim on a private namespace, learn the
     /// vehicle's thrusters, hold attitude, report, shut everything down.
     Demo(crate::demo::DemoArgs),
+    /// The paper's pool experiments in simulation (manual-vs-learned, misaligned, aligned,
+    /// hot-swap): daemon and simulator on a private namespace, scored against the truth.
+    Experiment(crate::experiment::ExperimentArgs),
     /// Show the daemon's state, progress and health.
     Status {
         /// One JSON object instead of text.

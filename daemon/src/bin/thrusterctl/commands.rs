@@ -27,6 +27,7 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         // The demo runs its own daemon on a private namespace: no --namespace, no timeout.
         Command::Demo(args) => crate::demo::run(args),
+        Command::Experiment(args) => crate::experiment::run(args),
         Command::Status { json } => status(&Daemon::connect(&target, timeout)?, json),
         Command::Estimate {
             wait,

@@ -12,10 +12,12 @@ mod commands;
 mod demo;
 mod estimate;
 mod exit;
+mod experiment;
 mod geometry;
 mod json;
 mod publish;
 mod render;
+mod scoring;
 mod session;
 mod watch;
 

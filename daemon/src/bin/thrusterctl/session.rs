@@ -332,11 +332,14 @@ impl Session {
             &ns,
             "--state-dir",
             state.to_str().unwrap_or("."),
-            "--thrusters",
-            &count,
         ]
         .map(String::from)
         .to_vec();
+        // A generated config says the count itself, possibly with a declared layout, which
+        // `--thrusters` would clear.
+        if !matches!(spec.daemon_config, DaemonConfig::Text(_)) {
+            daemon_args.extend(["--thrusters".into(), count]);
+        }
         // In lockstep the simulator waits for every answer: the daemon's low-latency mode
         // (poll before blocking) saves a wake-up per sample.
         if !spec.realtime {
@@ -524,14 +527,9 @@ impl Session {
         })
     }
 
-    /// The latest model (waits up to 5 s for one).
+    /// The latest model (waits up to 10 s for one).
     pub fn model(&mut self) -> Result<ModelMsg> {
         self.latest_blocking(|s| s.model_inbox(), "a model")
-    }
-
-    /// The latest truth (waits up to 5 s for one).
-    pub fn truth(&mut self) -> Result<TruthMsg> {
-        self.latest_blocking(|s| s.truth_inbox(), "the simulator's truth")
     }
 
     /// The newest vehicle state (waits up to 10 s for one).
