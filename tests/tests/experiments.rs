@@ -1,0 +1,162 @@
+//! `thrusterctl experiment NAME --json`: the paper's four pool experiments, each run with the
+//! real thrusterd and thruster-sim processes (lockstep, paper noise), asserting the headline
+//! result with a margin. The numbers in the comments are what the runs measured (seed 1,
+//! docs/experiments.md); the margins leave room for scheduling on a loaded 2-core machine,
+//! which shifts when a setpoint lands by a few samples.
+
+use std::process::Command;
+
+use serde_json::Value;
+use system_tests::{bin, workspace};
+
+fn experiment(name: &str) -> Value {
+    let out = Command::new(bin("thrusterctl"))
+        .args(["experiment", name, "--json"])
+        .current_dir(workspace())
+        // Under cargo, thrusterctl would build its siblings itself (`cargo run`); the test has
+        // them already, and a -p build from here could re-unify features and rebuild.
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .output()
+        .expect("thrusterctl runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "experiment {name} failed\nstdout: {stdout}\nstderr: {stderr}"
+    );
+    let v: Value = serde_json::from_str(&stdout).expect("one JSON object");
+    for (label, run) in v["runs"].as_object().expect("runs") {
+        assert_eq!(run["clean_exit"], true, "{name}/{label}: {run}");
+        assert_eq!(run["files_left"], 0, "{name}/{label}: {run}");
+        // Most of the 200 Hz vehicle samples were scored (the inbox keeps up).
+        let scored = run["vehicle_samples_scored"].as_f64().unwrap();
+        let hold = run["hold_s"].as_f64().unwrap();
+        assert!(
+            scored > 0.5 * 200.0 * hold,
+            "{name}/{label}: {scored} samples"
+        );
+    }
+    v
+}
+
+fn f(v: &Value, path: &[&str]) -> f64 {
+    let mut x = v;
+    for p in path {
+        x = &x[*p];
+    }
+    x.as_f64()
+        .unwrap_or_else(|| panic!("{path:?} is not a number in {v}"))
+}
+
+fn dofs(v: &Value) -> Vec<String> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d.as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn manual_vs_learned_the_learned_model_holds_attitude_as_well_as_the_manual_one() {
+    let v = experiment("manual-vs-learned");
+    let (l, m) = (
+        f(&v, &["runs", "learned", "mean_err_deg"]),
+        f(&v, &["runs", "manual", "mean_err_deg"]),
+    );
+    // Measured: about 4 deg each (steps of 15-30 deg included), learned/manual 0.9-1.0. The
+    // paper's claim is "matches"; 1.5x allows for the noise of one run each.
+    assert!(l < 1.5 * m, "learned {l} deg vs manual {m} deg");
+    assert!(l < 8.0 && m < 8.0, "learned {l}, manual {m}");
+    assert_eq!(
+        dofs(&v["runs"]["learned"]["model"]["actuated"]),
+        ["roll", "pitch", "yaw", "surge", "heave"]
+    );
+}
+
+#[test]
+fn misaligned_the_relearned_model_does_not_yaw_more_than_the_manual_one() {
+    let v = experiment("misaligned");
+    let h = &v["headline"];
+    let (m, l) = (
+        f(h, &["manual_yaw_err_mean_deg"]),
+        f(h, &["learned_yaw_err_mean_deg"]),
+    );
+    // The paper: more than 2x smaller with the learned model. Measured here: 2.9 vs 2.5 deg
+    // (1.2x): the daemon's attitude PID with integral action rejects most of the yaw torque
+    // the misaligned thruster adds (docs/experiments.md). Asserted: the learned model is no
+    // worse (10 % for noise), and the manual model's model error is what the truth says.
+    assert!(l < 1.1 * m, "learned {l} deg vs manual {m} deg");
+    assert!(m < 10.0, "manual {m}");
+    assert!(f(&v, &["runs", "manual", "model", "rel_err_rot_vs_truth"]) > 0.3);
+    assert!(f(&v, &["runs", "learned", "model", "rel_err_rot_vs_truth"]) < 0.3);
+}
+
+#[test]
+fn aligned_ours_reports_the_missing_dofs_and_the_papers_thrust_chatters() {
+    let v = experiment("aligned");
+    let paper = dofs(&v["headline"]["paper"]["actuated"]);
+    let ours = dofs(&v["headline"]["forward"]["actuated"]);
+    assert_eq!(ours, ["pitch", "yaw", "surge"]);
+    // The paper's estimator "learns" the nonexistent DOFs (its Fig. 5b, blue bars).
+    for dof in ["roll", "sway", "heave"] {
+        assert!(paper.iter().any(|d| d == dof), "paper {paper:?}");
+    }
+    // Measured: thrust activity 467/s (paper) vs 29/s (ours), 16x: the paper's model commands
+    // the thrusters back and forth for the DOFs they cannot move. 4x is far from both.
+    let ratio = f(&v, &["headline", "paper_over_forward_thrust_activity"]);
+    assert!(ratio > 4.0, "thrust activity paper/ours {ratio}");
+    // Ours holds yaw (measured 5.9 deg mean over the 30 deg yaw step and back; the paper's
+    // model measured 4.8 and 13.6 deg in two runs, so it is not asserted). Ours is NOT
+    // asserted on the pitch step: it overshoots and rolls away there (docs/experiments.md).
+    let yaw = f(
+        &v,
+        &["runs", "forward", "per_maneuver", "yaw", "mean_err_deg"],
+    );
+    assert!(yaw < 10.0, "ours: yaw maneuver {yaw} deg");
+}
+
+#[test]
+fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
+    let v = experiment("hot-swap");
+    let a = &v["runs"]["announced"]["hot_swap"];
+    // Announced: the nominal model of the declared geometry at once (measured 0.04 s), the
+    // learned one after re-estimating (measured 13.9 s; the first estimation took ~15 s, so
+    // 30 s is a generous bound), and the error back under 1.5x its worst 2 s window before
+    // the change within 30 s (measured 15.7 s).
+    assert_eq!(a["first_swap_source"], "Nominal", "{a}");
+    assert!(f(a, &["first_swap_delay_s"]) < 0.5, "{a}");
+    assert!(f(a, &["new_model_delay_s"]) < 30.0, "{a}");
+    assert!(f(a, &["recovered_after_s"]) < 30.0, "{a}");
+    // After: as good as before, within 2 deg (measured 4.4 before, 4.6 after).
+    let (before, after) = (
+        f(a, &["before", "mean_err_deg"]),
+        f(a, &["after", "mean_err_deg"]),
+    );
+    assert!(after < before + 2.0, "before {before}, after {after}");
+
+    let s = &v["runs"]["silent"]["hot_swap"];
+    if v["daemon_has_monitor"] == true {
+        // Silent: the model-mismatch monitor notices and re-estimates.
+        assert!(f(s, &["detection_delay_s"]) < 20.0, "{s}");
+        assert!(f(s, &["new_model_delay_s"]) < 40.0, "{s}");
+        assert!(f(s, &["recovered_after_s"]) < 40.0, "{s}");
+        let (before, after) = (
+            f(s, &["before", "mean_err_deg"]),
+            f(s, &["after", "mean_err_deg"]),
+        );
+        assert!(after < before + 2.0, "before {before}, after {after}");
+    } else {
+        // A daemon without the monitor keeps the old model: the vehicle stays controlled
+        // (measured 5.5 deg after the change vs 4.6 before) but nothing is re-learned.
+        assert!(s["new_model_delay_s"].is_null(), "{s}");
+        let (before, during) = (
+            f(s, &["before", "mean_err_deg"]),
+            f(s, &["during", "mean_err_deg"]),
+        );
+        assert!(
+            during < before + 5.0,
+            "before {before}, after the change {during}"
+        );
+    }
+}
