@@ -43,7 +43,7 @@ fn target_dir() -> PathBuf {
     exe.parent().unwrap().parent().unwrap().to_path_buf()
 }
 
-/// Build thrusterd, thrusterctl and thruster-sim in the running profile, once per process.
+/// Build thrusterd, thrusterctl, thruster-sim and thruster-hw in the running profile, once per process.
 /// (`-p` selects a different feature set than the whole workspace, so this can rebuild the
 /// project's own crates: that is why tests do not call it when the binaries exist.)
 pub fn build_binaries() {
@@ -58,6 +58,8 @@ pub fn build_binaries() {
             "thrusterd",
             "-p",
             "thruster-sim",
+            "-p",
+            "thruster-hw",
             "--bins",
         ]);
         if target_dir().ends_with("release") {

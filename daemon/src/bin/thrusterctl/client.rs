@@ -6,7 +6,9 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use thruster_protocol::services::{Inbox, IpcConfig, IpcError, IpcNode, Port, TopicMessage};
+use thruster_protocol::services::{
+    cleanup_dead_nodes, Inbox, IpcConfig, IpcError, IpcNode, Port, TopicMessage,
+};
 use thruster_protocol::{ControlRequest, ControlResponse, RequestKind};
 
 use crate::exit::{self, Failure};
@@ -64,6 +66,12 @@ impl Daemon {
     /// Sends `request` and returns the daemon's validated answer, whatever its code.
     /// Never waits longer than the timeout: no server fails at once.
     pub fn call(&self, request: ControlRequest) -> Result<ControlResponse> {
+        // A daemon that died (SIGKILL, crash) after we joined the namespace keeps its server
+        // port registered until someone removes its resources: the call would wait out the
+        // whole timeout and report a slow daemon (exit 5) instead of a dead one (exit 3).
+        // Joining cleans up once; long waits (`estimate --wait`, `watch`) ask again later,
+        // so clean up before every call (a directory listing; failures change nothing).
+        let _ = cleanup_dead_nodes(&self.ipc);
         self.control
             .call(request, self.timeout)
             .map_err(|e| self.ipc_failure(e).into())

@@ -112,6 +112,10 @@ struct Daemon {
     model_seq: u64,
     last_imu: Option<(u64, u64)>,
     pending_estimate: bool,
+    /// The predecessor died while controlling (see `session`): hold with the loaded model
+    /// as soon as the IMU is up.
+    pending_hold: bool,
+    session: Option<crate::session::Session>,
     stale_reported: bool,
 }
 
@@ -156,6 +160,8 @@ impl Daemon {
             model_seq: 0,
             last_imu: None,
             pending_estimate: false,
+            pending_hold: false,
+            session: None,
             stale_reported: false,
         })
     }
@@ -167,6 +173,7 @@ impl Daemon {
             Err(e) => warn!("could not clean up dead nodes: {e}"),
         }
         let node = self.ipc.create_node("thrusterd")?;
+        self.open_session();
         let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
         let reconfig_in = Inbox::<ReconfigEvent>::create(&node, &self.ipc)?;
         let setpoint_in = Inbox::<Setpoint>::create(&node, &self.ipc)?;
@@ -316,6 +323,16 @@ impl Daemon {
                     warn!("start-up estimation refused: {e}");
                 }
             }
+            if self.pending_hold
+                && self.last_imu.is_some()
+                && self.machine.state() != thrusterd::machine::State::Fault
+            {
+                self.pending_hold = false;
+                match self.machine.on_request(Request::Hold) {
+                    Ok(_) => info!("resumed control after a crash: holding attitude"),
+                    Err(e) => warn!("could not resume control after a crash: {e}"),
+                }
+            }
             let changed = self.handle_events(&model_out);
             systemd.tick();
             if changed || last_status.elapsed() >= status_period {
@@ -344,6 +361,10 @@ impl Daemon {
         self.handle_events(&model_out);
         if let Some(model) = self.machine.model().cloned() {
             self.save(&model);
+        }
+        // A clean stop: the next start begins idle.
+        if let Some(session) = self.session.take() {
+            session.finish();
         }
         let mut status = self.status_msg();
         status.set_text("thrusterd stopped");
@@ -480,11 +501,52 @@ impl Daemon {
                 Event::ModelDropped(why) => warn!("model dropped: {why}"),
                 Event::ModelRejected(why) => warn!("model rejected, old one kept: {why}"),
                 Event::StateChanged { from, to, why } => {
-                    info!("{} -> {}: {why}", from.name(), to.name())
+                    info!("{} -> {}: {why}", from.name(), to.name());
+                    self.record_intent(to);
                 }
             }
         }
         changed
+    }
+
+    /// Reads what a crashed predecessor was doing and starts this daemon's own marker.
+    fn open_session(&mut self) {
+        use crate::session::{Intent, Session};
+        let (mut session, previous) = Session::open(&self.cfg.runtime.state_dir);
+        let resume = match previous {
+            Some(Intent::Hold) if self.pending_estimate => Intent::Hold,
+            Some(Intent::Hold) if self.machine.model().is_some() => {
+                warn!("the previous thrusterd did not stop cleanly while controlling: resuming control with the saved model");
+                self.pending_hold = true;
+                Intent::Hold
+            }
+            Some(Intent::Hold) => {
+                warn!("the previous thrusterd did not stop cleanly while controlling, but there is no model to resume with: idle");
+                Intent::Idle
+            }
+            Some(Intent::Idle) => {
+                info!("the previous thrusterd did not stop cleanly; it was idle: idle");
+                Intent::Idle
+            }
+            None => Intent::Idle,
+        };
+        session.record(resume);
+        self.session = Some(session);
+    }
+
+    /// Keeps the session marker in step: controlling and estimating move the vehicle, so a
+    /// crash in them resumes control; Fault keeps whatever it will recover to.
+    fn record_intent(&mut self, to: thrusterd::machine::State) {
+        use thrusterd::machine::State;
+        let intent = match to {
+            State::Active => crate::session::Intent::Hold,
+            s if s.is_estimating() => crate::session::Intent::Hold,
+            State::Idle => crate::session::Intent::Idle,
+            _ => return,
+        };
+        if let Some(session) = self.session.as_mut() {
+            session.record(intent);
+        }
     }
 
     fn save(&self, model: &thrusterd::model::Model) {
