@@ -230,10 +230,8 @@ proptest! {
             MAX_THRUSTERS),
     ) {
         let mut e = ReconfigEvent { seq: 1, kind, thruster, count, has_geometry, ..Default::default() };
-        for i in 0..MAX_THRUSTERS {
-            e.position[i] = positions[i];
-            e.direction[i] = unit_dirs[i];
-        }
+        e.position.copy_from_slice(&positions);
+        e.direction.copy_from_slice(&unit_dirs);
         let n = (count as usize).min(MAX_THRUSTERS);
         let index_ok = match kind {
             0 => true,
