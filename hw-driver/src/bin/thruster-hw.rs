@@ -1,7 +1,6 @@
 //! `thruster-hw`: the hardware driver process. See `thruster-hw --help`,
 //! config/thruster-hw.toml and docs/hardware.md.
 
-use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -9,16 +8,10 @@ use clap::Parser;
 use thruster_hw::cli::{Cli, Command};
 use thruster_hw::config::Settings;
 use thruster_hw::driver::{self, shutdown::Shutdown};
-use tracing_subscriber::EnvFilter;
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_env_filter(
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
-        )
-        .init();
+    // journald under systemd (JOURNAL_STREAM names our stderr), stderr otherwise.
+    thruster_driver_kit::logging::init("info");
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,7 +1,6 @@
 //! `thruster-sim`: the simulated vehicle as a driver process. See `thruster-sim --help`,
 //! config/thruster-sim.toml and the `thruster_sim::driver` docs.
 
-use std::io::IsTerminal;
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -13,16 +12,10 @@ use thruster_sim::driver::shutdown::Shutdown;
 use thruster_sim::driver::Driver;
 use thruster_sim::responder::{respond, ResponderOptions};
 use thruster_sim::settings::Settings;
-use tracing_subscriber::EnvFilter;
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_env_filter(
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
-        )
-        .init();
+    // journald under systemd (JOURNAL_STREAM names our stderr), stderr otherwise.
+    thruster_driver_kit::logging::init("info");
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,

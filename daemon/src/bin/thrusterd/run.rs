@@ -87,13 +87,10 @@ pub fn run(args: RunArgs) -> Result<()> {
     daemon.serve()
 }
 
+/// journald with structured fields under systemd (when `JOURNAL_STREAM` names our stderr),
+/// stderr otherwise; one setup shared with the drivers (thruster_driver_kit::logging).
 fn init_logging() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
+    thruster_driver_kit::logging::init("info");
 }
 
 struct Daemon {
