@@ -4,7 +4,7 @@
 //! ```text
 //! thruster-sim run --namespace NS --vehicle FILE [--config FILE] [--noise paper|realistic|none]
 //!                  [--rate HZ] [--seed S] [--scenario FILE] [--lockstep | --realtime]
-//!                  [--duration SECONDS] [--truth-file PATH]
+//!                  [--duration SECONDS] [--truth-file PATH] [--stats-file PATH]
 //! thruster-sim respond --namespace NS [--neutral] [--count N] [--spin-us US] [--idle-exit S]
 //! ```
 //!
@@ -76,6 +76,11 @@ pub struct RunArgs {
     /// Write the true effectiveness (at start and after every change) to this JSON file.
     #[arg(long, value_name = "PATH")]
     pub truth_file: Option<PathBuf>,
+    /// Real time only: append link statistics (samples published / answered / unanswered,
+    /// sample -> thrust latency histogram) to this file once per second, one JSON line each
+    /// (`thruster_sim::link_stats::StatsLine`). Used by the soak run.
+    #[arg(long, value_name = "PATH")]
+    pub stats_file: Option<PathBuf>,
 }
 
 /// Options of `thruster-sim respond`.

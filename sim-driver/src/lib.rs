@@ -31,6 +31,7 @@ pub mod disturbance;
 pub mod driver;
 pub mod dynamics;
 pub mod effectiveness;
+pub mod link_stats;
 pub mod load;
 pub mod random;
 pub mod responder;

@@ -228,6 +228,8 @@ pub struct Settings {
     pub scenario: Option<PathBuf>,
     /// Truth JSON file, if any.
     pub truth_file: Option<PathBuf>,
+    /// Link statistics file (JSON lines, real time only), if any; command line only.
+    pub stats_file: Option<PathBuf>,
     /// Base directory of iceoryx2's files.
     pub ipc_root: PathBuf,
     /// Noise seed.
@@ -323,6 +325,7 @@ impl Settings {
                 .truth_file
                 .clone()
                 .or_else(|| from_file(file.truth_file)),
+            stats_file: args.stats_file.clone(),
             ipc_root: file.ipc_root,
             seed: args.seed.unwrap_or(file.seed),
             mode,

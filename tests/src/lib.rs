@@ -14,6 +14,8 @@ use thruster_protocol::{
     ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
 };
 
+pub mod soak;
+
 /// Workspace root (this crate lives in tests/).
 pub fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -36,11 +38,17 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
-/// target/<profile> of the running test or bench.
+/// target/<profile> of the running test, bench or tool.
 fn target_dir() -> PathBuf {
-    // target/<profile>/deps/<test-binary> -> target/<profile>
+    // Tests and benches: target/<profile>/deps/<binary>; tools such as `soak` are binaries of
+    // this crate: target/<profile>/<binary>.
     let exe = std::env::current_exe().unwrap();
-    exe.parent().unwrap().parent().unwrap().to_path_buf()
+    let dir = exe.parent().unwrap();
+    if dir.ends_with("deps") {
+        dir.parent().unwrap().to_path_buf()
+    } else {
+        dir.to_path_buf()
+    }
 }
 
 /// Build thrusterd, thrusterctl, thruster-sim and thruster-hw in the running profile, once per process.

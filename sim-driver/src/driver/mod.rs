@@ -15,6 +15,7 @@
 pub mod convert;
 pub mod gate;
 pub mod shutdown;
+pub mod stats_file;
 pub mod truth_file;
 pub mod wait;
 
@@ -37,6 +38,7 @@ use crate::sim::{SimError, Simulator};
 use crate::vehicle::Vehicle;
 use gate::CommandGate;
 use shutdown::Shutdown;
+use stats_file::{StatsFile, StatsFileError};
 use truth_file::{TruthEntry, TruthFile, TruthFileError};
 
 /// Node name of the driver in iceoryx2 listings.
@@ -77,6 +79,12 @@ pub enum DriverError {
     /// The truth file could not be written.
     #[error(transparent)]
     TruthFile(#[from] TruthFileError),
+    /// The link statistics file could not be written.
+    #[error(transparent)]
+    StatsFile(#[from] StatsFileError),
+    /// `--stats-file` was given in lockstep (it measures the real-time loop only).
+    #[error("--stats-file needs real-time mode")]
+    StatsNeedRealtime,
     /// The integration produced non-finite values.
     #[error("the simulation diverged at t = {t_s} s (non-finite sensor values)")]
     Diverged {
@@ -182,6 +190,8 @@ pub struct Driver {
     scenario: Scenario,
     gate: CommandGate,
     truth_file: Option<TruthFile>,
+    /// `--stats-file` (real time only).
+    stats: Option<StatsFile>,
     stop: Shutdown,
     period_ns: u64,
     /// Seq of the newest sample taken (0 before the first).
@@ -239,6 +249,11 @@ impl Driver {
             .truth_file
             .as_ref()
             .map(|p| TruthFile::new(p, &sim.vehicle().name));
+        let stats = match (&settings.stats_file, settings.mode) {
+            (None, _) => None,
+            (Some(path), Mode::Realtime) => Some(StatsFile::create(path)?),
+            (Some(_), Mode::Lockstep) => return Err(DriverError::StatsNeedRealtime),
+        };
         let period_ns = settings.sample_period_ns();
         let now = Instant::now();
         Ok(Driver {
@@ -246,6 +261,7 @@ impl Driver {
             sim,
             scenario,
             truth_file,
+            stats,
             stop,
             period_ns,
             imu_seq: 0,
@@ -289,6 +305,7 @@ impl Driver {
         };
         self.go_neutral();
         self.publish_truth("final")?;
+        self.write_stats(true)?;
         let summary = self.summary(reason);
         info!(
             reason = ?summary.reason,
@@ -355,7 +372,26 @@ impl Driver {
             self.ports.vehicle.send(&self.state)?;
             self.state_sent = true;
         }
-        Ok(self.ports.imu.send(sample)?)
+        let sent = self.ports.imu.send(sample)?;
+        if let Some(stats) = &mut self.stats {
+            stats.published(sample.seq);
+        }
+        Ok(sent)
+    }
+
+    /// Appends a `--stats-file` line when one is due (or `force`).
+    fn write_stats(&mut self, force: bool) -> Result<(), DriverError> {
+        let wall_s = self.started.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        let vehicle_s = self.sim.time_s();
+        let counters = (
+            self.applied,
+            self.gate.stale(),
+            self.gate.rejected().total(),
+        );
+        if let Some(stats) = &mut self.stats {
+            stats.tick(force, wall_s, vehicle_s, counters)?;
+        }
+        Ok(())
     }
 
     /// Publishes the current truth (and appends it to the truth file).

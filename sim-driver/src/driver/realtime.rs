@@ -46,6 +46,9 @@ impl Driver {
                                 let arrived_ns = u64::try_from(arrived_ns).unwrap_or(u64::MAX);
                                 self.sim.step_to(arrived_ns.min(next_t_ns));
                                 self.hold(cmd.thrusters())?;
+                                if let Some(stats) = &mut self.stats {
+                                    stats.answered(cmd.imu_seq, now);
+                                }
                                 last_valid = Some(now);
                                 last_applied_seq = cmd.imu_seq;
                             }
@@ -73,6 +76,7 @@ impl Driver {
             let sample = self.take_sample()?;
             self.send_sample(&sample)?;
             self.housekeeping()?;
+            self.write_stats(false)?;
             let due = origin + Duration::from_nanos(self.sim.time_ns());
             let lag = Instant::now().saturating_duration_since(due);
             if lag > MAX_LAG {
