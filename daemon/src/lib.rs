@@ -8,6 +8,7 @@ pub mod controller;
 pub mod estimator;
 pub mod machine;
 pub mod model;
+pub mod monitor;
 pub mod store;
 pub mod study;
 pub mod wire;

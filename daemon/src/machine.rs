@@ -16,6 +16,7 @@ use crate::estimator::{
     Estimate, Estimator, EstimatorConfig, NoiseLevels, NoiseMeter, StopDecision,
 };
 use crate::model::{geometry_key, nominal_effectiveness, Model, ModelSource, RigidBody};
+use crate::monitor::{Mismatch, MismatchAction, ModelMonitor, MonitorConfig};
 
 /// Capacity of every thrust vector (the protocol's).
 pub const MAX_THRUSTERS: usize = 16;
@@ -125,6 +126,7 @@ pub struct MachineSetup {
     pub estimator: EstimatorConfig,
     pub controller: ControllerConfig,
     pub attitude: AttitudeConfig,
+    pub monitor: MonitorConfig,
     pub body: RigidBody,
     /// Thrusters at start.
     pub thrusters: usize,
@@ -192,6 +194,8 @@ pub enum Event {
     ModelDropped(String),
     /// A candidate was refused; the old model stays.
     ModelRejected(String),
+    /// While controlling, the thrusters stopped doing what the model says (see `monitor`).
+    MismatchDetected(String),
     StateChanged {
         from: State,
         to: State,
@@ -256,6 +260,7 @@ pub struct Machine {
     last_t_ns: Option<u64>,
     attitude: AttitudeFilter,
     controller: Controller,
+    monitor: ModelMonitor,
     target: Option<Target>,
     model: Option<Model>,
     previous: Option<Model>,
@@ -286,6 +291,7 @@ impl Machine {
             last_t_ns: None,
             attitude: AttitudeFilter::new(setup.attitude.clone()),
             controller: Controller::new(setup.controller.clone()),
+            monitor: ModelMonitor::new(setup.monitor.clone(), n),
             target: None,
             model: None,
             previous: None,
@@ -595,6 +601,10 @@ impl Machine {
         if let Some(t) = self.last_t_ns {
             self.phase_start_ns = t;
         }
+        if to == State::Active && from != State::Active {
+            // Control (re)starts: judge the model on fresh data only.
+            self.monitor.reset(self.n);
+        }
         if from != to {
             self.events.push(Event::StateChanged {
                 from,
@@ -793,6 +803,7 @@ impl Machine {
         }
         self.versions += 1;
         model.version = self.versions;
+        self.monitor.reset(self.n);
         model.source = source;
         if let Some(old) = self.model.replace(model.clone()) {
             self.previous = Some(old);
@@ -822,8 +833,35 @@ impl Machine {
         let n = self.n.min(model.thrusters());
         self.controller
             .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
+        // The monitor compares in model units: the command before deadband compensation.
+        let gravity_body = attitude.inverse() * Vector3::z();
+        let mismatch = self.monitor.observe(
+            dt,
+            &meas.rate,
+            &gravity_body,
+            &model.effectiveness,
+            &cmd.thrust[..n],
+        );
         finish(&mut cmd, self.setup.machine.deadband);
+        if let Some(m) = mismatch {
+            self.on_mismatch(s.t_ns, m);
+        }
         cmd
+    }
+
+    /// The monitor found the thrusters doing something else than the model says.
+    fn on_mismatch(&mut self, t_ns: u64, m: Mismatch) {
+        let why = m.to_string();
+        self.events.push(Event::MismatchDetected(why.clone()));
+        self.monitor.reset(self.n);
+        match self.monitor.action() {
+            MismatchAction::Estimate => {
+                self.start_estimation(t_ns, &format!("{why}: re-estimating"))
+            }
+            MismatchAction::Report | MismatchAction::Off => {
+                self.text = format!("holding attitude; {why}");
+            }
+        }
     }
 }
 

@@ -70,6 +70,11 @@ pub struct RunArgs {
     /// Real time: one sample per period of the wall clock (the default).
     #[arg(long)]
     pub realtime: bool,
+    /// Lockstep, but no faster than this many times real time (e.g. 50), so an observer
+    /// polling the vehicle state sees vehicle time advance evenly [default: as fast as the
+    /// daemon answers].
+    #[arg(long, value_name = "X", requires = "lockstep")]
+    pub pace: Option<f64>,
     /// Stop after this much vehicle time, s [default: run until SIGINT/SIGTERM].
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,

@@ -151,7 +151,7 @@ impl SensorSettings {
 }
 
 /// `[lockstep]`.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LockstepSettings {
     /// How long to wait for the command answering a sample, wall ms (1..=600000). Default
@@ -167,6 +167,11 @@ pub struct LockstepSettings {
     /// Adaptive: see [`crate::driver::wait::AdaptiveSpin`].
     #[serde(deserialize_with = "de_spin_us")]
     pub spin_us: u64,
+    /// Run no faster than this many times real time (0 = as fast as the daemon answers, the
+    /// default; otherwise 1..=100000). Experiments that send setpoints at vehicle times use
+    /// it so their timing does not depend on how fast they poll.
+    #[serde(deserialize_with = "de_pace")]
+    pub pace: f64,
 }
 
 impl Default for LockstepSettings {
@@ -175,6 +180,7 @@ impl Default for LockstepSettings {
             timeout_ms: 2000,
             idle_period_ms: 100,
             spin_us: 50,
+            pace: 0.0,
         }
     }
 }
@@ -332,7 +338,16 @@ impl Settings {
             duration_s,
             sensors,
             sim: file.sim,
-            lockstep: file.lockstep,
+            lockstep: LockstepSettings {
+                pace: match args.pace {
+                    Some(p) => check_pace(p).map_err(|reason| SettingsError::Argument {
+                        flag: "--pace",
+                        reason,
+                    })?,
+                    None => file.lockstep.pace,
+                },
+                ..file.lockstep
+            },
             realtime: file.realtime,
         })
     }
@@ -400,6 +415,20 @@ fn de_ms<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
     }
 }
 
+fn de_pace<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    let v = f64::deserialize(d)?;
+    check_pace(v).map_err(serde::de::Error::custom)
+}
+
+/// 0 (off) or a speed-up factor in [1, 100000].
+fn check_pace(v: f64) -> Result<f64, String> {
+    if v == 0.0 || (1.0..=100_000.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("pace must be 0 or in [1, 100000], got {v}"))
+    }
+}
+
 fn de_spin_us<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
     let v = u64::deserialize(d)?;
     if v <= 10_000 {
@@ -434,6 +463,14 @@ mod tests {
         assert_eq!(f.lockstep.timeout_ms, 2000);
         assert_eq!(f.realtime.watchdog_ms, 200);
         assert_eq!(f.sim, SimOptions::default());
+    }
+
+    #[test]
+    fn pace_is_off_or_a_speed_up_of_at_least_one() {
+        assert_eq!(parse("").unwrap().lockstep.pace, 0.0);
+        assert_eq!(parse("[lockstep]\npace = 50.0\n").unwrap().lockstep.pace, 50.0);
+        let err = parse("[lockstep]\npace = 0.5\n").unwrap_err().to_string();
+        assert!(err.starts_with("sim.toml:2:") && err.contains("pace"), "{err}");
     }
 
     #[test]

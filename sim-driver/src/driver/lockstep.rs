@@ -55,6 +55,7 @@ impl Driver {
             if self.duration_reached() {
                 return Ok(StopReason::Duration);
             }
+            self.pace(cfg.pace);
             self.sim.step(self.period_ns);
             self.apply_due_events()?;
             let sample = self.take_sample()?;
@@ -101,6 +102,17 @@ impl Driver {
                 }
                 Answer::Shutdown => return Ok(StopReason::Signal),
             }
+        }
+    }
+
+    /// With `pace` > 0, sleeps until the wall clock has caught up with vehicle time / pace.
+    fn pace(&self, pace: f64) {
+        let (Some(started), true) = (self.started, pace > 0.0) else {
+            return;
+        };
+        let due = Duration::from_secs_f64(self.sim.time_s() / pace);
+        if let Some(wait) = due.checked_sub(started.elapsed()) {
+            std::thread::sleep(wait);
         }
     }
 
