@@ -371,6 +371,15 @@ fn run(args: &Args) -> Result<ExitCode> {
         rows.push(row);
     }
 
+    // A Ctrl-C at a terminal reaches the children too (same process group): they may exit
+    // before this loop saw the flag, which is not a death.
+    if stop.requested() {
+        interrupted = true;
+        died = None;
+    }
+    // The answers of a partial last minute still count in the run's percentiles.
+    total_latency.merge(&window);
+
     // Orderly end: the simulator first (it writes its final stats line), then let the daemon
     // drain and publish its counters once more, then the daemon.
     let sim_exit = sim.stop();
