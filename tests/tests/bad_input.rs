@@ -350,10 +350,11 @@ fn bad_reconfig_events_setpoints_and_requests_are_counted_and_refused() {
         let with_geometry = |edit: fn(&mut ReconfigEvent)| {
             let mut e = event(ReconfigKind::ThrusterMoved, 1, THRUSTERS);
             e.has_geometry = 1;
-            for i in 0..THRUSTERS as usize {
-                e.position[i] = [0.1 * i as f64, 0.0, 0.0];
-                e.direction[i] = [1.0, 0.0, 0.0];
+            let n = THRUSTERS as usize;
+            for (i, p) in e.position[..n].iter_mut().enumerate() {
+                *p = [0.1 * i as f64, 0.0, 0.0];
             }
+            e.direction[..n].fill([1.0, 0.0, 0.0]);
             edit(&mut e);
             e
         };
@@ -584,7 +585,7 @@ fn bad_saved_models_are_refused_at_start_counted_and_the_daemon_serves() {
     let variants: [(&str, Vec<u8>, &str); 5] = [
         (
             "truncated",
-            real[..real.len() - 40].as_bytes().to_vec(),
+            real.as_bytes()[..real.len() - 40].to_vec(),
             "not a thrusterd model file",
         ),
         ("corrupt byte", corrupt, "not a thrusterd model file"),
@@ -649,7 +650,7 @@ fn bad_config_files_are_refused_with_file_line_and_key() {
     let variants: [(&str, Vec<u8>, &[&str]); 6] = [
         (
             "truncated mid-key",
-            shipped[..cut].as_bytes().to_vec(),
+            shipped.as_bytes()[..cut].to_vec(),
             &["line ", "expected"],
         ),
         (
