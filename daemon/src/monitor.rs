@@ -476,9 +476,11 @@ fn residual<const L: usize>(
             if i == j {
                 s += 1e-9 * scale;
             }
-            for m in 0..j {
-                s -= l[i][m] * l[j][m];
-            }
+            s -= l[i][..j]
+                .iter()
+                .zip(&l[j][..j])
+                .map(|(x, y)| x * y)
+                .sum::<f64>();
             if i == j {
                 if s <= 0.0 {
                     return None;
@@ -494,9 +496,7 @@ fn residual<const L: usize>(
     let mut explained = 0.0;
     for i in 0..k {
         let mut s = b[from + i];
-        for m in 0..i {
-            s -= l[i][m] * z[m];
-        }
+        s -= l[i][..i].iter().zip(&z[..i]).map(|(x, y)| x * y).sum::<f64>();
         z[i] = s / l[i][i];
         explained += z[i] * z[i];
     }
