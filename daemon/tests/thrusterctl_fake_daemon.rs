@@ -252,7 +252,14 @@ fn status_text_and_json() {
     assert_eq!(v["state"], "Active");
     assert_eq!(v["model_version"], 1);
     assert_eq!(v["imu_rate_hz"], 400.0);
-    assert_eq!(v.as_object().unwrap().len(), 18);
+    // One JSON key per wire field (StatusMsg has no padding left: `reserved` became
+    // `requests_refused`), so a field added to the protocol cannot be forgotten here.
+    let wire = serde_json::to_value(thruster_protocol::StatusMsg::default()).unwrap();
+    assert_eq!(
+        v.as_object().unwrap().len(),
+        wire.as_object().unwrap().len()
+    );
+    assert_eq!(v["requests_refused"], 0);
     let received = daemon.finish();
     assert!(received
         .requests
