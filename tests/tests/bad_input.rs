@@ -279,6 +279,20 @@ fn bad_imu_samples_each_raise_their_counter_and_the_daemon_keeps_serving() {
             same.t_ns = s.t_ns;
             d.send(&same);
         });
+        // Samples lost on the way (a sequence gap) are not bad input but must not go
+        // unnoticed either: status counts them.
+        let missed_before = d
+            .until_status(&op, Duration::from_secs(5), |_| true)
+            .expect("status")
+            .samples_missed;
+        d.seq += 7;
+        d.t_ns += 7 * PERIOD_NS;
+        let s = d
+            .until_status(&op, Duration::from_secs(5), |s| {
+                s.samples_missed > missed_before
+            })
+            .expect("a gap of 7 samples is counted in status");
+        assert_eq!(s.samples_missed, missed_before + 7);
 
         // Still serving: estimating on, answering, a request works.
         assert!(daemon.is_running());

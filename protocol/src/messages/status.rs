@@ -28,7 +28,7 @@ wire_enum! {
 /// Daemon progress and health (daemon -> all, service `status`, history 1).
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.StatusMsg.v1")]
+#[type_name("thrusterd.StatusMsg.v2")]
 pub struct StatusMsg {
     /// Sequence number, +1 per status message.
     pub seq: u64,
@@ -56,6 +56,11 @@ pub struct StatusMsg {
     pub sigma_acc: f64,
     /// IMU samples accepted since start.
     pub samples: u64,
+    /// IMU samples that never arrived: gaps in the sequence numbers of accepted samples (a
+    /// driver's samples lost on the way, e.g. a burst longer than the subscriber's buffer).
+    /// With `samples` and the `rejected_*` counters every sample a driver published is
+    /// accounted for. (v2 of this message.)
+    pub samples_missed: u64,
     /// Messages rejected because a value was NaN or infinite.
     pub rejected_nonfinite: u64,
     /// Messages rejected because a value was outside its physical range (or a vector or

@@ -83,12 +83,14 @@ impl Topic {
     /// The topic's QoS.
     pub const fn qos(self) -> TopicQos {
         match self {
-            // Streams: every sample matters, buffer ~40 ms at 400 Hz so a briefly
-            // descheduled reader loses nothing; no history (stale samples are useless).
+            // Streams: every sample matters, buffer 128 ms at 1 kHz so a reader descheduled
+            // for a while, or a real-time driver catching up after a stall with a burst of
+            // overdue samples, loses nothing (16 lost 2 % of the samples in a 12-minute soak
+            // on a loaded VM); no history (stale samples are useless).
             Topic::Imu | Topic::Thrust | Topic::Vehicle => TopicQos {
                 history: 0,
-                max_buffer: 16,
-                default_buffer: 16,
+                max_buffer: 128,
+                default_buffer: 128,
             },
             // Discrete events: keep a few, but do not replay old ones to a new reader.
             Topic::Reconfig => TopicQos {

@@ -72,6 +72,7 @@ fn rejections(s: &StatusMsg) -> String {
         (s.rejected_time, "time/sequence"),
         (s.rejected_count, "count/index"),
         (s.rejected_other, "other"),
+        (s.samples_missed, "IMU samples missed"),
     ]
     .iter()
     .filter(|(n, _)| *n > 0)

@@ -104,6 +104,8 @@ struct Daemon {
     /// Operator requests refused (invalid, wrong state, failed) and saved model files refused
     /// at start: status `requests_refused`.
     refused: u32,
+    /// IMU samples that never arrived (sequence gaps between accepted samples).
+    missed: u64,
     thrust_seq: u64,
     status_seq: u64,
     model_seq: u64,
@@ -152,6 +154,7 @@ impl Daemon {
             validator: ImuSampleValidator::default(),
             rejected: RejectCounters::default(),
             refused,
+            missed: 0,
             thrust_seq: 0,
             status_seq: 0,
             model_seq: 0,
@@ -293,6 +296,13 @@ impl Daemon {
             }
             if ctrl {
                 control.drain_events()?;
+            }
+            // Serve on every round, not only after a notification: a request whose
+            // notification was lost while this daemon started (the client notified before
+            // our listener existed) would otherwise wait unanswered until the client gave up
+            // (thrusterctl exit 5 right after a restart, seen in tests/faults.rs). An empty
+            // queue costs one check per round, after the IMU answer.
+            {
                 // Count every refusal (invalid request, wrong state, failure) for status.
                 let mut refused = 0u32;
                 let served = control.serve(|kind, req| {
@@ -373,6 +383,19 @@ impl Daemon {
         match self.validator.check(sample) {
             Ok(accepted) => {
                 self.last_imu = Some((sample.seq, sample.t_ns));
+                if accepted.missed > 0 {
+                    // Counted for status so no loss goes unnoticed; logged sparingly.
+                    let before = self.missed;
+                    self.missed = self.missed.saturating_add(accepted.missed);
+                    if before < 20 || before.ilog2() != self.missed.ilog2() {
+                        warn!(
+                            missed = self.missed,
+                            "{} IMU sample(s) missing before seq {}",
+                            accepted.missed,
+                            sample.seq
+                        );
+                    }
+                }
                 if accepted.resynced {
                     warn!(
                         "IMU stream restarted (seq {}): time discontinuity",
@@ -577,6 +600,7 @@ impl Daemon {
         self.status_seq += 1;
         self.rejected.write_to(&mut msg);
         msg.requests_refused = self.refused;
+        msg.samples_missed = self.missed;
         msg
     }
 
