@@ -496,7 +496,11 @@ fn residual<const L: usize>(
     let mut explained = 0.0;
     for i in 0..k {
         let mut s = b[from + i];
-        s -= l[i][..i].iter().zip(&z[..i]).map(|(x, y)| x * y).sum::<f64>();
+        s -= l[i][..i]
+            .iter()
+            .zip(&z[..i])
+            .map(|(x, y)| x * y)
+            .sum::<f64>();
         z[i] = s / l[i][i];
         explained += z[i] * z[i];
     }

@@ -326,7 +326,10 @@ fn silent_rotation_of_the_top_thruster_is_detected_and_re_estimated() {
         let model = run.machine.model().unwrap().clone();
         assert_eq!(model.source, ModelSource::Estimated);
         let e_rot = rel_err(&model.effectiveness, &run.truth(), 0);
-        assert!(e_rot < 0.3, "seed {seed}: re-learned rotation error {e_rot:.3}");
+        assert!(
+            e_rot < 0.3,
+            "seed {seed}: re-learned rotation error {e_rot:.3}"
+        );
     }
 }
 

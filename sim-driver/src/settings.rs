@@ -468,9 +468,15 @@ mod tests {
     #[test]
     fn pace_is_off_or_a_speed_up_of_at_least_one() {
         assert_eq!(parse("").unwrap().lockstep.pace, 0.0);
-        assert_eq!(parse("[lockstep]\npace = 50.0\n").unwrap().lockstep.pace, 50.0);
+        assert_eq!(
+            parse("[lockstep]\npace = 50.0\n").unwrap().lockstep.pace,
+            50.0
+        );
         let err = parse("[lockstep]\npace = 0.5\n").unwrap_err().to_string();
-        assert!(err.starts_with("sim.toml:2:") && err.contains("pace"), "{err}");
+        assert!(
+            err.starts_with("sim.toml:2:") && err.contains("pace"),
+            "{err}"
+        );
     }
 
     #[test]

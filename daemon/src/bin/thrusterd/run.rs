@@ -390,9 +390,7 @@ impl Daemon {
                     if before < 20 || before.ilog2() != self.missed.ilog2() {
                         warn!(
                             missed = self.missed,
-                            "{} IMU sample(s) missing before seq {}",
-                            accepted.missed,
-                            sample.seq
+                            "{} IMU sample(s) missing before seq {}", accepted.missed, sample.seq
                         );
                     }
                 }
