@@ -298,10 +298,16 @@ fn bad_imu_samples_each_raise_their_counter_and_the_daemon_keeps_serving() {
         assert!(daemon.is_running());
         let r = op.request(RequestKind::Status);
         assert!(r.is_ok(), "{}", r.text());
-        let s = d
-            .until_status(&op, Duration::from_secs(5), |_| true)
-            .expect("status");
-        assert_ne!(state(&s), DaemonState::Fault, "{}", s.text());
+        // Garbage never faults the daemon. (A stale-IMU fault can happen when this test
+        // process is descheduled for over 100 ms on a loaded machine: that is the watchdog
+        // doing its job, not a reaction to bad input, and recovery follows.)
+        let log = daemon.log_text();
+        for line in log.lines().filter(|l| l.contains("-> fault")) {
+            assert!(
+                line.contains("no IMU sample for"),
+                "fault on bad input: {line}"
+            );
+        }
         assert!(
             d.answers
                 .iter()
