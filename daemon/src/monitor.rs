@@ -106,13 +106,14 @@ impl Default for MonitorConfig {
 impl MonitorConfig {
     /// (key, value, valid) for the config checker.
     pub fn checks(&self) -> [(&'static str, f64, bool); 8] {
+        // block_s first: the others are compared with it, and a NaN must be named where it is.
         [
+            ("monitor.block_s", self.block_s, self.block_s > 0.0),
             (
                 "monitor.reference_s",
                 self.reference_s,
                 self.reference_s >= self.block_s,
             ),
-            ("monitor.block_s", self.block_s, self.block_s > 0.0),
             (
                 "monitor.window_s",
                 self.window_s,
