@@ -831,7 +831,8 @@ impl Machine {
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Controlling;
         let n = self.n.min(model.thrusters());
-        self.controller
+        self.last_desired = self
+            .controller
             .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
         // The monitor compares in model units: the command before deadband compensation.
         let gravity_body = attitude.inverse() * Vector3::z();

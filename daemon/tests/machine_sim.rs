@@ -133,6 +133,11 @@ fn amour5_estimation_at_the_papers_noise_matches_truth() {
     // Then it holds attitude: 5 s of control keep roll and pitch within a few degrees.
     run.run_for(5.0);
     assert_eq!(run.last_mode, Mode::Controlling);
+    let desired = run.machine.last_desired();
+    assert!(
+        desired.iter().all(|v| v.is_finite()) && desired.iter().any(|v| *v != 0.0),
+        "the last control tick's desired motion is reported: {desired:?}"
+    );
     let [roll, pitch, _] = run.sim.roll_pitch_yaw();
     assert!(
         roll.abs().to_degrees() < 5.0 && pitch.abs().to_degrees() < 5.0,
