@@ -12,6 +12,10 @@ use serde::{Deserialize, Serialize};
 use crate::machine::MAX_THRUSTERS;
 use crate::model::Model;
 
+/// Depth is controlled only when the actuated translations can push at least this share of a
+/// vertical force (0.5: the vertical is within 60 degrees of their span).
+const MIN_VERTICAL_AUTHORITY: f64 = 0.5;
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ControllerConfig {
@@ -124,7 +128,24 @@ impl Controller {
         }
         let mut lin = [0.0; 3];
         let mut depth_err = 0.0;
-        if let (Some(depth), Some(want)) = (m.depth, target.depth) {
+        // Depth is held only through actuated translations that point mostly up or down now.
+        // A vehicle without heave (all thrusters along x) could "fly" to depth by surging while
+        // pitched, but a hover controller must not: the surge it would command at every pitch
+        // step (from an integrator wound up while level, where depth was out of reach) pitches
+        // a moving body further (Munk moment) and wrecks the attitude hold.
+        let down_body = m.attitude.inverse_transform_vector(&Vector3::z());
+        let vertical_authority = (0..3)
+            .filter(|&i| model.actuated.0[3 + i])
+            .map(|i| down_body[i] * down_body[i])
+            .sum::<f64>()
+            .sqrt();
+        let depth_controllable = vertical_authority >= MIN_VERTICAL_AUTHORITY;
+        if !depth_controllable {
+            self.depth_integral = 0.0;
+        }
+        if let Some(depth) = m.depth {
+            // The rate is tracked even while depth is not controlled, so taking over again
+            // does not start from a stale sample.
             if let Some(last) = self.last_depth {
                 if dt > 0.0 {
                     // Low-passed depth rate: pressure sensors are noisy.
@@ -133,6 +154,8 @@ impl Controller {
                 }
             }
             self.last_depth = Some(depth);
+        }
+        if let (Some(depth), Some(want), true) = (m.depth, target.depth, depth_controllable) {
             depth_err = want - depth;
             let a_down = c.kp_depth * depth_err - c.kd_depth * self.depth_rate
                 + c.ki_depth * self.depth_integral;
@@ -168,7 +191,7 @@ impl Controller {
                         .clamp(-c.integral_limit, c.integral_limit);
                 }
             }
-            if target.depth.is_some() {
+            if target.depth.is_some() && depth_controllable {
                 self.depth_integral = (self.depth_integral + depth_err * dt)
                     .clamp(-c.integral_limit, c.integral_limit);
             }
@@ -282,6 +305,43 @@ mod tests {
             (out[2] - out[3] - 2.0 * roll_alloc[2] * want).abs() < 1e-9,
             "{out:?}"
         );
+    }
+
+    #[test]
+    fn depth_is_not_held_through_surge_alone() {
+        // Two thrusters along x at different heights: pitch and surge, no heave.
+        let pos = [[0.0, 0.0, -0.15], [0.0, 0.0, 0.15]];
+        let dir = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        let m = Model::nominal(
+            nominal_effectiveness(&RigidBody::default(), &pos, &dir),
+            None,
+        );
+        assert!(m.actuated.0[3] && !m.actuated.0[5], "surge yes, heave no");
+        let mut c = Controller::new(ControllerConfig::default());
+        // Pitched 20 degrees, 5 m too shallow: surging would move it down, but must not.
+        let pitched = UnitQuaternion::from_euler_angles(0.0, 20f64.to_radians(), 0.0);
+        let meas = Measured {
+            attitude: pitched,
+            rate: Vector3::zeros(),
+            depth: Some(0.0),
+        };
+        let target = Target {
+            attitude: pitched,
+            depth: Some(5.0),
+        };
+        let mut out = [0.0; 2];
+        for _ in 0..100 {
+            let desired = c.update(&meas, &target, &m, 0.01, &mut out);
+            assert_eq!(desired[3..], [0.0; 3], "no translation asked for");
+        }
+        assert!(out.iter().all(|v| v.abs() < 1e-12), "{out:?}");
+        assert_eq!(c.depth_integral, 0.0, "nothing wound up");
+
+        // With heave actuated (the four-thruster model) the same error is held.
+        let mut c = Controller::new(ControllerConfig::default());
+        let mut out = [0.0; 4];
+        let desired = c.update(&meas, &target, &model(), 0.01, &mut out);
+        assert!(desired[5] > 0.0, "{desired:?}");
     }
 
     #[test]
