@@ -39,7 +39,14 @@ fn estimate(vehicle: &str, seed: u64) -> (ModelMsg, f64, f64) {
     op.wait_status(LONG, |s| {
         state(s) == DaemonState::Active && s.model_version >= 1
     })
-    .unwrap_or_else(|| panic!("{vehicle}: no model\n{}", daemon.log_text()));
+    .unwrap_or_else(|| {
+        panic!(
+            "{vehicle}: no model\n--- thrusterd ---\n{}\n--- thruster-sim (running: {}) ---\n{}",
+            daemon.log_text(),
+            sim.is_running(),
+            sim.log_text()
+        )
+    });
     let model = op
         .wait_model(LONG, |m| m.source() == Ok(ModelSource::Estimated))
         .expect("model published");

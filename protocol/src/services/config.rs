@@ -5,6 +5,7 @@ use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, NodeBuilder, NodeName, SemanticString, SignalHandlingMode};
 
 use super::error::{ice, IpcError};
+use super::retry::retry_creation;
 use super::{Ipc, IpcNode};
 
 /// Where namespaces put their iceoryx2 files (static service configs, node monitors,
@@ -142,12 +143,14 @@ impl IpcConfig {
     /// stale resources of dead nodes of this namespace (iceoryx2 default).
     pub fn create_node(&self, name: &str) -> Result<IpcNode, IpcError> {
         let node_name = NodeName::new(name).map_err(ice("make node name", name))?;
-        NodeBuilder::new()
-            .name(&node_name)
-            .config(&self.iceoryx)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<Ipc>()
-            .map_err(ice("create node", name))
+        retry_creation(|| {
+            NodeBuilder::new()
+                .name(&node_name)
+                .config(&self.iceoryx)
+                .signal_handling_mode(SignalHandlingMode::Disabled)
+                .create::<Ipc>()
+        })
+        .map_err(ice("create node", name))
     }
 }
 

@@ -10,6 +10,7 @@ use iceoryx2::service::port_factory::request_response::PortFactory;
 
 use super::error::{ice, IpcError};
 use super::ports::open_event;
+use super::retry::retry_creation;
 use super::topics::MAX_NODES;
 use super::{Ipc, IpcConfig, IpcNode};
 use crate::messages::{ControlRequest, ControlResponse, RequestKind, ResponseCode};
@@ -31,18 +32,19 @@ type ControlFactory = PortFactory<Ipc, ControlRequest, (), ControlResponse, ()>;
 fn open_control(node: &IpcNode, ipc: &IpcConfig) -> Result<(String, ControlFactory), IpcError> {
     let name = ipc.service_name(CONTROL_LEAF);
     let service_name = ServiceName::new(&name).map_err(ice("make service name", &name))?;
-    let factory = node
-        .service_builder(&service_name)
-        .request_response::<ControlRequest, ControlResponse>()
-        // One daemon per namespace: a second server fails to create, which catches two
-        // daemons started on the same vehicle.
-        .max_servers(1)
-        .max_clients(MAX_CLIENTS)
-        .max_active_requests_per_client(MAX_ACTIVE_REQUESTS_PER_CLIENT)
-        .max_response_buffer_size(1)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(ice("open or create request-response service", &name))?;
+    let factory = retry_creation(|| {
+        node.service_builder(&service_name)
+            .request_response::<ControlRequest, ControlResponse>()
+            // One daemon per namespace: a second server fails to create, which catches two
+            // daemons started on the same vehicle.
+            .max_servers(1)
+            .max_clients(MAX_CLIENTS)
+            .max_active_requests_per_client(MAX_ACTIVE_REQUESTS_PER_CLIENT)
+            .max_response_buffer_size(1)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+    })
+    .map_err(ice("open or create request-response service", &name))?;
     Ok((name, factory))
 }
 

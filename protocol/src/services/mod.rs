@@ -23,6 +23,7 @@ mod config;
 mod control;
 mod error;
 mod ports;
+mod retry;
 mod topics;
 
 pub use cleanup::{

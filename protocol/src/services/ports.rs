@@ -10,6 +10,7 @@ use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 
 use super::error::{ice, IpcError};
+use super::retry::retry_creation;
 use super::topics::{
     TopicMessage, EVENT_SUFFIX, MAX_EVENT_PORTS, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS,
 };
@@ -25,19 +26,20 @@ pub fn open_topic<T: TopicMessage>(
     let name = ipc.service_name(T::TOPIC.leaf());
     let qos = T::TOPIC.qos();
     let service_name = ServiceName::new(&name).map_err(ice("make service name", &name))?;
-    let factory = node
-        .service_builder(&service_name)
-        .publish_subscribe::<T>()
-        // Never block a publisher on a slow reader: a driver must not stall because the
-        // daemon does, and vice versa. The oldest sample is dropped instead.
-        .enable_safe_overflow(true)
-        .history_size(qos.history)
-        .subscriber_max_buffer_size(qos.max_buffer)
-        .max_publishers(MAX_PUBLISHERS)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(ice("open or create publish-subscribe service", &name))?;
+    let factory = retry_creation(|| {
+        node.service_builder(&service_name)
+            .publish_subscribe::<T>()
+            // Never block a publisher on a slow reader: a driver must not stall because the
+            // daemon does, and vice versa. The oldest sample is dropped instead.
+            .enable_safe_overflow(true)
+            .history_size(qos.history)
+            .subscriber_max_buffer_size(qos.max_buffer)
+            .max_publishers(MAX_PUBLISHERS)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+    })
+    .map_err(ice("open or create publish-subscribe service", &name))?;
     Ok((name, factory))
 }
 
@@ -46,13 +48,15 @@ pub fn open_topic<T: TopicMessage>(
 pub fn open_event(node: &IpcNode, service: &str) -> Result<EventFactory<Ipc>, IpcError> {
     let name = format!("{service}{EVENT_SUFFIX}");
     let service_name = ServiceName::new(&name).map_err(ice("make service name", &name))?;
-    node.service_builder(&service_name)
-        .event()
-        .max_notifiers(MAX_EVENT_PORTS)
-        .max_listeners(MAX_EVENT_PORTS)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(ice("open or create event service", &name))
+    retry_creation(|| {
+        node.service_builder(&service_name)
+            .event()
+            .max_notifiers(MAX_EVENT_PORTS)
+            .max_listeners(MAX_EVENT_PORTS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+    })
+    .map_err(ice("open or create event service", &name))
 }
 
 /// Creates a wait set with iceoryx2's signal handling disabled (see module docs). Attach
