@@ -248,19 +248,23 @@ impl Daemon {
                 continue;
             }
             wait_errors = 0;
-            if imu || !spin.is_zero() {
+            if imu {
                 imu_in.drain_events()?;
-                let mut got = false;
-                while let Some(sample) = imu_in.recv()? {
-                    self.on_imu(&sample, &thrust_out);
-                    got = true;
-                }
-                if got {
-                    self.stale_reported = false;
-                }
+            }
+            // The inbox is read on every wake-up, not only on an IMU event: a sample whose
+            // notification was lost (a driver that notified before this listener was
+            // connected, at start) would otherwise sit unread while a lockstep driver waits
+            // for its answer forever. An empty inbox costs one check.
+            let mut got = false;
+            while let Some(sample) = imu_in.recv()? {
+                self.on_imu(&sample, &thrust_out);
+                got = true;
+            }
+            if got {
+                self.stale_reported = false;
             }
             // Before the first sample there is nothing to go stale: the driver is not up yet.
-            if stale && !self.stale_reported && self.last_imu.is_some() {
+            if stale && !got && !self.stale_reported && self.last_imu.is_some() {
                 let cmd = self
                     .machine
                     .on_imu_stale(&format!("no IMU sample for {} ms", imu_timeout.as_millis()));
