@@ -252,9 +252,9 @@ pub struct ModelMonitor {
     n: usize,
     /// Command in force since the last sample.
     last_u: [f64; MAX_THRUSTERS],
-    /// Thrust (in command units) the propellers deliver: `last_u` through the lag.
-    thrust: [f64; MAX_THRUSTERS],
-    /// Its forward and reverse parts, each through the lag.
+    /// Thrust (in command units) the propellers deliver, `last_u` through the lag: forward
+    /// parts, then (from index MAX_THRUSTERS) reverse parts. The lag is linear, so their sum
+    /// is the thrust.
     thrust_split: [f64; THRUSTER_TERMS],
     running: Integrals,
     block_sum: Integrals,
@@ -274,7 +274,6 @@ impl ModelMonitor {
             cfg,
             n: thrusters.clamp(1, MAX_THRUSTERS),
             last_u: [0.0; MAX_THRUSTERS],
-            thrust: [0.0; MAX_THRUSTERS],
             thrust_split: [0.0; THRUSTER_TERMS],
             running: Integrals::default(),
             block_sum: Integrals::default(),
@@ -300,7 +299,6 @@ impl ModelMonitor {
     pub fn reset(&mut self, thrusters: usize) {
         self.n = thrusters.clamp(1, MAX_THRUSTERS);
         self.last_u = [0.0; MAX_THRUSTERS];
-        self.thrust = [0.0; MAX_THRUSTERS];
         self.thrust_split = [0.0; THRUSTER_TERMS];
         self.running = Integrals::default();
         self.block_sum = Integrals::default();
@@ -337,7 +335,6 @@ impl ModelMonitor {
             };
             for i in 0..n {
                 let u = self.last_u[i];
-                self.thrust[i] = keep * self.thrust[i] + (1.0 - keep) * u;
                 let (fwd, rev) = (u.max(0.0), u.min(0.0));
                 let j = MAX_THRUSTERS + i;
                 self.thrust_split[i] = keep * self.thrust_split[i] + (1.0 - keep) * fwd;
@@ -347,7 +344,8 @@ impl ModelMonitor {
             for a in 0..3 {
                 let mut bu = 0.0;
                 for i in 0..n {
-                    bu += effectiveness[(a, i)] * self.thrust[i];
+                    let thrust = self.thrust_split[i] + self.thrust_split[MAX_THRUSTERS + i];
+                    bu += effectiveness[(a, i)] * thrust;
                 }
                 r.predicted[a] += bu * dt;
                 r.damping[a] += rate[a] * dt;
@@ -411,8 +409,9 @@ impl ModelMonitor {
         if in_reference || self.recent.seconds < self.cfg.min_data_s {
             return None;
         }
+        let predicted = self.predicted_motion(n);
         let worst = (0..3)
-            .filter_map(|a| self.test_axis(a, n))
+            .filter_map(|a| self.test_axis(a, n, predicted))
             .max_by(|x, y| x.z.total_cmp(&y.z));
         match worst {
             Some(m) if m.z >= self.cfg.z && m.share >= self.cfg.min_share => {
@@ -429,7 +428,20 @@ impl ModelMonitor {
     /// Did the thrusters' effect on one axis change between the reference and the recent
     /// past? A Chow-type test: the fit with the thruster coefficients shared by both stretches
     /// (nuisance terms free in each) against separate fits.
-    fn test_axis(&self, axis: usize, n: usize) -> Option<Mismatch> {
+    /// The thrust-driven motion the model predicts on all axes in both stretches, beyond what
+    /// the nuisance terms could also explain: what a change is measured against.
+    fn predicted_motion(&self, n: usize) -> f64 {
+        let (k, p) = (2 * n, 2 * n + NUISANCE);
+        let mut predicted = 0.0;
+        for ax in 0..3 {
+            for s in [&self.reference.axes[ax], &self.recent.axes[ax]] {
+                predicted += residual(&s.a, &s.b_pred, s.pp, k, p).unwrap_or(0.0);
+            }
+        }
+        predicted
+    }
+
+    fn test_axis(&self, axis: usize, n: usize, predicted: f64) -> Option<Mismatch> {
         let (r0, r1) = (&self.reference.axes[axis], &self.recent.axes[axis]);
         // Thruster terms (forward and reverse parts), then the nuisance terms.
         let k = 2 * n;
@@ -460,13 +472,7 @@ impl ModelMonitor {
         let chi2 = gain / s2;
         let z = (chi2 - k as f64) / (2.0 * k as f64).sqrt();
         // The size of the change: the part noise alone would explain on average (k s^2) taken
-        // off, against the thrust-driven motion this axis and the others are predicted to have.
-        let mut predicted = 0.0;
-        for ax in 0..3 {
-            let (s0, s1) = (&self.reference.axes[ax], &self.recent.axes[ax]);
-            predicted += residual(&s0.a, &s0.b_pred, s0.pp, k, p).unwrap_or(0.0)
-                + residual(&s1.a, &s1.b_pred, s1.pp, k, p).unwrap_or(0.0);
-        }
+        // off, against the predicted thrust-driven motion.
         if predicted <= 0.0 {
             return None;
         }
