@@ -70,7 +70,16 @@ pub struct MonitorConfig {
     pub action: MismatchAction,
     /// Averaging block, s (default 0.1: 20 samples at 200 Hz).
     pub block_s: f64,
-    /// Control time after a swap that serves as the reference, s (default 10): how the model
+    /// The reference starts once the body rate (block mean, norm) has stayed below
+    /// `settle_rate_rad_s` for `settle_s` (defaults 0.5 rad/s, 1 s; a 20 deg pitch step of the
+    /// hot-swap experiment peaks at 0.57 rad/s for a fraction of a second). Why: after a
+    /// re-estimation that left the vehicle tumbling, the recovery's large, fast motion
+    /// (Coriolis coupling, saturated thrusters) fitted differently from ordinary manoeuvres,
+    /// and the monitor "found" a change in the model it had just learned and re-estimated
+    /// again (hot-swap experiment, silent run, on a loaded machine).
+    pub settle_rate_rad_s: f64,
+    pub settle_s: f64,
+    /// Control time after settling that serves as the reference, s (default 10): how the model
     /// fits this vehicle in closed loop when it is right, its own bias, the thrusters'
     /// asymmetry and whatever else it leaves out included.
     pub reference_s: f64,
@@ -101,6 +110,8 @@ impl Default for MonitorConfig {
         MonitorConfig {
             action: MismatchAction::Estimate,
             block_s: 0.1,
+            settle_rate_rad_s: 0.5,
+            settle_s: 1.0,
             reference_s: 10.0,
             window_s: 8.0,
             min_data_s: 4.0,
@@ -114,10 +125,16 @@ impl Default for MonitorConfig {
 
 impl MonitorConfig {
     /// (key, value, valid) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, bool); 8] {
+    pub fn checks(&self) -> [(&'static str, f64, bool); 10] {
         // block_s first: the others are compared with it, and a NaN must be named where it is.
         [
             ("monitor.block_s", self.block_s, self.block_s > 0.0),
+            (
+                "monitor.settle_rate_rad_s",
+                self.settle_rate_rad_s,
+                self.settle_rate_rad_s > 0.0,
+            ),
+            ("monitor.settle_s", self.settle_s, self.settle_s >= 0.0),
             (
                 "monitor.reference_s",
                 self.reference_s,
@@ -261,7 +278,9 @@ pub struct ModelMonitor {
     block_samples: u32,
     block_elapsed: f64,
     prev_mean: Option<Integrals>,
-    /// The first `reference_s` of control with this model: how it fits when it is right.
+    /// How long the vehicle has been settled before the reference began, s.
+    settled_s: f64,
+    /// The first `reference_s` of settled control with this model: how it fits when right.
     reference: Box<Stretch>,
     /// The recent past (forgetting), compared with the reference.
     recent: Box<Stretch>,
@@ -280,6 +299,7 @@ impl ModelMonitor {
             block_samples: 0,
             block_elapsed: 0.0,
             prev_mean: None,
+            settled_s: 0.0,
             reference: Box::default(),
             recent: Box::default(),
             failing_s: 0.0,
@@ -305,6 +325,7 @@ impl ModelMonitor {
         self.block_samples = 0;
         self.block_elapsed = 0.0;
         self.prev_mean = None;
+        self.settled_s = 0.0;
         *self.reference = Stretch::default();
         *self.recent = Stretch::default();
         self.failing_s = 0.0;
@@ -384,6 +405,15 @@ impl ModelMonitor {
         self.block_samples = 0;
         self.block_elapsed = 0.0;
         let prev = self.prev_mean.replace(mean)?;
+        if self.reference.seconds == 0.0 && self.settled_s < self.cfg.settle_s {
+            let rate = Vector3::from(mean.rate).norm();
+            self.settled_s = if rate < self.cfg.settle_rate_rad_s {
+                self.settled_s + block_s
+            } else {
+                0.0
+            };
+            return None;
+        }
         let mut d = mean;
         d.add_scaled(&prev, -1.0);
         let k = 2 * n;

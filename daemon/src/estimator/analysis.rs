@@ -25,9 +25,10 @@ pub struct RankReport {
     pub threshold: f64,
     /// Number of independently actuated motions.
     pub rank: usize,
-    /// Share (0..1) of each DOF's unit vector inside the actuated subspace, in DOF order.
+    /// Share (0..1) of each DOF's unit vector inside the actuated subspace, in DOF order
+    /// (diagnostic: below 1 means the DOF only moves together with another).
     pub dof_share: [f64; 6],
-    /// DOFs whose share reaches the configured minimum.
+    /// The DOFs the actuated motions are assigned to, by the configured priority.
     pub actuated: DofMask,
 }
 
@@ -109,14 +110,56 @@ pub fn rank_report(b: &DMatrix<f64>, std_err: &DMatrix<f64>, cfg: &EstimatorConf
     for (j, share) in dof_share.iter_mut().enumerate() {
         *share = significant.iter().map(|&k| u[(j, k)].powi(2)).sum::<f64>();
     }
-    let actuated = DofMask(std::array::from_fn(|j| dof_share[j] >= cfg.actuation_share));
+    let rank = significant.len();
+    let actuated = assign_dofs(&z, rank, threshold, top, &cfg.dof_priority);
     RankReport {
         singular_values,
         threshold,
-        rank: significant.len(),
+        rank,
         dof_share,
         actuated,
     }
+}
+
+/// The DOFs the `rank` actuated motions are assigned to: in `priority` order, each DOF whose
+/// row of `z` (standard-error units) is independent of the rows already taken, above the noise
+/// threshold, until `rank` are taken.
+///
+/// Why not "every DOF mostly inside the actuated subspace": when the subspace is not aligned
+/// with the axes (AMOUR-5 with its top thruster tilted 45 deg about x can only pitch while
+/// swaying), a DOF's share sits near any cut-off and flips between runs with the noise, and
+/// dropping pitch left the attitude controller unable to hold it. Taking a DOF needs the
+/// smallest singular value of the taken rows above the threshold; by interlacing that is at
+/// most the rank-th singular value of the whole matrix, so never more than `rank` are taken.
+fn assign_dofs(
+    z: &DMatrix<f64>,
+    rank: usize,
+    threshold: f64,
+    top: f64,
+    priority: &[Dof; 6],
+) -> DofMask {
+    let mut taken = DofMask::NONE;
+    for &dof in priority {
+        if taken.count() == rank {
+            break;
+        }
+        let mut trial = taken;
+        trial.0[dof.index()] = true;
+        let rows: Vec<usize> = Dof::ALL
+            .iter()
+            .filter(|d| trial.contains(**d))
+            .map(|d| d.index())
+            .collect();
+        // A direct SVD, not the Gram matrix: squaring would lift round-off of exactly-zero
+        // rows (noise-free nominal models, scaled by a tiny floor) above the threshold.
+        let sv = z.select_rows(rows.iter()).singular_values();
+        // Fewer thrusters than rows: the missing singular values are zero.
+        let smallest = if sv.len() < rows.len() { 0.0 } else { sv.min() };
+        if smallest > threshold && smallest > top * NUMERICAL_REL_TOL {
+            taken = trial;
+        }
+    }
+    taken
 }
 
 /// Allocation (N x 6): thruster commands per unit of desired motion in each DOF.
@@ -284,6 +327,106 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// AMOUR-5 with its top thruster T rotated 45 deg about x (unit mass and inertia): five
+    /// thrusters, rank 5, and pitch only comes with sway (T is the only one that pitches
+    /// differently from how it heaves, and it also sways).
+    fn amour5_top45() -> DMatrix<f64> {
+        let c = std::f64::consts::FRAC_1_SQRT_2;
+        DMatrix::from_row_slice(
+            6,
+            5,
+            &[
+                0.15 * c,
+                0.15,
+                -0.15,
+                0.0,
+                0.0, // roll
+                0.2 * c,
+                -0.2,
+                -0.2,
+                0.0,
+                0.0, // pitch
+                0.2 * c,
+                0.0,
+                0.0,
+                0.2,
+                -0.2, // yaw
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+                1.0, // surge
+                c,
+                0.0,
+                0.0,
+                0.0,
+                0.0, // sway
+                -c,
+                -1.0,
+                -1.0,
+                0.0,
+                0.0, // heave
+            ],
+        )
+    }
+
+    #[test]
+    fn coupled_dofs_go_to_the_controlled_ones_first_whatever_the_row_noise() {
+        let b = amour5_top45();
+        let cfg = EstimatorConfig::default();
+        // The pitch row's standard error from 1x to 30x the others' (a vehicle that swung
+        // during the pulses leaves more unexplained pitch): pitch's share of the actuated
+        // subspace falls, but it stays the DOF taken, sway the one left out.
+        for pitch_noise in [1.0, 3.0, 10.0, 30.0] {
+            let mut se = DMatrix::from_element(6, 5, 0.001);
+            se.row_mut(Dof::Pitch.index()).fill(0.001 * pitch_noise);
+            let r = rank_report(&b, &se, &cfg);
+            assert_eq!(r.rank, 5, "x{pitch_noise}");
+            assert_eq!(
+                r.actuated.names(),
+                vec!["roll", "pitch", "yaw", "surge", "heave"],
+                "x{pitch_noise}: shares {:?}",
+                r.dof_share
+            );
+            // The allocation reproduces the five exactly; sway follows as a side effect.
+            let ba = &b * allocation(&b, r.actuated, r.rank);
+            for dof in [Dof::Roll, Dof::Pitch, Dof::Yaw, Dof::Surge, Dof::Heave] {
+                let j = dof.index();
+                assert!((ba[(j, j)] - 1.0).abs() < 1e-9, "{dof:?}: {}", ba[(j, j)]);
+            }
+        }
+        // At 30x the old rule (share >= 0.5) would have dropped pitch: the share is low.
+        let mut se = DMatrix::from_element(6, 5, 0.001);
+        se.row_mut(Dof::Pitch.index()).fill(0.03);
+        let r = rank_report(&b, &se, &cfg);
+        assert!(r.dof_share[Dof::Pitch.index()] < 0.5, "{:?}", r.dof_share);
+        // A vehicle that would rather sway than pitch says so.
+        let sway_first = EstimatorConfig {
+            dof_priority: [
+                Dof::Roll,
+                Dof::Sway,
+                Dof::Yaw,
+                Dof::Heave,
+                Dof::Surge,
+                Dof::Pitch,
+            ],
+            ..cfg
+        };
+        let r = rank_report(&b, &DMatrix::from_element(6, 5, 0.001), &sway_first);
+        assert_eq!(
+            r.actuated.names(),
+            vec!["roll", "yaw", "surge", "sway", "heave"]
+        );
+    }
+
+    #[test]
+    fn a_priority_that_misses_a_dof_is_refused() {
+        let mut cfg = EstimatorConfig::default();
+        cfg.dof_priority[5] = Dof::Roll;
+        let e = cfg.validate().unwrap_err();
+        assert_eq!(e.key, "dof_priority");
     }
 
     #[test]

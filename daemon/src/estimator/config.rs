@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::dof::Dof;
 use super::excitation::Excitation;
 
 /// Which estimator produces the model.
@@ -64,8 +65,13 @@ pub struct EstimatorConfig {
     /// A singular value counts when it exceeds this factor times the largest singular value a
     /// pure-noise matrix of the same size would have (sqrt(6) + sqrt(N) in standard errors).
     pub rank_threshold: f64,
-    /// A DOF is actuated when this share of its unit vector lies in the actuated subspace.
-    pub actuation_share: f64,
+    /// Which DOFs the actuated motions are assigned to, most wanted first. When the thrusters
+    /// make fewer independent motions than DOFs they touch (a tilted thruster couples pitch and
+    /// sway, say), each DOF in this order is taken if its row is independent of those already
+    /// taken, above the noise, until the rank is reached. The default keeps what the attitude
+    /// and depth controller holds (attitude, then depth) ahead of surge and sway, which then
+    /// move as a side effect. Must name each of the six once.
+    pub dof_priority: [Dof; 6],
     /// A thruster "responds" when its column's chi-square (6 dof) exceeds this value
     /// (22.46 = the 99.9 % quantile).
     pub response_chi2: f64,
@@ -93,7 +99,14 @@ impl Default for EstimatorConfig {
             baseline_samples: 20,
             detrend: false,
             rank_threshold: 1.5,
-            actuation_share: 0.5,
+            dof_priority: [
+                Dof::Roll,
+                Dof::Pitch,
+                Dof::Yaw,
+                Dof::Heave,
+                Dof::Surge,
+                Dof::Sway,
+            ],
             response_chi2: 22.46,
             dead_min_command: 0.95,
             diagnosis_z: 4.0,
@@ -185,12 +198,13 @@ impl EstimatorConfig {
             self.rank_threshold,
             "must be > 0",
         )?;
-        check(
-            f(self.actuation_share) && self.actuation_share > 0.0 && self.actuation_share < 1.0,
-            "actuation_share",
-            self.actuation_share,
-            "must be in (0, 1)",
-        )?;
+        if Dof::ALL.iter().any(|d| !self.dof_priority.contains(d)) {
+            return Err(ConfigError {
+                key: "dof_priority",
+                value: format!("{:?}", self.dof_priority),
+                why: "must name each of roll, pitch, yaw, surge, sway, heave once",
+            });
+        }
         check(
             f(self.response_chi2) && self.response_chi2 > 0.0,
             "response_chi2",

@@ -1,12 +1,12 @@
 //! The six rigid-body degrees of freedom, in the order every model matrix uses.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Degrees of freedom in model row order: rotations first (body x, y, z), then translations.
 ///
 /// Rows 0-2 of an effectiveness matrix are angular accelerations (rad/s^2), rows 3-5 linear
 /// accelerations (m/s^2), per unit thruster command. Body frame: x forward, y starboard, z down.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Dof {
     Roll,

@@ -187,7 +187,8 @@ fn probe_config(daemon: &Path, text: &str) -> bool {
         .is_ok_and(|s| s.success())
 }
 
-/// A folder under the system temp dir, removed on drop.
+/// A folder under the system temp dir (the children's logs and config), removed on drop
+/// unless `THRUSTERCTL_KEEP_LOGS` is set: then its path is printed for a post-mortem.
 struct TempDir {
     path: PathBuf,
 }
@@ -207,6 +208,10 @@ impl TempDir {
 
 impl Drop for TempDir {
     fn drop(&mut self) {
+        if std::env::var_os("THRUSTERCTL_KEEP_LOGS").is_some() {
+            eprintln!("kept {}", self.path.display());
+            return;
+        }
         let _ = std::fs::remove_dir_all(&self.path);
     }
 }
