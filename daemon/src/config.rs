@@ -172,6 +172,17 @@ impl DaemonConfig {
         let m = &self.machine;
         for (key, v, ok) in [
             ("machine.noise_s", m.noise_s, m.noise_s > 0.0),
+            ("machine.level_max_s", m.level_max_s, m.level_max_s >= 0.0),
+            (
+                "machine.level_tilt_deg",
+                m.level_tilt_deg,
+                m.level_tilt_deg > 0.0 && m.level_tilt_deg < 90.0,
+            ),
+            (
+                "machine.level_hold_s",
+                m.level_hold_s,
+                m.level_hold_s >= 0.0,
+            ),
             ("machine.pulse_s", m.pulse_s, m.pulse_s > 0.0),
             // Before settle_max_s, which is compared with it: a NaN here is named here.
             (

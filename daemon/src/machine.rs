@@ -70,6 +70,16 @@ pub struct MachineConfig {
     /// Rest period for the noise levels, s (default 1.0: 200 samples at 200 Hz put the sigma
     /// within ~5 %).
     pub noise_s: f64,
+    /// An estimation that starts while the daemon controls (a reconfiguration, a mismatch, a
+    /// request) first levels the vehicle with the model in force, for at most this long, s
+    /// (default 5; 0 = pulse from wherever the vehicle is). Why: started mid-manoeuvre, the
+    /// "rest" the noise is measured in was a swinging vehicle, and the pulses then tumbled
+    /// AMOUR-5 past 150 deg in the hot-swap experiment.
+    pub level_max_s: f64,
+    /// Levelling ends once the tilt stayed below `level_tilt_deg` for `level_hold_s`
+    /// (defaults 5 deg, 1 s).
+    pub level_tilt_deg: f64,
+    pub level_hold_s: f64,
     /// Length of one excitation pulse, s (default 0.1; the paper used 1.0). Short pulses keep
     /// the vehicle in the regime where the response is still the thrust's, not the drag's: on a
     /// BlueROV2-class body quadratic roll/yaw damping already takes ~5 % off the rate after
@@ -105,6 +115,9 @@ impl Default for MachineConfig {
     fn default() -> Self {
         MachineConfig {
             noise_s: 1.0,
+            level_max_s: 5.0,
+            level_tilt_deg: 5.0,
+            level_hold_s: 1.0,
             pulse_s: 0.1,
             settle_min_s: 0.15,
             settle_max_s: 1.0,
@@ -245,6 +258,11 @@ pub struct StatusSnapshot {
 }
 
 /// What to go back to after a fault.
+struct Levelling {
+    target: Target,
+    level_since_ns: Option<u64>,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Resume {
     Idle,
@@ -272,6 +290,8 @@ pub struct Machine {
     est: Option<Estimator>,
     last_estimate: Option<Estimate>,
     quiet_since_ns: Option<u64>,
+    /// Levelling before the noise measurement: the attitude held, and since when it is level.
+    levelling: Option<Levelling>,
     resume: Resume,
     good_samples: u32,
     events: Vec<Event>,
@@ -303,6 +323,7 @@ impl Machine {
             est: None,
             last_estimate: None,
             quiet_since_ns: None,
+            levelling: None,
             resume: Resume::Idle,
             good_samples: 0,
             events: Vec::new(),
@@ -395,6 +416,7 @@ impl Machine {
                 }
                 Command::neutral(self.n)
             }
+            State::MeasureNoise if self.levelling.is_some() => self.level_tick(s, &gyro, dt),
             State::MeasureNoise => {
                 let motion = motion_accel(&accel, &self.attitude.attitude());
                 self.noise.push(&s.gyro, &[motion.x, motion.y, motion.z]);
@@ -598,6 +620,9 @@ impl Machine {
         let from = self.state;
         self.state = to;
         self.text = why.to_string();
+        if to != State::MeasureNoise {
+            self.levelling = None;
+        }
         if let Some(t) = self.last_t_ns {
             self.phase_start_ns = t;
         }
@@ -646,10 +671,77 @@ impl Machine {
         self.noise = NoiseMeter::new();
         self.est = None;
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
-        self.transition(
-            State::MeasureNoise,
-            &format!("{why}: measuring noise at rest"),
-        );
+        // Controlling with a model: level the vehicle first (see MachineConfig::level_max_s).
+        // A reconfiguration while levelling levels on (the vehicle is no more at rest).
+        self.levelling = ((self.state == State::Active || self.levelling.is_some())
+            && self.model.is_some()
+            && self.setup.machine.level_max_s > 0.0)
+            .then(|| Levelling {
+                target: Target {
+                    attitude: UnitQuaternion::from_euler_angles(
+                        0.0,
+                        0.0,
+                        self.attitude.attitude().euler_angles().2,
+                    ),
+                    depth: self.target.and_then(|t| t.depth),
+                },
+                level_since_ns: None,
+            });
+        let then = if self.levelling.is_some() {
+            "levelling, then measuring noise at rest"
+        } else {
+            "measuring noise at rest"
+        };
+        self.transition(State::MeasureNoise, &format!("{why}: {then}"));
+    }
+
+    /// Levelling before the noise measurement: the controller holds level at the heading the
+    /// estimation started with (no monitor: the model is about to be replaced). Ends, thrusters
+    /// neutral and the noise clock restarted, once level for `level_hold_s` or after
+    /// `level_max_s` whatever the tilt.
+    fn level_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
+        let elapsed = self.elapsed_s(s.t_ns);
+        let (Some(model), Some(lev)) = (self.model.as_ref(), self.levelling.as_mut()) else {
+            self.levelling = None;
+            return Command::neutral(self.n);
+        };
+        let attitude = self.attitude.attitude();
+        let meas = Measured {
+            attitude,
+            rate: gyro - self.attitude.gyro_bias(),
+            depth: s.depth,
+        };
+        let up = attitude * Vector3::z();
+        let tilt_deg = up.z.clamp(-1.0, 1.0).acos().to_degrees();
+        let m = &self.setup.machine;
+        if tilt_deg <= m.level_tilt_deg {
+            lev.level_since_ns.get_or_insert(s.t_ns);
+        } else {
+            lev.level_since_ns = None;
+        }
+        let level_for = lev
+            .level_since_ns
+            .map_or(0.0, |t| s.t_ns.saturating_sub(t) as f64 * 1e-9);
+        if level_for >= m.level_hold_s || elapsed >= m.level_max_s {
+            self.levelling = None;
+            self.controller.reset();
+            self.phase_start_ns = s.t_ns;
+            self.text = if level_for >= m.level_hold_s {
+                "level: measuring noise at rest".to_string()
+            } else {
+                format!("still {tilt_deg:.0} deg tilted after levelling: measuring noise")
+            };
+            return Command::neutral(self.n);
+        }
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Controlling;
+        let n = self.n.min(model.thrusters());
+        let target = lev.target;
+        self.last_desired = self
+            .controller
+            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
+        finish(&mut cmd, self.setup.machine.deadband);
+        cmd
     }
 
     fn start_pulse(&mut self, t_ns: u64) -> Command {

@@ -380,3 +380,53 @@ fn a_new_operating_point_is_not_a_mismatch() {
     assert!(seen.is_empty(), "false alarm {seen:?}");
     assert_eq!(run.machine.state(), State::Active);
 }
+
+/// An estimation requested while the daemon holds a 20 degree pitch first levels the vehicle
+/// with the model in force (thrusters driven, state MeasureNoise), then measures the noise with
+/// the thrusters neutral and the vehicle level and at rest, then pulses; without levelling
+/// (`level_max_s = 0`) the thrusters go neutral at once, with the vehicle still pitched.
+#[test]
+fn an_estimation_started_mid_manoeuvre_levels_the_vehicle_first() {
+    for level in [true, false] {
+        let mut run = Run::new("amour5", NoisePreset::Realistic, 3);
+        if !level {
+            let mut setup = MachineSetup {
+                thrusters: 5,
+                ..MachineSetup::default()
+            };
+            setup.machine.deadband = 0.05;
+            setup.machine.level_max_s = 0.0;
+            run.machine = Machine::new(setup);
+        }
+        run.run_for(1.0);
+        run.estimate();
+        pitch_steps(&mut run, 6.0, 10.0, [20.0, 20.0]);
+        let pitch = run.sim.roll_pitch_yaw()[1].to_degrees();
+        assert!(pitch > 12.0, "holding the pitch: {pitch:.1} deg");
+        run.machine.on_request(Request::Estimate).unwrap();
+        assert_eq!(run.machine.state(), State::MeasureNoise);
+        // Through the noise measurement: the largest tilt once the thrusters went neutral,
+        // and whether they were driven before.
+        let (mut driven, mut tilt_at_rest) = (false, 0.0f64);
+        while run.machine.state() == State::MeasureNoise {
+            run.tick();
+            if run.last_mode == Mode::Controlling {
+                driven = true;
+            } else {
+                let [r, p, _] = run.sim.roll_pitch_yaw();
+                tilt_at_rest = tilt_at_rest.max(r.abs().max(p.abs()).to_degrees());
+            }
+        }
+        assert_eq!(run.machine.state(), State::Pulse);
+        if level {
+            assert!(driven, "levelling drives the thrusters");
+            assert!(
+                tilt_at_rest < 8.0,
+                "noise measured {tilt_at_rest:.1} deg from level"
+            );
+        } else {
+            assert!(!driven);
+            assert!(tilt_at_rest > 10.0, "{tilt_at_rest:.1} deg");
+        }
+    }
+}
