@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::attitude::{AttitudeConfig, AttitudeFilter};
 use crate::controller::{Controller, ControllerConfig, Measured, Target};
+use crate::estimator::power::pulse_power;
 use crate::estimator::response::motion_accel;
 use crate::estimator::{
     Estimate, Estimator, EstimatorConfig, NoiseLevels, NoiseMeter, StopDecision,
@@ -424,7 +425,26 @@ impl Machine {
                 if elapsed >= self.setup.machine.noise_s && self.noise.samples() >= 10 {
                     let levels = self.noise.levels();
                     self.levels = Some(levels);
-                    let mut est = Estimator::new(self.setup.estimator.clone(), self.n, levels);
+                    let mut cfg = self.setup.estimator.clone();
+                    if let Some(p) = self
+                        .model
+                        .as_ref()
+                        .filter(|_| cfg.pulse_snr > 0.0)
+                        .and_then(|m| {
+                            pulse_power(
+                                &m.effectiveness,
+                                self.n,
+                                &levels,
+                                self.setup.machine.pulse_s,
+                                cfg.pulse_snr,
+                                cfg.min_power,
+                                cfg.initial_power,
+                            )
+                        })
+                    {
+                        cfg.initial_power = p;
+                    }
+                    let mut est = Estimator::new(cfg, self.n, levels);
                     if let Some(nominal) = self
                         .model
                         .as_ref()
@@ -930,6 +950,7 @@ impl Machine {
         let gravity_body = attitude.inverse() * Vector3::z();
         let mismatch = self.monitor.observe(
             dt,
+            attitude.angle_to(&target.attitude),
             &meas.rate,
             &gravity_body,
             &model.effectiveness,

@@ -71,13 +71,15 @@ pub struct MonitorConfig {
     /// Averaging block, s (default 0.1: 20 samples at 200 Hz).
     pub block_s: f64,
     /// The reference starts once the body rate (block mean, norm) has stayed below
-    /// `settle_rate_rad_s` for `settle_s` (defaults 0.5 rad/s, 1 s; a 20 deg pitch step of the
-    /// hot-swap experiment peaks at 0.57 rad/s for a fraction of a second). Why: after a
-    /// re-estimation that left the vehicle tumbling, the recovery's large, fast motion
-    /// (Coriolis coupling, saturated thrusters) fitted differently from ordinary manoeuvres,
-    /// and the monitor "found" a change in the model it had just learned and re-estimated
-    /// again (hot-swap experiment, silent run, on a loaded machine).
+    /// `settle_rate_rad_s` and the attitude error below `settle_error_deg` for `settle_s`
+    /// (defaults 0.5 rad/s, 10 deg, 1 s; a 20 deg pitch step of the hot-swap experiment peaks
+    /// at 0.57 rad/s for a fraction of a second). Why: after a re-estimation the vehicle may
+    /// be far from its setpoint (pulses leave the heading up to 100 deg off), and the way
+    /// back (large, saturating commands, Coriolis coupling) fitted differently from ordinary
+    /// manoeuvres: the monitor "found" a change in the model it had just learned and
+    /// re-estimated again (hot-swap experiment, silent run: 3 of 8 seeds with neither gate).
     pub settle_rate_rad_s: f64,
+    pub settle_error_deg: f64,
     pub settle_s: f64,
     /// Control time after settling that serves as the reference, s (default 10): how the model
     /// fits this vehicle in closed loop when it is right, its own bias, the thrusters'
@@ -111,6 +113,7 @@ impl Default for MonitorConfig {
             action: MismatchAction::Estimate,
             block_s: 0.1,
             settle_rate_rad_s: 0.5,
+            settle_error_deg: 10.0,
             settle_s: 1.0,
             reference_s: 10.0,
             window_s: 8.0,
@@ -125,7 +128,7 @@ impl Default for MonitorConfig {
 
 impl MonitorConfig {
     /// (key, value, valid) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, bool); 10] {
+    pub fn checks(&self) -> [(&'static str, f64, bool); 11] {
         // block_s first: the others are compared with it, and a NaN must be named where it is.
         [
             ("monitor.block_s", self.block_s, self.block_s > 0.0),
@@ -133,6 +136,11 @@ impl MonitorConfig {
                 "monitor.settle_rate_rad_s",
                 self.settle_rate_rad_s,
                 self.settle_rate_rad_s > 0.0,
+            ),
+            (
+                "monitor.settle_error_deg",
+                self.settle_error_deg,
+                self.settle_error_deg > 0.0,
             ),
             ("monitor.settle_s", self.settle_s, self.settle_s >= 0.0),
             (
@@ -280,6 +288,8 @@ pub struct ModelMonitor {
     prev_mean: Option<Integrals>,
     /// How long the vehicle has been settled before the reference began, s.
     settled_s: f64,
+    /// Largest attitude error in the current block, rad.
+    block_max_err: f64,
     /// The first `reference_s` of settled control with this model: how it fits when right.
     reference: Box<Stretch>,
     /// The recent past (forgetting), compared with the reference.
@@ -300,6 +310,7 @@ impl ModelMonitor {
             block_elapsed: 0.0,
             prev_mean: None,
             settled_s: 0.0,
+            block_max_err: 0.0,
             reference: Box::default(),
             recent: Box::default(),
             failing_s: 0.0,
@@ -326,17 +337,20 @@ impl ModelMonitor {
         self.block_elapsed = 0.0;
         self.prev_mean = None;
         self.settled_s = 0.0;
+        self.block_max_err = 0.0;
         *self.reference = Stretch::default();
         *self.recent = Stretch::default();
         self.failing_s = 0.0;
     }
 
-    /// One control tick: `dt` since the last one, the bias-free body rate, the gravity direction
-    /// in the body frame, the model's effectiveness (6 x N) and the command sent now. The
-    /// command in force over `dt` is the previous one. A verdict when the model fails.
+    /// One control tick: `dt` since the last one, the attitude error (angle to the setpoint,
+    /// rad), the bias-free body rate, the gravity direction in the body frame, the model's
+    /// effectiveness (6 x N) and the command sent now. The command in force over `dt` is the
+    /// previous one. A verdict when the model fails.
     pub fn observe(
         &mut self,
         dt: f64,
+        error_rad: f64,
         rate: &Vector3<f64>,
         gravity_body: &Vector3<f64>,
         effectiveness: &DMatrix<f64>,
@@ -381,6 +395,7 @@ impl ModelMonitor {
             self.block_elapsed += dt;
         }
         self.running.rate = [rate.x, rate.y, rate.z];
+        self.block_max_err = self.block_max_err.max(error_rad.abs());
         let snapshot = self.running;
         self.block_sum.add_scaled(&snapshot, 1.0);
         self.block_samples += 1;
@@ -401,13 +416,16 @@ impl ModelMonitor {
         let mut mean = Integrals::default();
         mean.add_scaled(&self.block_sum, 1.0 / f64::from(self.block_samples.max(1)));
         let block_s = self.block_elapsed;
+        let max_err = std::mem::take(&mut self.block_max_err);
         self.block_sum = Integrals::default();
         self.block_samples = 0;
         self.block_elapsed = 0.0;
         let prev = self.prev_mean.replace(mean)?;
         if self.reference.seconds == 0.0 && self.settled_s < self.cfg.settle_s {
             let rate = Vector3::from(mean.rate).norm();
-            self.settled_s = if rate < self.cfg.settle_rate_rad_s {
+            let settled = rate < self.cfg.settle_rate_rad_s
+                && max_err.to_degrees() < self.cfg.settle_error_deg;
+            self.settled_s = if settled {
                 self.settled_s + block_s
             } else {
                 0.0
@@ -616,7 +634,7 @@ mod tests {
             w += (k[0] * thrust[0] + k[1] * thrust[1] - 1.5 * w) * dt;
             t += dt;
             let meas = Vector3::new(0.0, 0.0, w + noise * gauss());
-            if let Some(m) = mon.observe(dt, &meas, &Vector3::z(), &b, &next) {
+            if let Some(m) = mon.observe(dt, 0.0, &meas, &Vector3::z(), &b, &next) {
                 fired.push(t);
                 assert_eq!(m.axis, 2);
                 mon.reset(2);
@@ -661,7 +679,7 @@ mod tests {
         for i in 0..10_000 {
             let u = if i < 5000 { 1.0 } else { -1.0 };
             assert!(mon
-                .observe(0.005, &Vector3::x(), &Vector3::z(), &b, &[u])
+                .observe(0.005, 0.0, &Vector3::x(), &Vector3::z(), &b, &[u])
                 .is_none());
         }
     }

@@ -430,3 +430,59 @@ fn an_estimation_started_mid_manoeuvre_levels_the_vehicle_first() {
         }
     }
 }
+
+/// With the declared geometry as the model in force, the first pulse is only as strong as the
+/// measured noise needs: with a realistic IMU the 0.2 floor (the vehicle tilts less than half
+/// as far and the model comes out better, measured 17 vs 43 deg and 0.12 vs 0.16 error by
+/// `cargo run --release -p thrusterd --example pulse_power_study`), at the paper's noise the
+/// configured 0.8 as before.
+#[test]
+fn with_a_declared_geometry_the_pulses_are_as_strong_as_the_noise_needs() {
+    for (noise, want_power) in [(NoisePreset::Realistic, 0.2), (NoisePreset::Paper, 0.8)] {
+        let v = vehicle("amour5");
+        let sensors = SensorConfig {
+            rate_hz: 200.0,
+            noise,
+            ..SensorConfig::default()
+        };
+        let mut setup = MachineSetup {
+            thrusters: 5,
+            geometry: Some(Geometry {
+                positions: v.thrusters.iter().map(|t| t.position_m).collect(),
+                directions: v.thrusters.iter().map(|t| t.direction).collect(),
+            }),
+            ..MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        let mut run = Run {
+            machine: Machine::new(setup),
+            sim: Simulator::new(v, sensors, 2).unwrap(),
+            last_mode: Mode::Neutral,
+            max_abs_cmd: 0.0,
+        };
+        run.run_for(1.0);
+        run.machine.on_request(Request::Estimate).unwrap();
+        let mut tilt = 0.0f64;
+        let mut power = None;
+        while run.machine.state() != State::Active {
+            run.tick();
+            if run.machine.state() == State::Pulse {
+                power.get_or_insert(run.machine.status().power);
+            }
+            let [r, p, _] = run.sim.roll_pitch_yaw();
+            tilt = tilt.max(r.abs().max(p.abs()).to_degrees());
+            assert!(run.sim.time_s() < 120.0, "no model");
+        }
+        let power = power.expect("pulsed");
+        assert!(
+            (power - want_power).abs() < 1e-9,
+            "{noise:?}: power {power}"
+        );
+        let e_rot = rel_err(&run.machine.model().unwrap().effectiveness, &run.truth(), 0);
+        println!("{noise:?}: power {power}, tilt {tilt:.0} deg, error {e_rot:.3}");
+        if want_power < 0.5 {
+            assert!(tilt < 25.0, "tilt {tilt:.0} deg");
+            assert!(e_rot < 0.16, "rotation error {e_rot:.3}");
+        }
+    }
+}

@@ -37,6 +37,15 @@ pub struct EstimatorConfig {
     /// First pulse strength as a fraction of full command (default 0.8; the paper: 0.5).
     /// Stronger pulses reach the error bound in fewer pulses; 0.1 s pulses keep the motion small.
     pub initial_power: f64,
+    /// With a model in force (declared geometry, or the one being replaced), the first pulse is
+    /// only as strong as it needs to be: the model's typical thruster should change the body
+    /// rate by `pulse_snr` gyro standard deviations in one pulse (default 20: at the paper's
+    /// noise that asks for more than `initial_power`, which then stays the start; 12 lowered
+    /// it on AMOUR-5 top45 and doubled the estimation time), but never below `min_power`
+    /// (default 0.2). 0 turns this off: every estimation starts at
+    /// `initial_power`. See estimator/power.rs for why.
+    pub pulse_snr: f64,
+    pub min_power: f64,
     /// Increase after a pulse that kept no sample (paper: 0.1).
     pub power_step: f64,
     /// Cap on the pulse strength (paper: 1.0; the paper's max() is meant as min()).
@@ -89,6 +98,8 @@ impl Default for EstimatorConfig {
             excitation: Excitation::Orthogonal,
             k_sigma: 3.0,
             initial_power: 0.8,
+            pulse_snr: 20.0,
+            min_power: 0.2,
             power_step: 0.1,
             max_power: 1.0,
             target_rel_err: 0.1,
@@ -155,6 +166,18 @@ impl EstimatorConfig {
             "max_power",
             self.max_power,
             "must be in [initial_power, 1]",
+        )?;
+        check(
+            f(self.pulse_snr) && self.pulse_snr >= 0.0,
+            "pulse_snr",
+            self.pulse_snr,
+            "must be >= 0 (0: off)",
+        )?;
+        check(
+            f(self.min_power) && self.min_power > 0.0 && self.min_power <= 1.0,
+            "min_power",
+            self.min_power,
+            "must be in (0, 1]",
         )?;
         check(
             f(self.power_step) && self.power_step >= 0.0,

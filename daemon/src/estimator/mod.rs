@@ -6,6 +6,7 @@
 //! - [`forward`]: the unbiased regression y = B u (normal equations, incremental).
 //! - [`paper`]: Doniec, Detweiler and Rus's S * A = T.
 //! - [`analysis`]: rank, actuated DOFs, allocation, thruster diagnosis.
+//! - [`power`]: the first pulse's strength from a model in force and the measured noise.
 //! - [`session`]: one estimation run tying these together, with power escalation and the stop.
 
 pub mod analysis;
@@ -16,6 +17,7 @@ pub mod forward;
 pub mod linalg;
 pub mod noise;
 pub mod paper;
+pub mod power;
 pub mod response;
 pub mod session;
 

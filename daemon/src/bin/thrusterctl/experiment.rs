@@ -386,6 +386,8 @@ struct RunOutput {
     /// Status changes: (t, state, text).
     notes: Vec<(f64, String, String)>,
     mismatch_at: Option<f64>,
+    /// Mismatch warnings in the daemon's log.
+    mismatch_reports: usize,
     /// First estimation pulse after the scenario's change.
     reestimate_at: Option<f64>,
     truth_changes: Vec<f64>,
@@ -622,7 +624,13 @@ fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> {
             std::thread::sleep(Duration::from_micros(200));
         }
     }
-    // The monitor's findings also go to the daemon's log.
+    // The monitor's findings also go to the daemon's log, one warning each: counted there,
+    // since a status message can be overtaken at 50x real time.
+    let mismatch_reports = session
+        .daemon_log()
+        .lines()
+        .filter(|l| l.contains("WARN") && l.contains("model mismatch"))
+        .count();
     if mismatch_at.is_none() {
         if let Some(line) = session
             .daemon_log()
@@ -644,6 +652,7 @@ fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> {
         swaps,
         notes,
         mismatch_at,
+        mismatch_reports,
         reestimate_at,
         truth_changes,
         activity,
@@ -745,6 +754,7 @@ fn common(out: &RunOutput) -> Value {
             "thrust_activity_per_s": num(activity.mean),
         },
         "monitor_mismatch_at_s": opt(out.mismatch_at),
+        "monitor_mismatch_reports": out.mismatch_reports,
         "model_swaps": out.swaps.iter().map(|s| json!({"t_s": num(s.t), "version": s.version, "source": s.source})).collect::<Vec<_>>(),
         "status_changes": out.notes.len(),
         "vehicle_samples_scored": out.rows.len(),
