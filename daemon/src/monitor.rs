@@ -15,8 +15,8 @@
 //!
 //! No model is exact: a learned one carries ~10 % bias, the thrusters are asymmetric, the
 //! closed loop feeds sensor noise back into the commands. So the monitor does not ask "is the
-//! model wrong" but "did the thrusters change": the first `reference_s` of control after a swap
-//! is the reference, and the recent past (forgetting, `window_s`) is compared with it by a
+//! model wrong" but "did the thrusters change": the first `reference_s` of settled control
+//! after a swap (see `settle_s`) is the reference, and the recent past (forgetting, `window_s`) is compared with it by a
 //! Chow-type test: the fit with the thruster terms shared by both stretches against separate
 //! fits, as a z-score of its chi-square, plus a size test (the change as a share of the
 //! thrust-driven motion the model predicts). Both must hold for `confirm_s`.
