@@ -63,6 +63,11 @@ pub struct RuntimeSection {
     pub spin_us: u64,
     /// Load the saved model at start (default true).
     pub load_model: bool,
+    /// After a crash while controlling or estimating (the session marker in `state_dir` was
+    /// left behind), hold attitude with the saved model as soon as the IMU is up (default
+    /// true: a vehicle in the water must not drift). false: start idle whatever happened,
+    /// e.g. on a bench or where an operator must confirm.
+    pub resume_after_crash: bool,
 }
 
 impl Default for RuntimeSection {
@@ -73,6 +78,7 @@ impl Default for RuntimeSection {
             status_period_ms: 100,
             spin_us: 0,
             load_model: true,
+            resume_after_crash: true,
         }
     }
 }

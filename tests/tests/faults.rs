@@ -765,3 +765,58 @@ fn the_shipped_hw_watchdog_is_what_the_neutral_target_relies_on() {
         "watchdog_ms = {ms} cannot give neutral within {NEUTRAL_WITHIN:?}"
     );
 }
+
+/// `runtime.resume_after_crash = false`: a daemon restarted after a kill -9 while controlling
+/// loads the saved model but stays idle, with neutral thrust, and says why in its log.
+#[test]
+fn with_resume_after_crash_off_a_restarted_daemon_stays_idle() {
+    let world = World::new("nores");
+    let op = Operator::new(&world);
+    let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
+    let mut daemon = world.daemon(&["--estimate"]);
+    let mut sim = world.sim(
+        "amour5",
+        &["--noise", "paper", "--lockstep", "--duration", "100000"],
+    );
+    op.wait_status(LONG, |s| {
+        state(s) == DaemonState::Active && s.model_version >= 1
+    })
+    .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+    kill9(&mut daemon);
+
+    let cfg = world.path("noresume.toml");
+    std::fs::write(&cfg, "[runtime]\nresume_after_crash = false\n").unwrap();
+    drain(&op.status);
+    let mut daemon2 = world.daemon(&["--config", cfg.to_str().unwrap()]);
+    let idle = op
+        .wait_status(LONG, |s| {
+            state(s) == DaemonState::Idle && s.model_version >= 1 && s.samples > 200
+        })
+        .unwrap_or_else(|| panic!("not idle with the model\n{}", daemon2.log_text()));
+    // A second of samples answered: never a Controlling command, never Active.
+    drain(&thrust);
+    let end = Instant::now() + Duration::from_secs(1);
+    while Instant::now() < end {
+        for c in drain(&thrust) {
+            assert_eq!(c.mode(), Ok(ThrustMode::Neutral), "{c:?}");
+        }
+        for s in drain(&op.status) {
+            assert_eq!(state(&s), DaemonState::Idle, "{}", daemon2.log_text());
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let log = daemon2.log_text();
+    assert!(log.contains("resume_after_crash = false"), "{log}");
+    println!(
+        "restart with resume_after_crash = false: Idle with model v{} after {} samples",
+        idle.model_version, idle.samples
+    );
+    assert!(daemon2.stop().success(), "{log}");
+    assert!(sim.stop().success());
+    drop(thrust);
+    drop(op);
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}

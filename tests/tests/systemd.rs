@@ -66,3 +66,34 @@ fn ready_watchdog_status_and_stopping_reach_systemd() {
     let status = daemon.wait_timeout(Duration::from_secs(5)).expect("exits");
     assert!(status.success());
 }
+
+/// The shipped units' hardening as `systemd-analyze security` scores it (offline: the unit
+/// files themselves, no running systemd needed). Exposure 0 = locked down, 10 = unprotected;
+/// measured 1.5 for thrusterd (no devices, no network, Unix sockets only) and 2.5 for
+/// thruster-hw (it keeps device access for sysfs PWM, IIO and the MAVLink serial/UDP link).
+/// The bounds catch a hardening line lost in an edit.
+#[test]
+fn the_units_pass_systemd_analyze_security() {
+    for (unit, max) in [("thrusterd.service", 2.0), ("thruster-hw.service", 3.0)] {
+        let path = system_tests::workspace().join("config/systemd").join(unit);
+        let out = std::process::Command::new("systemd-analyze")
+            .args(["security", "--offline=yes", "--no-pager"])
+            .arg(&path)
+            .output()
+            .expect("systemd-analyze runs (Debian package systemd)");
+        let text = String::from_utf8_lossy(&out.stdout);
+        let line = text
+            .lines()
+            .find(|l| l.contains("Overall exposure level"))
+            .unwrap_or_else(|| panic!("no exposure level for {unit}: {text}"));
+        // "→ Overall exposure level for thrusterd.service: 1.5 OK 🙂"
+        let level: f64 = line
+            .rsplit(": ")
+            .next()
+            .and_then(|s| s.split_whitespace().next())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("unparsable: {line}"));
+        println!("{unit}: exposure {level}");
+        assert!(level <= max, "{unit}: exposure {level} > {max}\n{text}");
+    }
+}

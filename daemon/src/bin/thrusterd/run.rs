@@ -538,6 +538,10 @@ impl Daemon {
         let (mut session, previous) = Session::open(&self.cfg.runtime.state_dir);
         let resume = match previous {
             Some(Intent::Hold) if self.pending_estimate => Intent::Hold,
+            Some(Intent::Hold) if !self.cfg.runtime.resume_after_crash => {
+                warn!("the previous thrusterd did not stop cleanly while controlling; runtime.resume_after_crash = false: idle");
+                Intent::Idle
+            }
             Some(Intent::Hold) if self.machine.model().is_some() => {
                 warn!("the previous thrusterd did not stop cleanly while controlling: resuming control with the saved model");
                 self.pending_hold = true;
