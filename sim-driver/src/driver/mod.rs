@@ -41,6 +41,8 @@ use shutdown::Shutdown;
 use stats_file::{StatsFile, StatsFileError};
 use truth_file::{TruthEntry, TruthFile, TruthFileError};
 
+/// How long the ports stay open after the last sample, so readers can take it.
+const EXIT_LINGER: std::time::Duration = std::time::Duration::from_millis(100);
 /// Node name of the driver in iceoryx2 listings.
 pub const NODE_NAME: &str = "thruster-sim";
 
@@ -306,6 +308,11 @@ impl Driver {
         self.go_neutral();
         self.publish_truth("final")?;
         self.write_stats(true)?;
+        // iceoryx2 drops what a reader has not taken yet once the publisher goes away
+        // (eclipse-iceoryx/iceoryx2#39): give readers a moment to take the last samples, or a
+        // reader descheduled just then never sees the end of the run (a real-time process test
+        // waited 10 s for its t = 1 s sample).
+        std::thread::sleep(EXIT_LINGER);
         let summary = self.summary(reason);
         info!(
             reason = ?summary.reason,
