@@ -719,6 +719,12 @@ fn save_fails_reported_daemon_keeps_serving(full: bool) {
         .unwrap_or_else(|| panic!("the daemon stopped serving\n{}", daemon.log_text()));
     assert_eq!(state(&after), DaemonState::Active);
     assert!(daemon.is_running());
+    // The status says so too, for an operator who does not read the log.
+    assert!(
+        after.text().starts_with("model not saved: "),
+        "status text: {}",
+        after.text()
+    );
     let (out, _) = ctl(&world, &["status"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
 
@@ -727,6 +733,10 @@ fn save_fails_reported_daemon_keeps_serving(full: bool) {
     let (out, _) = ctl(&world, &["save"]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     assert!(model_path.exists());
+    let cleared = op
+        .wait_status(Duration::from_secs(5), |s| !s.text().contains("not saved"))
+        .unwrap_or_else(|| panic!("the status still says the model is not saved"));
+    assert_eq!(state(&cleared), DaemonState::Active);
 
     assert!(sim.stop().success());
     assert!(daemon.stop().success(), "{}", daemon.log_text());

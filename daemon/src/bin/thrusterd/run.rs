@@ -106,6 +106,9 @@ struct Daemon {
     refused: u32,
     /// IMU samples that never arrived (sequence gaps between accepted samples).
     missed: u64,
+    /// Why the model in use is not on disk (the last save to `model_path` failed), until a
+    /// save there succeeds: appended to the status text, so an operator sees it without the log.
+    save_error: Option<String>,
     thrust_seq: u64,
     status_seq: u64,
     model_seq: u64,
@@ -155,6 +158,7 @@ impl Daemon {
             rejected: RejectCounters::default(),
             refused,
             missed: 0,
+            save_error: None,
             thrust_seq: 0,
             status_seq: 0,
             model_seq: 0,
@@ -473,7 +477,11 @@ impl Daemon {
                 } else {
                     PathBuf::from(req.text.as_str())
                 };
-                return match store::save_atomic(&model, &path) {
+                let result = store::save_atomic(&model, &path);
+                if path == self.model_path {
+                    self.save_error = result.as_ref().err().map(|e| e.to_string());
+                }
+                return match result {
                     Ok(()) => ControlResponse::ok(&format!(
                         "saved model v{} to {}",
                         model.version,
@@ -576,19 +584,22 @@ impl Daemon {
         }
     }
 
-    fn save(&self, model: &thrusterd::model::Model) {
+    fn save(&mut self, model: &thrusterd::model::Model) {
         if let Err(e) = std::fs::create_dir_all(&self.cfg.runtime.state_dir) {
-            warn!(
-                "model not saved: {}: {e}",
-                self.cfg.runtime.state_dir.display()
-            );
+            let why = format!("{}: {e}", self.cfg.runtime.state_dir.display());
+            warn!("model not saved: {why}");
+            self.save_error = Some(why);
             return;
         }
         match store::save_atomic(model, &self.model_path) {
             Ok(()) => {
-                info!(path = %self.model_path.display(), version = model.version, "model saved")
+                info!(path = %self.model_path.display(), version = model.version, "model saved");
+                self.save_error = None;
             }
-            Err(e) => warn!("model not saved (daemon keeps running): {e}"),
+            Err(e) => {
+                warn!("model not saved (daemon keeps running): {e}");
+                self.save_error = Some(e.to_string());
+            }
         }
     }
 
@@ -607,6 +618,12 @@ impl Daemon {
         self.rejected.write_to(&mut msg);
         msg.requests_refused = self.refused;
         msg.samples_missed = self.missed;
+        if let Some(why) = &self.save_error {
+            // First, since the text is bounded (128 bytes) and the state has its own field: the
+            // machine's words are what gets cut.
+            let text = format!("model not saved: {why} | {}", msg.text());
+            msg.set_text(&text);
+        }
         msg
     }
 
