@@ -87,21 +87,10 @@ impl Topic {
             // for a while, or a real-time driver catching up after a stall with a burst of
             // overdue samples, loses nothing (16 lost 2 % of the samples in a 12-minute soak
             // on a loaded VM); no history (stale samples are useless).
-            Topic::Imu | Topic::Thrust => TopicQos {
+            Topic::Imu | Topic::Thrust | Topic::Vehicle => TopicQos {
                 history: 0,
                 max_buffer: 128,
                 default_buffer: 128,
-            },
-            // Ground truth for scoring, outside the control loop: a lockstep simulator runs it
-            // at 50-800x real time, so 128 samples were 10-20 ms of wall time and a scorer
-            // descheduled that long on a busy machine lost whole seconds of vehicle time
-            // (hot-swap's recovery was then judged on the samples that happened to arrive).
-            // 1024 (5 s at 200 Hz, 100 ms of wall time at 50x) rides out such stalls; the
-            // publisher's shared memory grows to ~3 MB (16 possible readers), 4096 made it 11.
-            Topic::Vehicle => TopicQos {
-                history: 0,
-                max_buffer: 1024,
-                default_buffer: 1024,
             },
             // Discrete events: keep a few, but do not replay old ones to a new reader.
             Topic::Reconfig => TopicQos {
