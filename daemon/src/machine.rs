@@ -258,12 +258,13 @@ pub struct StatusSnapshot {
     pub text: String,
 }
 
-/// What to go back to after a fault.
+/// Levelling before the noise measurement: the attitude held, and since when it is level.
 struct Levelling {
     target: Target,
     level_since_ns: Option<u64>,
 }
 
+/// What to go back to after a fault.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Resume {
     Idle,
@@ -291,7 +292,6 @@ pub struct Machine {
     est: Option<Estimator>,
     last_estimate: Option<Estimate>,
     quiet_since_ns: Option<u64>,
-    /// Levelling before the noise measurement: the attitude held, and since when it is level.
     levelling: Option<Levelling>,
     resume: Resume,
     good_samples: u32,
@@ -721,17 +721,12 @@ impl Machine {
     /// `level_max_s` whatever the tilt.
     fn level_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
         let elapsed = self.elapsed_s(s.t_ns);
+        let meas = self.measured(s, gyro);
         let (Some(model), Some(lev)) = (self.model.as_ref(), self.levelling.as_mut()) else {
             self.levelling = None;
             return Command::neutral(self.n);
         };
-        let attitude = self.attitude.attitude();
-        let meas = Measured {
-            attitude,
-            rate: gyro - self.attitude.gyro_bias(),
-            depth: s.depth,
-        };
-        let up = attitude * Vector3::z();
+        let up = meas.attitude * Vector3::z();
         let tilt_deg = up.z.clamp(-1.0, 1.0).acos().to_degrees();
         let m = &self.setup.machine;
         if tilt_deg <= m.level_tilt_deg {
@@ -924,22 +919,27 @@ impl Machine {
         Ok(())
     }
 
+    /// What the controller sees of this sample: filtered attitude, bias-free rate, depth.
+    fn measured(&self, s: &ImuInput, gyro: &Vector3<f64>) -> Measured {
+        Measured {
+            attitude: self.attitude.attitude(),
+            rate: gyro - self.attitude.gyro_bias(),
+            depth: s.depth,
+        }
+    }
+
     fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
         let Some(model) = self.model.as_ref() else {
             return Command::neutral(self.n);
         };
-        let attitude = self.attitude.attitude();
+        let meas = self.measured(s, gyro);
+        let attitude = meas.attitude;
         // Without a setpoint, hold level at the current heading and depth: a vehicle may enter
         // Active still swinging from the last pulse, and that tilt is nothing to keep.
         let target = *self.target.get_or_insert_with(|| Target {
             attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, attitude.euler_angles().2),
             depth: s.depth,
         });
-        let meas = Measured {
-            attitude,
-            rate: gyro - self.attitude.gyro_bias(),
-            depth: s.depth,
-        };
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Controlling;
         let n = self.n.min(model.thrusters());

@@ -61,11 +61,11 @@ fn drain<T: thruster_protocol::services::TopicMessage>(inbox: &Inbox<T>) -> Vec<
     out
 }
 
-/// A model estimated by a real run (daemon + simulator in lockstep), saved by the daemon in
-/// the world's state directory as it does on every estimated model and on SIGTERM.
-fn estimate_and_save_a_model(world: &World, op: &Operator) {
-    let mut daemon = world.daemon(&["--estimate"]);
-    let mut sim = world.sim(
+/// thrusterd estimating on a lockstep AMOUR-5 at the paper's noise, until it controls with its
+/// first model.
+fn daemon_active_on_sim(world: &World, op: &Operator) -> (Proc, Proc) {
+    let daemon = world.daemon(&["--estimate"]);
+    let sim = world.sim(
         "amour5",
         &["--noise", "paper", "--lockstep", "--duration", "100000"],
     );
@@ -73,6 +73,21 @@ fn estimate_and_save_a_model(world: &World, op: &Operator) {
         state(s) == DaemonState::Active && s.model_version >= 1
     })
     .unwrap_or_else(|| panic!("no estimated model\n{}", daemon.log_text()));
+    (daemon, sim)
+}
+
+/// Nothing of the namespace left on disk, once every process has exited and the caller has
+/// dropped its ports.
+fn assert_nothing_left(mut world: World) {
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+/// A model estimated by a real run (daemon + simulator in lockstep), saved by the daemon in
+/// the world's state directory as it does on every estimated model and on SIGTERM.
+fn estimate_and_save_a_model(world: &World, op: &Operator) {
+    let (mut daemon, mut sim) = daemon_active_on_sim(world, op);
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     assert!(sim.stop().success());
     assert!(world.path("state/model.json").exists());
@@ -272,10 +287,7 @@ fn daemon_killed_mid_pulse_hw_goes_neutral_and_a_restart_resumes_control() {
     assert!(hw.stop().success(), "{}", hw.log_text());
     drop(thrust);
     drop(op);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    assert_nothing_left(world);
 }
 
 #[test]
@@ -283,15 +295,7 @@ fn driver_killed_faults_with_neutral_thrust_and_a_new_driver_recovers() {
     let world = World::new("kdrv");
     let op = Operator::new(&world);
     let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
-    let mut daemon = world.daemon(&["--estimate"]);
-    let mut sim = world.sim(
-        "amour5",
-        &["--noise", "paper", "--lockstep", "--duration", "100000"],
-    );
-    op.wait_status(LONG, |s| {
-        state(s) == DaemonState::Active && s.model_version >= 1
-    })
-    .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+    let (mut daemon, mut sim) = daemon_active_on_sim(&world, &op);
     let start = Instant::now();
     while !drain(&thrust)
         .iter()
@@ -371,10 +375,7 @@ fn driver_killed_faults_with_neutral_thrust_and_a_new_driver_recovers() {
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     drop(thrust);
     drop(op);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    assert_nothing_left(world);
 }
 
 /// Runs thrusterctl with the shipped default timeout (2 s), killing it if it runs past
@@ -509,10 +510,7 @@ fn thrusterctl_while_the_daemon_restarts_fails_clearly_and_never_hangs() {
     assert!(daemon2.stop().success(), "{}", daemon2.log_text());
     assert!(sim.stop().success());
     drop(op);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    assert_nothing_left(world);
 }
 
 /// A child that is killed and reaped however the test ends.
@@ -670,16 +668,8 @@ fn save_fails_reported_daemon_keeps_serving(full: bool) {
     };
     let model_path = world.path("state/model.json");
     let op = Operator::new(&world);
-    let mut daemon = world.daemon(&["--estimate"]);
-    let mut sim = world.sim(
-        "amour5",
-        &["--noise", "paper", "--lockstep", "--duration", "100000"],
-    );
     // The estimated model is swapped in, and saving it (which the daemon does at once) fails.
-    op.wait_status(LONG, |s| {
-        state(s) == DaemonState::Active && s.model_version >= 1
-    })
-    .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+    let (mut daemon, mut sim) = daemon_active_on_sim(&world, &op);
     let expected = format!("{}: {os_error}", model_path.display());
     let start = Instant::now();
     while !daemon.log_text().contains(&expected) {
@@ -742,10 +732,7 @@ fn save_fails_reported_daemon_keeps_serving(full: bool) {
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     drop(broken);
     drop(op);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    assert_nothing_left(world);
 }
 
 #[test]
@@ -783,15 +770,7 @@ fn with_resume_after_crash_off_a_restarted_daemon_stays_idle() {
     let world = World::new("nores");
     let op = Operator::new(&world);
     let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
-    let mut daemon = world.daemon(&["--estimate"]);
-    let mut sim = world.sim(
-        "amour5",
-        &["--noise", "paper", "--lockstep", "--duration", "100000"],
-    );
-    op.wait_status(LONG, |s| {
-        state(s) == DaemonState::Active && s.model_version >= 1
-    })
-    .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+    let (mut daemon, mut sim) = daemon_active_on_sim(&world, &op);
     kill9(&mut daemon);
 
     let cfg = world.path("noresume.toml");
@@ -825,8 +804,5 @@ fn with_resume_after_crash_off_a_restarted_daemon_stays_idle() {
     assert!(sim.stop().success());
     drop(thrust);
     drop(op);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    assert_nothing_left(world);
 }
