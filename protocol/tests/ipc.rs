@@ -547,3 +547,45 @@ fn new_node_removes_dead_nodes_on_creation() {
     let census = cleanup_dead_nodes(&ipc).unwrap();
     assert_eq!((census.alive, census.dead_cleaned), (1, 0));
 }
+
+/// iceoryx2 turns a listener timeout into a socket timeout of whole microseconds, and the
+/// kernel reads `{0, 0}` as "forever": a remainder like `deadline - now` of a few hundred
+/// nanoseconds once hung a real-time simulator in `recvfrom`. Every short timeout, zero
+/// included, must come back promptly.
+#[test]
+fn a_sub_microsecond_wait_returns_instead_of_blocking_forever() {
+    let ipc = NamespaceGuard::unique_for_test("shortwait").unwrap();
+    let cfg: IpcConfig = (*ipc).clone();
+    let (tx, rx) = mpsc::channel();
+    // In a thread of its own, so that a wait that blocks forever fails the test instead of
+    // hanging it (the thread is then leaked with the process, which ends right after).
+    let waiter = std::thread::spawn(move || {
+        let node = cfg.create_node("waiter").unwrap();
+        let inbox = Inbox::<ImuSample>::create(&node, &cfg).unwrap();
+        for timeout in [
+            Duration::ZERO,
+            Duration::from_nanos(1),
+            Duration::from_nanos(300),
+            Duration::from_nanos(999),
+            Duration::from_micros(1),
+        ] {
+            let start = Instant::now();
+            let notified = inbox.wait(timeout).unwrap();
+            tx.send((timeout, notified, start.elapsed())).unwrap();
+        }
+    });
+    for _ in 0..5 {
+        let (timeout, notified, took) = rx
+            .recv_timeout(TIMEOUT)
+            .expect("a short wait blocked for more than 5 s");
+        assert!(!notified, "nothing was sent, yet {timeout:?} reported a notification");
+        assert!(took < Duration::from_secs(1), "{timeout:?} took {took:?}");
+    }
+    waiter.join().unwrap();
+    assert_eq!(bounded_wait_timeout(Duration::ZERO), None);
+    assert_eq!(bounded_wait_timeout(Duration::from_nanos(300)), Some(MIN_WAIT));
+    assert_eq!(
+        bounded_wait_timeout(Duration::from_millis(3)),
+        Some(Duration::from_millis(3))
+    );
+}

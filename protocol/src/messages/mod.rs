@@ -14,6 +14,7 @@
 //!   with an incompatible layout fails to open the service instead of misreading it.
 
 mod control;
+mod driver_status;
 mod imu;
 mod model;
 mod reconfig;
@@ -23,6 +24,7 @@ mod thrust;
 mod truth;
 
 pub use control::{ControlRequest, ControlResponse, RequestKind, ResponseCode};
+pub use driver_status::{DriverStatusMsg, OutputState};
 pub use imu::ImuSample;
 pub use model::{ModelMethod, ModelMsg, ModelSource};
 pub use reconfig::{ReconfigEvent, ReconfigKind};

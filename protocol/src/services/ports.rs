@@ -220,11 +220,14 @@ impl<T: TopicMessage> Inbox<T> {
 
     /// Blocks until notified or `timeout` passes, consuming the notifications; true when
     /// notified. For simple single-input loops; use a wait set for several inputs.
+    ///
+    /// Every timeout is honoured, however short: see [`bounded_wait_timeout`].
     pub fn wait(&self, timeout: Duration) -> Result<bool, IpcError> {
-        let n = self
-            .listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(ice("wait on listener", &self.service))?;
+        let n = match bounded_wait_timeout(timeout) {
+            None => self.listener.try_wait(|_| {}),
+            Some(t) => self.listener.timed_wait(|_| {}, t),
+        }
+        .map_err(ice("wait on listener", &self.service))?;
         Ok(n > 0)
     }
 
@@ -241,5 +244,25 @@ impl<T: TopicMessage> Inbox<T> {
     /// The subscriber, for zero-copy reads of large messages.
     pub fn subscriber(&self) -> &Subscriber<Ipc, T, ()> {
         &self.subscriber
+    }
+}
+
+/// The shortest blocking wait iceoryx2 can express: its listener turns the timeout into a
+/// socket `SO_RCVTIMEO` of whole microseconds.
+pub const MIN_WAIT: Duration = Duration::from_micros(1);
+
+/// The timeout to hand iceoryx2's `timed_wait` for a requested `timeout`, or `None` when
+/// the wait must not block at all.
+///
+/// iceoryx2 0.10 converts the timeout into a `timeval` of whole microseconds, and the
+/// kernel reads a socket timeout of `{0, 0}` as "block forever": a computed remainder
+/// such as `deadline - now` of a few hundred nanoseconds would hang the caller for good
+/// (a real-time simulator was found blocked in `recvfrom` that way). Zero becomes a
+/// non-blocking poll; anything else below [`MIN_WAIT`] is rounded up to it.
+pub fn bounded_wait_timeout(timeout: Duration) -> Option<Duration> {
+    if timeout.is_zero() {
+        None
+    } else {
+        Some(timeout.max(MIN_WAIT))
     }
 }

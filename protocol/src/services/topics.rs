@@ -36,6 +36,8 @@ pub enum Topic {
     Setpoint,
     /// [`VehicleStateMsg`], simulator -> anyone: the true vehicle state per sample.
     Vehicle,
+    /// [`DriverStatusMsg`], driver -> daemon and operators, history 1.
+    DriverStatus,
 }
 
 /// Quality-of-service settings of a topic. Every process opens services with the same
@@ -55,7 +57,7 @@ pub struct TopicQos {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 8] = [
+    pub const ALL: [Topic; 9] = [
         Topic::Imu,
         Topic::Thrust,
         Topic::Reconfig,
@@ -64,6 +66,7 @@ impl Topic {
         Topic::Truth,
         Topic::Setpoint,
         Topic::Vehicle,
+        Topic::DriverStatus,
     ];
 
     /// Service name below the namespace, e.g. `imu`.
@@ -77,6 +80,7 @@ impl Topic {
             Topic::Truth => "truth",
             Topic::Setpoint => "setpoint",
             Topic::Vehicle => "vehicle",
+            Topic::DriverStatus => "driver_status",
         }
     }
 
@@ -99,7 +103,11 @@ impl Topic {
                 default_buffer: 8,
             },
             // State: a late joiner gets the latest value; readers want the newest.
-            Topic::Model | Topic::Status | Topic::Truth | Topic::Setpoint => TopicQos {
+            Topic::Model
+            | Topic::Status
+            | Topic::Truth
+            | Topic::Setpoint
+            | Topic::DriverStatus => TopicQos {
                 history: 1,
                 max_buffer: 4,
                 default_buffer: 2,
@@ -137,4 +145,7 @@ impl TopicMessage for Setpoint {
 }
 impl TopicMessage for VehicleStateMsg {
     const TOPIC: Topic = Topic::Vehicle;
+}
+impl TopicMessage for DriverStatusMsg {
+    const TOPIC: Topic = Topic::DriverStatus;
 }

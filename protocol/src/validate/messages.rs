@@ -454,3 +454,16 @@ impl Validate for crate::VehicleStateMsg {
         Ok(())
     }
 }
+
+impl Validate for DriverStatusMsg {
+    /// Count within capacity (0 allowed: a driver with no thrusters), output state known,
+    /// `link_up` and `armed` 0 or 1, texts valid UTF-8.
+    fn validate(&self) -> Result<(), RejectReason> {
+        thruster_count("thruster_count", self.thruster_count, true)?;
+        known_enum("output_state", self.output_state())?;
+        zero_or_one("link_up", self.link_up)?;
+        zero_or_one("armed", self.armed)?;
+        utf8_text("driver", &self.driver)?;
+        utf8_text("text", &self.text)
+    }
+}
