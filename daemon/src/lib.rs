@@ -5,6 +5,7 @@
 pub mod attitude;
 pub mod config;
 pub mod controller;
+pub mod driver_watch;
 pub mod estimator;
 pub mod machine;
 pub mod model;

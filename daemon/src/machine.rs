@@ -22,6 +22,11 @@ use crate::monitor::{Mismatch, MismatchAction, ModelMonitor, MonitorConfig};
 /// Capacity of every thrust vector (the protocol's).
 pub const MAX_THRUSTERS: usize = 16;
 
+/// Why estimation and control are refused before the first IMU sample: the vehicle cannot be
+/// measured, and a run started now would wait at "measuring noise" forever.
+pub const NO_IMU_YET: &str =
+    "no IMU samples from any driver yet: is thruster-sim or thruster-hw running on this namespace?";
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum State {
@@ -300,6 +305,9 @@ pub struct Machine {
     samples: u64,
     text: String,
     last_desired: [f64; 6],
+    /// Why the driver's outputs cannot be used (see `driver_watch`), while they cannot: the
+    /// machine stays in Fault, neutral, and does not recover on good IMU samples alone.
+    output_block: Option<String>,
 }
 
 impl Machine {
@@ -332,6 +340,7 @@ impl Machine {
             samples: 0,
             text: "idle: waiting for an estimate request".into(),
             last_desired: [0.0; 6],
+            output_block: None,
             setup,
         };
         if let Some(g) = m.setup.geometry.clone() {
@@ -374,10 +383,13 @@ impl Machine {
         std::mem::take(&mut self.events)
     }
 
-    /// Install a model loaded from disk (it must pass the same checks as any swap).
+    /// Install a model from a file (at start, or an operator's load request): its
+    /// allocation is derived again from its effectiveness, and it must pass the same checks
+    /// as any swap, the physical bounds included.
     pub fn load_model(&mut self, model: Model) -> Result<(), Refused> {
+        let model = model.with_derived_allocation(&self.setup.estimator);
         self.try_swap(model, ModelSource::Loaded)
-            .map_err(|e| Refused(format!("saved model not used: {e}")))
+            .map_err(|e| Refused(format!("model not used: {e}")))
     }
 
     /// The answer to one IMU sample. Always a command: neutral unless estimating or controlling.
@@ -411,7 +423,9 @@ impl Machine {
         match self.state {
             State::Idle | State::Solve => Command::neutral(self.n),
             State::Fault => {
-                self.good_samples += 1;
+                if self.output_block.is_none() {
+                    self.good_samples += 1;
+                }
                 if self.good_samples >= self.setup.machine.recover_samples {
                     self.recover(s.t_ns);
                 }
@@ -470,12 +484,41 @@ impl Machine {
             self.fault(t, why);
         }
         self.good_samples = 0;
+        // No samples, no rate: status must not go on showing the last one.
+        self.imu_rate_hz = 0.0;
         Command::neutral(self.n)
+    }
+
+    /// No IMU sample has come from any driver yet, for `why`: said in status while idle (a
+    /// daemon started before its driver is not in fault), and estimation and control are
+    /// refused with it until a sample comes.
+    pub fn on_no_imu_yet(&mut self, why: &str) {
+        if self.state == State::Idle && self.samples == 0 {
+            self.text = format!("idle: {why}");
+        }
+    }
+
+    /// The driver's verdict on its outputs (`None`: usable). Blocked outputs fault the
+    /// machine, thrusters neutral, and keep it there: it recovers as after any fault, on good
+    /// samples, only once the outputs are usable again.
+    pub fn on_outputs(&mut self, blocked: Option<&str>) {
+        if self.output_block.as_deref() == blocked {
+            return;
+        }
+        self.output_block = blocked.map(str::to_string);
+        self.good_samples = 0;
+        if let Some(why) = blocked {
+            let t = self.last_t_ns.unwrap_or(0);
+            self.fault(t, why);
+        }
     }
 
     pub fn on_request(&mut self, req: Request) -> Result<String, Refused> {
         match req {
             Request::Estimate => {
+                if self.samples == 0 {
+                    return Err(Refused(NO_IMU_YET.into()));
+                }
                 if self.state == State::Fault {
                     return Err(Refused(format!(
                         "in fault ({}); estimate after it clears",
@@ -498,6 +541,9 @@ impl Machine {
                 Ok("aborted".into())
             }
             Request::Hold => {
+                if self.samples == 0 {
+                    return Err(Refused(NO_IMU_YET.into()));
+                }
                 if self.state == State::Fault {
                     return Err(Refused("in fault: cannot hold".into()));
                 }

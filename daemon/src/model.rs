@@ -4,6 +4,8 @@
 use nalgebra::{DMatrix, Vector3};
 use serde::{Deserialize, Serialize};
 
+use thruster_protocol::validate::limits::{MAX_ALLOCATION, MAX_EFFECTIVENESS};
+
 use crate::estimator::analysis::{allocation, rank_report};
 use crate::estimator::{Dof, DofMask, Estimate, EstimatorConfig, Method};
 
@@ -56,6 +58,35 @@ pub enum SwapRejection {
     LowConfidence { rel_err: f64, limit: f64 },
     #[error("thrusters were never excited in both directions")]
     NotExcited,
+    /// Beyond the protocol's physical bounds: no thruster of a small vehicle does that, so
+    /// the model comes from a units mistake, a corrupt file or a failed estimate.
+    #[error("model {what}[{row}][{col}] = {value:e} is outside the physical bound +-{max:e}")]
+    OutOfBounds {
+        what: &'static str,
+        row: usize,
+        col: usize,
+        value: f64,
+        max: f64,
+    },
+}
+
+/// The first entry of `m` with |x| > `max`, as a rejection naming it.
+fn out_of_bounds(what: &'static str, m: &DMatrix<f64>, max: f64) -> Result<(), SwapRejection> {
+    for row in 0..m.nrows() {
+        for col in 0..m.ncols() {
+            let value = m[(row, col)];
+            if value.abs() > max {
+                return Err(SwapRejection::OutOfBounds {
+                    what,
+                    row,
+                    col,
+                    value,
+                    max,
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 impl Model {
@@ -99,8 +130,23 @@ impl Model {
         }
     }
 
-    /// Checks before a hot swap: right size, finite, actuates something, confident enough.
-    /// `max_rel_err` applies to estimated models (nominal and paper models carry no bound).
+    /// The same model with its actuated DOFs and allocation derived again from its
+    /// effectiveness and standard errors, as the estimator derives them. A model from a file
+    /// or a request is used this way: its own allocation is never trusted (a file can pair a
+    /// harmless effectiveness with an absurd allocation). Unknown standard errors count as
+    /// none, as for a nominal model.
+    pub fn with_derived_allocation(mut self, cfg: &EstimatorConfig) -> Model {
+        let known_err = self.std_err.map(|v| if v.is_finite() { v } else { 0.0 });
+        let rank = rank_report(&self.effectiveness, &known_err, cfg);
+        self.allocation = allocation(&self.effectiveness, rank.actuated, rank.rank);
+        self.actuated = rank.actuated;
+        self
+    }
+
+    /// Checks before a hot swap: right size, finite, within the protocol's physical bounds,
+    /// actuates something, confident enough. Every model passes it, learned, nominal,
+    /// cached or loaded. `max_rel_err` applies to estimated models (nominal and paper models
+    /// carry no bound).
     pub fn check(&self, thrusters: usize, max_rel_err: f64) -> Result<(), SwapRejection> {
         let n = self.effectiveness.ncols();
         if n != thrusters {
@@ -121,6 +167,13 @@ impl Model {
         if !self.allocation.iter().all(|v| v.is_finite()) {
             return Err(SwapRejection::NonFinite("allocation"));
         }
+        out_of_bounds("effectiveness", &self.effectiveness, MAX_EFFECTIVENESS)?;
+        out_of_bounds("allocation", &self.allocation, MAX_ALLOCATION)?;
+        let known_err = self.std_err.map(|v| if v.is_nan() { 0.0 } else { v });
+        if known_err.iter().any(|v| *v < 0.0) {
+            return Err(SwapRejection::NonFinite("std_err (negative)"));
+        }
+        out_of_bounds("std_err", &known_err, MAX_EFFECTIVENESS)?;
         if self.actuated.count() == 0 || self.allocation.norm() == 0.0 {
             return Err(SwapRejection::NoDof);
         }
@@ -265,6 +318,46 @@ mod tests {
         let mut unexcited = good;
         unexcited.rel_err_acc = f64::INFINITY;
         assert_eq!(unexcited.check(2, 0.1), Err(SwapRejection::NotExcited));
+    }
+
+    #[test]
+    fn check_applies_the_protocols_physical_bounds_and_loads_derive_their_allocation() {
+        let body = RigidBody::default();
+        let pos = [[0.0, -0.2, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, -0.15]];
+        let dir = [[1.0, 0.0, 0.0]; 3];
+        let good = Model::nominal(nominal_effectiveness(&body, &pos, &dir), None);
+        let mut absurd = good.clone();
+        absurd.effectiveness[(Dof::Yaw.index(), 1)] = 1e300;
+        let e = absurd.check(3, 0.1).unwrap_err();
+        assert!(matches!(
+            e,
+            SwapRejection::OutOfBounds {
+                what: "effectiveness",
+                row: 2,
+                col: 1,
+                ..
+            }
+        ));
+        assert!(e.to_string().contains("effectiveness[2][1] = 1e300"), "{e}");
+        // A harmless effectiveness with an absurd allocation: the allocation is derived again
+        // from the effectiveness, so what a file says about it does not matter.
+        let mut lying = good.clone();
+        lying.allocation[(0, Dof::Yaw.index())] = 1e9;
+        lying.actuated = DofMask::ALL;
+        assert!(matches!(
+            lying.check(3, 0.1),
+            Err(SwapRejection::OutOfBounds {
+                what: "allocation",
+                ..
+            })
+        ));
+        let derived = lying.with_derived_allocation(&EstimatorConfig::default());
+        assert_eq!(derived.actuated, good.actuated);
+        assert!((&derived.allocation - &good.allocation).amax() < 1e-12);
+        derived.check(3, 0.1).unwrap();
+        let mut negative = good;
+        negative.std_err[(0, 0)] = -1.0;
+        assert!(negative.check(3, 0.1).is_err());
     }
 
     #[test]

@@ -602,7 +602,22 @@ fn bad_saved_models_are_refused_at_start_counted_and_the_daemon_serves() {
     assert!(real.contains("\"thrusters\": 5"));
     let mut corrupt = real.clone().into_bytes();
     corrupt[real.len() / 2] = b'}';
-    let variants: [(&str, Vec<u8>, &str); 5] = [
+    // A well-formed file whose physics is absurd (a units mistake, a hand edit): refused
+    // with the entry named, by the same bounds the protocol applies.
+    let absurd = {
+        let mut v: serde_json::Value = serde_json::from_str(&real).unwrap();
+        // Cut to this daemon's 4 thrusters, so the count is right and the physics is not.
+        v["thrusters"] = serde_json::json!(4);
+        for key in ["effectiveness", "std_err"] {
+            for row in v[key].as_array_mut().unwrap() {
+                row.as_array_mut().unwrap().truncate(4);
+            }
+        }
+        v["allocation"].as_array_mut().unwrap().truncate(4);
+        v["effectiveness"][2][3] = serde_json::json!(1e300);
+        serde_json::to_string_pretty(&v).unwrap().into_bytes()
+    };
+    let variants: [(&str, Vec<u8>, &str); 6] = [
         (
             "truncated",
             real.as_bytes()[..real.len() - 40].to_vec(),
@@ -620,11 +635,16 @@ fn bad_saved_models_are_refused_at_start_counted_and_the_daemon_serves() {
             vec![0xff, 0xfe, b'{', 0x80],
             "stream did not contain valid UTF-8",
         ),
+        (
+            "absurd effectiveness",
+            absurd,
+            "model not used: model effectiveness[2][3] = 1e300 is outside the physical bound",
+        ),
         // A well-formed file for another vehicle (5 thrusters; this daemon has 4).
         (
             "wrong thruster count",
             real.into_bytes(),
-            "saved model not used",
+            "model not used: model has 5 thrusters",
         ),
     ];
     std::fs::create_dir_all(world.path("state")).unwrap();

@@ -146,6 +146,53 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     assert!(left.is_empty(), "left behind: {left:?}");
 }
 
+/// An absurd model (a units mistake, a hand edit) is refused with the entry named, the model
+/// in force stays, and it is the good one that is saved at shutdown and loaded at restart.
+#[test]
+fn load_refuses_an_absurd_model_and_the_good_one_stays_saved_and_reloaded() {
+    let world = World::new("ctlabsurd");
+    let good =
+        std::fs::read_to_string(workspace().join("fuzz/corpus/model_parse/model.json")).unwrap();
+    let mut v: Value = serde_json::from_str(&good).unwrap();
+    v["effectiveness"][1][0] = serde_json::json!(1e300);
+    let good_path = world.path("good.json");
+    let absurd_path = world.path("absurd.json");
+    std::fs::write(&good_path, &good).unwrap();
+    std::fs::write(&absurd_path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+    let saved = world.path("state/model.json");
+
+    let mut daemon = world.daemon(&[]);
+    wait_status(&world, "a daemon", |_| true);
+    let out = ctl(&world, &["load", good_path.to_str().unwrap()]);
+    expect_code(&out, 0, "load of a good model");
+    let version =
+        wait_status(&world, "the good model", |s| s["model_version"] != 0)["model_version"].clone();
+    let out = ctl(&world, &["load", absurd_path.to_str().unwrap()]);
+    expect_code(&out, 4, "load of an absurd model");
+    assert!(
+        text(&out.stderr).contains("effectiveness[1][0] = 1e300 is outside the physical bound"),
+        "{}",
+        text(&out.stderr)
+    );
+    let s = wait_status(&world, "a status", |_| true);
+    assert_eq!(
+        s["model_version"], version,
+        "the absurd model was swapped in"
+    );
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+    let on_disk: Value = serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();
+    let good_value: Value = serde_json::from_str(&good).unwrap();
+    assert_eq!(
+        on_disk["effectiveness"][1][0], good_value["effectiveness"][1][0],
+        "the model saved at shutdown is not the good one"
+    );
+    // Restart: the good model comes back, no refusal counted.
+    let mut daemon = world.daemon(&[]);
+    let s = wait_status(&world, "the reloaded model", |s| s["model_version"] != 0);
+    assert_eq!(s["requests_refused"], 0, "{s}");
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+}
+
 #[test]
 fn load_refuses_a_missing_file_with_exit_4() {
     let world = World::new("ctlload");

@@ -27,7 +27,8 @@ use std::time::{Duration, Instant};
 use thruster_protocol::services::{Inbox, IpcConfig, IpcError, IpcNode, Port};
 use thruster_protocol::validate::{RejectCounters, RejectReason};
 use thruster_protocol::{
-    ImuSample, ReconfigEvent, ThrustCommand, TruthMsg, Validate, VehicleStateMsg,
+    DriverStatusMsg, ImuSample, OutputState, ReconfigEvent, ThrustCommand, TruthMsg, Validate,
+    VehicleStateMsg,
 };
 use tracing::{debug, error, info, warn};
 
@@ -145,6 +146,7 @@ struct Ports {
     truth: Port<TruthMsg>,
     reconfig: Port<ReconfigEvent>,
     vehicle: Port<VehicleStateMsg>,
+    driver_status: Port<DriverStatusMsg>,
     _node: IpcNode,
 }
 
@@ -214,6 +216,13 @@ pub struct Driver {
     started: Option<Instant>,
     next_housekeeping: Instant,
     next_report: Instant,
+    /// Vehicle time at which the next driver status is due, and what the last one said
+    /// (rejections, output state, count) so a change goes out at once.
+    next_driver_status_ns: u64,
+    driver_status_seq: u64,
+    last_driver_status: Option<(u64, u32, u32)>,
+    /// Why the last thrust command was rejected, for the driver status.
+    last_rejection: Option<String>,
     ports: Ports,
 }
 
@@ -245,6 +254,7 @@ impl Driver {
             truth: Port::create(&node, &ipc)?,
             reconfig: Port::create(&node, &ipc)?,
             vehicle: Port::create(&node, &ipc)?,
+            driver_status: Port::create(&node, &ipc)?,
             _node: node,
         };
         let truth_file = settings
@@ -280,6 +290,10 @@ impl Driver {
             started: None,
             next_housekeeping: now,
             next_report: now + REPORT_PERIOD,
+            next_driver_status_ns: 0,
+            driver_status_seq: 0,
+            last_driver_status: None,
+            last_rejection: None,
             ports,
             settings,
         })
@@ -379,11 +393,53 @@ impl Driver {
             self.ports.vehicle.send(&self.state)?;
             self.state_sent = true;
         }
+        self.publish_driver_status()?;
         let sent = self.ports.imu.send(sample)?;
         if let Some(stats) = &mut self.stats {
             stats.published(sample.seq);
         }
         Ok(sent)
+    }
+
+    /// Publishes this driver's status when due: every [`DriverStatusMsg::PERIOD_MS`] of
+    /// vehicle time (so a lockstep run far faster than real time reports as often, per
+    /// vehicle second, as a real-time one), and at once when the thruster count, the output
+    /// state or the rejections changed. Sent before the IMU sample, so a daemon sees a count
+    /// mismatch no later than the sample it would answer with the wrong count.
+    fn publish_driver_status(&mut self) -> Result<(), DriverError> {
+        let rejected = self.gate.rejected().total();
+        let output = if self.neutral {
+            OutputState::Neutral
+        } else {
+            OutputState::Active
+        };
+        let count = self.sim.thruster_count() as u32;
+        let now_ns = self.sim.time_ns();
+        let changed = self.last_driver_status != Some((rejected, output.as_u32(), count));
+        if !changed && now_ns < self.next_driver_status_ns {
+            return Ok(());
+        }
+        self.driver_status_seq += 1;
+        let mut msg = DriverStatusMsg {
+            seq: self.driver_status_seq,
+            time_ns: now_ns,
+            thruster_count: count,
+            commands_accepted: self.gate.accepted(),
+            commands_rejected: rejected,
+            watchdog_expiries: self.timeouts,
+            link_up: 1,
+            armed: 1,
+            ..Default::default()
+        };
+        msg.set_output_state(output);
+        msg.driver.set(NODE_NAME);
+        if let Some(reason) = &self.last_rejection {
+            msg.text.set(reason);
+        }
+        self.ports.driver_status.send(&msg)?;
+        self.last_driver_status = Some((rejected, output.as_u32(), count));
+        self.next_driver_status_ns = now_ns + DriverStatusMsg::PERIOD_MS * 1_000_000;
+        Ok(())
     }
 
     /// Appends a `--stats-file` line when one is due (or `force`).
@@ -492,6 +548,7 @@ impl Driver {
     }
 
     fn log_rejection(&mut self, cmd: &ThrustCommand, reason: &RejectReason) {
+        self.last_rejection = Some(format!("last command rejected: {reason}"));
         if let Some(suppressed) = self.reject_log.allow() {
             warn!(
                 %reason,

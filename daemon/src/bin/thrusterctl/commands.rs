@@ -7,13 +7,15 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use thruster_protocol::{ControlRequest, ModelMsg, RequestKind, StatusMsg};
+use thruster_protocol::{
+    ControlRequest, DriverStatusMsg, ModelMsg, RequestKind, StatusMsg, Validate,
+};
 
 use crate::checks::{model_problem, status_problem, Warner};
 use crate::cli::{self, Cli, Command};
 use crate::client::{wait_latest, Daemon, Target};
 use crate::exit::{self, Failure};
-use crate::json::{ModelJson, StatusJson};
+use crate::json::{DriverJson, ModelJson, StatusJson, StatusReportJson};
 use crate::{estimate, publish, render, watch};
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -103,6 +105,7 @@ fn or_ok(text: &str) -> &str {
 fn status(daemon: &Daemon, json: bool) -> Result<()> {
     // Subscribe first: the history sample is then on its way while we ask the daemon.
     let inbox = daemon.inbox::<StatusMsg>()?;
+    let drivers = daemon.inbox::<DriverStatusMsg>()?;
     let reply = daemon.ensure_running()?;
     let Some(status) = wait_latest(&inbox, daemon.timeout())? else {
         return Err(Failure::new(
@@ -116,10 +119,24 @@ fn status(daemon: &Daemon, json: bool) -> Result<()> {
         .into());
     };
     Warner::default().warn(status_problem(&status));
+    // Drivers report at least every DriverStatusMsg::PERIOD_MS; none after a few periods
+    // means no driver publishes one (not an error: a third-party driver may not).
+    let driver = wait_latest(
+        &drivers,
+        daemon
+            .timeout()
+            .min(Duration::from_millis(3 * DriverStatusMsg::PERIOD_MS)),
+    )?
+    .filter(|d| d.validate().is_ok());
     if json {
-        say(&serde_json::to_string(&StatusJson::from(&status))?)
+        say(&serde_json::to_string(&StatusReportJson {
+            status: StatusJson::from(&status),
+            driver: driver.as_ref().map(DriverJson::from),
+        })?)
     } else {
-        say(render::status_report(daemon.namespace(), &status).trim_end())
+        let mut text = render::status_report(daemon.namespace(), &status);
+        text.push_str(&render::driver_line(driver.as_ref()));
+        say(text.trim_end())
     }
 }
 

@@ -3,7 +3,9 @@
 //! or drop a key. Non-finite numbers become `null`.
 
 use serde::Serialize;
-use thruster_protocol::{DaemonState, Dof, ModelMsg, StatusMsg, DOF_COUNT, MAX_THRUSTERS};
+use thruster_protocol::{
+    DaemonState, Dof, DriverStatusMsg, ModelMsg, StatusMsg, DOF_COUNT, MAX_THRUSTERS,
+};
 
 /// One status message.
 #[derive(Serialize, Debug, PartialEq)]
@@ -56,6 +58,51 @@ impl From<&StatusMsg> for StatusJson {
             imu_rate_hz: finite(s.imu_rate_hz),
             vehicle_time_ns: s.vehicle_time_ns,
             text: s.text().to_string(),
+        }
+    }
+}
+
+/// `status --json`: the daemon's status and, beside it, the driver's own report.
+#[derive(Serialize, Debug, PartialEq)]
+pub struct StatusReportJson {
+    #[serde(flatten)]
+    pub status: StatusJson,
+    /// The driver's report on its outputs; null when no driver published one.
+    pub driver: Option<DriverJson>,
+}
+
+/// One driver status message.
+#[derive(Serialize, Debug, PartialEq)]
+pub struct DriverJson {
+    pub driver: String,
+    pub thruster_count: u32,
+    /// OutputState name ("Active", "Neutral", "Disarmed", "LinkDown", ...).
+    pub output_state: String,
+    pub commands_accepted: u64,
+    pub commands_rejected: u64,
+    pub watchdog_expiries: u64,
+    pub link_up: bool,
+    pub armed: bool,
+    pub time_ns: u64,
+    pub text: String,
+}
+
+impl From<&DriverStatusMsg> for DriverJson {
+    fn from(d: &DriverStatusMsg) -> Self {
+        Self {
+            driver: d.driver().to_string(),
+            thruster_count: d.thruster_count,
+            output_state: d
+                .output_state()
+                .map(|s| format!("{s:?}"))
+                .unwrap_or_else(|e| format!("Unknown({})", e.value)),
+            commands_accepted: d.commands_accepted,
+            commands_rejected: d.commands_rejected,
+            watchdog_expiries: d.watchdog_expiries,
+            link_up: d.link_up == 1,
+            armed: d.armed == 1,
+            time_ns: d.time_ns,
+            text: d.text().to_string(),
         }
     }
 }

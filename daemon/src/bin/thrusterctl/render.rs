@@ -90,6 +90,33 @@ pub fn total_rejections(s: &StatusMsg) -> u64 {
 }
 
 /// The multi-line report of `thrusterctl status`.
+/// The driver's own report on its outputs, one indented line like the status rows.
+pub fn driver_line(d: Option<&thruster_protocol::DriverStatusMsg>) -> String {
+    let Some(d) = d else {
+        return format!("  {:<13}no driver status published\n", "driver");
+    };
+    let state = d
+        .output_state()
+        .map(|s| format!("{s:?}"))
+        .unwrap_or_else(|e| format!("Unknown({})", e.value));
+    let mut line = format!(
+        "  {:<13}{}: {} thrusters, outputs {state}, link {}, {}, commands {} accepted / {} rejected, watchdog {}",
+        "driver",
+        d.driver(),
+        d.thruster_count,
+        if d.link_up == 1 { "up" } else { "down" },
+        if d.armed == 1 { "armed" } else { "disarmed" },
+        d.commands_accepted,
+        d.commands_rejected,
+        d.watchdog_expiries,
+    );
+    if !d.text().is_empty() {
+        line.push_str(&format!(" ({})", d.text()));
+    }
+    line.push('\n');
+    line
+}
+
 pub fn status_report(namespace: &str, s: &StatusMsg) -> String {
     let mut out = String::new();
     let model = if s.model_version == 0 {

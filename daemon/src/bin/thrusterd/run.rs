@@ -20,10 +20,11 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
-    ControlResponse, ImuSample, ModelMsg, ReconfigEvent, RequestKind, ResponseCode, Setpoint,
-    StatusMsg, ThrustCommand,
+    ControlResponse, DriverStatusMsg, ImuSample, ModelMsg, ReconfigEvent, RequestKind,
+    ResponseCode, Setpoint, StatusMsg, ThrustCommand,
 };
 use thrusterd::config::DaemonConfig;
+use thrusterd::driver_watch::{DriverWatch, OutputVerdict};
 use thrusterd::machine::{Command, Event, Machine, Request};
 use thrusterd::store;
 use thrusterd::wire;
@@ -119,6 +120,10 @@ struct Daemon {
     pending_hold: bool,
     session: Option<crate::session::Session>,
     stale_reported: bool,
+    /// The driver's own reports on its outputs (count, rejections, armed, link).
+    driver: DriverWatch,
+    /// Driver reports that failed validation are counted with the other rejections.
+    driver_verdict: OutputVerdict,
 }
 
 impl Daemon {
@@ -167,6 +172,8 @@ impl Daemon {
             pending_hold: false,
             session: None,
             stale_reported: false,
+            driver: DriverWatch::new(),
+            driver_verdict: OutputVerdict::Usable,
         })
     }
 
@@ -181,6 +188,7 @@ impl Daemon {
         let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
         let reconfig_in = Inbox::<ReconfigEvent>::create(&node, &self.ipc)?;
         let setpoint_in = Inbox::<Setpoint>::create(&node, &self.ipc)?;
+        let driver_in = Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?;
         let thrust_out = Port::<ThrustCommand>::create(&node, &self.ipc)?;
         let model_out = Port::<ModelMsg>::create(&node, &self.ipc)?;
         let status_out = Port::<StatusMsg>::create(&node, &self.ipc)?;
@@ -192,6 +200,7 @@ impl Daemon {
         let imu_guard = waitset.attach_deadline(imu_in.listener(), imu_timeout)?;
         let reconfig_guard = waitset.attach_notification(reconfig_in.listener())?;
         let setpoint_guard = waitset.attach_notification(setpoint_in.listener())?;
+        let driver_guard = waitset.attach_notification(driver_in.listener())?;
         let control_guard = waitset.attach_notification(control.listener())?;
         let status_period = Duration::from_millis(self.cfg.runtime.status_period_ms.max(1));
         let spin = Duration::from_micros(self.cfg.runtime.spin_us);
@@ -223,14 +232,15 @@ impl Daemon {
                     }
                 }
             }
-            let (mut imu, mut stale, mut reconf, mut setp, mut ctrl) =
-                (false, false, false, false, false);
+            let (mut imu, mut stale, mut reconf, mut setp, mut ctrl, mut drv) =
+                (false, false, false, false, false, false);
             let waited = waitset.wait_and_process_once_with_timeout(
                 |id| {
                     imu |= id.has_event_from(&imu_guard);
                     stale |= id.has_missed_deadline(&imu_guard);
                     reconf |= id.has_event_from(&reconfig_guard);
                     setp |= id.has_event_from(&setpoint_guard);
+                    drv |= id.has_event_from(&driver_guard);
                     ctrl |= id.has_event_from(&control_guard);
                     CallbackProgression::Continue
                 },
@@ -268,6 +278,14 @@ impl Daemon {
                 self.stale_reported = false;
             }
             // Before the first sample there is nothing to go stale: the driver is not up yet.
+            // Status says so, and estimation and control are refused until a sample comes.
+            if stale && self.last_imu.is_none() {
+                self.machine.on_no_imu_yet(&format!(
+                    "no IMU samples from any driver for {} ms (namespace {})",
+                    imu_timeout.as_millis(),
+                    self.ipc.namespace()
+                ));
+            }
             if stale && !got && !self.stale_reported && self.last_imu.is_some() {
                 let cmd = self
                     .machine
@@ -287,6 +305,24 @@ impl Daemon {
                     }
                 }
             }
+            if drv {
+                driver_in.drain_events()?;
+            }
+            // Read on every round like the IMU: the driver's report decides whether thrust
+            // may go out at all, so a lost notification must not delay it.
+            while let Some(report) = driver_in.recv()? {
+                match report.validate() {
+                    Ok(()) => {
+                        self.driver.observe(&report, self.machine.thrusters());
+                    }
+                    Err(reason) => {
+                        self.rejected.record(&reason);
+                        warn!("driver status rejected: {reason}");
+                    }
+                }
+            }
+            // Judged every round: a reconfiguration changes the count the driver must match.
+            self.judge_outputs();
             if setp {
                 setpoint_in.drain_events()?;
                 while let Some(s) = setpoint_in.recv()? {
@@ -385,6 +421,25 @@ impl Daemon {
         status.set_text("thrusterd stopped");
         let _ = status_out.send(&status);
         Ok(())
+    }
+
+    /// Hands the machine the driver's verdict on its outputs when it changed.
+    fn judge_outputs(&mut self) {
+        let verdict = self.driver.verdict(self.machine.thrusters());
+        if verdict == self.driver_verdict {
+            return;
+        }
+        match &verdict {
+            OutputVerdict::Blocked(why) => {
+                error!("driver outputs unusable: {why}; thrusters neutral");
+                self.machine.on_outputs(Some(why));
+            }
+            OutputVerdict::Usable => {
+                info!("driver outputs usable again");
+                self.machine.on_outputs(None);
+            }
+        }
+        self.driver_verdict = verdict;
     }
 
     fn on_imu(&mut self, sample: &ImuSample, thrust_out: &Port<ThrustCommand>) {

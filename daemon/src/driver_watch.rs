@@ -1,0 +1,204 @@
+//! What the driver says of its outputs, judged against what the daemon is about to do.
+//!
+//! The IMU alone cannot tell the daemon that its commands go nowhere: a driver configured for
+//! another thruster count rejects every command, an autopilot that is disarmed or unreachable
+//! moves nothing, and the vehicle simply does not respond. Estimating on such a vehicle learns
+//! garbage; controlling it is pretending. Each driver reports its own state on the
+//! `driver_status` topic; this module turns the latest report into one verdict: the outputs
+//! can be used, or why not. Pure: reports in, verdicts out.
+
+use thruster_protocol::{DriverStatusMsg, OutputState};
+
+/// Whether the daemon's commands can reach the water.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum OutputVerdict {
+    /// Usable (or not known: a driver that publishes no status is trusted as before).
+    Usable,
+    /// Not usable, and why, in words for the operator.
+    Blocked(String),
+}
+
+/// The latest driver report and the verdict it led to.
+#[derive(Debug, Default, Clone)]
+pub struct DriverWatch {
+    last: Option<DriverStatusMsg>,
+    /// Rejections counted by the driver at the report before the last one.
+    rejected_before: Option<u64>,
+}
+
+impl DriverWatch {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The latest report, if any driver published one.
+    pub fn last(&self) -> Option<&DriverStatusMsg> {
+        self.last.as_ref()
+    }
+
+    /// Takes a validated report and judges it for a daemon driving `thrusters` thrusters.
+    ///
+    /// Blocked when the driver is configured for another count (it rejects every command),
+    /// when it rejected commands since its previous report, when the output device is
+    /// disarmed, or when its link is down. A rejection clears with the first report that
+    /// counts no new one.
+    pub fn observe(&mut self, report: &DriverStatusMsg, thrusters: usize) -> OutputVerdict {
+        // A restarted driver counts from zero again: compare only within one run.
+        let rejected_before = match &self.last {
+            Some(prev) if report.commands_rejected >= prev.commands_rejected => {
+                Some(prev.commands_rejected)
+            }
+            _ => None,
+        };
+        self.rejected_before = rejected_before;
+        self.last = Some(*report);
+        self.verdict(thrusters)
+    }
+
+    /// The verdict on the latest report for a daemon driving `thrusters` thrusters (the
+    /// count can change with a reconfiguration while the driver's report stays the same).
+    pub fn verdict(&self, thrusters: usize) -> OutputVerdict {
+        let Some(r) = &self.last else {
+            return OutputVerdict::Usable;
+        };
+        let driver = r.driver();
+        let driver = if driver.is_empty() {
+            "the driver"
+        } else {
+            driver
+        };
+        if r.thruster_count as usize != thrusters {
+            return OutputVerdict::Blocked(format!(
+                "{driver} drives {} thrusters, the daemon {thrusters}: every command would be \
+                 rejected",
+                r.thruster_count
+            ));
+        }
+        if let Some(before) = self.rejected_before {
+            let new = r.commands_rejected.saturating_sub(before);
+            if new > 0 {
+                let why = r.text();
+                let why = if why.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({why})")
+                };
+                return OutputVerdict::Blocked(format!(
+                    "{driver} rejected {new} of the daemon's commands{why}"
+                ));
+            }
+        }
+        match r.output_state() {
+            Ok(OutputState::Disarmed) => OutputVerdict::Blocked(format!(
+                "{driver}: outputs disarmed, thrust does not reach the water (arm the vehicle)"
+            )),
+            Ok(OutputState::LinkDown) => {
+                let why = r.text();
+                OutputVerdict::Blocked(format!(
+                    "{driver}: no link to the outputs{}",
+                    if why.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({why})")
+                    }
+                ))
+            }
+            // Validated reports carry known states only; an unknown state is not a reason to
+            // stop a vehicle that works.
+            _ => OutputVerdict::Usable,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(count: u32, state: OutputState, accepted: u64, rejected: u64) -> DriverStatusMsg {
+        let mut r = DriverStatusMsg {
+            thruster_count: count,
+            commands_accepted: accepted,
+            commands_rejected: rejected,
+            link_up: 1,
+            armed: 1,
+            ..Default::default()
+        };
+        r.set_output_state(state);
+        r.driver.set("thruster-test");
+        r
+    }
+
+    #[test]
+    fn no_report_is_usable_and_a_matching_active_driver_is_usable() {
+        let mut w = DriverWatch::new();
+        assert_eq!(w.verdict(5), OutputVerdict::Usable);
+        assert_eq!(
+            w.observe(&report(5, OutputState::Active, 10, 0), 5),
+            OutputVerdict::Usable
+        );
+        assert_eq!(
+            w.observe(&report(5, OutputState::Neutral, 20, 0), 5),
+            OutputVerdict::Usable
+        );
+    }
+
+    #[test]
+    fn a_count_mismatch_blocks_and_names_both_counts() {
+        let mut w = DriverWatch::new();
+        let OutputVerdict::Blocked(why) = w.observe(&report(5, OutputState::Neutral, 0, 0), 6)
+        else {
+            panic!("a 5-thruster driver accepted for 6 thrusters");
+        };
+        assert!(
+            why.contains("thruster-test drives 5 thrusters, the daemon 6"),
+            "{why}"
+        );
+        // Reconfigured back to the driver's count: usable again.
+        assert_eq!(w.verdict(5), OutputVerdict::Usable);
+    }
+
+    #[test]
+    fn new_rejections_block_until_a_report_counts_none() {
+        let mut w = DriverWatch::new();
+        // Rejections from before this daemon looked are history.
+        assert_eq!(
+            w.observe(&report(5, OutputState::Active, 100, 7), 5),
+            OutputVerdict::Usable
+        );
+        let mut r = report(5, OutputState::Neutral, 100, 9);
+        r.text.set("count = 4 does not match 5");
+        let OutputVerdict::Blocked(why) = w.observe(&r, 5) else {
+            panic!("rejections not seen");
+        };
+        assert!(why.contains("rejected 2 of the daemon's commands"), "{why}");
+        assert!(why.contains("count = 4 does not match 5"), "{why}");
+        assert_eq!(
+            w.observe(&report(5, OutputState::Active, 150, 9), 5),
+            OutputVerdict::Usable
+        );
+        // A restarted driver counts from zero: not a rejection.
+        assert_eq!(
+            w.observe(&report(5, OutputState::Active, 3, 0), 5),
+            OutputVerdict::Usable
+        );
+    }
+
+    #[test]
+    fn disarmed_and_link_down_block() {
+        let mut w = DriverWatch::new();
+        let OutputVerdict::Blocked(why) = w.observe(&report(5, OutputState::Disarmed, 0, 0), 5)
+        else {
+            panic!("disarmed accepted");
+        };
+        assert!(why.contains("disarmed"), "{why}");
+        let mut r = report(5, OutputState::LinkDown, 0, 0);
+        r.text.set("no heartbeat for 3 s");
+        let OutputVerdict::Blocked(why) = w.observe(&r, 5) else {
+            panic!("link down accepted");
+        };
+        assert!(
+            why.contains("no link to the outputs (no heartbeat for 3 s)"),
+            "{why}"
+        );
+    }
+}

@@ -1,0 +1,201 @@
+//! What the daemon knows of its driver, with the real processes: a driver that cannot take
+//! the daemon's commands (another thruster count) faults the daemon, neutral, instead of
+//! letting it pulse into nothing; a daemon with no driver at all refuses to estimate and says
+//! why; the operator sees the driver's own report.
+
+use std::process::Command;
+use std::time::Duration;
+
+use serde_json::Value;
+use system_tests::{bin, state, Operator, World};
+use thruster_protocol::services::Inbox;
+use thruster_protocol::{
+    DaemonState, DriverStatusMsg, OutputState, ReconfigEvent, ReconfigKind, RequestKind,
+};
+
+const LONG: Duration = Duration::from_secs(60);
+
+fn assert_nothing_left(mut world: World) {
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+#[test]
+fn a_daemon_for_six_thrusters_on_a_five_thruster_driver_faults_and_never_pulses() {
+    let world = World::new("drvcount");
+    {
+        let op = Operator::new(&world);
+        let driver: Inbox<DriverStatusMsg> = Inbox::create(world.node(), world.ipc()).unwrap();
+        let mut daemon = world.daemon(&["--thrusters", "6", "--estimate"]);
+        let mut sim = world.sim(
+            "amour5",
+            &["--noise", "none", "--lockstep", "--duration", "100000"],
+        );
+        let s = op
+            .wait_status(LONG, |s| {
+                state(s) == DaemonState::Fault
+                    && s.text()
+                        .contains("thruster-sim drives 5 thrusters, the daemon 6")
+            })
+            .unwrap_or_else(|| panic!("no fault on the count mismatch\n{}", daemon.log_text()));
+        assert_eq!(
+            s.pulse, 0,
+            "pulsed into a driver that rejects every command"
+        );
+        // It stays there: good IMU samples alone do not clear it.
+        std::thread::sleep(Duration::from_millis(500));
+        let r = op.request(RequestKind::Estimate);
+        assert!(!r.is_ok(), "an estimation started: {}", r.text());
+        assert!(r.text().contains("fault"), "{}", r.text());
+        let s = op
+            .wait_status(Duration::from_secs(5), |_| true)
+            .expect("a status");
+        assert_eq!(state(&s), DaemonState::Fault, "{}", s.text());
+        assert_eq!(s.pulse, 0);
+        // The driver's own report says the same, for anyone to read.
+        let report =
+            system_tests::wait_for(&driver, Duration::from_secs(5), |d| d.commands_rejected > 0)
+                .expect("the driver reports its rejections");
+        assert_eq!(report.thruster_count, 5);
+        assert_eq!(report.driver(), "thruster-sim");
+        assert!(report.text().contains("count"), "{}", report.text());
+        // And the operator tool shows it.
+        let out = Command::new(bin("thrusterctl"))
+            .args(["--namespace", &world.namespace(), "status", "--json"])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["state"], "Fault", "{v}");
+        assert_eq!(v["driver"]["thruster_count"], 5, "{v}");
+        assert_eq!(v["driver"]["driver"], "thruster-sim", "{v}");
+        assert!(
+            v["driver"]["commands_rejected"].as_u64().unwrap() > 0,
+            "{v}"
+        );
+        assert!(daemon.stop().success(), "{}", daemon.log_text());
+        assert!(sim.stop().success(), "{}", sim.log_text());
+        assert!(
+            daemon.log_text().contains("driver outputs unusable"),
+            "{}",
+            daemon.log_text()
+        );
+    }
+    assert_nothing_left(world);
+}
+
+#[test]
+fn reconfigured_to_a_count_the_driver_lacks_while_controlling_faults_neutral() {
+    let world = World::new("drvreconf");
+    {
+        let op = Operator::new(&world);
+        let reconfig =
+            thruster_protocol::services::Port::<ReconfigEvent>::create(world.node(), world.ipc())
+                .unwrap();
+        let mut daemon = world.daemon(&["--estimate"]);
+        let mut sim = world.sim(
+            "amour5",
+            &["--noise", "none", "--lockstep", "--duration", "100000"],
+        );
+        op.wait_status(LONG, |s| {
+            state(s) == DaemonState::Active && s.model_version >= 1
+        })
+        .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+        let mut e = ReconfigEvent {
+            seq: 1,
+            thruster: 5,
+            count: 6,
+            ..Default::default()
+        };
+        e.set_kind(ReconfigKind::ThrusterAdded);
+        reconfig.send(&e).unwrap();
+        let s = op
+            .wait_status(LONG, |s| state(s) == DaemonState::Fault)
+            .unwrap_or_else(|| panic!("no fault\n{}", daemon.log_text()));
+        assert!(
+            s.text().contains("drives 5 thrusters, the daemon 6"),
+            "{}",
+            s.text()
+        );
+        // No estimation runs on: for a second no status shows a pulse, and it is still in
+        // fault at the end.
+        let mut states = Vec::new();
+        let end = std::time::Instant::now() + Duration::from_secs(1);
+        while std::time::Instant::now() < end {
+            while let Some(s) = op.status.recv().unwrap() {
+                states.push(state(&s));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert!(
+            !states.contains(&DaemonState::Pulse),
+            "pulsed into a driver that rejects every command: {states:?}"
+        );
+        let s = op
+            .wait_status(Duration::from_secs(5), |_| true)
+            .expect("a status");
+        assert_eq!(state(&s), DaemonState::Fault, "{}", s.text());
+        assert!(daemon.stop().success(), "{}", daemon.log_text());
+        assert!(sim.stop().success(), "{}", sim.log_text());
+    }
+    assert_nothing_left(world);
+}
+
+#[test]
+fn with_no_driver_an_estimate_is_refused_and_status_says_why() {
+    let world = World::new("drvnone");
+    {
+        let op = Operator::new(&world);
+        let mut daemon = world.daemon(&[]);
+        op.wait_status(Duration::from_secs(30), |_| true)
+            .expect("a status");
+        let r = op.request(RequestKind::Estimate);
+        assert!(!r.is_ok(), "an estimation started with no IMU");
+        assert!(
+            r.text().contains("no IMU samples from any driver"),
+            "{}",
+            r.text()
+        );
+        let r = op.request(RequestKind::Hold);
+        assert!(!r.is_ok());
+        let s = op
+            .wait_status(Duration::from_secs(10), |s| {
+                s.text().contains("no IMU samples from any driver for")
+            })
+            .unwrap_or_else(|| panic!("status does not say it\n{}", daemon.log_text()));
+        assert_eq!(state(&s), DaemonState::Idle);
+        assert_eq!(s.samples, 0);
+        assert!(daemon.stop().success(), "{}", daemon.log_text());
+    }
+    assert_nothing_left(world);
+}
+
+#[test]
+fn the_simulators_report_counts_what_it_accepted() {
+    // A driver that takes every command reports outputs active, link up, nothing rejected.
+    let world = World::new("drvok");
+    {
+        let op = Operator::new(&world);
+        let driver: Inbox<DriverStatusMsg> = Inbox::create(world.node(), world.ipc()).unwrap();
+        let mut daemon = world.daemon(&["--estimate"]);
+        let mut sim = world.sim(
+            "amour5",
+            &["--noise", "none", "--lockstep", "--duration", "100000"],
+        );
+        op.wait_status(LONG, |s| {
+            state(s) == DaemonState::Active && s.model_version >= 1
+        })
+        .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+        let report = system_tests::wait_for(&driver, Duration::from_secs(5), |d| {
+            d.output_state() == Ok(OutputState::Active)
+        })
+        .expect("an active report");
+        assert_eq!(report.commands_rejected, 0, "{}", report.text());
+        assert!(report.commands_accepted > 1000, "{report:?}");
+        assert_eq!((report.link_up, report.armed), (1, 1));
+        assert!(daemon.stop().success(), "{}", daemon.log_text());
+        assert!(sim.stop().success(), "{}", sim.log_text());
+    }
+    assert_nothing_left(world);
+}
