@@ -389,7 +389,19 @@ impl Machine {
     pub fn load_model(&mut self, model: Model) -> Result<(), Refused> {
         let model = model.with_derived_allocation(&self.setup.estimator);
         self.try_swap(model, ModelSource::Loaded)
-            .map_err(|e| Refused(format!("model not used: {e}")))
+            .map_err(|e| Refused(format!("model not used: {e}")))?;
+        self.describe_swap("model loaded");
+        Ok(())
+    }
+
+    /// After an operator's swap (revert, load): status says which model is in force and
+    /// where it came from, instead of the words of the run that made the old one.
+    fn describe_swap(&mut self, what: &str) -> String {
+        let Some(m) = &self.model else {
+            return what.to_string();
+        };
+        self.text = format!("{what}: model v{}, {}", m.version, m.provenance());
+        self.text.clone()
     }
 
     /// The answer to one IMU sample. Always a command: neutral unless estimating or controlling.
@@ -573,8 +585,8 @@ impl Machine {
                 };
                 let source = prev.source;
                 self.try_swap(prev, source)
-                    .map(|_| "reverted to the previous model".into())
-                    .map_err(|e| Refused(format!("revert refused: {e}")))
+                    .map_err(|e| Refused(format!("revert refused: {e}")))?;
+                Ok(self.describe_swap("reverted to the previous model"))
             }
         }
     }
@@ -615,7 +627,9 @@ impl Machine {
                     }
                 } else {
                     let b = nominal_effectiveness(&self.setup.body, &g.positions, &g.directions);
-                    let _ = self.try_swap(Model::nominal(b, Some(key)), ModelSource::Nominal);
+                    let mut nominal = Model::nominal(b, Some(key));
+                nominal.made_t_ns = self.last_t_ns.unwrap_or(0);
+                let _ = self.try_swap(nominal, ModelSource::Nominal);
                 }
             }
             None => {
@@ -647,15 +661,24 @@ impl Machine {
     pub fn status(&self) -> StatusSnapshot {
         let (pulse, planned, power) = match (&self.est, &self.last_estimate) {
             (Some(e), _) => (e.pulses(), e.planned_pulses(), e.power()),
-            // After a run: how many pulses the current model took.
-            (None, Some(e)) => (e.pulses, e.pulses, 0.0),
-            (None, None) => (0, 0, 0.0),
+            // Not estimating: how many pulses the model in force took (0 for a nominal
+            // one), not the last run's, which may have been refused or reverted.
+            (None, _) => {
+                let p = self.model.as_ref().map_or(0, |m| m.pulses);
+                (p, p, 0.0)
+            }
         };
-        let error_bound = self
-            .last_estimate
-            .as_ref()
-            .map(|e| e.rel_err_rot.max(e.rel_err_acc))
-            .unwrap_or(f64::NAN);
+        // Likewise the bound: the running estimate's, else the model in force's (NaN when it
+        // has none: nominal, or the paper's method).
+        let error_bound = match (&self.est, &self.model) {
+            (Some(_), _) => self
+                .last_estimate
+                .as_ref()
+                .map(|e| e.rel_err_rot.max(e.rel_err_acc))
+                .unwrap_or(f64::NAN),
+            (None, Some(m)) => m.rel_err_rot.max(m.rel_err_acc),
+            (None, None) => f64::NAN,
+        };
         let levels = self
             .levels
             .unwrap_or(NoiseLevels::isotropic(f64::NAN, f64::NAN));
@@ -903,7 +926,7 @@ impl Machine {
         let Some(est) = self.est.take() else { return };
         let estimate = est.estimate();
         let key = self.geometry.as_ref().map(|g| g.key());
-        let candidate = Model::from_estimate(&estimate, key);
+        let candidate = Model::from_estimate(&estimate, key, self.last_t_ns.unwrap_or(0));
         self.last_estimate = Some(estimate);
         let why = match decision {
             StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(

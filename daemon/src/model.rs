@@ -41,6 +41,16 @@ pub struct Model {
     pub rel_err_acc: f64,
     /// Identity of the declared geometry this model belongs to, when known (cache key).
     pub geometry_key: Option<u64>,
+    /// Vehicle time at which the model was made (solved, or computed from geometry), ns on
+    /// the IMU's clock; 0 when unknown (a file from an older daemon). Not the swap time: a
+    /// model reverted to, cached or loaded keeps it.
+    pub made_t_ns: u64,
+    /// Made by an estimation in the water (true) or computed from declared geometry.
+    pub estimated: bool,
+    /// Pulses the estimation that made it took (0 when unknown or not estimated).
+    pub pulses: usize,
+    /// The file it was last loaded from, when it came from one.
+    pub loaded_from: Option<String>,
 }
 
 /// Why a candidate model was not swapped in.
@@ -94,9 +104,13 @@ impl Model {
         self.effectiveness.ncols()
     }
 
-    /// A model from an estimate (version assigned at swap time).
-    pub fn from_estimate(e: &Estimate, geometry_key: Option<u64>) -> Model {
+    /// A model from an estimate solved at vehicle time `t_ns` (version assigned at swap time).
+    pub fn from_estimate(e: &Estimate, geometry_key: Option<u64>, t_ns: u64) -> Model {
         Model {
+            made_t_ns: t_ns,
+            estimated: true,
+            pulses: e.pulses,
+            loaded_from: None,
             version: 0,
             source: ModelSource::Estimated,
             method: e.method,
@@ -117,6 +131,10 @@ impl Model {
         let zeros = DMatrix::zeros(6, n);
         let rank = rank_report(&effectiveness, &zeros, &EstimatorConfig::default());
         Model {
+            made_t_ns: 0,
+            estimated: false,
+            pulses: 0,
+            loaded_from: None,
             version: 0,
             source: ModelSource::Nominal,
             method: Method::Forward,
@@ -202,6 +220,32 @@ impl Model {
 
     pub fn is_actuated(&self, dof: Dof) -> bool {
         self.actuated.contains(dof)
+    }
+
+    /// Where the model came from, in words: how it was made, and how it got here when that
+    /// was not by being made here (a cache, a file). The same words in status and `model`.
+    pub fn provenance(&self) -> String {
+        let made = if self.estimated {
+            let at = if self.made_t_ns > 0 {
+                format!(" at vehicle time {:.1} s", self.made_t_ns as f64 * 1e-9)
+            } else {
+                String::new()
+            };
+            let pulses = if self.pulses > 0 {
+                format!(" from {} pulses", self.pulses)
+            } else {
+                String::new()
+            };
+            format!("estimated{at}{pulses}")
+        } else {
+            "nominal, from the declared geometry".to_string()
+        };
+        match (self.source, &self.loaded_from) {
+            (ModelSource::Loaded, Some(file)) => format!("loaded from {file} ({made})"),
+            (ModelSource::Loaded, None) => format!("loaded ({made})"),
+            (ModelSource::Cache, _) => format!("from the cache ({made})"),
+            _ => made,
+        }
     }
 }
 
@@ -358,6 +402,31 @@ mod tests {
         let mut negative = good;
         negative.std_err[(0, 0)] = -1.0;
         assert!(negative.check(3, 0.1).is_err());
+    }
+
+    #[test]
+    fn provenance_says_how_it_was_made_and_how_it_got_here() {
+        let body = RigidBody::default();
+        let pos = [[0.0, -0.2, 0.0], [0.0, 0.2, 0.0]];
+        let dir = [[1.0, 0.0, 0.0]; 2];
+        let mut m = Model::nominal(nominal_effectiveness(&body, &pos, &dir), None);
+        assert_eq!(m.provenance(), "nominal, from the declared geometry");
+        m.estimated = true;
+        m.pulses = 16;
+        m.made_t_ns = 16_500_000_000;
+        m.source = ModelSource::Estimated;
+        assert_eq!(m.provenance(), "estimated at vehicle time 16.5 s from 16 pulses");
+        m.source = ModelSource::Cache;
+        assert_eq!(
+            m.provenance(),
+            "from the cache (estimated at vehicle time 16.5 s from 16 pulses)"
+        );
+        m.source = ModelSource::Loaded;
+        m.loaded_from = Some("/var/lib/thrusterd/model.json".into());
+        assert_eq!(
+            m.provenance(),
+            "loaded from /var/lib/thrusterd/model.json (estimated at vehicle time 16.5 s from 16 pulses)"
+        );
     }
 
     #[test]

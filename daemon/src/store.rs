@@ -50,6 +50,15 @@ struct ModelFile {
     rel_err_rot: Option<f64>,
     rel_err_acc: Option<f64>,
     geometry_key: Option<u64>,
+    /// Vehicle time the model was made, ns (absent in files of older daemons).
+    #[serde(default)]
+    made_t_ns: u64,
+    /// Made by an estimation (absent in older files: then taken from `source`).
+    #[serde(default)]
+    estimated: Option<bool>,
+    /// Pulses of the estimation that made it; 0 for a nominal model (absent in older files).
+    #[serde(default)]
+    pulses: usize,
 }
 
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -85,6 +94,9 @@ pub fn to_json(model: &Model) -> String {
         rel_err_rot: finite(model.rel_err_rot),
         rel_err_acc: finite(model.rel_err_acc),
         geometry_key: model.geometry_key,
+        made_t_ns: model.made_t_ns,
+        estimated: Some(model.estimated),
+        pulses: model.pulses,
     };
     // Plain data with string keys: serialisation cannot fail.
     serde_json::to_string_pretty(&file).unwrap_or_default()
@@ -156,6 +168,10 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
         rel_err_rot: f.rel_err_rot.unwrap_or(f64::NAN),
         rel_err_acc: f.rel_err_acc.unwrap_or(f64::NAN),
         geometry_key: f.geometry_key,
+        made_t_ns: f.made_t_ns,
+        estimated: f.estimated.unwrap_or(f.source != ModelSource::Nominal),
+        pulses: f.pulses,
+        loaded_from: Some(origin.to_string()),
     })
 }
 

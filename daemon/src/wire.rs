@@ -69,19 +69,21 @@ pub fn status_msg(seq: u64, s: &StatusSnapshot) -> StatusMsg {
     m
 }
 
-pub fn model_msg(seq: u64, t_ns: u64, model: &Model) -> ModelMsg {
+pub fn model_msg(seq: u64, model: &Model) -> ModelMsg {
     let n = model.thrusters().min(MAX_THRUSTERS);
     let known = |v: f64| if v.is_finite() { v } else { f64::NAN };
     let mut m = ModelMsg {
         seq,
         version: model.version,
-        t_ns,
+        t_ns: model.made_t_ns,
+        pulses: u32::try_from(model.pulses).unwrap_or(u32::MAX),
         count: n as u32,
         actuated: model.actuated.bits() as u32,
         rel_err_rot: known(model.rel_err_rot),
         rel_err_acc: known(model.rel_err_acc),
         ..ModelMsg::default()
     };
+    m.provenance.set(&model.provenance());
     m.set_source(match model.source {
         ModelSource::Nominal => WireSource::Nominal,
         ModelSource::Estimated => WireSource::Estimated,
@@ -150,7 +152,7 @@ mod tests {
             None,
         );
         model.rel_err_acc = f64::INFINITY;
-        let msg = model_msg(1, 0, &model);
+        let msg = model_msg(1, &model);
         msg.validate().unwrap();
         assert_eq!(msg.count, 3);
         assert!(msg.rel_err_acc.is_nan());

@@ -1,7 +1,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
-use super::{clamp_count, Dof, DOF_COUNT, MAX_THRUSTERS};
+use super::{clamp_count, Dof, Text, DOF_COUNT, MAX_THRUSTERS};
 use crate::wire::{wire_enum, UnknownEnumValue};
 
 wire_enum! {
@@ -37,14 +37,16 @@ wire_enum! {
 /// Columns at and beyond `count` are ignored and should be zero.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.ModelMsg.v1")]
+#[type_name("thrusterd.ModelMsg.v2")]
 pub struct ModelMsg {
     /// Sequence number, +1 per published model message.
     pub seq: u64,
     /// Model version, +1 each time the model in use changes (hot swap); never reused
     /// while the daemon runs.
     pub version: u64,
-    /// Vehicle time at which the model was produced, ns, IMU monotonic clock.
+    /// Vehicle time at which the model was made (solved, or computed from geometry), ns,
+    /// IMU monotonic clock; kept when the model is reverted to, cached or loaded; 0 when
+    /// unknown.
     pub t_ns: u64,
     /// Number of thrusters (columns in use), at most [`MAX_THRUSTERS`].
     pub count: u32,
@@ -70,6 +72,14 @@ pub struct ModelMsg {
     pub rel_err_rot: f64,
     /// Relative error bound of the translational rows (dimensionless, >= 0; NaN if unknown).
     pub rel_err_acc: f64,
+    /// Pulses of the estimation that made the model; 0 for a nominal one. (v2)
+    pub pulses: u32,
+    /// Padding, written as zero. (v2)
+    pub reserved: u32,
+    /// Where the model came from, in words: "estimated at vehicle time 16.5 s from 16
+    /// pulses", "loaded from /var/lib/thrusterd/model.json (...)", "nominal, from the
+    /// declared geometry". (v2)
+    pub provenance: Text,
 }
 
 impl ModelMsg {
@@ -101,5 +111,10 @@ impl ModelMsg {
     /// Thruster count clamped to capacity (safe for slicing).
     pub fn thruster_count(&self) -> usize {
         clamp_count(self.count)
+    }
+
+    /// Where the model came from, in words.
+    pub fn provenance(&self) -> &str {
+        self.provenance.as_str()
     }
 }

@@ -298,6 +298,7 @@ impl Validate for ModelMsg {
             f64::MAX,
             "",
         )?;
+        utf8_text("provenance", &self.provenance)?;
         for (i, row) in self.allocation[..n].iter().enumerate() {
             for dof in Dof::ALL {
                 if !self.is_actuated(*dof) && row[dof.index()] != 0.0 {

@@ -138,6 +138,10 @@ pub struct ModelJson {
     pub allocation: Vec<Vec<Option<f64>>>,
     pub rel_err_rot: Option<f64>,
     pub rel_err_acc: Option<f64>,
+    /// Pulses of the estimation that made the model; 0 for a nominal one.
+    pub pulses: u32,
+    /// Where the model came from, in words.
+    pub provenance: String,
 }
 
 impl From<&ModelMsg> for ModelJson {
@@ -176,6 +180,8 @@ impl From<&ModelMsg> for ModelJson {
                 .collect(),
             rel_err_rot: finite(m.rel_err_rot),
             rel_err_acc: finite(m.rel_err_acc),
+            pulses: m.pulses,
+            provenance: m.provenance().to_string(),
         }
     }
 }

@@ -193,16 +193,23 @@ pub fn model_report(m: &ModelMsg) -> String {
         .map_or_else(|e| e.to_string(), |s| s.name().into());
     let _ = writeln!(
         out,
-        "model version {}: {n} thrusters, source {source}, method {method}, made at vehicle time {}",
+        "model version {}: {n} thrusters, source {source}, method {method}",
         m.version,
-        seconds(m.t_ns)
     );
-    let _ = writeln!(
-        out,
-        "confidence: relative error bound {} (rotation), {} (translation)",
-        percent(m.rel_err_rot),
-        percent(m.rel_err_acc)
-    );
+    if !m.provenance().is_empty() {
+        let _ = writeln!(out, "provenance: {}", m.provenance());
+    }
+    if m.rel_err_rot.is_finite() || m.rel_err_acc.is_finite() {
+        let _ = writeln!(
+            out,
+            "confidence: relative error bound {} (rotation), {} (translation)",
+            percent(m.rel_err_rot),
+            percent(m.rel_err_acc)
+        );
+    } else {
+        // A nominal model, or the paper's method: no bound, not "NaN %".
+        let _ = writeln!(out, "confidence: no error bound (not estimated by this method)");
+    }
     let (on, off): (Vec<Dof>, Vec<Dof>) = Dof::ALL.iter().partition(|d| m.is_actuated(**d));
     let names = |dofs: &[Dof]| {
         if dofs.is_empty() {

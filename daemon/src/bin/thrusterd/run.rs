@@ -659,8 +659,7 @@ impl Daemon {
     }
 
     fn publish_model(&mut self, model_out: &Port<ModelMsg>, model: &thrusterd::model::Model) {
-        let t = self.last_imu.map(|(_, t)| t).unwrap_or(0);
-        let msg = wire::model_msg(self.model_seq, t, model);
+        let msg = wire::model_msg(self.model_seq, model);
         self.model_seq += 1;
         if let Err(e) = model_out.send(&msg) {
             error!("model not published: {e}");
