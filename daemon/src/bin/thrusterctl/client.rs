@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use thruster_protocol::services::{
-    cleanup_dead_nodes, Inbox, IpcConfig, IpcError, IpcNode, Port, TopicMessage,
+    check_access, cleanup_dead_nodes, Inbox, IpcConfig, IpcError, IpcNode, Port, TopicMessage,
 };
 use thruster_protocol::{ControlRequest, ControlResponse, RequestKind};
 
@@ -42,6 +42,11 @@ impl Daemon {
         let namespace = target.namespace.as_str();
         let ipc = IpcConfig::with_root_base(namespace, &target.root_base)
             .map_err(|e| Failure::usage(format!("--namespace/--ipc-root: {e}")))?;
+        // Before the node: joining creates files, and files the daemon cannot open stall it.
+        check_access(&ipc).map_err(|e| match e {
+            IpcError::AccessDenied(denied) => Failure::new(exit::FORBIDDEN, denied.to_string()),
+            other => Failure::new(exit::GENERIC, other.to_string()),
+        })?;
         let node = ipc
             .create_node("thrusterctl")
             .with_context(|| format!("joining namespace {namespace}"))?;
