@@ -214,6 +214,8 @@ pub struct Driver {
     started: Option<Instant>,
     next_housekeeping: Instant,
     next_report: Instant,
+    /// systemd notify: READY when the loop starts, WATCHDOG=1 from its housekeeping.
+    systemd: thruster_driver_kit::Systemd,
     ports: Ports,
 }
 
@@ -280,6 +282,7 @@ impl Driver {
             started: None,
             next_housekeeping: now,
             next_report: now + REPORT_PERIOD,
+            systemd: thruster_driver_kit::Systemd::new(),
             ports,
             settings,
         })
@@ -301,10 +304,13 @@ impl Driver {
             duration_s = ?self.settings.duration_s,
             "thruster-sim starting"
         );
+        // The ports are up and the thrusters neutral (nothing applied yet): safe to be ready.
+        self.systemd.ready();
         let reason = match self.settings.mode {
             Mode::Lockstep => self.run_lockstep()?,
             Mode::Realtime => self.run_realtime()?,
         };
+        self.systemd.stopping();
         self.go_neutral();
         self.publish_truth("final")?;
         self.write_stats(true)?;
@@ -513,6 +519,8 @@ impl Driver {
     /// Once per sample: hands the truth history to late subscribers now and then, and logs
     /// progress.
     fn housekeeping(&mut self) -> Result<(), DriverError> {
+        // Every loop round of both modes comes here: a loop that stops coming is hung.
+        self.systemd.tick();
         let now = Instant::now();
         if now < self.next_housekeeping {
             return Ok(());
