@@ -84,6 +84,15 @@ pub fn check_access(ipc: &IpcConfig) -> Result<(), IpcError> {
     Ok(())
 }
 
+/// Whether this process owns the namespace's root base (or it does not exist yet): only then
+/// may it remove what dead nodes left (see [`IpcConfig::without_dead_node_cleanup`]).
+pub fn owns_root(ipc: &IpcConfig) -> bool {
+    match std::fs::metadata(ipc.root_base()) {
+        Ok(m) => m.uid() == unsafe { libc::geteuid() },
+        Err(_) => true,
+    }
+}
+
 /// Effective user and groups of a process.
 #[derive(Debug, Clone)]
 pub(crate) struct Credentials {

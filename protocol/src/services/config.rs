@@ -139,6 +139,19 @@ impl IpcConfig {
         &self.root_base
     }
 
+    /// The same namespace for a process that must not remove dead nodes' resources: an
+    /// operator of another user than the daemon's. In the sticky /dev/shm only a file's owner
+    /// may remove it, so an operator that starts removing a crashed daemon's service leaves
+    /// it marked for destruction, and the restarted daemon can never open it again (seen
+    /// under systemd: kill -9, then every restart failed with IsMarkedForDestruction).
+    pub fn without_dead_node_cleanup(mut self) -> Self {
+        let node = &mut self.iceoryx.global.node;
+        node.cleanup_dead_nodes_on_creation = false;
+        node.cleanup_dead_nodes_on_destruction = false;
+        self.iceoryx.global.service.cleanup_dead_nodes_on_open = false;
+        self
+    }
+
     /// The iceoryx2 root directory of this namespace, `<root base>/<namespace>`.
     pub fn root_dir(&self) -> PathBuf {
         self.root_base.join(&self.namespace)

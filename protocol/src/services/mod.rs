@@ -27,7 +27,7 @@ mod ports;
 mod retry;
 mod topics;
 
-pub use access::{check_access, AccessDenied};
+pub use access::{check_access, owns_root, AccessDenied};
 pub use cleanup::{
     cleanup_dead_nodes, namespace_files, purge_namespace, NamespaceGuard, NodeCensus, PurgeReport,
 };
