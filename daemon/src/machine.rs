@@ -628,8 +628,8 @@ impl Machine {
                 } else {
                     let b = nominal_effectiveness(&self.setup.body, &g.positions, &g.directions);
                     let mut nominal = Model::nominal(b, Some(key));
-                nominal.made_t_ns = self.last_t_ns.unwrap_or(0);
-                let _ = self.try_swap(nominal, ModelSource::Nominal);
+                    nominal.made_t_ns = self.last_t_ns.unwrap_or(0);
+                    let _ = self.try_swap(nominal, ModelSource::Nominal);
                 }
             }
             None => {

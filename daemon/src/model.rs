@@ -415,7 +415,10 @@ mod tests {
         m.pulses = 16;
         m.made_t_ns = 16_500_000_000;
         m.source = ModelSource::Estimated;
-        assert_eq!(m.provenance(), "estimated at vehicle time 16.5 s from 16 pulses");
+        assert_eq!(
+            m.provenance(),
+            "estimated at vehicle time 16.5 s from 16 pulses"
+        );
         m.source = ModelSource::Cache;
         assert_eq!(
             m.provenance(),

@@ -216,3 +216,43 @@ fn load_refuses_a_missing_file_with_exit_4() {
     );
     assert!(daemon.stop().success());
 }
+
+/// `sudo thrusterctl` on a vehicle: the ipc root belongs to thrusterd:thrusterd (2770) and the
+/// caller is neither. Refused with exit 7, the path and the fix named, before any file exists
+/// (files of another user are what stalled the daemon).
+#[test]
+fn a_user_outside_the_ipc_roots_group_is_refused_with_exit_7_and_no_file() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let root_base = dir.path().join("run");
+    std::fs::create_dir(&root_base).unwrap();
+    let ns = "ctlacc";
+    if unsafe { libc::geteuid() } == 0 {
+        std::os::unix::fs::chown(&root_base, Some(65534), Some(65534)).unwrap();
+        std::fs::set_permissions(&root_base, std::fs::Permissions::from_mode(0o2770)).unwrap();
+    } else {
+        // Not root: no chown; a directory with empty owner bits refuses its owner the same way.
+        std::fs::set_permissions(&root_base, std::fs::Permissions::from_mode(0o070)).unwrap();
+    }
+    let out = Command::new(bin("thrusterctl"))
+        .args(["--namespace", ns, "--ipc-root", root_base.to_str().unwrap()])
+        .args(["--timeout-ms", "500", "status"])
+        .output()
+        .unwrap();
+    expect_code(&out, 7, "a user outside the ipc root's group");
+    let err = text(&out.stderr);
+    assert!(err.contains(&root_base.display().to_string()), "{err}");
+    assert!(err.contains("usermod -aG"), "{err}");
+    std::fs::set_permissions(&root_base, std::fs::Permissions::from_mode(0o700)).unwrap();
+    assert!(
+        !root_base.join(ns).exists(),
+        "thrusterctl made its root dir"
+    );
+    let shm: Vec<String> = std::fs::read_dir("/dev/shm")
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(&format!("thr_{ns}_")))
+        .collect();
+    assert!(shm.is_empty(), "thrusterctl left shared memory: {shm:?}");
+}

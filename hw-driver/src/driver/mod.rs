@@ -179,6 +179,10 @@ fn run_inner(
         watchdog_ms = settings.watchdog_ms,
         "thruster-hw running: outputs neutral"
     );
+    // READY only now: the outputs are neutral (arming) and the ports are up. Pings come from
+    // the loop below, so a hung loop is killed by systemd (WatchdogSec) and restarted neutral.
+    let mut systemd = thruster_driver_kit::Systemd::new();
+    systemd.ready();
     let mut lp = Loop {
         last_written: controller.neutral().to_vec(),
         controller,
@@ -200,6 +204,7 @@ fn run_inner(
             break;
         }
         lp.round(backend, &imu, &thrust)?;
+        systemd.tick();
 
         let now = monotonic_ns();
         let deadline = [
@@ -230,6 +235,7 @@ fn run_inner(
         wake.drain();
         thrust.drain_events()?;
     }
+    systemd.stopping();
     let summary = lp.summary();
     let c = &summary.commands;
     info!(

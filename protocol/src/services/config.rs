@@ -18,6 +18,18 @@ pub const DEFAULT_ROOT_BASE: &str = "/tmp/iceoryx2/thr";
 /// dynamic service state and a per-prefix global management segment.
 pub const SHM_DIR: &str = "/dev/shm";
 
+/// How long iceoryx2 waits for another process's shared resource (a connection or data
+/// segment, a service being created) to become usable: its `global.creation_timeout`.
+///
+/// iceoryx2's default is 1 s, and it is spent inside whatever port call meets the resource:
+/// a client whose files the daemon cannot open (another user's mode-0600 files read as "not
+/// initialised yet") cost the daemon's control loop 1 s per connection, long enough for its
+/// IMU deadline and systemd's watchdog. A healthy process finishes a resource in well under
+/// a millisecond, so this bounds a bad client to a short stall per new port it opens. A
+/// connection that does give up is retried when the port list changes next; service
+/// creation is retried by [`super::retry`] anyway.
+pub const CONNECTION_TIMEOUT: std::time::Duration = std::time::Duration::from_millis(20);
+
 /// Longest namespace, bytes. Kept short because iceoryx2 binds unix datagram sockets at
 /// `<root><prefix><39-digit id>.event`, and a socket path is limited to 107 bytes.
 pub const MAX_NAMESPACE_LEN: usize = 16;
@@ -83,6 +95,7 @@ impl IpcConfig {
         let root_path = iceoryx2::prelude::Path::new(root_str.as_bytes())
             .map_err(ice("set iceoryx2 root path", &root_str))?;
         cfg.iceoryx.global.set_root_path(&root_path);
+        cfg.iceoryx.global.creation_timeout = CONNECTION_TIMEOUT;
         Ok(cfg)
     }
 
@@ -119,6 +132,24 @@ impl IpcConfig {
     /// The iceoryx2 file prefix, `thr_<namespace>_`.
     pub fn prefix(&self) -> String {
         format!("thr_{}_", self.namespace)
+    }
+
+    /// The base directory holding the namespaces' root directories (e.g. `/run/thrusterd`).
+    pub fn root_base(&self) -> &Path {
+        &self.root_base
+    }
+
+    /// The same namespace for a process that must not remove dead nodes' resources: an
+    /// operator of another user than the daemon's. In the sticky /dev/shm only a file's owner
+    /// may remove it, so an operator that starts removing a crashed daemon's service leaves
+    /// it marked for destruction, and the restarted daemon can never open it again (seen
+    /// under systemd: kill -9, then every restart failed with IsMarkedForDestruction).
+    pub fn without_dead_node_cleanup(mut self) -> Self {
+        let node = &mut self.iceoryx.global.node;
+        node.cleanup_dead_nodes_on_creation = false;
+        node.cleanup_dead_nodes_on_destruction = false;
+        self.iceoryx.global.service.cleanup_dead_nodes_on_open = false;
+        self
     }
 
     /// The iceoryx2 root directory of this namespace, `<root base>/<namespace>`.
@@ -213,6 +244,10 @@ mod tests {
         assert_eq!(c.prefix(), "thr_veh1_");
         assert_eq!(c.root_dir(), PathBuf::from("/tmp/iceoryx2/thr/veh1"));
         assert_eq!(c.iceoryx_config().global.prefix.as_str(), "thr_veh1_");
+        assert_eq!(
+            c.iceoryx_config().global.creation_timeout,
+            CONNECTION_TIMEOUT
+        );
         assert_eq!(
             c.iceoryx_config().global.root_path().to_string(),
             "/tmp/iceoryx2/thr/veh1/"

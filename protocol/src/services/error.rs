@@ -75,6 +75,9 @@ pub enum IpcError {
         /// Live nodes found.
         alive: usize,
     },
+    /// This user may not use the namespace's files (see [`super::check_access`]).
+    #[error("{0}")]
+    AccessDenied(Box<super::AccessDenied>),
     /// A file system operation failed.
     #[error("{op} {path}: {source}")]
     Io {

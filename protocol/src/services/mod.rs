@@ -18,6 +18,7 @@
 //! Signals: nodes and wait sets are created with iceoryx2's signal handling disabled,
 //! because its handler would replace the process's own (ctrlc) SIGINT/SIGTERM handlers.
 
+mod access;
 mod cleanup;
 mod config;
 mod control;
@@ -26,10 +27,11 @@ mod ports;
 mod retry;
 mod topics;
 
+pub use access::{check_access, owns_root, AccessDenied};
 pub use cleanup::{
     cleanup_dead_nodes, namespace_files, purge_namespace, NamespaceGuard, NodeCensus, PurgeReport,
 };
-pub use config::{IpcConfig, DEFAULT_ROOT_BASE, MAX_NAMESPACE_LEN, SHM_DIR};
+pub use config::{IpcConfig, CONNECTION_TIMEOUT, DEFAULT_ROOT_BASE, MAX_NAMESPACE_LEN, SHM_DIR};
 pub use control::{ControlClient, ControlServer, ServeCount, CONTROL_LEAF};
 pub use error::IpcError;
 pub use ports::{

@@ -223,6 +223,8 @@ pub struct Driver {
     last_driver_status: Option<(u64, u32, u32)>,
     /// Why the last thrust command was rejected, for the driver status.
     last_rejection: Option<String>,
+    /// systemd notify: READY when the loop starts, WATCHDOG=1 from its housekeeping.
+    systemd: thruster_driver_kit::Systemd,
     ports: Ports,
 }
 
@@ -294,6 +296,7 @@ impl Driver {
             driver_status_seq: 0,
             last_driver_status: None,
             last_rejection: None,
+            systemd: thruster_driver_kit::Systemd::new(),
             ports,
             settings,
         })
@@ -315,10 +318,13 @@ impl Driver {
             duration_s = ?self.settings.duration_s,
             "thruster-sim starting"
         );
+        // The ports are up and the thrusters neutral (nothing applied yet): safe to be ready.
+        self.systemd.ready();
         let reason = match self.settings.mode {
             Mode::Lockstep => self.run_lockstep()?,
             Mode::Realtime => self.run_realtime()?,
         };
+        self.systemd.stopping();
         self.go_neutral();
         self.publish_truth("final")?;
         self.write_stats(true)?;
@@ -570,6 +576,8 @@ impl Driver {
     /// Once per sample: hands the truth history to late subscribers now and then, and logs
     /// progress.
     fn housekeeping(&mut self) -> Result<(), DriverError> {
+        // Every loop round of both modes comes here: a loop that stops coming is hung.
+        self.systemd.tick();
         let now = Instant::now();
         if now < self.next_housekeeping {
             return Ok(());

@@ -7,7 +7,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use thruster_protocol::services::{
-    cleanup_dead_nodes, Inbox, IpcConfig, IpcError, IpcNode, Port, TopicMessage,
+    check_access, cleanup_dead_nodes, owns_root, Inbox, IpcConfig, IpcError, IpcNode, Port,
+    TopicMessage,
 };
 use thruster_protocol::{ControlRequest, ControlResponse, RequestKind};
 
@@ -30,6 +31,8 @@ pub struct Target {
 pub struct Daemon {
     control: thruster_protocol::services::ControlClient,
     ipc: IpcConfig,
+    /// Whether this user may remove dead nodes' files (see `owns_root`).
+    owns_root: bool,
     timeout: Duration,
     // Declared last so it drops after every port created from it.
     node: IpcNode,
@@ -42,6 +45,17 @@ impl Daemon {
         let namespace = target.namespace.as_str();
         let ipc = IpcConfig::with_root_base(namespace, &target.root_base)
             .map_err(|e| Failure::usage(format!("--namespace/--ipc-root: {e}")))?;
+        // Before the node: joining creates files, and files the daemon cannot open stall it.
+        check_access(&ipc).map_err(|e| match e {
+            IpcError::AccessDenied(denied) => Failure::new(exit::FORBIDDEN, denied.to_string()),
+            other => Failure::new(exit::GENERIC, other.to_string()),
+        })?;
+        // An operator of another user than the daemon leaves dead nodes to the daemon.
+        let ipc = if owns_root(&ipc) {
+            ipc
+        } else {
+            ipc.without_dead_node_cleanup()
+        };
         let node = ipc
             .create_node("thrusterctl")
             .with_context(|| format!("joining namespace {namespace}"))?;
@@ -49,6 +63,7 @@ impl Daemon {
             .context("opening the control service")?;
         Ok(Self {
             control,
+            owns_root: owns_root(&ipc),
             ipc,
             timeout,
             node,
@@ -71,7 +86,9 @@ impl Daemon {
         // whole timeout and report a slow daemon (exit 5) instead of a dead one (exit 3).
         // Joining cleans up once; long waits (`estimate --wait`, `watch`) ask again later,
         // so clean up before every call (a directory listing; failures change nothing).
-        let _ = cleanup_dead_nodes(&self.ipc);
+        if self.owns_root {
+            let _ = cleanup_dead_nodes(&self.ipc);
+        }
         self.control
             .call(request, self.timeout)
             .map_err(|e| self.ipc_failure(e).into())

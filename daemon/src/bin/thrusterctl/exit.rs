@@ -19,6 +19,9 @@ pub const REFUSED: u8 = 4;
 pub const TIMEOUT: u8 = 5;
 /// Estimation ended in Fault, or without producing a new model.
 pub const ESTIMATION_FAILED: u8 = 6;
+/// This user may not operate the namespace (not the owner or in the group of its ipc root);
+/// refused before any file was created.
+pub const FORBIDDEN: u8 = 7;
 /// Interrupted by Ctrl-C while waiting (128 + SIGINT, the shell convention).
 pub const INTERRUPTED: u8 = 130;
 

@@ -208,7 +208,10 @@ pub fn model_report(m: &ModelMsg) -> String {
         );
     } else {
         // A nominal model, or the paper's method: no bound, not "NaN %".
-        let _ = writeln!(out, "confidence: no error bound (not estimated by this method)");
+        let _ = writeln!(
+            out,
+            "confidence: no error bound (not estimated by this method)"
+        );
     }
     let (on, off): (Vec<Dof>, Vec<Dof>) = Dof::ALL.iter().partition(|d| m.is_actuated(**d));
     let names = |dofs: &[Dof]| {

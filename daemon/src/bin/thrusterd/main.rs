@@ -3,7 +3,6 @@
 mod run;
 mod session;
 mod study;
-mod systemd;
 
 use std::path::PathBuf;
 

@@ -209,7 +209,7 @@ impl Daemon {
             self.publish_model(&model_out, &model);
         }
         info!(thrusters = self.machine.thrusters(), "thrusterd serving");
-        let mut systemd = crate::systemd::Systemd::new();
+        let mut systemd = thruster_driver_kit::Systemd::new();
         systemd.ready();
         self.publish_status(&status_out);
         let mut last_status = Instant::now();

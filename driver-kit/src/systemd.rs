@@ -1,12 +1,16 @@
-//! systemd integration: READY once the services are up, WATCHDOG=1 from the main loop (so a
-//! hung loop gets the daemon restarted), STATUS= with the state, STOPPING on the way out.
-//! Every call is a no-op when not started by systemd (no NOTIFY_SOCKET).
+//! systemd's notify protocol for every thrusterd process (`Type=notify` units): READY once
+//! the process is safe and its services are up, WATCHDOG=1 from the main loop (so a hung
+//! loop gets the process killed and restarted, and a driver's outputs go neutral with it),
+//! STATUS= with the state, STOPPING on the way out. Every call is a no-op when not started
+//! by systemd (no NOTIFY_SOCKET), and pings only when the unit set WatchdogSec
+//! (WATCHDOG_USEC).
 
 use std::time::{Duration, Instant};
 
 use sd_notify::NotifyState;
 use tracing::warn;
 
+/// The notify state of one process. Create it once, in the thread running the main loop.
 pub struct Systemd {
     /// Ping period: half of WatchdogSec, as sd_watchdog_enabled(3) recommends.
     watchdog: Option<Duration>,
@@ -14,7 +18,14 @@ pub struct Systemd {
     last_status: String,
 }
 
+impl Default for Systemd {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Systemd {
+    /// Reads WATCHDOG_USEC (for this process only, as sd_watchdog_enabled(3) checks).
     pub fn new() -> Self {
         Systemd {
             watchdog: sd_notify::watchdog_enabled().map(|d| d / 2),
@@ -29,9 +40,15 @@ impl Systemd {
         }
     }
 
+    /// READY=1 (and a first ping): call once the process does its job safely.
     pub fn ready(&mut self) {
         self.send(&[NotifyState::Ready]);
         self.ping();
+    }
+
+    /// Whether systemd expects watchdog pings (WatchdogSec set on the unit).
+    pub fn watchdog_enabled(&self) -> bool {
+        self.watchdog.is_some()
     }
 
     /// Call from every loop iteration; pings when due.
@@ -58,6 +75,7 @@ impl Systemd {
         }
     }
 
+    /// STOPPING=1: the process is shutting down on purpose.
     pub fn stopping(&self) {
         self.send(&[NotifyState::Stopping]);
     }

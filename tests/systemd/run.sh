@@ -1,0 +1,296 @@
+#!/usr/bin/env bash
+# The units under a real systemd: boots systemd 252 in a container (systemd-nspawn), installs
+# thrusterd exactly as the README's "Install on a vehicle" section says, with thruster-sim in
+# real time standing in for thruster-hw (a runtime drop-in), and checks what an operator and
+# systemd rely on. Any failed check exits non-zero naming the check. Nothing is left running.
+#
+#   sudo tests/systemd/run.sh          (root: nspawn, mounts; CI runs it from .ci/run)
+#
+# Needs: Debian/Ubuntu with apt (installs systemd-container and mmdebstrap if missing), the
+# Debian mirror apt uses (once, for the container's rootfs, cached in $THRUSTERD_CI_CACHE,
+# default /var/cache/thrusterd-ci), a Rust toolchain (builds the debug binaries).
+set -euo pipefail
+
+REPO=$(cd "$(dirname "$0")/../.." && pwd)
+CACHE=${THRUSTERD_CI_CACHE:-/var/cache/thrusterd-ci}
+# Bump the suffix when the package list changes: a new rootfs is built beside the old one.
+ROOTFS=$CACHE/rootfs-bookworm-v1
+PACKAGES=systemd,systemd-sysv,dbus
+NS=thrusterd
+IPC=/run/thrusterd
+T0=$EPOCHREALTIME
+
+elapsed() { awk -v a="$T0" -v b="$EPOCHREALTIME" 'BEGIN { printf "%.1f", b - a }'; }
+say() { echo "[systemd-test $(elapsed) s] $*"; }
+fail() {
+    echo "FAIL: $*" >&2
+    if [ -n "${LEADER:-}" ]; then
+        echo "--- journal (last 80 lines) ---" >&2
+        inside 'journalctl --no-pager -n 80 -u thrusterd -u thruster-hw' >&2 || true
+    fi
+    exit 1
+}
+
+[ "$(id -u)" = 0 ] || fail "setup: must run as root (systemd-nspawn, overlay mount)"
+
+# --- host tools (idempotent: apt only when something is missing) -----------------------------
+if ! command -v systemd-nspawn >/dev/null || ! command -v mmdebstrap >/dev/null; then
+    echo "installing systemd-container and mmdebstrap"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+        systemd-container mmdebstrap >/dev/null || fail "setup: apt-get install"
+fi
+
+# --- rootfs, once ----------------------------------------------------------------------------
+if [ ! -x "$ROOTFS/lib/systemd/systemd" ]; then
+    say "building the container rootfs in $ROOTFS (once, about 30 s to 2 min)"
+    mkdir -p "$CACHE"
+    rm -rf "$ROOTFS.tmp"
+    mmdebstrap --quiet --variant=minbase --include="$PACKAGES" bookworm "$ROOTFS.tmp" \
+        || fail "setup: mmdebstrap"
+    mv "$ROOTFS.tmp" "$ROOTFS"
+fi
+
+# --- binaries (debug: quick to build, the same code) -----------------------------------------
+say "cargo build --bins"
+(cd "$REPO" && cargo build --quiet --bins) || fail "setup: cargo build --bins"
+TARGET=$(cd "$REPO" && cargo metadata --format-version 1 --no-deps \
+    | sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')
+BIN=$TARGET/debug
+
+# --- the container: an overlay, so the cached rootfs stays clean -----------------------------
+WORK=$(mktemp -d /tmp/thrusterd-systemd-test.XXXXXX)
+MNT=$WORK/root
+mkdir -p "$WORK/upper" "$WORK/work" "$MNT"
+NSPAWN_PID=
+LEADER=
+cleanup() {
+    local rc=$?
+    set +e
+    if [ -n "$NSPAWN_PID" ] && kill -0 "$NSPAWN_PID" 2>/dev/null; then
+        # SIGTERM: nspawn asks the container's systemd to power off.
+        kill -TERM "$NSPAWN_PID"
+        for _ in $(seq 50); do kill -0 "$NSPAWN_PID" 2>/dev/null || break; sleep 0.2; done
+        kill -0 "$NSPAWN_PID" 2>/dev/null && kill -KILL "$NSPAWN_PID"
+        wait "$NSPAWN_PID" 2>/dev/null
+    fi
+    mountpoint -q "$MNT" && umount "$MNT"
+    rm -rf "$WORK"
+    say "exit $rc, wall time $(elapsed) s"
+    exit $rc
+}
+trap cleanup EXIT
+mount -t overlay overlay -o "lowerdir=$ROOTFS,upperdir=$WORK/upper,workdir=$WORK/work" "$MNT" \
+    || fail "setup: overlay mount"
+
+# What the README's install commands expect in their working directory.
+SRC=$MNT/root/thrusterd-src
+mkdir -p "$SRC/target/release"
+cp -r "$REPO/config" "$SRC/"
+cp "$BIN"/thrusterd "$BIN"/thrusterctl "$BIN"/thruster-hw "$BIN"/thruster-sim "$SRC/target/release/"
+
+say "booting systemd in the container"
+# Facts from issue 13: no host systemd/D-Bus (--register=no --keep-unit), a mixed cgroup layout
+# (unified hierarchy forced), bpf() for IPAddressDeny=, a read-only console (a passive one can
+# block PID 1).
+SYSTEMD_NSPAWN_UNIFIED_HIERARCHY=1 systemd-nspawn --quiet --boot --directory="$MNT" \
+    --machine="thrusterd-ci-$$" --register=no --keep-unit --console=read-only \
+    --capability=CAP_BPF,CAP_NET_ADMIN --system-call-filter=bpf \
+    >"$WORK/console.log" 2>&1 &
+NSPAWN_PID=$!
+
+# The container's PID 1: the descendant of nspawn that is PID 1 in its own namespace.
+for _ in $(seq 100); do
+    for p in $(pgrep -P "$NSPAWN_PID" 2>/dev/null) $(for c in $(pgrep -P "$NSPAWN_PID"); do pgrep -P "$c"; done); do
+        if [ "$(awk '/^NSpid:/ {print $NF}' "/proc/$p/status" 2>/dev/null)" = 1 ]; then LEADER=$p; fi
+    done
+    [ -n "$LEADER" ] && break
+    kill -0 "$NSPAWN_PID" 2>/dev/null || { cat "$WORK/console.log"; fail "boot: nspawn exited"; }
+    sleep 0.1
+done
+[ -n "$LEADER" ] || fail "boot: no container PID 1 after 10 s"
+
+inside() {
+    nsenter -t "$LEADER" -a -- /usr/bin/env -i \
+        PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin HOME=/root LANG=C.UTF-8 \
+        /bin/bash -c "$1"
+}
+for _ in $(seq 150); do
+    state=$(inside 'systemctl is-system-running' 2>/dev/null || true)
+    case "$state" in running | degraded) break ;; esac
+    sleep 0.2
+done
+case "$state" in running | degraded) ;; *) fail "boot: system state '$state' after 30 s" ;; esac
+say "systemd up ($state)"
+
+prop() { inside "systemctl show -P $2 $1"; }
+as_operator() { inside "runuser -u alice -- thrusterctl --namespace $NS --ipc-root $IPC $1"; }
+
+# --- install exactly as the README says ------------------------------------------------------
+# The README's "Install on a vehicle" code blocks, in order; `cargo build` was done above
+# (debug binaries placed where the README expects release ones), `sudo` is a no-op for root.
+readme_block() {
+    awk -v want="$1" '
+        /^## Install on a vehicle/ { sec = 1; next }
+        /^## / { sec = 0 }
+        sec && /^```sh/ { n++; inb = (n == want); next }
+        sec && /^```/ { inb = 0; next }
+        inb { print }' "$REPO/README.md"
+}
+INSTALL=$(readme_block 1 | grep -v '^cargo build')
+START=$(readme_block 2)
+[ -n "$INSTALL" ] && [ -n "$START" ] || fail "install: README install section not found"
+inside "sudo() { \"\$@\"; }; set -e; cd /root/thrusterd-src; $INSTALL" \
+    || fail "install: the README's install commands failed"
+
+# The README's edit step: one namespace and the shared ipc root in both files.
+inside "set -e
+    sed -i 's|^# root = \"/run/thrusterd\"|root = \"$IPC\"|' /etc/thrusterd/thrusterd.toml
+    grep -q '^root = \"$IPC\"' /etc/thrusterd/thrusterd.toml
+    sed -i 's|^namespace = .*|namespace = \"$NS\"|; s|^ipc_root = .*|ipc_root = \"$IPC\"|' /etc/thrusterd/thruster-hw.toml
+    grep -q '^ipc_root = \"$IPC\"' /etc/thrusterd/thruster-hw.toml" \
+    || fail "install: editing the configs as the README says"
+
+# No vehicle here: thruster-hw.service runs the simulator in real time (a runtime drop-in).
+inside "set -e
+    install -m 0755 /root/thrusterd-src/target/release/thruster-sim /usr/local/bin/
+    install -d /etc/thrusterd/vehicles
+    install -m 0644 /root/thrusterd-src/config/vehicles/amour5.toml /etc/thrusterd/vehicles/
+    install -m 0644 /root/thrusterd-src/config/thruster-sim.toml /etc/thrusterd/
+    sed -i 's|^namespace = .*|namespace = \"$NS\"|; s|^ipc_root = .*|ipc_root = \"$IPC\"|; s|^mode = .*|mode = \"realtime\"|' /etc/thrusterd/thruster-sim.toml
+    mkdir -p /run/systemd/system/thruster-hw.service.d
+    printf '[Service]\nExecStart=\nExecStart=/usr/local/bin/thruster-sim run --config /etc/thrusterd/thruster-sim.toml\n' \
+        > /run/systemd/system/thruster-hw.service.d/sim.conf
+    useradd --create-home alice
+    useradd --create-home bob" || fail "install: simulator drop-in and test accounts"
+
+say "systemctl enable --now thruster-hw thrusterd (README)"
+inside "sudo() { \"\$@\"; }; set -e; ${START//OPERATOR/alice}" \
+    || fail "notify start: the README's start commands failed"
+
+status_json() { as_operator "status --json" | tr -d '\n'; }
+json_num() { sed -n "s/.*\"$1\": *\([0-9.]*\).*/\1/p"; }
+json_str() { sed -n "s/.*\"$1\": *\"\([^\"]*\)\".*/\1/p"; }
+watch_mark() { inside "wc -l < /tmp/imu-watch.log"; }
+imu_ok() { # watcher samples FROM..TO (line numbers) all show IMU above 150 Hz
+    local bad n
+    n=$(($2 - $1))
+    [ "$n" -ge 2 ] || fail "real-time sim: only $n status samples ($3)"
+    bad=$(inside "sed -n '$(($1 + 1)),$2p' /tmp/imu-watch.log" | while read -r l; do
+        r=$(echo "$l" | json_num imu_rate_hz); [ -n "$r" ] && [ "${r%.*}" -ge 150 ] || echo "$l"
+    done)
+    [ -z "$bad" ] || fail "real-time sim: IMU not flowing ($3): $(echo "$bad" | head -3)"
+}
+
+
+# --- checks ------------------------------------------------------------------------------------
+check_active() { # unit: active, Type=notify, watchdog 2 s
+    local s
+    s=$(inside "systemctl show -p ActiveState -p SubState -p Type -p WatchdogUSec $1 | sort | tr '\n' ' '")
+    [ "$s" = "ActiveState=active SubState=running Type=notify WatchdogUSec=2s " ] \
+        || fail "notify start: $1 is '$s', want active/running, Type=notify, WatchdogUSec=2s"
+}
+check_active thruster-hw
+check_active thrusterd
+[ "$(inside "stat -c '%U:%G %a' $IPC")" = "thrusterd:thrusterd 2770" ] \
+    || fail "ipc root: $IPC is '$(inside "stat -c '%U:%G %a' $IPC")', want thrusterd:thrusterd 2770"
+say "notify start: both units active after READY"
+
+# IMU must flow the whole run (a real-time sim that hangs starves the daemon): a watcher
+# inside the container samples the daemon's status every 0.5 s into a file.
+inside "nohup runuser -u alice -- bash -c 'while sleep 0.5; do
+        thrusterctl --namespace $NS --ipc-root $IPC status --json 2>&1 | tr -d \"\\n\"; echo; done' \
+        </dev/null >/tmp/imu-watch.log 2>&1 &"
+sleep 1; W0=$(watch_mark)
+
+# Operator account in group thrusterd.
+st=$(status_json) || fail "operator: thrusterctl status as alice (group thrusterd) failed: $st"
+say "operator: alice's status works: state $(echo "$st" | json_str state)"
+
+# Watchdog over a whole estimation.
+NR_D=$(prop thrusterd NRestarts); PID_D=$(prop thrusterd MainPID)
+NR_H=$(prop thruster-hw NRestarts)
+as_operator "estimate --wait --max-wait-s 90" >"$WORK/estimate.log" 2>&1 \
+    || { cat "$WORK/estimate.log"; fail "estimation: thrusterctl estimate --wait failed"; }
+[ "$(prop thrusterd NRestarts)" = "$NR_D" ] && [ "$(prop thrusterd MainPID)" = "$PID_D" ] \
+    || fail "watchdog: thrusterd restarted during the estimation"
+[ "$(prop thruster-hw NRestarts)" = "$NR_H" ] || fail "watchdog: thruster-hw restarted during the estimation"
+inside "journalctl -u thrusterd -u thruster-hw --no-pager | grep -q 'Watchdog timeout'" \
+    && fail "watchdog: a watchdog timeout was logged during the estimation"
+MODEL=$(status_json | json_num model_version)
+[ -n "$MODEL" ] && [ "$MODEL" -ge 1 ] || fail "estimation: no model after estimate --wait"
+inside "ls /var/lib/thrusterd/*" >/dev/null || fail "estimation: nothing saved in /var/lib/thrusterd"
+say "watchdog: fed over a whole estimation (model version $MODEL, no restart)"
+
+# root (sudo thrusterctl) and a non-member are refused before any file; the daemon is unharmed.
+for who in root bob; do
+    if [ $who = root ]; then cmd="thrusterctl --namespace $NS --ipc-root $IPC status"
+    else cmd="runuser -u bob -- thrusterctl --namespace $NS --ipc-root $IPC status"; fi
+    set +e; out=$(inside "$cmd" 2>&1); code=$?; set -e
+    [ $code = 7 ] || fail "refusal: thrusterctl as $who exited $code, want 7: $out"
+    echo "$out" | grep -q "$IPC" && echo "$out" | grep -q "usermod -aG thrusterd" \
+        || fail "refusal: message for $who names neither $IPC nor the fix: $out"
+done
+inside "find $IPC /dev/shm -mindepth 1 \\( -user root -o -user bob \\) -print" >"$WORK/foreign"
+[ ! -s "$WORK/foreign" ] || fail "refusal: files of root/bob appeared: $(head -3 "$WORK/foreign")"
+sleep 3
+[ "$(prop thrusterd NRestarts)" = "$NR_D" ] && [ "$(prop thrusterd MainPID)" = "$PID_D" ] \
+    || fail "refusal: thrusterd restarted after a refused client"
+st=$(status_json) || fail "refusal: the daemon stopped answering alice"
+say "refusal: root and bob exit 7 with the fix named, no file made, daemon unharmed"
+
+imu_ok "$W0" "$(watch_mark)" "from the start to the daemon's kill"
+
+# kill -9 -> restart -> resume with the saved model.
+inside "kill -9 $PID_D"
+for _ in $(seq 100); do
+    pid=$(prop thrusterd MainPID); act=$(prop thrusterd ActiveState)
+    [ "$pid" != "$PID_D" ] && [ "$pid" != 0 ] && [ "$act" = active ] && break
+    sleep 0.1
+done
+[ "$(prop thrusterd NRestarts)" = $((NR_D + 1)) ] || fail "kill -9: thrusterd not restarted once (NRestarts $(prop thrusterd NRestarts))"
+sleep 0.5
+log=$(inside "journalctl _SYSTEMD_INVOCATION_ID=$(prop thrusterd InvocationID) --no-pager -o cat")
+echo "$log" | grep -q 'loaded the saved model' \
+    || fail "kill -9: the restarted daemon did not load the saved model: $log"
+echo "$log" | grep -q 'resuming control with the saved model' \
+    || fail "kill -9: the restarted daemon did not resume control: $log"
+st=$(status_json) || fail "kill -9: the restarted daemon does not answer"
+v=$(echo "$st" | json_num model_version)
+[ -n "$v" ] && [ "$v" -ge 1 ] || fail "kill -9: no model in force after the restart: $st"
+PID_D=$(prop thrusterd MainPID); NR_D=$(prop thrusterd NRestarts)
+say "kill -9: restarted, saved model loaded, control resumed"
+
+# The driver's watchdog: a stopped (hung) driver is killed and restarted by systemd.
+PID_H=$(prop thruster-hw MainPID)
+W1=$(watch_mark); sleep 1.5
+imu_ok "$W1" "$(watch_mark)" "after the daemon's restart"
+inside "kill -STOP $PID_H"
+for _ in $(seq 150); do
+    pid=$(prop thruster-hw MainPID)
+    [ "$pid" != "$PID_H" ] && [ "$pid" != 0 ] && [ "$(prop thruster-hw ActiveState)" = active ] && break
+    sleep 0.1
+done
+[ "$(prop thruster-hw NRestarts)" = $((NR_H + 1)) ] \
+    || fail "driver watchdog: SIGSTOPped thruster-hw not restarted within 15 s (NRestarts $(prop thruster-hw NRestarts))"
+inside "journalctl -u thruster-hw --no-pager | grep -q 'Watchdog timeout'" \
+    || fail "driver watchdog: no 'Watchdog timeout' for thruster-hw in the journal"
+sleep 1.5; W2=$(watch_mark); sleep 1.5
+imu_ok "$W2" "$(watch_mark)" "after the driver's restart"
+[ "$(prop thrusterd NRestarts)" = "$NR_D" ] || fail "driver watchdog: thrusterd restarted too"
+say "driver watchdog: a stopped thruster-hw was killed and restarted, IMU flows again"
+
+# What operators leave: alice's watcher ran thrusterctl every 0.5 s all along.
+inside "pkill -u alice; sleep 1; ls -la /dev/shm | grep -c alice; ls -la /dev/shm | grep alice | head -5; ls -la /dev/shm | wc -l" || true
+
+# systemctl stop -> neutral and model saved.
+inside "systemctl stop thrusterd"
+[ "$(prop thrusterd ActiveState)" = inactive ] && [ "$(prop thrusterd Result)" = success ] \
+    || fail "stop: thrusterd is $(prop thrusterd ActiveState)/$(prop thrusterd Result) after stop"
+log=$(inside "journalctl -u thrusterd --no-pager -o cat -n 40")
+echo "$log" | grep -q 'shutting down: thrusters neutral' || fail "stop: no neutral shutdown in the log"
+echo "$log" | grep -q 'model saved' || fail "stop: the model was not saved at stop"
+inside "systemctl stop thruster-hw"
+[ "$(prop thruster-hw Result)" = success ] || fail "stop: thruster-hw stopped with $(prop thruster-hw Result)"
+say "stop: thrusters neutral, model saved, both units stopped cleanly"
+say "all checks passed"
