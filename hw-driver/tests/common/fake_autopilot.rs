@@ -316,7 +316,6 @@ fn run(
                     xmag: s.mag[0],
                     ymag: s.mag[1],
                     zmag: s.mag[2],
-                    ..RAW_IMU_DATA::DEFAULT
                 }),
                 30 => MavMessage::ATTITUDE(ATTITUDE_DATA {
                     time_boot_ms: boot_ms,
