@@ -8,10 +8,14 @@ mod common;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use common::fake_autopilot::{AP_COMP, AP_SYS};
+use common::fake_autopilot::{FakeAutopilot, AP_COMP, AP_SYS};
 use common::*;
-use mavlink::dialects::ardupilotmega::{MavAutopilot, MavType};
+use mavlink::dialects::ardupilotmega::{
+    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
+};
+use mavlink::{MavHeader, MavlinkVersion};
 use thruster_hw::clock::monotonic_ns;
+use thruster_protocol::OutputState;
 
 static SERIAL: Mutex<()> = Mutex::new(());
 
@@ -131,7 +135,7 @@ fn motor_tests_carry_board_order_pwm_and_are_resent_well_inside_500_ms() {
     for (k, ch) in Mavlink::CHANNELS.iter().enumerate() {
         let mine: Vec<_> = tests
             .iter()
-            .filter(|(_, c)| c.param1 == *ch as f32)
+            .filter(|(_, c)| c.param1 == motor_index(*ch))
             .collect();
         assert!(
             mine.len() >= 15,
@@ -169,22 +173,52 @@ fn motor_tests_carry_board_order_pwm_and_are_resent_well_inside_500_ms() {
     h.finish();
 }
 
+/// Issue 16 item 3: disarmed from the start (not only armed -> disarmed) is visible in the
+/// log and on `driver_status`; commands are accepted but no motor test goes out.
 #[test]
-fn a_disarmed_autopilot_gets_no_motor_tests_but_samples_flow() {
+fn a_disarmed_autopilot_is_reported_from_the_first_heartbeat() {
     let _s = serial();
-    let h = Harness::<Mavlink>::start_with(100, "", "", |fx| fx.0.with(|s| s.armed = false));
-    let s = h
-        .daemon
+    let mut h = Harness::<Mavlink>::start_with(100, "", "", |fx| fx.0.with(|s| s.armed = false));
+    h.daemon
         .try_sample(TIMEOUT)
         .expect("samples while disarmed");
-    assert!(s.seq >= 1);
-    std::thread::sleep(Duration::from_millis(800));
+    // The daemon commands thrust as usual; nothing can reach the water.
+    h.daemon.hold(&A, Duration::from_millis(800));
     assert!(h.fx.0.with(|s| s.motor_tests()).is_empty());
-    // Armed (seen in the next HEARTBEAT, within a second): neutral motor tests begin.
+    let st = h.daemon.wait_status(TIMEOUT, |m| m.link_up == 1);
+    assert_eq!(st.output_state(), Ok(OutputState::Disarmed), "{st:?}");
+    assert_eq!((st.armed, st.thruster_count), (0, 4));
+    assert_eq!(st.driver(), "thruster-hw mavlink");
+    assert!(st.commands_accepted > 0, "{st:?}");
+    assert_eq!(st.text(), "autopilot disarmed");
+    let log = h.proc.log();
+    assert!(log.contains("autopilot disarmed"), "{log}");
+    assert!(!log.contains("outputs: active"), "{log}");
+    // Armed (seen in the next HEARTBEAT, within a second): thrust reaches the motors.
     h.fx.0.with(|s| s.armed = true);
-    h.wait_pulses(Duration::from_secs(3), |p| p == NEUTRAL);
+    h.drive_to(&A, PULSES_A);
+    let st = h.daemon.wait_status(TIMEOUT, |m| m.armed == 1);
+    assert_eq!(st.link_up, 1);
     let (proc, _) = h.finish();
     assert!(proc.log().contains("autopilot armed"), "{}", proc.log());
+}
+
+/// Issue 16 item 7: with nothing to command the driver stays out of ArduSub's motor-test
+/// mode (which bypasses the pilot and ends with a disarm 500 ms after the last test), so a
+/// driver that never commanded thrust leaves the vehicle armed when it exits.
+#[test]
+fn nothing_to_command_sends_no_motor_tests_and_exit_leaves_the_vehicle_armed() {
+    let _s = serial();
+    let h = Harness::<Mavlink>::start(100, "");
+    h.daemon.try_sample(TIMEOUT).expect("samples");
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(h.fx.0.with(|s| s.motor_tests()).is_empty());
+    let (_, fx) = h.finish();
+    std::thread::sleep(Duration::from_millis(800));
+    fx.0.with(|s| {
+        assert_eq!(s.lapses, 0, "motor-test timeout after exit");
+        assert!(s.armed, "the exit disarmed the vehicle");
+    });
 }
 
 #[test]
@@ -284,4 +318,252 @@ fn an_unreachable_autopilot_is_an_error_naming_the_address() {
     assert_eq!(status.code(), Some(1), "{}", p.log());
     assert!(p.log().contains("/dev/thruster-hw-none"), "{}", p.log());
     assert_namespace_clean(&ns);
+}
+
+/// A free loopback UDP port for a driver in udpin mode.
+fn free_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A driver listening (`udpin`) with the fake autopilot as the client, like a BlueOS
+/// "UDP Client" endpoint; returns the harness and the driver's port.
+fn udpin_harness(section_extra: &str) -> (Harness<Mavlink>, u16) {
+    let port = free_port();
+    let fx = Mavlink(FakeAutopilot::start_client(port));
+    (Harness::start_fx(100, "", section_extra, fx), port)
+}
+
+fn frame(sys: u8, comp: u8, autopilot: MavAutopilot) -> Vec<u8> {
+    let h = MavHeader {
+        system_id: u32::from(sys),
+        component_id: comp,
+        sequence: 0,
+    };
+    let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 19,
+        mavtype: MavType::MAV_TYPE_SUBMARINE,
+        autopilot,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    });
+    let mut v = Vec::new();
+    mavlink::write_versioned_msg(&mut v, MavlinkVersion::V2, h, &hb).unwrap();
+    v
+}
+
+/// Issue 16 item 1: any UDP sender used to capture the motor tests in udpin mode (replies
+/// went to the last datagram's source). A flood of stray datagrams (empty, random bytes, a
+/// ground station's and a spoofed autopilot's HEARTBEAT) during held thrust: the stray
+/// socket gets nothing, the autopilot no gap near ArduSub's 500 ms, and no lapse.
+#[test]
+fn a_flood_of_stray_datagrams_captures_nothing_and_causes_no_lapse() {
+    let _s = serial();
+    let (mut h, port) = udpin_harness("");
+    h.drive_to(&A, PULSES_A);
+    let stray = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    stray.set_nonblocking(true).unwrap();
+    let flood_socket = stray.try_clone().unwrap();
+    let from = monotonic_ns();
+    let flood = std::thread::spawn(move || {
+        let end = Instant::now() + Duration::from_secs(2);
+        let mut x: u32 = 12345;
+        let mut sent = 0u64;
+        while Instant::now() < end {
+            x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
+            let d: Vec<u8> = match sent % 4 {
+                0 => Vec::new(),
+                1 => (0..(x % 300)).map(|i| (x >> (i % 24)) as u8).collect(),
+                2 => frame(255, 190, MavAutopilot::MAV_AUTOPILOT_INVALID),
+                _ => frame(AP_SYS, AP_COMP, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA),
+            };
+            let _ = flood_socket.send_to(&d, ("127.0.0.1", port));
+            sent += 1;
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        sent
+    });
+    h.daemon.hold(&A, Duration::from_secs(2));
+    let sent = flood.join().unwrap();
+    let to = monotonic_ns();
+    assert!(sent > 200, "{sent} stray datagrams");
+    let mut buf = [0u8; 512];
+    let mut captured = 0;
+    while stray.recv_from(&mut buf).is_ok() {
+        captured += 1;
+    }
+    assert_eq!(captured, 0, "the stray sender received our messages");
+    let tests = h.fx.0.with(|s| s.motor_tests());
+    for ch in Mavlink::CHANNELS {
+        let times: Vec<u64> = tests
+            .iter()
+            .filter(|(t, c)| (from..to).contains(t) && c.param1 == motor_index(ch))
+            .map(|(t, _)| *t)
+            .collect();
+        assert!(times.len() >= 15, "motor {ch}: {} tests", times.len());
+        let worst = gaps_ms(&times).into_iter().fold(0.0, f64::max);
+        assert!(
+            worst < 200.0,
+            "motor {ch}: {worst:.0} ms gap during the flood"
+        );
+    }
+    h.fx.0.with(|s| assert_eq!((s.lapses, s.armed), (0, true)));
+    let (proc, _) = h.finish();
+    assert!(
+        proc.summary_value("datagrams_foreign") > 100,
+        "{}",
+        proc.log()
+    );
+}
+
+/// Issue 16 item 5: one empty datagram used to end the driver (exit 1). Empty and garbage
+/// datagrams, from the autopilot's own address and from a stranger, change nothing.
+#[test]
+fn an_empty_datagram_changes_nothing() {
+    let _s = serial();
+    let (mut h, port) = udpin_harness("");
+    h.drive_to(&A, PULSES_A);
+    let stray = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    h.fx.0.send_raw(&[], port);
+    stray.send_to(&[], ("127.0.0.1", port)).unwrap();
+    h.fx.0.send_raw(&[0xfd, 0x01, 0x02], port);
+    h.daemon.hold(&A, Duration::from_millis(700));
+    assert!(
+        h.proc.wait_exit(Duration::from_millis(20)).is_none(),
+        "the driver exited\n{}",
+        h.proc.log()
+    );
+    assert_eq!(h.fx.pulses().unwrap(), PULSES_A);
+    h.daemon.try_sample(TIMEOUT).expect("samples still flow");
+    h.fx.0.with(|s| assert_eq!((s.lapses, s.armed), (0, true)));
+    let (proc, _) = h.finish();
+    assert_eq!(proc.summary_value("datagrams_empty"), 2, "{}", proc.log());
+    assert_eq!(proc.summary_value("datagrams_malformed"), 1);
+}
+
+/// Issue 16 item 2: HEARTBEATs lost while the IMU keeps flowing and thrust is held: the
+/// link goes down and the last thing the autopilot got is a neutral round, not the held
+/// pulses; `driver_status` says LinkDown.
+#[test]
+fn heartbeat_loss_with_imu_flowing_ends_in_a_neutral_round() {
+    let _s = serial();
+    let mut h = Harness::<Mavlink>::start_with(100, "", "link_timeout_ms = 1000", |_| {});
+    h.drive_to(&A, PULSES_A);
+    h.fx.0.with(|s| s.heartbeat = false);
+    // Keep answering samples with thrust until they stop (the link is down).
+    let stopped = Instant::now();
+    let mut last_sample = Instant::now();
+    while last_sample.elapsed() < Duration::from_millis(500) {
+        assert!(
+            stopped.elapsed() < Duration::from_secs(5),
+            "samples never stopped"
+        );
+        if let Some(smp) = h.daemon.try_sample(Duration::from_millis(20)) {
+            let c = h.daemon.command(&smp, &A);
+            h.daemon.send(&c);
+            last_sample = Instant::now();
+        }
+    }
+    assert!(h.fx.0.with(|s| s.imu_sent) > 0);
+    let tests = h.fx.0.with(|s| s.motor_tests());
+    for (k, ch) in Mavlink::CHANNELS.iter().enumerate() {
+        let last = tests
+            .iter()
+            .rev()
+            .find(|(_, c)| c.param1 == motor_index(*ch))
+            .map(|(_, c)| c.param3 as u16);
+        assert_eq!(
+            last,
+            Some(NEUTRAL[k]),
+            "motor {ch}: last pulse before going quiet"
+        );
+    }
+    let st = h
+        .daemon
+        .wait_status(TIMEOUT, |m| m.output_state() == Ok(OutputState::LinkDown));
+    assert_eq!(st.link_up, 0);
+    assert!(st.text().contains("link down"), "{}", st.text());
+    let (proc, _) = h.finish();
+    assert!(proc.log().contains("link down"), "{}", proc.log());
+}
+
+/// Issue 16 item 8: RAW_IMU holding ADC counts (-4096 on z = 1 g at +-8 g) must not be
+/// published as -40 m/s^2: rejected and counted; good readings flow again after.
+#[test]
+fn implausible_raw_imu_readings_are_rejected_and_counted() {
+    let _s = serial();
+    let h = Harness::<Mavlink>::start_with(100, "", "imu_message = \"raw_imu\"", |_| {});
+    let s = h.daemon.try_sample(TIMEOUT).expect("samples");
+    assert!((s.accel[2] + 9.80665).abs() < 0.01, "{:?}", s.accel);
+    h.fx.0.with(|s| s.acc = [0, 0, -4096]);
+    std::thread::sleep(Duration::from_millis(100));
+    let end = Instant::now() + Duration::from_millis(600);
+    while Instant::now() < end {
+        if let Some(s) = h.daemon.try_sample(Duration::from_millis(20)) {
+            assert!(s.accel[2] > -30.0, "published {:?}", s.accel);
+        }
+    }
+    h.fx.0.with(|s| s.acc = [0, 0, -1000]);
+    let end = Instant::now() + TIMEOUT;
+    loop {
+        let s = h.daemon.try_sample(TIMEOUT).expect("samples resume");
+        if (s.accel[2] + 9.80665).abs() < 0.01 {
+            break;
+        }
+        assert!(Instant::now() < end);
+    }
+    let (proc, _) = h.finish();
+    assert!(proc.summary_value("imu_implausible") > 10, "{}", proc.log());
+}
+
+/// Issue 16 item 4: ArduSub's DO_MOTOR_TEST param1 is the 0-based motor index
+/// (AP_MotorsMatrix::output_test_num); config channel n is motor n, so channel 8 of an
+/// 8-motor frame is param1 7 and is accepted (param1 8 was refused, and channel 1 drove
+/// motor 2).
+#[test]
+fn channel_n_drives_ardusub_motor_n_including_the_last() {
+    let _s = serial();
+    let ns = thruster_protocol::services::NamespaceGuard::unique_for_test("motnum").unwrap();
+    let fx = FakeAutopilot::start();
+    let config = format!(
+        "namespace = \"{}\"\nbackend = \"mavlink\"\narming_ms = 100\n\
+         [[thruster]]\nchannel = 1\n[[thruster]]\nchannel = 8\n\
+         [mavlink]\naddress = \"{}\"\ncommand_timeout_ms = 300\n",
+        ns.namespace(),
+        fx.address()
+    );
+    let mut daemon = Daemon::new(&ns);
+    let mut proc = Proc::run(&config, &[]);
+    let end = Instant::now() + TIMEOUT;
+    loop {
+        daemon.answer(&[0.6, -0.2]);
+        let tests = fx.with(|s| s.motor_tests());
+        let last = |m: f32| {
+            tests
+                .iter()
+                .rev()
+                .find(|(_, c)| c.param1 == m)
+                .map(|(_, c)| c.param3)
+        };
+        if last(0.0) == Some(1750.0) && last(7.0) == Some(1400.0) {
+            assert!(tests
+                .iter()
+                .all(|(_, c)| c.param1 == 0.0 || c.param1 == 7.0));
+            break;
+        }
+        assert!(Instant::now() < end, "{tests:?}\n{}", proc.log());
+    }
+    proc.terminate();
+    drop(daemon);
+    assert_namespace_clean(&ns);
+    assert_eq!(
+        proc.summary_value("motor_test_refused"),
+        0,
+        "{}",
+        proc.log()
+    );
 }

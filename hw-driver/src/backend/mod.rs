@@ -177,6 +177,18 @@ pub trait Backend {
     /// The link's state.
     fn link(&self) -> LinkState;
 
+    /// The output device moves the thrusters: false while an autopilot reports itself
+    /// disarmed (commands are then accepted but reach nothing), or before it said either.
+    /// Hardware without arming is always armed.
+    fn armed(&self) -> bool {
+        true
+    }
+
+    /// Backend counters for the status line and the final summary (`name=value`).
+    fn stats(&self) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
+
     /// Writes neutral (repeatedly if the link is lossy), undoes what `start` did to the
     /// vehicle (disarm if it armed) and stops background threads. Outputs stay neutral.
     fn stop(&mut self) -> Result<(), BackendError>;

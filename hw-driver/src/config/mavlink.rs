@@ -120,9 +120,12 @@ pub enum OutputMode {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MavlinkConfig {
-    /// Connection string of the `mavlink` crate: `udpin:ADDR:PORT` (listen; replies go to
-    /// the last sender), `udpout:HOST:PORT`, `tcpout:HOST:PORT`, `tcpin:ADDR:PORT`,
-    /// `serial:/dev/ttyACM0:115200`. Default "udpin:0.0.0.0:14550".
+    /// Connection string: `udpin:ADDR:PORT` (listen; replies go only to the address the
+    /// autopilot's HEARTBEAT came from, other senders are dropped), `udpout:HOST:PORT`,
+    /// `tcpout:HOST:PORT`, `tcpin:ADDR:PORT`, `serial:/dev/ttyACM0:115200`. Default
+    /// "udpin:127.0.0.1:14660": loopback only, for a BlueOS "UDP Client" endpoint on the
+    /// same computer; listening on every interface would let anyone on the tether's network
+    /// talk to the driver.
     pub address: String,
     /// Our system id. Default 255: ArduSub accepts RC_CHANNELS_OVERRIDE only from
     /// SYSID_MYGCS (default 255).
@@ -196,7 +199,7 @@ pub struct MavlinkConfig {
 impl Default for MavlinkConfig {
     fn default() -> Self {
         MavlinkConfig {
-            address: "udpin:0.0.0.0:14550".to_string(),
+            address: "udpin:127.0.0.1:14660".to_string(),
             system_id: 255,
             component_id: 191,
             target_system: 0,

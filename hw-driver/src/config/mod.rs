@@ -377,7 +377,23 @@ reversed = true
             ..args()
         };
         let s = Settings::resolve(&a).unwrap();
-        assert!(!s.thrusters.is_empty());
+        // The shipped examples work together: same namespace and thruster count as
+        // config/thrusterd.toml (AMOUR-5), and its IPC root (iceoryx2's default there).
+        let daemon: toml::Value = toml::from_str(
+            &std::fs::read_to_string(path.with_file_name("thrusterd.toml")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            s.thrusters.len() as i64,
+            daemon["vehicle"]["thrusters"].as_integer().unwrap()
+        );
+        assert_eq!(s.namespace, daemon["ipc"]["namespace"].as_str().unwrap());
+        assert!(daemon["ipc"].get("root").is_none());
+        assert_eq!(
+            s.ipc_root,
+            Path::new(thruster_protocol::services::DEFAULT_ROOT_BASE)
+        );
+        assert_eq!(s.mavlink.address, MavlinkConfig::default().address);
         // Both backends' sections are valid whichever is selected.
         let b = RunArgs {
             backend: Some(BackendKind::Linux),

@@ -16,6 +16,7 @@
 //! (the backends' `Drop`).
 
 pub mod shutdown;
+pub mod status;
 pub mod wake;
 
 use std::time::Duration;
@@ -23,7 +24,7 @@ use std::time::Duration;
 use iceoryx2::prelude::CallbackProgression;
 use thruster_protocol::services::{create_waitset, Inbox, IpcConfig, IpcError, Port};
 use thruster_protocol::validate::limits::{MAX_DEPTH_M, MIN_DEPTH_M};
-use thruster_protocol::{ImuSample, ThrustCommand, Validate};
+use thruster_protocol::{DriverStatusMsg, ImuSample, ThrustCommand, Validate};
 use tracing::{error, info, warn};
 
 use crate::backend::linux::LinuxBackend;
@@ -35,6 +36,7 @@ use crate::core::controller::{Controller, Counters, Outcome, OutputState};
 use crate::core::pwm::{OutputMap, Pwm};
 use crate::log_limit::LogLimiter;
 use shutdown::Shutdown;
+use status::StatusReporter;
 use wake::WakePipe;
 
 /// Node name of the driver in iceoryx2 listings.
@@ -150,6 +152,7 @@ fn run_inner(
     // Declared before its ports so it is dropped after them.
     let node = ipc.create_node(NODE_NAME)?;
     let imu = Port::<ImuSample>::create(&node, &ipc)?;
+    let driver_status = Port::<DriverStatusMsg>::create(&node, &ipc)?;
     let thrust = Inbox::<ThrustCommand>::create(&node, &ipc)?;
     let wake = WakePipe::new().map_err(DriverError::Wait)?;
     let waitset = create_waitset()?;
@@ -197,6 +200,9 @@ fn run_inner(
         last_link: LinkState::Connecting,
         next_status_ns: start_ns + settings.status_period_ms * 1_000_000,
         status_period_ns: settings.status_period_ms * 1_000_000,
+        reporter: StatusReporter::new(backend.name(), settings.thrusters.len(), start_ns),
+        driver_status,
+        last_reported: None,
     };
     let mut wait_errors = 0;
     loop {
@@ -211,6 +217,7 @@ fn run_inner(
             lp.controller.next_change_ns(now),
             backend.next_deadline_ns(),
             Some(lp.next_status_ns),
+            Some(lp.reporter.next_ns()),
         ]
         .into_iter()
         .flatten()
@@ -238,10 +245,15 @@ fn run_inner(
     systemd.stopping();
     let summary = lp.summary();
     let c = &summary.commands;
+    let backend_stats: String = backend
+        .stats()
+        .iter()
+        .map(|(k, v)| format!(" {k}={v}"))
+        .collect();
     info!(
         "thruster-hw stopped reason=signal samples={} applied={} arming={} stale={} rejected={} \
          rejected_nonfinite={} rejected_range={} rejected_count={} rejected_time={} \
-         rejected_other={} sensor_rejected={} depth_dropped={}",
+         rejected_other={} sensor_rejected={} depth_dropped={} watchdog_expiries={}{}",
         summary.samples,
         c.applied,
         c.arming,
@@ -254,6 +266,8 @@ fn run_inner(
         c.rejected.other,
         summary.sensor_rejected,
         summary.depth_dropped,
+        lp.reporter.watchdog_expiries(),
+        backend_stats,
     );
     Ok(summary)
 }
@@ -277,6 +291,9 @@ struct Loop {
     last_link: LinkState,
     next_status_ns: u64,
     status_period_ns: u64,
+    reporter: StatusReporter,
+    driver_status: Port<DriverStatusMsg>,
+    last_reported: Option<thruster_protocol::OutputState>,
 }
 
 impl Loop {
@@ -294,6 +311,7 @@ impl Loop {
         while let Some(cmd) = thrust.recv()? {
             let outcome = self.controller.on_command(&cmd, monotonic_ns());
             if let Outcome::Rejected(reason) = outcome {
+                self.reporter.rejected(&reason.to_string());
                 if let Some(suppressed) = self.reject_log.allow() {
                     warn!(
                         seq = cmd.seq,
@@ -312,7 +330,19 @@ impl Loop {
             self.last_written.extend_from_slice(outs);
         }
         backend.service(now)?;
-        self.report(backend, now);
+        self.report(backend, now)
+    }
+
+    /// The driver's own status on `driver_status` (see [`status`]).
+    fn publish_status(&mut self, backend: &dyn Backend, now: u64) -> Result<(), DriverError> {
+        let core = self.controller.state(now);
+        let (link, armed) = (backend.link(), backend.armed());
+        if let Some(msg) = self
+            .reporter
+            .report(now, core, self.controller.counters(), &link, armed)
+        {
+            self.driver_status.send(&msg)?;
+        }
         Ok(())
     }
 
@@ -354,13 +384,18 @@ impl Loop {
         Ok(())
     }
 
-    fn report(&mut self, backend: &dyn Backend, now: u64) {
+    fn report(&mut self, backend: &dyn Backend, now: u64) -> Result<(), DriverError> {
+        self.publish_status(backend, now)?;
         let state = self.controller.state(now);
-        if state != self.last_state {
+        // What reaches the water: the backend's link and armed state win over the core's.
+        let reported = status::output_state(state, &backend.link(), backend.armed());
+        let described = status::describe(state, reported);
+        if state != self.last_state || Some(reported) != self.last_reported {
             if let Some(suppressed) = self.state_log.allow() {
-                info!(suppressed, pwm_us = ?us(self.controller.outputs(now)), "outputs: {state}");
+                info!(suppressed, pwm_us = ?us(self.controller.outputs(now)), "outputs: {described}");
             }
             self.last_state = state;
+            self.last_reported = Some(reported);
         }
         let link = backend.link();
         if link != self.last_link {
@@ -370,7 +405,7 @@ impl Loop {
         if now >= self.next_status_ns {
             let c = self.controller.counters();
             info!(
-                outputs = %state,
+                outputs = %described,
                 link = %self.last_link,
                 samples = self.seq,
                 applied = c.applied,
@@ -382,6 +417,7 @@ impl Loop {
             );
             self.next_status_ns = now + self.status_period_ns;
         }
+        Ok(())
     }
 
     fn summary(&self) -> Summary {

@@ -1,8 +1,10 @@
 //! A fake ArduSub on loopback UDP, written with the `mavlink` crate: sends HEARTBEATs
 //! (1 Hz, armed or not), ACKs MAV_CMD_SET_MESSAGE_INTERVAL and streams SCALED_IMU2,
-//! ATTITUDE and SCALED_PRESSURE2 at the requested intervals, ACKs DO_MOTOR_TEST like
-//! ArduSub (FAILED when disarmed), and records everything it receives with the
-//! CLOCK_MONOTONIC time of reception. Bounded: the thread ends after `MAX_LIFETIME`.
+//! RAW_IMU, ATTITUDE and SCALED_PRESSURE2 at the requested intervals, handles DO_MOTOR_TEST
+//! like ArduSub (param1 is the 0-based motor index, FAILED when disarmed or for a motor the
+//! frame does not have; 500 ms without one ends motor-test mode with a disarm, counted as
+//! a lapse), and records everything it receives with the CLOCK_MONOTONIC time of
+//! reception. Bounded: the thread ends after `MAX_LIFETIME`.
 
 use std::collections::HashMap;
 use std::net::UdpSocket;
@@ -16,6 +18,12 @@ use mavlink::{Connectable, ConnectionAddress, MavConnection, MavHeader, UdpConfi
 use thruster_hw::clock::monotonic_ns;
 
 const MAX_LIFETIME: Duration = Duration::from_secs(120);
+
+/// Motors of the fake's frame (a BlueROV2 Heavy: motors 0..=7).
+pub const MOTORS: u32 = 8;
+
+/// ArduSub's motor-test timeout (`Sub::verify_motor_test`).
+pub const MOTOR_TEST_TIMEOUT_NS: u64 = 500_000_000;
 
 /// What the fake does and what it saw.
 #[derive(Debug, Clone)]
@@ -40,6 +48,11 @@ pub struct ApState {
     pub overrides: Vec<(u64, MavHeader, RC_CHANNELS_OVERRIDE_DATA)>,
     /// IMU messages sent.
     pub imu_sent: u64,
+    /// In motor-test mode (a DO_MOTOR_TEST was accepted and none lapsed since).
+    pub motor_test_mode: bool,
+    pub last_motor_test_ns: u64,
+    /// Motor-test timeouts (each disarmed the fake, as on ArduSub).
+    pub lapses: u64,
 }
 
 impl Default for ApState {
@@ -58,6 +71,9 @@ impl Default for ApState {
             commands: Vec::new(),
             overrides: Vec::new(),
             imu_sent: 0,
+            motor_test_mode: false,
+            last_motor_test_ns: 0,
+            lapses: 0,
         }
     }
 }
@@ -84,6 +100,9 @@ impl ApState {
 
 pub struct FakeAutopilot {
     port: u16,
+    /// Client mode: the port the driver listens on.
+    driver_port: Option<u16>,
+    raw: UdpSocket,
     state: Arc<Mutex<ApState>>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
@@ -94,10 +113,29 @@ pub const AP_SYS: u8 = 1;
 pub const AP_COMP: u8 = 1;
 
 impl FakeAutopilot {
+    /// A fake that listens (the driver uses `udpout`).
     pub fn start() -> FakeAutopilot {
+        Self::start_on(None)
+    }
+
+    /// A fake that sends to a driver listening on `driver_port` (`udpin`), like a BlueOS
+    /// "UDP Client" endpoint: it talks first.
+    pub fn start_client(driver_port: u16) -> FakeAutopilot {
+        Self::start_on(Some(driver_port))
+    }
+
+    fn start_on(client_of: Option<u16>) -> FakeAutopilot {
         let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
         let port = socket.local_addr().unwrap().port();
-        let cfg = UdpConfig::from_socket(socket, UdpMode::Udpin)
+        let raw = socket.try_clone().unwrap();
+        let mode = match client_of {
+            Some(p) => {
+                socket.connect(("127.0.0.1", p)).unwrap();
+                UdpMode::Udpout
+            }
+            None => UdpMode::Udpin,
+        };
+        let cfg = UdpConfig::from_socket(socket, mode)
             .unwrap()
             .read_timeout(Duration::from_millis(1));
         let conn = ConnectionAddress::Udp(cfg).connect::<MavMessage>().unwrap();
@@ -105,10 +143,13 @@ impl FakeAutopilot {
         let stop = Arc::new(AtomicBool::new(false));
         let thread = {
             let (state, stop) = (state.clone(), stop.clone());
-            std::thread::spawn(move || run(conn, state, stop))
+            let client = client_of.is_some();
+            std::thread::spawn(move || run(conn, state, stop, client))
         };
         FakeAutopilot {
             port,
+            driver_port: client_of,
+            raw,
             state,
             stop,
             thread: Some(thread),
@@ -117,7 +158,16 @@ impl FakeAutopilot {
 
     /// The driver's `mavlink.address` for this fake.
     pub fn address(&self) -> String {
-        format!("udpout:127.0.0.1:{}", self.port)
+        match self.driver_port {
+            Some(p) => format!("udpin:127.0.0.1:{p}"),
+            None => format!("udpout:127.0.0.1:{}", self.port),
+        }
+    }
+
+    /// Sends `bytes` as one datagram from the fake's own address to `port` (an empty or
+    /// garbage datagram from the autopilot's address).
+    pub fn send_raw(&self, bytes: &[u8], port: u16) {
+        self.raw.send_to(bytes, ("127.0.0.1", port)).unwrap();
     }
 
     /// Reads or changes the state.
@@ -143,12 +193,17 @@ fn header() -> MavHeader {
     }
 }
 
-fn run(conn: impl MavConnection<MavMessage>, state: Arc<Mutex<ApState>>, stop: Arc<AtomicBool>) {
+fn run(
+    conn: impl MavConnection<MavMessage>,
+    state: Arc<Mutex<ApState>>,
+    stop: Arc<AtomicBool>,
+    client: bool,
+) {
     let end = Instant::now() + MAX_LIFETIME;
     let mut next_hb = monotonic_ns();
     // Like a router that learns its peer from the first packet: the first HEARTBEAT goes
-    // out as soon as someone talks to us, then every second.
-    let mut peer_seen = false;
+    // out as soon as someone talks to us, then every second. A client talks first.
+    let mut peer_seen = client;
     let mut next_stream: HashMap<u32, u64> = HashMap::new();
     let send = |m: &MavMessage| {
         let _ = conn.send(&header(), m);
@@ -171,7 +226,13 @@ fn run(conn: impl MavConnection<MavMessage>, state: Arc<Mutex<ApState>>, stop: A
                             Some(s.interval_result)
                         }
                         MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => None,
-                        MavCmd::MAV_CMD_DO_MOTOR_TEST if s.armed => {
+                        // As Sub::handle_do_motor_test -> AP_MotorsMatrix::output_test_num:
+                        // param1 is the 0-based motor index; a motor the frame lacks fails.
+                        MavCmd::MAV_CMD_DO_MOTOR_TEST
+                            if s.armed && c.param1 >= 0.0 && (c.param1 as u32) < MOTORS =>
+                        {
+                            s.motor_test_mode = true;
+                            s.last_motor_test_ns = t;
                             Some(MavResult::MAV_RESULT_ACCEPTED)
                         }
                         MavCmd::MAV_CMD_DO_MOTOR_TEST => Some(MavResult::MAV_RESULT_FAILED),
@@ -193,6 +254,15 @@ fn run(conn: impl MavConnection<MavMessage>, state: Arc<Mutex<ApState>>, stop: A
             }
         }
         let now = monotonic_ns();
+        {
+            // Sub::verify_motor_test: no DO_MOTOR_TEST for 500 ms ends the test and disarms.
+            let mut s = state.lock().unwrap();
+            if s.motor_test_mode && now > s.last_motor_test_ns + MOTOR_TEST_TIMEOUT_NS {
+                s.motor_test_mode = false;
+                s.armed = false;
+                s.lapses += 1;
+            }
+        }
         let s = state.lock().unwrap().clone_controls();
         if now >= next_hb && peer_seen {
             if s.heartbeat {
@@ -235,6 +305,18 @@ fn run(conn: impl MavConnection<MavMessage>, state: Arc<Mutex<ApState>>, stop: A
                     ymag: s.mag[1],
                     zmag: s.mag[2],
                 }),
+                27 => MavMessage::RAW_IMU(RAW_IMU_DATA {
+                    time_usec: now / 1000,
+                    xacc: s.acc[0],
+                    yacc: s.acc[1],
+                    zacc: s.acc[2],
+                    xgyro: s.gyro[0],
+                    ygyro: s.gyro[1],
+                    zgyro: s.gyro[2],
+                    xmag: s.mag[0],
+                    ymag: s.mag[1],
+                    zmag: s.mag[2],
+                }),
                 30 => MavMessage::ATTITUDE(ATTITUDE_DATA {
                     time_boot_ms: boot_ms,
                     rollspeed: f32::from(s.gyro[0]) / 1000.0,
@@ -251,7 +333,7 @@ fn run(conn: impl MavConnection<MavMessage>, state: Arc<Mutex<ApState>>, stop: A
                 _ => continue,
             };
             send(&msg);
-            if id == 116 {
+            if id == 116 || id == 27 {
                 state.lock().unwrap().imu_sent += 1;
             }
         }
@@ -275,6 +357,9 @@ impl ApState {
             commands: Vec::new(),
             overrides: Vec::new(),
             imu_sent: 0,
+            motor_test_mode: self.motor_test_mode,
+            last_motor_test_ns: self.last_motor_test_ns,
+            lapses: self.lapses,
         }
     }
 }

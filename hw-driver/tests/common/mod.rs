@@ -16,7 +16,7 @@ use thruster_hw::clock::monotonic_ns;
 use thruster_protocol::services::{
     cleanup_dead_nodes, namespace_files, Inbox, IpcConfig, IpcNode, NamespaceGuard, Port, SHM_DIR,
 };
-use thruster_protocol::{ImuSample, ThrustCommand, ThrustMode};
+use thruster_protocol::{DriverStatusMsg, ImuSample, ThrustCommand, ThrustMode};
 
 use fake_autopilot::FakeAutopilot;
 use fake_sysfs::FakeSysfs;
@@ -137,6 +137,7 @@ impl Drop for Proc {
 
 pub struct Daemon {
     imu: Inbox<ImuSample>,
+    status: Inbox<DriverStatusMsg>,
     thrust: Port<ThrustCommand>,
     seq: u64,
     _node: IpcNode,
@@ -147,6 +148,7 @@ impl Daemon {
         let node = ns.create_node("test-daemon").unwrap();
         Daemon {
             imu: Inbox::create(&node, ns).unwrap(),
+            status: Inbox::create(&node, ns).unwrap(),
             thrust: Port::create(&node, ns).unwrap(),
             seq: 0,
             _node: node,
@@ -169,6 +171,38 @@ impl Daemon {
                 return Some(s);
             }
             let _ = self.imu.wait((end - now).min(Duration::from_millis(20)));
+        }
+    }
+
+    /// Every driver status received since the last call, oldest first.
+    pub fn statuses(&self) -> Vec<DriverStatusMsg> {
+        let mut v = Vec::new();
+        while let Some(m) = self.status.recv().unwrap() {
+            v.push(m);
+        }
+        v
+    }
+
+    /// Waits for a driver status satisfying `pred`; panics after `within`.
+    pub fn wait_status(
+        &self,
+        within: Duration,
+        pred: impl Fn(&DriverStatusMsg) -> bool,
+    ) -> DriverStatusMsg {
+        let end = Instant::now() + within;
+        let mut last = None;
+        loop {
+            for m in self.statuses() {
+                if pred(&m) {
+                    return m;
+                }
+                last = Some(m);
+            }
+            assert!(
+                Instant::now() < end,
+                "no matching driver status within {within:?}; last {last:?}"
+            );
+            std::thread::sleep(Duration::from_millis(5));
         }
     }
 
@@ -267,6 +301,11 @@ pub trait Fixture {
 
 pub struct Mavlink(pub FakeAutopilot);
 
+/// DO_MOTOR_TEST param1 ArduSub expects for config channel `ch` (its 0-based motor index).
+pub fn motor_index(ch: u32) -> f32 {
+    (ch - 1) as f32
+}
+
 impl Fixture for Mavlink {
     const BACKEND: &'static str = "mavlink";
     const CHANNELS: [u32; 4] = [1, 2, 3, 4];
@@ -284,16 +323,21 @@ impl Fixture for Mavlink {
         )
     }
 
+    /// Until the driver's first motor test ArduSub drives its outputs itself, at neutral
+    /// (nothing commands them: the driver stays out of motor-test mode while it has nothing
+    /// to command), so a channel without a motor test reads its neutral.
     fn pulses(&self) -> Option<Vec<u16>> {
         let tests = self.0.with(|s| s.motor_tests());
         Self::CHANNELS
             .iter()
-            .map(|&ch| {
-                tests
+            .enumerate()
+            .map(|(k, &ch)| {
+                let last = tests
                     .iter()
                     .rev()
-                    .find(|(_, c)| c.param1 == ch as f32)
-                    .map(|(_, c)| c.param3 as u16)
+                    .find(|(_, c)| c.param1 == motor_index(ch))
+                    .map(|(_, c)| c.param3 as u16);
+                Some(last.unwrap_or(NEUTRAL[k]))
             })
             .collect()
     }
@@ -305,7 +349,7 @@ impl Fixture for Mavlink {
             .filter_map(|(t, c)| {
                 let i = Self::CHANNELS
                     .iter()
-                    .position(|&ch| c.param1 == ch as f32)?;
+                    .position(|&ch| c.param1 == motor_index(ch))?;
                 Some((t, i, c.param3 as u16))
             })
             .collect()
@@ -417,9 +461,14 @@ impl<F: Fixture> Harness<F> {
         section_extra: &str,
         setup: impl FnOnce(&F),
     ) -> Harness<F> {
-        let ns = NamespaceGuard::unique_for_test(F::BACKEND).unwrap();
         let fx = F::new();
         setup(&fx);
+        Self::start_fx(arming_ms, extra, section_extra, fx)
+    }
+
+    /// As [`Harness::start_with`] with fake hardware made by the test.
+    pub fn start_fx(arming_ms: u64, extra: &str, section_extra: &str, fx: F) -> Harness<F> {
+        let ns = NamespaceGuard::unique_for_test(F::BACKEND).unwrap();
         let config = format!(
             "namespace = \"{}\"\nbackend = \"{}\"\nwatchdog_ms = 200\narming_ms = {arming_ms}\n\
              status_period_ms = 1000\n{extra}\n{}{}",

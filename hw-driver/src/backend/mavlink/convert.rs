@@ -41,6 +41,38 @@ pub fn scaled_imu(acc: [i16; 3], gyro: [i16; 3], mag: [i16; 3]) -> ImuSi {
     }
 }
 
+/// Largest specific force accepted on any axis, m/s^2 (3 g). An underwater vehicle sees about
+/// 1 g plus its own manoeuvring; more means the message does not hold what we think it holds
+/// (e.g. an autopilot sending ADC counts in RAW_IMU: 1 g = 4096 counts at +-8 g, which read
+/// as mG would be 4.1 g), or a glitch. Publishing it would corrupt the estimate.
+pub const MAX_ACCEL_MSS: f64 = 3.0 * GRAVITY_MSS;
+
+/// Largest angular rate accepted on any axis, rad/s (2000 deg/s, the widest range ArduPilot
+/// configures its gyros for).
+pub const MAX_GYRO_RADPS: f64 = 2000.0 * std::f64::consts::PI / 180.0;
+
+/// Largest magnetic field accepted on any axis, uT (the Earth's field is 25-65 uT; a field
+/// of 1 mT near a thruster's magnets is already useless as a compass).
+pub const MAX_MAG_UT: f64 = 1000.0;
+
+/// Why a reading is not physically plausible, if it is not. The magnetometer is judged on
+/// its own by [`plausible_mag`]: a bad compass must not cost the gyro and accelerometer.
+pub fn implausible(imu: &ImuSi) -> Option<&'static str> {
+    let over = |v: &[f64; 3], max: f64| v.iter().any(|x| !x.is_finite() || x.abs() > max);
+    if over(&imu.accel, MAX_ACCEL_MSS) {
+        Some("acceleration beyond 3 g")
+    } else if over(&imu.gyro, MAX_GYRO_RADPS) {
+        Some("angular rate beyond 2000 deg/s")
+    } else {
+        None
+    }
+}
+
+/// The magnetometer reading if it is plausible.
+pub fn plausible_mag(mag: Option<[f64; 3]>) -> Option<[f64; 3]> {
+    mag.filter(|m| m.iter().all(|x| x.is_finite() && x.abs() <= MAX_MAG_UT))
+}
+
 /// Depth below the surface, m, from absolute pressure in hPa.
 pub fn depth_from_hpa(press_abs_hpa: f64, surface_hpa: f64, density_kg_m3: f64) -> f64 {
     (press_abs_hpa - surface_hpa) * 100.0 / (density_kg_m3 * GRAVITY_MSS)
@@ -48,6 +80,38 @@ pub fn depth_from_hpa(press_abs_hpa: f64, surface_hpa: f64, density_kg_m3: f64) 
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn implausible_readings_are_named_and_good_ones_pass() {
+        use super::*;
+        let rest = scaled_imu([0, 0, -1000], [0, 0, 0], [200, 0, 400]);
+        assert_eq!(implausible(&rest), None);
+        // RAW_IMU from an autopilot that sends ADC counts: 1 g = 4096 counts.
+        let counts = scaled_imu([0, 0, -4096], [0, 0, 0], [0, 0, 0]);
+        assert_eq!(implausible(&counts), Some("acceleration beyond 3 g"));
+        // Every i16 mrad/s is within 2000 deg/s; only other sources can exceed it.
+        assert_eq!(
+            implausible(&scaled_imu([0, 0, -1000], [0, 0, i16::MAX], [0; 3])),
+            None
+        );
+        let spin = ImuSi {
+            gyro: [0.0, 0.0, 40.0],
+            ..rest
+        };
+        assert_eq!(implausible(&spin), Some("angular rate beyond 2000 deg/s"));
+        let nan = ImuSi {
+            accel: [f64::NAN, 0.0, 0.0],
+            ..rest
+        };
+        assert!(implausible(&nan).is_some());
+        // Just under 3 g is still accepted; the field of a magnet is not a compass.
+        assert_eq!(implausible(&scaled_imu([2990, 0, 0], [0; 3], [0; 3])), None);
+        assert_eq!(
+            plausible_mag(Some([30.0, 0.0, 40.0])),
+            Some([30.0, 0.0, 40.0])
+        );
+        assert_eq!(plausible_mag(Some([3000.0, 0.0, 0.0])), None);
+    }
+
     use super::*;
 
     #[test]

@@ -4,6 +4,11 @@
 //! and SCALED_PRESSURE2 streams; thrust goes out as MAV_CMD_DO_MOTOR_TEST per thruster or
 //! RC_CHANNELS_OVERRIDE. The protocol logic is the pure [`session::Session`]; this module
 //! owns the connection and the receive thread ([`io`]). No autopilot parameter is changed.
+//!
+//! A connection that fails after start (TCP closed, serial unplugged) ends the session, not
+//! the driver: the link is reported down and the connection is opened again every
+//! [`RECONNECT_PERIOD`]. Only a connection that cannot be opened at start is an error (a
+//! wrong address in the configuration).
 
 pub mod convert;
 pub mod io;
@@ -15,10 +20,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use mavlink::dialects::ardupilotmega::MavMessage;
-use mavlink::{Connectable, ConnectionAddress, MavConnection};
-
-use self::io::{Incoming, SharedConnection};
+use self::io::{Incoming, SharedLink};
 use self::session::{Session, SessionCounters};
 use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Waker};
 use crate::clock::monotonic_ns;
@@ -35,11 +37,20 @@ const STOP_GAP: Duration = Duration::from_millis(20);
 /// a message, so the thread may outlive this; it is then left to end with the process.
 const JOIN_WAIT: Duration = Duration::from_millis(300);
 
+/// How often a lost connection is opened again.
+pub const RECONNECT_PERIOD: Duration = Duration::from_secs(1);
+
 /// See the module docs.
 pub struct MavlinkBackend {
     cfg: MavlinkConfig,
     outputs: Vec<OutputSpec>,
-    conn: Option<SharedConnection>,
+    conn: Option<SharedLink>,
+    /// While the connection is lost: when to try again (ns).
+    reconnect_at_ns: Option<u64>,
+    reconnects: u64,
+    waker: Option<Waker>,
+    /// Link state last seen, to forget udpin's peer when the link goes down.
+    was_up: bool,
     rx: Option<Receiver<Incoming>>,
     rx_stop: Arc<AtomicBool>,
     rx_thread: Option<JoinHandle<()>>,
@@ -65,6 +76,10 @@ impl MavlinkBackend {
             cfg,
             outputs,
             conn: None,
+            reconnect_at_ns: None,
+            reconnects: 0,
+            waker: None,
+            was_up: false,
             rx: None,
             rx_stop: Arc::new(AtomicBool::new(false)),
             rx_thread: None,
@@ -83,27 +98,87 @@ impl MavlinkBackend {
             .unwrap_or_default()
     }
 
-    fn connect(&self) -> Result<SharedConnection, BackendError> {
-        let err = |reason: String| BackendError::Mavlink {
+    fn connect(&self) -> Result<SharedLink, BackendError> {
+        // A receive timeout lets the thread see the stop flag (TCP has its own 100 ms; a
+        // serial receive retries internally).
+        io::open(
+            &self.cfg.address,
+            Duration::from_millis(self.cfg.read_timeout_ms),
+            (self.cfg.target_system, self.cfg.target_component),
+        )
+        .map_err(|reason| BackendError::Mavlink {
             what: "connect",
             reason,
+        })
+    }
+
+    /// Opens the connection and starts its receive thread.
+    fn open(&mut self) -> Result<(), BackendError> {
+        let conn = self.connect()?;
+        let (tx, rx) = mpsc::channel();
+        self.rx_stop = Arc::new(AtomicBool::new(false));
+        let waker = self.waker.clone().unwrap_or_else(Waker::noop);
+        self.rx_thread = Some(io::spawn(conn.clone(), tx, waker, self.rx_stop.clone())?);
+        self.rx = Some(rx);
+        self.conn = Some(conn);
+        Ok(())
+    }
+
+    /// The connection failed: the session's link is down at once, the receive thread is
+    /// gone, and the connection is opened again from [`Backend::service`].
+    fn lost(&mut self, reason: &str, now_ns: u64) {
+        tracing::warn!(
+            address = %self.cfg.address,
+            "MAVLink connection lost: {reason}; reconnecting every {} ms",
+            RECONNECT_PERIOD.as_millis()
+        );
+        if let Some(s) = self.session.as_mut() {
+            // Nothing can reach the autopilot any more: the neutral round ArduSub would get
+            // is its own, 500 ms after our last motor test (documented).
+            s.on_disconnect(reason);
+            s.drain_outgoing();
+        }
+        self.join_receiver();
+        self.rx = None;
+        self.conn = None;
+        self.reconnect_at_ns = Some(now_ns + RECONNECT_PERIOD.as_nanos() as u64);
+    }
+
+    fn try_reconnect(&mut self, now_ns: u64) {
+        let Some(at) = self.reconnect_at_ns else {
+            return;
         };
-        let addr = ConnectionAddress::parse_address(&self.cfg.address)
-            .map_err(|e| err(format!("{:?}: {e}", self.cfg.address)))?;
-        let addr = match addr {
-            // A receive timeout lets the thread see the stop flag (TCP has its own 100 ms;
-            // a serial receive retries internally).
-            ConnectionAddress::Udp(udp) => ConnectionAddress::Udp(
-                udp.read_timeout(Duration::from_millis(self.cfg.read_timeout_ms)),
-            ),
-            other => other,
-        };
-        let mut conn = addr
-            .connect::<MavMessage>()
-            .map_err(|e| err(format!("{}: {e}", self.cfg.address)))?;
-        // ArduPilot answers in the version it is spoken to; accept both anyway.
-        conn.set_allow_recv_any_version(true);
-        Ok(Arc::new(conn))
+        if now_ns < at {
+            return;
+        }
+        match self.open() {
+            Ok(()) => {
+                self.reconnects += 1;
+                self.reconnect_at_ns = None;
+                tracing::info!(address = %self.cfg.address, "MAVLink connection open again");
+            }
+            Err(e) => {
+                if let Some(suppressed) = self.send_log.allow() {
+                    tracing::warn!(suppressed, "reconnect failed: {e}");
+                }
+                self.reconnect_at_ns = Some(now_ns + RECONNECT_PERIOD.as_nanos() as u64);
+            }
+        }
+    }
+
+    /// udpin replies only to the autopilot's address; once the link is lost that lock is
+    /// released, so an autopilot (or router) that comes back from another port is found.
+    fn watch_link(&mut self) {
+        let up = self
+            .session
+            .as_ref()
+            .is_some_and(|s| s.link() == LinkState::Up);
+        if self.was_up && !up {
+            if let Some(c) = self.conn.as_ref() {
+                c.forget_peer();
+            }
+        }
+        self.was_up = up;
     }
 
     /// Sends what the session queued. Send failures are counted and logged, not fatal: a
@@ -127,26 +202,18 @@ impl MavlinkBackend {
         let (Some(rx), Some(session)) = (self.rx.as_ref(), self.session.as_mut()) else {
             return Ok(());
         };
-        loop {
+        let lost = loop {
             match rx.try_recv() {
                 Ok(Incoming::Message { t_ns, header, msg }) => {
                     session.on_message(t_ns, &header, &msg)
                 }
-                Ok(Incoming::Closed(reason)) => {
-                    return Err(BackendError::Mavlink {
-                        what: "connection",
-                        reason: format!("closed: {reason}"),
-                    })
-                }
+                Ok(Incoming::Closed(reason)) => break format!("closed: {reason}"),
                 Err(TryRecvError::Empty) => return Ok(()),
-                Err(TryRecvError::Disconnected) => {
-                    return Err(BackendError::Mavlink {
-                        what: "connection",
-                        reason: "the receive thread ended".to_string(),
-                    })
-                }
+                Err(TryRecvError::Disconnected) => break "the receive thread ended".to_string(),
             }
-        }
+        };
+        self.lost(&lost, monotonic_ns());
+        Ok(())
     }
 
     fn join_receiver(&mut self) {
@@ -169,11 +236,8 @@ impl Backend for MavlinkBackend {
     }
 
     fn start(&mut self, waker: Waker, now_ns: u64) -> Result<(), BackendError> {
-        let conn = self.connect()?;
-        let (tx, rx) = mpsc::channel();
-        self.rx_thread = Some(io::spawn(conn.clone(), tx, waker, self.rx_stop.clone())?);
-        self.rx = Some(rx);
-        self.conn = Some(conn);
+        self.waker = Some(waker);
+        self.open()?;
         self.session = Some(Session::new(self.cfg.clone(), self.outputs.clone(), now_ns));
         tracing::info!(
             address = %self.cfg.address,
@@ -207,15 +271,41 @@ impl Backend for MavlinkBackend {
     }
 
     fn service(&mut self, now_ns: u64) -> Result<(), BackendError> {
+        self.try_reconnect(now_ns);
         if let Some(s) = self.session.as_mut() {
             s.service(now_ns);
         }
+        // Before the peer is forgotten: the link-down neutral round goes to the autopilot.
         self.flush();
+        self.watch_link();
         Ok(())
     }
 
     fn next_deadline_ns(&self) -> Option<u64> {
-        self.session.as_ref().map(Session::next_deadline_ns)
+        let session = self.session.as_ref().map(Session::next_deadline_ns);
+        [session, self.reconnect_at_ns].into_iter().flatten().min()
+    }
+
+    fn armed(&self) -> bool {
+        self.session.as_ref().is_some_and(Session::autopilot_armed)
+    }
+
+    fn stats(&self) -> Vec<(&'static str, u64)> {
+        let c = self.counters();
+        let (empty, malformed, foreign) = self
+            .conn
+            .as_ref()
+            .map_or((0, 0, 0), |l| l.counters().snapshot());
+        vec![
+            ("imu_implausible", c.imu_implausible),
+            ("mag_implausible", c.mag_implausible),
+            ("datagrams_empty", empty),
+            ("datagrams_malformed", malformed),
+            ("datagrams_foreign", foreign),
+            ("motor_test_refused", c.motor_test_refused),
+            ("link_losses", c.link_losses),
+            ("reconnects", self.reconnects),
+        ]
     }
 
     fn link(&self) -> LinkState {

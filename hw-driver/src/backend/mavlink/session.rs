@@ -14,7 +14,15 @@
 //! - Thrust: the current pulses go out at once when they change and every `resend_ms`
 //!   otherwise, as DO_MOTOR_TEST per thruster (only while the autopilot reports armed:
 //!   ArduSub refuses motor tests when disarmed and announces each refusal) or as one
-//!   RC_CHANNELS_OVERRIDE.
+//!   RC_CHANNELS_OVERRIDE. Motor tests start with the first non-neutral pulse, not at
+//!   link-up: the first one puts ArduSub into motor-test mode, which bypasses the pilot and
+//!   which ArduSub leaves only by disarming 500 ms after the last one (docs/hardware.md).
+//!   Once started they go on (neutral when there is nothing to do) until the vehicle
+//!   disarms or the link is lost.
+//! - Every path that stops thrust messages sends a neutral round first: link loss (no
+//!   HEARTBEAT while data may still flow) and shutdown.
+//! - DO_MOTOR_TEST param1 is ArduSub's 0-based motor index: `channel - 1` (see
+//!   [`ardusub_motor_index`]).
 //! - Our HEARTBEAT every `heartbeat_ms`, from the start.
 
 use std::collections::VecDeque;
@@ -28,7 +36,7 @@ use mavlink::dialects::ardupilotmega::{
 use mavlink::{MavHeader, MessageData};
 use tracing::{debug, info, warn};
 
-use super::convert::{depth_from_hpa, scaled_imu, ImuSi};
+use super::convert::{depth_from_hpa, implausible, plausible_mag, scaled_imu, ImuSi};
 use crate::backend::{LinkState, OutputSpec, SensorReading};
 use crate::config::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
 use crate::core::pwm::Pwm;
@@ -69,6 +77,10 @@ pub struct SessionCounters {
     pub commands_unacked: u64,
     /// Link losses.
     pub link_losses: u64,
+    /// IMU messages dropped because a value was physically implausible (e.g. ADC counts).
+    pub imu_implausible: u64,
+    /// Magnetometer readings dropped as implausible (the sample was kept without them).
+    pub mag_implausible: u64,
 }
 
 /// See the module docs.
@@ -80,7 +92,10 @@ pub struct Session {
     target: Option<(u8, u8)>,
     last_heartbeat_ns: Option<u64>,
     link: LinkState,
-    armed: bool,
+    /// The autopilot's armed flag from its last HEARTBEAT; `None` before the first one.
+    armed: Option<bool>,
+    /// Motor tests have started (ArduSub is in motor-test mode because of us).
+    engaged: bool,
     armed_by_us: bool,
     commands: VecDeque<Pending>,
     attitude: Option<(u64, [f64; 3])>,
@@ -94,6 +109,7 @@ pub struct Session {
     counters: SessionCounters,
     refusal_log: LogLimiter,
     text_log: LogLimiter,
+    implausible_log: LogLimiter,
 }
 
 impl Session {
@@ -110,7 +126,8 @@ impl Session {
             target,
             last_heartbeat_ns: None,
             link: LinkState::Connecting,
-            armed: false,
+            armed: None,
+            engaged: false,
             armed_by_us: false,
             commands: VecDeque::new(),
             attitude: None,
@@ -124,6 +141,7 @@ impl Session {
             counters: SessionCounters::default(),
             refusal_log: LogLimiter::default(),
             text_log: LogLimiter::new(20, std::time::Duration::from_secs(10)),
+            implausible_log: LogLimiter::default(),
         }
     }
 
@@ -148,7 +166,38 @@ impl Session {
 
     /// The autopilot reported itself armed in its last HEARTBEAT.
     pub fn autopilot_armed(&self) -> bool {
+        self.armed == Some(true)
+    }
+
+    /// The autopilot's armed flag from its last HEARTBEAT (`None` before the first one and
+    /// after a link loss).
+    pub fn armed_state(&self) -> Option<bool> {
         self.armed
+    }
+
+    /// Motor tests have started: ArduSub is in motor-test mode because of us.
+    pub fn engaged(&self) -> bool {
+        self.engaged
+    }
+
+    /// The connection itself failed (TCP closed, serial gone): the link is down at once,
+    /// nothing can be sent until the backend has reconnected.
+    pub fn on_disconnect(&mut self, reason: &str) {
+        if self.link == LinkState::Up {
+            self.counters.link_losses += 1;
+        }
+        self.link = LinkState::Down(format!("connection lost: {reason}"));
+        self.forget_link();
+    }
+
+    /// What a lost link invalidates: pending readings and requests, and the armed state
+    /// (unknown until the next HEARTBEAT). Motor-test mode ends on ArduSub's side 500 ms
+    /// after our last motor test, with a disarm.
+    fn forget_link(&mut self) {
+        self.readings.clear();
+        self.commands.clear();
+        self.armed = None;
+        self.engaged = false;
     }
 
     /// We armed the vehicle (so we disarm it on exit).
@@ -287,13 +336,17 @@ impl Session {
         let armed = hb
             .base_mode
             .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-        if armed != self.armed {
+        // Logged from the first HEARTBEAT on (None -> Some), not only on transitions: a
+        // vehicle disarmed from the start must not look like one whose thrusters follow.
+        if Some(armed) != self.armed {
             if armed {
                 info!("autopilot armed: thrust commands take effect");
             } else {
                 warn!("autopilot disarmed: thrust commands have no effect until it is armed");
+                // Disarming also ends what our motor tests started.
+                self.engaged = false;
             }
-            self.armed = armed;
+            self.armed = Some(armed);
             // Armed state gates DO_MOTOR_TEST: send the current pulses at once.
             self.thrust_dirty = true;
         }
@@ -332,7 +385,7 @@ impl Session {
                 });
             }
         }
-        if self.cfg.arm && !self.armed {
+        if self.cfg.arm && self.armed != Some(true) {
             self.commands.push_back(Pending {
                 label: "arm".to_string(),
                 command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
@@ -343,10 +396,27 @@ impl Session {
         }
     }
 
-    fn on_imu(&mut self, t_ns: u64, imu: ImuSi) {
+    fn on_imu(&mut self, t_ns: u64, mut imu: ImuSi) {
         if self.link != LinkState::Up {
             self.counters.dropped_link_down += 1;
             return;
+        }
+        if let Some(why) = implausible(&imu) {
+            self.counters.imu_implausible += 1;
+            if let Some(suppressed) = self.implausible_log.allow() {
+                warn!(
+                    suppressed,
+                    total = self.counters.imu_implausible,
+                    accel = ?imu.accel,
+                    gyro = ?imu.gyro,
+                    "IMU message dropped: {why} (not a physical reading; is imu_message right?)"
+                );
+            }
+            return;
+        }
+        if imu.mag.is_some() && plausible_mag(imu.mag).is_none() {
+            self.counters.mag_implausible += 1;
+            imu.mag = None;
         }
         let fresh = |t: u64| t_ns.saturating_sub(t) < self.cfg.depth_timeout_ms * MS;
         let gyro = match self.cfg.gyro_source {
@@ -443,14 +513,17 @@ impl Session {
             (Some(t), LinkState::Up) if now_ns >= t + timeout => {
                 warn!(
                     link_timeout_ms = self.cfg.link_timeout_ms,
-                    "no autopilot HEARTBEAT within the link timeout: link down, IMU samples stop"
+                    "no autopilot HEARTBEAT within the link timeout: link down, outputs \
+                     neutral, IMU samples stop"
                 );
+                // Data may still flow (only HEARTBEATs lost), so the autopilot may still be
+                // listening: leave it with neutral, not with the last pulses, before going
+                // quiet. Nothing is sent while the link is down.
+                self.neutral_round(now_ns);
                 self.link =
                     LinkState::Down(format!("no HEARTBEAT for {} ms", self.cfg.link_timeout_ms));
                 self.counters.link_losses += 1;
-                self.readings.clear();
-                self.commands.clear();
-                self.armed = false;
+                self.forget_link();
             }
             (None, LinkState::Connecting) if now_ns >= self.started_ns + timeout => {
                 warn!(
@@ -511,8 +584,23 @@ impl Session {
         self.last_thrust_ns = Some(now_ns);
         match self.cfg.output {
             OutputMode::MotorTest => {
-                if !self.armed {
+                if self.armed != Some(true) {
+                    self.engaged = false;
                     return;
+                }
+                if !self.engaged {
+                    let idle = self
+                        .outputs
+                        .iter()
+                        .zip(&self.pwm)
+                        .all(|(o, p)| *p == o.neutral);
+                    // Nothing to command: stay out of motor-test mode, which would take the
+                    // vehicle from its pilot and disarm it 500 ms after we stop.
+                    if idle {
+                        return;
+                    }
+                    info!("first thrust: motor tests start (ArduSub motor-test mode: pilot input bypassed until it disarms)");
+                    self.engaged = true;
                 }
                 let timeout_s = self.cfg.motor_test_timeout_ms as f32 / 1000.0;
                 for (o, p) in self.outputs.iter().zip(&self.pwm) {
@@ -550,12 +638,18 @@ impl Session {
         }
     }
 
-    /// Queues the messages that end the session: neutral thrust now (whatever the resend
-    /// timer says) and, if we armed the vehicle, a disarm command.
-    pub fn shutdown(&mut self, now_ns: u64) {
+    /// Neutral on every output now, whatever the resend timer says (nothing if motor tests
+    /// never started: then nothing of ours is on the outputs).
+    fn neutral_round(&mut self, now_ns: u64) {
         let neutral: Vec<Pwm> = self.outputs.iter().map(|o| o.neutral).collect();
         self.set_outputs(&neutral);
         self.push_thrust(now_ns);
+    }
+
+    /// Queues the messages that end the session: neutral thrust now (whatever the resend
+    /// timer says) and, if we armed the vehicle, a disarm command.
+    pub fn shutdown(&mut self, now_ns: u64) {
+        self.neutral_round(now_ns);
         if self.armed_by_us {
             if let Some((sys, comp)) = self.target {
                 self.outgoing
@@ -571,10 +665,23 @@ impl Session {
     }
 }
 
-/// One DO_MOTOR_TEST: `channel` is the 1-based board output, the pulse in us.
+/// DO_MOTOR_TEST param1 for the thruster on `channel` (config: 1-based, ArduSub's motor n,
+/// i.e. the output whose `SERVOn_FUNCTION` is "Motor n", MAIN OUT n by default).
+///
+/// ArduSub's `Sub::handle_do_motor_test` passes param1 unchanged to
+/// `AP_MotorsMatrix::output_test_num(output_channel, pwm)`, which indexes
+/// `motor_enabled[output_channel]` and calls `rc_write(output_channel, pwm)`, and
+/// `SRV_Channels::get_motor_function` maps that "zero-based motor channel" to k_motor1 +
+/// channel: param1 = 0 is motor 1. Sending the 1-based channel drove motor n + 1 and had
+/// the last motor of a frame refused. Source lines: docs/hardware.md.
+pub fn ardusub_motor_index(channel: u32) -> f32 {
+    channel.saturating_sub(1) as f32
+}
+
+/// One DO_MOTOR_TEST: `channel` is the 1-based motor (board output), the pulse in us.
 pub fn motor_test(sys: u8, comp: u8, channel: u32, pwm: Pwm, timeout_s: f32) -> MavMessage {
     MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        param1: channel as f32,
+        param1: ardusub_motor_index(channel),
         param2: MotorTestThrottleType::MOTOR_TEST_THROTTLE_PWM as u32 as f32,
         param3: f32::from(pwm.us()),
         param4: timeout_s,
@@ -874,7 +981,8 @@ mod tests {
         s.service(12 * MS);
         let c = commands(&s.drain_outgoing());
         assert_eq!(c.len(), 2);
-        for (c, (motor, pwm)) in c.iter().zip([(1.0, 1700.0), (4.0, 1300.0)]) {
+        // Channels 1 and 4 are ArduSub's motors 0 and 3 (0-based).
+        for (c, (motor, pwm)) in c.iter().zip([(0.0, 1700.0), (3.0, 1300.0)]) {
             assert_eq!(c.command, MavCmd::MAV_CMD_DO_MOTOR_TEST);
             assert_eq!(
                 [c.param1, c.param2, c.param3, c.param4, c.param5, c.param6],
@@ -976,5 +1084,105 @@ mod tests {
             (c.last().unwrap().command, c.last().unwrap().param1),
             (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0)
         );
+    }
+    #[test]
+    fn motor_test_param1_is_ardusubs_zero_based_motor_index() {
+        assert_eq!(ardusub_motor_index(1), 0.0);
+        assert_eq!(ardusub_motor_index(8), 7.0);
+        let m = motor_test(1, 1, 8, Pwm(1600), 0.5);
+        let MavMessage::COMMAND_LONG(c) = m else {
+            panic!("{m:?}")
+        };
+        assert_eq!((c.param1, c.param3), (7.0, 1600.0));
+    }
+
+    #[test]
+    fn no_motor_tests_while_there_is_nothing_to_command() {
+        let mut s = up(true);
+        // Armed, link up, outputs neutral: motor-test mode would bypass the pilot and
+        // disarm the vehicle after we stop, so nothing goes out.
+        for t in 1..=10 {
+            s.service(t * 100 * MS);
+        }
+        assert!(commands(&s.drain_outgoing()).is_empty());
+        assert!(!s.engaged());
+        // A shutdown with nothing of ours on the outputs sends nothing either.
+        let mut quiet = up(true);
+        quiet.shutdown(5 * MS);
+        assert!(commands(&quiet.drain_outgoing()).is_empty());
+        // The first real pulse starts them; neutral then keeps going out.
+        s.set_outputs(&[Pwm(1600), Pwm(1510)]);
+        s.service(1100 * MS);
+        assert_eq!(commands(&s.drain_outgoing()).len(), 2);
+        assert!(s.engaged());
+        s.set_outputs(&[Pwm(1500), Pwm(1510)]);
+        s.service(1110 * MS);
+        s.service(1210 * MS);
+        let c = commands(&s.drain_outgoing());
+        assert_eq!(c.len(), 4);
+        assert!(c.iter().all(|c| c.param3 == 1500.0 || c.param3 == 1510.0));
+    }
+
+    #[test]
+    fn heartbeat_loss_with_imu_flowing_ends_in_a_neutral_round() {
+        let mut s = up(true);
+        s.set_outputs(&[Pwm(1750), Pwm(1300)]);
+        s.service(10 * MS);
+        s.drain_outgoing();
+        let timeout = MavlinkConfig::default().link_timeout_ms * MS;
+        // IMU keeps coming, HEARTBEATs do not.
+        let mut t = 20 * MS;
+        let mut sent = Vec::new();
+        while t <= timeout + 200 * MS {
+            s.on_message(t, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+            s.service(t);
+            sent.extend(commands(&s.drain_outgoing()));
+            t += 10 * MS;
+        }
+        assert!(matches!(s.link(), LinkState::Down(_)));
+        let last: Vec<f32> = sent[sent.len() - 2..].iter().map(|c| c.param3).collect();
+        assert_eq!(last, [1500.0, 1510.0], "the last motor tests are neutral");
+        // Nothing more while down, whatever the loop asks.
+        s.set_outputs(&[Pwm(1900), Pwm(1900)]);
+        s.service(t + 500 * MS);
+        assert!(commands(&s.drain_outgoing()).is_empty());
+    }
+
+    #[test]
+    fn a_vehicle_disarmed_from_the_start_is_known_as_such() {
+        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+        assert_eq!(s.armed_state(), None);
+        s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+        assert_eq!(s.armed_state(), Some(false));
+        s.on_message(2, &hdr(1, 1), &ap_heartbeat(true));
+        assert_eq!(s.armed_state(), Some(true));
+    }
+
+    #[test]
+    fn implausible_imu_readings_are_dropped_and_counted() {
+        let cfg = MavlinkConfig {
+            imu_message: ImuMessage::RawImu,
+            ..MavlinkConfig::default()
+        };
+        let mut s = Session::new(cfg, specs(), 0);
+        s.on_message(1, &hdr(1, 1), &ap_heartbeat(true));
+        let raw = |z: i16, mag: [i16; 3]| {
+            MavMessage::RAW_IMU(RAW_IMU_DATA {
+                zacc: z,
+                xmag: mag[0],
+                ymag: mag[1],
+                zmag: mag[2],
+                ..RAW_IMU_DATA::DEFAULT
+            })
+        };
+        // ADC counts (1 g = 4096) are not mG.
+        s.on_message(2, &hdr(1, 1), &raw(-4096, [0; 3]));
+        assert_eq!(s.take_reading(), None);
+        assert_eq!(s.counters().imu_implausible, 1);
+        s.on_message(3, &hdr(1, 1), &raw(-1000, [30000, 0, 0]));
+        let r = s.take_reading().unwrap();
+        assert!((r.accel[2] + 9.80665).abs() < 1e-9);
+        assert_eq!(r.mag, None, "an implausible magnetometer is dropped alone");
+        assert_eq!(s.counters().mag_implausible, 1);
     }
 }
