@@ -253,12 +253,15 @@ fn status_text_and_json() {
     assert_eq!(v["model_version"], 1);
     assert_eq!(v["imu_rate_hz"], 400.0);
     // One JSON key per wire field (StatusMsg has no padding left: `reserved` became
-    // `requests_refused`), so a field added to the protocol cannot be forgotten here.
+    // `requests_refused`), so a field added to the protocol cannot be forgotten here, plus
+    // the driver's own report beside them (null: this fake has no driver).
     let wire = serde_json::to_value(thruster_protocol::StatusMsg::default()).unwrap();
     assert_eq!(
         v.as_object().unwrap().len(),
-        wire.as_object().unwrap().len()
+        wire.as_object().unwrap().len() + 1
     );
+    assert!(v["driver"].is_null(), "{v}");
+    assert!(stdout.contains("  driver       no driver status published"), "{stdout}");
     assert_eq!(v["requests_refused"], 0);
     let received = daemon.finish();
     assert!(received
