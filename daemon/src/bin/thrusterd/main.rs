@@ -6,6 +6,7 @@ mod study;
 mod systemd;
 
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -37,8 +38,26 @@ enum Command {
     },
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+/// Exit code of a configuration that cannot be used (file or command line): a script tells
+/// "fix the config" from "the daemon failed".
+const EXIT_CONFIG: u8 = 2;
+
+fn main() -> ExitCode {
+    // A closed stdout pipe (`thrusterd check-config FILE | head -1`) ends quietly.
+    thruster_driver_kit::pipe::main(|| match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) if thruster_driver_kit::pipe::is_broken_pipe(e.as_ref()) => ExitCode::SUCCESS,
+        // `{:#}`: the message and its causes on one line, no "Caused by" list or backtrace
+        // (what anyhow's Debug form, the default for `main -> Result`, prints).
+        Err(e) => {
+            eprintln!("thrusterd: {e:#}");
+            let config = e.chain().any(|c| c.is::<thrusterd::config::ConfigError>());
+            ExitCode::from(if config { EXIT_CONFIG } else { 1 })
+        }
+    })
+}
+
+fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Run(args) => run::run(args),
         Command::CheckConfig { file } => {
