@@ -8,5 +8,5 @@ pub mod logging;
 pub mod pipe;
 pub mod shutdown;
 
-pub use load::{parse_toml, read_text, LoadError};
+pub use load::{locate, parse_toml, read_text, LoadError, Range};
 pub use shutdown::Shutdown;

@@ -2,10 +2,12 @@
 //! name what is wrong, and no files left behind. Real processes, each test on its own
 //! namespace, every child reaped.
 
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, ExitStatus, Output, Stdio};
+use std::time::Duration;
 
-use system_tests::{bin, workspace};
+use system_tests::{bin, workspace, Operator, Proc, World};
 use thruster_protocol::services::NamespaceGuard;
+use thruster_protocol::RequestKind;
 
 /// Runs `name args` with stdout a pipe whose reader is already gone (`| head -0`).
 fn run_into_closed_pipe(name: &str, args: &[&str]) -> Output {
@@ -46,4 +48,107 @@ fn a_closed_stdout_pipe_ends_the_demo_quietly() {
         &["demo", "--hold-s", "0", "--namespace", ns.namespace()],
     );
     assert_quiet_success("thrusterctl demo | head -0", &out);
+}
+
+/// Runs a short-lived command to its end (10 s at most), its output merged into a log.
+fn finish(mut p: Proc, what: &str) -> (ExitStatus, String) {
+    let status = p
+        .wait_timeout(Duration::from_secs(10))
+        .unwrap_or_else(|| panic!("{what}: still running after 10 s\n{}", p.log_text()));
+    (status, p.log_text())
+}
+
+#[test]
+fn config_errors_give_file_line_column_key_and_range_and_check_config_catches_what_run_refuses() {
+    let world = World::new("cfg");
+    let cases: [(&str, &str, &str); 3] = [
+        (
+            "the issue's example",
+            "[machine]\npulse_s = -3\n",
+            ".toml:2:11: machine.pulse_s: must be in (0, inf), got -3",
+        ),
+        (
+            "a namespace iceoryx2 cannot use (check-config passed it)",
+            "[ipc]\nnamespace = \"a-namespace-too-long\"\n",
+            ".toml:2:13: ipc.namespace: ",
+        ),
+        (
+            "a state directory that is a regular file",
+            "[runtime]\nstate_dir = \"/etc/hostname\"\n",
+            ".toml:2:13: runtime.state_dir: /etc/hostname is not a directory",
+        ),
+    ];
+    for (i, (what, text, want)) in cases.iter().enumerate() {
+        let path = world.path(&format!("c{i}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let path_s = path.to_str().unwrap();
+        let check = Proc::spawn("thrusterd", &["check-config", path_s], world.dir.path());
+        let (status, log) = finish(check, what);
+        assert_eq!(status.code(), Some(2), "{what}: check-config\n{log}");
+        assert!(
+            log.contains(&format!("{path_s}:")) && log.contains(want),
+            "{what}:\n{log}"
+        );
+        assert!(
+            !log.contains("Caused by") && !log.contains("panicked"),
+            "{what}:\n{log}"
+        );
+        // `run` refuses it the same way, before any IPC (no --namespace or --state-dir
+        // here: the file's own are the point).
+        let run = Proc::spawn("thrusterd", &["run", "--config", path_s], world.dir.path());
+        let (status, log) = finish(run, what);
+        assert_eq!(status.code(), Some(2), "{what}: run\n{log}");
+        assert!(!log.contains("did not stop cleanly"), "{what}:\n{log}");
+    }
+}
+
+#[test]
+fn a_second_daemon_on_a_live_namespace_refuses_without_a_crash_message() {
+    let world = World::new("two");
+    let mut first = world.daemon(&[]);
+    let op = Operator::new(&world);
+    assert!(op.request(RequestKind::Status).is_ok());
+    let marker = world.path("state").join("session");
+    let before = std::fs::read_to_string(&marker).expect("the live daemon's session marker");
+    // Same namespace, same state directory: what a second `systemctl start` by hand does.
+    let second = world.daemon(&[]);
+    let (status, log) = finish(second, "the second daemon");
+    assert!(!status.success(), "{log}");
+    assert!(log.contains("another thrusterd already serves"), "{log}");
+    assert!(
+        !log.contains("did not stop cleanly") && !log.contains("resum"),
+        "a live daemon taken for a crashed one:\n{log}"
+    );
+    assert_eq!(std::fs::read_to_string(&marker).unwrap(), before);
+    assert!(first.is_running());
+    assert!(first.stop().success());
+}
+
+#[test]
+fn a_state_dir_that_is_a_file_is_refused_at_start_with_the_path() {
+    let world = World::new("stf");
+    let file = world.path("state-file");
+    std::fs::write(&file, "not a directory").unwrap();
+    let ns = world.namespace();
+    let daemon = Proc::spawn(
+        "thrusterd",
+        &[
+            "run",
+            "--namespace",
+            &ns,
+            "--state-dir",
+            file.to_str().unwrap(),
+        ],
+        world.dir.path(),
+    );
+    let (status, log) = finish(daemon, "a daemon with a file for a state dir");
+    assert_eq!(status.code(), Some(2), "{log}");
+    assert!(
+        log.contains(&format!(
+            "runtime.state_dir: {} is not a directory",
+            file.display()
+        )),
+        "{log}"
+    );
+    assert!(!log.contains("did not stop cleanly"), "{log}");
 }

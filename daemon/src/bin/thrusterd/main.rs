@@ -61,7 +61,11 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Run(args) => run::run(args),
         Command::CheckConfig { file } => {
-            let cfg = thrusterd::config::DaemonConfig::load(&file)?;
+            let origin = file.display().to_string();
+            let text = thruster_driver_kit::read_text(&file)?;
+            let cfg = thrusterd::config::DaemonConfig::from_toml_str(&text, &origin)?;
+            // Everything `run` would refuse about this file, not only its values.
+            cfg.check_runnable(&text, &origin)?;
             println!("{}: ok", file.display());
             println!("{}", toml::to_string_pretty(&cfg)?);
             Ok(())
