@@ -194,7 +194,19 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, Lo
             origin: origin.to_string(),
             line,
             column,
-            message: e.message().trim().to_string(),
+            // Some syntax errors carry their reason only in the rendered form (the last
+            // line, under the caret), not in `message()`.
+            message: match e.message().trim() {
+                "" => e
+                    .to_string()
+                    .lines()
+                    .rev()
+                    .map(str::trim)
+                    .find(|l| !l.is_empty() && !l.ends_with('|') && !l.contains('^'))
+                    .unwrap_or("invalid TOML")
+                    .to_string(),
+                m => m.to_string(),
+            },
         }
     })
 }

@@ -578,12 +578,18 @@ fn a_sub_microsecond_wait_returns_instead_of_blocking_forever() {
         let (timeout, notified, took) = rx
             .recv_timeout(TIMEOUT)
             .expect("a short wait blocked for more than 5 s");
-        assert!(!notified, "nothing was sent, yet {timeout:?} reported a notification");
+        assert!(
+            !notified,
+            "nothing was sent, yet {timeout:?} reported a notification"
+        );
         assert!(took < Duration::from_secs(1), "{timeout:?} took {took:?}");
     }
     waiter.join().unwrap();
     assert_eq!(bounded_wait_timeout(Duration::ZERO), None);
-    assert_eq!(bounded_wait_timeout(Duration::from_nanos(300)), Some(MIN_WAIT));
+    assert_eq!(
+        bounded_wait_timeout(Duration::from_nanos(300)),
+        Some(MIN_WAIT)
+    );
     assert_eq!(
         bounded_wait_timeout(Duration::from_millis(3)),
         Some(Duration::from_millis(3))

@@ -103,15 +103,13 @@ impl Topic {
                 default_buffer: 8,
             },
             // State: a late joiner gets the latest value; readers want the newest.
-            Topic::Model
-            | Topic::Status
-            | Topic::Truth
-            | Topic::Setpoint
-            | Topic::DriverStatus => TopicQos {
-                history: 1,
-                max_buffer: 4,
-                default_buffer: 2,
-            },
+            Topic::Model | Topic::Status | Topic::Truth | Topic::Setpoint | Topic::DriverStatus => {
+                TopicQos {
+                    history: 1,
+                    max_buffer: 4,
+                    default_buffer: 2,
+                }
+            }
         }
     }
 }
