@@ -152,3 +152,45 @@ fn a_state_dir_that_is_a_file_is_refused_at_start_with_the_path() {
     );
     assert!(!log.contains("did not stop cleanly"), "{log}");
 }
+
+#[test]
+fn a_demo_refused_for_its_vehicle_or_noise_leaves_no_namespace_folder() {
+    let world = World::new("dbad");
+    let zero = world.path("zero.toml");
+    std::fs::write(&zero, "# no [[thruster]] tables\n").unwrap();
+    let seventeen = world.path("seventeen.toml");
+    let amour = std::fs::read_to_string(workspace().join("config/vehicles/amour5.toml")).unwrap();
+    let one = &amour[amour.find("[[thruster]]").unwrap()..];
+    let one = &one[..one[1..].find("[[thruster]]").map_or(one.len(), |i| i + 1)];
+    std::fs::write(&seventeen, format!("{amour}\n{}", one.repeat(12))).unwrap();
+    let amour5 = workspace().join("config/vehicles/amour5.toml");
+    for (what, args, want) in [
+        (
+            "0 thrusters",
+            vec!["--vehicle", zero.to_str().unwrap()],
+            "0 thrusters",
+        ),
+        (
+            "17 thrusters",
+            vec!["--vehicle", seventeen.to_str().unwrap()],
+            "17 thrusters",
+        ),
+        (
+            "an unknown noise preset",
+            vec!["--vehicle", amour5.to_str().unwrap(), "--noise", "bogus"],
+            "--noise must be paper, realistic or none",
+        ),
+    ] {
+        let mut argv = vec!["demo"];
+        argv.extend(args);
+        let demo = Proc::spawn("thrusterctl", &argv, world.dir.path());
+        let pid = demo.pid();
+        let (status, log) = finish(demo, what);
+        assert!(!status.success() && log.contains(want), "{what}:\n{log}");
+        // The demo's namespace is `demo-<pid>-<n>` (session.rs), its folder under the default
+        // root.
+        let folder = std::path::Path::new(thruster_protocol::services::DEFAULT_ROOT_BASE)
+            .join(format!("demo-{}-0", pid % 1_000_000));
+        assert!(!folder.exists(), "{what}: {} left", folder.display());
+    }
+}
