@@ -16,7 +16,7 @@ use std::process::ExitCode;
 pub fn main(body: impl FnOnce() -> ExitCode) -> ExitCode {
     let previous = panic::take_hook();
     panic::set_hook(Box::new(move |info| {
-        if !info.payload_as_str().is_some_and(is_broken_pipe_panic) {
+        if !payload_text(info.payload()).is_some_and(is_broken_pipe_panic) {
             previous(info);
         }
     }));
@@ -25,11 +25,7 @@ pub fn main(body: impl FnOnce() -> ExitCode) -> ExitCode {
     match panic::catch_unwind(AssertUnwindSafe(body)) {
         Ok(code) => code,
         Err(payload) => {
-            let text = payload
-                .downcast_ref::<String>()
-                .map(String::as_str)
-                .or_else(|| payload.downcast_ref::<&str>().copied());
-            if text.is_some_and(is_broken_pipe_panic) {
+            if payload_text(payload.as_ref()).is_some_and(is_broken_pipe_panic) {
                 ExitCode::SUCCESS
             } else {
                 panic::resume_unwind(payload)
@@ -51,6 +47,15 @@ pub fn is_broken_pipe(error: &(dyn std::error::Error + 'static)) -> bool {
         next = e.source();
     }
     false
+}
+
+/// A panic's message: a `String` for a formatted one (std's print panics), else a `&str`.
+/// (`PanicHookInfo::payload_as_str` does this from Rust 1.91, above this project's MSRV.)
+fn payload_text(payload: &(dyn std::any::Any + Send)) -> Option<&str> {
+    payload
+        .downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| payload.downcast_ref::<&str>().copied())
 }
 
 /// The message std's `print!`/`eprint!` family panics with on a failed write, for EPIPE.
