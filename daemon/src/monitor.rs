@@ -36,6 +36,7 @@
 
 use nalgebra::{DMatrix, Vector3};
 use serde::{Deserialize, Serialize};
+use thruster_driver_kit::Range;
 
 use crate::machine::MAX_THRUSTERS;
 
@@ -127,41 +128,37 @@ impl Default for MonitorConfig {
 }
 
 impl MonitorConfig {
-    /// (key, value, valid) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, bool); 11] {
+    /// (key, value, allowed range) for the config checker.
+    pub fn checks(&self) -> [(&'static str, f64, Range); 11] {
         // block_s first: the others are compared with it, and a NaN must be named where it is.
         [
-            ("monitor.block_s", self.block_s, self.block_s > 0.0),
+            ("monitor.block_s", self.block_s, Range::above(0.0)),
             (
                 "monitor.settle_rate_rad_s",
                 self.settle_rate_rad_s,
-                self.settle_rate_rad_s > 0.0,
+                Range::above(0.0),
             ),
             (
                 "monitor.settle_error_deg",
                 self.settle_error_deg,
-                self.settle_error_deg > 0.0,
+                Range::above(0.0),
             ),
-            ("monitor.settle_s", self.settle_s, self.settle_s >= 0.0),
+            ("monitor.settle_s", self.settle_s, Range::at_least(0.0)),
             (
                 "monitor.reference_s",
                 self.reference_s,
-                self.reference_s >= self.block_s,
+                Range::at_least(self.block_s),
             ),
             (
                 "monitor.window_s",
                 self.window_s,
-                self.window_s >= self.block_s,
+                Range::at_least(self.block_s),
             ),
-            (
-                "monitor.min_data_s",
-                self.min_data_s,
-                self.min_data_s >= 0.0,
-            ),
-            ("monitor.z", self.z, self.z > 0.0),
-            ("monitor.min_share", self.min_share, self.min_share > 0.0),
-            ("monitor.confirm_s", self.confirm_s, self.confirm_s >= 0.0),
-            ("monitor.lag_s", self.lag_s, self.lag_s >= 0.0),
+            ("monitor.min_data_s", self.min_data_s, Range::at_least(0.0)),
+            ("monitor.z", self.z, Range::above(0.0)),
+            ("monitor.min_share", self.min_share, Range::above(0.0)),
+            ("monitor.confirm_s", self.confirm_s, Range::at_least(0.0)),
+            ("monitor.lag_s", self.lag_s, Range::at_least(0.0)),
         ]
     }
 }

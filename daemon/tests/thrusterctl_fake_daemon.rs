@@ -261,7 +261,10 @@ fn status_text_and_json() {
         wire.as_object().unwrap().len() + 1
     );
     assert!(v["driver"].is_null(), "{v}");
-    assert!(stdout.contains("  driver       no driver status published"), "{stdout}");
+    assert!(
+        stdout.contains("  driver       no driver status published"),
+        "{stdout}"
+    );
     assert_eq!(v["requests_refused"], 0);
     let received = daemon.finish();
     assert!(received

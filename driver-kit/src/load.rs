@@ -26,6 +26,14 @@ pub enum LoadError {
         column: usize,
         message: String,
     },
+    /// A value is not acceptable, with its place in the file when it has one there.
+    #[error("{origin}{at}: {key}: {reason}")]
+    Value {
+        origin: String,
+        at: At,
+        key: String,
+        reason: String,
+    },
     /// The structure is right but a value is not acceptable (named by its key path).
     #[error("{origin}: invalid `{key}`: {reason}")]
     Invalid {
@@ -35,7 +43,128 @@ pub enum LoadError {
     },
 }
 
+/// Where a value sits in a file: 1-based line and column, or nowhere (a default, or a value
+/// from the command line).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct At(pub Option<(usize, usize)>);
+
+impl std::fmt::Display for At {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some((line, column)) => write!(f, ":{line}:{column}"),
+            None => Ok(()),
+        }
+    }
+}
+
+/// An allowed interval, as messages print it: `[0, 1]`, `(0, inf)`, `[1, 16]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Range {
+    pub lo: f64,
+    pub hi: f64,
+    pub lo_open: bool,
+    pub hi_open: bool,
+}
+
+impl Range {
+    /// `[lo, hi]`.
+    pub fn closed(lo: f64, hi: f64) -> Range {
+        Range {
+            lo,
+            hi,
+            lo_open: false,
+            hi_open: false,
+        }
+    }
+    /// `(lo, inf)`: strictly above `lo`, finite.
+    pub fn above(lo: f64) -> Range {
+        Range {
+            lo,
+            hi: f64::INFINITY,
+            lo_open: true,
+            hi_open: true,
+        }
+    }
+    /// `[lo, inf)`: at least `lo`, finite.
+    pub fn at_least(lo: f64) -> Range {
+        Range {
+            lo,
+            hi: f64::INFINITY,
+            lo_open: false,
+            hi_open: true,
+        }
+    }
+    /// `(lo, hi]`.
+    pub fn above_to(lo: f64, hi: f64) -> Range {
+        Range {
+            lo,
+            hi,
+            lo_open: true,
+            hi_open: false,
+        }
+    }
+    /// `[lo, hi)`.
+    pub fn from_below(lo: f64, hi: f64) -> Range {
+        Range {
+            lo,
+            hi,
+            lo_open: false,
+            hi_open: true,
+        }
+    }
+    /// True for a value inside (NaN never is).
+    pub fn contains(&self, v: f64) -> bool {
+        let above = if self.lo_open {
+            v > self.lo
+        } else {
+            v >= self.lo
+        };
+        let below = if self.hi_open {
+            v < self.hi
+        } else {
+            v <= self.hi
+        };
+        above && below
+    }
+}
+
+impl std::fmt::Display for Range {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}{}, {}{}",
+            if self.lo_open { '(' } else { '[' },
+            self.lo,
+            self.hi,
+            if self.hi_open { ')' } else { ']' }
+        )
+    }
+}
+
 impl LoadError {
+    /// A value outside `range`, located in `text` by its key path (`machine.pulse_s`,
+    /// `controller.kp_att[1]`): `file:line:col: key: must be in [a, b], got x`, the form
+    /// every binary uses.
+    pub fn out_of_range(
+        origin: &str,
+        text: &str,
+        key: &str,
+        range: Range,
+        got: impl std::fmt::Display,
+    ) -> Self {
+        Self::value(origin, text, key, format!("must be in {range}, got {got}"))
+    }
+
+    /// Any other unusable value, located the same way: `file:line:col: key: reason`.
+    pub fn value(origin: &str, text: &str, key: &str, reason: impl Into<String>) -> Self {
+        LoadError::Value {
+            origin: origin.to_string(),
+            at: At(locate(text, key)),
+            key: key.to_string(),
+            reason: reason.into(),
+        }
+    }
+
     /// Shorthand for [`LoadError::Invalid`].
     pub fn invalid(origin: &str, key: impl Into<String>, reason: impl Into<String>) -> Self {
         LoadError::Invalid {
@@ -65,9 +194,47 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, Lo
             origin: origin.to_string(),
             line,
             column,
-            message: e.message().trim().to_string(),
+            // Some syntax errors carry their reason only in the rendered form (the last
+            // line, under the caret), not in `message()`.
+            message: match e.message().trim() {
+                "" => e
+                    .to_string()
+                    .lines()
+                    .rev()
+                    .map(str::trim)
+                    .find(|l| !l.is_empty() && !l.ends_with('|') && !l.contains('^'))
+                    .unwrap_or("invalid TOML")
+                    .to_string(),
+                m => m.to_string(),
+            },
         }
     })
+}
+
+/// Line and column of the value of `key` (dotted path, `[i]` for an array element or a
+/// table of an array of tables) in `text`; None when the file does not set it.
+pub fn locate(text: &str, key: &str) -> Option<(usize, usize)> {
+    let doc = toml_edit::ImDocument::parse(text).ok()?;
+    let mut item: &toml_edit::Item = doc.as_item();
+    let mut span = None;
+    for part in key.split('.') {
+        let (name, indices) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        item = item.get(name)?;
+        span = item.span();
+        for index in indices
+            .split(['[', ']'])
+            .filter(|s| !s.is_empty())
+            .map(|s| s.parse::<usize>().ok())
+        {
+            // An element of an array, or a table of an array of tables.
+            item = item.get(index?)?;
+            span = item.span();
+        }
+    }
+    span.map(|s| line_column(text, s.start))
 }
 
 /// 1-based line and column (in characters) of byte offset `offset` in `text`.
@@ -108,6 +275,35 @@ mod tests {
             }
             other => panic!("expected a parse error, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn values_are_located_by_key_path() {
+        let text = "[machine]\npulse_s = -3\n[controller]\nkp_att = [1.0, nan, 1.0]\n\
+                    [[vehicle.thruster]]\nposition_m = [0, 0, 0]\n[[vehicle.thruster]]\n\
+                    direction = [0, 0, 0]\n";
+        assert_eq!(locate(text, "machine.pulse_s"), Some((2, 11)));
+        assert_eq!(locate(text, "controller.kp_att[1]"), Some((4, 16)));
+        assert_eq!(locate(text, "vehicle.thruster[1].direction"), Some((8, 13)));
+        assert_eq!(locate(text, "machine.noise_s"), None);
+        let e = LoadError::out_of_range("d.toml", text, "machine.pulse_s", Range::above(0.0), -3);
+        assert_eq!(
+            e.to_string(),
+            "d.toml:2:11: machine.pulse_s: must be in (0, inf), got -3"
+        );
+        let e =
+            LoadError::out_of_range("d.toml", "", "machine.pulse_s", Range::closed(1.0, 16.0), 0);
+        assert_eq!(
+            e.to_string(),
+            "d.toml: machine.pulse_s: must be in [1, 16], got 0"
+        );
+        assert!(
+            Range::from_below(0.0, 0.5).contains(0.0) && !Range::from_below(0.0, 0.5).contains(0.5)
+        );
+        assert!(
+            !Range::at_least(0.0).contains(f64::NAN)
+                && !Range::at_least(0.0).contains(f64::INFINITY)
+        );
     }
 
     #[test]

@@ -18,7 +18,8 @@ fuzz_target!(|data: &[u8]| {
         }
         Err(e) => {
             let msg = e.to_string();
-            assert!(msg.starts_with("fuzz.toml: "), "{msg}");
+            // `fuzz.toml:line:col: ...` or, for a value the file does not locate, `fuzz.toml: ...`.
+            assert!(msg.starts_with("fuzz.toml"), "{msg}");
             assert!(msg.len() > "fuzz.toml: ".len(), "empty reason");
         }
     }

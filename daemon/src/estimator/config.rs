@@ -1,6 +1,7 @@
 //! Estimator settings, as they appear in the `[estimator]` table of thrusterd.toml.
 
 use serde::{Deserialize, Serialize};
+use thruster_driver_kit::Range;
 
 use super::dof::Dof;
 use super::excitation::Excitation;
@@ -127,125 +128,82 @@ impl Default for EstimatorConfig {
 
 /// A setting outside its meaningful range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("estimator.{key} = {value}: {why}")]
+#[error("estimator.{key}: {why}")]
 pub struct ConfigError {
     pub key: &'static str,
-    pub value: String,
-    pub why: &'static str,
+    pub why: String,
 }
 
 impl EstimatorConfig {
+    /// (key under `[estimator]`, value, allowed range) of every number; the config file's
+    /// checker locates a failing one in the file.
+    pub fn checks(&self) -> [(&'static str, f64, Range); 16] {
+        [
+            ("k_sigma", self.k_sigma, Range::above(0.0)),
+            (
+                "initial_power",
+                self.initial_power,
+                Range::above_to(0.0, 1.0),
+            ),
+            (
+                "max_power",
+                self.max_power,
+                Range::closed(self.initial_power, 1.0),
+            ),
+            ("pulse_snr", self.pulse_snr, Range::at_least(0.0)),
+            ("min_power", self.min_power, Range::above_to(0.0, 1.0)),
+            ("power_step", self.power_step, Range::at_least(0.0)),
+            ("target_rel_err", self.target_rel_err, Range::above(0.0)),
+            ("min_cycles", self.min_cycles as f64, Range::at_least(1.0)),
+            ("max_pulses", self.max_pulses as f64, Range::at_least(1.0)),
+            (
+                "paper_cycles",
+                self.paper_cycles as f64,
+                Range::at_least(1.0),
+            ),
+            ("spin_up_s", self.spin_up_s, Range::closed(0.0, 2.0)),
+            ("rank_threshold", self.rank_threshold, Range::above(0.0)),
+            ("response_chi2", self.response_chi2, Range::above(0.0)),
+            (
+                "dead_min_command",
+                self.dead_min_command,
+                Range::above_to(0.0, 1.0),
+            ),
+            ("diagnosis_z", self.diagnosis_z, Range::above(0.0)),
+            // Counted like the others so the array stays one list; always in range.
+            (
+                "baseline_samples",
+                self.baseline_samples as f64,
+                Range::at_least(0.0),
+            ),
+        ]
+    }
+
     /// Check ranges that serde cannot express.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let check = |ok: bool, key: &'static str, value: f64, why: &'static str| {
-            if ok {
-                Ok(())
-            } else {
-                Err(ConfigError {
+        for (key, v, range) in self.checks() {
+            if !range.contains(v) {
+                return Err(ConfigError {
                     key,
-                    value: value.to_string(),
-                    why,
-                })
+                    why: format!("must be in {range}, got {v}"),
+                });
             }
-        };
-        let f = |v: f64| v.is_finite();
-        check(
-            f(self.k_sigma) && self.k_sigma > 0.0,
-            "k_sigma",
-            self.k_sigma,
-            "must be > 0",
-        )?;
-        check(
-            f(self.initial_power) && self.initial_power > 0.0 && self.initial_power <= 1.0,
-            "initial_power",
-            self.initial_power,
-            "must be in (0, 1]",
-        )?;
-        check(
-            f(self.max_power) && self.max_power >= self.initial_power && self.max_power <= 1.0,
-            "max_power",
-            self.max_power,
-            "must be in [initial_power, 1]",
-        )?;
-        check(
-            f(self.pulse_snr) && self.pulse_snr >= 0.0,
-            "pulse_snr",
-            self.pulse_snr,
-            "must be >= 0 (0: off)",
-        )?;
-        check(
-            f(self.min_power) && self.min_power > 0.0 && self.min_power <= 1.0,
-            "min_power",
-            self.min_power,
-            "must be in (0, 1]",
-        )?;
-        check(
-            f(self.power_step) && self.power_step >= 0.0,
-            "power_step",
-            self.power_step,
-            "must be >= 0",
-        )?;
-        check(
-            f(self.target_rel_err) && self.target_rel_err > 0.0,
-            "target_rel_err",
-            self.target_rel_err,
-            "must be > 0",
-        )?;
-        check(
-            self.min_cycles >= 1,
-            "min_cycles",
-            self.min_cycles as f64,
-            "must be >= 1",
-        )?;
-        check(
-            self.max_pulses >= 1,
-            "max_pulses",
-            self.max_pulses as f64,
-            "must be >= 1",
-        )?;
-        check(
-            self.paper_cycles >= 1,
-            "paper_cycles",
-            self.paper_cycles as f64,
-            "must be >= 1",
-        )?;
-        check(
-            f(self.spin_up_s) && (0.0..=2.0).contains(&self.spin_up_s),
-            "spin_up_s",
-            self.spin_up_s,
-            "must be in [0, 2] s",
-        )?;
-        check(
-            f(self.rank_threshold) && self.rank_threshold > 0.0,
-            "rank_threshold",
-            self.rank_threshold,
-            "must be > 0",
-        )?;
+        }
+        self.check_dof_priority()
+    }
+
+    /// `dof_priority` names each DOF once.
+    pub fn check_dof_priority(&self) -> Result<(), ConfigError> {
         if Dof::ALL.iter().any(|d| !self.dof_priority.contains(d)) {
             return Err(ConfigError {
                 key: "dof_priority",
-                value: format!("{:?}", self.dof_priority),
-                why: "must name each of roll, pitch, yaw, surge, sway, heave once",
+                why: format!(
+                    "must name each of roll, pitch, yaw, surge, sway, heave once, got {:?}",
+                    self.dof_priority
+                ),
             });
         }
-        check(
-            f(self.response_chi2) && self.response_chi2 > 0.0,
-            "response_chi2",
-            self.response_chi2,
-            "must be > 0",
-        )?;
-        check(
-            f(self.dead_min_command) && self.dead_min_command > 0.0 && self.dead_min_command <= 1.0,
-            "dead_min_command",
-            self.dead_min_command,
-            "must be in (0, 1]",
-        )?;
-        check(
-            f(self.diagnosis_z) && self.diagnosis_z > 0.0,
-            "diagnosis_z",
-            self.diagnosis_z,
-            "must be > 0",
-        )
+        Ok(())
     }
 }
 
@@ -267,6 +225,9 @@ mod tests {
         let c: EstimatorConfig = toml::from_str("method = \"paper\"\ninitial_power = 1.5").unwrap();
         let e = c.validate().unwrap_err();
         assert_eq!(e.key, "initial_power");
-        assert!(e.to_string().contains("estimator.initial_power = 1.5"));
+        assert_eq!(
+            e.to_string(),
+            "estimator.initial_power: must be in (0, 1], got 1.5"
+        );
     }
 }

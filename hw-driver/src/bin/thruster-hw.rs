@@ -10,16 +10,19 @@ use thruster_hw::config::Settings;
 use thruster_hw::driver::{self, shutdown::Shutdown};
 
 fn main() -> ExitCode {
-    // journald under systemd (JOURNAL_STREAM names our stderr), stderr otherwise.
-    thruster_driver_kit::logging::init("info");
-    let cli = Cli::parse();
-    match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e:#}");
-            ExitCode::FAILURE
+    // A closed stdout pipe ends the process quietly (one helper for every binary).
+    thruster_driver_kit::pipe::main(|| {
+        // journald under systemd (JOURNAL_STREAM names our stderr), stderr otherwise.
+        thruster_driver_kit::logging::init("info");
+        let cli = Cli::parse();
+        match run(cli) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                tracing::error!("{e:#}");
+                ExitCode::FAILURE
+            }
         }
-    }
+    })
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {

@@ -14,16 +14,19 @@ use thruster_sim::responder::{respond, ResponderOptions};
 use thruster_sim::settings::Settings;
 
 fn main() -> ExitCode {
-    // journald under systemd (JOURNAL_STREAM names our stderr), stderr otherwise.
-    thruster_driver_kit::logging::init("info");
-    let cli = Cli::parse();
-    match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e:#}");
-            ExitCode::FAILURE
+    // A closed stdout pipe ends the process quietly (one helper for every binary).
+    thruster_driver_kit::pipe::main(|| {
+        // journald under systemd (JOURNAL_STREAM names our stderr), stderr otherwise.
+        thruster_driver_kit::logging::init("info");
+        let cli = Cli::parse();
+        match run(cli) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                tracing::error!("{e:#}");
+                ExitCode::FAILURE
+            }
         }
-    }
+    })
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {

@@ -26,19 +26,23 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
-    init_logging();
-    let cli = cli::Cli::parse();
-    // `run` returns instead of exiting so every iceoryx2 port and node is dropped
-    // normally: a process::exit would leave the namespace's files behind.
-    match commands::run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
-        // `thrusterctl watch | head`: the reader is gone, nothing more to say.
-        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("thrusterctl: {e:#}");
-            ExitCode::from(exit::code_of(&e))
+    // `thrusterctl demo | head -1`: a print to the closed pipe ends the process quietly,
+    // after unwinding has stopped the demo's children and purged its namespace.
+    thruster_driver_kit::pipe::main(|| {
+        init_logging();
+        let cli = cli::Cli::parse();
+        // `run` returns instead of exiting so every iceoryx2 port and node is dropped
+        // normally: a process::exit would leave the namespace's files behind.
+        match commands::run(cli) {
+            Ok(()) => ExitCode::SUCCESS,
+            // `thrusterctl watch | head`: the reader is gone, nothing more to say.
+            Err(e) if thruster_driver_kit::pipe::is_broken_pipe(e.as_ref()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("thrusterctl: {e:#}");
+                ExitCode::from(exit::code_of(&e))
+            }
         }
-    }
+    })
 }
 
 /// iceoryx2 logs through `tracing`; show it only when asked (RUST_LOG), since operators
@@ -50,11 +54,4 @@ fn init_logging() {
             .with_writer(std::io::stderr)
             .init();
     }
-}
-
-fn is_broken_pipe(e: &anyhow::Error) -> bool {
-    e.chain().any(|c| {
-        c.downcast_ref::<std::io::Error>()
-            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
-    })
 }

@@ -305,6 +305,16 @@ impl Session {
         if !spec.vehicle.exists() {
             bail!("vehicle file {} not found", spec.vehicle.display());
         }
+        // Every check before the first iceoryx2 file: a vehicle file with 0 or 17 thrusters
+        // used to fail after the session's node existed, leaving its namespace folder.
+        let count = thruster_count(&spec.vehicle)?.to_string();
+        if !["paper", "realistic", "none"].contains(&spec.noise.as_str()) {
+            return Err(crate::exit::Failure::usage(format!(
+                "--noise must be paper, realistic or none, got {:?}",
+                spec.noise
+            ))
+            .into());
+        }
         static N: AtomicU32 = AtomicU32::new(0);
         // Namespaces are at most 16 characters.
         let ns = format!(
@@ -329,7 +339,6 @@ impl Session {
             client: ControlClient::create(&node, &ipc)?,
         };
 
-        let count = thruster_count(&spec.vehicle)?.to_string();
         let state = tmp.path.join("state");
         let mut daemon_args: Vec<String> = [
             "run",

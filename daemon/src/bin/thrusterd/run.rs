@@ -75,6 +75,23 @@ pub fn run(args: RunArgs) -> Result<()> {
         cfg.runtime.spin_us = spin;
     }
 
+    // Refused here, before anything is created, with the command line applied: a state_dir
+    // that is a file used to start anyway, its unreadable marker taken for a crashed
+    // predecessor ("did not stop cleanly"); check-config runs the same check.
+    let origin = args
+        .config
+        .as_ref()
+        .map_or_else(|| "command line".to_string(), |p| p.display().to_string());
+    cfg.check_runnable("", &origin)?;
+    std::fs::create_dir_all(&cfg.runtime.state_dir).map_err(|e| {
+        thrusterd::config::ConfigError::value(
+            &origin,
+            "",
+            "runtime.state_dir",
+            format!("{}: {e}", cfg.runtime.state_dir.display()),
+        )
+    })?;
+
     let shutdown = Arc::new(AtomicBool::new(false));
     {
         let flag = shutdown.clone();
@@ -184,6 +201,11 @@ impl Daemon {
             Err(e) => warn!("could not clean up dead nodes: {e}"),
         }
         let node = self.ipc.create_node("thrusterd")?;
+        // The control server first: it is what tells a live daemon on this namespace apart
+        // from a crashed one, and the session marker of a live daemon must neither be read as
+        // a crash ("did not stop cleanly ... resuming control") nor overwritten.
+        let control = ControlServer::create(&node, &self.ipc)
+            .context("another thrusterd already serves this namespace")?;
         self.open_session();
         let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
         let reconfig_in = Inbox::<ReconfigEvent>::create(&node, &self.ipc)?;
@@ -192,8 +214,6 @@ impl Daemon {
         let thrust_out = Port::<ThrustCommand>::create(&node, &self.ipc)?;
         let model_out = Port::<ModelMsg>::create(&node, &self.ipc)?;
         let status_out = Port::<StatusMsg>::create(&node, &self.ipc)?;
-        let control = ControlServer::create(&node, &self.ipc)
-            .context("another thrusterd already serves this namespace")?;
 
         let waitset = create_waitset()?;
         let imu_timeout = Duration::from_millis(self.cfg.runtime.imu_timeout_ms);
