@@ -245,6 +245,15 @@ pub struct Reconfig {
     pub what: String,
 }
 
+/// An operator's setpoint: the attitude wanted, which of roll, pitch, yaw keep the value held
+/// now instead, and the depth to hold (None: heave free).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SetpointInput {
+    pub attitude: UnitQuaternion<f64>,
+    pub keep: [bool; 3],
+    pub depth: Option<f64>,
+}
+
 /// Status numbers for the status message.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StatusSnapshot {
@@ -605,6 +614,22 @@ impl Machine {
     /// A new attitude (body to NED) and optional depth to hold.
     pub fn on_setpoint(&mut self, attitude: UnitQuaternion<f64>, depth: Option<f64>) {
         self.target = Some(Target { attitude, depth });
+    }
+
+    /// An operator's setpoint in which some angles may be left out: those keep the value held
+    /// now (the current target's, or, before any target, what control would hold: level at
+    /// the current heading).
+    pub fn on_setpoint_input(&mut self, s: &SetpointInput) {
+        let held = match &self.target {
+            Some(t) => t.attitude.euler_angles(),
+            None => (0.0, 0.0, self.attitude.attitude().euler_angles().2),
+        };
+        let held = [held.0, held.1, held.2];
+        let (r, p, y) = s.attitude.euler_angles();
+        let want = [r, p, y];
+        let pick = |i: usize| if s.keep[i] { held[i] } else { want[i] };
+        let attitude = UnitQuaternion::from_euler_angles(pick(0), pick(1), pick(2));
+        self.on_setpoint(attitude, s.depth);
     }
 
     pub fn on_reconfig(&mut self, r: Reconfig) {

@@ -120,11 +120,15 @@ pub fn reconfig(e: &ReconfigEvent) -> Reconfig {
 }
 
 /// Attitude and optional depth of a validated setpoint.
-pub fn setpoint(s: &Setpoint) -> (UnitQuaternion<f64>, Option<f64>) {
+pub fn setpoint(s: &Setpoint) -> crate::machine::SetpointInput {
     let [w, x, y, z] = s.attitude;
     let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
     let depth = (s.flags & Setpoint::HOLD_DEPTH != 0).then_some(s.depth);
-    (q, depth)
+    crate::machine::SetpointInput {
+        attitude: q,
+        keep: s.kept_angles(),
+        depth,
+    }
 }
 
 #[cfg(test)]

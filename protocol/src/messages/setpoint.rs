@@ -20,12 +20,26 @@ pub struct Setpoint {
 impl Setpoint {
     /// Hold `depth`; otherwise heave is left free.
     pub const HOLD_DEPTH: u64 = 1 << 0;
-    /// Every flag this protocol version defines; other bits are rejected.
-    pub const KNOWN_FLAGS: u64 = Self::HOLD_DEPTH;
+    /// Keep the roll the daemon holds now; `attitude`'s roll is ignored.
+    pub const KEEP_ROLL: u64 = 1 << 1;
+    /// Keep the pitch the daemon holds now; `attitude`'s pitch is ignored.
+    pub const KEEP_PITCH: u64 = 1 << 2;
+    /// Keep the heading the daemon holds now; `attitude`'s yaw is ignored.
+    pub const KEEP_YAW: u64 = 1 << 3;
+    /// Every flag this protocol version defines; other bits are rejected (a daemon that
+    /// does not know the KEEP_* flags refuses such a setpoint rather than misreading it).
+    pub const KNOWN_FLAGS: u64 =
+        Self::HOLD_DEPTH | Self::KEEP_ROLL | Self::KEEP_PITCH | Self::KEEP_YAW;
 
     /// True when depth is to be held.
     pub fn hold_depth(&self) -> bool {
         self.flags & Self::HOLD_DEPTH != 0
+    }
+
+    /// Which of roll, pitch, yaw keep the value the daemon holds now (the operator left
+    /// them out).
+    pub fn kept_angles(&self) -> [bool; 3] {
+        [Self::KEEP_ROLL, Self::KEEP_PITCH, Self::KEEP_YAW].map(|f| self.flags & f != 0)
     }
 }
 

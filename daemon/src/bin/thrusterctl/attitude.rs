@@ -28,20 +28,31 @@ pub fn quaternion_from_euler(roll: f64, pitch: f64, yaw: f64) -> [f64; 4] {
 /// The setpoint message for checked operator arguments (degrees, metres). `seq` is the
 /// caller's: each thrusterctl run is a new sender.
 pub fn setpoint(args: &SetpointArgs, seq: u64) -> Setpoint {
+    // An angle left out is sent as 0 with its KEEP_* flag: the daemon keeps what it holds.
+    let angle = |a: Option<f64>| a.unwrap_or(0.0).to_radians();
     let attitude = quaternion_from_euler(
-        args.roll_deg.to_radians(),
-        args.pitch_deg.to_radians(),
-        args.yaw_deg.to_radians(),
+        angle(args.roll_deg),
+        angle(args.pitch_deg),
+        angle(args.yaw_deg),
     );
+    let mut flags = 0;
+    for (value, flag) in [
+        (args.roll_deg, Setpoint::KEEP_ROLL),
+        (args.pitch_deg, Setpoint::KEEP_PITCH),
+        (args.yaw_deg, Setpoint::KEEP_YAW),
+    ] {
+        if value.is_none() {
+            flags |= flag;
+        }
+    }
+    if args.depth_m.is_some() {
+        flags |= Setpoint::HOLD_DEPTH;
+    }
     Setpoint {
         seq,
         attitude,
         depth: args.depth_m.unwrap_or(0.0),
-        flags: if args.depth_m.is_some() {
-            Setpoint::HOLD_DEPTH
-        } else {
-            0
-        },
+        flags,
     }
 }
 
@@ -104,9 +115,9 @@ mod tests {
     #[test]
     fn depth_hold_flag_follows_depth() {
         let args = SetpointArgs {
-            roll_deg: 0.0,
-            pitch_deg: 10.0,
-            yaw_deg: -45.0,
+            roll_deg: Some(0.0),
+            pitch_deg: Some(10.0),
+            yaw_deg: Some(-45.0),
             depth_m: Some(2.5),
         };
         let sp = setpoint(&args, 7);
@@ -124,5 +135,18 @@ mod tests {
         assert!(!free.hold_depth());
         assert_eq!(free.flags, 0);
         free.validate().unwrap();
+        // Angles left out are flagged to be kept, and only those.
+        let pitch_only = setpoint(
+            &SetpointArgs {
+                roll_deg: None,
+                pitch_deg: Some(10.0),
+                yaw_deg: None,
+                depth_m: None,
+            },
+            9,
+        );
+        assert_eq!(pitch_only.kept_angles(), [true, false, true]);
+        assert!(!pitch_only.hold_depth());
+        pitch_only.validate().unwrap();
     }
 }

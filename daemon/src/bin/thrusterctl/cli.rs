@@ -118,15 +118,16 @@ pub enum Command {
     },
     /// Set the attitude (and optionally depth) to hold.
     Setpoint {
-        /// Roll, degrees, in [-180, 180].
+        /// Roll, degrees, in [-180, 180]; left out: the roll held now is kept.
         #[arg(long, allow_negative_numbers = true)]
-        roll: f64,
-        /// Pitch, degrees, in [-90, 90].
+        roll: Option<f64>,
+        /// Pitch, degrees, in [-90, 90]; left out: the pitch held now is kept.
         #[arg(long, allow_negative_numbers = true)]
-        pitch: f64,
-        /// Yaw (heading from north), degrees, in [-360, 360].
+        pitch: Option<f64>,
+        /// Yaw (heading from north), degrees, in [-360, 360]; left out: the heading held
+        /// now is kept.
         #[arg(long, allow_negative_numbers = true)]
-        yaw: f64,
+        yaw: Option<f64>,
         /// Depth to hold, m, positive down; heave is left free if omitted.
         #[arg(long, allow_negative_numbers = true)]
         depth: Option<f64>,
@@ -266,24 +267,37 @@ pub fn reconfig_args(
 
 /// Checked `setpoint` arguments, degrees and metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
+/// Angles in degrees; `None`: keep the value the daemon holds now.
 pub struct SetpointArgs {
-    pub roll_deg: f64,
-    pub pitch_deg: f64,
-    pub yaw_deg: f64,
+    pub roll_deg: Option<f64>,
+    pub pitch_deg: Option<f64>,
+    pub yaw_deg: Option<f64>,
     pub depth_m: Option<f64>,
 }
 
 pub fn setpoint_args(
-    roll: f64,
-    pitch: f64,
-    yaw: f64,
+    roll: Option<f64>,
+    pitch: Option<f64>,
+    yaw: Option<f64>,
     depth: Option<f64>,
 ) -> Result<SetpointArgs, Failure> {
+    if roll.is_none() && pitch.is_none() && yaw.is_none() && depth.is_none() {
+        return Err(Failure::usage(
+            "setpoint needs at least one of --roll, --pitch, --yaw, --depth (the others keep \
+             their current value)",
+        ));
+    }
     // Pitch beyond +-90 or roll beyond +-180 only restate an attitude another triple
     // describes; such a value is more likely a typo than intended, so refuse it.
-    check_range("--roll", roll, -180.0, 180.0, "degrees")?;
-    check_range("--pitch", pitch, -90.0, 90.0, "degrees")?;
-    check_range("--yaw", yaw, -360.0, 360.0, "degrees")?;
+    for (name, value, limit) in [
+        ("--roll", roll, 180.0),
+        ("--pitch", pitch, 90.0),
+        ("--yaw", yaw, 360.0),
+    ] {
+        if let Some(v) = value {
+            check_range(name, v, -limit, limit, "degrees")?;
+        }
+    }
     if let Some(d) = depth {
         check_range("--depth", d, MIN_DEPTH_M, MAX_DEPTH_M, "m")?;
     }
@@ -348,7 +362,10 @@ mod tests {
                 yaw,
                 depth,
             } => {
-                assert_eq!((roll, pitch, yaw, depth), (-10.0, -5.5, -90.0, Some(2.0)));
+                assert_eq!(
+                    (roll, pitch, yaw, depth),
+                    (Some(-10.0), Some(-5.5), Some(-90.0), Some(2.0))
+                );
             }
             other => panic!("parsed as {other:?}"),
         }
@@ -430,15 +447,27 @@ mod tests {
 
     #[test]
     fn setpoint_ranges() {
-        let ok = setpoint_args(10.0, -20.0, 350.0, Some(1.5)).unwrap();
+        let ok = setpoint_args(Some(10.0), Some(-20.0), Some(350.0), Some(1.5)).unwrap();
         assert_eq!(ok.depth_m, Some(1.5));
+        // One angle alone is enough (the README's `setpoint --pitch 10`).
+        let pitch_only = setpoint_args(None, Some(10.0), None, None).unwrap();
+        assert_eq!(
+            (
+                pitch_only.roll_deg,
+                pitch_only.pitch_deg,
+                pitch_only.yaw_deg
+            ),
+            (None, Some(10.0), None)
+        );
+        let z = Some(0.0);
         let cases = [
-            (f64::NAN, 0.0, 0.0, None, "--roll must be a finite number"),
-            (0.0, 91.0, 0.0, None, "--pitch must be in [-90, 90]"),
-            (181.0, 0.0, 0.0, None, "--roll must be in [-180, 180]"),
-            (0.0, 0.0, f64::INFINITY, None, "--yaw must be a finite"),
-            (0.0, 0.0, 0.0, Some(f64::NAN), "--depth must be a finite"),
-            (0.0, 0.0, 0.0, Some(-20.0), "--depth must be in"),
+            (Some(f64::NAN), z, z, None, "--roll must be a finite number"),
+            (z, Some(91.0), z, None, "--pitch must be in [-90, 90]"),
+            (Some(181.0), z, z, None, "--roll must be in [-180, 180]"),
+            (z, z, Some(f64::INFINITY), None, "--yaw must be a finite"),
+            (z, z, z, Some(f64::NAN), "--depth must be a finite"),
+            (z, z, z, Some(-20.0), "--depth must be in"),
+            (None, None, None, None, "needs at least one of"),
         ];
         for (r, p, y, d, want) in cases {
             let e = setpoint_args(r, p, y, d).unwrap_err();

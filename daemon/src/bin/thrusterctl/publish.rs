@@ -22,12 +22,12 @@ use anyhow::Result;
 use thruster_protocol::services::TopicMessage;
 use thruster_protocol::{ReconfigEvent, Validate};
 
+use crate::attitude;
 use crate::cli::{self, KindArg, ReconfigArgs, SetpointArgs};
 use crate::client::{Daemon, Target};
 use crate::commands::say;
 use crate::exit::{self, Failure};
 use crate::geometry::{self, Geometry};
-use crate::{attitude, render};
 
 pub fn reconfigure(
     target: &Target,
@@ -65,11 +65,15 @@ pub fn setpoint(target: &Target, timeout: Duration, args: SetpointArgs) -> Resul
         Some(d) => format!("hold depth {d:.2} m"),
         None => "depth free".to_string(),
     };
-    let q = sp.attitude.map(render::num).join(", ");
+    let angle = |a: Option<f64>| match a {
+        Some(v) => format!("{v:.1} deg"),
+        None => "kept".to_string(),
+    };
     say(&format!(
-        "setpoint sent to {reached} subscriber(s): roll {:.1} deg, pitch {:.1} deg, \
-         yaw {:.1} deg (q = [{q}]), {depth}",
-        args.roll_deg, args.pitch_deg, args.yaw_deg
+        "setpoint sent to {reached} subscriber(s): roll {}, pitch {}, yaw {}, {depth}",
+        angle(args.roll_deg),
+        angle(args.pitch_deg),
+        angle(args.yaw_deg)
     ))
 }
 

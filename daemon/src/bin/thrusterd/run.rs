@@ -348,8 +348,7 @@ impl Daemon {
                 while let Some(s) = setpoint_in.recv()? {
                     match s.validate() {
                         Ok(()) => {
-                            let (q, depth) = wire::setpoint(&s);
-                            self.machine.on_setpoint(q, depth);
+                            self.machine.on_setpoint_input(&wire::setpoint(&s));
                         }
                         Err(reason) => {
                             self.rejected.record(&reason);
