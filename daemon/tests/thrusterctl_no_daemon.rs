@@ -45,8 +45,10 @@ fn status_exits_3_with_the_message_quickly_and_leaves_nothing() {
     let (out, took) = thrusterctl(&guard, &["status"]);
     assert_eq!(out.status.code(), Some(3), "stderr: {}", stderr(&out));
     let expected = format!(
-        "thrusterd is not running on namespace {} (no control server)",
-        guard.namespace()
+        "thrusterd is not running on namespace {} (no control server in {}; a daemon \
+         elsewhere needs --namespace and --ipc-root)",
+        guard.namespace(),
+        guard.root_dir().display()
     );
     assert!(stderr(&out).contains(&expected), "stderr: {}", stderr(&out));
     assert!(out.stdout.is_empty(), "stdout: {:?}", out.stdout);

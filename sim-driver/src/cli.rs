@@ -48,6 +48,10 @@ pub struct RunArgs {
     /// IPC namespace shared with the daemon (1-16 ASCII letters, digits or '-').
     #[arg(long, value_name = "NS")]
     pub namespace: Option<String>,
+    /// Base folder of iceoryx2's files, the same for every process of the namespace (the
+    /// daemon's `[ipc] root`) [file default: /tmp/iceoryx2/thr].
+    #[arg(long, value_name = "DIR")]
+    pub ipc_root: Option<PathBuf>,
     /// Vehicle file (config/vehicles/*.toml).
     #[arg(long, value_name = "FILE")]
     pub vehicle: Option<PathBuf>,

@@ -332,7 +332,7 @@ impl Settings {
                 .clone()
                 .or_else(|| from_file(file.truth_file)),
             stats_file: args.stats_file.clone(),
-            ipc_root: file.ipc_root,
+            ipc_root: args.ipc_root.clone().unwrap_or(file.ipc_root),
             seed: args.seed.unwrap_or(file.seed),
             mode,
             duration_s,

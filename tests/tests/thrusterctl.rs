@@ -256,3 +256,112 @@ fn a_user_outside_the_ipc_roots_group_is_refused_with_exit_7_and_no_file() {
         .collect();
     assert!(shm.is_empty(), "thrusterctl left shared memory: {shm:?}");
 }
+
+/// `--ipc-root` on every binary: a daemon and a simulator started on another root (as under
+/// systemd, /run/thrusterd) are reached by a thrusterctl given the same root; one without it
+/// is told where it looked.
+#[test]
+fn an_ipc_root_on_the_command_line_is_used_by_daemon_simulator_and_operator() {
+    let world = World::new("ctlroot");
+    let root = world.path("ipc");
+    let root_s = root.to_str().unwrap().to_string();
+    let ns = world.namespace();
+    let state = world.path("state2");
+    let vehicle = workspace().join("config/vehicles/amour5.toml");
+    let mut daemon = system_tests::Proc::spawn(
+        "thrusterd",
+        &[
+            "run",
+            "--namespace",
+            &ns,
+            "--ipc-root",
+            &root_s,
+            "--state-dir",
+            state.to_str().unwrap(),
+        ],
+        world.dir.path(),
+    );
+    let mut sim = system_tests::Proc::spawn(
+        "thruster-sim",
+        &[
+            "run",
+            "--namespace",
+            &ns,
+            "--ipc-root",
+            &root_s,
+            "--vehicle",
+            vehicle.to_str().unwrap(),
+            "--lockstep",
+            "--noise",
+            "none",
+        ],
+        world.dir.path(),
+    );
+    let ctl_at = |with_root: bool| {
+        let mut c = Command::new(bin("thrusterctl"));
+        c.args(["--namespace", &ns, "--timeout-ms", "5000"]);
+        if with_root {
+            c.args(["--ipc-root", &root_s]);
+        }
+        c.args(["status", "--json"]).output().unwrap()
+    };
+    let deadline = Instant::now() + LONG;
+    let v = loop {
+        let out = ctl_at(true);
+        if out.status.success() {
+            let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+            if v["samples"].as_u64().unwrap_or(0) > 0 && !v["driver"].is_null() {
+                break v;
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no status with samples on {root_s}: {}\n{}\n{}",
+            text(&out.stderr),
+            daemon.log_text(),
+            sim.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(v["driver"]["driver"], "thruster-sim", "{v}");
+    // Nothing on the default root: the files are where the flag said.
+    assert!(
+        root.join(&ns).is_dir(),
+        "no namespace folder under {root_s}"
+    );
+    let out = ctl_at(false);
+    expect_code(&out, 3, "status on the default root");
+    assert!(
+        text(&out.stderr).contains(&format!(
+            "no control server in {}",
+            world.ipc().root_dir().display()
+        )),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+    assert!(sim.stop().success(), "{}", sim.log_text());
+    let ipc = thruster_protocol::services::IpcConfig::with_root_base(&ns, &root).unwrap();
+    thruster_protocol::services::purge_namespace(&ipc).unwrap();
+    assert_eq!(
+        thruster_protocol::services::namespace_files(&ipc).unwrap(),
+        Vec::<std::path::PathBuf>::new()
+    );
+}
+
+/// The demo and the experiments run on a private namespace of their own: a --namespace
+/// given to them was silently ignored; now it is refused as a usage error before anything
+/// starts.
+#[test]
+fn demo_refuses_a_namespace_it_would_ignore() {
+    let out = Command::new(bin("thrusterctl"))
+        .args(["--namespace", "veh9", "demo"])
+        .output()
+        .unwrap();
+    expect_code(&out, 2, "demo --namespace");
+    assert!(
+        text(&out.stderr).contains("private namespace"),
+        "{}",
+        text(&out.stderr)
+    );
+}

@@ -74,6 +74,11 @@ impl Daemon {
         self.ipc.namespace()
     }
 
+    /// The folder of the namespace's iceoryx2 files.
+    pub fn root_dir(&self) -> std::path::PathBuf {
+        self.ipc.root_dir()
+    }
+
     pub fn timeout(&self) -> Duration {
         self.timeout
     }
@@ -122,7 +127,9 @@ impl Daemon {
     pub fn ipc_failure(&self, error: IpcError) -> Failure {
         let ns = self.namespace();
         match error {
-            IpcError::NoServer { .. } => Failure::new(exit::NOT_RUNNING, not_running(ns)),
+            IpcError::NoServer { .. } => {
+                Failure::new(exit::NOT_RUNNING, not_running(ns, &self.ipc.root_dir()))
+            }
             IpcError::Timeout { timeout, .. } => Failure::new(
                 exit::TIMEOUT,
                 format!(
@@ -136,8 +143,14 @@ impl Daemon {
 }
 
 /// The message for a namespace without a control server.
-pub fn not_running(namespace: &str) -> String {
-    format!("thrusterd is not running on namespace {namespace} (no control server)")
+/// The words for "no daemon": the namespace and the folder searched, since a daemon on
+/// another `--ipc-root` (under systemd, /run/thrusterd) is invisible from the default one.
+pub fn not_running(namespace: &str, root: &std::path::Path) -> String {
+    format!(
+        "thrusterd is not running on namespace {namespace} (no control server in {}; \
+         a daemon elsewhere needs --namespace and --ipc-root)",
+        root.display()
+    )
 }
 
 /// The daemon's text when `response` is a success, else a refusal [`Failure`].
@@ -196,8 +209,9 @@ mod tests {
     #[test]
     fn not_running_names_the_namespace() {
         assert_eq!(
-            not_running("veh1"),
-            "thrusterd is not running on namespace veh1 (no control server)"
+            not_running("veh1", std::path::Path::new("/run/thrusterd/veh1")),
+            "thrusterd is not running on namespace veh1 (no control server in \
+             /run/thrusterd/veh1; a daemon elsewhere needs --namespace and --ipc-root)"
         );
     }
 }

@@ -27,7 +27,20 @@ pub fn run(cli: Cli) -> Result<()> {
     // Checks that need no daemon come first (inside each command, before connecting),
     // so bad input is reported even when the daemon is down.
     match cli.command {
-        // The demo runs its own daemon on a private namespace: no --namespace, no timeout.
+        // The demo and the experiments run their own daemon on a private namespace: a
+        // --namespace or --ipc-root given to them would be silently ignored, so refuse it.
+        Command::Demo(_) | Command::Experiment(_)
+            if target.namespace != cli::DEFAULT_NAMESPACE
+                || target.root_base.as_path()
+                    != std::path::Path::new(thruster_protocol::services::DEFAULT_ROOT_BASE) =>
+        {
+            Err(Failure::usage(
+                "demo and experiment start their own thrusterd and thruster-sim on a private \
+                 namespace under the default ipc root; --namespace and --ipc-root are for \
+                 talking to a running daemon",
+            )
+            .into())
+        }
         Command::Demo(args) => crate::demo::run(args),
         Command::Experiment(args) => crate::experiment::run(args),
         Command::Status { json } => status(&Daemon::connect(&target, timeout)?, json),

@@ -115,7 +115,7 @@ pub fn run(daemon: &Daemon, json: bool, interrupted: Arc<AtomicBool>) -> Result<
                     if !gone {
                         eprintln!(
                             "{}; waiting for it (Ctrl-C to stop)",
-                            not_running(daemon.namespace())
+                            not_running(daemon.namespace(), &daemon.root_dir())
                         );
                         gone = true;
                     }

@@ -37,6 +37,10 @@ pub struct RunArgs {
     /// Override `ipc.namespace`.
     #[arg(long)]
     namespace: Option<String>,
+    /// Override `ipc.root`: base folder of iceoryx2's files, the same for every process of
+    /// the namespace.
+    #[arg(long)]
+    ipc_root: Option<PathBuf>,
     /// Override `runtime.state_dir`.
     #[arg(long)]
     state_dir: Option<PathBuf>,
@@ -62,6 +66,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     };
     if let Some(ns) = args.namespace {
         cfg.ipc.namespace = ns;
+    }
+    if let Some(root) = args.ipc_root {
+        cfg.ipc.root = Some(root);
     }
     if let Some(dir) = args.state_dir {
         cfg.runtime.state_dir = dir;
