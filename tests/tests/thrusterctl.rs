@@ -365,3 +365,30 @@ fn demo_refuses_a_namespace_it_would_ignore() {
         text(&out.stderr)
     );
 }
+
+/// A cleanly stopped vehicle leaves nothing of its namespace: not even the empty nodes/ and
+/// services/ folders and the world-writable global_mgmt segment iceoryx2 leaves behind (the
+/// last process to stop removes them). Checked without any purge by the test.
+#[test]
+fn a_clean_stop_of_every_process_leaves_nothing_of_the_namespace() {
+    let mut world = World::new("ctltidy");
+    // No node of the test's own in the namespace: the processes are alone in it.
+    world.node = None;
+    let mut daemon = world.daemon(&[]);
+    let mut sim = world.sim("amour5", &["--lockstep", "--noise", "none"]);
+    wait_status(&world, "samples", |v| {
+        v["samples"].as_u64().unwrap_or(0) > 0
+    });
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+    assert!(sim.stop().success(), "{}", sim.log_text());
+    let files = thruster_protocol::services::namespace_files(world.ipc()).unwrap();
+    assert!(
+        files.is_empty(),
+        "left behind after a clean stop: {files:?}"
+    );
+    // An operator alone in the namespace (no daemon) leaves nothing either.
+    let out = ctl(&world, &["status"]);
+    expect_code(&out, 3, "status with no daemon");
+    let files = thruster_protocol::services::namespace_files(world.ipc()).unwrap();
+    assert!(files.is_empty(), "left behind by thrusterctl: {files:?}");
+}

@@ -149,6 +149,9 @@ fn run_inner(
     stop: &Shutdown,
 ) -> Result<Summary, DriverError> {
     let ipc = IpcConfig::with_root_base(&settings.namespace, &settings.ipc_root)?;
+    // Before the node, so it drops after it: the last process of the namespace to stop
+    // removes iceoryx2's residue.
+    let _tidy = thruster_protocol::services::TidyOnDrop::new(&ipc);
     // Declared before its ports so it is dropped after them.
     let node = ipc.create_node(NODE_NAME)?;
     let imu = Port::<ImuSample>::create(&node, &ipc)?;

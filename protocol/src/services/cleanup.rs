@@ -123,6 +123,69 @@ pub fn purge_namespace(ipc: &IpcConfig) -> Result<PurgeReport, IpcError> {
     Ok(report)
 }
 
+/// Removes what iceoryx2 0.10 leaves of a namespace after its last process dropped its node
+/// normally: the empty `nodes/` and `services/` folders, the root folder, and the
+/// world-writable `<prefix>*.global_mgmt` segment in /dev/shm. Only when that residue is all
+/// there is and no node is alive; anything else (a live process, a service, a dead node's
+/// files) leaves everything as it is. Returns whether it removed the residue.
+///
+/// Each of our processes calls it as it leaves (through [`TidyOnDrop`]), so a cleanly
+/// stopped vehicle leaves nothing. The window in which a process starting at that very
+/// moment could have opened the global segment but not yet created its node is a few
+/// microseconds; such a process then finds a fresh segment, which iceoryx2 tolerates.
+pub fn tidy_residue(ipc: &IpcConfig) -> Result<bool, IpcError> {
+    let files = namespace_files(ipc)?;
+    let root = ipc.root_dir();
+    let residue = |p: &PathBuf| {
+        *p == root
+            || *p == root.join("nodes")
+            || *p == root.join("services")
+            || (p.starts_with(SHM_DIR)
+                && p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().ends_with(".global_mgmt")))
+    };
+    if files.is_empty() || !files.iter().all(residue) {
+        return Ok(false);
+    }
+    match purge_namespace(ipc) {
+        Ok(_) => Ok(true),
+        // Someone joined meanwhile: theirs now.
+        Err(IpcError::NamespaceInUse { .. }) => Ok(false),
+        Err(e) => Err(e),
+    }
+}
+
+/// Calls [`tidy_residue`] when dropped. Declare it before the process's node (a local
+/// declared earlier, or a struct field after the node) so it runs once the node is gone.
+/// Failures are ignored: an operator of another user cannot remove the daemon's files, and
+/// must not be stopped for it.
+#[derive(Debug)]
+pub struct TidyOnDrop {
+    ipc: IpcConfig,
+}
+
+impl TidyOnDrop {
+    /// Tidies `ipc` on drop.
+    pub fn new(ipc: &IpcConfig) -> Self {
+        Self { ipc: ipc.clone() }
+    }
+}
+
+impl Drop for TidyOnDrop {
+    fn drop(&mut self) {
+        match tidy_residue(&self.ipc) {
+            Ok(true) => tracing::debug!(
+                namespace = self.ipc.namespace(),
+                "namespace residue removed"
+            ),
+            Ok(false) => {}
+            Err(e) => {
+                tracing::debug!(namespace = self.ipc.namespace(), error = %e, "namespace residue not removed")
+            }
+        }
+    }
+}
+
 /// Purges a namespace when dropped: create it before any node of the test (so it drops
 /// after them) and every test leaves nothing behind, even when it fails.
 #[derive(Debug)]

@@ -29,7 +29,8 @@ mod topics;
 
 pub use access::{check_access, owns_root, AccessDenied};
 pub use cleanup::{
-    cleanup_dead_nodes, namespace_files, purge_namespace, NamespaceGuard, NodeCensus, PurgeReport,
+    cleanup_dead_nodes, namespace_files, purge_namespace, tidy_residue, NamespaceGuard, NodeCensus,
+    PurgeReport, TidyOnDrop,
 };
 pub use config::{IpcConfig, CONNECTION_TIMEOUT, DEFAULT_ROOT_BASE, MAX_NAMESPACE_LEN, SHM_DIR};
 pub use control::{ControlClient, ControlServer, ServeCount, CONTROL_LEAF};

@@ -148,6 +148,8 @@ struct Ports {
     vehicle: Port<VehicleStateMsg>,
     driver_status: Port<DriverStatusMsg>,
     _node: IpcNode,
+    /// After the node: the last process of the namespace to stop removes iceoryx2's residue.
+    _tidy: thruster_protocol::services::TidyOnDrop,
 }
 
 /// Limits repeated warnings to a few per window, then reports how many were suppressed.
@@ -258,6 +260,7 @@ impl Driver {
             vehicle: Port::create(&node, &ipc)?,
             driver_status: Port::create(&node, &ipc)?,
             _node: node,
+            _tidy: thruster_protocol::services::TidyOnDrop::new(&ipc),
         };
         let truth_file = settings
             .truth_file

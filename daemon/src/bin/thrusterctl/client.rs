@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use thruster_protocol::services::{
     check_access, cleanup_dead_nodes, owns_root, Inbox, IpcConfig, IpcError, IpcNode, Port,
-    TopicMessage,
+    TidyOnDrop, TopicMessage,
 };
 use thruster_protocol::{ControlRequest, ControlResponse, RequestKind};
 
@@ -34,8 +34,10 @@ pub struct Daemon {
     /// Whether this user may remove dead nodes' files (see `owns_root`).
     owns_root: bool,
     timeout: Duration,
-    // Declared last so it drops after every port created from it.
+    // Declared after the ports so it drops after every port created from it.
     node: IpcNode,
+    /// After the node: the last process to leave a namespace removes iceoryx2's residue.
+    _tidy: TidyOnDrop,
 }
 
 impl Daemon {
@@ -61,12 +63,14 @@ impl Daemon {
             .with_context(|| format!("joining namespace {namespace}"))?;
         let control = thruster_protocol::services::ControlClient::create(&node, &ipc)
             .context("opening the control service")?;
+        let tidy = TidyOnDrop::new(&ipc);
         Ok(Self {
             control,
             owns_root: owns_root(&ipc),
             ipc,
             timeout,
             node,
+            _tidy: tidy,
         })
     }
 

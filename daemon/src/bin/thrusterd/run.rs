@@ -207,6 +207,9 @@ impl Daemon {
             Ok(census) => info!(?census, "iceoryx2 namespace {} ready", self.ipc.namespace()),
             Err(e) => warn!("could not clean up dead nodes: {e}"),
         }
+        // Before the node, so it drops after it: a clean stop of the last process of the
+        // namespace leaves no iceoryx2 residue behind.
+        let _tidy = thruster_protocol::services::TidyOnDrop::new(&self.ipc);
         let node = self.ipc.create_node("thrusterd")?;
         // The control server first: it is what tells a live daemon on this namespace apart
         // from a crashed one, and the session marker of a live daemon must neither be read as
