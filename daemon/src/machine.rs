@@ -562,14 +562,14 @@ impl Machine {
                 Ok("aborted".into())
             }
             Request::Hold => {
-                if self.samples == 0 {
-                    return Err(Refused(NO_IMU_YET.into()));
-                }
                 if self.state == State::Fault {
                     return Err(Refused("in fault: cannot hold".into()));
                 }
                 if self.model.is_none() {
                     return Err(Refused("no model yet: estimate first".into()));
+                }
+                if self.samples == 0 {
+                    return Err(Refused(NO_IMU_YET.into()));
                 }
                 self.est = None;
                 self.target = None;
