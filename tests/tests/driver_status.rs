@@ -7,13 +7,31 @@ use std::process::Command;
 use std::time::Duration;
 
 use serde_json::Value;
-use system_tests::{bin, state, Operator, World};
+use system_tests::{bin, state, Operator, Proc, World};
 use thruster_protocol::services::Inbox;
 use thruster_protocol::{
     DaemonState, DriverStatusMsg, OutputState, ReconfigEvent, ReconfigKind, RequestKind,
 };
 
 const LONG: Duration = Duration::from_secs(60);
+
+/// thrusterd (with `daemon_args`) and a lockstep, noise-free AMOUR-5 (5 thrusters).
+fn daemon_and_sim(world: &World, daemon_args: &[&str]) -> (Proc, Proc) {
+    let daemon = world.daemon(daemon_args);
+    let sim = world.sim(
+        "amour5",
+        &["--noise", "none", "--lockstep", "--duration", "100000"],
+    );
+    (daemon, sim)
+}
+
+/// The daemon controlling with its first estimated model.
+fn until_active(op: &Operator, daemon: &Proc) {
+    op.wait_status(LONG, |s| {
+        state(s) == DaemonState::Active && s.model_version >= 1
+    })
+    .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+}
 
 fn assert_nothing_left(mut world: World) {
     world.node = None;
@@ -27,11 +45,7 @@ fn a_daemon_for_six_thrusters_on_a_five_thruster_driver_faults_and_never_pulses(
     {
         let op = Operator::new(&world);
         let driver: Inbox<DriverStatusMsg> = Inbox::create(world.node(), world.ipc()).unwrap();
-        let mut daemon = world.daemon(&["--thrusters", "6", "--estimate"]);
-        let mut sim = world.sim(
-            "amour5",
-            &["--noise", "none", "--lockstep", "--duration", "100000"],
-        );
+        let (mut daemon, mut sim) = daemon_and_sim(&world, &["--thrusters", "6", "--estimate"]);
         let s = op
             .wait_status(LONG, |s| {
                 state(s) == DaemonState::Fault
@@ -93,15 +107,8 @@ fn reconfigured_to_a_count_the_driver_lacks_while_controlling_faults_neutral() {
         let reconfig =
             thruster_protocol::services::Port::<ReconfigEvent>::create(world.node(), world.ipc())
                 .unwrap();
-        let mut daemon = world.daemon(&["--estimate"]);
-        let mut sim = world.sim(
-            "amour5",
-            &["--noise", "none", "--lockstep", "--duration", "100000"],
-        );
-        op.wait_status(LONG, |s| {
-            state(s) == DaemonState::Active && s.model_version >= 1
-        })
-        .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+        let (mut daemon, mut sim) = daemon_and_sim(&world, &["--estimate"]);
+        until_active(&op, &daemon);
         let mut e = ReconfigEvent {
             seq: 1,
             thruster: 5,
@@ -178,15 +185,8 @@ fn the_simulators_report_counts_what_it_accepted() {
     {
         let op = Operator::new(&world);
         let driver: Inbox<DriverStatusMsg> = Inbox::create(world.node(), world.ipc()).unwrap();
-        let mut daemon = world.daemon(&["--estimate"]);
-        let mut sim = world.sim(
-            "amour5",
-            &["--noise", "none", "--lockstep", "--duration", "100000"],
-        );
-        op.wait_status(LONG, |s| {
-            state(s) == DaemonState::Active && s.model_version >= 1
-        })
-        .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+        let (mut daemon, mut sim) = daemon_and_sim(&world, &["--estimate"]);
+        until_active(&op, &daemon);
         let report = system_tests::wait_for(&driver, Duration::from_secs(5), |d| {
             d.output_state() == Ok(OutputState::Active)
         })

@@ -10,19 +10,8 @@ use thruster_hw::config::Settings;
 use thruster_hw::driver::{self, shutdown::Shutdown};
 
 fn main() -> ExitCode {
-    // A closed stdout pipe ends the process quietly (one helper for every binary).
-    thruster_driver_kit::pipe::main(|| {
-        // journald under systemd (JOURNAL_STREAM names our stderr), stderr otherwise.
-        thruster_driver_kit::logging::init("info");
-        let cli = Cli::parse();
-        match run(cli) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(e) => {
-                tracing::error!("{e:#}");
-                ExitCode::FAILURE
-            }
-        }
-    })
+    // Quiet exit on a closed stdout pipe, logging, one-line errors: shared by every driver.
+    thruster_driver_kit::pipe::driver_main(|| run(Cli::parse()))
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
