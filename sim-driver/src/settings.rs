@@ -570,7 +570,7 @@ mod tests {
         let f = load_file(&path).unwrap_or_else(|e| panic!("{e}"));
         let d = FileConfig::default();
         // The file sets the example keys and writes every other key with its default.
-        assert_eq!(f.namespace.as_deref(), Some("veh1"));
+        assert_eq!(f.namespace.as_deref(), Some("thrusterd"));
         assert_eq!(f.vehicle, Some(PathBuf::from("vehicles/amour5.toml")));
         assert_eq!(
             (&f.scenario, &f.truth_file, f.duration_s),
