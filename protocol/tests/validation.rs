@@ -480,10 +480,10 @@ fn setpoint_validation() {
         "depth = 12000 m is outside [-10, 11000]",
     );
     let p = Setpoint {
-        flags: 2,
+        flags: 1 << 4,
         ..Default::default()
     };
-    assert_rejects(&p, RejectCategory::Other, "flags has unknown bits 0x2");
+    assert_rejects(&p, RejectCategory::Other, "flags has unknown bits 0x10");
 }
 
 // ---- control ---------------------------------------------------------------------------

@@ -67,7 +67,6 @@ struct Summary {
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
-    let bins = Binaries::locate()?;
     let vehicle = args
         .vehicle
         .clone()
@@ -85,6 +84,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
             .map_or(DaemonConfig::Defaults, DaemonConfig::File),
         scenario: None,
     };
+    // Bad arguments are answered before the binaries are built or probed.
+    spec.check()?;
+    let bins = Binaries::locate()?;
     let mut session = Session::start(&bins, &spec)?;
     let result = drive(&args, &mut session, &vehicle);
     let shutdown = session.finish();

@@ -265,6 +265,26 @@ pub struct SessionSpec {
     pub scenario: Option<String>,
 }
 
+impl SessionSpec {
+    /// What can be wrong with the spec itself (the vehicle file, the noise preset): checked
+    /// before anything is built or started, so a typo is answered at once. The vehicle's
+    /// thruster count.
+    pub fn check(&self) -> Result<usize> {
+        if !self.vehicle.exists() {
+            bail!("vehicle file {} not found", self.vehicle.display());
+        }
+        let count = thruster_count(&self.vehicle)?;
+        if !["paper", "realistic", "none"].contains(&self.noise.as_str()) {
+            return Err(crate::exit::Failure::usage(format!(
+                "--noise must be paper, realistic or none, got {:?}",
+                self.noise
+            ))
+            .into());
+        }
+        Ok(count)
+    }
+}
+
 /// The operator-side ports. Dropped before the node, and both before the namespace is purged.
 struct Ports {
     status: Inbox<StatusMsg>,
@@ -302,19 +322,9 @@ impl Session {
     /// Start both processes. The daemon is told the thruster count (and whatever the config
     /// says), never the simulator's geometry.
     pub fn start(bins: &Binaries, spec: &SessionSpec) -> Result<Session> {
-        if !spec.vehicle.exists() {
-            bail!("vehicle file {} not found", spec.vehicle.display());
-        }
         // Every check before the first iceoryx2 file: a vehicle file with 0 or 17 thrusters
         // used to fail after the session's node existed, leaving its namespace folder.
-        let count = thruster_count(&spec.vehicle)?.to_string();
-        if !["paper", "realistic", "none"].contains(&spec.noise.as_str()) {
-            return Err(crate::exit::Failure::usage(format!(
-                "--noise must be paper, realistic or none, got {:?}",
-                spec.noise
-            ))
-            .into());
-        }
+        let count = spec.check()?.to_string();
         static N: AtomicU32 = AtomicU32::new(0);
         // Namespaces are at most 16 characters.
         let ns = format!(
