@@ -3,6 +3,12 @@
 //! letting it pulse into nothing; a daemon with no driver at all refuses to estimate and says
 //! why; the operator sees the driver's own report.
 
+// The hardware driver's fake ArduSub (heartbeats armed or not, IMU stream, motor tests),
+// used as is rather than copied.
+#[allow(dead_code)]
+#[path = "../../hw-driver/tests/common/fake_autopilot.rs"]
+mod fake_autopilot;
+
 use std::process::Command;
 use std::time::Duration;
 
@@ -196,6 +202,75 @@ fn the_simulators_report_counts_what_it_accepted() {
         assert_eq!((report.link_up, report.armed), (1, 1));
         assert!(daemon.stop().success(), "{}", daemon.log_text());
         assert!(sim.stop().success(), "{}", sim.log_text());
+    }
+    assert_nothing_left(world);
+}
+
+/// thruster-hw on an ArduSub that is disarmed: the driver says so, and the daemon does not
+/// pulse into a vehicle that cannot move (it faults, neutral, with the reason); once the
+/// autopilot is armed, the interrupted estimation runs and its pulses reach the motors.
+#[test]
+fn a_disarmed_autopilot_holds_the_estimation_until_it_is_armed() {
+    let world = World::new("drvarm");
+    {
+        let op = Operator::new(&world);
+        let fake = fake_autopilot::FakeAutopilot::start();
+        fake.with(|s| s.armed = false);
+        let config = world.path("thruster-hw.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "namespace = \"{}\"\nbackend = \"mavlink\"\nwatchdog_ms = 200\narming_ms = 100\n\
+                 [[thruster]]\nchannel = 1\n[[thruster]]\nchannel = 2\n\
+                 [[thruster]]\nchannel = 3\n[[thruster]]\nchannel = 4\n\
+                 [mavlink]\naddress = \"{}\"\nimu_rate_hz = 100.0\n",
+                world.namespace(),
+                fake.address()
+            ),
+        )
+        .unwrap();
+        let mut hw = Proc::spawn(
+            "thruster-hw",
+            &["run", "--config", config.to_str().unwrap()],
+            world.dir.path(),
+        );
+        let mut daemon = world.daemon(&["--thrusters", "4", "--estimate"]);
+        let s = op
+            .wait_status(LONG, |s| {
+                state(s) == DaemonState::Fault && s.text().contains("disarmed")
+            })
+            .unwrap_or_else(|| {
+                panic!(
+                    "no fault on a disarmed autopilot\n{}\n{}",
+                    daemon.log_text(),
+                    hw.log_text()
+                )
+            });
+        assert!(s.text().contains("thruster-hw mavlink"), "{}", s.text());
+        std::thread::sleep(Duration::from_millis(500));
+        assert!(
+            fake.with(|s| s.motor_tests()).is_empty(),
+            "motor tests sent to a disarmed autopilot"
+        );
+        let s = op
+            .wait_status(Duration::from_secs(5), |_| true)
+            .expect("a status");
+        assert_eq!(state(&s), DaemonState::Fault, "{}", s.text());
+        // Armed: the estimation runs and its pulses reach the motors.
+        fake.with(|s| s.armed = true);
+        op.wait_status(LONG, |s| state(s) == DaemonState::Pulse)
+            .unwrap_or_else(|| panic!("no pulse once armed\n{}", daemon.log_text()));
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        while fake.with(|s| s.motor_tests()).is_empty() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "no motor test once armed\n{}",
+                hw.log_text()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(daemon.stop().success(), "{}", daemon.log_text());
+        assert!(hw.stop().success(), "{}", hw.log_text());
     }
     assert_nothing_left(world);
 }
