@@ -2,7 +2,10 @@
 # The units under a real systemd: boots systemd 252 in a container (systemd-nspawn), installs
 # thrusterd exactly as the README's "Install on a vehicle" section says, with thruster-sim in
 # real time standing in for thruster-hw (a runtime drop-in), and checks what an operator and
-# systemd rely on. Any failed check exits non-zero naming the check. Nothing is left running.
+# systemd rely on. Any failed check exits non-zero naming the check and keeps the container's
+# journal in $THRUSTERD_CI_LOGS (default /tmp/thrusterd-systemd-test-logs). Nothing is left
+# running or mounted. One test-bed setting differs from the shipped configs: imu_timeout_ms
+# (see below and docs/reliability.md).
 #
 #   sudo tests/systemd/run.sh          (root: nspawn, mounts; CI runs it from .ci/run)
 #
@@ -149,13 +152,28 @@ START=$(readme_block 2)
 inside "sudo() { \"\$@\"; }; set -e; cd /root/thrusterd-src; $INSTALL" \
     || fail "install: the README's install commands failed"
 
-# The README's edit step: one namespace and the shared ipc root in both files.
+# The README's edit step: one namespace and the shared ipc root in both files. The shipped
+# files already share the namespace (checked, not edited into agreement).
 inside "set -e
+    grep -q '^namespace = \"$NS\"' /etc/thrusterd/thrusterd.toml
+    grep -q '^namespace = \"$NS\"' /etc/thrusterd/thruster-hw.toml
     sed -i 's|^# root = \"/run/thrusterd\"|root = \"$IPC\"|' /etc/thrusterd/thrusterd.toml
     grep -q '^root = \"$IPC\"' /etc/thrusterd/thrusterd.toml
     sed -i 's|^namespace = .*|namespace = \"$NS\"|; s|^ipc_root = .*|ipc_root = \"$IPC\"|' /etc/thrusterd/thruster-hw.toml
     grep -q '^ipc_root = \"$IPC\"' /etc/thrusterd/thruster-hw.toml" \
-    || fail "install: editing the configs as the README says"
+    || fail "install: editing the configs as the README says (shipped namespace not '$NS'?)"
+
+# The one departure from the shipped thrusterd.toml, for this test bed only: imu_timeout_ms 500
+# (shipped: 100). Here the driver is a debug build of the simulator in a container on a shared
+# 2-core machine (CI builds run beside it), and it was seen to publish nothing for about 120 ms
+# now and then while the daemon was not blocked (its IMU inbox was empty when the deadline
+# fired): one estimation in five failed on that. The test checks that the IMU keeps flowing
+# (a hang), not the vehicle computer's 100 ms margin; 500 ms is still 4x shorter than the
+# watchdog, and a SIGSTOPped driver still faults the daemon.
+inside "set -e
+    sed -i 's|^imu_timeout_ms = .*|imu_timeout_ms = 500|' /etc/thrusterd/thrusterd.toml
+    grep -q '^imu_timeout_ms = 500\$' /etc/thrusterd/thrusterd.toml" \
+    || fail "install: imu_timeout_ms of the test bed"
 
 # No vehicle here: thruster-hw.service runs the simulator in real time (a runtime drop-in).
 inside "set -e
@@ -177,35 +195,35 @@ inside "sudo() { \"\$@\"; }; set -e; ${START//OPERATOR/alice}" \
 status_json() { as_operator "status --json" | tr -d '\n'; }
 json_num() { sed -n "s/.*\"$1\": *\([0-9.]*\).*/\1/p"; }
 json_str() { sed -n "s/.*\"$1\": *\"\([^\"]*\)\".*/\1/p"; }
-watch_mark() { inside "wc -l < /tmp/imu-watch.log"; }
-imu_ok() { # watcher samples FROM..TO (line numbers) all show IMU above 150 Hz
-    local bad n
-    n=$(($2 - $1))
-    [ "$n" -ge 2 ] || fail "real-time sim: only $n status samples ($3)"
-    bad=$(inside "sed -n '$(($1 + 1)),$2p' /tmp/imu-watch.log" | while read -r l; do
-        imu_good "$l" || echo "$l"
-    done)
-    [ -z "$bad" ] || fail "real-time sim: IMU not flowing ($3): $(echo "$bad" | head -3)"
-}
-imu_good() { # a watcher line shows a daemon that answered with IMU above 150 Hz
+now() { echo "$EPOCHREALTIME"; }
+imu_good() { # a status that answered with IMU above 150 Hz
     local r
     r=$(echo "$1" | json_num imu_rate_hz)
     [ -n "$r" ] && [ "${r%.*}" -ge 150 ]
 }
-wait_imu_back() { # after a restart: the watcher's line number of its first good sample after
-    # line $1. A status call already waiting on the killed process times out (2 s) after the
-    # restart; what counts is what comes after the first answer of the restarted one.
-    local n l i
+imu_ok() { # the watcher's status calls that started between FROM and TO (epoch seconds; TO
+    # empty: the first 3 that started after FROM, waiting 10 s at most for them) all answered
+    # with IMU above 150 Hz. By start time: a call still waiting on a killed daemon ends with a
+    # timeout after the restart, and is not a call made after it.
+    local bad n
+    for _ in $(seq 50); do
+        inside "cat /tmp/imu-watch.log" | awk -v a="$1" -v b="${2:-9e99}" '$1 >= a && $1 <= b' \
+            | head -n "$([ -n "$2" ] && echo 100000 || echo 3)" >"$WORK/window"
+        n=$(wc -l <"$WORK/window")
+        [ -n "$2" ] || [ "$n" -ge 3 ] && break
+        sleep 0.2
+    done
+    [ "$n" -ge 2 ] || fail "real-time sim: only $n status samples ($3)"
+    bad=$(while read -r l; do imu_good "$l" || echo "$l"; done <"$WORK/window")
+    [ -z "$bad" ] || fail "real-time sim: IMU not flowing ($3): $(echo "$bad" | head -3)"
+}
+wait_imu_back() { # after a restart: until alice's status shows IMU above 150 Hz (10 s at most)
+    local st
     for _ in $(seq 40); do
-        n=$(watch_mark); i=$1
-        while [ "$i" -lt "$n" ]; do
-            i=$((i + 1))
-            l=$(inside "sed -n '${i}p' /tmp/imu-watch.log")
-            if imu_good "$l"; then echo "$i"; return 0; fi
-        done
+        st=$(status_json 2>/dev/null) && imu_good "$st" && return 0
         sleep 0.25
     done
-    fail "real-time sim: no status with IMU above 150 Hz within 10 s ($2)"
+    fail "real-time sim: no status with IMU above 150 Hz within 10 s ($1)"
 }
 
 
@@ -223,11 +241,19 @@ check_active thrusterd
 say "notify start: both units active after READY"
 
 # IMU must flow the whole run (a real-time sim that hangs starves the daemon): a watcher
-# inside the container samples the daemon's status every 0.5 s into a file.
-inside "nohup runuser -u alice -- bash -c 'while sleep 0.5; do
-        thrusterctl --namespace $NS --ipc-root $IPC status --json 2>&1 | tr -d \"\\n\"; echo; done' \
-        </dev/null >/tmp/imu-watch.log 2>&1 &"
-sleep 1; W0=$(watch_mark)
+# inside the container samples the daemon's status every 0.5 s into a file, until
+# /tmp/imu-watch.stop exists (the minimal rootfs has no pkill).
+# Each line: the call's start time (epoch s), then its output.
+cat >"$MNT/usr/local/bin/imu-watch" <<WATCH
+#!/bin/bash
+while [ ! -e /tmp/imu-watch.stop ] && sleep 0.5; do
+    t=\$(date +%s.%N)
+    echo "\$t \$(thrusterctl --namespace $NS --ipc-root $IPC status --json 2>&1 | tr -d '\\n')"
+done
+WATCH
+chmod 0755 "$MNT/usr/local/bin/imu-watch"
+WATCHER=$(inside "nohup runuser -u alice -- imu-watch </dev/null >/tmp/imu-watch.log 2>&1 & echo \$!")
+T_WATCH=$(now)
 
 # Operator account in group thrusterd.
 st=$(status_json) || fail "operator: thrusterctl status as alice (group thrusterd) failed: $st"
@@ -272,8 +298,7 @@ sleep 3
 st=$(status_json) || fail "refusal: the daemon stopped answering alice"
 say "refusal: root and bob exit 7 with the fix named, no file made, daemon unharmed"
 
-imu_ok "$W0" "$(watch_mark)" "from the start to the daemon's kill"
-W_KILL=$(watch_mark)
+imu_ok "$T_WATCH" "$(now)" "from the start to the daemon's kill"
 
 # kill -9 -> restart -> resume with the saved model.
 inside "kill -9 $PID_D"
@@ -293,8 +318,8 @@ st=$(status_json) || fail "kill -9: the restarted daemon does not answer"
 v=$(echo "$st" | json_num model_version)
 [ -n "$v" ] && [ "$v" -ge 1 ] || fail "kill -9: no model in force after the restart: $st"
 PID_D=$(prop thrusterd MainPID); NR_D=$(prop thrusterd NRestarts)
-W1=$(wait_imu_back "$W_KILL" "after the daemon's restart"); sleep 1.5
-imu_ok "$W1" "$(watch_mark)" "after the daemon's restart"
+wait_imu_back "after the daemon's restart"
+imu_ok "$(now)" "" "after the daemon's restart"
 say "kill -9: restarted, saved model loaded, control resumed, IMU flows"
 
 # The driver's watchdog: a stopped (hung) driver is killed and restarted by systemd.
@@ -309,12 +334,14 @@ done
     || fail "driver watchdog: SIGSTOPped thruster-hw not restarted within 15 s (NRestarts $(prop thruster-hw NRestarts))"
 inside "journalctl -u thruster-hw --no-pager | grep -q 'Watchdog timeout'" \
     || fail "driver watchdog: no 'Watchdog timeout' for thruster-hw in the journal"
-W2=$(wait_imu_back "$(watch_mark)" "after the driver's restart"); sleep 1.5
-imu_ok "$W2" "$(watch_mark)" "after the driver's restart"
+wait_imu_back "after the driver's restart"
+imu_ok "$(now)" "" "after the driver's restart"
 [ "$(prop thrusterd NRestarts)" = "$NR_D" ] || fail "driver watchdog: thrusterd restarted too"
 say "driver watchdog: a stopped thruster-hw was killed and restarted, IMU flows again"
 
-inside "pkill -u alice" || true
+# The watcher ends before the stop (a status call then would only time out).
+inside "touch /tmp/imu-watch.stop; for _ in \$(seq 30); do kill -0 $WATCHER 2>/dev/null || exit 0; sleep 0.1; done; exit 1" \
+    || fail "setup: the status watcher did not end within 3 s"
 
 # systemctl stop -> neutral and model saved.
 inside "systemctl stop thrusterd"
