@@ -208,6 +208,17 @@ pub fn save_atomic(model: &Model, path: &Path) -> Result<(), StoreError> {
 
 /// Load the model at `path`; Ok(None) when there is none yet.
 pub fn load(path: &Path) -> Result<Option<Model>, StoreError> {
+    // Only a regular file: reading a FIFO or a device would block the caller (the daemon's
+    // loop, for an operator's load) until someone writes to it.
+    match fs::metadata(path) {
+        Ok(m) if !m.is_file() => {
+            return Err(StoreError::Corrupt {
+                path: path.display().to_string(),
+                why: "not a regular file".into(),
+            })
+        }
+        _ => {}
+    }
     match fs::read_to_string(path) {
         Ok(text) => from_json(&text, &path.display().to_string()).map(Some),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),

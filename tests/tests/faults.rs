@@ -771,6 +771,13 @@ fn with_resume_after_crash_off_a_restarted_daemon_stays_idle() {
     let op = Operator::new(&world);
     let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
     let (mut daemon, mut sim) = daemon_active_on_sim(&world, &op);
+    // Saves run off the control loop: the model reaches the disk just after the swap.
+    let saved = world.path("state/model.json");
+    let end = Instant::now() + LONG;
+    while !saved.exists() {
+        assert!(Instant::now() < end, "model never saved\n{}", daemon.log_text());
+        std::thread::sleep(Duration::from_millis(10));
+    }
     kill9(&mut daemon);
 
     let cfg = world.path("noresume.toml");
@@ -804,5 +811,50 @@ fn with_resume_after_crash_off_a_restarted_daemon_stays_idle() {
     assert!(sim.stop().success());
     drop(thrust);
     drop(op);
+    assert_nothing_left(world);
+}
+
+/// A disk that never answers never stalls control. The model save's temp file is a FIFO
+/// nobody reads, so opening it for writing blocks forever, like a hung SD card: the daemon
+/// still swaps in its estimated model and goes on answering every sample, an operator's
+/// `save` is answered at once, and a stop exits promptly, saying the save was abandoned.
+/// (Before the saves moved off the loop, the loop blocked in the save after the swap.)
+#[test]
+fn a_stalled_disk_never_stalls_control() {
+    let world = World::new("stall");
+    {
+        let op = Operator::new(&world);
+        std::fs::create_dir_all(world.path("state")).unwrap();
+        let fifo = world.path("state/.model.json.tmp");
+        let c_path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: mkfifo(3) on a NUL-terminated path we own.
+        assert_eq!(unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) }, 0);
+        let (mut daemon, mut sim) = daemon_active_on_sim(&world, &op);
+        let before = op
+            .wait_status(LONG, |_| true)
+            .expect("a status after the swap");
+        std::thread::sleep(Duration::from_secs(1));
+        let after = op
+            .wait_status(LONG, |s| s.samples > before.samples + 100)
+            .unwrap_or_else(|| panic!("control stalled\n{}", daemon.log_text()));
+        assert_eq!(state(&after), DaemonState::Active, "{}", after.text());
+        let r = op.request(RequestKind::Save);
+        assert!(r.is_ok() && r.text().contains("slow"), "{}", r.text());
+        let t0 = Instant::now();
+        daemon.signal("TERM");
+        let status = daemon
+            .wait_timeout(Duration::from_secs(15))
+            .unwrap_or_else(|| panic!("no exit with a stalled disk\n{}", daemon.log_text()));
+        let took = t0.elapsed();
+        assert!(status.success(), "{}", daemon.log_text());
+        assert!(took < Duration::from_secs(10), "stop took {took:?}");
+        assert!(
+            daemon.log_text().contains("abandoned"),
+            "{}",
+            daemon.log_text()
+        );
+        println!("stalled disk: stop took {took:?}");
+        assert!(sim.stop().success());
+    }
     assert_nothing_left(world);
 }

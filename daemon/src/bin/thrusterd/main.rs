@@ -1,6 +1,7 @@
 //! thrusterd: the thruster-configuration daemon (`run`), and its offline studies (`study`).
 
 mod run;
+mod saver;
 mod session;
 mod study;
 

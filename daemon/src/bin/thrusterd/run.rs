@@ -57,6 +57,12 @@ pub struct RunArgs {
 
 /// In low-latency mode, other inputs and status are looked at least this often.
 const HOUSEKEEPING: Duration = Duration::from_millis(1);
+/// How long an operator's `save` request may wait for the saving thread inside the loop: a
+/// healthy disk or a fast failure (full, read-only) answers well within it; a stalled disk
+/// gets a "saving" answer instead of stalling control.
+const SAVE_ANSWER_WAIT: Duration = Duration::from_millis(50);
+/// How long a stopping daemon waits for its last saves (thrust already neutral).
+const SHUTDOWN_SAVE_WAIT: Duration = Duration::from_secs(3);
 
 pub fn run(args: RunArgs) -> Result<()> {
     init_logging();
@@ -134,6 +140,8 @@ struct Daemon {
     /// Why the model in use is not on disk (the last save to `model_path` failed), until a
     /// save there succeeds: appended to the status text, so an operator sees it without the log.
     save_error: Option<String>,
+    /// Saves run here, off the loop (see `saver`).
+    saver: crate::saver::Saver,
     thrust_seq: u64,
     status_seq: u64,
     model_seq: u64,
@@ -188,6 +196,7 @@ impl Daemon {
             refused,
             missed: 0,
             save_error: None,
+            saver: crate::saver::Saver::spawn().context("starting the model-saving thread")?,
             thrust_seq: 0,
             status_seq: 0,
             model_seq: 0,
@@ -414,6 +423,7 @@ impl Daemon {
                 }
             }
             let changed = self.handle_events(&model_out);
+            self.poll_saves();
             systemd.tick();
             if changed || last_status.elapsed() >= status_period {
                 let s = self.machine.status();
@@ -441,6 +451,18 @@ impl Daemon {
         self.handle_events(&model_out);
         if let Some(model) = self.machine.model().cloned() {
             self.save(&model);
+        }
+        // Thrust is neutral: now the saves may be waited for, but not forever (a disk that
+        // never answers must not keep the process, and systemd's stop, waiting).
+        let (outcomes, abandoned) = self.saver.finish(SHUTDOWN_SAVE_WAIT);
+        for outcome in outcomes {
+            self.on_saved(outcome);
+        }
+        if abandoned > 0 {
+            error!(
+                "{abandoned} model save(s) still waiting for the disk after {} s: abandoned",
+                SHUTDOWN_SAVE_WAIT.as_secs()
+            );
         }
         // A clean stop: the next start begins idle.
         if let Some(session) = self.session.take() {
@@ -561,17 +583,28 @@ impl Daemon {
                 } else {
                     PathBuf::from(req.text.as_str())
                 };
-                let result = store::save_atomic(&model, &path);
-                if path == self.model_path {
-                    self.save_error = result.as_ref().err().map(|e| e.to_string());
-                }
-                return match result {
-                    Ok(()) => ControlResponse::ok(&format!(
-                        "saved model v{} to {}",
+                // On the saving thread; the answer waits for it a few milliseconds at most
+                // (a healthy disk, or a fast failure such as a full one), never for a stalled
+                // disk: then the answer says so and status reports the outcome.
+                let id = self.saver.submit(&model, &path);
+                return match self.saver.wait_for(id, SAVE_ANSWER_WAIT) {
+                    Some(outcome) => {
+                        let result = outcome.result.clone();
+                        self.on_saved(outcome);
+                        match result {
+                            Ok(()) => ControlResponse::ok(&format!(
+                                "saved model v{} to {}",
+                                model.version,
+                                path.display()
+                            )),
+                            Err(e) => ControlResponse::new(ResponseCode::Failed, &e),
+                        }
+                    }
+                    None => ControlResponse::ok(&format!(
+                        "saving model v{} to {} (the disk is slow: status reports a failure)",
                         model.version,
                         path.display()
                     )),
-                    Err(e) => ControlResponse::new(ResponseCode::Failed, &e.to_string()),
                 };
             }
             RequestKind::Load => {
@@ -668,22 +701,31 @@ impl Daemon {
         }
     }
 
+    /// Queues a save of `model` to the state directory; the outcome comes back through
+    /// [`Daemon::poll_saves`]. Never blocks the loop.
     fn save(&mut self, model: &thrusterd::model::Model) {
-        if let Err(e) = std::fs::create_dir_all(&self.cfg.runtime.state_dir) {
-            let why = format!("{}: {e}", self.cfg.runtime.state_dir.display());
-            warn!("model not saved: {why}");
-            self.save_error = Some(why);
-            return;
+        let path = self.model_path.clone();
+        self.saver.submit(model, &path);
+    }
+
+    /// Takes the outcomes of finished saves (non-blocking).
+    fn poll_saves(&mut self) {
+        for outcome in self.saver.poll() {
+            self.on_saved(outcome);
         }
-        match store::save_atomic(model, &self.model_path) {
+    }
+
+    /// Logs a save's outcome; one to the state directory sets or clears the status note.
+    fn on_saved(&mut self, outcome: crate::saver::Outcome) {
+        let to_state_dir = outcome.path == self.model_path;
+        match &outcome.result {
             Ok(()) => {
-                info!(path = %self.model_path.display(), version = model.version, "model saved");
-                self.save_error = None;
+                info!(path = %outcome.path.display(), version = outcome.version, "model saved")
             }
-            Err(e) => {
-                warn!("model not saved (daemon keeps running): {e}");
-                self.save_error = Some(e.to_string());
-            }
+            Err(e) => warn!("model not saved (daemon keeps running): {e}"),
+        }
+        if to_state_dir {
+            self.save_error = outcome.result.err();
         }
     }
 
