@@ -775,7 +775,11 @@ fn with_resume_after_crash_off_a_restarted_daemon_stays_idle() {
     let saved = world.path("state/model.json");
     let end = Instant::now() + LONG;
     while !saved.exists() {
-        assert!(Instant::now() < end, "model never saved\n{}", daemon.log_text());
+        assert!(
+            Instant::now() < end,
+            "model never saved\n{}",
+            daemon.log_text()
+        );
         std::thread::sleep(Duration::from_millis(10));
     }
     kill9(&mut daemon);
