@@ -65,6 +65,22 @@ fn is_broken_pipe_panic(message: &str) -> bool {
         && message.to_ascii_lowercase().contains("broken pipe")
 }
 
+/// The whole `main` of a driver process: [`main`]'s quiet exit on a closed pipe, logging
+/// (journald under systemd, stderr otherwise), then `run`; an error is logged on one line
+/// (`{:#}`: anyhow joins its causes) and the process exits 1.
+pub fn driver_main<E: std::fmt::Display>(run: impl FnOnce() -> Result<(), E>) -> ExitCode {
+    main(|| {
+        crate::logging::init("info");
+        match run() {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                tracing::error!("{e:#}");
+                ExitCode::FAILURE
+            }
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -95,20 +111,4 @@ mod tests {
         let e = Wrapper(std::io::Error::other("no"));
         assert!(!is_broken_pipe(&e));
     }
-}
-
-/// The whole `main` of a driver process: [`main`]'s quiet exit on a closed pipe, logging
-/// (journald under systemd, stderr otherwise), then `run`; an error is logged on one line
-/// (`{:#}`: anyhow joins its causes) and the process exits 1.
-pub fn driver_main<E: std::fmt::Display>(run: impl FnOnce() -> Result<(), E>) -> ExitCode {
-    main(|| {
-        crate::logging::init("info");
-        match run() {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(e) => {
-                tracing::error!("{e:#}");
-                ExitCode::FAILURE
-            }
-        }
-    })
 }
