@@ -8,6 +8,7 @@ use std::collections::HashMap;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use thruster_protocol::MAX_THRUSTERS;
 
 use crate::attitude::{AttitudeConfig, AttitudeFilter};
 use crate::controller::{Controller, ControllerConfig, Measured, Target};
@@ -18,9 +19,6 @@ use crate::estimator::{
 };
 use crate::model::{geometry_key, nominal_effectiveness, Model, ModelSource, RigidBody};
 use crate::monitor::{Mismatch, MismatchAction, ModelMonitor, MonitorConfig};
-
-/// Capacity of every thrust vector (the protocol's).
-pub const MAX_THRUSTERS: usize = 16;
 
 /// Why estimation and control are refused before the first IMU sample: the vehicle cannot be
 /// measured, and a run started now would wait at "measuring noise" forever.
