@@ -10,9 +10,10 @@ use thruster_protocol::services::{IpcConfig, IpcError, DEFAULT_ROOT_BASE};
 use crate::attitude::AttitudeConfig;
 use crate::controller::ControllerConfig;
 use crate::estimator::EstimatorConfig;
-use crate::machine::{Geometry, MachineConfig, MachineSetup, MAX_THRUSTERS};
+use crate::machine::{Geometry, MachineConfig, MachineSetup};
 use crate::model::RigidBody;
 use crate::monitor::MonitorConfig;
+use thruster_protocol::MAX_THRUSTERS;
 
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]

@@ -9,8 +9,8 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::machine::MAX_THRUSTERS;
 use crate::model::Model;
+use thruster_protocol::MAX_THRUSTERS;
 
 /// Depth is controlled only when the actuated translations can push at least this share of a
 /// vertical force (0.5: the vertical is within 60 degrees of their span).

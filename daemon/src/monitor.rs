@@ -38,7 +38,7 @@ use nalgebra::{DMatrix, Vector3};
 use serde::{Deserialize, Serialize};
 use thruster_driver_kit::Range;
 
-use crate::machine::MAX_THRUSTERS;
+use thruster_protocol::MAX_THRUSTERS;
 
 /// Nuisance regressors per axis: linear and quadratic damping, gravity direction (3) and a
 /// constant acceleration.

@@ -140,8 +140,11 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
     }
     let f: ModelFile = serde_json::from_value(header).map_err(|e| corrupt(e.to_string()))?;
     let n = f.thrusters;
-    if !(1..=crate::machine::MAX_THRUSTERS).contains(&n) {
-        return Err(corrupt(format!("thrusters = {n} is not 1..16")));
+    if !(1..=thruster_protocol::MAX_THRUSTERS).contains(&n) {
+        return Err(corrupt(format!(
+            "thrusters = {n} is not 1..{}",
+            thruster_protocol::MAX_THRUSTERS
+        )));
     }
     let effectiveness = matrix("effectiveness", &f.effectiveness, 6, n).map_err(corrupt)?;
     let allocation = matrix("allocation", &f.allocation, n, 6).map_err(corrupt)?;

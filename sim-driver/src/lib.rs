@@ -51,4 +51,4 @@ pub use scenario::{Action, Event, Scenario};
 pub use sensors::{ImuNoise, ImuReading, NoisePreset, SensorBiases, SensorConfig};
 pub use sim::{Change, ChangeKind, InitialState, SimError, SimOptions, Simulator};
 pub use thruster::{sanitize_command, steady_thrust, Thruster};
-pub use vehicle::{Body, Dof6, ThrusterSpec, Vehicle, MAX_THRUSTERS};
+pub use vehicle::{Body, Dof6, ThrusterSpec, Vehicle};

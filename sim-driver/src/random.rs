@@ -11,7 +11,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use crate::load::LoadError;
-use crate::vehicle::{Body, ThrusterSpec, Vehicle, MAX_THRUSTERS};
+use crate::vehicle::{Body, ThrusterSpec, Vehicle};
+use thruster_protocol::MAX_THRUSTERS;
 
 /// Half extents of the hull box, m: a standard BlueROV2 is 0.457 x 0.338 x 0.254 m.
 pub const HULL_HALF_EXTENTS_M: [f64; 3] = [0.2285, 0.169, 0.127];

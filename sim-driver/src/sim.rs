@@ -14,7 +14,8 @@ use crate::load::{check_finite, LoadError};
 use crate::scenario::Action;
 use crate::sensors::{Imu, ImuReading, SensorBiases, SensorConfig, SensorTruth};
 use crate::thruster::Thruster;
-use crate::vehicle::{ThrusterSpec, Vehicle, MAX_THRUSTERS};
+use crate::vehicle::{ThrusterSpec, Vehicle};
+use thruster_protocol::MAX_THRUSTERS;
 
 /// Errors of the simulator.
 #[derive(Debug, thiserror::Error)]

@@ -12,6 +12,9 @@ use std::path::Path;
 
 use nalgebra::{Vector3, Vector6};
 use serde::{Deserialize, Serialize};
+// The largest thruster count a vehicle may have is the protocol's (the fixed capacity of its
+// messages), so every simulated vehicle can be driven by the daemon.
+use thruster_protocol::MAX_THRUSTERS;
 
 use crate::load::{check_finite, parse_toml, read_text, LoadError};
 
@@ -21,10 +24,6 @@ pub const KGF_N: f64 = 9.80665;
 pub const T200_FORWARD_MAX_N: f64 = 5.25 * KGF_N;
 /// Blue Robotics T200 maximum reverse thrust at 16 V: 4.1 kgf, in N (40.2 N).
 pub const T200_REVERSE_MAX_N: f64 = 4.1 * KGF_N;
-/// Largest thruster count a vehicle may have. Mirrors `MAX_THRUSTERS` of the protocol (the
-/// fixed capacity of its messages), so every simulated vehicle can be driven by the daemon.
-pub const MAX_THRUSTERS: usize = 16;
-
 /// One value per degree of freedom, by name, so no file depends on a DOF ordering convention.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -15,7 +15,7 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::{
     ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, Setpoint, StatusMsg,
-    ThrustCommand, TruthMsg, VehicleStateMsg,
+    ThrustCommand, TruthMsg, VehicleStateMsg, MAX_THRUSTERS,
 };
 
 /// A child process killed and reaped on drop, whatever happens.
@@ -643,9 +643,9 @@ pub fn thruster_count(vehicle: &Path) -> Result<usize> {
         .and_then(|t| t.as_array())
         .map(|a| a.len())
         .unwrap_or(0);
-    if !(1..=16).contains(&n) {
+    if !(1..=MAX_THRUSTERS).contains(&n) {
         bail!(
-            "{}: {n} thrusters ([[thruster]] tables), expected 1..16",
+            "{}: {n} thrusters ([[thruster]] tables), expected 1..{MAX_THRUSTERS}",
             vehicle.display()
         );
     }

@@ -21,7 +21,7 @@ use thruster_protocol::services::{
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
     ControlResponse, DriverStatusMsg, ImuSample, ModelMsg, ReconfigEvent, RequestKind,
-    ResponseCode, Setpoint, StatusMsg, ThrustCommand,
+    ResponseCode, Setpoint, StatusMsg, ThrustCommand, MAX_THRUSTERS,
 };
 use thrusterd::config::DaemonConfig;
 use thrusterd::driver_watch::{DriverWatch, OutputVerdict};
@@ -80,7 +80,10 @@ pub fn run(args: RunArgs) -> Result<()> {
         cfg.runtime.state_dir = dir;
     }
     if let Some(n) = args.thrusters {
-        anyhow::ensure!((1..=16).contains(&n), "--thrusters {n}: must be 1..16");
+        anyhow::ensure!(
+            (1..=MAX_THRUSTERS).contains(&n),
+            "--thrusters {n}: must be 1..{MAX_THRUSTERS}"
+        );
         cfg.vehicle.thrusters = n;
         cfg.vehicle.thruster.clear();
     }
@@ -444,7 +447,7 @@ impl Daemon {
         systemd.stopping();
         let neutral = Command {
             count: self.machine.thrusters(),
-            thrust: [0.0; 16],
+            thrust: [0.0; MAX_THRUSTERS],
             mode: thrusterd::machine::Mode::Neutral,
         };
         self.send_thrust(&thrust_out, &neutral);
@@ -529,7 +532,7 @@ impl Daemon {
                 // a garbage sample must never keep a pulse running.
                 let neutral = Command {
                     count: self.machine.thrusters(),
-                    thrust: [0.0; 16],
+                    thrust: [0.0; MAX_THRUSTERS],
                     mode: thrusterd::machine::Mode::Neutral,
                 };
                 let mut msg =
@@ -762,6 +765,10 @@ impl Daemon {
 
 /// Indices and counts the machine must never see out of range.
 fn check_reconfig(e: &ReconfigEvent) -> Result<(), RejectReason> {
-    thruster_protocol::validate::expect_count("count", e.count, e.count.clamp(1, 16))?;
+    thruster_protocol::validate::expect_count(
+        "count",
+        e.count,
+        e.count.clamp(1, MAX_THRUSTERS as u32),
+    )?;
     Ok(())
 }

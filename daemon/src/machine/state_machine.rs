@@ -1,276 +1,23 @@
-//! The daemon's state machine: Idle -> MeasureNoise -> Pulse -> Settle -> ... -> Solve ->
-//! Active, plus Fault. Pure: IMU samples (with their own timestamps), operator requests,
-//! setpoints and reconfiguration events in; a thrust command for every sample, model swaps and
-//! status out. Time comes only from sample timestamps, so real time and a faster-than-real-time
-//! simulator run the same code.
-
-use std::collections::HashMap;
+//! The machine itself: routes every input to the state it is in, and owns the states and their
+//! changes (`transition`), faults and recovery, levelling before a run, and control. The model
+//! slot (`models`) and the estimation run (`estimation`) hold what they own.
 
 use nalgebra::{UnitQuaternion, Vector3};
-use serde::{Deserialize, Serialize};
+use thruster_protocol::MAX_THRUSTERS;
 
-use crate::attitude::{AttitudeConfig, AttitudeFilter};
-use crate::controller::{Controller, ControllerConfig, Measured, Target};
-use crate::estimator::power::pulse_power;
-use crate::estimator::response::motion_accel;
-use crate::estimator::{
-    Estimate, Estimator, EstimatorConfig, NoiseLevels, NoiseMeter, StopDecision,
+use super::config::{MachineSetup, ReconfigPolicy};
+use super::estimation::{EstimationRun, Motion, PulseStep};
+use super::models::ModelSlot;
+use super::types::{
+    finish, Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput,
+    State, StatusSnapshot, NO_IMU_YET,
 };
-use crate::model::{geometry_key, nominal_effectiveness, Model, ModelSource, RigidBody};
-use crate::monitor::{Mismatch, MismatchAction, ModelMonitor, MonitorConfig};
-
-/// Capacity of every thrust vector (the protocol's).
-pub const MAX_THRUSTERS: usize = 16;
-
-/// Why estimation and control are refused before the first IMU sample: the vehicle cannot be
-/// measured, and a run started now would wait at "measuring noise" forever.
-pub const NO_IMU_YET: &str =
-    "no IMU samples from any driver yet: is thruster-sim or thruster-hw running on this namespace?";
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum State {
-    Idle,
-    MeasureNoise,
-    Pulse,
-    Settle,
-    Solve,
-    Active,
-    Fault,
-}
-
-impl State {
-    pub fn name(self) -> &'static str {
-        match self {
-            State::Idle => "idle",
-            State::MeasureNoise => "measure_noise",
-            State::Pulse => "pulse",
-            State::Settle => "settle",
-            State::Solve => "solve",
-            State::Active => "active",
-            State::Fault => "fault",
-        }
-    }
-
-    pub fn is_estimating(self) -> bool {
-        matches!(
-            self,
-            State::MeasureNoise | State::Pulse | State::Settle | State::Solve
-        )
-    }
-}
-
-/// What a reconfiguration event leads to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ReconfigPolicy {
-    /// Re-estimate at once (default).
-    Estimate,
-    /// Swap nominal/cached models where possible, estimate only on request.
-    OnRequest,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MachineConfig {
-    /// Rest period for the noise levels, s (default 1.0: 200 samples at 200 Hz put the sigma
-    /// within ~5 %).
-    pub noise_s: f64,
-    /// An estimation that starts while the daemon controls (a reconfiguration, a mismatch, a
-    /// request) first levels the vehicle with the model in force, for at most this long, s
-    /// (default 5; 0 = pulse from wherever the vehicle is). Why: started mid-manoeuvre, the
-    /// "rest" the noise is measured in was a swinging vehicle, and the pulses then tumbled
-    /// AMOUR-5 past 150 deg in the hot-swap experiment.
-    pub level_max_s: f64,
-    /// Levelling ends once the tilt stayed below `level_tilt_deg` for `level_hold_s`
-    /// (defaults 5 deg, 1 s).
-    pub level_tilt_deg: f64,
-    pub level_hold_s: f64,
-    /// Length of one excitation pulse, s (default 0.1; the paper used 1.0). Short pulses keep
-    /// the vehicle in the regime where the response is still the thrust's, not the drag's: on a
-    /// BlueROV2-class body quadratic roll/yaw damping already takes ~5 % off the rate after
-    /// 0.1 s (docs/simulation.md).
-    pub pulse_s: f64,
-    /// Minimum pause after a pulse, s (default 0.15).
-    pub settle_min_s: f64,
-    /// Maximum pause after a pulse, s (default 1.0; the paper paused a fixed 3 s). The per-pulse
-    /// intercept absorbs what is left of the last pulse's motion.
-    pub settle_max_s: f64,
-    /// The pause ends once every gyro axis stayed within k sigma of rest for this long, s
-    /// (default 0.1).
-    pub settle_quiet_s: f64,
-    /// A new estimated model is swapped in only if both relative error bounds are below this
-    /// (default 0.25).
-    pub max_swap_rel_err: f64,
-    /// "estimate" (default) or "on_request".
-    pub on_reconfig: ReconfigPolicy,
-    /// Hold attitude with the new model after an estimation (default true); otherwise Idle.
-    pub control_after_estimate: bool,
-    /// A gap between sample timestamps above this is a sensor dropout, s (default 0.1).
-    pub max_sample_gap_s: f64,
-    /// Consecutive good samples that end a fault (default 20).
-    pub recover_samples: u32,
-    /// Thruster deadband the daemon compensates, as a fraction of full command (default 0: the
-    /// drivers, thruster-sim and thruster-hw, own their actuators' deadband). For a driver that
-    /// does not, a command u != 0 goes out as sign(u) (deadband + (1 - deadband) |u|), so thrust
-    /// stays proportional to what the estimator and controller asked for.
-    pub deadband: f64,
-}
-
-impl Default for MachineConfig {
-    fn default() -> Self {
-        MachineConfig {
-            noise_s: 1.0,
-            level_max_s: 5.0,
-            level_tilt_deg: 5.0,
-            level_hold_s: 1.0,
-            pulse_s: 0.1,
-            settle_min_s: 0.15,
-            settle_max_s: 1.0,
-            settle_quiet_s: 0.1,
-            max_swap_rel_err: 0.25,
-            on_reconfig: ReconfigPolicy::Estimate,
-            control_after_estimate: true,
-            max_sample_gap_s: 0.1,
-            recover_samples: 20,
-            deadband: 0.0,
-        }
-    }
-}
-
-/// Everything the machine is configured with.
-#[derive(Debug, Clone, Default)]
-pub struct MachineSetup {
-    pub machine: MachineConfig,
-    pub estimator: EstimatorConfig,
-    pub controller: ControllerConfig,
-    pub attitude: AttitudeConfig,
-    pub monitor: MonitorConfig,
-    pub body: RigidBody,
-    /// Thrusters at start.
-    pub thrusters: usize,
-    /// Declared geometry at start (positions m, directions), if known.
-    pub geometry: Option<Geometry>,
-}
-
-/// Declared thruster layout.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Geometry {
-    pub positions: Vec<[f64; 3]>,
-    pub directions: Vec<[f64; 3]>,
-}
-
-impl Geometry {
-    pub fn key(&self) -> u64 {
-        geometry_key(&self.positions, &self.directions)
-    }
-}
-
-/// One validated IMU sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ImuInput {
-    pub seq: u64,
-    pub t_ns: u64,
-    pub gyro: [f64; 3],
-    pub accel: [f64; 3],
-    pub mag: Option<[f64; 3]>,
-    pub depth: Option<f64>,
-}
-
-/// Why the thrusters are doing what they do.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Mode {
-    Neutral,
-    Estimating,
-    Controlling,
-}
-
-/// The answer to one IMU sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Command {
-    pub count: usize,
-    pub thrust: [f64; MAX_THRUSTERS],
-    pub mode: Mode,
-}
-
-impl Command {
-    fn neutral(count: usize) -> Self {
-        Command {
-            count,
-            thrust: [0.0; MAX_THRUSTERS],
-            mode: Mode::Neutral,
-        }
-    }
-}
-
-/// Something the IO layer must publish or persist.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Event {
-    /// A new current model (publish it; save it when estimated).
-    ModelSwapped(Box<Model>),
-    /// The current model was dropped (thruster count changed, no geometry): neutral until a
-    /// new one exists.
-    ModelDropped(String),
-    /// A candidate was refused; the old model stays.
-    ModelRejected(String),
-    /// While controlling, the thrusters stopped doing what the model says (see `monitor`).
-    MismatchDetected(String),
-    StateChanged {
-        from: State,
-        to: State,
-        why: String,
-    },
-}
-
-/// An operator request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Request {
-    Estimate,
-    Abort,
-    Hold,
-    Idle,
-    Revert,
-}
-
-/// A request that cannot be carried out now.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{0}")]
-pub struct Refused(pub String);
-
-/// A reconfiguration event, validated.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Reconfig {
-    pub count: usize,
-    pub geometry: Option<Geometry>,
-    pub what: String,
-}
-
-/// An operator's setpoint: the attitude wanted, which of roll, pitch, yaw keep the value held
-/// now instead, and the depth to hold (None: heave free).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SetpointInput {
-    pub attitude: UnitQuaternion<f64>,
-    pub keep: [bool; 3],
-    pub depth: Option<f64>,
-}
-
-/// Status numbers for the status message.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct StatusSnapshot {
-    pub state: State,
-    pub pulse: usize,
-    pub pulses_planned: usize,
-    pub error_bound: f64,
-    pub power: f64,
-    pub sigma_rot: f64,
-    pub sigma_acc: f64,
-    pub samples: u64,
-    pub model_version: u64,
-    pub imu_rate_hz: f64,
-    pub vehicle_time_ns: u64,
-    pub thrusters: usize,
-    pub text: String,
-}
+use crate::attitude::AttitudeFilter;
+use crate::controller::{Controller, Measured, Target};
+use crate::estimator::response::motion_accel;
+use crate::estimator::{Estimate, NoiseLevels, StopDecision};
+use crate::model::{nominal_effectiveness, Model, ModelSource};
+use crate::monitor::{Mismatch, MismatchAction, ModelMonitor};
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
 struct Levelling {
@@ -296,16 +43,9 @@ pub struct Machine {
     controller: Controller,
     monitor: ModelMonitor,
     target: Option<Target>,
-    model: Option<Model>,
-    previous: Option<Model>,
-    versions: u64,
-    cache: HashMap<u64, Model>,
+    models: ModelSlot,
     geometry: Option<Geometry>,
-    noise: NoiseMeter,
-    levels: Option<NoiseLevels>,
-    est: Option<Estimator>,
-    last_estimate: Option<Estimate>,
-    quiet_since_ns: Option<u64>,
+    run: EstimationRun,
     levelling: Option<Levelling>,
     resume: Resume,
     good_samples: u32,
@@ -331,16 +71,9 @@ impl Machine {
             controller: Controller::new(setup.controller.clone()),
             monitor: ModelMonitor::new(setup.monitor.clone(), n),
             target: None,
-            model: None,
-            previous: None,
-            versions: 0,
-            cache: HashMap::new(),
+            models: ModelSlot::default(),
             geometry: None,
-            noise: NoiseMeter::new(),
-            levels: None,
-            est: None,
-            last_estimate: None,
-            quiet_since_ns: None,
+            run: EstimationRun::new(),
             levelling: None,
             resume: Resume::Idle,
             good_samples: 0,
@@ -371,11 +104,11 @@ impl Machine {
     }
 
     pub fn model(&self) -> Option<&Model> {
-        self.model.as_ref()
+        self.models.current()
     }
 
     pub fn last_estimate(&self) -> Option<&Estimate> {
-        self.last_estimate.as_ref()
+        self.run.last_estimate()
     }
 
     /// The desired motion (DOF order) of the last control tick.
@@ -406,7 +139,7 @@ impl Machine {
     /// After an operator's swap (revert, load): status says which model is in force and
     /// where it came from, instead of the words of the run that made the old one.
     fn describe_swap(&mut self, what: &str) -> String {
-        let Some(m) = &self.model else {
+        let Some(m) = self.models.current() else {
             return what.to_string();
         };
         self.text = format!("{what}: model v{}, {}", m.version, m.provenance());
@@ -454,40 +187,15 @@ impl Machine {
             }
             State::MeasureNoise if self.levelling.is_some() => self.level_tick(s, &gyro, dt),
             State::MeasureNoise => {
-                let motion = motion_accel(&accel, &self.attitude.attitude());
-                self.noise.push(&s.gyro, &[motion.x, motion.y, motion.z]);
+                let m = Motion {
+                    gyro,
+                    accel: motion_accel(&accel, &self.attitude.attitude()),
+                };
                 let elapsed = self.elapsed_s(s.t_ns);
-                if elapsed >= self.setup.machine.noise_s && self.noise.samples() >= 10 {
-                    let levels = self.noise.levels();
-                    self.levels = Some(levels);
-                    let mut cfg = self.setup.estimator.clone();
-                    if let Some(p) = self
-                        .model
-                        .as_ref()
-                        .filter(|_| cfg.pulse_snr > 0.0)
-                        .and_then(|m| {
-                            pulse_power(
-                                &m.effectiveness,
-                                self.n,
-                                &levels,
-                                self.setup.machine.pulse_s,
-                                cfg.pulse_snr,
-                                cfg.min_power,
-                                cfg.initial_power,
-                            )
-                        })
-                    {
-                        cfg.initial_power = p;
-                    }
-                    let mut est = Estimator::new(cfg, self.n, levels);
-                    if let Some(nominal) = self
-                        .model
-                        .as_ref()
-                        .filter(|m| m.source == ModelSource::Nominal)
-                    {
-                        est = est.with_nominal(nominal.effectiveness.clone());
-                    }
-                    self.est = Some(est);
+                let ready =
+                    self.run
+                        .measure_noise(&m, elapsed, &self.setup, self.models.current(), self.n);
+                if ready {
                     return self.start_pulse(s.t_ns);
                 }
                 Command::neutral(self.n)
@@ -557,7 +265,7 @@ impl Machine {
                         self.state.name()
                     )));
                 }
-                self.est = None;
+                self.run.stop();
                 self.transition(State::Idle, "estimation aborted: thrusters neutral");
                 Ok("aborted".into())
             }
@@ -565,20 +273,20 @@ impl Machine {
                 if self.state == State::Fault {
                     return Err(Refused("in fault: cannot hold".into()));
                 }
-                if self.model.is_none() {
+                if self.models.current().is_none() {
                     return Err(Refused("no model yet: estimate first".into()));
                 }
                 if self.samples == 0 {
                     return Err(Refused(NO_IMU_YET.into()));
                 }
-                self.est = None;
+                self.run.stop();
                 self.target = None;
                 self.controller.reset();
                 self.transition(State::Active, "holding attitude");
                 Ok("holding".into())
             }
             Request::Idle => {
-                self.est = None;
+                self.run.stop();
                 let t = self.last_t_ns.unwrap_or(0);
                 if self.state == State::Fault {
                     self.resume = Resume::Idle;
@@ -589,7 +297,7 @@ impl Machine {
                 Ok("idle".into())
             }
             Request::Revert => {
-                let Some(prev) = self.previous.take() else {
+                let Some(prev) = self.models.take_previous() else {
                     return Err(Refused("no previous model to revert to".into()));
                 };
                 let source = prev.source;
@@ -640,12 +348,12 @@ impl Machine {
         let t = self.last_t_ns.unwrap_or(0);
         let mut estimate = self.setup.machine.on_reconfig == ReconfigPolicy::Estimate;
         if self.state.is_estimating() {
-            self.est = None;
+            self.run.stop();
         }
         match self.geometry.clone() {
             Some(g) => {
                 let key = g.key();
-                if let Some(cached) = self.cache.get(&key).cloned() {
+                if let Some(cached) = self.models.cached(key) {
                     // Seen before: its learned model is back at once, no pulses needed.
                     if self.try_swap(cached, ModelSource::Cache).is_ok() {
                         estimate = false;
@@ -659,9 +367,7 @@ impl Machine {
             }
             None => {
                 if count_changed {
-                    if let Some(old) = self.model.take() {
-                        self.previous = Some(old);
-                    }
+                    self.models.drop_current();
                     self.events.push(Event::ModelDropped(format!(
                         "{}: now {count} thrusters and no declared geometry",
                         r.what
@@ -671,7 +377,7 @@ impl Machine {
         }
         if estimate {
             self.start_estimation(t, &format!("{}: re-estimating", r.what));
-        } else if self.model.is_some() && self.state != State::Fault {
+        } else if self.models.current().is_some() && self.state != State::Fault {
             if self.state.is_estimating() || self.state == State::Active {
                 self.transition(State::Active, &format!("{}: model swapped", r.what));
             }
@@ -684,28 +390,29 @@ impl Machine {
     }
 
     pub fn status(&self) -> StatusSnapshot {
-        let (pulse, planned, power) = match (&self.est, &self.last_estimate) {
-            (Some(e), _) => (e.pulses(), e.planned_pulses(), e.power()),
+        let (pulse, planned, power) = match self.run.estimator() {
+            Some(e) => (e.pulses(), e.planned_pulses(), e.power()),
             // Not estimating: how many pulses the model in force took (0 for a nominal
             // one), not the last run's, which may have been refused or reverted.
-            (None, _) => {
-                let p = self.model.as_ref().map_or(0, |m| m.pulses);
+            None => {
+                let p = self.models.current().map_or(0, |m| m.pulses);
                 (p, p, 0.0)
             }
         };
         // Likewise the bound: the running estimate's, else the model in force's (NaN when it
         // has none: nominal, or the paper's method).
-        let error_bound = match (&self.est, &self.model) {
+        let error_bound = match (self.run.estimator(), self.models.current()) {
             (Some(_), _) => self
-                .last_estimate
-                .as_ref()
+                .run
+                .last_estimate()
                 .map(|e| e.rel_err_rot.max(e.rel_err_acc))
                 .unwrap_or(f64::NAN),
             (None, Some(m)) => m.rel_err_rot.max(m.rel_err_acc),
             (None, None) => f64::NAN,
         };
         let levels = self
-            .levels
+            .run
+            .levels()
             .unwrap_or(NoiseLevels::isotropic(f64::NAN, f64::NAN));
         StatusSnapshot {
             state: self.state,
@@ -716,7 +423,7 @@ impl Machine {
             sigma_rot: levels.sigma_rot(),
             sigma_acc: levels.sigma_acc(),
             samples: self.samples,
-            model_version: self.model.as_ref().map(|m| m.version).unwrap_or(0),
+            model_version: self.models.current().map(|m| m.version).unwrap_or(0),
             imu_rate_hz: self.imu_rate_hz,
             vehicle_time_ns: self.last_t_ns.unwrap_or(0),
             thrusters: self.n,
@@ -760,7 +467,7 @@ impl Machine {
             State::Fault => self.resume,
             _ => Resume::Idle,
         };
-        self.est = None;
+        self.run.stop();
         self.good_samples = 0;
         self.controller.reset();
         self.transition(State::Fault, &format!("fault: {why}; thrusters neutral"));
@@ -773,7 +480,7 @@ impl Machine {
             Resume::Estimate => {
                 self.start_estimation(t_ns, "IMU back: restarting the interrupted estimation")
             }
-            Resume::Active if self.model.is_some() => {
+            Resume::Active if self.models.current().is_some() => {
                 self.target = None;
                 self.transition(State::Active, "IMU back: holding attitude again")
             }
@@ -782,13 +489,12 @@ impl Machine {
     }
 
     fn start_estimation(&mut self, t_ns: u64, why: &str) {
-        self.noise = NoiseMeter::new();
-        self.est = None;
+        self.run.restart();
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
         // Controlling with a model: level the vehicle first (see MachineConfig::level_max_s).
         // A reconfiguration while levelling levels on (the vehicle is no more at rest).
         self.levelling = ((self.state == State::Active || self.levelling.is_some())
-            && self.model.is_some()
+            && self.models.current().is_some()
             && self.setup.machine.level_max_s > 0.0)
             .then(|| Levelling {
                 target: Target {
@@ -816,7 +522,7 @@ impl Machine {
     fn level_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
         let elapsed = self.elapsed_s(s.t_ns);
         let meas = self.measured(s, gyro);
-        let (Some(model), Some(lev)) = (self.model.as_ref(), self.levelling.as_mut()) else {
+        let (Some(model), Some(lev)) = (self.models.current(), self.levelling.as_mut()) else {
             self.levelling = None;
             return Command::neutral(self.n);
         };
@@ -856,12 +562,7 @@ impl Machine {
     fn start_pulse(&mut self, t_ns: u64) -> Command {
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Estimating;
-        if let Some(est) = self.est.as_mut() {
-            let u = est.begin_pulse_at(t_ns as f64 * 1e-9);
-            for (o, v) in cmd.thrust.iter_mut().zip(u) {
-                *o = *v;
-            }
-            let k = est.pulses() + 1;
+        if let Some(k) = self.run.begin_pulse(t_ns, &mut cmd.thrust) {
             self.phase_start_ns = t_ns;
             let from = self.state;
             self.state = State::Pulse;
@@ -880,64 +581,43 @@ impl Machine {
 
     fn pulse_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, accel: &Vector3<f64>) -> Command {
         let elapsed = self.elapsed_s(s.t_ns);
-        let motion = motion_accel(accel, &self.attitude.attitude());
-        let (Some(est), Some(levels)) = (self.est.as_mut(), self.levels) else {
-            self.transition(State::Idle, "internal: pulse without an estimator");
-            return Command::neutral(self.n);
+        let m = Motion {
+            gyro: *gyro,
+            accel: motion_accel(accel, &self.attitude.attitude()),
         };
-        let gyro_d = levels.gyro_delta(&[gyro.x, gyro.y, gyro.z]);
-        let acc_d = levels.accel_delta(&[motion.x, motion.y, motion.z]);
-        est.push_pulse_sample(elapsed, &gyro_d, &acc_d);
-        if elapsed < self.setup.machine.pulse_s {
-            let mut cmd = Command::neutral(self.n);
-            cmd.mode = Mode::Estimating;
-            if let Some(u) = est.current_command() {
-                for (o, v) in cmd.thrust.iter_mut().zip(u) {
-                    *o = *v;
-                }
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Estimating;
+        let step = self
+            .run
+            .pulse_sample(elapsed, &m, self.setup.machine.pulse_s, &mut cmd.thrust);
+        match step {
+            PulseStep::NoRun => {
+                self.transition(State::Idle, "internal: pulse without an estimator");
             }
-            finish(&mut cmd, self.setup.machine.deadband);
-            return cmd;
-        }
-        est.end_pulse();
-        let decision = est.stop_decision();
-        self.last_estimate = Some(est.estimate());
-        if decision.is_stop() {
-            self.solve(decision);
-        } else {
-            self.quiet_since_ns = None;
-            self.state = State::Settle;
-            self.phase_start_ns = s.t_ns;
-            self.text = format!("settling after pulse {}", est.pulses());
+            PulseStep::Pulsing => {
+                finish(&mut cmd, self.setup.machine.deadband);
+                return cmd;
+            }
+            PulseStep::Ended { decision, .. } if decision.is_stop() => self.solve(decision),
+            PulseStep::Ended { pulses, .. } => {
+                self.state = State::Settle;
+                self.phase_start_ns = s.t_ns;
+                self.text = format!("settling after pulse {pulses}");
+            }
         }
         Command::neutral(self.n)
     }
 
     fn settle_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, accel: &Vector3<f64>) -> Command {
         let elapsed = self.elapsed_s(s.t_ns);
-        let Some(levels) = self.levels else {
-            return Command::neutral(self.n);
+        let m = Motion {
+            gyro: *gyro,
+            accel: motion_accel(accel, &self.attitude.attitude()),
         };
         let k = self.setup.estimator.k_sigma;
-        let d = levels.gyro_delta(&[gyro.x, gyro.y, gyro.z]);
-        let motion = motion_accel(accel, &self.attitude.attitude());
-        if let Some(est) = self.est.as_mut() {
-            est.push_rest_sample(
-                s.t_ns as f64 * 1e-9,
-                &d,
-                &levels.accel_delta(&[motion.x, motion.y, motion.z]),
-            );
-        }
-        let quiet = (0..3).all(|a| d[a].abs() <= k * levels.gyro_sigma[a].max(1e-6));
-        if quiet {
-            self.quiet_since_ns.get_or_insert(s.t_ns);
-        } else {
-            self.quiet_since_ns = None;
-        }
-        let quiet_for = self
-            .quiet_since_ns
-            .map(|q| (s.t_ns - q) as f64 * 1e-9)
-            .unwrap_or(0.0);
+        let Some(quiet_for) = self.run.settle_sample(s.t_ns, &m, k) else {
+            return Command::neutral(self.n);
+        };
         let m = &self.setup.machine;
         if (elapsed >= m.settle_min_s && quiet_for >= m.settle_quiet_s) || elapsed >= m.settle_max_s
         {
@@ -948,24 +628,22 @@ impl Machine {
 
     fn solve(&mut self, decision: StopDecision) {
         self.state = State::Solve;
-        let Some(est) = self.est.take() else { return };
-        let estimate = est.estimate();
         let key = self.geometry.as_ref().map(|g| g.key());
-        let candidate = Model::from_estimate(&estimate, key, self.last_t_ns.unwrap_or(0));
-        self.last_estimate = Some(estimate);
+        let Some((candidate, pulses)) = self.run.conclude(key, self.last_t_ns.unwrap_or(0)) else {
+            return;
+        };
         let why = match decision {
             StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
-                "converged after {} pulses (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})",
-                est.pulses()
+                "converged after {pulses} pulses (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
             ),
-            StopDecision::PlanComplete => format!("planned {} pulses done", est.pulses()),
-            StopDecision::MaxPulses => format!("pulse limit {} reached", est.pulses()),
+            StopDecision::PlanComplete => format!("planned {pulses} pulses done"),
+            StopDecision::MaxPulses => format!("pulse limit {pulses} reached"),
             StopDecision::Continue => "stopped".into(),
         };
         match self.try_swap(candidate, ModelSource::Estimated) {
             Ok(()) => {
-                if let (Some(k), Some(m)) = (key, self.model.clone()) {
-                    self.cache.insert(k, m);
+                if let Some(k) = key {
+                    self.models.remember_current(k);
                 }
                 if self.setup.machine.control_after_estimate {
                     self.target = None;
@@ -979,7 +657,9 @@ impl Machine {
                 }
             }
             Err(e) => {
-                let next = if self.model.is_some() && self.setup.machine.control_after_estimate {
+                let next = if self.models.current().is_some()
+                    && self.setup.machine.control_after_estimate
+                {
                     State::Active
                 } else {
                     State::Idle
@@ -992,25 +672,27 @@ impl Machine {
         }
     }
 
-    /// Validate and install a model between two ticks.
+    /// Validate and install a model between two ticks: the monitor judges the new one on fresh
+    /// data only.
     fn try_swap(
         &mut self,
-        mut model: Model,
+        model: Model,
         source: ModelSource,
     ) -> Result<(), crate::model::SwapRejection> {
-        if let Err(e) = model.check(self.n, self.setup.machine.max_swap_rel_err) {
-            self.events.push(Event::ModelRejected(e.to_string()));
-            return Err(e);
+        match self
+            .models
+            .swap(model, source, self.n, self.setup.machine.max_swap_rel_err)
+        {
+            Ok(installed) => {
+                self.monitor.reset(self.n);
+                self.events.push(Event::ModelSwapped(Box::new(installed)));
+                Ok(())
+            }
+            Err(e) => {
+                self.events.push(Event::ModelRejected(e.to_string()));
+                Err(e)
+            }
         }
-        self.versions += 1;
-        model.version = self.versions;
-        self.monitor.reset(self.n);
-        model.source = source;
-        if let Some(old) = self.model.replace(model.clone()) {
-            self.previous = Some(old);
-        }
-        self.events.push(Event::ModelSwapped(Box::new(model)));
-        Ok(())
     }
 
     /// What the controller sees of this sample: filtered attitude, bias-free rate, depth.
@@ -1023,7 +705,7 @@ impl Machine {
     }
 
     fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
-        let Some(model) = self.model.as_ref() else {
+        let Some(model) = self.models.current() else {
             return Command::neutral(self.n);
         };
         let meas = self.measured(s, gyro);
@@ -1070,28 +752,5 @@ impl Machine {
                 self.text = format!("holding attitude; {why}");
             }
         }
-    }
-}
-
-/// Last line of defence: nothing non-finite or out of range leaves the machine; then the
-/// deadband compensation (which maps [-1, 1] onto itself).
-fn finish(cmd: &mut Command, deadband: f64) {
-    let db = if deadband.is_finite() {
-        deadband.clamp(0.0, 0.5)
-    } else {
-        0.0
-    };
-    for (i, v) in cmd.thrust.iter_mut().enumerate() {
-        let u = if i < cmd.count && v.is_finite() {
-            v.clamp(-1.0, 1.0)
-        } else {
-            0.0
-        };
-        // Commands this small are numerical dust: send true neutral, not the deadband edge.
-        *v = if u.abs() < 1e-6 {
-            0.0
-        } else {
-            u.signum() * (db + (1.0 - db) * u.abs())
-        };
     }
 }

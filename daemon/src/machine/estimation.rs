@@ -1,0 +1,195 @@
+//! One estimation run, as the machine drives it: the noise at rest, then the pulses and the
+//! pauses between them, then the candidate model. It owns the noise meter, the noise levels,
+//! the estimator and the last estimate; the machine owns the states and when they change.
+
+use nalgebra::Vector3;
+use thruster_protocol::MAX_THRUSTERS;
+
+use super::config::MachineSetup;
+use crate::estimator::power::pulse_power;
+use crate::estimator::{Estimate, Estimator, NoiseLevels, NoiseMeter, StopDecision};
+use crate::model::{Model, ModelSource};
+
+/// One IMU sample as the run uses it: the body rate and the gravity-compensated acceleration.
+pub(super) struct Motion {
+    pub(super) gyro: Vector3<f64>,
+    pub(super) accel: Vector3<f64>,
+}
+
+/// What one sample during a pulse led to.
+pub(super) enum PulseStep {
+    /// No estimator or no noise levels: there is no run to pulse.
+    NoRun,
+    /// The pulse goes on (its thrust was written).
+    Pulsing,
+    /// The pulse ended; the decision says whether the run stops now.
+    Ended {
+        decision: StopDecision,
+        pulses: usize,
+    },
+}
+
+pub(super) struct EstimationRun {
+    noise: NoiseMeter,
+    levels: Option<NoiseLevels>,
+    est: Option<Estimator>,
+    last_estimate: Option<Estimate>,
+    quiet_since_ns: Option<u64>,
+}
+
+impl EstimationRun {
+    pub(super) fn new() -> Self {
+        EstimationRun {
+            noise: NoiseMeter::new(),
+            levels: None,
+            est: None,
+            last_estimate: None,
+            quiet_since_ns: None,
+        }
+    }
+
+    /// A new run begins: the noise is measured afresh.
+    pub(super) fn restart(&mut self) {
+        self.noise = NoiseMeter::new();
+        self.est = None;
+    }
+
+    /// The run ends without a candidate (abort, fault, idle, hold, reconfiguration).
+    pub(super) fn stop(&mut self) {
+        self.est = None;
+    }
+
+    /// The estimator of the run under way.
+    pub(super) fn estimator(&self) -> Option<&Estimator> {
+        self.est.as_ref()
+    }
+
+    pub(super) fn last_estimate(&self) -> Option<&Estimate> {
+        self.last_estimate.as_ref()
+    }
+
+    /// The last noise levels measured.
+    pub(super) fn levels(&self) -> Option<NoiseLevels> {
+        self.levels
+    }
+
+    /// One sample at rest, `elapsed_s` into the noise measurement. Once it is long enough, the
+    /// levels are kept and the estimator is built, its first power sized to the noise with the
+    /// model in force: then true (pulse now).
+    pub(super) fn measure_noise(
+        &mut self,
+        m: &Motion,
+        elapsed_s: f64,
+        setup: &MachineSetup,
+        model: Option<&Model>,
+        n: usize,
+    ) -> bool {
+        self.noise.push(&m.gyro.into(), &m.accel.into());
+        if !(elapsed_s >= setup.machine.noise_s && self.noise.samples() >= 10) {
+            return false;
+        }
+        let levels = self.noise.levels();
+        self.levels = Some(levels);
+        let mut cfg = setup.estimator.clone();
+        if let Some(p) = model.filter(|_| cfg.pulse_snr > 0.0).and_then(|m| {
+            pulse_power(
+                &m.effectiveness,
+                n,
+                &levels,
+                setup.machine.pulse_s,
+                cfg.pulse_snr,
+                cfg.min_power,
+                cfg.initial_power,
+            )
+        }) {
+            cfg.initial_power = p;
+        }
+        let mut est = Estimator::new(cfg, n, levels);
+        if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
+            est = est.with_nominal(nominal.effectiveness.clone());
+        }
+        self.est = Some(est);
+        true
+    }
+
+    /// Begin the next pulse at `t_ns`, its thrust written into `thrust`: the pulse's number
+    /// (None without an estimator).
+    pub(super) fn begin_pulse(
+        &mut self,
+        t_ns: u64,
+        thrust: &mut [f64; MAX_THRUSTERS],
+    ) -> Option<usize> {
+        let est = self.est.as_mut()?;
+        let u = est.begin_pulse_at(t_ns as f64 * 1e-9);
+        for (o, v) in thrust.iter_mut().zip(u) {
+            *o = *v;
+        }
+        Some(est.pulses() + 1)
+    }
+
+    /// One sample `elapsed_s` into a pulse. While the pulse lasts its thrust is written into
+    /// `thrust`; at its end the estimate is updated.
+    pub(super) fn pulse_sample(
+        &mut self,
+        elapsed_s: f64,
+        m: &Motion,
+        pulse_s: f64,
+        thrust: &mut [f64; MAX_THRUSTERS],
+    ) -> PulseStep {
+        let (Some(est), Some(levels)) = (self.est.as_mut(), self.levels) else {
+            return PulseStep::NoRun;
+        };
+        let gyro_d = levels.gyro_delta(&m.gyro.into());
+        let acc_d = levels.accel_delta(&m.accel.into());
+        est.push_pulse_sample(elapsed_s, &gyro_d, &acc_d);
+        if elapsed_s < pulse_s {
+            if let Some(u) = est.current_command() {
+                for (o, v) in thrust.iter_mut().zip(u) {
+                    *o = *v;
+                }
+            }
+            return PulseStep::Pulsing;
+        }
+        est.end_pulse();
+        let decision = est.stop_decision();
+        self.last_estimate = Some(est.estimate());
+        if !decision.is_stop() {
+            self.quiet_since_ns = None;
+        }
+        PulseStep::Ended {
+            decision,
+            pulses: est.pulses(),
+        }
+    }
+
+    /// One sample of the pause after a pulse: fed to the estimator as rest. How long every
+    /// gyro axis has stayed within k sigma of rest, s (None without noise levels).
+    pub(super) fn settle_sample(&mut self, t_ns: u64, m: &Motion, k_sigma: f64) -> Option<f64> {
+        let levels = self.levels?;
+        let d = levels.gyro_delta(&m.gyro.into());
+        if let Some(est) = self.est.as_mut() {
+            est.push_rest_sample(t_ns as f64 * 1e-9, &d, &levels.accel_delta(&m.accel.into()));
+        }
+        let quiet = (0..3).all(|a| d[a].abs() <= k_sigma * levels.gyro_sigma[a].max(1e-6));
+        if quiet {
+            self.quiet_since_ns.get_or_insert(t_ns);
+        } else {
+            self.quiet_since_ns = None;
+        }
+        Some(
+            self.quiet_since_ns
+                .map(|q| (t_ns - q) as f64 * 1e-9)
+                .unwrap_or(0.0),
+        )
+    }
+
+    /// The run ends with its estimate: the candidate model (for the geometry `key`, made at
+    /// `t_ns`) and how many pulses it took. None when no run was under way.
+    pub(super) fn conclude(&mut self, key: Option<u64>, t_ns: u64) -> Option<(Model, usize)> {
+        let est = self.est.take()?;
+        let estimate = est.estimate();
+        let candidate = Model::from_estimate(&estimate, key, t_ns);
+        self.last_estimate = Some(estimate);
+        Some((candidate, est.pulses()))
+    }
+}

@@ -1,0 +1,26 @@
+//! The daemon's state machine: Idle -> MeasureNoise -> Pulse -> Settle -> ... -> Solve ->
+//! Active, plus Fault. Pure: IMU samples (with their own timestamps), operator requests,
+//! setpoints and reconfiguration events in; a thrust command for every sample, model swaps and
+//! status out. Time comes only from sample timestamps, so real time and a faster-than-real-time
+//! simulator run the same code.
+//!
+//! One file per part, split by the state each part owns (imports point one way, down this
+//! list):
+//! - `types`: what goes in and out (states, inputs, the command, events, status);
+//! - `config`: the machine's settings and setup;
+//! - `models`: the model slot (the model in force, the previous one, the per-geometry cache);
+//! - `estimation`: one estimation run (noise at rest, pulses and pauses, the candidate);
+//! - `state_machine`: the machine itself (routing, state changes, faults, levelling, control).
+
+mod config;
+mod estimation;
+mod models;
+mod state_machine;
+mod types;
+
+pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
+pub use state_machine::Machine;
+pub use types::{
+    Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput, State,
+    StatusSnapshot, NO_IMU_YET,
+};

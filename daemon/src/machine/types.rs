@@ -1,0 +1,188 @@
+//! What goes in and out of the machine: states, inputs (IMU samples, requests, setpoints,
+//! reconfigurations), the thrust command, events and the status numbers.
+
+use nalgebra::UnitQuaternion;
+use serde::Serialize;
+use thruster_protocol::MAX_THRUSTERS;
+
+use crate::model::{geometry_key, Model};
+
+/// Why estimation and control are refused before the first IMU sample: the vehicle cannot be
+/// measured, and a run started now would wait at "measuring noise" forever.
+pub const NO_IMU_YET: &str =
+    "no IMU samples from any driver yet: is thruster-sim or thruster-hw running on this namespace?";
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum State {
+    Idle,
+    MeasureNoise,
+    Pulse,
+    Settle,
+    Solve,
+    Active,
+    Fault,
+}
+
+impl State {
+    pub fn name(self) -> &'static str {
+        match self {
+            State::Idle => "idle",
+            State::MeasureNoise => "measure_noise",
+            State::Pulse => "pulse",
+            State::Settle => "settle",
+            State::Solve => "solve",
+            State::Active => "active",
+            State::Fault => "fault",
+        }
+    }
+
+    pub fn is_estimating(self) -> bool {
+        matches!(
+            self,
+            State::MeasureNoise | State::Pulse | State::Settle | State::Solve
+        )
+    }
+}
+
+/// Declared thruster layout.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Geometry {
+    pub positions: Vec<[f64; 3]>,
+    pub directions: Vec<[f64; 3]>,
+}
+
+impl Geometry {
+    pub fn key(&self) -> u64 {
+        geometry_key(&self.positions, &self.directions)
+    }
+}
+
+/// One validated IMU sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuInput {
+    pub seq: u64,
+    pub t_ns: u64,
+    pub gyro: [f64; 3],
+    pub accel: [f64; 3],
+    pub mag: Option<[f64; 3]>,
+    pub depth: Option<f64>,
+}
+
+/// Why the thrusters are doing what they do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    Neutral,
+    Estimating,
+    Controlling,
+}
+
+/// The answer to one IMU sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command {
+    pub count: usize,
+    pub thrust: [f64; MAX_THRUSTERS],
+    pub mode: Mode,
+}
+
+impl Command {
+    pub(super) fn neutral(count: usize) -> Self {
+        Command {
+            count,
+            thrust: [0.0; MAX_THRUSTERS],
+            mode: Mode::Neutral,
+        }
+    }
+}
+
+/// Something the IO layer must publish or persist.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A new current model (publish it; save it when estimated).
+    ModelSwapped(Box<Model>),
+    /// The current model was dropped (thruster count changed, no geometry): neutral until a
+    /// new one exists.
+    ModelDropped(String),
+    /// A candidate was refused; the old model stays.
+    ModelRejected(String),
+    /// While controlling, the thrusters stopped doing what the model says (see `monitor`).
+    MismatchDetected(String),
+    StateChanged {
+        from: State,
+        to: State,
+        why: String,
+    },
+}
+
+/// An operator request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Request {
+    Estimate,
+    Abort,
+    Hold,
+    Idle,
+    Revert,
+}
+
+/// A request that cannot be carried out now.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct Refused(pub String);
+
+/// A reconfiguration event, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reconfig {
+    pub count: usize,
+    pub geometry: Option<Geometry>,
+    pub what: String,
+}
+
+/// An operator's setpoint: the attitude wanted, which of roll, pitch, yaw keep the value held
+/// now instead, and the depth to hold (None: heave free).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SetpointInput {
+    pub attitude: UnitQuaternion<f64>,
+    pub keep: [bool; 3],
+    pub depth: Option<f64>,
+}
+
+/// Status numbers for the status message.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StatusSnapshot {
+    pub state: State,
+    pub pulse: usize,
+    pub pulses_planned: usize,
+    pub error_bound: f64,
+    pub power: f64,
+    pub sigma_rot: f64,
+    pub sigma_acc: f64,
+    pub samples: u64,
+    pub model_version: u64,
+    pub imu_rate_hz: f64,
+    pub vehicle_time_ns: u64,
+    pub thrusters: usize,
+    pub text: String,
+}
+
+/// Last line of defence: nothing non-finite or out of range leaves the machine; then the
+/// deadband compensation (which maps [-1, 1] onto itself).
+pub(super) fn finish(cmd: &mut Command, deadband: f64) {
+    let db = if deadband.is_finite() {
+        deadband.clamp(0.0, 0.5)
+    } else {
+        0.0
+    };
+    for (i, v) in cmd.thrust.iter_mut().enumerate() {
+        let u = if i < cmd.count && v.is_finite() {
+            v.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        // Commands this small are numerical dust: send true neutral, not the deadband edge.
+        *v = if u.abs() < 1e-6 {
+            0.0
+        } else {
+            u.signum() * (db + (1.0 - db) * u.abs())
+        };
+    }
+}
