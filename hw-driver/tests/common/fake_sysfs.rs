@@ -104,6 +104,12 @@ impl FakeSysfs {
         self.log.lock().unwrap().clone()
     }
 
+    /// Forgets the writes seen so far (a test's own set-up writes, e.g. [`Self::pre_export`],
+    /// which the watcher may or may not have seen depending on when it added its watch).
+    pub fn clear_writes(&self) {
+        self.log.lock().unwrap().clear();
+    }
+
     /// The pulse a channel outputs now, us (None before it is enabled).
     pub fn pulse_us(&self, channel: u32) -> Option<u16> {
         let d = self.chip().join(format!("pwm{channel}"));
