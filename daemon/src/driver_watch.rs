@@ -24,7 +24,16 @@ pub struct DriverWatch {
     last: Option<DriverStatusMsg>,
     /// Rejections counted by the driver at the report before the last one.
     rejected_before: Option<u64>,
+    /// Reports in a row that counted new rejections.
+    rejecting: u32,
 }
+
+/// Reports in a row with new rejections that make the outputs unusable. One burst is not
+/// enough: when a driver announces a new thruster count, the commands already on their way
+/// carry the old one and are rightly refused until the daemon has read the announcement. A
+/// driver that keeps refusing (it reports at once on every change) crosses this within a
+/// few samples.
+const REJECTING_REPORTS: u32 = 2;
 
 impl DriverWatch {
     pub fn new() -> Self {
@@ -39,9 +48,9 @@ impl DriverWatch {
     /// Takes a validated report and judges it for a daemon driving `thrusters` thrusters.
     ///
     /// Blocked when the driver is configured for another count (it rejects every command),
-    /// when it rejected commands since its previous report, when the output device is
-    /// disarmed, or when its link is down. A rejection clears with the first report that
-    /// counts no new one.
+    /// when it rejected commands in [`REJECTING_REPORTS`] reports in a row, when the output
+    /// device is disarmed, or when its link is down. Rejections clear with the first report
+    /// that counts no new one.
     pub fn observe(&mut self, report: &DriverStatusMsg, thrusters: usize) -> OutputVerdict {
         // A restarted driver counts from zero again: compare only within one run.
         let rejected_before = match &self.last {
@@ -49,6 +58,13 @@ impl DriverWatch {
                 Some(prev.commands_rejected)
             }
             _ => None,
+        };
+        let new_rejections =
+            rejected_before.is_some_and(|before| report.commands_rejected > before);
+        self.rejecting = if new_rejections {
+            self.rejecting.saturating_add(1)
+        } else {
+            0
         };
         self.rejected_before = rejected_before;
         self.last = Some(*report);
@@ -74,7 +90,10 @@ impl DriverWatch {
                 r.thruster_count
             ));
         }
-        if let Some(before) = self.rejected_before {
+        if let Some(before) = self
+            .rejected_before
+            .filter(|_| self.rejecting >= REJECTING_REPORTS)
+        {
             let new = r.commands_rejected.saturating_sub(before);
             if new > 0 {
                 let why = r.text();
@@ -165,7 +184,13 @@ mod tests {
             w.observe(&report(5, OutputState::Active, 100, 7), 5),
             OutputVerdict::Usable
         );
-        let mut r = report(5, OutputState::Neutral, 100, 9);
+        // One burst (commands in flight while the driver changed its count) is tolerated...
+        assert_eq!(
+            w.observe(&report(5, OutputState::Active, 100, 8), 5),
+            OutputVerdict::Usable
+        );
+        // ...a driver that goes on refusing is not.
+        let mut r = report(5, OutputState::Neutral, 100, 10);
         r.text.set("count = 4 does not match 5");
         let OutputVerdict::Blocked(why) = w.observe(&r, 5) else {
             panic!("rejections not seen");
