@@ -157,8 +157,11 @@ struct Daemon {
     stale_reported: bool,
     /// The driver's own reports on its outputs (count, rejections, armed, link).
     driver: DriverWatch,
-    /// Driver reports that failed validation are counted with the other rejections.
+    /// The verdict the machine was last given on the driver's outputs.
     driver_verdict: OutputVerdict,
+    /// The thruster count the latest report was judged for; `None` when a new report came.
+    /// Judging again only then keeps the per-round work (and its text) off the hot path.
+    driver_judged_for: Option<usize>,
 }
 
 impl Daemon {
@@ -210,6 +213,7 @@ impl Daemon {
             stale_reported: false,
             driver: DriverWatch::new(),
             driver_verdict: OutputVerdict::Usable,
+            driver_judged_for: None,
         })
     }
 
@@ -356,6 +360,7 @@ impl Daemon {
                 match report.validate() {
                     Ok(()) => {
                         self.driver.observe(&report, self.machine.thrusters());
+                        self.driver_judged_for = None;
                     }
                     Err(reason) => {
                         self.rejected.record(&reason);
@@ -363,8 +368,12 @@ impl Daemon {
                     }
                 }
             }
-            // Judged every round: a reconfiguration changes the count the driver must match.
-            self.judge_outputs();
+            // Judged on a new report, and when a reconfiguration changed the count the
+            // driver must match.
+            if self.driver_judged_for != Some(self.machine.thrusters()) {
+                self.judge_outputs();
+                self.driver_judged_for = Some(self.machine.thrusters());
+            }
             if setp {
                 setpoint_in.drain_events()?;
                 while let Some(s) = setpoint_in.recv()? {
