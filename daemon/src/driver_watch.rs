@@ -22,8 +22,8 @@ pub enum OutputVerdict {
 #[derive(Debug, Default, Clone)]
 pub struct DriverWatch {
     last: Option<DriverStatusMsg>,
-    /// Rejections counted by the driver at the report before the last one.
-    rejected_before: Option<u64>,
+    /// Rejections the latest report counted since the one before it.
+    new_rejections: u64,
     /// Reports in a row that counted new rejections.
     rejecting: u32,
 }
@@ -40,11 +40,6 @@ impl DriverWatch {
         Self::default()
     }
 
-    /// The latest report, if any driver published one.
-    pub fn last(&self) -> Option<&DriverStatusMsg> {
-        self.last.as_ref()
-    }
-
     /// Takes a validated report and judges it for a daemon driving `thrusters` thrusters.
     ///
     /// Blocked when the driver is configured for another count (it rejects every command),
@@ -52,21 +47,19 @@ impl DriverWatch {
     /// device is disarmed, or when its link is down. Rejections clear with the first report
     /// that counts no new one.
     pub fn observe(&mut self, report: &DriverStatusMsg, thrusters: usize) -> OutputVerdict {
-        // A restarted driver counts from zero again: compare only within one run.
-        let rejected_before = match &self.last {
-            Some(prev) if report.commands_rejected >= prev.commands_rejected => {
-                Some(prev.commands_rejected)
-            }
-            _ => None,
-        };
-        let new_rejections =
-            rejected_before.is_some_and(|before| report.commands_rejected > before);
-        self.rejecting = if new_rejections {
+        // A restarted driver counts from zero again (a smaller count): compare only within
+        // one run; rejections from before this daemon looked are history.
+        self.new_rejections = self.last.map_or(0, |prev| {
+            report
+                .commands_rejected
+                .checked_sub(prev.commands_rejected)
+                .unwrap_or(0)
+        });
+        self.rejecting = if self.new_rejections > 0 {
             self.rejecting.saturating_add(1)
         } else {
             0
         };
-        self.rejected_before = rejected_before;
         self.last = Some(*report);
         self.verdict(thrusters)
     }
@@ -90,37 +83,24 @@ impl DriverWatch {
                 r.thruster_count
             ));
         }
-        if let Some(before) = self
-            .rejected_before
-            .filter(|_| self.rejecting >= REJECTING_REPORTS)
-        {
-            let new = r.commands_rejected.saturating_sub(before);
-            if new > 0 {
-                let why = r.text();
-                let why = if why.is_empty() {
-                    String::new()
-                } else {
-                    format!(" ({why})")
-                };
-                return OutputVerdict::Blocked(format!(
-                    "{driver} rejected {new} of the daemon's commands{why}"
-                ));
-            }
+        // The driver's own words, when it gave any.
+        let detail = if r.text().is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", r.text())
+        };
+        if self.rejecting >= REJECTING_REPORTS {
+            return OutputVerdict::Blocked(format!(
+                "{driver} rejected {} of the daemon's commands{detail}",
+                self.new_rejections
+            ));
         }
         match r.output_state() {
             Ok(OutputState::Disarmed) => OutputVerdict::Blocked(format!(
                 "{driver}: outputs disarmed, thrust does not reach the water (arm the vehicle)"
             )),
             Ok(OutputState::LinkDown) => {
-                let why = r.text();
-                OutputVerdict::Blocked(format!(
-                    "{driver}: no link to the outputs{}",
-                    if why.is_empty() {
-                        String::new()
-                    } else {
-                        format!(" ({why})")
-                    }
-                ))
+                OutputVerdict::Blocked(format!("{driver}: no link to the outputs{detail}"))
             }
             // Validated reports carry known states only; an unknown state is not a reason to
             // stop a vehicle that works.
@@ -198,7 +178,7 @@ mod tests {
         assert!(why.contains("rejected 2 of the daemon's commands"), "{why}");
         assert!(why.contains("count = 4 does not match 5"), "{why}");
         assert_eq!(
-            w.observe(&report(5, OutputState::Active, 150, 9), 5),
+            w.observe(&report(5, OutputState::Active, 150, 10), 5),
             OutputVerdict::Usable
         );
         // A restarted driver counts from zero: not a rejection.

@@ -86,7 +86,8 @@ pub struct Command {
 }
 
 impl Command {
-    pub(super) fn neutral(count: usize) -> Self {
+    /// Every thruster at zero, for `count` thrusters.
+    pub fn neutral(count: usize) -> Self {
         Command {
             count,
             thrust: [0.0; MAX_THRUSTERS],

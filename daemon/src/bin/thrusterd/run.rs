@@ -454,11 +454,7 @@ impl Daemon {
 
         info!("shutting down: thrusters neutral");
         systemd.stopping();
-        let neutral = Command {
-            count: self.machine.thrusters(),
-            thrust: [0.0; MAX_THRUSTERS],
-            mode: thrusterd::machine::Mode::Neutral,
-        };
+        let neutral = Command::neutral(self.machine.thrusters());
         self.send_thrust(&thrust_out, &neutral);
         self.handle_events(&model_out);
         if let Some(model) = self.machine.model().cloned() {
@@ -539,11 +535,7 @@ impl Daemon {
                 }
                 // Still answer, with neutral: a driver in lockstep waits for every answer, and
                 // a garbage sample must never keep a pulse running.
-                let neutral = Command {
-                    count: self.machine.thrusters(),
-                    thrust: [0.0; MAX_THRUSTERS],
-                    mode: thrusterd::machine::Mode::Neutral,
-                };
+                let neutral = Command::neutral(self.machine.thrusters());
                 let mut msg =
                     wire::thrust_command(self.thrust_seq, sample.seq, sample.t_ns, &neutral);
                 self.thrust_seq += 1;
