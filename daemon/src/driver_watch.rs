@@ -52,8 +52,7 @@ impl DriverWatch {
         self.new_rejections = self.last.map_or(0, |prev| {
             report
                 .commands_rejected
-                .checked_sub(prev.commands_rejected)
-                .unwrap_or(0)
+                .saturating_sub(prev.commands_rejected)
         });
         self.rejecting = if self.new_rejections > 0 {
             self.rejecting.saturating_add(1)
