@@ -10,6 +10,7 @@ pub mod estimator;
 pub mod machine;
 pub mod model;
 pub mod monitor;
+pub mod navigation;
 pub mod store;
 pub mod study;
 pub mod wire;

@@ -93,6 +93,7 @@ pub fn model_msg(seq: u64, model: &Model) -> ModelMsg {
     m.set_method(match model.method {
         Method::Paper => ModelMethod::Paper,
         Method::Forward => ModelMethod::Forward,
+        Method::Dynamic => ModelMethod::Dynamic,
     });
     for j in 0..DOF_COUNT {
         for i in 0..n {

@@ -554,7 +554,7 @@ fn enums_round_trip_and_reject_unknown_values() {
     check(ThrustMode::ALL, 3);
     check(ReconfigKind::ALL, 4);
     check(ModelSource::ALL, 4);
-    check(ModelMethod::ALL, 2);
+    check(ModelMethod::ALL, 3);
     check(DaemonState::ALL, 7);
     check(RequestKind::ALL, 9);
     check(ResponseCode::ALL, 6);

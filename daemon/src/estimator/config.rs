@@ -12,8 +12,12 @@ use super::excitation::Excitation;
 pub enum Method {
     /// Doniec, Detweiler and Rus, Algorithm 1: k-sigma sample selection and S * A = T.
     Paper,
-    /// Least squares on y = B u (unbiased), SVD allocation, confidence, automatic stop.
+    /// Least squares on y = B u with a fixed pulse shape, SVD allocation, confidence,
+    /// automatic stop. Biased in the water by drag, restoring moment and added mass.
     Forward,
+    /// The forward model regressed together with the vehicle's dynamics ([`super::dynamic`]):
+    /// also learns damping, restoring and Coriolis coefficients, pulses back to back.
+    Dynamic,
 }
 
 impl Method {
@@ -21,6 +25,7 @@ impl Method {
         match self {
             Method::Paper => "paper",
             Method::Forward => "forward",
+            Method::Dynamic => "dynamic",
         }
     }
 }
@@ -29,9 +34,10 @@ impl Method {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EstimatorConfig {
-    /// "forward" (default) or "paper".
+    /// "dynamic" (default), "forward" or "paper".
     pub method: Method,
-    /// "round_robin" (the paper's), "pairs" or "orthogonal" (default: the most informative).
+    /// "doublet_pairs" (default: back-to-back +-,-+ pairs of orthogonal patterns that return
+    /// the vehicle near rest), "orthogonal", "pairs" or "round_robin" (the paper's).
     pub excitation: Excitation,
     /// Sample selection and significance threshold in noise standard deviations (paper: 3).
     pub k_sigma: f64,
@@ -90,13 +96,21 @@ pub struct EstimatorConfig {
     /// Forward/reverse gains (and a declared direction) differ when the difference exceeds
     /// this many standard errors.
     pub diagnosis_z: f64,
+    /// Dynamic method: positive pulse commands are scaled by this (default 0.78, a T200's
+    /// reverse/forward thrust ratio) so forward and reverse impulses balance and the vehicle
+    /// does not drift into a tumble (measured: 70 -> 16 deg largest tilt on AMOUR-5); 1 turns
+    /// it off.
+    pub reverse_ratio: f64,
+    /// Dynamic method: length of a regression segment (own intercept, integrals restarted), s
+    /// (default 1.0).
+    pub segment_s: f64,
 }
 
 impl Default for EstimatorConfig {
     fn default() -> Self {
         EstimatorConfig {
-            method: Method::Forward,
-            excitation: Excitation::Orthogonal,
+            method: Method::Dynamic,
+            excitation: Excitation::DoubletPairs,
             k_sigma: 3.0,
             initial_power: 0.8,
             pulse_snr: 20.0,
@@ -122,6 +136,8 @@ impl Default for EstimatorConfig {
             response_chi2: 22.46,
             dead_min_command: 0.95,
             diagnosis_z: 4.0,
+            reverse_ratio: 0.78,
+            segment_s: 1.0,
         }
     }
 }
@@ -137,7 +153,7 @@ pub struct ConfigError {
 impl EstimatorConfig {
     /// (key under `[estimator]`, value, allowed range) of every number; the config file's
     /// checker locates a failing one in the file.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 16] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 18] {
         [
             ("k_sigma", self.k_sigma, Range::above(0.0)),
             (
@@ -170,6 +186,8 @@ impl EstimatorConfig {
                 Range::above_to(0.0, 1.0),
             ),
             ("diagnosis_z", self.diagnosis_z, Range::above(0.0)),
+            ("reverse_ratio", self.reverse_ratio, Range::above_to(0.0, 1.0)),
+            ("segment_s", self.segment_s, Range::closed(0.05, 60.0)),
             // Counted like the others so the array stays one list; always in range.
             (
                 "baseline_samples",

@@ -18,9 +18,14 @@ pub enum Excitation {
     /// All thrusters at once, signs from the rows of a Sylvester Hadamard matrix, each row
     /// followed by its negation so forward and reverse thrust are balanced.
     Orthogonal,
+    /// Orthogonal patterns as doublet pairs, back to back: each Hadamard row r pulsed as
+    /// +r, -r, -r, +r, so the body rate and the angle it caused both return near zero after
+    /// every four pulses (no settles needed; the dynamic method's default).
+    DoubletPairs,
 }
 
 impl Excitation {
+    /// The pulse-and-settle plans of the static study (Fig. 2).
     pub const ALL: [Excitation; 3] = [
         Excitation::RoundRobin,
         Excitation::Pairs,
@@ -32,6 +37,7 @@ impl Excitation {
             Excitation::RoundRobin => "round_robin",
             Excitation::Pairs => "pairs",
             Excitation::Orthogonal => "orthogonal",
+            Excitation::DoubletPairs => "doublet_pairs",
         }
     }
 }
@@ -53,6 +59,7 @@ impl ExcitationPlan {
             Excitation::RoundRobin => round_robin(n),
             Excitation::Pairs => pairs(n),
             Excitation::Orthogonal => orthogonal(n),
+            Excitation::DoubletPairs => doublet_pairs(n),
         };
         ExcitationPlan { kind, n, cycle }
     }
@@ -117,6 +124,18 @@ fn orthogonal(n: usize) -> Vec<Vec<f64>> {
     }
     for row in &h {
         out.push(row[..n].iter().map(|x| -x).collect());
+    }
+    out
+}
+
+/// Each Hadamard row (first n columns) as +r, -r, -r, +r.
+fn doublet_pairs(n: usize) -> Vec<Vec<f64>> {
+    let h = hadamard(n.next_power_of_two().max(2));
+    let mut out = Vec::with_capacity(4 * h.len());
+    for row in &h {
+        let r = &row[..n];
+        let neg: Vec<f64> = r.iter().map(|x| -x).collect();
+        out.extend([r.to_vec(), neg.clone(), neg, r.to_vec()]);
     }
     out
 }

@@ -4,6 +4,7 @@
 //! - [`excitation`]: which thrusters fire on each pulse (round robin, pairs, orthogonal).
 //! - [`response`]: the time shape of a pulse's response, and gravity compensation.
 //! - [`forward`]: the unbiased regression y = B u (normal equations, incremental).
+//! - [`dynamic`]: the response regressed with the vehicle's dynamics (drag, restoring, Coriolis).
 //! - [`paper`]: Doniec, Detweiler and Rus's S * A = T.
 //! - [`analysis`]: rank, actuated DOFs, allocation, thruster diagnosis.
 //! - [`power`]: the first pulse's strength from a model in force and the measured noise.
@@ -12,6 +13,7 @@
 pub mod analysis;
 pub mod config;
 pub mod dof;
+pub mod dynamic;
 pub mod excitation;
 pub mod forward;
 pub mod linalg;

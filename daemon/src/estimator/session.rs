@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, Vector3};
 use super::analysis::{allocation, diagnose, rank_report, RankReport, ThrusterDiagnosis};
 use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
+use super::dynamic::{DynamicRun, DynamicTerms};
 use super::excitation::ExcitationPlan;
 use super::forward::{ForwardLs, ForwardSolution};
 use super::linalg::singular_right;
@@ -85,6 +86,9 @@ pub struct Estimate {
     pub thruster: Vec<ThrusterDiagnosis>,
     /// Every thruster has been excited (the Gram matrix is full rank).
     pub excited: bool,
+    /// The dynamic method's other coefficients (damping, restoring, Coriolis) and the
+    /// excursion during the excitation; None for the static methods.
+    pub dynamics: Option<DynamicTerms>,
 }
 
 /// Running sums of one sensor group over a pulse (and the quiet samples just before it, whose
@@ -225,6 +229,10 @@ pub struct Estimator {
     paper: [PaperLs; 2],
     max_command: Vec<f64>,
     nominal: Option<DMatrix<f64>>,
+    /// The dynamic method's fit, built at the first pulse.
+    dynamic: Option<DynamicRun>,
+    /// Mean specific force at rest (m/s^2, body): where the dynamic method's navigation starts.
+    rest_force: Option<Vector3<f64>>,
 }
 
 impl Estimator {
@@ -246,6 +254,8 @@ impl Estimator {
             paper: [PaperLs::new(n), PaperLs::new(n)],
             max_command: vec![0.0; n],
             nominal: None,
+            dynamic: None,
+            rest_force: None,
             noise,
             cfg,
         }
@@ -255,6 +265,16 @@ impl Estimator {
     pub fn with_nominal(mut self, nominal: DMatrix<f64>) -> Self {
         if nominal.nrows() == 6 && nominal.ncols() == self.thrusters() {
             self.nominal = Some(nominal);
+        }
+        self
+    }
+
+    /// The mean specific force measured at rest just before the run (m/s^2, body frame, the
+    /// raw accelerometer): the dynamic method starts its navigation from it. Without it the
+    /// vehicle is taken as level.
+    pub fn with_rest_specific_force(mut self, f: Vector3<f64>) -> Self {
+        if f.iter().all(|v| v.is_finite()) {
+            self.rest_force = Some(f);
         }
         self
     }
@@ -290,7 +310,7 @@ impl Estimator {
     pub fn planned_pulses(&self) -> usize {
         let cycles = match self.cfg.method {
             Method::Paper => self.cfg.paper_cycles,
-            Method::Forward => self.cfg.min_cycles,
+            Method::Forward | Method::Dynamic => self.cfg.min_cycles,
         };
         (cycles * self.plan.cycle_len()).min(self.cfg.max_pulses)
     }
@@ -306,10 +326,30 @@ impl Estimator {
     /// As `begin_pulse`, with the pulse's start on the clock of `push_rest_sample` (s).
     pub fn begin_pulse_at(&mut self, t0_s: f64) -> &[f64] {
         let pattern = self.plan.pattern(self.pulses);
+        // The dynamic method balances forward and reverse impulses (see `reverse_ratio`).
+        let forward_scale = if self.cfg.method == Method::Dynamic {
+            self.cfg.reverse_ratio
+        } else {
+            1.0
+        };
         let u: Vec<f64> = pattern
             .iter()
-            .map(|s| (s * self.power).clamp(-1.0, 1.0))
+            .map(|s| {
+                let v = s * self.power;
+                let v = if v > 0.0 { v * forward_scale } else { v };
+                v.clamp(-1.0, 1.0)
+            })
             .collect();
+        if self.cfg.method == Method::Dynamic && self.dynamic.is_none() {
+            self.dynamic = Some(DynamicRun::new(
+                self.thrusters(),
+                self.cfg.spin_up_s,
+                self.cfg.segment_s,
+                &self
+                    .rest_force
+                    .unwrap_or(Vector3::new(0.0, 0.0, -super::response::GRAVITY)),
+            ));
+        }
         let split = split_regressor(&u);
         for (m, v) in self.max_command.iter_mut().zip(&u) {
             *m = m.max(v.abs());
@@ -365,8 +405,56 @@ impl Estimator {
         }
     }
 
+    /// One IMU sample for the dynamic method at `t_s` (the clock of `begin_pulse_at`), during a
+    /// pulse or between pulses: bias-free gyro (rad/s), the raw specific force (m/s^2) and the
+    /// depth (m) if measured. The command is the pulse's (zero between pulses). Samples before
+    /// the first pulse, and every sample for the static methods, are ignored.
+    pub fn push_dynamic_sample(
+        &mut self,
+        t_s: f64,
+        gyro: &Vector3<f64>,
+        specific_force: &Vector3<f64>,
+        depth: Option<f64>,
+    ) {
+        let Some(run) = self.dynamic.as_mut() else {
+            return;
+        };
+        let zeros = [0.0; 0];
+        let u: &[f64] = match self.pulse.as_mut() {
+            Some(p) => {
+                p.samples += 1;
+                p.kept = [p.samples; 2];
+                &p.u
+            }
+            None => &zeros,
+        };
+        if u.is_empty() {
+            // Between pulses: the thrusters are at neutral.
+            let n = run.thrusters();
+            let idle = [0.0; thruster_protocol::MAX_THRUSTERS];
+            run.push(t_s, gyro, specific_force, depth, &idle[..n]);
+        } else {
+            run.push(t_s, gyro, specific_force, depth, u);
+        }
+        self.samples += 1;
+    }
+
     /// Close the pulse; raises the power when a sensor group kept no sample (Algorithm 1).
     pub fn end_pulse(&mut self) -> Option<PulseSummary> {
+        if self.cfg.method == Method::Dynamic {
+            // Fitted sample by sample; the power stays (back-to-back pulses need no rescue).
+            let p = self.pulse.take()?;
+            let summary = PulseSummary {
+                index: self.pulses,
+                samples: p.samples,
+                kept_rot: p.kept[ROT],
+                kept_acc: p.kept[ACC],
+                power: self.power,
+                next_power: self.power,
+            };
+            self.pulses += 1;
+            return Some(summary);
+        }
         let p = self.pulse.take()?;
         let detrend = self.cfg.detrend;
         for g in [ROT, ACC] {
@@ -442,6 +530,7 @@ impl Estimator {
         match self.cfg.method {
             Method::Forward => self.forward_estimate(),
             Method::Paper => self.paper_estimate(),
+            Method::Dynamic => self.dynamic_estimate(),
         }
     }
 
@@ -454,6 +543,25 @@ impl Estimator {
             Method::Paper => {
                 if self.pulses >= self.planned_pulses() {
                     StopDecision::PlanComplete
+                } else {
+                    StopDecision::Continue
+                }
+            }
+            Method::Dynamic => {
+                // Stop only after a whole cycle (every pattern seen) and then at the end of a
+                // doublet pair, when the vehicle is back near rest.
+                if self.pulses < self.planned_pulses() || !self.pulses.is_multiple_of(4) {
+                    return StopDecision::Continue;
+                }
+                let e = self.dynamic_estimate();
+                if e.excited
+                    && e.rel_err_rot <= self.cfg.target_rel_err
+                    && e.rel_err_acc <= self.cfg.target_rel_err
+                {
+                    StopDecision::Converged {
+                        rel_err_rot: e.rel_err_rot,
+                        rel_err_acc: e.rel_err_acc,
+                    }
                 } else {
                     StopDecision::Continue
                 }
@@ -569,6 +677,67 @@ impl Estimator {
             rank,
             thruster,
             excited,
+            dynamics: None,
+        }
+    }
+
+    fn dynamic_estimate(&self) -> Estimate {
+        let n = self.thrusters();
+        let rest = [
+            self.noise.gyro_sigma[0],
+            self.noise.gyro_sigma[1],
+            self.noise.gyro_sigma[2],
+            self.noise.accel_sigma[0],
+            self.noise.accel_sigma[1],
+            self.noise.accel_sigma[2],
+        ];
+        let Some(run) = self.dynamic.as_ref() else {
+            let zeros = DMatrix::zeros(6, n);
+            let inf = DMatrix::from_element(6, n, f64::INFINITY);
+            let rank = rank_report(&zeros, &inf, &self.cfg);
+            return Estimate {
+                method: Method::Dynamic,
+                thrusters: n,
+                pulses: self.pulses,
+                samples: self.samples,
+                allocation: DMatrix::zeros(n, 6),
+                thruster: diagnose(&zeros, &inf, &self.max_command, None, None, &self.cfg),
+                effectiveness: zeros,
+                std_err: inf,
+                rel_err_rot: f64::INFINITY,
+                rel_err_acc: f64::INFINITY,
+                sigma: rest,
+                rank,
+                excited: false,
+                dynamics: None,
+            };
+        };
+        let sol = run.solve(&rest);
+        let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
+        let alloc = allocation(&sol.b, rank.actuated, rank.rank);
+        let thruster = diagnose(
+            &sol.b,
+            &sol.std_err,
+            &self.max_command,
+            None,
+            self.nominal.as_ref(),
+            &self.cfg,
+        );
+        Estimate {
+            method: Method::Dynamic,
+            thrusters: n,
+            pulses: self.pulses,
+            samples: self.samples,
+            effectiveness: sol.b,
+            std_err: sol.std_err,
+            allocation: alloc,
+            rel_err_rot: sol.rel_err[ROT],
+            rel_err_acc: sol.rel_err[ACC],
+            sigma: sol.sigma,
+            rank,
+            thruster,
+            excited: sol.excited,
+            dynamics: Some(sol.terms),
         }
     }
 
@@ -637,6 +806,7 @@ impl Estimator {
             rank,
             thruster,
             excited: self.paper[ROT].rows() > 0 && self.paper[ACC].rows() > 0,
+            dynamics: None,
         }
     }
 }

@@ -7,13 +7,16 @@ use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::MachineSetup;
 use crate::estimator::power::pulse_power;
-use crate::estimator::{Estimate, Estimator, NoiseLevels, NoiseMeter, StopDecision};
+use crate::estimator::{Estimate, Estimator, Method, NoiseLevels, NoiseMeter, StopDecision};
 use crate::model::{Model, ModelSource};
 
 /// One IMU sample as the run uses it: the body rate and the gravity-compensated acceleration.
 pub(super) struct Motion {
     pub(super) gyro: Vector3<f64>,
     pub(super) accel: Vector3<f64>,
+    /// The raw accelerometer reading (specific force), m/s^2.
+    pub(super) specific_force: Vector3<f64>,
+    pub(super) depth: Option<f64>,
 }
 
 /// What one sample during a pulse led to.
@@ -35,6 +38,8 @@ pub(super) struct EstimationRun {
     est: Option<Estimator>,
     last_estimate: Option<Estimate>,
     quiet_since_ns: Option<u64>,
+    /// Sum and count of the raw specific force during the noise measurement.
+    rest_force: (Vector3<f64>, u64),
 }
 
 impl EstimationRun {
@@ -45,18 +50,27 @@ impl EstimationRun {
             est: None,
             last_estimate: None,
             quiet_since_ns: None,
+            rest_force: (Vector3::zeros(), 0),
         }
     }
 
     /// A new run begins: the noise is measured afresh.
     pub(super) fn restart(&mut self) {
         self.noise = NoiseMeter::new();
+        self.rest_force = (Vector3::zeros(), 0);
         self.est = None;
     }
 
     /// The run ends without a candidate (abort, fault, idle, hold, reconfiguration).
     pub(super) fn stop(&mut self) {
         self.est = None;
+    }
+
+    /// The run pulses back to back (the dynamic method fits through the motion, no settles).
+    pub(super) fn back_to_back(&self) -> bool {
+        self.est
+            .as_ref()
+            .is_some_and(|e| e.config().method == Method::Dynamic)
     }
 
     /// The estimator of the run under way.
@@ -85,6 +99,10 @@ impl EstimationRun {
         n: usize,
     ) -> bool {
         self.noise.push(&m.gyro.into(), &m.accel.into());
+        if m.specific_force.iter().all(|v| v.is_finite()) {
+            self.rest_force.0 += m.specific_force;
+            self.rest_force.1 += 1;
+        }
         if !(elapsed_s >= setup.machine.noise_s && self.noise.samples() >= 10) {
             return false;
         }
@@ -105,6 +123,9 @@ impl EstimationRun {
             cfg.initial_power = p;
         }
         let mut est = Estimator::new(cfg, n, levels);
+        if self.rest_force.1 > 0 {
+            est = est.with_rest_specific_force(self.rest_force.0 / self.rest_force.1 as f64);
+        }
         if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
             est = est.with_nominal(nominal.effectiveness.clone());
         }
@@ -131,6 +152,7 @@ impl EstimationRun {
     /// `thrust`; at its end the estimate is updated.
     pub(super) fn pulse_sample(
         &mut self,
+        t_ns: u64,
         elapsed_s: f64,
         m: &Motion,
         pulse_s: f64,
@@ -141,7 +163,11 @@ impl EstimationRun {
         };
         let gyro_d = levels.gyro_delta(&m.gyro.into());
         let acc_d = levels.accel_delta(&m.accel.into());
-        est.push_pulse_sample(elapsed_s, &gyro_d, &acc_d);
+        if est.config().method == Method::Dynamic {
+            est.push_dynamic_sample(t_ns as f64 * 1e-9, &gyro_d, &m.specific_force, m.depth);
+        } else {
+            est.push_pulse_sample(elapsed_s, &gyro_d, &acc_d);
+        }
         if elapsed_s < pulse_s {
             if let Some(u) = est.current_command() {
                 for (o, v) in thrust.iter_mut().zip(u) {
@@ -169,6 +195,7 @@ impl EstimationRun {
         let d = levels.gyro_delta(&m.gyro.into());
         if let Some(est) = self.est.as_mut() {
             est.push_rest_sample(t_ns as f64 * 1e-9, &d, &levels.accel_delta(&m.accel.into()));
+            est.push_dynamic_sample(t_ns as f64 * 1e-9, &d, &m.specific_force, m.depth);
         }
         let quiet = (0..3).all(|a| d[a].abs() <= k_sigma * levels.gyro_sigma[a].max(1e-6));
         if quiet {

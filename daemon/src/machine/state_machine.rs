@@ -190,6 +190,8 @@ impl Machine {
                 let m = Motion {
                     gyro,
                     accel: motion_accel(&accel, &self.attitude.attitude()),
+                    specific_force: accel,
+                    depth: s.depth,
                 };
                 let elapsed = self.elapsed_s(s.t_ns);
                 let ready =
@@ -584,12 +586,14 @@ impl Machine {
         let m = Motion {
             gyro: *gyro,
             accel: motion_accel(accel, &self.attitude.attitude()),
+            specific_force: *accel,
+            depth: s.depth,
         };
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Estimating;
         let step = self
             .run
-            .pulse_sample(elapsed, &m, self.setup.machine.pulse_s, &mut cmd.thrust);
+            .pulse_sample(s.t_ns, elapsed, &m, self.setup.machine.pulse_s, &mut cmd.thrust);
         match step {
             PulseStep::NoRun => {
                 self.transition(State::Idle, "internal: pulse without an estimator");
@@ -599,6 +603,7 @@ impl Machine {
                 return cmd;
             }
             PulseStep::Ended { decision, .. } if decision.is_stop() => self.solve(decision),
+            PulseStep::Ended { .. } if self.run.back_to_back() => return self.start_pulse(s.t_ns),
             PulseStep::Ended { pulses, .. } => {
                 self.state = State::Settle;
                 self.phase_start_ns = s.t_ns;
@@ -613,6 +618,8 @@ impl Machine {
         let m = Motion {
             gyro: *gyro,
             accel: motion_accel(accel, &self.attitude.attitude()),
+            specific_force: *accel,
+            depth: s.depth,
         };
         let k = self.setup.estimator.k_sigma;
         let Some(quiet_for) = self.run.settle_sample(s.t_ns, &m, k) else {

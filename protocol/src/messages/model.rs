@@ -27,6 +27,9 @@ wire_enum! {
         Paper = 0,
         /// Forward model y = B u by least squares, allocation = pseudoinverse of B.
         Forward = 1,
+        /// Forward model regressed together with the vehicle's dynamics (damping, restoring,
+        /// added mass), allocation = pseudoinverse of B.
+        Dynamic = 2,
     }
 }
 

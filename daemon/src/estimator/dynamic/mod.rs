@@ -1,0 +1,250 @@
+//! The dynamic response model: thrust and the vehicle's own dynamics regressed together, so
+//! drag, restoring moment and added-mass effects no longer bias B.
+//!
+//! Per rotational axis, in integrated form (no differentiated gyro):
+//!   omega(t) = c_segment + B_row . int(u_lag) + theta_row . int(terms)
+//! and per translational axis, directly on the gravity-free accelerometer:
+//!   f + g down = c_segment + B_row . u_lag + theta_row . terms
+//! with u_lag the commands through the thrusters' first-order spin-up and `terms` the ones in
+//! [`regressors`], evaluated on the [`crate::navigation::Navigator`]'s attitude and velocity.
+//! Both are linear in the unknowns, so the fit stays incremental (normal equations, one
+//! intercept per segment) and gives covariances like the static forward model.
+
+pub mod regressors;
+pub mod segmented_ls;
+
+use nalgebra::{DMatrix, Vector3};
+
+use self::regressors::{terms, TERMS};
+use self::segmented_ls::{SegmentedLs, SegmentedSolution};
+use crate::estimator::response::GRAVITY;
+use crate::navigation::{DepthAid, Navigator};
+
+/// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
+const MIN_RESIDUAL_DOF: u64 = 10;
+
+/// What the dynamic fit learned besides B: the coefficients of every term, per DOF row.
+#[derive(Debug, Clone)]
+pub struct DynamicTerms {
+    /// 6 x TERMS coefficients, rows in DOF order (rotation rows per rad/s^2, translation rows
+    /// per m/s^2), columns as [`regressors::TERM_NAMES`].
+    pub coefficients: DMatrix<f64>,
+    /// Their standard errors, same shape.
+    pub std_err: DMatrix<f64>,
+    /// Largest tilt during the excitation, rad (navigation estimate).
+    pub max_tilt_rad: f64,
+    /// Largest heading change during the excitation, rad.
+    pub max_heading_change_rad: f64,
+}
+
+impl DynamicTerms {
+    /// Coefficient and standard error of term `name` on DOF row `row`.
+    pub fn get(&self, row: usize, name: &str) -> Option<(f64, f64)> {
+        let j = regressors::TERM_NAMES.iter().position(|n| *n == name)?;
+        Some((self.coefficients[(row, j)], self.std_err[(row, j)]))
+    }
+}
+
+/// The fit of both groups.
+#[derive(Debug, Clone)]
+pub struct DynamicSolution {
+    /// 6 x N effectiveness.
+    pub b: DMatrix<f64>,
+    /// 6 x N standard errors (infinite for unexcited thrusters).
+    pub std_err: DMatrix<f64>,
+    /// 1-sigma relative Frobenius error bound of the rotation and translation rows.
+    pub rel_err: [f64; 2],
+    /// Noise sigma used per DOF row.
+    pub sigma: [f64; 6],
+    /// Every thruster column identified in both groups.
+    pub excited: bool,
+    pub terms: DynamicTerms,
+}
+
+/// One dynamic-model fit in progress: navigation, thrust lag, integrals and both regressions.
+/// Allocated once; each sample costs two rank-1 updates of a (N + 38)-wide Gram matrix.
+#[derive(Debug, Clone)]
+pub struct DynamicRun {
+    n: usize,
+    lag_s: f64,
+    segment_s: f64,
+    nav: Navigator,
+    lag: Vec<f64>,
+    lag_prev: Vec<f64>,
+    lag_abs: f64,
+    terms: [f64; TERMS],
+    terms_prev: [f64; TERMS],
+    integral: Vec<f64>,
+    direct: Vec<f64>,
+    last_t_s: Option<f64>,
+    segment_start_s: f64,
+    rot: SegmentedLs,
+    acc: SegmentedLs,
+}
+
+impl DynamicRun {
+    /// A fit for `n` thrusters with spin-up time constant `lag_s`, segments of `segment_s`,
+    /// starting from a rest whose mean specific force was `accel_rest`.
+    pub fn new(n: usize, lag_s: f64, segment_s: f64, accel_rest: &Vector3<f64>) -> Self {
+        let k = n + TERMS;
+        DynamicRun {
+            n,
+            lag_s: lag_s.max(0.0),
+            segment_s: segment_s.max(1e-3),
+            nav: Navigator::at_rest(accel_rest, 0.0, None, DepthAid::default()),
+            lag: vec![0.0; n],
+            lag_prev: vec![0.0; n],
+            lag_abs: 0.0,
+            terms: [0.0; TERMS],
+            terms_prev: [0.0; TERMS],
+            integral: vec![0.0; k],
+            direct: vec![0.0; k],
+            last_t_s: None,
+            segment_start_s: 0.0,
+            rot: SegmentedLs::new(k),
+            acc: SegmentedLs::new(k),
+        }
+    }
+
+    pub fn thrusters(&self) -> usize {
+        self.n
+    }
+
+    /// Rows fitted.
+    pub fn samples(&self) -> u64 {
+        self.rot.rows()
+    }
+
+    pub fn navigator(&self) -> &Navigator {
+        &self.nav
+    }
+
+    /// One sample at `t_s`: bias-free gyro (rad/s), specific force (m/s^2), depth (m), and the
+    /// command `u` that was applied during the interval this sample ends. A sample with a
+    /// non-finite value is dropped whole (the estimate is untouched).
+    pub fn push(
+        &mut self,
+        t_s: f64,
+        gyro: &Vector3<f64>,
+        specific_force: &Vector3<f64>,
+        depth: Option<f64>,
+        u: &[f64],
+    ) {
+        let finite = t_s.is_finite()
+            && gyro.iter().chain(specific_force.iter()).all(|v| v.is_finite())
+            && u.len() == self.n
+            && u.iter().all(|v| v.is_finite());
+        if !finite || self.last_t_s.is_some_and(|t0| t_s <= t0) {
+            return;
+        }
+        let nav = self.nav.update(t_s, gyro, specific_force, depth);
+        let dt = self.last_t_s.map(|t0| (t_s - t0).min(0.1)).unwrap_or(0.0);
+        let a = if self.lag_s > 0.0 {
+            1.0 - (-dt / self.lag_s).exp()
+        } else {
+            1.0
+        };
+        self.lag_prev.copy_from_slice(&self.lag);
+        let mut abs_target = 0.0;
+        for (l, v) in self.lag.iter_mut().zip(u) {
+            *l += a * (v - *l);
+            abs_target += v.abs();
+        }
+        self.lag_abs += a * (abs_target / self.n.max(1) as f64 - self.lag_abs);
+        self.terms_prev = self.terms;
+        terms(
+            &nav.velocity,
+            &nav.rate,
+            &nav.down,
+            self.lag_abs,
+            &mut self.terms,
+        );
+        let first = self.last_t_s.is_none();
+        self.last_t_s = Some(t_s);
+        if first || t_s - self.segment_start_s >= self.segment_s {
+            // A new segment: its own intercept, integrals from zero.
+            self.rot.close_segment();
+            self.acc.close_segment();
+            self.segment_start_s = t_s;
+            self.integral.fill(0.0);
+        } else {
+            let n = self.n;
+            for i in 0..n {
+                self.integral[i] += 0.5 * (self.lag_prev[i] + self.lag[i]) * dt;
+            }
+            for j in 0..TERMS {
+                self.integral[n + j] += 0.5 * (self.terms_prev[j] + self.terms[j]) * dt;
+            }
+        }
+        self.direct[..self.n].copy_from_slice(&self.lag);
+        self.direct[self.n..].copy_from_slice(&self.terms);
+        self.rot.add(&self.integral, gyro);
+        let motion = specific_force + nav.down * GRAVITY;
+        self.acc.add(&self.direct, &motion);
+    }
+
+    /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer).
+    pub fn solve(&self, rest_sigma: &[f64; 6]) -> DynamicSolution {
+        let n = self.n;
+        let sols = [self.rot.solve(), self.acc.solve()];
+        let mut b = DMatrix::zeros(6, n);
+        let mut std_err = DMatrix::zeros(6, n);
+        let mut coefficients = DMatrix::zeros(6, TERMS);
+        let mut coef_se = DMatrix::zeros(6, TERMS);
+        let mut sigma = [0.0; 6];
+        let mut rel_err = [f64::INFINITY; 2];
+        let mut excited = true;
+        for (g, sol) in sols.iter().enumerate() {
+            let s = group_sigma(sol, &rest_sigma[3 * g..3 * g + 3]);
+            let mut var_sum = 0.0;
+            let mut norm2 = 0.0;
+            for a in 0..3 {
+                let row = 3 * g + a;
+                sigma[row] = s[a];
+                for i in 0..n {
+                    b[(row, i)] = sol.theta[(i, a)];
+                    let d = sol.gram_inv[(i, i)];
+                    std_err[(row, i)] = if d > 0.0 {
+                        s[a] * d.sqrt()
+                    } else {
+                        f64::INFINITY
+                    };
+                    var_sum += s[a] * s[a] * d.max(0.0);
+                    norm2 += b[(row, i)] * b[(row, i)];
+                }
+                for j in 0..TERMS {
+                    coefficients[(row, j)] = sol.theta[(n + j, a)];
+                    coef_se[(row, j)] = s[a] * sol.gram_inv[(n + j, n + j)].max(0.0).sqrt();
+                }
+            }
+            let identified = (0..n).all(|i| sol.gram_inv[(i, i)] > 0.0);
+            excited &= identified;
+            if identified && norm2 > 0.0 {
+                rel_err[g] = var_sum.sqrt() / norm2.sqrt();
+            }
+        }
+        DynamicSolution {
+            b,
+            std_err,
+            rel_err,
+            sigma,
+            excited,
+            terms: DynamicTerms {
+                coefficients,
+                std_err: coef_se,
+                max_tilt_rad: self.nav.max_tilt(),
+                max_heading_change_rad: self.nav.max_heading_change(),
+            },
+        }
+    }
+}
+
+/// Noise per axis: the at-rest level, or the residual level when larger and well determined.
+fn group_sigma(sol: &SegmentedSolution, rest: &[f64]) -> [f64; 3] {
+    match sol.residual_var {
+        Some(var) if sol.residual_dof >= MIN_RESIDUAL_DOF => {
+            std::array::from_fn(|a| rest[a].max(var[a].sqrt()))
+        }
+        _ => std::array::from_fn(|a| rest[a]),
+    }
+}

@@ -1,0 +1,83 @@
+//! The terms of the dynamic response model besides the thrust, one value each per sample.
+//!
+//! Fossen's model, M nu_dot + C(nu) nu + D(nu) nu + g(q) = tau, solved for nu_dot, is linear in
+//! these terms once M^-1 is folded into unknown coefficients: body rates and velocities (linear
+//! damping, and the coupling M^-1 brings between axes), their |x| x (quadratic damping), gravity
+//! in the body frame (restoring moment and net buoyancy), and the products nu_i nu_j (rigid-body
+//! and added-mass Coriolis, the Munk moment, and the accelerometer's omega x v). A constant takes
+//! a slow drift (a gyro bias left after the rest), and the mean |command| through the thruster
+//! lag takes the forward/reverse asymmetry that the balanced excitation leaves as a near-constant
+//! force. Noise-free, this set recovers the simulator's B to 1e-3 with the true state
+//! (docs/study.md, "oracle").
+
+use nalgebra::Vector3;
+
+/// Number of terms.
+pub const TERMS: usize = 38;
+
+/// Name of each term, in order (for reports and the demo's JSON).
+pub const TERM_NAMES: [&str; TERMS] = [
+    "p", "q", "r", "|p|p", "|q|q", "|r|r", "u", "v", "w", "|u|u", "|v|v", "|w|w", "down_x",
+    "down_y", "down_z", "uu", "uv", "uw", "up", "uq", "ur", "vv", "vw", "vp", "vq", "vr", "ww",
+    "wp", "wq", "wr", "pp", "pq", "pr", "qq", "qr", "rr", "const", "mean_abs_command",
+];
+
+/// Index of the first term of each group in [`TERM_NAMES`].
+pub const RATE: usize = 0;
+pub const RATE_QUADRATIC: usize = 3;
+pub const VELOCITY: usize = 6;
+pub const VELOCITY_QUADRATIC: usize = 9;
+pub const DOWN: usize = 12;
+
+/// Writes the terms for body velocity `v`, rate `w`, gravity direction `down` (unit, body
+/// frame) and mean lagged |command| into `out` (length [`TERMS`]).
+pub fn terms(
+    v: &Vector3<f64>,
+    w: &Vector3<f64>,
+    down: &Vector3<f64>,
+    mean_abs_command: f64,
+    out: &mut [f64],
+) {
+    debug_assert_eq!(out.len(), TERMS);
+    let nu = [v.x, v.y, v.z, w.x, w.y, w.z];
+    for a in 0..3 {
+        out[RATE + a] = w[a];
+        out[RATE_QUADRATIC + a] = w[a].abs() * w[a];
+        out[VELOCITY + a] = v[a];
+        out[VELOCITY_QUADRATIC + a] = v[a].abs() * v[a];
+        out[DOWN + a] = down[a];
+    }
+    let mut k = DOWN + 3;
+    for i in 0..6 {
+        for j in i..6 {
+            out[k] = nu[i] * nu[j];
+            k += 1;
+        }
+    }
+    out[k] = 1.0;
+    out[k + 1] = mean_abs_command;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_match_the_layout() {
+        let mut out = [0.0; TERMS];
+        terms(
+            &Vector3::new(1.0, 2.0, 3.0),
+            &Vector3::new(4.0, 5.0, 6.0),
+            &Vector3::z(),
+            0.5,
+            &mut out,
+        );
+        let at = |name: &str| out[TERM_NAMES.iter().position(|n| *n == name).unwrap()];
+        assert_eq!(at("q"), 5.0);
+        assert_eq!(at("|w|w"), 9.0);
+        assert_eq!(at("down_z"), 1.0);
+        assert_eq!(at("vr"), 12.0);
+        assert_eq!(at("rr"), 36.0);
+        assert_eq!(at("mean_abs_command"), 0.5);
+    }
+}

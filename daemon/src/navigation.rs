@@ -1,0 +1,212 @@
+//! Navigation during an excitation: attitude and body velocity from the IMU and depth sensor.
+//!
+//! The dynamic-model estimator needs the vehicle's attitude (restoring moment, gravity in the
+//! accelerometer) and body velocity (drag, Munk moment, omega x v) while the thrusters pulse.
+//! The attitude filter that the controller uses leans on the accelerometer for tilt, which is
+//! wrong exactly then: the accelerometer sees the thrust. So this filter starts from the rest
+//! that precedes the excitation (vehicle still, attitude from gravity, velocity zero) and then
+//! dead-reckons a few seconds:
+//! - attitude: the bias-free gyro integrated (exact rotation vector step per sample);
+//! - velocity: strapdown, v_dot = f + g_body - omega x v, the accelerometer's at-rest bias
+//!   taken out by starting from the measured gravity direction;
+//! - depth: a complementary correction of the vertical (NED z) velocity and depth from the
+//!   pressure sensor, which bounds the vertical drift that an attitude error causes.
+//!
+//! Pure: time only from the samples. Horizontal velocity is not observed by anything here (no
+//! DVL), so it drifts with the attitude error; over the excitation's few seconds that drift is
+//! well below the velocities the thrusters cause at a realistic IMU (docs/study.md).
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::estimator::response::GRAVITY;
+
+/// Complementary gains of the depth aid (per sample at the nominal rate; dimensionless).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DepthAid {
+    /// Share of the depth innovation added to the depth estimate.
+    pub depth_gain: f64,
+    /// Vertical velocity correction per metre of depth innovation, 1/s.
+    pub velocity_gain: f64,
+}
+
+impl Default for DepthAid {
+    fn default() -> Self {
+        // Measured on the simulator (docs/study.md): stiff enough to hold the vertical velocity
+        // within a few cm/s at paper noise, soft enough not to pass the depth noise through.
+        DepthAid {
+            depth_gain: 0.05,
+            velocity_gain: 0.5,
+        }
+    }
+}
+
+/// The navigation state at one sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavState {
+    /// Body to NED.
+    pub attitude: UnitQuaternion<f64>,
+    /// Body velocity over ground, m/s.
+    pub velocity: Vector3<f64>,
+    /// Body angular rate (bias removed), rad/s.
+    pub rate: Vector3<f64>,
+    /// Unit gravity direction in the body frame (NED down seen from the body).
+    pub down: Vector3<f64>,
+}
+
+/// Dead reckoning from a rest, aided by depth.
+#[derive(Debug, Clone)]
+pub struct Navigator {
+    aid: DepthAid,
+    attitude: UnitQuaternion<f64>,
+    velocity: Vector3<f64>,
+    depth: Option<f64>,
+    /// The accelerometer's reading at rest is -g in the body frame plus its bias; starting the
+    /// attitude from that reading makes f + g_body zero at rest, bias included.
+    last_t_s: Option<f64>,
+    /// Largest tilt (angle of body z from down) and heading change seen, rad.
+    max_tilt: f64,
+    max_heading: f64,
+    heading0: f64,
+}
+
+impl Navigator {
+    /// Starts at rest: `accel_rest` is the mean specific force at rest (m/s^2), `heading` the
+    /// heading then (rad, from the attitude filter; it does not enter the dynamics), `depth`
+    /// the depth then if a sensor gives one.
+    pub fn at_rest(
+        accel_rest: &Vector3<f64>,
+        heading: f64,
+        depth: Option<f64>,
+        aid: DepthAid,
+    ) -> Self {
+        let down = if accel_rest.norm() > 1e-6 {
+            -accel_rest.normalize()
+        } else {
+            Vector3::z()
+        };
+        let roll = down.y.atan2(down.z);
+        let pitch = (-down.x).atan2((down.y * down.y + down.z * down.z).sqrt());
+        let attitude = UnitQuaternion::from_euler_angles(roll, pitch, heading);
+        let mut nav = Navigator {
+            aid,
+            attitude,
+            velocity: Vector3::zeros(),
+            depth: depth.filter(|d| d.is_finite()),
+            last_t_s: None,
+            max_tilt: 0.0,
+            max_heading: 0.0,
+            heading0: heading,
+        };
+        nav.max_tilt = nav.tilt();
+        nav
+    }
+
+    /// One sample at `t_s`: bias-free gyro (rad/s), specific force (m/s^2), depth (m).
+    /// Non-finite inputs are skipped (the state is kept).
+    pub fn update(
+        &mut self,
+        t_s: f64,
+        rate: &Vector3<f64>,
+        specific_force: &Vector3<f64>,
+        depth: Option<f64>,
+    ) -> NavState {
+        let finite = t_s.is_finite()
+            && rate.iter().chain(specific_force.iter()).all(|v| v.is_finite());
+        if finite {
+            let dt = self
+                .last_t_s
+                .map(|t0| (t_s - t0).clamp(0.0, 0.1))
+                .unwrap_or(0.0);
+            self.last_t_s = Some(t_s);
+            self.attitude *= UnitQuaternion::from_scaled_axis(rate * dt);
+            let g_body = self.down() * GRAVITY;
+            let accel = specific_force + g_body - rate.cross(&self.velocity);
+            self.velocity += accel * dt;
+            let measured = depth.filter(|d| d.is_finite());
+            if self.depth.is_none() {
+                // The first depth reading anchors the depth channel.
+                self.depth = measured;
+            }
+            if let (Some(z), Some(measured)) = (self.depth.as_mut(), measured) {
+                let vz = self.attitude.transform_vector(&self.velocity).z;
+                *z += vz * dt;
+                let innovation = measured - *z;
+                *z += self.aid.depth_gain * innovation;
+                let correction = Vector3::new(0.0, 0.0, self.aid.velocity_gain * innovation * dt);
+                self.velocity += self.attitude.inverse_transform_vector(&correction);
+            }
+            self.max_tilt = self.max_tilt.max(self.tilt());
+            let heading = self.attitude.euler_angles().2 - self.heading0;
+            let heading = heading.sin().atan2(heading.cos());
+            self.max_heading = self.max_heading.max(heading.abs());
+        }
+        NavState {
+            attitude: self.attitude,
+            velocity: self.velocity,
+            rate: if finite { *rate } else { Vector3::zeros() },
+            down: self.down(),
+        }
+    }
+
+    /// Unit gravity direction in the body frame.
+    pub fn down(&self) -> Vector3<f64> {
+        self.attitude.inverse_transform_vector(&Vector3::z())
+    }
+
+    /// Angle between body z and down, rad.
+    pub fn tilt(&self) -> f64 {
+        self.down().z.clamp(-1.0, 1.0).acos()
+    }
+
+    /// Largest tilt since the rest, rad.
+    pub fn max_tilt(&self) -> f64 {
+        self.max_tilt
+    }
+
+    /// Largest heading change since the rest, rad.
+    pub fn max_heading_change(&self) -> f64 {
+        self.max_heading
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_still_vehicle_stays_put_even_tilted_and_with_an_accelerometer_bias() {
+        let q = UnitQuaternion::from_euler_angles(0.2, -0.1, 0.0);
+        let bias = Vector3::new(0.03, -0.02, 0.05);
+        let f = -q.inverse_transform_vector(&Vector3::z()) * GRAVITY + bias;
+        let mut nav = Navigator::at_rest(&f, 0.0, Some(10.0), DepthAid::default());
+        let mut s = nav.update(0.0, &Vector3::zeros(), &f, Some(10.0));
+        for k in 1..=1000 {
+            s = nav.update(k as f64 * 0.005, &Vector3::zeros(), &f, Some(10.0));
+        }
+        assert!(s.velocity.norm() < 1e-9, "{}", s.velocity);
+        assert!((nav.max_tilt() - f.normalize().z.abs().acos()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_constant_rate_turns_the_attitude_by_rate_times_time() {
+        let f = Vector3::new(0.0, 0.0, -GRAVITY);
+        let mut nav = Navigator::at_rest(&f, 0.0, None, DepthAid::default());
+        let w = Vector3::new(0.0, 0.0, 0.5);
+        for k in 0..=200 {
+            // A yaw turn leaves gravity where it is.
+            nav.update(k as f64 * 0.005, &w, &f, None);
+        }
+        assert!((nav.max_heading_change() - 0.5).abs() < 1e-9);
+        assert!(nav.tilt() < 1e-9);
+    }
+
+    #[test]
+    fn non_finite_samples_leave_the_state_alone() {
+        let f = Vector3::new(0.0, 0.0, -GRAVITY);
+        let mut nav = Navigator::at_rest(&f, 0.0, None, DepthAid::default());
+        nav.update(0.0, &Vector3::zeros(), &f, None);
+        let s = nav.update(0.01, &Vector3::new(f64::NAN, 0.0, 0.0), &f, None);
+        assert_eq!(s.velocity, Vector3::zeros());
+        assert_eq!(s.attitude, UnitQuaternion::identity());
+    }
+}
