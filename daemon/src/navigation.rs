@@ -57,12 +57,17 @@ pub struct NavState {
 #[derive(Debug, Clone)]
 pub struct Navigator {
     aid: DepthAid,
+    /// Gravity, m/s^2.
+    gravity: f64,
     attitude: UnitQuaternion<f64>,
     velocity: Vector3<f64>,
     depth: Option<f64>,
     /// The accelerometer's reading at rest is -g in the body frame plus its bias; starting the
     /// attitude from that reading makes f + g_body zero at rest, bias included.
     last_t_s: Option<f64>,
+    /// The previous sample's rate and motion acceleration (trapezoidal integration).
+    last_rate: Vector3<f64>,
+    last_accel: Vector3<f64>,
     /// Largest tilt (angle of body z from down) and heading change seen, rad.
     max_tilt: f64,
     max_heading: f64,
@@ -87,12 +92,18 @@ impl Navigator {
         let roll = down.y.atan2(down.z);
         let pitch = (-down.x).atan2((down.y * down.y + down.z * down.z).sqrt());
         let attitude = UnitQuaternion::from_euler_angles(roll, pitch, heading);
+        // Standard gravity: the rest's magnitude is no better, since a body that is not
+        // exactly neutrally buoyant is still accelerating then (measured: 5x the velocity error).
+        let gravity = GRAVITY;
         let mut nav = Navigator {
             aid,
+            gravity,
             attitude,
             velocity: Vector3::zeros(),
             depth: depth.filter(|d| d.is_finite()),
             last_t_s: None,
+            last_rate: Vector3::zeros(),
+            last_accel: Vector3::zeros(),
             max_tilt: 0.0,
             max_heading: 0.0,
             heading0: heading,
@@ -117,11 +128,16 @@ impl Navigator {
                 .last_t_s
                 .map(|t0| (t_s - t0).clamp(0.0, 0.1))
                 .unwrap_or(0.0);
+            let first = self.last_t_s.is_none();
             self.last_t_s = Some(t_s);
-            self.attitude *= UnitQuaternion::from_scaled_axis(rate * dt);
-            let g_body = self.down() * GRAVITY;
+            let mean_rate = if first { *rate } else { 0.5 * (rate + self.last_rate) };
+            self.attitude *= UnitQuaternion::from_scaled_axis(mean_rate * dt);
+            self.last_rate = *rate;
+            let g_body = self.down() * self.gravity;
             let accel = specific_force + g_body - rate.cross(&self.velocity);
-            self.velocity += accel * dt;
+            let mean_accel = if first { accel } else { 0.5 * (accel + self.last_accel) };
+            self.velocity += mean_accel * dt;
+            self.last_accel = accel;
             let measured = depth.filter(|d| d.is_finite());
             if self.depth.is_none() {
                 // The first depth reading anchors the depth channel.
@@ -146,6 +162,11 @@ impl Navigator {
             rate: if finite { *rate } else { Vector3::zeros() },
             down: self.down(),
         }
+    }
+
+    /// Gravity's magnitude as measured at rest, m/s^2.
+    pub fn gravity(&self) -> f64 {
+        self.gravity
     }
 
     /// Unit gravity direction in the body frame.

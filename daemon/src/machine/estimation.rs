@@ -109,7 +109,10 @@ impl EstimationRun {
         let levels = self.noise.levels();
         self.levels = Some(levels);
         let mut cfg = setup.estimator.clone();
-        if let Some(p) = model.filter(|_| cfg.pulse_snr > 0.0).and_then(|m| {
+        // The dynamic method pulses back to back at a fixed strength: its information grows
+        // with the motion it fits, not with one pulse's SNR (pulse_power's model).
+        let sized = cfg.pulse_snr > 0.0 && cfg.method != Method::Dynamic;
+        if let Some(p) = model.filter(|_| sized).and_then(|m| {
             pulse_power(
                 &m.effectiveness,
                 n,

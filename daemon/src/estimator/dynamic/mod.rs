@@ -17,7 +17,6 @@ use nalgebra::{DMatrix, Vector3};
 
 use self::regressors::{terms, TERMS};
 use self::segmented_ls::{SegmentedLs, SegmentedSolution};
-use crate::estimator::response::GRAVITY;
 use crate::navigation::{DepthAid, Navigator};
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
@@ -179,7 +178,7 @@ impl DynamicRun {
         self.direct[..self.n].copy_from_slice(&self.lag);
         self.direct[self.n..].copy_from_slice(&self.terms);
         self.rot.add(&self.integral, gyro);
-        let motion = specific_force + nav.down * GRAVITY;
+        let motion = specific_force + nav.down * self.nav.gravity();
         self.acc.add(&self.direct, &motion);
     }
 
