@@ -8,7 +8,7 @@ use nalgebra::{DMatrix, Matrix3, Matrix6, UnitQuaternion, Vector3};
 use thruster_sim::dynamics::{fossen_to_dof_order, RigidBody};
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd::estimator::dynamic::DynamicTerms;
-use thrusterd::estimator::Method;
+use thrusterd::estimator::{EstimatorConfig, Method};
 use thrusterd::machine::{ImuInput, Machine, MachineSetup, Request, State};
 use thrusterd::navigation::{DepthAid, Navigator};
 
@@ -67,7 +67,8 @@ fn estimate(name: &str, noise: NoisePreset, seed: u64) -> Outcome {
         thrusters: n,
         ..MachineSetup::default()
     };
-    assert_eq!(setup.estimator.method, Method::Dynamic, "the default");
+    setup.estimator = EstimatorConfig::dynamic();
+    assert_eq!(setup.estimator.method, Method::Dynamic);
     // No driver in between: the daemon compensates the T200 deadband itself.
     setup.machine.deadband = 0.05;
     let mut machine = Machine::new(setup);
@@ -198,7 +199,10 @@ fn restoring_and_damping_coefficients_match_the_simulator() {
         );
         if row < 2 {
             let (c, se) = o.terms.get(row, axis).unwrap();
-            let k = ["down_x", "down_y", "down_z"].iter().position(|n| *n == axis).unwrap();
+            let k = ["down_x", "down_y", "down_z"]
+                .iter()
+                .position(|n| *n == axis)
+                .unwrap();
             let t = restoring[(row, k)];
             assert!(
                 (c - t).abs() <= 0.1 * t.abs(),
@@ -223,7 +227,14 @@ fn navigation_follows_the_true_velocity() {
         r0 = sim.advance_and_sample();
         rest += Vector3::from(r0.accel) / 400.0;
     }
-    let aid = if std::env::var("NOAID").is_ok() { DepthAid { depth_gain: 0.0, velocity_gain: 0.0 } } else { DepthAid::default() };
+    let aid = if std::env::var("NOAID").is_ok() {
+        DepthAid {
+            depth_gain: 0.0,
+            velocity_gain: 0.0,
+        }
+    } else {
+        DepthAid::default()
+    };
     let mut nav = Navigator::at_rest(&rest, 0.0, Some(r0.depth), aid);
     // The filter starts at zero velocity (no DVL); so does the body here.
     let mut state = *sim.state();
@@ -233,29 +244,56 @@ fn navigation_follows_the_true_velocity() {
     let mut worst_att = 0.0f64;
     let mut peak_v = 0.0f64;
     for k in 0..800 {
-        let sign = if matches!(k / 20 % 4, 0 | 3) { 1.0 } else { -1.0 };
-        let u: Vec<f64> = (0..n).map(|i| if (i + k / 80) % 2 == 0 { 0.8 * sign } else { -0.8 * sign }).collect();
+        let sign = if matches!(k / 20 % 4, 0 | 3) {
+            1.0
+        } else {
+            -1.0
+        };
+        let u: Vec<f64> = (0..n)
+            .map(|i| {
+                if (i + k / 80) % 2 == 0 {
+                    0.8 * sign
+                } else {
+                    -0.8 * sign
+                }
+            })
+            .collect();
         sim.set_commands(&u).unwrap();
         let r = sim.advance_and_sample();
-        let s = nav.update(r.t_ns as f64 * 1e-9, &Vector3::from(r.gyro), &Vector3::from(r.accel), Some(r.depth));
+        let s = nav.update(
+            r.t_ns as f64 * 1e-9,
+            &Vector3::from(r.gyro),
+            &Vector3::from(r.accel),
+            Some(r.depth),
+        );
         worst_v = worst_v.max((s.velocity - sim.linear_velocity()).norm());
         worst_att = worst_att.max(s.attitude.angle_to(&sim.attitude()).to_degrees());
         peak_v = peak_v.max(sim.linear_velocity().norm());
     }
-    assert!(peak_v > 0.1, "the excitation moved the vehicle ({peak_v:.3} m/s)");
+    assert!(
+        peak_v > 0.1,
+        "the excitation moved the vehicle ({peak_v:.3} m/s)"
+    );
     assert!(worst_att < 0.5, "attitude off by {worst_att:.3} deg");
     // Measured 0.038 m/s at a 0.76 m/s peak: dead reckoning at 200 Hz through a tumble.
-    assert!(worst_v < 0.08 * peak_v, "velocity off by {worst_v:.4} m/s (peak {peak_v:.3})");
+    assert!(
+        worst_v < 0.08 * peak_v,
+        "velocity off by {worst_v:.4} m/s (peak {peak_v:.3})"
+    );
 }
 
 /// A non-finite sample in the middle of the excitation is dropped; the model is the one a
 /// clean run gives.
 #[test]
 fn a_non_finite_sample_mid_excitation_changes_nothing() {
-    use thrusterd::estimator::{Estimator, EstimatorConfig, NoiseLevels};
+    use thrusterd::estimator::{Estimator, NoiseLevels};
     let mk = || {
-        Estimator::new(EstimatorConfig::default(), 2, NoiseLevels::isotropic(0.01, 0.01))
-            .with_rest_specific_force(Vector3::new(0.0, 0.0, -9.80665))
+        Estimator::new(
+            EstimatorConfig::dynamic(),
+            2,
+            NoiseLevels::isotropic(0.01, 0.01),
+        )
+        .with_rest_specific_force(Vector3::new(0.0, 0.0, -9.80665))
     };
     let feed = |e: &mut Estimator, poison: bool| {
         for p in 0..40 {
@@ -268,8 +306,18 @@ fn a_non_finite_sample_mid_excitation_changes_nothing() {
                 let f = Vector3::new(0.5 * u[0], 0.0, -9.80665 + 0.1 * u[1]);
                 e.push_dynamic_sample(t, &w, &f, Some(5.0));
                 if poison && p == 17 && k == 5 {
-                    e.push_dynamic_sample(t + 0.001, &Vector3::new(f64::NAN, 0.0, 0.0), &f, Some(5.0));
-                    e.push_dynamic_sample(t + 0.002, &w, &Vector3::new(0.0, f64::INFINITY, 0.0), None);
+                    e.push_dynamic_sample(
+                        t + 0.001,
+                        &Vector3::new(f64::NAN, 0.0, 0.0),
+                        &f,
+                        Some(5.0),
+                    );
+                    e.push_dynamic_sample(
+                        t + 0.002,
+                        &w,
+                        &Vector3::new(0.0, f64::INFINITY, 0.0),
+                        None,
+                    );
                 }
             }
             e.end_pulse();

@@ -345,8 +345,8 @@ fn model_rejections() {
     m.source = 4;
     assert_rejects(&m, RejectCategory::Other, "source has unknown value 4");
     let mut m = model();
-    m.method = 2;
-    assert_rejects(&m, RejectCategory::Other, "method has unknown value 2");
+    m.method = 3;
+    assert_rejects(&m, RejectCategory::Other, "method has unknown value 3");
     let mut m = model();
     m.actuated = 0x40;
     assert_rejects(&m, RejectCategory::Other, "actuated has unknown bits 0x40");

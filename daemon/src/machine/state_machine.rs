@@ -591,9 +591,13 @@ impl Machine {
         };
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Estimating;
-        let step = self
-            .run
-            .pulse_sample(s.t_ns, elapsed, &m, self.setup.machine.pulse_s, &mut cmd.thrust);
+        let step = self.run.pulse_sample(
+            s.t_ns,
+            elapsed,
+            &m,
+            self.setup.machine.pulse_s,
+            &mut cmd.thrust,
+        );
         match step {
             PulseStep::NoRun => {
                 self.transition(State::Idle, "internal: pulse without an estimator");

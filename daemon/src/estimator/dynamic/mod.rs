@@ -130,7 +130,10 @@ impl DynamicRun {
         u: &[f64],
     ) {
         let finite = t_s.is_finite()
-            && gyro.iter().chain(specific_force.iter()).all(|v| v.is_finite())
+            && gyro
+                .iter()
+                .chain(specific_force.iter())
+                .all(|v| v.is_finite())
             && u.len() == self.n
             && u.iter().all(|v| v.is_finite());
         if !finite || self.last_t_s.is_some_and(|t0| t_s <= t0) {
@@ -183,6 +186,8 @@ impl DynamicRun {
     }
 
     /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer).
+    // Index loops: DOF row 3g + a, thruster i and term j address several matrices at once.
+    #[allow(clippy::needless_range_loop)]
     pub fn solve(&self, rest_sigma: &[f64; 6]) -> DynamicSolution {
         let n = self.n;
         let sols = [self.rot.solve(), self.acc.solve()];

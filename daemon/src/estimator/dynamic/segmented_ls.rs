@@ -65,6 +65,8 @@ impl SegmentedLs {
     }
 
     /// One row; `x` has `width()` entries. Only the upper triangle is accumulated.
+    // Index loops: row i and column j of the same Gram matrix, clearer than zipped iterators.
+    #[allow(clippy::needless_range_loop)]
     pub fn add(&mut self, x: &[f64], y: &Vector3<f64>) {
         debug_assert_eq!(x.len(), self.k);
         for i in 0..self.k {
