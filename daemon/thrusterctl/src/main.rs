@@ -36,14 +36,14 @@ enum Command {
     /// hot-swap): daemon and simulator on a private namespace, scored against the truth.
     #[cfg(feature = "lab")]
     Experiment(thruster_lab::experiment::ExperimentArgs),
-    /// Not in this build (built without the lab): says so.
+    /// Not in this build: thrusterctl was built without the simulation lab (feature `lab`).
     #[cfg(not(feature = "lab"))]
     #[command(disable_help_flag = true)]
     Demo {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         args: Vec<std::ffi::OsString>,
     },
-    /// Not in this build (built without the lab): says so.
+    /// Not in this build: thrusterctl was built without the simulation lab (feature `lab`).
     #[cfg(not(feature = "lab"))]
     #[command(disable_help_flag = true)]
     Experiment {
