@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use thrusterd::config::DaemonConfig;
+use thrusterd_core::config::DaemonConfig;
 
 fuzz_target!(|data: &[u8]| {
     // The daemon reads the file with read_to_string: non-UTF-8 is an I/O error before parsing.

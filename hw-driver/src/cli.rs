@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use crate::config::BackendKind;
+use crate::config::{BackendKind, Overrides};
 
 /// `thruster-hw`: drives a vehicle's thrusters and reads its IMU for thrusterd, over
 /// iceoryx2 (ArduSub over MAVLink, or Linux sysfs PWM and IIO).
@@ -40,6 +40,16 @@ pub struct RunArgs {
     /// Hardware backend.
     #[arg(long, value_name = "BACKEND", value_parser = parse_backend)]
     pub backend: Option<BackendKind>,
+}
+
+impl From<&RunArgs> for Overrides {
+    fn from(args: &RunArgs) -> Overrides {
+        Overrides {
+            config: args.config.clone(),
+            namespace: args.namespace.clone(),
+            backend: args.backend,
+        }
+    }
 }
 
 /// Parses a backend name.

@@ -65,6 +65,8 @@ pub fn build_binaries() {
             "-p",
             "thrusterd",
             "-p",
+            "thrusterctl",
+            "-p",
             "thruster-sim",
             "-p",
             "thruster-hw",

@@ -46,7 +46,7 @@ fn estimation_from_request_to_swapped_model_and_restart_loads_it() {
         model_error(&model, &truth, 0),
         model_error(&model, &truth, 3),
     );
-    // Same margin as the in-process test (daemon/tests/machine_sim.rs): noise at the 10 %
+    // Same margin as the in-process test (daemon/core/tests/machine_sim.rs): noise at the 10 %
     // target plus ~7 % drag bias of 0.1 s pulses.
     assert!(
         e_rot < 0.25 && e_acc < 0.25,

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Parser;
 use thruster_hw::cli::{Cli, Command};
-use thruster_hw::config::Settings;
+use thruster_hw::config::{Overrides, Settings};
 use thruster_hw::driver::{self, shutdown::Shutdown};
 
 fn main() -> ExitCode {
@@ -20,7 +20,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let stop = Shutdown::on_signals().context("cannot install the signal handlers")?;
     match cli.command {
         Command::Run(args) => {
-            let settings = Settings::resolve(&args)?;
+            let settings = Settings::resolve(&Overrides::from(&args))?;
             driver::run(&settings, &stop)
                 .with_context(|| format!("thruster-hw ({} backend)", settings.backend.name()))?;
             Ok(())

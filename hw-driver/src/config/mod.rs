@@ -22,7 +22,6 @@ pub use load::{parse_toml, read_text, LoadError};
 pub use mavlink::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
 pub use thruster::{ThrusterConfig, PULSE_LIMITS_US};
 
-use crate::cli::RunArgs;
 use ranged::ranged;
 
 ranged!(de_watchdog_ms, "watchdog_ms", u64, 10, 60_000, " ms");
@@ -54,6 +53,18 @@ impl BackendKind {
             BackendKind::Linux => "linux",
         }
     }
+}
+
+/// What the command line gives over the file (`thruster-hw run`'s options; the command line
+/// itself, clap's `RunArgs`, converts into this, so the settings do not depend on the CLI).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Overrides {
+    /// Config file (TOML, see config/thruster-hw.toml).
+    pub config: PathBuf,
+    /// IPC namespace shared with the daemon.
+    pub namespace: Option<String>,
+    /// Hardware backend.
+    pub backend: Option<BackendKind>,
 }
 
 /// Problems with the settings.
@@ -147,7 +158,7 @@ pub struct Settings {
 
 impl Settings {
     /// Reads `args.config` and applies the command line over it.
-    pub fn resolve(args: &RunArgs) -> Result<Settings, SettingsError> {
+    pub fn resolve(args: &Overrides) -> Result<Settings, SettingsError> {
         let file = load_file(&args.config)?;
         let mut settings = Settings::merge(file, &args.config.display().to_string(), args)?;
         // Relative sysfs roots are relative to the config file (like every path in it).
@@ -163,7 +174,7 @@ impl Settings {
     pub fn merge(
         file: FileConfig,
         origin: &str,
-        args: &RunArgs,
+        args: &Overrides,
     ) -> Result<Settings, SettingsError> {
         let namespace =
             args.namespace
@@ -278,8 +289,8 @@ pub fn load_file(path: &Path) -> Result<FileConfig, LoadError> {
 mod tests {
     use super::*;
 
-    fn args() -> RunArgs {
-        RunArgs {
+    fn args() -> Overrides {
+        Overrides {
             config: PathBuf::from("x.toml"),
             namespace: None,
             backend: None,
@@ -312,7 +323,7 @@ reversed = true
     #[test]
     fn command_line_wins() {
         let f: FileConfig = parse_toml(MINIMAL, "m.toml").unwrap();
-        let a = RunArgs {
+        let a = Overrides {
             namespace: Some("other".into()),
             backend: Some(BackendKind::Linux),
             ..args()
@@ -372,7 +383,7 @@ reversed = true
     #[test]
     fn shipped_config_file_is_valid() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/thruster-hw.toml");
-        let a = RunArgs {
+        let a = Overrides {
             config: path.clone(),
             ..args()
         };
@@ -395,7 +406,7 @@ reversed = true
         );
         assert_eq!(s.mavlink.address, MavlinkConfig::default().address);
         // Both backends' sections are valid whichever is selected.
-        let b = RunArgs {
+        let b = Overrides {
             backend: Some(BackendKind::Linux),
             ..a
         };

@@ -12,45 +12,9 @@
 
 use std::ffi::CStr;
 use std::os::unix::fs::MetadataExt;
-use std::path::PathBuf;
 
+use super::error::AccessDenied;
 use super::{IpcConfig, IpcError};
-
-/// The refusal, with what the operator needs to fix it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AccessDenied {
-    /// The directory the user may not use.
-    pub path: PathBuf,
-    /// The user asking, e.g. "root (uid 0)".
-    pub user: String,
-    /// Owner of `path`, e.g. "thrusterd".
-    pub owner: String,
-    /// Group of `path`, e.g. "thrusterd".
-    pub group: String,
-    /// Permission bits of `path` (with setgid/sticky), e.g. 0o2770.
-    pub mode: u32,
-}
-
-impl std::fmt::Display for AccessDenied {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "user {} may not use the iceoryx2 files at {} ({}:{}, mode {:04o}): files it \
-             made there could not be opened or removed by the daemon. Operate as a member of \
-             group {} (sudo usermod -aG {} USER, then log in again) or as user {} \
-             (sudo -u {} thrusterctl ...)",
-            self.user,
-            self.path.display(),
-            self.owner,
-            self.group,
-            self.mode,
-            self.group,
-            self.group,
-            self.owner,
-            self.owner,
-        )
-    }
-}
 
 /// Checks that this process may use `ipc`'s namespace, before it creates any file there.
 ///

@@ -77,7 +77,7 @@ pub enum IpcError {
     },
     /// This user may not use the namespace's files (see [`super::check_access`]).
     #[error("{0}")]
-    AccessDenied(Box<super::AccessDenied>),
+    AccessDenied(Box<AccessDenied>),
     /// A file system operation failed.
     #[error("{op} {path}: {source}")]
     Io {
@@ -88,6 +88,42 @@ pub enum IpcError {
         /// The I/O error.
         source: std::io::Error,
     },
+}
+
+/// The refusal of [`super::check_access`], with what the operator needs to fix it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AccessDenied {
+    /// The directory the user may not use.
+    pub path: PathBuf,
+    /// The user asking, e.g. "root (uid 0)".
+    pub user: String,
+    /// Owner of `path`, e.g. "thrusterd".
+    pub owner: String,
+    /// Group of `path`, e.g. "thrusterd".
+    pub group: String,
+    /// Permission bits of `path` (with setgid/sticky), e.g. 0o2770.
+    pub mode: u32,
+}
+
+impl std::fmt::Display for AccessDenied {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "user {} may not use the iceoryx2 files at {} ({}:{}, mode {:04o}): files it \
+             made there could not be opened or removed by the daemon. Operate as a member of \
+             group {} (sudo usermod -aG {} USER, then log in again) or as user {} \
+             (sudo -u {} thrusterctl ...)",
+            self.user,
+            self.path.display(),
+            self.owner,
+            self.group,
+            self.mode,
+            self.group,
+            self.group,
+            self.owner,
+            self.owner,
+        )
+    }
 }
 
 /// `map_err` adapter wrapping an iceoryx2 error with context.

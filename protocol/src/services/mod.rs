@@ -27,14 +27,14 @@ mod ports;
 mod retry;
 mod topics;
 
-pub use access::{check_access, owns_root, AccessDenied};
+pub use access::{check_access, owns_root};
 pub use cleanup::{
     cleanup_dead_nodes, namespace_files, purge_namespace, tidy_residue, NamespaceGuard, NodeCensus,
     PurgeReport, TidyOnDrop,
 };
 pub use config::{IpcConfig, CONNECTION_TIMEOUT, DEFAULT_ROOT_BASE, MAX_NAMESPACE_LEN, SHM_DIR};
 pub use control::{ControlClient, ControlServer, ServeCount, CONTROL_LEAF};
-pub use error::IpcError;
+pub use error::{AccessDenied, IpcError};
 pub use ports::{
     bounded_wait_timeout, create_waitset, open_event, open_topic, Inbox, Port, MIN_WAIT,
 };

@@ -1,0 +1,9 @@
+//! The simulation lab: the demo and the paper's pool experiments. Each starts thrusterd and
+//! thruster-sim as processes on a private namespace ([`session`]), drives them through the
+//! operator's client and scores the result against the simulator's truth ([`scoring`]).
+//! Not part of a vehicle build (thrusterctl's `lab` feature).
+
+pub mod demo;
+pub mod experiment;
+pub mod scoring;
+pub mod session;

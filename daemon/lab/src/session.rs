@@ -1,0 +1,653 @@
+//! One simulated session: thrusterd and thruster-sim started as separate processes on a private
+//! iceoryx2 namespace, the operator-side ports to talk to them, and a shutdown that leaves no
+//! process and no shared-memory file behind. Used by `thrusterctl demo` and by every run of
+//! `thrusterctl experiment`.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use nalgebra::UnitQuaternion;
+use thruster_protocol::services::{
+    namespace_files, purge_namespace, ControlClient, Inbox, IpcConfig, IpcNode, Port, TopicMessage,
+};
+use thruster_protocol::{
+    ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, Setpoint, StatusMsg,
+    ThrustCommand, TruthMsg, VehicleStateMsg, MAX_THRUSTERS,
+};
+
+/// A child process killed and reaped on drop, whatever happens.
+pub struct ChildProc {
+    name: &'static str,
+    child: Option<Child>,
+    log: PathBuf,
+}
+
+impl ChildProc {
+    fn spawn(name: &'static str, exe: &Path, args: &[String], dir: &Path) -> Result<ChildProc> {
+        let log = dir.join(format!("{name}.log"));
+        let out = std::fs::File::create(&log)?;
+        let child = Command::new(exe)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(out.try_clone()?)
+            .stderr(out)
+            .spawn()
+            .with_context(|| format!("starting {}", exe.display()))?;
+        Ok(ChildProc {
+            name,
+            child: Some(child),
+            log,
+        })
+    }
+
+    /// SIGTERM and wait (SIGKILL after 5 s); true when it exited cleanly.
+    fn stop(&mut self) -> bool {
+        let Some(mut child) = self.child.take() else {
+            return true;
+        };
+        let _ = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status();
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_secs(5) {
+            if let Ok(Some(status)) = child.try_wait() {
+                return status.success();
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+        false
+    }
+
+    fn kill(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    fn alive(&mut self) -> bool {
+        self.child
+            .as_mut()
+            .is_some_and(|c| matches!(c.try_wait(), Ok(None)))
+    }
+
+    /// The whole log (the monitor's findings, for instance).
+    pub fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// The end of the process's log, for error messages.
+    fn tail(&self) -> String {
+        let text = self.log_text();
+        let lines: Vec<&str> = text.lines().collect();
+        format!(
+            "--- {} ({}) ---\n{}",
+            self.name,
+            self.log.display(),
+            lines[lines.len().saturating_sub(15)..].join("\n")
+        )
+    }
+}
+
+impl Drop for ChildProc {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// The daemon and simulator binaries, and what this build of them supports.
+#[derive(Debug, Clone)]
+pub struct Binaries {
+    pub daemon: PathBuf,
+    pub sim: PathBuf,
+    /// `thruster-sim run --pace X` exists (lockstep, but no faster than X times real time).
+    pub sim_pace: bool,
+    /// The daemon's config accepts a `[monitor]` table (the model-mismatch monitor).
+    pub daemon_monitor: bool,
+}
+
+impl Binaries {
+    /// The binaries next to this one; under `cargo run` they are built first (cargo only builds
+    /// the binary it runs). Optional features are probed, so this tool works with a daemon or
+    /// simulator that predates them.
+    pub fn locate() -> Result<Binaries> {
+        let exe = std::env::current_exe()?;
+        let dir = exe
+            .parent()
+            .context("thrusterctl has no folder")?
+            .to_path_buf();
+        if let (Ok(cargo), Ok(manifest)) =
+            (std::env::var("CARGO"), std::env::var("CARGO_MANIFEST_DIR"))
+        {
+            let mut cmd = Command::new(cargo);
+            cmd.args([
+                "build",
+                "-q",
+                "-p",
+                "thrusterd",
+                "-p",
+                "thruster-sim",
+                "--bins",
+            ]);
+            if dir.ends_with("release") {
+                cmd.arg("--release");
+            }
+            let status = cmd
+                .current_dir(manifest)
+                .status()
+                .context("building thrusterd and thruster-sim")?;
+            if !status.success() {
+                bail!("building thrusterd and thruster-sim failed");
+            }
+        }
+        let (daemon, sim) = (dir.join("thrusterd"), dir.join("thruster-sim"));
+        for p in [&daemon, &sim] {
+            if !p.exists() {
+                bail!(
+                    "{} not found: build the workspace (cargo build --release)",
+                    p.display()
+                );
+            }
+        }
+        let sim_pace = Command::new(&sim)
+            .args(["run", "--help"])
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).contains("--pace"))
+            .unwrap_or(false);
+        let daemon_monitor = probe_config(&daemon, "[monitor]\naction = \"report\"\n");
+        Ok(Binaries {
+            daemon,
+            sim,
+            sim_pace,
+            daemon_monitor,
+        })
+    }
+}
+
+/// True when `thrusterd check-config` accepts `text`.
+fn probe_config(daemon: &Path, text: &str) -> bool {
+    let Ok(dir) = TempDir::new("probe") else {
+        return false;
+    };
+    let file = dir.path.join("probe.toml");
+    if std::fs::write(&file, text).is_err() {
+        return false;
+    }
+    Command::new(daemon)
+        .arg("check-config")
+        .arg(&file)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// A folder under the system temp dir (the children's logs and config), removed on drop
+/// unless `THRUSTERCTL_KEEP_LOGS` is set: then its path is printed for a post-mortem.
+struct TempDir {
+    path: PathBuf,
+}
+
+impl TempDir {
+    fn new(tag: &str) -> Result<TempDir> {
+        static N: AtomicU32 = AtomicU32::new(0);
+        let path = std::env::temp_dir().join(format!(
+            "thrusterd-{tag}-{}-{}",
+            std::process::id(),
+            N.fetch_add(1, Ordering::Relaxed)
+        ));
+        std::fs::create_dir_all(&path).with_context(|| format!("creating {}", path.display()))?;
+        Ok(TempDir { path })
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if std::env::var_os("THRUSTERCTL_KEEP_LOGS").is_some() {
+            eprintln!("kept {}", self.path.display());
+            return;
+        }
+        let _ = std::fs::remove_dir_all(&self.path);
+    }
+}
+
+/// Where a file of the repository's `config/` folder is: beside the sources under cargo, the
+/// workspace of the binary (target/<profile>/..), the current folder, or /etc/thrusterd.
+pub fn config_file(relative: &str) -> PathBuf {
+    let mut candidates = Vec::new();
+    if let Ok(d) = std::env::var("CARGO_MANIFEST_DIR") {
+        candidates.push(Path::new(&d).join("../../config").join(relative));
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        if let Some(ws) = exe.parent().and_then(Path::parent).and_then(Path::parent) {
+            candidates.push(ws.join("config").join(relative));
+        }
+    }
+    candidates.push(Path::new("config").join(relative));
+    candidates.push(Path::new("/etc/thrusterd").join(relative));
+    candidates
+        .iter()
+        .find(|p| p.exists())
+        .cloned()
+        .unwrap_or_else(|| Path::new("config").join(relative))
+}
+
+/// The daemon's configuration for a session.
+#[derive(Debug, Clone)]
+pub enum DaemonConfig {
+    /// The daemon's defaults.
+    Defaults,
+    /// The operator's file.
+    File(PathBuf),
+    /// Generated TOML, written into the session's temp folder.
+    Text(String),
+}
+
+/// What to start.
+#[derive(Debug, Clone)]
+pub struct SessionSpec {
+    /// Namespace prefix (the process id and a counter make it unique).
+    pub tag: &'static str,
+    pub vehicle: PathBuf,
+    pub noise: String,
+    pub seed: u64,
+    /// Simulator against the wall clock instead of lockstep.
+    pub realtime: bool,
+    /// In lockstep, no faster than this many times real time (when the simulator supports it).
+    pub pace: Option<f64>,
+    pub daemon_config: DaemonConfig,
+    /// Scenario TOML (scripted reconfigurations), written into the session's temp folder.
+    pub scenario: Option<String>,
+}
+
+impl SessionSpec {
+    /// What can be wrong with the spec itself (the vehicle file, the noise preset): checked
+    /// before anything is built or started, so a typo is answered at once. The vehicle's
+    /// thruster count.
+    pub fn check(&self) -> Result<usize> {
+        if !self.vehicle.exists() {
+            bail!("vehicle file {} not found", self.vehicle.display());
+        }
+        let count = thruster_count(&self.vehicle)?;
+        if !["paper", "realistic", "none"].contains(&self.noise.as_str()) {
+            return Err(thrusterctl_operator::exit::Failure::usage(format!(
+                "--noise must be paper, realistic or none, got {:?}",
+                self.noise
+            ))
+            .into());
+        }
+        Ok(count)
+    }
+}
+
+/// The operator-side ports. Dropped before the node, and both before the namespace is purged.
+struct Ports {
+    status: Inbox<StatusMsg>,
+    model: Inbox<ModelMsg>,
+    truth: Inbox<TruthMsg>,
+    vehicle: Inbox<VehicleStateMsg>,
+    thrust: Inbox<ThrustCommand>,
+    setpoint: Port<Setpoint>,
+    client: ControlClient,
+}
+
+/// How a session ended.
+#[derive(Debug, Clone, Copy)]
+pub struct Shutdown {
+    /// Both processes exited with status 0 after SIGTERM.
+    pub clean: bool,
+    /// Files of the namespace still on disk after the purge.
+    pub leftovers: usize,
+}
+
+/// A running daemon + simulator pair and the ports to them.
+pub struct Session {
+    ports: Option<Ports>,
+    node: Option<IpcNode>,
+    ipc: IpcConfig,
+    daemon: ChildProc,
+    sim: ChildProc,
+    /// The pace the simulator runs at, if any.
+    pub pace: Option<f64>,
+    // Last: removed after the processes that write into it are gone.
+    _tmp: TempDir,
+}
+
+impl Session {
+    /// Start both processes. The daemon is told the thruster count (and whatever the config
+    /// says), never the simulator's geometry.
+    pub fn start(bins: &Binaries, spec: &SessionSpec) -> Result<Session> {
+        // Every check before the first iceoryx2 file: a vehicle file with 0 or 17 thrusters
+        // used to fail after the session's node existed, leaving its namespace folder.
+        let count = spec.check()?.to_string();
+        static N: AtomicU32 = AtomicU32::new(0);
+        // Namespaces are at most 16 characters.
+        let ns = format!(
+            "{}-{}-{}",
+            &spec.tag[..spec.tag.len().min(4)],
+            std::process::id() % 1_000_000,
+            N.fetch_add(1, Ordering::Relaxed) % 1000
+        );
+        let ipc = IpcConfig::new(&ns)?;
+        // A crashed earlier run with the same id must not confuse this one.
+        let _ = purge_namespace(&ipc);
+        let tmp = TempDir::new(spec.tag)?;
+        let node = ipc.create_node("thrusterctl-session")?;
+        let ports = Ports {
+            // The largest buffers the topics allow: the runner reads in bursts.
+            status: Inbox::create_with_buffer(&node, &ipc, 4)?,
+            model: Inbox::create_with_buffer(&node, &ipc, 4)?,
+            truth: Inbox::create_with_buffer(&node, &ipc, 4)?,
+            vehicle: Inbox::create_with_buffer(&node, &ipc, 16)?,
+            thrust: Inbox::create_with_buffer(&node, &ipc, 16)?,
+            setpoint: Port::create(&node, &ipc)?,
+            client: ControlClient::create(&node, &ipc)?,
+        };
+
+        let state = tmp.path.join("state");
+        let mut daemon_args: Vec<String> = [
+            "run",
+            "--namespace",
+            &ns,
+            "--state-dir",
+            state.to_str().unwrap_or("."),
+        ]
+        .map(String::from)
+        .to_vec();
+        // A generated config says the count itself, possibly with a declared layout, which
+        // `--thrusters` would clear.
+        if !matches!(spec.daemon_config, DaemonConfig::Text(_)) {
+            daemon_args.extend(["--thrusters".into(), count]);
+        }
+        // In lockstep the simulator waits for every answer: the daemon's low-latency mode
+        // (poll before blocking) saves a wake-up per sample.
+        if !spec.realtime {
+            daemon_args.extend(["--spin-us".into(), "500".into()]);
+        }
+        match &spec.daemon_config {
+            DaemonConfig::Defaults => {}
+            DaemonConfig::File(p) => daemon_args.extend(["--config".into(), path_arg(p)]),
+            DaemonConfig::Text(text) => {
+                let p = tmp.path.join("thrusterd.toml");
+                std::fs::write(&p, text)?;
+                daemon_args.extend(["--config".into(), path_arg(&p)]);
+            }
+        }
+        let mut sim_args: Vec<String> = vec![
+            "run".into(),
+            "--namespace".into(),
+            ns.clone(),
+            "--vehicle".into(),
+            path_arg(&spec.vehicle),
+            "--noise".into(),
+            spec.noise.clone(),
+            "--seed".into(),
+            spec.seed.to_string(),
+        ];
+        let mut pace = None;
+        if spec.realtime {
+            sim_args.push("--realtime".into());
+        } else {
+            sim_args.push("--lockstep".into());
+            if let (Some(x), true) = (spec.pace, bins.sim_pace) {
+                sim_args.extend(["--pace".into(), x.to_string()]);
+                pace = Some(x);
+            }
+        }
+        if let Some(text) = &spec.scenario {
+            let p = tmp.path.join("scenario.toml");
+            std::fs::write(&p, text)?;
+            sim_args.extend(["--scenario".into(), path_arg(&p)]);
+        }
+        let daemon = ChildProc::spawn("thrusterd", &bins.daemon, &daemon_args, &tmp.path)?;
+        let sim = ChildProc::spawn("thruster-sim", &bins.sim, &sim_args, &tmp.path)?;
+        Ok(Session {
+            ports: Some(ports),
+            node: Some(node),
+            ipc,
+            daemon,
+            sim,
+            pace,
+            _tmp: tmp,
+        })
+    }
+
+    fn ports(&self) -> &Ports {
+        self.ports.as_ref().expect("ports live until finish")
+    }
+
+    pub fn status_inbox(&self) -> &Inbox<StatusMsg> {
+        &self.ports().status
+    }
+    pub fn model_inbox(&self) -> &Inbox<ModelMsg> {
+        &self.ports().model
+    }
+    pub fn truth_inbox(&self) -> &Inbox<TruthMsg> {
+        &self.ports().truth
+    }
+    pub fn vehicle_inbox(&self) -> &Inbox<VehicleStateMsg> {
+        &self.ports().vehicle
+    }
+    pub fn thrust_inbox(&self) -> &Inbox<ThrustCommand> {
+        &self.ports().thrust
+    }
+
+    /// The daemon's log so far.
+    pub fn daemon_log(&self) -> String {
+        self.daemon.log_text()
+    }
+
+    /// An error if either process has exited.
+    pub fn check_alive(&mut self, what: &str) -> Result<()> {
+        if !self.daemon.alive() {
+            bail!(
+                "thrusterd exited while waiting for {what}:\n{}",
+                self.daemon.tail()
+            );
+        }
+        if !self.sim.alive() {
+            bail!(
+                "thruster-sim exited while waiting for {what}:\n{}",
+                self.sim.tail()
+            );
+        }
+        Ok(())
+    }
+
+    /// An error naming `what`, with both logs' ends.
+    pub fn timeout_error(&self, what: &str) -> anyhow::Error {
+        anyhow::anyhow!(
+            "timed out waiting for {what}\n{}\n{}",
+            self.daemon.tail(),
+            self.sim.tail()
+        )
+    }
+
+    /// The first status satisfying `pred` (every status is shown to it, oldest first).
+    pub fn wait_status(
+        &mut self,
+        what: &str,
+        timeout: Duration,
+        pred: &mut dyn FnMut(&StatusMsg) -> bool,
+    ) -> Result<StatusMsg> {
+        let start = Instant::now();
+        loop {
+            while let Some(st) = self.status_inbox().recv()? {
+                if pred(&st) {
+                    return Ok(st);
+                }
+            }
+            self.check_alive(what)?;
+            if start.elapsed() > timeout {
+                return Err(self.timeout_error(what));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// Both processes up, the daemon answering samples, the simulator's truth received.
+    pub fn ready(&mut self) -> Result<(StatusMsg, TruthMsg)> {
+        let first =
+            self.wait_status("the first IMU samples", Duration::from_secs(30), &mut |s| {
+                s.samples > 20
+            })?;
+        let start = Instant::now();
+        // History 1: the simulator's truth reaches us on its next connection update.
+        loop {
+            if let Some(t) = latest(self.truth_inbox())? {
+                return Ok((first, t));
+            }
+            self.check_alive("the simulator's truth")?;
+            if start.elapsed() > Duration::from_secs(10) {
+                bail!("the simulator published no truth");
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// A control request, retried while the daemon's server is not reachable yet.
+    pub fn request(&self, request: ControlRequest) -> Result<ControlResponse> {
+        let start = Instant::now();
+        loop {
+            match self.ports().client.call(request, Duration::from_secs(2)) {
+                Ok(r) => return Ok(r),
+                Err(e) if start.elapsed() < Duration::from_secs(10) => {
+                    let _ = e;
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(e) => return Err(e).context(format!("{:?} request", request.kind())),
+            }
+        }
+    }
+
+    /// A request that must succeed.
+    pub fn command(&self, kind: RequestKind) -> Result<String> {
+        let r = self.request(ControlRequest::new(kind))?;
+        if !r.is_ok() {
+            bail!("{kind:?} refused: {}", r.text());
+        }
+        Ok(r.text().to_string())
+    }
+
+    /// Request an estimate and wait until the daemon holds attitude with a new model;
+    /// `progress` sees every status on the way. The final status.
+    pub fn estimate(
+        &mut self,
+        timeout: Duration,
+        progress: &mut dyn FnMut(&StatusMsg),
+    ) -> Result<StatusMsg> {
+        let before = latest(self.status_inbox())?
+            .map(|s| s.model_version)
+            .unwrap_or(0);
+        self.command(RequestKind::Estimate)?;
+        self.wait_status("the estimated model", timeout, &mut |s| {
+            progress(s);
+            s.state() == Ok(DaemonState::Active) && s.model_version > before
+        })
+    }
+
+    /// The latest model (waits up to 10 s for one).
+    pub fn model(&mut self) -> Result<ModelMsg> {
+        self.latest_blocking(|s| s.model_inbox(), "a model")
+    }
+
+    /// The newest vehicle state (waits up to 10 s for one).
+    pub fn vehicle_state(&mut self) -> Result<VehicleStateMsg> {
+        self.latest_blocking(|s| s.vehicle_inbox(), "the vehicle state")
+    }
+
+    fn latest_blocking<T: TopicMessage>(
+        &mut self,
+        inbox: fn(&Session) -> &Inbox<T>,
+        what: &str,
+    ) -> Result<T> {
+        let start = Instant::now();
+        loop {
+            if let Some(m) = latest(inbox(self))? {
+                return Ok(m);
+            }
+            self.check_alive(what)?;
+            if start.elapsed() > Duration::from_secs(10) {
+                return Err(self.timeout_error(what));
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
+    }
+
+    /// Send an attitude (body to NED) and depth to hold.
+    pub fn send_setpoint(&self, attitude: &UnitQuaternion<f64>, depth: Option<f64>) -> Result<()> {
+        let q = attitude.into_inner();
+        let sp = Setpoint {
+            attitude: [q.w, q.i, q.j, q.k],
+            depth: depth.unwrap_or(0.0),
+            flags: if depth.is_some() {
+                Setpoint::HOLD_DEPTH
+            } else {
+                0
+            },
+            ..Setpoint::default()
+        };
+        self.ports().setpoint.send(&sp)?;
+        Ok(())
+    }
+
+    /// SIGTERM both processes, drop every port, purge the namespace.
+    pub fn finish(mut self) -> Shutdown {
+        // The simulator first: the daemon then sees no more samples and exits on its own signal.
+        let clean = self.sim.stop() & self.daemon.stop();
+        self.ports = None;
+        self.node = None;
+        let _ = purge_namespace(&self.ipc);
+        let leftovers = namespace_files(&self.ipc).map(|f| f.len()).unwrap_or(0);
+        Shutdown { clean, leftovers }
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        // finish() did this already on the normal path; on an error path kill first.
+        self.daemon.kill();
+        self.sim.kill();
+        self.ports = None;
+        self.node = None;
+        let _ = purge_namespace(&self.ipc);
+    }
+}
+
+fn path_arg(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// The newest message in `inbox`, draining it.
+pub fn latest<T: TopicMessage>(inbox: &Inbox<T>) -> Result<Option<T>> {
+    let mut last = None;
+    while let Some(m) = inbox.recv()? {
+        last = Some(m);
+    }
+    Ok(last)
+}
+
+/// Number of `[[thruster]]` tables in a vehicle file.
+pub fn thruster_count(vehicle: &Path) -> Result<usize> {
+    let text = std::fs::read_to_string(vehicle)
+        .with_context(|| format!("reading {}", vehicle.display()))?;
+    let value: toml::Value =
+        toml::from_str(&text).with_context(|| format!("{}", vehicle.display()))?;
+    let n = value
+        .get("thruster")
+        .and_then(|t| t.as_array())
+        .map(|a| a.len())
+        .unwrap_or(0);
+    if !(1..=MAX_THRUSTERS).contains(&n) {
+        bail!(
+            "{}: {n} thrusters ([[thruster]] tables), expected 1..{MAX_THRUSTERS}",
+            vehicle.display()
+        );
+    }
+    Ok(n)
+}

@@ -1,0 +1,163 @@
+//! One function per operator subcommand; `run` dispatches. Commands that only need a control
+//! round trip live here; longer ones have their own modules.
+
+use std::time::Duration;
+
+use anyhow::Result;
+use thruster_protocol::{
+    ControlRequest, DriverStatusMsg, ModelMsg, RequestKind, StatusMsg, Validate,
+};
+
+use crate::checks::{model_problem, status_problem, Warner};
+use crate::cli::{self, Command, Globals};
+use crate::client::{wait_latest, Daemon, Target};
+use crate::console::{interrupt_flag, say};
+use crate::exit::{self, Failure};
+use crate::json::{DriverJson, ModelJson, StatusJson, StatusReportJson};
+use crate::{estimate, publish, render, watch};
+
+/// The target daemon (namespace, ipc root) and the timeout, from the global options.
+pub fn target(globals: Globals) -> Result<(Target, Duration), Failure> {
+    let timeout = cli::timeout(globals.timeout_ms)?;
+    let target = Target {
+        namespace: globals.namespace,
+        root_base: globals.ipc_root,
+    };
+    Ok((target, timeout))
+}
+
+/// Runs one operator verb against the daemon `target` (see [`target`]).
+pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
+    // Checks that need no daemon come first (inside each command, before connecting),
+    // so bad input is reported even when the daemon is down.
+    match command {
+        Command::Status { json } => status(&Daemon::connect(&target, timeout)?, json),
+        Command::Estimate {
+            wait,
+            power,
+            max_wait_s,
+        } => {
+            let power = cli::estimate_power(power)?;
+            let max_wait = cli::max_wait(max_wait_s)?;
+            let daemon = Daemon::connect(&target, timeout)?;
+            if wait {
+                estimate::run_and_wait(&daemon, power, max_wait)
+            } else {
+                let text =
+                    daemon.command(ControlRequest::with_value(RequestKind::Estimate, power))?;
+                say(&format!("estimation started: {}", or_ok(&text)))
+            }
+        }
+        Command::Abort => simple(&target, timeout, ControlRequest::new(RequestKind::Abort)),
+        Command::Hold => simple(&target, timeout, ControlRequest::new(RequestKind::Hold)),
+        Command::Idle => simple(&target, timeout, ControlRequest::new(RequestKind::Idle)),
+        Command::Revert => simple(&target, timeout, ControlRequest::new(RequestKind::Revert)),
+        Command::Shutdown => simple(&target, timeout, ControlRequest::new(RequestKind::Shutdown)),
+        Command::Save { path } => {
+            let request = match path {
+                Some(p) => cli::path_request(RequestKind::Save, &p)?,
+                None => ControlRequest::new(RequestKind::Save),
+            };
+            simple(&target, timeout, request)
+        }
+        Command::Load { path } => simple(
+            &target,
+            timeout,
+            cli::path_request(RequestKind::Load, &path)?,
+        ),
+        Command::Model { json } => model(&Daemon::connect(&target, timeout)?, json),
+        Command::Watch { json } => {
+            watch::run(&Daemon::connect(&target, timeout)?, json, interrupt_flag()?)
+        }
+        Command::Reconfigure {
+            kind,
+            thruster,
+            count,
+            geometry,
+        } => publish::reconfigure(&target, timeout, kind, thruster, count, geometry.as_deref()),
+        Command::Setpoint {
+            roll,
+            pitch,
+            yaw,
+            depth,
+        } => publish::setpoint(
+            &target,
+            timeout,
+            cli::setpoint_args(roll, pitch, yaw, depth)?,
+        ),
+    }
+}
+
+/// Sends one request and prints the daemon's answer.
+fn simple(target: &Target, timeout: Duration, request: ControlRequest) -> Result<()> {
+    let daemon = Daemon::connect(target, timeout)?;
+    let text = daemon.command(request)?;
+    say(&format!("thrusterd: {}", or_ok(&text)))
+}
+
+fn or_ok(text: &str) -> &str {
+    if text.is_empty() {
+        "ok"
+    } else {
+        text
+    }
+}
+
+fn status(daemon: &Daemon, json: bool) -> Result<()> {
+    // Subscribe first: the history sample is then on its way while we ask the daemon.
+    let inbox = daemon.inbox::<StatusMsg>()?;
+    let drivers = daemon.inbox::<DriverStatusMsg>()?;
+    let reply = daemon.ensure_running()?;
+    let Some(status) = wait_latest(&inbox, daemon.timeout())? else {
+        return Err(Failure::new(
+            exit::TIMEOUT,
+            format!(
+                "thrusterd answered ({}) but published no status within {} ms",
+                reply.text(),
+                daemon.timeout().as_millis()
+            ),
+        )
+        .into());
+    };
+    Warner::default().warn(status_problem(&status));
+    // Drivers report at least every DriverStatusMsg::PERIOD_MS; none after a few periods
+    // means no driver publishes one (not an error: a third-party driver may not).
+    let driver = wait_latest(
+        &drivers,
+        daemon
+            .timeout()
+            .min(Duration::from_millis(3 * DriverStatusMsg::PERIOD_MS)),
+    )?
+    .filter(|d| d.validate().is_ok());
+    if json {
+        say(&serde_json::to_string(&StatusReportJson {
+            status: StatusJson::from(&status),
+            driver: driver.as_ref().map(DriverJson::from),
+        })?)
+    } else {
+        let mut text = render::status_report(daemon.namespace(), &status);
+        text.push_str(&render::driver_line(driver.as_ref()));
+        say(text.trim_end())
+    }
+}
+
+fn model(daemon: &Daemon, json: bool) -> Result<()> {
+    let inbox = daemon.inbox::<ModelMsg>()?;
+    daemon.ensure_running()?;
+    let Some(model) = wait_latest(&inbox, daemon.timeout())? else {
+        return Err(Failure::new(
+            exit::TIMEOUT,
+            format!(
+                "thrusterd published no model within {} ms (none estimated or loaded yet?)",
+                daemon.timeout().as_millis()
+            ),
+        )
+        .into());
+    };
+    Warner::default().warn(model_problem(&model));
+    if json {
+        say(&serde_json::to_string(&ModelJson::from(&model))?)
+    } else {
+        say(render::model_report(&model).trim_end())
+    }
+}

@@ -1,0 +1,194 @@
+//! Publishing-only commands: `reconfigure` and `setpoint`.
+//!
+//! There is no answer to wait for; `Port::send` reports how many subscribers got the
+//! message. Neither topic keeps a message for a later reader once we exit (reconfig has
+//! no history; the setpoint history lives in our publisher), so zero means the message is
+//! lost: we say so and exit [`exit::NOT_RUNNING`].
+//!
+//! Delivery needs one more step. iceoryx2 (0.10, upstream issue #39) drops a sample whose
+//! publisher is gone before the subscriber's next `receive` has connected to it, and a
+//! command-line tool exits within milliseconds. So we keep the publisher alive until a
+//! control round trip: thrusterd wakes on the topic's event and reads reconfiguration and
+//! setpoint inputs before it serves control requests in the same loop iteration, and our
+//! request is notified after our message. One round trip can still be answered by an
+//! iteration that woke for another client's request before our event arrived; by the
+//! second, the daemon has passed the top of its loop with our event pending, so has read
+//! our message. Two round trips cost about a millisecond.
+
+use std::path::Path;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use anyhow::Result;
+use thruster_protocol::services::TopicMessage;
+use thruster_protocol::{ReconfigEvent, Validate};
+
+use crate::attitude;
+use crate::cli::{self, KindArg, ReconfigArgs, SetpointArgs};
+use crate::client::{Daemon, Target};
+use crate::console::say;
+use crate::exit::{self, Failure};
+use crate::geometry::{self, Geometry};
+
+pub fn reconfigure(
+    target: &Target,
+    timeout: Duration,
+    kind: KindArg,
+    thruster: Option<u32>,
+    count: u32,
+    geometry_file: Option<&Path>,
+) -> Result<()> {
+    let args = cli::reconfig_args(kind, thruster, count)?;
+    let geometry = match geometry_file {
+        Some(path) => Some(geometry::load(path).map_err(|e| Failure::usage(format!("{e:#}")))?),
+        None => None,
+    };
+    let event = reconfig_event(&args, geometry.as_ref(), sender_seq())?;
+    let daemon = Daemon::connect(target, timeout)?;
+    let reached = send(&daemon, &event)?;
+    let what = match geometry_file {
+        Some(p) => format!(" with the geometry of {}", p.display()),
+        None => String::new(),
+    };
+    say(&format!(
+        "reconfiguration sent to {reached} subscriber(s): {} thruster {}, {} thrusters{what}",
+        args.kind, args.thruster, args.count
+    ))
+}
+
+pub fn setpoint(target: &Target, timeout: Duration, args: SetpointArgs) -> Result<()> {
+    let sp = attitude::setpoint(&args, sender_seq());
+    sp.validate()
+        .map_err(|r| anyhow::anyhow!("internal error: setpoint fails validation: {r}"))?;
+    let daemon = Daemon::connect(target, timeout)?;
+    let reached = send(&daemon, &sp)?;
+    let depth = match args.depth_m {
+        Some(d) => format!("hold depth {d:.2} m"),
+        None => "depth free".to_string(),
+    };
+    let angle = |a: Option<f64>| match a {
+        Some(v) => format!("{v:.1} deg"),
+        None => "kept".to_string(),
+    };
+    say(&format!(
+        "setpoint sent to {reached} subscriber(s): roll {}, pitch {}, yaw {}, {depth}",
+        angle(args.roll_deg),
+        angle(args.pitch_deg),
+        angle(args.yaw_deg)
+    ))
+}
+
+/// Builds the event and runs the protocol's own check, so the daemon will not reject it.
+pub fn reconfig_event(
+    args: &ReconfigArgs,
+    geometry: Option<&Geometry>,
+    seq: u64,
+) -> Result<ReconfigEvent, Failure> {
+    let mut event = ReconfigEvent {
+        seq,
+        thruster: args.thruster,
+        count: args.count,
+        ..ReconfigEvent::default()
+    };
+    event.set_kind(args.kind);
+    if let Some(g) = geometry {
+        if g.count() != args.count as usize {
+            return Err(Failure::usage(format!(
+                "the geometry file declares {} thrusters but --count is {}",
+                g.count(),
+                args.count
+            )));
+        }
+        event.has_geometry = 1;
+        event.position[..g.count()].copy_from_slice(&g.position);
+        event.direction[..g.count()].copy_from_slice(&g.direction);
+    }
+    event
+        .validate()
+        .map_err(|r| Failure::usage(format!("the daemon would reject this event: {r}")))?;
+    Ok(event)
+}
+
+/// Publishes `msg` and returns once thrusterd has read it (see the module docs).
+fn send<T: TopicMessage>(daemon: &Daemon, msg: &T) -> Result<usize> {
+    let port = daemon.port::<T>()?;
+    let reached = port.send(msg).map_err(|e| daemon.ipc_failure(e))?;
+    if reached == 0 {
+        return Err(Failure::new(
+            exit::NOT_RUNNING,
+            format!(
+                "nobody subscribes to {} (is thrusterd running on namespace {}?); \
+                 the message was not delivered",
+                port.service_name(),
+                daemon.namespace()
+            ),
+        )
+        .into());
+    }
+    // The delivery barrier; `port` must outlive it.
+    if let Err(e) = daemon
+        .ensure_running()
+        .and_then(|_| daemon.ensure_running())
+    {
+        let code = exit::code_of(&e);
+        return Err(Failure::new(
+            code,
+            format!(
+                "sent to {reached} subscriber(s) of {}, but thrusterd did not confirm, \
+                 so it may not have read it: {e:#}",
+                port.service_name()
+            ),
+        )
+        .into());
+    }
+    drop(port);
+    Ok(reached)
+}
+
+/// Sequence number for our one message. Each run is a new sender; starting from the wall
+/// clock keeps successive runs increasing, should a reader ever drop repeats.
+fn sender_seq() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(1, |d| d.as_nanos() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use thruster_protocol::ReconfigKind;
+
+    fn args(kind: KindArg, thruster: u32, count: u32) -> ReconfigArgs {
+        cli::reconfig_args(kind, Some(thruster), count).unwrap()
+    }
+
+    #[test]
+    fn event_without_geometry() {
+        let ev = reconfig_event(&args(KindArg::Moved, 0, 5), None, 9).unwrap();
+        assert_eq!(ev.kind().unwrap(), ReconfigKind::ThrusterMoved);
+        assert_eq!(
+            (ev.seq, ev.thruster, ev.count, ev.has_geometry),
+            (9, 0, 5, 0)
+        );
+    }
+
+    #[test]
+    fn event_with_geometry_fills_every_thruster() {
+        let g = geometry::parse(
+            "[[thruster]]\nposition_m = [0.1, 0, 0.02]\ndirection = [0, 0, -1]\n\
+             [[thruster]]\nposition_m = [0, 0.2, 0.02]\ndirection = [1, 0, 0]\n",
+        )
+        .unwrap();
+        let ev = reconfig_event(&args(KindArg::Added, 1, 2), Some(&g), 1).unwrap();
+        assert!(ev.geometry_declared());
+        assert_eq!(ev.position[0], [0.1, 0.0, 0.0]);
+        assert_eq!(ev.direction[1], [1.0, 0.0, 0.0]);
+        assert_eq!(ev.position[2], [0.0; 3]);
+        let e = reconfig_event(&args(KindArg::Added, 2, 3), Some(&g), 1).unwrap_err();
+        assert_eq!(e.code, exit::USAGE);
+        assert!(
+            e.to_string()
+                .contains("declares 2 thrusters but --count is 3"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,129 @@
+//! thrusterctl: the operator's tool for thrusterd.
+//!
+//! The operator's verbs live in `thrusterctl_operator` (they talk to the daemon only through
+//! `thruster_protocol`); `demo` and `experiment` come from the simulation lab
+//! (`thruster_lab`, cargo feature `lab`, on by default). This file is the top-level command
+//! line and the dispatch between the two. Exit codes are in `thrusterctl_operator::exit`.
+
+use std::process::ExitCode;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use thrusterctl_operator::cli::{self, Globals};
+use thrusterctl_operator::{commands, exit};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "thrusterctl",
+    version,
+    about = "Operator tool for thrusterd: estimate the thruster model, watch, inspect, steer"
+)]
+struct Cli {
+    #[command(flatten)]
+    globals: Globals,
+
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// The simulated demo: start thrusterd and thruster-sim on a private namespace, learn the
+    /// vehicle's thrusters, hold attitude, report, shut everything down.
+    #[cfg(feature = "lab")]
+    Demo(thruster_lab::demo::DemoArgs),
+    /// The paper's pool experiments in simulation (manual-vs-learned, misaligned, aligned,
+    /// hot-swap): daemon and simulator on a private namespace, scored against the truth.
+    #[cfg(feature = "lab")]
+    Experiment(thruster_lab::experiment::ExperimentArgs),
+    /// Not in this build: thrusterctl was built without the simulation lab (feature `lab`).
+    #[cfg(not(feature = "lab"))]
+    #[command(disable_help_flag = true)]
+    Demo {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<std::ffi::OsString>,
+    },
+    /// Not in this build: thrusterctl was built without the simulation lab (feature `lab`).
+    #[cfg(not(feature = "lab"))]
+    #[command(disable_help_flag = true)]
+    Experiment {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<std::ffi::OsString>,
+    },
+    #[command(flatten)]
+    Operator(cli::Command),
+}
+
+fn main() -> ExitCode {
+    // `thrusterctl demo | head -1`: a print to the closed pipe ends the process quietly,
+    // after unwinding has stopped the demo's children and purged its namespace.
+    thruster_driver_kit::pipe::main(|| {
+        init_logging();
+        let cli = Cli::parse();
+        // `run` returns instead of exiting so every iceoryx2 port and node is dropped
+        // normally: a process::exit would leave the namespace's files behind.
+        match run(cli) {
+            Ok(()) => ExitCode::SUCCESS,
+            // `thrusterctl watch | head`: the reader is gone, nothing more to say.
+            Err(e) if thruster_driver_kit::pipe::is_broken_pipe(e.as_ref()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("thrusterctl: {e:#}");
+                ExitCode::from(exit::code_of(&e))
+            }
+        }
+    })
+}
+
+fn run(cli: Cli) -> Result<()> {
+    let (target, timeout) = commands::target(cli.globals)?;
+    let lab_verb = !matches!(cli.command, Command::Operator(_));
+    // The demo and the experiments run their own daemon on a private namespace: a
+    // --namespace or --ipc-root given to them would be silently ignored, so refuse it.
+    if lab_verb
+        && (target.namespace != cli::DEFAULT_NAMESPACE
+            || target.root_base.as_path()
+                != std::path::Path::new(thruster_protocol::services::DEFAULT_ROOT_BASE))
+    {
+        return Err(exit::Failure::usage(
+            "demo and experiment start their own thrusterd and thruster-sim on a private \
+             namespace under the default ipc root; --namespace and --ipc-root are for \
+             talking to a running daemon",
+        )
+        .into());
+    }
+    match cli.command {
+        #[cfg(feature = "lab")]
+        Command::Demo(args) => thruster_lab::demo::run(args),
+        #[cfg(feature = "lab")]
+        Command::Experiment(args) => thruster_lab::experiment::run(args),
+        #[cfg(not(feature = "lab"))]
+        Command::Demo { .. } | Command::Experiment { .. } => Err(exit::Failure::usage(
+            "this thrusterctl was built without the simulation lab (cargo feature `lab`): \
+             demo and experiment are not available; build it with the default features",
+        )
+        .into()),
+        Command::Operator(command) => commands::run(target, timeout, command),
+    }
+}
+
+/// iceoryx2 logs through `tracing`; show it only when asked (RUST_LOG), since operators
+/// read our own messages on stderr.
+fn init_logging() {
+    if std::env::var_os("RUST_LOG").is_some() {
+        tracing_subscriber::fmt()
+            .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+            .with_writer(std::io::stderr)
+            .init();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn clap_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+}

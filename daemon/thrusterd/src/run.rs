@@ -1,0 +1,775 @@
+//! The daemon's event loop: iceoryx2 in and out around the pure state machine.
+//!
+//! One thread, one WaitSet. IMU samples are validated and answered with a thrust command each;
+//! a deadline on the IMU listener turns a silent driver into Fault with neutral thrust.
+//! Reconfiguration events, setpoints and operator requests feed the machine; model swaps are
+//! published (history 1) and saved; status is published on change and periodically.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use clap::Args;
+use iceoryx2::prelude::CallbackProgression;
+use tracing::{error, info, warn};
+
+use thruster_protocol::services::{
+    cleanup_dead_nodes, create_waitset, ControlServer, Inbox, IpcConfig, Port,
+};
+use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
+use thruster_protocol::{
+    ControlResponse, DriverStatusMsg, ImuSample, ModelMsg, ReconfigEvent, RequestKind,
+    ResponseCode, Setpoint, StatusMsg, ThrustCommand, MAX_THRUSTERS,
+};
+use thrusterd_core::config::DaemonConfig;
+use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
+use thrusterd_core::machine::{Command, Event, Machine, Request};
+use thrusterd_core::store;
+use thrusterd_core::wire;
+
+#[derive(Args)]
+pub struct RunArgs {
+    /// Configuration file (see config/thrusterd.toml); defaults apply without one.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Override `ipc.namespace`.
+    #[arg(long)]
+    namespace: Option<String>,
+    /// Override `ipc.root`: base folder of iceoryx2's files, the same for every process of
+    /// the namespace.
+    #[arg(long)]
+    ipc_root: Option<PathBuf>,
+    /// Override `runtime.state_dir`.
+    #[arg(long)]
+    state_dir: Option<PathBuf>,
+    /// Override `vehicle.thrusters`.
+    #[arg(long)]
+    thrusters: Option<usize>,
+    /// Override `runtime.spin_us` (low-latency polling before blocking).
+    #[arg(long)]
+    spin_us: Option<u64>,
+    /// Start an estimation as soon as the IMU is up.
+    #[arg(long)]
+    estimate: bool,
+}
+
+/// In low-latency mode, other inputs and status are looked at least this often.
+const HOUSEKEEPING: Duration = Duration::from_millis(1);
+/// How long an operator's `save` request may wait for the saving thread inside the loop: a
+/// healthy disk or a fast failure (full, read-only) answers well within it; a stalled disk
+/// gets a "saving" answer instead of stalling control.
+const SAVE_ANSWER_WAIT: Duration = Duration::from_millis(50);
+/// How long a stopping daemon waits for its last saves (thrust already neutral).
+const SHUTDOWN_SAVE_WAIT: Duration = Duration::from_secs(3);
+
+pub fn run(args: RunArgs) -> Result<()> {
+    init_logging();
+    let mut cfg = match &args.config {
+        Some(path) => DaemonConfig::load(path)?,
+        None => DaemonConfig::default(),
+    };
+    if let Some(ns) = args.namespace {
+        cfg.ipc.namespace = ns;
+    }
+    if let Some(root) = args.ipc_root {
+        cfg.ipc.root = Some(root);
+    }
+    if let Some(dir) = args.state_dir {
+        cfg.runtime.state_dir = dir;
+    }
+    if let Some(n) = args.thrusters {
+        anyhow::ensure!(
+            (1..=MAX_THRUSTERS).contains(&n),
+            "--thrusters {n}: must be 1..{MAX_THRUSTERS}"
+        );
+        cfg.vehicle.thrusters = n;
+        cfg.vehicle.thruster.clear();
+    }
+    if let Some(spin) = args.spin_us {
+        cfg.runtime.spin_us = spin;
+    }
+
+    // Refused here, before anything is created, with the command line applied: a state_dir
+    // that is a file used to start anyway, its unreadable marker taken for a crashed
+    // predecessor ("did not stop cleanly"); check-config runs the same check.
+    let origin = args
+        .config
+        .as_ref()
+        .map_or_else(|| "command line".to_string(), |p| p.display().to_string());
+    cfg.check_runnable("", &origin)?;
+    std::fs::create_dir_all(&cfg.runtime.state_dir).map_err(|e| {
+        thrusterd_core::config::ConfigError::value(
+            &origin,
+            "",
+            "runtime.state_dir",
+            format!("{}: {e}", cfg.runtime.state_dir.display()),
+        )
+    })?;
+
+    let shutdown = Arc::new(AtomicBool::new(false));
+    {
+        let flag = shutdown.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+            .context("installing the SIGINT/SIGTERM handler")?;
+    }
+    let mut daemon = Daemon::new(&cfg, shutdown)?;
+    if args.estimate {
+        daemon.pending_estimate = true;
+    }
+    daemon.serve()
+}
+
+/// journald with structured fields under systemd (when `JOURNAL_STREAM` names our stderr),
+/// stderr otherwise; one setup shared with the drivers (thruster_driver_kit::logging).
+fn init_logging() {
+    thruster_driver_kit::logging::init("info");
+}
+
+struct Daemon {
+    cfg: DaemonConfig,
+    machine: Machine,
+    shutdown: Arc<AtomicBool>,
+    model_path: PathBuf,
+    ipc: IpcConfig,
+    validator: ImuSampleValidator,
+    rejected: RejectCounters,
+    /// Operator requests refused (invalid, wrong state, failed) and saved model files refused
+    /// at start: status `requests_refused`.
+    refused: u32,
+    /// IMU samples that never arrived (sequence gaps between accepted samples).
+    missed: u64,
+    /// Why the model in use is not on disk (the last save to `model_path` failed), until a
+    /// save there succeeds: appended to the status text, so an operator sees it without the log.
+    save_error: Option<String>,
+    /// Saves run here, off the loop (see `saver`).
+    saver: crate::saver::Saver,
+    thrust_seq: u64,
+    status_seq: u64,
+    model_seq: u64,
+    last_imu: Option<(u64, u64)>,
+    pending_estimate: bool,
+    /// The predecessor died while controlling (see `session`): hold with the loaded model
+    /// as soon as the IMU is up.
+    pending_hold: bool,
+    session: Option<crate::session::Session>,
+    stale_reported: bool,
+    /// The driver's own reports on its outputs (count, rejections, armed, link).
+    driver: DriverWatch,
+    /// The verdict the machine was last given on the driver's outputs.
+    driver_verdict: OutputVerdict,
+    /// The thruster count the latest report was judged for; `None` when a new report came.
+    /// Judging again only then keeps the per-round work (and its text) off the hot path.
+    driver_judged_for: Option<usize>,
+}
+
+impl Daemon {
+    fn new(cfg: &DaemonConfig, shutdown: Arc<AtomicBool>) -> Result<Self> {
+        let ipc = match &cfg.ipc.root {
+            Some(root) => IpcConfig::with_root_base(&cfg.ipc.namespace, root),
+            None => IpcConfig::new(&cfg.ipc.namespace),
+        }
+        .with_context(|| format!("ipc.namespace {:?}", cfg.ipc.namespace))?;
+        let mut machine = Machine::new(cfg.machine_setup());
+        let model_path = cfg.runtime.state_dir.join(store::MODEL_FILE);
+        // A refused saved model counts like a refused Load request, so status shows it.
+        let mut refused = 0u32;
+        if cfg.runtime.load_model {
+            match store::load(&model_path) {
+                Ok(Some(model)) => match machine.load_model(model) {
+                    Ok(()) => info!(path = %model_path.display(), "loaded the saved model"),
+                    Err(e) => {
+                        refused += 1;
+                        warn!("saved model ignored, starting without it: {e}")
+                    }
+                },
+                Ok(None) => info!(path = %model_path.display(), "no saved model yet"),
+                Err(e) => {
+                    refused += 1;
+                    warn!("saved model ignored, starting without it: {e}")
+                }
+            }
+        }
+        Ok(Daemon {
+            cfg: cfg.clone(),
+            machine,
+            shutdown,
+            model_path,
+            ipc,
+            validator: ImuSampleValidator::default(),
+            rejected: RejectCounters::default(),
+            refused,
+            missed: 0,
+            save_error: None,
+            saver: crate::saver::Saver::spawn().context("starting the model-saving thread")?,
+            thrust_seq: 0,
+            status_seq: 0,
+            model_seq: 0,
+            last_imu: None,
+            pending_estimate: false,
+            pending_hold: false,
+            session: None,
+            stale_reported: false,
+            driver: DriverWatch::new(),
+            driver_verdict: OutputVerdict::Usable,
+            driver_judged_for: None,
+        })
+    }
+
+    fn serve(&mut self) -> Result<()> {
+        // A crashed predecessor leaves its resources; clean them so it never blocks a restart.
+        match cleanup_dead_nodes(&self.ipc) {
+            Ok(census) => info!(?census, "iceoryx2 namespace {} ready", self.ipc.namespace()),
+            Err(e) => warn!("could not clean up dead nodes: {e}"),
+        }
+        // Before the node, so it drops after it: a clean stop of the last process of the
+        // namespace leaves no iceoryx2 residue behind.
+        let _tidy = thruster_protocol::services::TidyOnDrop::new(&self.ipc);
+        let node = self.ipc.create_node("thrusterd")?;
+        // The control server first: it is what tells a live daemon on this namespace apart
+        // from a crashed one, and the session marker of a live daemon must neither be read as
+        // a crash ("did not stop cleanly ... resuming control") nor overwritten.
+        let control = ControlServer::create(&node, &self.ipc)
+            .context("another thrusterd already serves this namespace")?;
+        self.open_session();
+        let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
+        let reconfig_in = Inbox::<ReconfigEvent>::create(&node, &self.ipc)?;
+        let setpoint_in = Inbox::<Setpoint>::create(&node, &self.ipc)?;
+        let driver_in = Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?;
+        let thrust_out = Port::<ThrustCommand>::create(&node, &self.ipc)?;
+        let model_out = Port::<ModelMsg>::create(&node, &self.ipc)?;
+        let status_out = Port::<StatusMsg>::create(&node, &self.ipc)?;
+
+        let waitset = create_waitset()?;
+        let imu_timeout = Duration::from_millis(self.cfg.runtime.imu_timeout_ms);
+        let imu_guard = waitset.attach_deadline(imu_in.listener(), imu_timeout)?;
+        let reconfig_guard = waitset.attach_notification(reconfig_in.listener())?;
+        let setpoint_guard = waitset.attach_notification(setpoint_in.listener())?;
+        let driver_guard = waitset.attach_notification(driver_in.listener())?;
+        let control_guard = waitset.attach_notification(control.listener())?;
+        let status_period = Duration::from_millis(self.cfg.runtime.status_period_ms.max(1));
+        let spin = Duration::from_micros(self.cfg.runtime.spin_us);
+
+        if let Some(model) = self.machine.model().cloned() {
+            self.publish_model(&model_out, &model);
+        }
+        info!(thrusters = self.machine.thrusters(), "thrusterd serving");
+        let mut systemd = thruster_driver_kit::Systemd::new();
+        systemd.ready();
+        self.publish_status(&status_out);
+        let mut last_status = Instant::now();
+        let mut wait_errors = 0u32;
+
+        while !self.shutdown.load(Ordering::SeqCst) {
+            // Low-latency mode: keep polling for samples (answering each at once) until none
+            // came for `spin`, or housekeeping is due; only then pay for the WaitSet (a
+            // syscall, and a wake-up if it blocks). Other inputs wait at most ~1 ms.
+            if !spin.is_zero() {
+                let housekeeping = Instant::now();
+                let mut idle_since = Instant::now();
+                while idle_since.elapsed() < spin && housekeeping.elapsed() < HOUSEKEEPING {
+                    if let Some(sample) = imu_in.recv()? {
+                        self.on_imu(&sample, &thrust_out);
+                        self.stale_reported = false;
+                        idle_since = Instant::now();
+                    } else {
+                        std::hint::spin_loop();
+                    }
+                }
+            }
+            let (mut imu, mut stale, mut reconf, mut setp, mut ctrl, mut drv) =
+                (false, false, false, false, false, false);
+            let waited = waitset.wait_and_process_once_with_timeout(
+                |id| {
+                    imu |= id.has_event_from(&imu_guard);
+                    stale |= id.has_missed_deadline(&imu_guard);
+                    reconf |= id.has_event_from(&reconfig_guard);
+                    setp |= id.has_event_from(&setpoint_guard);
+                    drv |= id.has_event_from(&driver_guard);
+                    ctrl |= id.has_event_from(&control_guard);
+                    CallbackProgression::Continue
+                },
+                if spin.is_zero() {
+                    status_period
+                } else {
+                    Duration::from_micros(1)
+                },
+            );
+            if let Err(e) = waited {
+                // A signal interrupts the wait (EINTR) before the handler's flag is seen: that
+                // is the shutdown path, not a failure; anything persistent is.
+                if self.shutdown.load(Ordering::SeqCst) {
+                    break;
+                }
+                wait_errors += 1;
+                warn!("waiting for events failed ({wait_errors} in a row): {e:?}");
+                anyhow::ensure!(wait_errors < 100, "the event loop keeps failing: {e:?}");
+                continue;
+            }
+            wait_errors = 0;
+            if imu {
+                imu_in.drain_events()?;
+            }
+            // The inbox is read on every wake-up, not only on an IMU event: a sample whose
+            // notification was lost (a driver that notified before this listener was
+            // connected, at start) would otherwise sit unread while a lockstep driver waits
+            // for its answer forever. An empty inbox costs one check.
+            let mut got = false;
+            while let Some(sample) = imu_in.recv()? {
+                self.on_imu(&sample, &thrust_out);
+                got = true;
+            }
+            if got {
+                self.stale_reported = false;
+            }
+            // Before the first sample there is nothing to go stale: the driver is not up yet.
+            // Status says so, and estimation and control are refused until a sample comes.
+            if stale && self.last_imu.is_none() {
+                self.machine.on_no_imu_yet(&format!(
+                    "no IMU samples from any driver for {} ms (namespace {})",
+                    imu_timeout.as_millis(),
+                    self.ipc.namespace()
+                ));
+            }
+            if stale && !got && !self.stale_reported && self.last_imu.is_some() {
+                let cmd = self
+                    .machine
+                    .on_imu_stale(&format!("no IMU sample for {} ms", imu_timeout.as_millis()));
+                self.send_thrust(&thrust_out, &cmd);
+                self.stale_reported = true;
+            }
+            if reconf {
+                reconfig_in.drain_events()?;
+                while let Some(e) = reconfig_in.recv()? {
+                    match e.validate().and_then(|_| check_reconfig(&e)) {
+                        Ok(()) => self.machine.on_reconfig(wire::reconfig(&e)),
+                        Err(reason) => {
+                            self.rejected.record(&reason);
+                            warn!("reconfiguration event rejected: {reason}");
+                        }
+                    }
+                }
+            }
+            if drv {
+                driver_in.drain_events()?;
+            }
+            // Read on every round like the IMU: the driver's report decides whether thrust
+            // may go out at all, so a lost notification must not delay it.
+            while let Some(report) = driver_in.recv()? {
+                match report.validate() {
+                    Ok(()) => {
+                        self.driver.observe(&report, self.machine.thrusters());
+                        self.driver_judged_for = None;
+                    }
+                    Err(reason) => {
+                        self.rejected.record(&reason);
+                        warn!("driver status rejected: {reason}");
+                    }
+                }
+            }
+            // Judged on a new report, and when a reconfiguration changed the count the
+            // driver must match.
+            if self.driver_judged_for != Some(self.machine.thrusters()) {
+                self.judge_outputs();
+                self.driver_judged_for = Some(self.machine.thrusters());
+            }
+            if setp {
+                setpoint_in.drain_events()?;
+                while let Some(s) = setpoint_in.recv()? {
+                    match s.validate() {
+                        Ok(()) => {
+                            self.machine.on_setpoint_input(&wire::setpoint(&s));
+                        }
+                        Err(reason) => {
+                            self.rejected.record(&reason);
+                            warn!("setpoint rejected: {reason}");
+                        }
+                    }
+                }
+            }
+            if ctrl {
+                control.drain_events()?;
+            }
+            // Serve on every round, not only after a notification: a request whose
+            // notification was lost while this daemon started (the client notified before
+            // our listener existed) would otherwise wait unanswered until the client gave up
+            // (thrusterctl exit 5 right after a restart, seen in tests/faults.rs). An empty
+            // queue costs one check per round, after the IMU answer.
+            {
+                // Count every refusal (invalid request, wrong state, failure) for status.
+                let mut refused = 0u32;
+                let served = control.serve(|kind, req| {
+                    let response = self.on_request(kind, req);
+                    if !response.is_ok() {
+                        refused += 1;
+                        warn!(?kind, "operator request refused: {}", response.text());
+                    }
+                    response
+                })?;
+                if served.invalid > 0 {
+                    warn!(invalid = served.invalid, "invalid operator request refused");
+                }
+                self.refused = self
+                    .refused
+                    .saturating_add(refused)
+                    .saturating_add(served.invalid as u32);
+            }
+            if self.pending_estimate
+                && self.last_imu.is_some()
+                && self.machine.state() != thrusterd_core::machine::State::Fault
+            {
+                self.pending_estimate = false;
+                if let Err(e) = self.machine.on_request(Request::Estimate) {
+                    warn!("start-up estimation refused: {e}");
+                }
+            }
+            if self.pending_hold
+                && self.last_imu.is_some()
+                && self.machine.state() != thrusterd_core::machine::State::Fault
+            {
+                self.pending_hold = false;
+                match self.machine.on_request(Request::Hold) {
+                    Ok(_) => info!("resumed control after a crash: holding attitude"),
+                    Err(e) => warn!("could not resume control after a crash: {e}"),
+                }
+            }
+            let changed = self.handle_events(&model_out);
+            self.poll_saves();
+            systemd.tick();
+            if changed || last_status.elapsed() >= status_period {
+                let s = self.machine.status();
+                if s.text.starts_with(s.state.name()) {
+                    systemd.status(&s.text);
+                } else {
+                    systemd.status(&format!("{}: {}", s.state.name(), s.text));
+                }
+                self.publish_status(&status_out);
+                // History-1 services only reach late joiners on a send or this call.
+                let _ = model_out.update_connections();
+                let _ = status_out.update_connections();
+                last_status = Instant::now();
+            }
+        }
+
+        info!("shutting down: thrusters neutral");
+        systemd.stopping();
+        let neutral = Command::neutral(self.machine.thrusters());
+        self.send_thrust(&thrust_out, &neutral);
+        self.handle_events(&model_out);
+        if let Some(model) = self.machine.model().cloned() {
+            self.save(&model);
+        }
+        // Thrust is neutral: now the saves may be waited for, but not forever (a disk that
+        // never answers must not keep the process, and systemd's stop, waiting).
+        let (outcomes, abandoned) = self.saver.finish(SHUTDOWN_SAVE_WAIT);
+        for outcome in outcomes {
+            self.on_saved(outcome);
+        }
+        if abandoned > 0 {
+            error!(
+                "{abandoned} model save(s) still waiting for the disk after {} s: abandoned",
+                SHUTDOWN_SAVE_WAIT.as_secs()
+            );
+        }
+        // A clean stop: the next start begins idle.
+        if let Some(session) = self.session.take() {
+            session.finish();
+        }
+        let mut status = self.status_msg();
+        status.set_text("thrusterd stopped");
+        let _ = status_out.send(&status);
+        Ok(())
+    }
+
+    /// Hands the machine the driver's verdict on its outputs when it changed.
+    fn judge_outputs(&mut self) {
+        let verdict = self.driver.verdict(self.machine.thrusters());
+        if verdict == self.driver_verdict {
+            return;
+        }
+        match &verdict {
+            OutputVerdict::Blocked(why) => {
+                error!("driver outputs unusable: {why}; thrusters neutral");
+                self.machine.on_outputs(Some(why));
+            }
+            OutputVerdict::Usable => {
+                info!("driver outputs usable again");
+                self.machine.on_outputs(None);
+            }
+        }
+        self.driver_verdict = verdict;
+    }
+
+    fn on_imu(&mut self, sample: &ImuSample, thrust_out: &Port<ThrustCommand>) {
+        match self.validator.check(sample) {
+            Ok(accepted) => {
+                self.last_imu = Some((sample.seq, sample.t_ns));
+                if accepted.missed > 0 {
+                    // Counted for status so no loss goes unnoticed; logged sparingly.
+                    let before = self.missed;
+                    self.missed = self.missed.saturating_add(accepted.missed);
+                    if before < 20 || before.ilog2() != self.missed.ilog2() {
+                        warn!(
+                            missed = self.missed,
+                            "{} IMU sample(s) missing before seq {}", accepted.missed, sample.seq
+                        );
+                    }
+                }
+                if accepted.resynced {
+                    warn!(
+                        "IMU stream restarted (seq {}): time discontinuity",
+                        sample.seq
+                    );
+                }
+                let cmd = self.machine.on_imu(&wire::imu_input(sample));
+                self.send_thrust(thrust_out, &cmd);
+            }
+            Err(reason) => {
+                self.rejected.record(&reason);
+                if self.rejected.total() < 20 || self.rejected.total().is_power_of_two() {
+                    warn!(
+                        rejected = self.rejected.total(),
+                        "IMU sample rejected: {reason}"
+                    );
+                }
+                // Still answer, with neutral: a driver in lockstep waits for every answer, and
+                // a garbage sample must never keep a pulse running.
+                let neutral = Command::neutral(self.machine.thrusters());
+                let mut msg =
+                    wire::thrust_command(self.thrust_seq, sample.seq, sample.t_ns, &neutral);
+                self.thrust_seq += 1;
+                msg.imu_seq = sample.seq;
+                let _ = thrust_out.send(&msg);
+            }
+        }
+    }
+
+    fn send_thrust(&mut self, thrust_out: &Port<ThrustCommand>, cmd: &Command) {
+        let (imu_seq, t_ns) = self.last_imu.unwrap_or((0, 0));
+        let mut msg = wire::thrust_command(self.thrust_seq, imu_seq, t_ns, cmd);
+        // The machine already sanitises; this is the protocol's own last check before the wire.
+        thruster_protocol::validate::sanitize_thrust(msg.thrusters_mut());
+        self.thrust_seq += 1;
+        if let Err(e) = thrust_out.send(&msg) {
+            error!("thrust command not sent: {e}");
+        }
+    }
+
+    fn on_request(
+        &mut self,
+        kind: RequestKind,
+        req: &thruster_protocol::ControlRequest,
+    ) -> ControlResponse {
+        let machine_req = match kind {
+            RequestKind::Status => {
+                let s = self.machine.status();
+                return ControlResponse::ok(&format!("{}: {}", s.state.name(), s.text));
+            }
+            RequestKind::Estimate => {
+                if req.value != 0.0 {
+                    if let Err(e) = self.machine.set_estimation_power(req.value) {
+                        return ControlResponse::new(ResponseCode::InvalidRequest, &e.0);
+                    }
+                }
+                Request::Estimate
+            }
+            RequestKind::Abort => Request::Abort,
+            RequestKind::Hold => Request::Hold,
+            RequestKind::Idle => Request::Idle,
+            RequestKind::Revert => Request::Revert,
+            RequestKind::Save => {
+                let Some(model) = self.machine.model().cloned() else {
+                    return ControlResponse::new(ResponseCode::Rejected, "no model to save");
+                };
+                let path = if req.text.as_str().is_empty() {
+                    self.model_path.clone()
+                } else {
+                    PathBuf::from(req.text.as_str())
+                };
+                // On the saving thread; the answer waits for it a few milliseconds at most
+                // (a healthy disk, or a fast failure such as a full one), never for a stalled
+                // disk: then the answer says so and status reports the outcome.
+                let id = self.saver.submit(&model, &path);
+                return match self.saver.wait_for(id, SAVE_ANSWER_WAIT) {
+                    Some(outcome) => {
+                        let result = outcome.result.clone();
+                        self.on_saved(outcome);
+                        match result {
+                            Ok(()) => ControlResponse::ok(&format!(
+                                "saved model v{} to {}",
+                                model.version,
+                                path.display()
+                            )),
+                            Err(e) => ControlResponse::new(ResponseCode::Failed, &e),
+                        }
+                    }
+                    None => ControlResponse::ok(&format!(
+                        "saving model v{} to {} (the disk is slow: status reports a failure)",
+                        model.version,
+                        path.display()
+                    )),
+                };
+            }
+            RequestKind::Load => {
+                let path = PathBuf::from(req.text.as_str());
+                return match store::load(&path) {
+                    Ok(Some(model)) => match self.machine.load_model(model) {
+                        Ok(()) => ControlResponse::ok(&format!("loaded {}", path.display())),
+                        Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.to_string()),
+                    },
+                    Ok(None) => ControlResponse::new(
+                        ResponseCode::Failed,
+                        &format!("{}: no such file", path.display()),
+                    ),
+                    Err(e) => ControlResponse::new(ResponseCode::Failed, &e.to_string()),
+                };
+            }
+            RequestKind::Shutdown => {
+                self.shutdown.store(true, Ordering::SeqCst);
+                return ControlResponse::ok("shutting down");
+            }
+        };
+        match self.machine.on_request(machine_req) {
+            Ok(text) => ControlResponse::ok(&text),
+            Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.0),
+        }
+    }
+
+    /// Publish and persist what the machine did; true when status should go out now.
+    fn handle_events(&mut self, model_out: &Port<ModelMsg>) -> bool {
+        let events = self.machine.take_events();
+        let changed = !events.is_empty();
+        for event in events {
+            match event {
+                Event::ModelSwapped(model) => {
+                    info!(version = model.version, source = ?model.source, actuated = ?model.actuated.names(), "model swapped in");
+                    self.publish_model(model_out, &model);
+                    if model.source == thrusterd_core::model::ModelSource::Estimated {
+                        self.save(&model);
+                    }
+                }
+                Event::ModelDropped(why) => warn!("model dropped: {why}"),
+                Event::ModelRejected(why) => warn!("model rejected, old one kept: {why}"),
+                Event::MismatchDetected(why) => warn!("{why}"),
+                Event::StateChanged { from, to, why } => {
+                    info!("{} -> {}: {why}", from.name(), to.name());
+                    self.record_intent(to);
+                }
+            }
+        }
+        changed
+    }
+
+    /// Reads what a crashed predecessor was doing and starts this daemon's own marker.
+    fn open_session(&mut self) {
+        use crate::session::{Intent, Session};
+        let (mut session, previous) = Session::open(&self.cfg.runtime.state_dir);
+        let resume = match previous {
+            Some(Intent::Hold) if self.pending_estimate => Intent::Hold,
+            Some(Intent::Hold) if !self.cfg.runtime.resume_after_crash => {
+                warn!("the previous thrusterd did not stop cleanly while controlling; runtime.resume_after_crash = false: idle");
+                Intent::Idle
+            }
+            Some(Intent::Hold) if self.machine.model().is_some() => {
+                warn!("the previous thrusterd did not stop cleanly while controlling: resuming control with the saved model");
+                self.pending_hold = true;
+                Intent::Hold
+            }
+            Some(Intent::Hold) => {
+                warn!("the previous thrusterd did not stop cleanly while controlling, but there is no model to resume with: idle");
+                Intent::Idle
+            }
+            Some(Intent::Idle) => {
+                info!("the previous thrusterd did not stop cleanly; it was idle: idle");
+                Intent::Idle
+            }
+            None => Intent::Idle,
+        };
+        session.record(resume);
+        self.session = Some(session);
+    }
+
+    /// Keeps the session marker in step: controlling and estimating move the vehicle, so a
+    /// crash in them resumes control; Fault keeps whatever it will recover to.
+    fn record_intent(&mut self, to: thrusterd_core::machine::State) {
+        use thrusterd_core::machine::State;
+        let intent = match to {
+            State::Active => crate::session::Intent::Hold,
+            s if s.is_estimating() => crate::session::Intent::Hold,
+            State::Idle => crate::session::Intent::Idle,
+            _ => return,
+        };
+        if let Some(session) = self.session.as_mut() {
+            session.record(intent);
+        }
+    }
+
+    /// Queues a save of `model` to the state directory; the outcome comes back through
+    /// [`Daemon::poll_saves`]. Never blocks the loop.
+    fn save(&mut self, model: &thrusterd_core::model::Model) {
+        let path = self.model_path.clone();
+        self.saver.submit(model, &path);
+    }
+
+    /// Takes the outcomes of finished saves (non-blocking).
+    fn poll_saves(&mut self) {
+        for outcome in self.saver.poll() {
+            self.on_saved(outcome);
+        }
+    }
+
+    /// Logs a save's outcome; one to the state directory sets or clears the status note.
+    fn on_saved(&mut self, outcome: crate::saver::Outcome) {
+        let to_state_dir = outcome.path == self.model_path;
+        match &outcome.result {
+            Ok(()) => {
+                info!(path = %outcome.path.display(), version = outcome.version, "model saved")
+            }
+            Err(e) => warn!("model not saved (daemon keeps running): {e}"),
+        }
+        if to_state_dir {
+            self.save_error = outcome.result.err();
+        }
+    }
+
+    fn publish_model(&mut self, model_out: &Port<ModelMsg>, model: &thrusterd_core::model::Model) {
+        let msg = wire::model_msg(self.model_seq, model);
+        self.model_seq += 1;
+        if let Err(e) = model_out.send(&msg) {
+            error!("model not published: {e}");
+        }
+    }
+
+    fn status_msg(&mut self) -> StatusMsg {
+        let mut msg = wire::status_msg(self.status_seq, &self.machine.status());
+        self.status_seq += 1;
+        self.rejected.write_to(&mut msg);
+        msg.requests_refused = self.refused;
+        msg.samples_missed = self.missed;
+        if let Some(why) = &self.save_error {
+            // First, since the text is bounded (128 bytes) and the state has its own field: the
+            // machine's words are what gets cut.
+            let text = format!("model not saved: {why} | {}", msg.text());
+            msg.set_text(&text);
+        }
+        msg
+    }
+
+    fn publish_status(&mut self, status_out: &Port<StatusMsg>) {
+        let msg = self.status_msg();
+        if let Err(e) = status_out.send(&msg) {
+            error!("status not published: {e}");
+        }
+    }
+}
+
+/// Indices and counts the machine must never see out of range.
+fn check_reconfig(e: &ReconfigEvent) -> Result<(), RejectReason> {
+    thruster_protocol::validate::expect_count(
+        "count",
+        e.count,
+        e.count.clamp(1, MAX_THRUSTERS as u32),
+    )?;
+    Ok(())
+}
