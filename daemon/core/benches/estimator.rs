@@ -11,7 +11,7 @@ fn warmed(n: usize) -> Estimator {
     // A high pulse limit so the stop decision really evaluates the bound.
     let cfg = EstimatorConfig {
         max_pulses: 1000,
-        ..EstimatorConfig::default()
+        ..EstimatorConfig::forward()
     };
     let mut est = Estimator::new(cfg, n, NoiseLevels::isotropic(0.25, 0.5));
     for k in 0..2 * est.plan().cycle_len() {

@@ -94,7 +94,7 @@ fn forward_recovers_exactly_without_noise_for_every_plan() {
     for excitation in Excitation::ALL {
         let cfg = EstimatorConfig {
             excitation,
-            ..EstimatorConfig::default()
+            ..EstimatorConfig::forward()
         };
         let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.0, 0.0));
         let cycle = est.plan().cycle_len();
@@ -131,7 +131,7 @@ fn paper_method_recovers_exactly_without_noise_on_a_balanced_plan() {
     let cfg = EstimatorConfig {
         method: Method::Paper,
         excitation: Excitation::RoundRobin,
-        ..EstimatorConfig::default()
+        ..EstimatorConfig::forward()
     };
     let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.0, 0.0));
     for k in 0..10 {
@@ -165,7 +165,7 @@ fn noisy_estimate_lies_within_its_own_confidence() {
     for seed in 0..runs {
         let mut rng = ChaCha8Rng::seed_from_u64(100 + seed);
         let mut est = Estimator::new(
-            EstimatorConfig::default(),
+            EstimatorConfig::forward(),
             5,
             NoiseLevels::isotropic(sr, sa),
         );
@@ -204,7 +204,7 @@ fn k_sigma_selection_and_power_escalation() {
     let cfg = EstimatorConfig {
         excitation: Excitation::RoundRobin,
         initial_power: 0.5,
-        ..EstimatorConfig::default()
+        ..EstimatorConfig::forward()
     };
     let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.25, 0.5));
     let mut powers = Vec::new();
@@ -226,7 +226,7 @@ fn k_sigma_selection_and_power_escalation() {
     // A strong response is kept, and the power stays where it is.
     let paper_power = EstimatorConfig {
         initial_power: 0.5,
-        ..EstimatorConfig::default()
+        ..EstimatorConfig::forward()
     };
     let mut est = Estimator::new(paper_power, 5, NoiseLevels::isotropic(0.25, 0.5));
     let u = est.begin_pulse().to_vec();
@@ -259,7 +259,7 @@ fn all_parallel_thrusters_report_missing_dofs() {
     let truth = aligned_truth();
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     let mut est = Estimator::new(
-        EstimatorConfig::default(),
+        EstimatorConfig::forward(),
         4,
         NoiseLevels::isotropic(0.25, 0.5),
     );
@@ -282,7 +282,7 @@ fn all_parallel_thrusters_report_missing_dofs() {
     let paper = Estimator::new(
         EstimatorConfig {
             method: Method::Paper,
-            ..EstimatorConfig::default()
+            ..EstimatorConfig::forward()
         },
         4,
         NoiseLevels::isotropic(0.25, 0.5),
@@ -302,7 +302,7 @@ fn dead_and_reversed_thrusters_are_diagnosed() {
     truth.column_mut(4).fill(0.0); // dead
     let cfg = EstimatorConfig {
         initial_power: 1.0,
-        ..EstimatorConfig::default()
+        ..EstimatorConfig::forward()
     };
     let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.25, 0.5)).with_nominal(nominal);
     let mut rng = ChaCha8Rng::seed_from_u64(4);
@@ -335,7 +335,7 @@ fn asymmetric_forward_and_reverse_gains_are_detected() {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let cfg = EstimatorConfig {
         excitation: Excitation::RoundRobin,
-        ..EstimatorConfig::default()
+        ..EstimatorConfig::forward()
     };
     let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.05, 0.1));
     let shape = PulseShape { lag_s: 0.1 };
@@ -372,7 +372,7 @@ fn asymmetric_forward_and_reverse_gains_are_detected() {
     );
 
     let mut orth = Estimator::new(
-        EstimatorConfig::default(),
+        EstimatorConfig::forward(),
         5,
         NoiseLevels::isotropic(0.05, 0.1),
     );
@@ -392,7 +392,7 @@ fn automatic_stop_fires_at_the_target_and_means_it() {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let cfg = EstimatorConfig {
             target_rel_err: 0.05,
-            ..EstimatorConfig::default()
+            ..EstimatorConfig::forward()
         };
         let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.25, 0.5));
         let mut stop = StopDecision::Continue;
@@ -431,7 +431,7 @@ fn forward_error_matches_the_cramer_rao_bound() {
             let (r, a) = random_configuration(&mut rng, n);
             let cfg = EstimatorConfig {
                 excitation,
-                ..EstimatorConfig::default()
+                ..EstimatorConfig::forward()
             };
             let mut est = Estimator::new(cfg, n, NoiseLevels::isotropic(0.25, 0.05));
             let mut gram = DMatrix::<f64>::zeros(n, n);

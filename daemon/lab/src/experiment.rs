@@ -123,7 +123,7 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
         vehicle: "amour5",
         start: Start::Estimate,
         declared: "amour5",
-        method: "forward",
+        method: "dynamic",
         // The model under test must stay the one under test: the monitor only reports.
         monitor: "report",
         change: None,
@@ -221,6 +221,7 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
                 RunSpec {
                     label: "forward",
                     title: "ours (forward model, DOF detection), all thrusters aligned",
+                    method: "forward",
                     ..aligned
                 },
             ]
@@ -330,6 +331,13 @@ fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> Result<Stri
         }
     }
     let _ = writeln!(t, "[estimator]\nmethod = \"{}\"", spec.method);
+    if spec.method != "dynamic" {
+        // The static methods with the settings they were tuned with (EstimatorConfig::forward).
+        let _ = writeln!(
+            t,
+            "excitation = \"orthogonal\"\ninitial_power = 0.8\ntarget_rel_err = 0.1\nmax_pulses = 64"
+        );
+    }
     if bins.daemon_monitor {
         let _ = writeln!(t, "[monitor]\naction = \"{}\"", spec.monitor);
     }

@@ -34,17 +34,18 @@ impl Method {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EstimatorConfig {
-    /// "forward" (default), "dynamic" or "paper". For "dynamic" use its settings as in
-    /// [`EstimatorConfig::dynamic`] (config/thrusterd.toml shows them).
+    /// "dynamic" (default), "forward" or "paper". The static methods were tuned with the
+    /// settings of [`EstimatorConfig::forward`] (config/thrusterd.toml names them).
     pub method: Method,
-    /// "orthogonal" (default), "doublet_pairs" (back-to-back +r,-r,-r,+r Hadamard patterns that
-    /// return the vehicle near rest: the dynamic method's), "pairs" or "round_robin" (the paper's).
+    /// "doublet_pairs" (default: back-to-back +r,-r,-r,+r Hadamard patterns that return the
+    /// vehicle near rest, the dynamic method's), "orthogonal", "pairs" or "round_robin" (the
+    /// paper's).
     pub excitation: Excitation,
     /// Sample selection and significance threshold in noise standard deviations (paper: 3).
     pub k_sigma: f64,
-    /// First pulse strength as a fraction of full command (default 0.8; the paper: 0.5;
-    /// [`EstimatorConfig::dynamic`]: 1.0, since at 0.8 the paper-noise bound did not reach 0.06
-    /// within 64 pulses on AMOUR-5, docs/study.md).
+    /// First pulse strength as a fraction of full command (default 1.0: at 0.8 the dynamic
+    /// method's paper-noise bound did not reach 0.06 within 64 pulses on AMOUR-5, docs/study.md;
+    /// forward settings 0.8; the paper: 0.5).
     /// Stronger pulses reach the error bound in fewer pulses; 0.1 s pulses keep the motion small.
     pub initial_power: f64,
     /// With a model in force (declared geometry, or the one being replaced), the first pulse is
@@ -61,8 +62,8 @@ pub struct EstimatorConfig {
     /// Cap on the pulse strength (paper: 1.0; the paper's max() is meant as min()).
     pub max_power: f64,
     /// Automatic stop: relative error bound (1 sigma, Frobenius) each of the rotation and
-    /// acceleration models must reach (forward and dynamic methods; default 0.1, dynamic
-    /// settings 0.06).
+    /// acceleration models must reach (forward and dynamic methods; default 0.06, forward
+    /// settings 0.1).
     pub target_rel_err: f64,
     /// Full excitation cycles before the automatic stop may fire (>= 1: every thruster seen in
     /// both directions).
@@ -113,17 +114,17 @@ pub struct EstimatorConfig {
 impl Default for EstimatorConfig {
     fn default() -> Self {
         EstimatorConfig {
-            method: Method::Forward,
-            excitation: Excitation::Orthogonal,
+            method: Method::Dynamic,
+            excitation: Excitation::DoubletPairs,
             k_sigma: 3.0,
-            initial_power: 0.8,
+            initial_power: 1.0,
             pulse_snr: 20.0,
             min_power: 0.2,
             power_step: 0.1,
             max_power: 1.0,
-            target_rel_err: 0.1,
+            target_rel_err: 0.06,
             min_cycles: 1,
-            max_pulses: 64,
+            max_pulses: 80,
             paper_cycles: 1,
             spin_up_s: 0.1,
             baseline_samples: 20,
@@ -156,14 +157,21 @@ pub struct ConfigError {
 
 impl EstimatorConfig {
     /// The dynamic method with the settings measured best on the simulator (docs/study.md):
-    /// doublet pairs at full power, stop at a 0.06 bound or 80 pulses (8 s).
+    /// doublet pairs at full power, stop at a 0.06 bound or 80 pulses (8 s). The default.
     pub fn dynamic() -> Self {
+        EstimatorConfig::default()
+    }
+
+    /// The static forward method with the settings it was tuned with (orthogonal pulses with
+    /// settles, power 0.8, stop at a 0.1 bound, 64 pulses): the idealised study, the paper's
+    /// comparisons and its own tests use these.
+    pub fn forward() -> Self {
         EstimatorConfig {
-            method: Method::Dynamic,
-            excitation: Excitation::DoubletPairs,
-            initial_power: 1.0,
-            target_rel_err: 0.06,
-            max_pulses: 80,
+            method: Method::Forward,
+            excitation: Excitation::Orthogonal,
+            initial_power: 0.8,
+            target_rel_err: 0.1,
+            max_pulses: 64,
             ..EstimatorConfig::default()
         }
     }

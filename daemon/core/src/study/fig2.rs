@@ -140,7 +140,7 @@ pub fn run_configuration(
     );
     let cfg = EstimatorConfig {
         excitation,
-        ..EstimatorConfig::default()
+        ..EstimatorConfig::forward()
     };
     let mut est = Estimator::new(cfg, n, NoiseLevels::isotropic(SIGMA_ROT, SIGMA_ACC));
     let plan = ExcitationPlan::new(excitation, n);
