@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use thruster_protocol::validate::limits::{MAX_ALLOCATION, MAX_EFFECTIVENESS};
 
 use crate::estimator::analysis::{allocation, rank_report};
+use crate::estimator::dynamic::DynamicTerms;
 use crate::estimator::{Dof, DofMask, Estimate, EstimatorConfig, Method};
 
 /// Where a model came from.
@@ -51,6 +52,10 @@ pub struct Model {
     pub pulses: usize,
     /// The file it was last loaded from, when it came from one.
     pub loaded_from: Option<String>,
+    /// The dynamic method's other coefficients (damping, restoring, Coriolis) and the
+    /// excursion while it was learned; None for other methods and for models from a file
+    /// (the state directory keeps B only).
+    pub dynamics: Option<DynamicTerms>,
 }
 
 /// Why a candidate model was not swapped in.
@@ -111,6 +116,7 @@ impl Model {
             estimated: true,
             pulses: e.pulses,
             loaded_from: None,
+            dynamics: e.dynamics.clone(),
             version: 0,
             source: ModelSource::Estimated,
             method: e.method,
@@ -135,6 +141,7 @@ impl Model {
             estimated: false,
             pulses: 0,
             loaded_from: None,
+            dynamics: None,
             version: 0,
             source: ModelSource::Nominal,
             method: Method::Forward,

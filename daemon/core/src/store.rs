@@ -175,6 +175,7 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
         estimated: f.estimated.unwrap_or(f.source != ModelSource::Nominal),
         pulses: f.pulses,
         loaded_from: Some(origin.to_string()),
+        dynamics: None,
     })
 }
 

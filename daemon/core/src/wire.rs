@@ -2,8 +2,9 @@
 
 use nalgebra::UnitQuaternion;
 use thruster_protocol::{
-    DaemonState, ImuSample, ModelMethod, ModelMsg, ModelSource as WireSource, ReconfigEvent,
-    ReconfigKind, Setpoint, StatusMsg, ThrustCommand, ThrustMode, DOF_COUNT, MAX_THRUSTERS,
+    DaemonState, DynamicsMsg, DynamicsRow, ImuSample, ModelMethod, ModelMsg,
+    ModelSource as WireSource, ReconfigEvent, ReconfigKind, Setpoint, StatusMsg, ThrustCommand,
+    ThrustMode, DOF_COUNT, MAX_THRUSTERS,
 };
 
 use crate::estimator::Method;
@@ -103,6 +104,29 @@ pub fn model_msg(seq: u64, model: &Model) -> ModelMsg {
         }
     }
     m
+}
+
+/// The dynamic coefficients of `model`, when its method learned any.
+pub fn dynamics_msg(seq: u64, model: &Model) -> Option<DynamicsMsg> {
+    let d = model.dynamics.as_ref()?;
+    let row = |m: &nalgebra::DMatrix<f64>, r: usize| {
+        // NaN marks "unknown" on the wire (an infinite standard error: a term never excited).
+        let terms: Vec<f64> = m
+            .row(r)
+            .iter()
+            .map(|v| if v.is_finite() { *v } else { f64::NAN })
+            .collect();
+        DynamicsRow::from_terms(&terms)
+    };
+    Some(DynamicsMsg {
+        seq,
+        model_version: model.version,
+        t_ns: model.made_t_ns,
+        coefficients: std::array::from_fn(|r| row(&d.coefficients, r)),
+        std_err: std::array::from_fn(|r| row(&d.std_err, r)),
+        max_tilt_rad: d.max_tilt_rad,
+        max_heading_change_rad: d.max_heading_change_rad,
+    })
 }
 
 /// A validated reconfiguration event for the machine.

@@ -11,7 +11,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Quaternion, UnitQuaternion};
-use thruster_protocol::{ModelMsg, TruthMsg};
+use thruster_protocol::{DynamicsMsg, ModelMsg, TruthMsg, DYNAMIC_TERM_NAMES};
 
 use crate::session::{config_file, latest, Binaries, DaemonConfig, Session, SessionSpec};
 
@@ -62,6 +62,13 @@ struct Summary {
     attitude_err_step_deg: Option<f64>,
     tilt_err_deg: Option<f64>,
     yaw_err_deg: Option<f64>,
+    /// The estimation method that made the model ("Dynamic", "Forward", "Paper").
+    method: String,
+    /// Largest true tilt and heading change while the daemon estimated, deg.
+    estimation_tilt_deg: Option<f64>,
+    estimation_heading_deg: Option<f64>,
+    /// What the dynamic method learned besides B.
+    dynamics: Option<DynamicsMsg>,
     clean_exit: bool,
     leftovers: usize,
 }
@@ -138,6 +145,8 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
     let wall_seconds = wall.elapsed().as_secs_f64();
     let vehicle_seconds = done.vehicle_time_ns.saturating_sub(t0) as f64 * 1e-9;
     let model = session.model()?;
+    let excursion = session.last_excursion().filter(|e| e.samples > 0);
+    let dynamics = session.dynamics(model.version)?;
     let truth = latest(session.truth_inbox())?.unwrap_or(truth);
     let err_rot = truth.relative_error(&model, 0);
     let err_acc = truth.relative_error(&model, 3);
@@ -227,6 +236,10 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
         attitude_err_step_deg: step_err,
         tilt_err_deg: tilt_yaw.map(|t| t.0),
         yaw_err_deg: tilt_yaw.map(|t| t.1),
+        method: model.method().map(|m| format!("{m:?}")).unwrap_or_default(),
+        estimation_tilt_deg: excursion.map(|e| e.max_tilt_deg),
+        estimation_heading_deg: excursion.map(|e| e.max_heading_deg),
+        dynamics,
         clean_exit: false,
         leftovers: 0,
     })
@@ -290,6 +303,10 @@ fn report(args: &DemoArgs, s: &Summary) {
             "attitude_err_pitch_step_deg": s.attitude_err_step_deg,
             "tilt_err_deg": s.tilt_err_deg,
             "yaw_err_deg": s.yaw_err_deg,
+            "method": s.method,
+            "estimation_max_tilt_deg": s.estimation_tilt_deg,
+            "estimation_max_heading_change_deg": s.estimation_heading_deg,
+            "dynamics": s.dynamics.as_ref().map(dynamics_json),
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,
         });
@@ -310,6 +327,12 @@ fn report(args: &DemoArgs, s: &Summary) {
             println!("  of which tilt (roll/pitch) {t:.2} deg, heading {y:.2} deg (the daemon's heading comes from the magnetometer)");
         }
     }
+    if let (Some(t), Some(h)) = (s.estimation_tilt_deg, s.estimation_heading_deg) {
+        println!("during estimation ({} method) the vehicle tilted up to {t:.1} deg and turned up to {h:.1} deg", s.method.to_lowercase());
+    }
+    if let Some(d) = &s.dynamics {
+        print_dynamics(d);
+    }
     println!(
         "shutdown: {} ({} files of the namespace left)",
         if s.clean_exit {
@@ -319,4 +342,60 @@ fn report(args: &DemoArgs, s: &Summary) {
         },
         s.leftovers
     );
+}
+
+/// The learned dynamic coefficients as JSON: per DOF row, term -> [value, standard error].
+fn dynamics_json(d: &DynamicsMsg) -> serde_json::Value {
+    let row = |r: usize| {
+        let (c, se) = (d.coefficients[r].to_terms(), d.std_err[r].to_terms());
+        let map: serde_json::Map<String, serde_json::Value> = DYNAMIC_TERM_NAMES
+            .iter()
+            .enumerate()
+            .map(|(k, name)| (name.to_string(), serde_json::json!([c[k], num(se[k])])))
+            .collect();
+        serde_json::Value::Object(map)
+    };
+    let rows: serde_json::Map<String, serde_json::Value> = DOFS
+        .iter()
+        .enumerate()
+        .map(|(r, dof)| (dof.to_string(), row(r)))
+        .collect();
+    serde_json::json!({
+        "per_row_term_value_and_std_err": rows,
+        "navigation_max_tilt_deg": d.max_tilt_rad.to_degrees(),
+        "navigation_max_heading_change_deg": d.max_heading_change_rad.to_degrees(),
+    })
+}
+
+/// A finite number, or null (JSON has no NaN).
+fn num(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::json!(v)
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+/// The rotation rows' own-axis damping and restoring, the coefficients people look for first.
+fn print_dynamics(d: &DynamicsMsg) {
+    println!("learned dynamics (per unit of the term, 1-sigma):");
+    for (r, rate) in ["p", "q", "r"].iter().enumerate() {
+        let c = d.coefficients[r].to_terms();
+        let se = d.std_err[r].to_terms();
+        let k = r;
+        let kq = 3 + r;
+        print!(
+            "  {:>5}: damping {rate} {:+.3} +- {:.3}, |{rate}|{rate} {:+.3} +- {:.3}",
+            DOFS[r], c[k], se[k], c[kq], se[kq]
+        );
+        // Roll is restored by gravity's y component, pitch by its x component.
+        if r < 2 {
+            let g = if r == 0 { 13 } else { 12 };
+            print!(
+                ", restoring {} {:+.2} +- {:.2}",
+                DYNAMIC_TERM_NAMES[g], c[g], se[g]
+            );
+        }
+        println!();
+    }
 }

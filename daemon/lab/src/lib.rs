@@ -4,6 +4,7 @@
 //! Not part of a vehicle build (thrusterctl's `lab` feature).
 
 pub mod demo;
+pub mod excursion;
 pub mod experiment;
 pub mod scoring;
 pub mod session;

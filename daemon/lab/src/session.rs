@@ -9,13 +9,15 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+
+use crate::excursion::Excursion;
 use nalgebra::UnitQuaternion;
 use thruster_protocol::services::{
     namespace_files, purge_namespace, ControlClient, Inbox, IpcConfig, IpcNode, Port, TopicMessage,
 };
 use thruster_protocol::{
-    ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, Setpoint, StatusMsg,
-    ThrustCommand, TruthMsg, VehicleStateMsg, MAX_THRUSTERS,
+    ControlRequest, ControlResponse, DaemonState, DynamicsMsg, ModelMsg, RequestKind, Setpoint,
+    StatusMsg, ThrustCommand, TruthMsg, VehicleStateMsg, MAX_THRUSTERS,
 };
 
 /// A child process killed and reaped on drop, whatever happens.
@@ -289,6 +291,7 @@ impl SessionSpec {
 struct Ports {
     status: Inbox<StatusMsg>,
     model: Inbox<ModelMsg>,
+    dynamics: Inbox<DynamicsMsg>,
     truth: Inbox<TruthMsg>,
     vehicle: Inbox<VehicleStateMsg>,
     thrust: Inbox<ThrustCommand>,
@@ -314,6 +317,9 @@ pub struct Session {
     sim: ChildProc,
     /// The pace the simulator runs at, if any.
     pub pace: Option<f64>,
+    /// While an estimation runs: how far the vehicle moves (from the true vehicle state).
+    excursion: Option<Excursion>,
+    last_excursion: Option<Excursion>,
     // Last: removed after the processes that write into it are gone.
     _tmp: TempDir,
 }
@@ -342,6 +348,7 @@ impl Session {
             // The largest buffers the topics allow: the runner reads in bursts.
             status: Inbox::create_with_buffer(&node, &ipc, 4)?,
             model: Inbox::create_with_buffer(&node, &ipc, 4)?,
+            dynamics: Inbox::create_with_buffer(&node, &ipc, 4)?,
             truth: Inbox::create_with_buffer(&node, &ipc, 4)?,
             vehicle: Inbox::create_with_buffer(&node, &ipc, 16)?,
             thrust: Inbox::create_with_buffer(&node, &ipc, 16)?,
@@ -413,6 +420,8 @@ impl Session {
             daemon,
             sim,
             pace,
+            excursion: None,
+            last_excursion: None,
             _tmp: tmp,
         })
     }
@@ -477,6 +486,13 @@ impl Session {
     ) -> Result<StatusMsg> {
         let start = Instant::now();
         loop {
+            if self.excursion.is_some() {
+                while let Some(v) = self.vehicle_inbox().recv()? {
+                    if let Some(e) = self.excursion.as_mut() {
+                        e.push(&v);
+                    }
+                }
+            }
             while let Some(st) = self.status_inbox().recv()? {
                 if pred(&st) {
                     return Ok(st);
@@ -544,11 +560,41 @@ impl Session {
         let before = latest(self.status_inbox())?
             .map(|s| s.model_version)
             .unwrap_or(0);
+        // Only what happens from the request on counts.
+        while self.vehicle_inbox().recv()?.is_some() {}
+        self.excursion = Some(Excursion::default());
         self.command(RequestKind::Estimate)?;
-        self.wait_status("the estimated model", timeout, &mut |s| {
+        let done = self.wait_status("the estimated model", timeout, &mut |s| {
             progress(s);
             s.state() == Ok(DaemonState::Active) && s.model_version > before
-        })
+        });
+        self.last_excursion = self.excursion.take();
+        done
+    }
+
+    /// How far the vehicle moved during the last `estimate` (the vehicle states the session
+    /// received; the inbox keeps the newest 16, so in fast lockstep some are skipped).
+    pub fn last_excursion(&self) -> Option<Excursion> {
+        self.last_excursion
+    }
+
+    /// The dynamic coefficients of model `version`, when its method learned any (waits up to
+    /// 2 s for them: they are published right after the model).
+    pub fn dynamics(&mut self, version: u64) -> Result<Option<DynamicsMsg>> {
+        let start = Instant::now();
+        let mut newest = None;
+        loop {
+            while let Some(d) = self.ports().dynamics.recv()? {
+                newest = Some(d);
+            }
+            match newest {
+                Some(d) if d.model_version == version => return Ok(Some(d)),
+                _ if start.elapsed() > Duration::from_secs(2) => return Ok(None),
+                _ => {}
+            }
+            self.check_alive("the dynamic coefficients")?;
+            std::thread::sleep(Duration::from_millis(2));
+        }
     }
 
     /// The latest model (waits up to 10 s for one).

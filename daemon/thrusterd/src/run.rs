@@ -20,7 +20,7 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
-    ControlResponse, DriverStatusMsg, ImuSample, ModelMsg, ReconfigEvent, RequestKind,
+    ControlResponse, DriverStatusMsg, DynamicsMsg, ImuSample, ModelMsg, ReconfigEvent, RequestKind,
     ResponseCode, Setpoint, StatusMsg, ThrustCommand, MAX_THRUSTERS,
 };
 use thrusterd_core::config::DaemonConfig;
@@ -148,6 +148,7 @@ struct Daemon {
     thrust_seq: u64,
     status_seq: u64,
     model_seq: u64,
+    dynamics_seq: u64,
     last_imu: Option<(u64, u64)>,
     pending_estimate: bool,
     /// The predecessor died while controlling (see `session`): hold with the loaded model
@@ -206,6 +207,7 @@ impl Daemon {
             thrust_seq: 0,
             status_seq: 0,
             model_seq: 0,
+            dynamics_seq: 0,
             last_imu: None,
             pending_estimate: false,
             pending_hold: false,
@@ -238,7 +240,10 @@ impl Daemon {
         let setpoint_in = Inbox::<Setpoint>::create(&node, &self.ipc)?;
         let driver_in = Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?;
         let thrust_out = Port::<ThrustCommand>::create(&node, &self.ipc)?;
-        let model_out = Port::<ModelMsg>::create(&node, &self.ipc)?;
+        let model_out = ModelPorts {
+            model: Port::<ModelMsg>::create(&node, &self.ipc)?,
+            dynamics: Port::<DynamicsMsg>::create(&node, &self.ipc)?,
+        };
         let status_out = Port::<StatusMsg>::create(&node, &self.ipc)?;
 
         let waitset = create_waitset()?;
@@ -446,7 +451,8 @@ impl Daemon {
                 }
                 self.publish_status(&status_out);
                 // History-1 services only reach late joiners on a send or this call.
-                let _ = model_out.update_connections();
+                let _ = model_out.model.update_connections();
+                let _ = model_out.dynamics.update_connections();
                 let _ = status_out.update_connections();
                 last_status = Instant::now();
             }
@@ -637,7 +643,7 @@ impl Daemon {
     }
 
     /// Publish and persist what the machine did; true when status should go out now.
-    fn handle_events(&mut self, model_out: &Port<ModelMsg>) -> bool {
+    fn handle_events(&mut self, model_out: &ModelPorts) -> bool {
         let events = self.machine.take_events();
         let changed = !events.is_empty();
         for event in events {
@@ -733,11 +739,17 @@ impl Daemon {
         }
     }
 
-    fn publish_model(&mut self, model_out: &Port<ModelMsg>, model: &thrusterd_core::model::Model) {
+    fn publish_model(&mut self, model_out: &ModelPorts, model: &thrusterd_core::model::Model) {
         let msg = wire::model_msg(self.model_seq, model);
         self.model_seq += 1;
-        if let Err(e) = model_out.send(&msg) {
+        if let Err(e) = model_out.model.send(&msg) {
             error!("model not published: {e}");
+        }
+        if let Some(d) = wire::dynamics_msg(self.dynamics_seq, model) {
+            self.dynamics_seq += 1;
+            if let Err(e) = model_out.dynamics.send(&d) {
+                error!("dynamic coefficients not published: {e}");
+            }
         }
     }
 
@@ -772,4 +784,11 @@ fn check_reconfig(e: &ReconfigEvent) -> Result<(), RejectReason> {
         e.count.clamp(1, MAX_THRUSTERS as u32),
     )?;
     Ok(())
+}
+
+/// Where a swapped-in model goes out: B and allocation, and the dynamic coefficients when the
+/// dynamic method made it.
+struct ModelPorts {
+    model: Port<ModelMsg>,
+    dynamics: Port<DynamicsMsg>,
 }

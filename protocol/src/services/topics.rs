@@ -38,6 +38,8 @@ pub enum Topic {
     Vehicle,
     /// [`DriverStatusMsg`], driver -> daemon and operators, history 1.
     DriverStatus,
+    /// [`DynamicsMsg`], daemon -> all, history 1: the dynamic coefficients of the model.
+    Dynamics,
 }
 
 /// Quality-of-service settings of a topic. Every process opens services with the same
@@ -57,7 +59,7 @@ pub struct TopicQos {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 9] = [
+    pub const ALL: [Topic; 10] = [
         Topic::Imu,
         Topic::Thrust,
         Topic::Reconfig,
@@ -67,6 +69,7 @@ impl Topic {
         Topic::Setpoint,
         Topic::Vehicle,
         Topic::DriverStatus,
+        Topic::Dynamics,
     ];
 
     /// Service name below the namespace, e.g. `imu`.
@@ -81,6 +84,7 @@ impl Topic {
             Topic::Setpoint => "setpoint",
             Topic::Vehicle => "vehicle",
             Topic::DriverStatus => "driver_status",
+            Topic::Dynamics => "dynamics",
         }
     }
 
@@ -103,13 +107,16 @@ impl Topic {
                 default_buffer: 8,
             },
             // State: a late joiner gets the latest value; readers want the newest.
-            Topic::Model | Topic::Status | Topic::Truth | Topic::Setpoint | Topic::DriverStatus => {
-                TopicQos {
-                    history: 1,
-                    max_buffer: 4,
-                    default_buffer: 2,
-                }
-            }
+            Topic::Model
+            | Topic::Status
+            | Topic::Truth
+            | Topic::Setpoint
+            | Topic::DriverStatus
+            | Topic::Dynamics => TopicQos {
+                history: 1,
+                max_buffer: 4,
+                default_buffer: 2,
+            },
         }
     }
 }
@@ -146,4 +153,7 @@ impl TopicMessage for VehicleStateMsg {
 }
 impl TopicMessage for DriverStatusMsg {
     const TOPIC: Topic = Topic::DriverStatus;
+}
+impl TopicMessage for DynamicsMsg {
+    const TOPIC: Topic = Topic::Dynamics;
 }

@@ -456,6 +456,51 @@ impl Validate for crate::VehicleStateMsg {
     }
 }
 
+impl Validate for DynamicsMsg {
+    /// Coefficients finite and within the physical bound of an effectiveness entry, standard
+    /// errors non-negative or NaN (unknown), excursions finite and non-negative.
+    fn validate(&self) -> Result<(), RejectReason> {
+        for (i, row) in self.coefficients.iter().enumerate() {
+            for (j, v) in row.to_terms().iter().enumerate() {
+                in_range(
+                    Field::at2("coefficients", i, j),
+                    *v,
+                    -MAX_EFFECTIVENESS,
+                    MAX_EFFECTIVENESS,
+                    "per unit term",
+                )?;
+            }
+        }
+        for (i, row) in self.std_err.iter().enumerate() {
+            for (j, v) in row.to_terms().iter().enumerate() {
+                if !v.is_nan() {
+                    in_range(
+                        Field::at2("std_err", i, j),
+                        *v,
+                        0.0,
+                        MAX_EFFECTIVENESS,
+                        "per unit term",
+                    )?;
+                }
+            }
+        }
+        in_range(
+            Field::new("max_tilt_rad"),
+            self.max_tilt_rad,
+            0.0,
+            std::f64::consts::PI,
+            "rad",
+        )?;
+        in_range(
+            Field::new("max_heading_change_rad"),
+            self.max_heading_change_rad,
+            0.0,
+            std::f64::consts::PI,
+            "rad",
+        )
+    }
+}
+
 impl Validate for DriverStatusMsg {
     /// Count within capacity (0 allowed: a driver with no thrusters), output state known,
     /// `link_up` and `armed` 0 or 1, texts valid UTF-8.

@@ -23,7 +23,7 @@ use crate::navigation::{DepthAid, Navigator};
 const MIN_RESIDUAL_DOF: u64 = 10;
 
 /// What the dynamic fit learned besides B: the coefficients of every term, per DOF row.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DynamicTerms {
     /// 6 x TERMS coefficients, rows in DOF order (rotation rows per rad/s^2, translation rows
     /// per m/s^2), columns as [`regressors::TERM_NAMES`].

@@ -12,50 +12,11 @@
 
 use nalgebra::Vector3;
 
-/// Number of terms.
-pub const TERMS: usize = 38;
+/// Number of terms (the protocol's, which carries them in `DynamicsMsg`).
+pub const TERMS: usize = thruster_protocol::DYNAMIC_TERMS;
 
 /// Name of each term, in order (for reports and the demo's JSON).
-pub const TERM_NAMES: [&str; TERMS] = [
-    "p",
-    "q",
-    "r",
-    "|p|p",
-    "|q|q",
-    "|r|r",
-    "u",
-    "v",
-    "w",
-    "|u|u",
-    "|v|v",
-    "|w|w",
-    "down_x",
-    "down_y",
-    "down_z",
-    "uu",
-    "uv",
-    "uw",
-    "up",
-    "uq",
-    "ur",
-    "vv",
-    "vw",
-    "vp",
-    "vq",
-    "vr",
-    "ww",
-    "wp",
-    "wq",
-    "wr",
-    "pp",
-    "pq",
-    "pr",
-    "qq",
-    "qr",
-    "rr",
-    "const",
-    "mean_abs_command",
-];
+pub const TERM_NAMES: [&str; TERMS] = thruster_protocol::DYNAMIC_TERM_NAMES;
 
 /// Index of the first term of each group in [`TERM_NAMES`].
 pub const RATE: usize = 0;

@@ -1,0 +1,160 @@
+use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize};
+
+use super::DOF_COUNT;
+
+/// Number of dynamic-model terms per DOF row.
+pub const DYNAMIC_TERMS: usize = 38;
+
+/// Name of each term, in the order of [`DynamicsRow::to_terms`]: body rates p, q, r and
+/// their |x| x; body velocities u, v, w and their |x| x; gravity's direction in the body
+/// frame; the 21 products of [u v w p q r] (upper triangle, row by row); a constant; and the
+/// mean |command| through the thrusters' spin-up lag.
+pub const DYNAMIC_TERM_NAMES: [&str; DYNAMIC_TERMS] = [
+    "p",
+    "q",
+    "r",
+    "|p|p",
+    "|q|q",
+    "|r|r",
+    "u",
+    "v",
+    "w",
+    "|u|u",
+    "|v|v",
+    "|w|w",
+    "down_x",
+    "down_y",
+    "down_z",
+    "uu",
+    "uv",
+    "uw",
+    "up",
+    "uq",
+    "ur",
+    "vv",
+    "vw",
+    "vp",
+    "vq",
+    "vr",
+    "ww",
+    "wp",
+    "wq",
+    "wr",
+    "pp",
+    "pq",
+    "pr",
+    "qq",
+    "qr",
+    "rr",
+    "const",
+    "mean_abs_command",
+];
+
+/// One DOF row of dynamic-model coefficients: how much each term adds to that DOF's
+/// acceleration (rad/s^2 for rotation rows, m/s^2 for translation rows, per unit of the term).
+#[repr(C)]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct DynamicsRow {
+    /// p, q, r (linear rate damping and the coupling M^-1 brings between axes).
+    pub rate: [f64; 3],
+    /// |p|p, |q|q, |r|r (quadratic rate damping).
+    pub rate_quadratic: [f64; 3],
+    /// u, v, w.
+    pub velocity: [f64; 3],
+    /// |u|u, |v|v, |w|w.
+    pub velocity_quadratic: [f64; 3],
+    /// Gravity's direction in the body frame (restoring moment, net buoyancy).
+    pub down: [f64; 3],
+    /// The products of [u v w p q r] (Coriolis, Munk moment, omega x v).
+    pub products: [f64; 21],
+    /// A constant acceleration.
+    pub constant: f64,
+    /// Mean |command| through the spin-up lag (the thrusters' forward/reverse asymmetry).
+    pub mean_abs_command: f64,
+}
+
+impl DynamicsRow {
+    /// From the terms in [`DYNAMIC_TERM_NAMES`] order (missing ones are 0).
+    pub fn from_terms(t: &[f64]) -> Self {
+        let at = |k: usize| t.get(k).copied().unwrap_or(0.0);
+        let arr3 = |k: usize| [at(k), at(k + 1), at(k + 2)];
+        DynamicsRow {
+            rate: arr3(0),
+            rate_quadratic: arr3(3),
+            velocity: arr3(6),
+            velocity_quadratic: arr3(9),
+            down: arr3(12),
+            products: std::array::from_fn(|j| at(15 + j)),
+            constant: at(36),
+            mean_abs_command: at(37),
+        }
+    }
+
+    /// The terms in [`DYNAMIC_TERM_NAMES`] order.
+    pub fn to_terms(&self) -> [f64; DYNAMIC_TERMS] {
+        let mut out = [0.0; DYNAMIC_TERMS];
+        out[0..3].copy_from_slice(&self.rate);
+        out[3..6].copy_from_slice(&self.rate_quadratic);
+        out[6..9].copy_from_slice(&self.velocity);
+        out[9..12].copy_from_slice(&self.velocity_quadratic);
+        out[12..15].copy_from_slice(&self.down);
+        out[15..36].copy_from_slice(&self.products);
+        out[36] = self.constant;
+        out[37] = self.mean_abs_command;
+        out
+    }
+}
+
+/// What the dynamic-model estimator learned besides B (daemon -> all, service `dynamics`,
+/// history 1): published with every model the dynamic method made, so operators and the lab
+/// can see the vehicle's damping, restoring and Coriolis coefficients and how far the vehicle
+/// moved while it was being excited.
+#[repr(C)]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[type_name("thrusterd.DynamicsMsg.v1")]
+pub struct DynamicsMsg {
+    /// Sequence number, +1 per message.
+    pub seq: u64,
+    /// The [`super::ModelMsg::version`] these coefficients belong to.
+    pub model_version: u64,
+    /// Vehicle time the model was made, ns (IMU clock).
+    pub t_ns: u64,
+    /// Coefficients per DOF row (roll, pitch, yaw, surge, sway, heave).
+    pub coefficients: [DynamicsRow; DOF_COUNT],
+    /// Their one-sigma standard errors, same shape (>= 0; NaN where unknown).
+    pub std_err: [DynamicsRow; DOF_COUNT],
+    /// Largest tilt during the excitation, rad (the daemon's navigation estimate).
+    pub max_tilt_rad: f64,
+    /// Largest heading change during the excitation, rad.
+    pub max_heading_change_rad: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_row_round_trips_through_the_term_order() {
+        let terms: Vec<f64> = (0..DYNAMIC_TERMS).map(|k| k as f64).collect();
+        let row = DynamicsRow::from_terms(&terms);
+        assert_eq!(row.down, [12.0, 13.0, 14.0]);
+        assert_eq!(row.products[0], 15.0);
+        assert_eq!(row.mean_abs_command, 37.0);
+        assert_eq!(row.to_terms().to_vec(), terms);
+    }
+
+    #[test]
+    fn validation_names_an_absurd_coefficient_and_accepts_unknown_errors() {
+        use crate::validate::Validate;
+        let mut m = DynamicsMsg::default();
+        m.std_err[2].products[4] = f64::NAN;
+        assert!(m.validate().is_ok());
+        m.coefficients[1].down[0] = 1e9;
+        let e = m.validate().unwrap_err().to_string();
+        assert!(e.contains("coefficients[1][12]"), "{e}");
+        m.coefficients[1].down[0] = 0.0;
+        m.max_tilt_rad = f64::INFINITY;
+        assert!(m.validate().is_err());
+    }
+}
