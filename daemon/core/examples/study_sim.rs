@@ -1,4 +1,11 @@
-//! In-process study harness (prototype of the lab's `study sim`): Machine + Simulator.
+//! The estimation methods against the simulator's truth, in one process: the machine drives the
+//! simulator's physics as the daemon does (1 s at rest, then `estimate`), for every vehicle file
+//! x noise preset x method x seed. CSV rows on stdout, means on stderr (docs/study.md).
+//!
+//! `cargo run --release -p thrusterd-core --example study_sim -- NOISES METHODS SEEDS [VEHICLES]`
+//! with comma lists, e.g. `none,realistic,paper dynamic,forward,paper 5`. Dynamic runs with the
+//! default settings, forward and paper with `EstimatorConfig::forward()` (paper: round robin).
+//! TARGET, POWER and MAXP in the environment override the bound, power and pulse limit.
 use nalgebra::DMatrix;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::Method;
@@ -76,9 +83,11 @@ fn run(
         ..MachineSetup::default()
     };
     setup.machine.deadband = 0.05;
-    if method == "dynamic" {
-        setup.estimator = thrusterd_core::estimator::EstimatorConfig::dynamic();
-    }
+    setup.estimator = if method == "dynamic" {
+        thrusterd_core::estimator::EstimatorConfig::dynamic()
+    } else {
+        thrusterd_core::estimator::EstimatorConfig::forward()
+    };
     setup.estimator.method = match method {
         "paper" => Method::Paper,
         "forward" => Method::Forward,
