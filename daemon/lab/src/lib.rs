@@ -8,3 +8,4 @@ pub mod excursion;
 pub mod experiment;
 pub mod scoring;
 pub mod session;
+pub mod study;

@@ -36,6 +36,10 @@ enum Command {
     /// hot-swap): daemon and simulator on a private namespace, scored against the truth.
     #[cfg(feature = "lab")]
     Experiment(thruster_lab::experiment::ExperimentArgs),
+    /// The estimation methods against the simulator's truth in one process (no daemon): every
+    /// vehicle x noise x method x seed; writes runs.csv, trace.csv and error-vs-time figures.
+    #[cfg(feature = "lab")]
+    Study(thruster_lab::study::StudyArgs),
     /// Not in this build: thrusterctl was built without the simulation lab (feature `lab`).
     #[cfg(not(feature = "lab"))]
     #[command(disable_help_flag = true)]
@@ -47,6 +51,13 @@ enum Command {
     #[cfg(not(feature = "lab"))]
     #[command(disable_help_flag = true)]
     Experiment {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<std::ffi::OsString>,
+    },
+    /// Not in this build: thrusterctl was built without the simulation lab (feature `lab`).
+    #[cfg(not(feature = "lab"))]
+    #[command(disable_help_flag = true)]
+    Study {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         args: Vec<std::ffi::OsString>,
     },
@@ -86,8 +97,8 @@ fn run(cli: Cli) -> Result<()> {
     {
         return Err(exit::Failure::usage(
             "demo and experiment start their own thrusterd and thruster-sim on a private \
-             namespace under the default ipc root; --namespace and --ipc-root are for \
-             talking to a running daemon",
+             namespace under the default ipc root, study runs none; --namespace and \
+             --ipc-root are for talking to a running daemon",
         )
         .into());
     }
@@ -96,12 +107,16 @@ fn run(cli: Cli) -> Result<()> {
         Command::Demo(args) => thruster_lab::demo::run(args),
         #[cfg(feature = "lab")]
         Command::Experiment(args) => thruster_lab::experiment::run(args),
+        #[cfg(feature = "lab")]
+        Command::Study(args) => thruster_lab::study::run(args),
         #[cfg(not(feature = "lab"))]
-        Command::Demo { .. } | Command::Experiment { .. } => Err(exit::Failure::usage(
-            "this thrusterctl was built without the simulation lab (cargo feature `lab`): \
-             demo and experiment are not available; build it with the default features",
-        )
-        .into()),
+        Command::Demo { .. } | Command::Experiment { .. } | Command::Study { .. } => {
+            Err(exit::Failure::usage(
+                "this thrusterctl was built without the simulation lab (cargo feature `lab`): \
+             demo, experiment and study are not available; build it with the default features",
+            )
+            .into())
+        }
         Command::Operator(command) => commands::run(target, timeout, command),
     }
 }
