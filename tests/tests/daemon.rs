@@ -46,10 +46,12 @@ fn estimation_from_request_to_swapped_model_and_restart_loads_it() {
         model_error(&model, &truth, 0),
         model_error(&model, &truth, 3),
     );
-    // Same margin as the in-process test (daemon/core/tests/machine_sim.rs): noise at the 10 %
-    // target plus ~7 % drag bias of 0.1 s pulses.
+    println!("errors rot {e_rot:.3} acc {e_acc:.3}");
+    // Paper noise: the dynamic method stops at a 5 % bound, optimistic at this noise (true
+    // 0.052 / 0.061 over demo seeds 1-5, docs/study.md); measured here 0.060 / 0.069. 0.15
+    // leaves room for where the request lands in vehicle time. (The static model needed 0.25.)
     assert!(
-        e_rot < 0.25 && e_acc < 0.25,
+        e_rot < 0.15 && e_acc < 0.15,
         "errors rot {e_rot:.3} acc {e_acc:.3}"
     );
 
@@ -142,7 +144,9 @@ fn reconfiguration_mid_control_leads_to_a_new_model() {
     let truth = op.latest_truth(LONG).unwrap();
     let e_new = model_error(&second, &truth, 0);
     let e_old = model_error(&first, &truth, 0);
-    assert!(e_new < 0.25, "re-estimated model vs new truth: {e_new:.3}");
+    println!("re-estimated {e_new:.3}, first model against the new truth {e_old:.3}");
+    // Measured 0.032 (the old model: 0.373 against the new truth).
+    assert!(e_new < 0.15, "re-estimated model vs new truth: {e_new:.3}");
     assert!(
         e_new < e_old,
         "the new model must fit the new truth better ({e_new:.3} vs {e_old:.3})"

@@ -69,18 +69,16 @@ fn actuated(m: &ModelMsg) -> Vec<String> {
         .collect()
 }
 
-/// Threshold 0.3: the automatic stop targets a 10 % (1 sigma) noise error, which the study
-/// shows the forward method meets (it sits on the Cramer-Rao bound), so 2-sigma noise is 20 %;
-/// the rest is the bias of the short-pulse response model against the simulator's drag and
-/// dynamic coupling, 7-10 % noise-free on these bodies (docs/simulation.md).
+/// Threshold 0.15 (paper noise, seed 7): the dynamic method stops at a 5 % (1 sigma) bound,
+/// which at this noise is optimistic (the demo over seeds 1-5: true 0.052 / 0.061, docs/study.md);
+/// measured here 0.038-0.061 rotation and 0.055-0.097 acceleration over the five vehicles. The
+/// margin is for the vehicle time at which the request lands, which moves with process
+/// scheduling. (With the static forward model this test needed 0.3, and 0.35 for four_up.)
 #[test]
 fn every_manual_configuration_is_learned_within_the_threshold() {
     for vehicle in ["four_up", "amour5", "six_dof", "eight_vectored"] {
         let (model, e_rot, e_acc) = estimate(vehicle, 7);
-        // four_up (all thrusters pushing up, rank 3) carries more drag/coupling bias: measured
-        // 0.26-0.31 over runs (the vehicle time at which estimation starts varies with process
-        // scheduling), so it gets 0.35; the others measure 0.10-0.19 against 0.3.
-        let limit = if vehicle == "four_up" { 0.35 } else { 0.3 };
+        let limit = 0.15;
         assert!(
             e_rot < limit && e_acc < limit,
             "{vehicle}: errors rot {e_rot:.3} acc {e_acc:.3}"

@@ -120,10 +120,11 @@ fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
     (est.rows(rows, 3) - truth.rows(rows, 3)).norm() / truth.rows(rows, 3).norm()
 }
 
-/// AMOUR-5 at the paper's noise (0.25 rad/s, 0.05 g): the learned model is within 25 % of the
-/// truth. The margin: the study puts the noise part of the error at the 10 % target bound; the
-/// rest is the model's known bias from rotational drag during 0.1 s pulses (about 7 % on this
-/// body, measured noise-free), see docs/simulation.md.
+/// AMOUR-5 at the paper's noise (0.25 rad/s, 0.05 g): the learned model (the default dynamic
+/// method) is within 10 % of the truth, in 8 vehicle-s. Measured 0.046 / 0.031 in 7.8 s (seed
+/// 1); over seeds 1-5 in-process 0.056 / 0.063 in 8.1 s (docs/study.md). In-process the run is
+/// deterministic; the margin is for seeds and the bound's optimism at this noise. (The static
+/// model needed 25 %: it carried a 12-23 % bias from drag and restoring moment.)
 #[test]
 fn amour5_estimation_at_the_papers_noise_matches_truth() {
     let mut run = Run::new("amour5", NoisePreset::Paper, 1);
@@ -142,8 +143,9 @@ fn amour5_estimation_at_the_papers_noise_matches_truth() {
     );
     assert_eq!(run.machine.state(), State::Active);
     assert_eq!(model.source, ModelSource::Estimated);
-    assert!(e_rot < 0.25, "rotation error {e_rot}");
-    assert!(e_acc < 0.25, "acceleration error {e_acc}");
+    assert!(e_rot < 0.10, "rotation error {e_rot}");
+    assert!(e_acc < 0.10, "acceleration error {e_acc}");
+    assert!(t < 9.0, "{t:.1} vehicle s");
     assert_eq!(
         model.actuated.names(),
         vec!["roll", "pitch", "yaw", "surge", "heave"]
