@@ -76,6 +76,10 @@ pub struct ExperimentArgs {
     /// hot-swap: vehicle time of the thruster rotation, s (after the first estimation).
     #[arg(long, default_value_t = 40.0)]
     pub t_change: f64,
+    /// Sensor noise of every run: paper, realistic or none (default: each run's own, the
+    /// paper's noise except hot-swap's silent run, which uses the realistic IMU).
+    #[arg(long)]
+    pub noise: Option<String>,
 }
 
 /// How a run gets its model.
@@ -85,6 +89,9 @@ enum Start {
     Estimate,
     /// The nominal model of the declared geometry: just hold.
     Manual,
+    /// The simulator's true model (symmetric: the mean of forward and reverse gain), loaded
+    /// into the daemon like a model file: the reference a learned model is judged against.
+    Oracle,
 }
 
 /// One run of an experiment.
@@ -158,6 +165,13 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
                     label: "manual",
                     title: "manual model (AMOUR-5)",
                     start: Start::Manual,
+                    plan: plan.clone(),
+                    ..base.clone()
+                },
+                RunSpec {
+                    label: "oracle",
+                    title: "the simulator's true model (AMOUR-5)",
+                    start: Start::Oracle,
                     plan,
                     ..base
                 },
@@ -191,6 +205,12 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
                 RunSpec {
                     label: "learned",
                     title: "re-learned model, top thruster at 45 deg",
+                    ..top45.clone()
+                },
+                RunSpec {
+                    label: "oracle",
+                    title: "the simulator's true model, top thruster at 45 deg",
+                    start: Start::Oracle,
                     ..top45
                 },
             ]
@@ -222,6 +242,12 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
                     label: "forward",
                     title: "ours (forward model, DOF detection), all thrusters aligned",
                     method: "forward",
+                    ..aligned.clone()
+                },
+                RunSpec {
+                    label: "oracle",
+                    title: "the simulator's true model (rank 3), all thrusters aligned",
+                    start: Start::Oracle,
                     ..aligned
                 },
             ]
@@ -452,6 +478,23 @@ fn run_one(bins: &Binaries, args: &ExperimentArgs, spec: &RunSpec) -> Result<Run
     Ok(out)
 }
 
+/// Hand the daemon the simulator's true model through a model file and `load`, the way an
+/// operator loads one: it passes the same checks as any other model.
+fn load_truth(session: &mut Session, truth: &TruthMsg) -> Result<()> {
+    let n = truth.thruster_count();
+    let b = nalgebra::DMatrix::from_fn(6, n, |j, i| truth.symmetric(j, i));
+    let model = thrusterd_core::model::Model::nominal(b, None);
+    let file = session.scratch_path("oracle-model.json");
+    std::fs::write(&file, thrusterd_core::store::to_json(&model))
+        .with_context(|| format!("writing {}", file.display()))?;
+    let request = thrusterctl_operator::cli::path_request(RequestKind::Load, &file)?;
+    let r = session.request(request)?;
+    if !r.is_ok() {
+        bail!("the daemon refused the true model: {}", r.text());
+    }
+    Ok(())
+}
+
 fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> {
     let (first, truth) = session.ready()?;
     let estimation = match spec.start {
@@ -465,6 +508,14 @@ fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> {
         Start::Manual => {
             // The declared geometry's nominal model is in from the start.
             session.wait_status("the nominal model", Duration::from_secs(30), &mut |s| {
+                s.model_version >= 1
+            })?;
+            session.command(RequestKind::Hold)?;
+            None
+        }
+        Start::Oracle => {
+            load_truth(session, &truth)?;
+            session.wait_status("the true model", Duration::from_secs(30), &mut |s| {
                 s.model_version >= 1
             })?;
             session.command(RequestKind::Hold)?;
@@ -845,7 +896,23 @@ fn hot_swap(out: &RunOutput) -> Value {
 
 pub fn run(args: ExperimentArgs) -> Result<()> {
     let bins = Binaries::locate()?;
-    let specs = runs(args.name, args.t_change);
+    let mut specs = runs(args.name, args.t_change);
+    if let Some(noise) = &args.noise {
+        let noise: &'static str = match noise.as_str() {
+            "paper" => "paper",
+            "realistic" => "realistic",
+            "none" => "none",
+            other => {
+                return Err(thrusterctl_operator::exit::Failure::usage(format!(
+                    "--noise must be paper, realistic or none, got {other:?}"
+                ))
+                .into())
+            }
+        };
+        for s in &mut specs {
+            s.noise = noise;
+        }
+    }
     let mut outs = Vec::new();
     for spec in &specs {
         if !args.json {
@@ -866,7 +933,7 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
     let summary = json!({
         "experiment": args.name.id(),
         "seed": args.seed,
-        "noise": "paper (per run: runs.*.noise)",
+        "noise": args.noise.clone().unwrap_or_else(|| "paper (per run: runs.*.noise)".into()),
         "pace_requested": args.pace,
         "sim_has_pace": bins.sim_pace,
         "daemon_has_monitor": bins.daemon_monitor,
@@ -901,11 +968,14 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
                 get(&r("learned"), &["mean_err_deg"]),
                 get(&r("manual"), &["mean_err_deg"]),
             );
+            let o = get(&r("oracle"), &["mean_err_deg"]);
             json!({
                 "claim": "the learned model holds attitude as well as the manual one",
                 "learned_mean_err_deg": num(l),
                 "manual_mean_err_deg": num(m),
+                "oracle_mean_err_deg": num(o),
                 "learned_over_manual": num(l / m),
+                "learned_over_oracle": num(l / o),
             })
         }
         Name::Misaligned => {
@@ -920,7 +990,11 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
                 "manual_yaw_err_max_deg": num(y("manual", "max_abs_yaw_err_deg")),
                 "learned_yaw_err_mean_deg": num(lm),
                 "learned_yaw_err_max_deg": num(y("learned", "max_abs_yaw_err_deg")),
+                "oracle_yaw_err_mean_deg": num(y("oracle", "mean_abs_yaw_err_deg")),
                 "manual_over_learned": num(mm / lm),
+                // How much of the paper's effect this setup can show at all (the true model),
+                // and how much of it the learned model captures.
+                "manual_over_oracle": num(mm / y("oracle", "mean_abs_yaw_err_deg")),
             })
         }
         Name::Aligned => {
@@ -943,6 +1017,7 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
                 "claim": "ours reports roll, sway and heave unactuated and holds yaw and pitch without oscillation; the paper's learns them and oscillates",
                 "paper": per("paper"),
                 "forward": per("forward"),
+                "oracle": per("oracle"),
                 "paper_over_forward_thrust_activity": ratio("thrust_activity_per_s"),
                 "paper_over_forward_high_passed_err": ratio("high_passed_err_rms_deg"),
                 "paper_over_forward_roll_rate": ratio("roll_rate_rms_deg_s"),
@@ -981,8 +1056,9 @@ fn fmt(v: &Value) -> String {
 
 fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
     println!(
-        "experiment {} (noise paper, seed {})",
+        "experiment {} (noise {}, seed {})",
         name.id(),
+        summary["noise"].as_str().unwrap_or("paper"),
         summary["seed"]
     );
     for o in outs {

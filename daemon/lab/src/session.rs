@@ -426,6 +426,11 @@ impl Session {
         })
     }
 
+    /// A path in the session's own temporary folder (removed with the session).
+    pub fn scratch_path(&self, name: &str) -> PathBuf {
+        self._tmp.path.join(name)
+    }
+
     fn ports(&self) -> &Ports {
         self.ports.as_ref().expect("ports live until finish")
     }
