@@ -2,6 +2,7 @@
 //! real thrusterd and thruster-sim processes in lockstep over iceoryx2. For each setting and
 //! seed: vehicle seconds from start to the swapped-in model (including the 2 s noise
 //! measurement), the model's error against the simulator's truth, and the lockstep speed-up.
+//! Issue 11's target for the default: <= 8 vehicle s to err_rot <= 0.06, err_acc <= 0.10.
 //!
 //! Run: cargo bench -p system-tests --bench time_to_model [-- SEEDS]
 
@@ -20,12 +21,18 @@ const SETTINGS: &[Setting] = &[
         name: "paper: Alg. 1, round robin, 1 s pulses, 3 s pauses, 2 pulses/thruster",
         toml: "[estimator]\nmethod = \"paper\"\nexcitation = \"round_robin\"\npaper_cycles = 1\ninitial_power = 0.5\n[machine]\nnoise_s = 2.0\npulse_s = 1.0\nsettle_min_s = 3.0\nsettle_max_s = 3.0\nmax_swap_rel_err = 10.0\n",
     },
+    // The static forward rows pin `method` and the forward stop rule (bound 0.1, 64 pulses):
+    // the default is now the dynamic method with its own stop rule.
     Setting {
         name: "forward, round robin, paper timing (1 s / 3 s), auto stop",
-        toml: "[estimator]\nexcitation = \"round_robin\"\ninitial_power = 0.5\n[machine]\nnoise_s = 2.0\npulse_s = 1.0\nsettle_min_s = 3.0\nsettle_max_s = 3.0\n",
+        toml: "[estimator]\nmethod = \"forward\"\nexcitation = \"round_robin\"\ninitial_power = 0.5\ntarget_rel_err = 0.1\nmax_pulses = 64\n[machine]\nnoise_s = 2.0\npulse_s = 1.0\nsettle_min_s = 3.0\nsettle_max_s = 3.0\n",
     },
     Setting {
-        name: "forward, orthogonal, 0.1 s pulses at 0.8, adaptive pauses, auto stop (defaults)",
+        name: "forward, orthogonal, 0.1 s pulses at 0.8, adaptive pauses, stop at 0.1 (EstimatorConfig::forward, the former default)",
+        toml: "[estimator]\nmethod = \"forward\"\nexcitation = \"orthogonal\"\ninitial_power = 0.8\ntarget_rel_err = 0.1\nmax_pulses = 64\n",
+    },
+    Setting {
+        name: "dynamic, doublet pairs back to back at 1.0, stop at 0.06 or 80 pulses (defaults)",
         toml: "",
     },
 ];

@@ -1,4 +1,5 @@
-//! Per-pulse update and solve costs of the estimator, N = 8 and N = 16.
+//! Per-pulse update and solve costs of the estimator, N = 8 and N = 16: the static forward
+//! method (`EstimatorConfig::forward()`) and the dynamic method (the default).
 //! Run: cargo bench -p thrusterd-core --bench estimator
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion};
@@ -20,6 +21,39 @@ fn warmed(n: usize) -> Estimator {
             let t = s as f64 * 0.01;
             let y = Vector3::new(u[0] * t, u[1 % n] * t, (k % 3) as f64 * 0.01);
             est.push_pulse_sample(t, &y, &(y * 0.5));
+        }
+        est.end_pulse();
+    }
+    est
+}
+
+const REST_FORCE: Vector3<f64> = Vector3::new(0.0, 0.0, -9.80665);
+
+/// One synthetic IMU sample at `t` s: a swaying vehicle (bias-free gyro rad/s, raw specific
+/// force m/s^2), every regressor non-zero.
+fn dynamic_sample(t: f64) -> (Vector3<f64>, Vector3<f64>) {
+    (
+        Vector3::new(0.2 * (3.0 * t).sin(), -0.1 * (2.0 * t).cos(), 0.05),
+        Vector3::new(0.3 * (5.0 * t).sin(), 0.1, -9.80665 + 0.2 * t.cos()),
+    )
+}
+
+/// A dynamic-method estimator (the default config) that has seen `pulses` back-to-back pulses
+/// of 0.1 s at 200 Hz, for the `estimate()` cost.
+fn warmed_dynamic(n: usize, pulses: usize) -> Estimator {
+    let cfg = EstimatorConfig {
+        max_pulses: 1000,
+        ..EstimatorConfig::default()
+    };
+    let mut est = Estimator::new(cfg, n, NoiseLevels::isotropic(0.25, 0.5))
+        .with_rest_specific_force(REST_FORCE);
+    let mut t = 0.0;
+    for _ in 0..pulses {
+        est.begin_pulse_at(t);
+        for _ in 0..20 {
+            t += 0.005;
+            let (w, f) = dynamic_sample(t);
+            est.push_dynamic_sample(t, &w, &f, Some(5.0));
         }
         est.end_pulse();
     }
@@ -55,6 +89,34 @@ fn bench(c: &mut Criterion) {
         });
         c.bench_with_input(BenchmarkId::new("stop_decision", n), &n, |b, _| {
             b.iter(|| black_box(base.stop_decision()))
+        });
+
+        // The dynamic method (EstimatorConfig::default()). One IMU sample during a pulse: the
+        // time must advance (a sample not later than the last one is dropped), so each
+        // iteration is 5 ms after the previous one; segments close every 1 s as in a run.
+        c.bench_with_input(BenchmarkId::new("dynamic_sample_update", n), &n, |b, _| {
+            let mut est = Estimator::new(
+                EstimatorConfig::default(),
+                n,
+                NoiseLevels::isotropic(0.25, 0.5),
+            )
+            .with_rest_specific_force(REST_FORCE);
+            est.begin_pulse_at(0.0);
+            let samples: Vec<_> = (0..200).map(|k| dynamic_sample(k as f64 * 0.005)).collect();
+            let mut k = 0u64;
+            b.iter(|| {
+                k += 1;
+                let (w, f) = &samples[(k % 200) as usize];
+                est.push_dynamic_sample(black_box(k as f64 * 0.005), w, f, black_box(Some(5.0)))
+            })
+        });
+        // A full dynamic estimate after 64 pulses (the default stops at a bound or 80 pulses).
+        let dynamic = warmed_dynamic(n, 64);
+        c.bench_with_input(BenchmarkId::new("dynamic_estimate", n), &n, |b, _| {
+            b.iter(|| black_box(dynamic.estimate()))
+        });
+        c.bench_with_input(BenchmarkId::new("dynamic_stop_decision", n), &n, |b, _| {
+            b.iter(|| black_box(dynamic.stop_decision()))
         });
     }
 }

@@ -88,3 +88,69 @@ fn answering_a_sample_does_not_allocate() {
     }
     assert_eq!(count(&mut m, &mut k, 10), 0, "inside a pulse");
 }
+
+/// The dynamic method's per-sample path (`Estimator::push_dynamic_sample`: navigation, thruster
+/// lag, regressors, two segmented least-squares updates) allocates nothing, at the 16-thruster
+/// capacity, during a pulse and between pulses, across segment boundaries (every 1 s).
+#[test]
+fn a_dynamic_sample_does_not_allocate() {
+    use nalgebra::Vector3;
+    use thrusterd_core::estimator::{Estimator, EstimatorConfig, NoiseLevels};
+
+    let n = 16;
+    let mut est = Estimator::new(
+        EstimatorConfig::default(),
+        n,
+        NoiseLevels::isotropic(0.25, 0.5),
+    )
+    .with_rest_specific_force(Vector3::new(0.0, 0.0, -9.80665));
+    let sample = |k: u64| {
+        let t = k as f64 * 0.005;
+        (
+            t,
+            Vector3::new(0.2 * (3.0 * t).sin(), -0.1 * (2.0 * t).cos(), 0.05),
+            Vector3::new(0.3 * (5.0 * t).sin(), 0.1, -9.80665 + 0.2 * t.cos()),
+        )
+    };
+    let mut k = 0u64;
+    // The first pulse builds the dynamic fit (once per run); a few samples warm it up.
+    est.begin_pulse_at(0.0);
+    for _ in 0..5 {
+        k += 1;
+        let (t, w, f) = sample(k);
+        est.push_dynamic_sample(t, &w, &f, Some(5.0));
+    }
+    ALLOCS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    // 3 s inside one pulse: three segment boundaries.
+    for _ in 0..600 {
+        k += 1;
+        let (t, w, f) = sample(k);
+        est.push_dynamic_sample(
+            std::hint::black_box(t),
+            &w,
+            &f,
+            std::hint::black_box(Some(5.0)),
+        );
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    let in_pulse = ALLOCS.load(Ordering::SeqCst);
+    assert_eq!(in_pulse, 0, "push_dynamic_sample during a pulse");
+
+    est.end_pulse();
+    ALLOCS.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    // Between pulses (thrusters at neutral), also without a depth reading.
+    for i in 0..300 {
+        k += 1;
+        let (t, w, f) = sample(k);
+        let depth = if i % 2 == 0 { Some(5.0) } else { None };
+        est.push_dynamic_sample(t, &w, &f, std::hint::black_box(depth));
+    }
+    COUNTING.store(false, Ordering::SeqCst);
+    assert_eq!(
+        ALLOCS.load(Ordering::SeqCst),
+        0,
+        "push_dynamic_sample between pulses"
+    );
+}
