@@ -76,6 +76,11 @@ fn manual_vs_learned_the_learned_model_holds_attitude_as_well_as_the_manual_one(
     // paper's claim is "matches"; 1.5x allows for the noise of one run each.
     assert!(l < 1.5 * m, "learned {l} deg vs manual {m} deg");
     assert!(l < 8.0 && m < 8.0, "learned {l}, manual {m}");
+    // The reference: the simulator's true model, loaded. Measured 4.75 deg against the learned
+    // model's 4.72: the hold is not limited by the model. 1.3x allows for one run each.
+    let o = f(&v, &["runs", "oracle", "mean_err_deg"]);
+    assert!(l < 1.3 * o, "learned {l} deg vs the true model {o} deg");
+    assert!(f(&v, &["runs", "oracle", "model", "rel_err_rot_vs_truth"]) < 1e-6);
     assert_eq!(
         dofs(&v["runs"]["learned"]["model"]["actuated"]),
         ["roll", "pitch", "yaw", "surge", "heave"]
@@ -90,11 +95,15 @@ fn misaligned_the_relearned_model_does_not_yaw_more_than_the_manual_one() {
         f(h, &["manual_yaw_err_mean_deg"]),
         f(h, &["learned_yaw_err_mean_deg"]),
     );
-    // The paper: more than 2x smaller with the learned model. Measured here: 2.9 vs 2.5 deg
-    // (1.2x): the daemon's attitude PID with integral action rejects most of the yaw torque
-    // the misaligned thruster adds (docs/experiments.md). Asserted: the learned model is no
-    // worse (10 % for noise), and the manual model's model error is what the truth says.
-    assert!(l < 1.1 * m, "learned {l} deg vs manual {m} deg");
+    // The paper: more than 2x smaller with the learned model. Measured here over seeds 1-5 at
+    // the paper's noise: manual/learned 1.44-2.06 (dynamic model), and with the simulator's
+    // true model (the "oracle" run) 1.37-2.13: this setup shows about 1.6x at this noise even
+    // with a perfect model, and the learned model gets as far (docs/experiments.md). Asserted
+    // at seed 1 (2.9 / 2.0 / 1.4 deg): the learned model clearly better than the manual one,
+    // and the true model better than the manual one by the margin the setup allows.
+    assert!(l < 0.85 * m, "learned {l} deg vs manual {m} deg");
+    let o = f(h, &["oracle_yaw_err_mean_deg"]);
+    assert!(o < 0.8 * m, "true model {o} deg vs manual {m} deg");
     assert!(m < 10.0, "manual {m}");
     assert!(f(&v, &["runs", "manual", "model", "rel_err_rot_vs_truth"]) > 0.3);
     assert!(f(&v, &["runs", "learned", "model", "rel_err_rot_vs_truth"]) < 0.3);
