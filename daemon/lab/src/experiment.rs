@@ -1330,10 +1330,18 @@ mod tests {
     }
 
     #[test]
-    fn every_experiment_has_two_runs_and_a_plan_that_ends() {
+    fn every_experiment_has_its_runs_an_oracle_and_a_plan_that_ends() {
         for name in Name::value_variants() {
             let specs = runs(*name, 40.0);
-            assert_eq!(specs.len(), 2, "{name:?}");
+            // Two runs compared, and the true model as their reference (hot-swap has none yet:
+            // its truth changes mid-run).
+            let oracles = specs.iter().filter(|s| s.start == Start::Oracle).count();
+            let want = if *name == Name::HotSwap {
+                (2, 0)
+            } else {
+                (3, 1)
+            };
+            assert_eq!((specs.len(), oracles), want, "{name:?}");
             for s in specs {
                 let d = s.plan.duration_s();
                 assert!(d > 20.0 && d < 100.0, "{name:?} {}: {d}", s.label);
