@@ -29,6 +29,7 @@
 pub mod cli;
 pub mod disturbance;
 pub mod driver;
+pub mod dvl;
 pub mod dynamics;
 pub mod effectiveness;
 pub mod link_stats;
@@ -43,6 +44,7 @@ pub mod thruster;
 pub mod vehicle;
 
 pub use disturbance::{DisturbanceConfig, WaveComponent};
+pub use dvl::{Dvl, DvlConfig};
 pub use dynamics::{RigidBody, State};
 pub use effectiveness::{effectiveness, rank};
 pub use load::LoadError;

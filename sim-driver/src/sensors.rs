@@ -150,6 +150,8 @@ pub struct SensorConfig {
     pub lever_arm_m: [f64; 3],
     /// Earth magnetic field in NED, uT. Default [20, 0, 45] (mid-latitude, northern hemisphere).
     pub mag_field_ned_ut: [f64; 3],
+    /// A Doppler velocity log, when the vehicle has one (default: none).
+    pub dvl: Option<crate::dvl::DvlConfig>,
 }
 
 impl Default for SensorConfig {
@@ -160,6 +162,7 @@ impl Default for SensorConfig {
             custom_noise: None,
             lever_arm_m: [0.0; 3],
             mag_field_ned_ut: [20.0, 0.0, 45.0],
+            dvl: None,
         }
     }
 }
@@ -198,6 +201,9 @@ impl SensorConfig {
         check_finite(origin, "mag_field_ned_ut", &self.mag_field_ned_ut)?;
         if let Some(n) = &self.custom_noise {
             n.validate(origin)?;
+        }
+        if let Some(d) = &self.dvl {
+            d.validate(origin)?;
         }
         Ok(())
     }

@@ -123,6 +123,9 @@ pub struct SensorSettings {
     pub lever_arm_m: [f64; 3],
     /// Earth magnetic field in NED, uT. Default [20, 0, 45].
     pub mag_field_ned_ut: [f64; 3],
+    /// `[sensors.dvl]`: a Doppler velocity log publishing on the `dvl` topic (rate_hz, default
+    /// 5; std_mps, default 0.01). Absent (default): none.
+    pub dvl: Option<crate::dvl::DvlConfig>,
 }
 
 impl Default for SensorSettings {
@@ -134,6 +137,7 @@ impl Default for SensorSettings {
             custom_noise: None,
             lever_arm_m: lib.lever_arm_m,
             mag_field_ned_ut: lib.mag_field_ned_ut,
+            dvl: None,
         }
     }
 }
@@ -146,6 +150,7 @@ impl SensorSettings {
             custom_noise: self.custom_noise,
             lever_arm_m: self.lever_arm_m,
             mag_field_ned_ut: self.mag_field_ned_ut,
+            dvl: self.dvl,
         }
     }
 }

@@ -166,6 +166,7 @@ pub struct Simulator {
     t_ns: u64,
     dt_inner_ns: u64,
     imu: Imu,
+    dvl: Option<crate::dvl::Dvl>,
     disturbance: DisturbanceConfig,
 }
 
@@ -204,6 +205,7 @@ impl Simulator {
             state: options.initial.to_state(),
             t_ns: 0,
             dt_inner_ns: (1e9 / options.integration_rate_hz).round() as u64,
+            dvl: sensors.dvl.map(|d| crate::dvl::Dvl::new(d, seed)),
             imu: Imu::new(sensors, seed),
             disturbance: options.disturbance,
             vehicle,
@@ -395,6 +397,14 @@ impl Simulator {
         self.vehicle.thrusters[i] = spec.clone();
         self.thrusters[i].set_spec(spec);
         Ok(())
+    }
+
+    /// The DVL's measurement of the body velocity when one is due now (its rate), else None;
+    /// always None without a DVL.
+    pub fn dvl_measurement(&mut self) -> Option<Vector3<f64>> {
+        let v = self.state.linear();
+        let t = self.t_ns;
+        self.dvl.as_mut()?.measure(t, &v)
     }
 
     /// Time since start, ns.

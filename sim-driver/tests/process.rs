@@ -874,3 +874,59 @@ fn bad_configuration_fails_with_file_line_and_key() {
     // Nothing got as far as creating IPC resources.
     assert_eq!(namespace_files(&ns).unwrap(), Vec::<PathBuf>::new());
 }
+
+/// A vehicle with a DVL (`[sensors.dvl]` in the config): the driver publishes its velocity on
+/// the `dvl` topic at the configured rate, just before the IMU sample it was taken with, and
+/// it reads what the simulator's truth says (noise-free here).
+#[test]
+fn a_configured_dvl_publishes_the_true_velocity_at_its_rate() {
+    let ns = NamespaceGuard::unique_for_test("dvl").unwrap();
+    {
+        let mut peer = Peer::new(&ns);
+        let node = ns.create_node("test-dvl").unwrap();
+        let dvl: Inbox<thruster_protocol::DvlSample> = Inbox::create(&node, &ns).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let config = dir.path().join("sim.toml");
+        fs::write(
+            &config,
+            "[sensors]\nrate_hz = 200.0\nnoise = \"none\"\n[sensors.dvl]\nrate_hz = 10.0\nstd_mps = 0.0\n",
+        )
+        .unwrap();
+        let mut sim = Proc::run(
+            &ns,
+            "amour5",
+            &["--lockstep", "--config", config.to_str().unwrap()],
+        );
+        let mut got = Vec::new();
+        let mut last_state = None;
+        for _ in 0..200 {
+            let s = peer.sample();
+            while let Some(v) = peer.vehicle.recv().unwrap() {
+                last_state = Some(v);
+            }
+            while let Some(d) = dvl.recv().unwrap() {
+                assert!(d.validate().is_ok(), "{d:?}");
+                assert_eq!(d.t_ns, s.t_ns, "taken with the sample that follows it");
+                let v = last_state.expect("vehicle state before the sample");
+                for a in 0..3 {
+                    assert!(
+                        (d.velocity[a] - v.velocity[a]).abs() < 1e-9,
+                        "{d:?} vs {v:?}"
+                    );
+                }
+                got.push(d);
+            }
+            // Full forward thrust on L and R: the vehicle surges, so the velocity is not zero.
+            peer.answer(&s, &[0.0, 0.0, 0.0, 1.0, 1.0]);
+        }
+        // 200 samples at 200 Hz = 1 s at 10 Hz: t = 0, 0.1, ..., 0.9 s.
+        assert_eq!(got.len(), 10, "{got:?}");
+        assert_eq!(
+            got.iter().map(|d| d.seq).collect::<Vec<_>>(),
+            (1..=10).collect::<Vec<_>>()
+        );
+        assert!(got.last().unwrap().velocity[0] > 0.05, "{got:?}");
+        sim.terminate();
+    }
+    assert_namespace_clean(&ns);
+}

@@ -44,6 +44,9 @@ pub struct StudyArgs {
     /// Vehicle files under config/vehicles, comma separated (default: all six).
     #[arg(long, value_delimiter = ',')]
     pub vehicles: Vec<String>,
+    /// Give the vehicle a DVL (5 Hz, 0.01 m/s) whose velocity the estimation's navigation uses.
+    #[arg(long)]
+    pub dvl: bool,
 }
 
 /// (vehicle s since the request, err_rot, err_acc) after every pulse of one run.
@@ -108,11 +111,13 @@ pub fn run_one(
     noise: NoisePreset,
     cfg: EstimatorConfig,
     seed: u64,
+    dvl: bool,
 ) -> Result<Outcome> {
     let n = vehicle.thrusters.len();
     let sensors = SensorConfig {
         rate_hz: 200.0,
         noise,
+        dvl: dvl.then(thruster_sim::DvlConfig::default),
         ..SensorConfig::default()
     };
     let mut sim = Simulator::new(vehicle, sensors, seed)?;
@@ -128,6 +133,10 @@ pub fn run_one(
     let truth = (fwd + rev) * 0.5;
     let tick = |machine: &mut Machine, sim: &mut Simulator| -> Result<()> {
         let r = sim.advance_and_sample();
+        // As the driver does: the DVL's measurement just before the IMU sample.
+        if let Some(v) = sim.dvl_measurement() {
+            machine.on_dvl(v.into());
+        }
         let cmd = machine.on_imu(&ImuInput {
             seq: 0,
             t_ns: r.t_ns,
@@ -232,7 +241,7 @@ pub fn run(args: StudyArgs) -> Result<()> {
             let mut count = 0.0;
             for (name, vehicle) in &loaded {
                 for seed in 1..=args.seeds {
-                    let o = run_one(vehicle.clone(), *p, cfg.clone(), seed)
+                    let o = run_one(vehicle.clone(), *p, cfg.clone(), seed, args.dvl)
                         .with_context(|| format!("{name} {noise} {method} seed {seed}"))?;
                     let _ = writeln!(
                         runs,
@@ -370,6 +379,7 @@ mod tests {
             methods: vec!["dynamic".into(), "forward".into()],
             seeds: 1,
             vehicles: vec!["amour5".into()],
+            dvl: false,
         })
         .unwrap();
         let runs = std::fs::read_to_string(dir.path().join("runs.csv")).unwrap();
@@ -397,6 +407,7 @@ mod tests {
             methods: vec!["dynamic".into()],
             seeds: 1,
             vehicles: vec![],
+            dvl: false,
         })
         .unwrap_err();
         assert!(e.to_string().contains("none, realistic or paper"), "{e}");

@@ -20,8 +20,8 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
-    ControlResponse, DriverStatusMsg, DynamicsMsg, ImuSample, ModelMsg, ReconfigEvent, RequestKind,
-    ResponseCode, Setpoint, StatusMsg, ThrustCommand, MAX_THRUSTERS,
+    ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample, ModelMsg, ReconfigEvent,
+    RequestKind, ResponseCode, Setpoint, StatusMsg, ThrustCommand, MAX_THRUSTERS,
 };
 use thrusterd_core::config::DaemonConfig;
 use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
@@ -239,6 +239,9 @@ impl Daemon {
         let reconfig_in = Inbox::<ReconfigEvent>::create(&node, &self.ipc)?;
         let setpoint_in = Inbox::<Setpoint>::create(&node, &self.ipc)?;
         let driver_in = Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?;
+        // Optional: only a vehicle with a DVL publishes here. Polled each round, before the
+        // IMU samples, which is when a driver sends it.
+        let dvl_in = Inbox::<DvlSample>::create(&node, &self.ipc)?;
         let thrust_out = Port::<ThrustCommand>::create(&node, &self.ipc)?;
         let model_out = ModelPorts {
             model: Port::<ModelMsg>::create(&node, &self.ipc)?,
@@ -315,6 +318,16 @@ impl Daemon {
             wait_errors = 0;
             if imu {
                 imu_in.drain_events()?;
+            }
+            dvl_in.drain_events()?;
+            while let Some(d) = dvl_in.recv()? {
+                match d.validate() {
+                    Ok(()) => self.machine.on_dvl(d.velocity),
+                    Err(reason) => {
+                        self.rejected.record(&reason);
+                        warn!("DVL sample rejected: {reason}");
+                    }
+                }
             }
             // The inbox is read on every wake-up, not only on an IMU event: a sample whose
             // notification was lost (a driver that notified before this listener was

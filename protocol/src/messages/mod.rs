@@ -15,6 +15,7 @@
 
 mod control;
 mod driver_status;
+mod dvl;
 mod dynamics;
 mod imu;
 mod model;
@@ -26,6 +27,7 @@ mod truth;
 
 pub use control::{ControlRequest, ControlResponse, RequestKind, ResponseCode};
 pub use driver_status::{DriverStatusMsg, OutputState};
+pub use dvl::DvlSample;
 pub use dynamics::{DynamicsMsg, DynamicsRow, DYNAMIC_TERMS, DYNAMIC_TERM_NAMES};
 pub use imu::ImuSample;
 pub use model::{ModelMethod, ModelMsg, ModelSource};

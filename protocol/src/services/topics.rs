@@ -40,6 +40,8 @@ pub enum Topic {
     DriverStatus,
     /// [`DynamicsMsg`], daemon -> all, history 1: the dynamic coefficients of the model.
     Dynamics,
+    /// [`DvlSample`], driver -> daemon (optional: only vehicles with a DVL).
+    Dvl,
 }
 
 /// Quality-of-service settings of a topic. Every process opens services with the same
@@ -59,7 +61,7 @@ pub struct TopicQos {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 10] = [
+    pub const ALL: [Topic; 11] = [
         Topic::Imu,
         Topic::Thrust,
         Topic::Reconfig,
@@ -70,6 +72,7 @@ impl Topic {
         Topic::Vehicle,
         Topic::DriverStatus,
         Topic::Dynamics,
+        Topic::Dvl,
     ];
 
     /// Service name below the namespace, e.g. `imu`.
@@ -85,6 +88,7 @@ impl Topic {
             Topic::Vehicle => "vehicle",
             Topic::DriverStatus => "driver_status",
             Topic::Dynamics => "dynamics",
+            Topic::Dvl => "dvl",
         }
     }
 
@@ -99,6 +103,12 @@ impl Topic {
                 history: 0,
                 max_buffer: 128,
                 default_buffer: 128,
+            },
+            // A slow stream (a DVL reports at a few Hz): a few buffered, no history.
+            Topic::Dvl => TopicQos {
+                history: 0,
+                max_buffer: 16,
+                default_buffer: 8,
             },
             // Discrete events: keep a few, but do not replay old ones to a new reader.
             Topic::Reconfig => TopicQos {
@@ -156,4 +166,7 @@ impl TopicMessage for DriverStatusMsg {
 }
 impl TopicMessage for DynamicsMsg {
     const TOPIC: Topic = Topic::Dynamics;
+}
+impl TopicMessage for DvlSample {
+    const TOPIC: Topic = Topic::Dvl;
 }

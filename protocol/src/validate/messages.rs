@@ -456,6 +456,23 @@ impl Validate for crate::VehicleStateMsg {
     }
 }
 
+impl Validate for DvlSample {
+    /// Velocity finite and within [`MAX_DVL_SPEED`] per axis (no small vehicle goes faster;
+    /// beyond it the DVL has lost bottom lock and reports garbage).
+    fn validate(&self) -> Result<(), RejectReason> {
+        for (a, v) in self.velocity.iter().enumerate() {
+            in_range(
+                Field::at("velocity", a),
+                *v,
+                -MAX_DVL_SPEED,
+                MAX_DVL_SPEED,
+                "m/s",
+            )?;
+        }
+        Ok(())
+    }
+}
+
 impl Validate for DynamicsMsg {
     /// Coefficients finite and within the physical bound of an effectiveness entry, standard
     /// errors non-negative or NaN (unknown), excursions finite and non-negative.

@@ -55,6 +55,8 @@ pub mod limits {
     pub const DIRECTION_NORM_TOLERANCE: f64 = 1e-2;
     /// Accepted deviation of a setpoint quaternion's norm from 1.
     pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
+    /// Largest accepted DVL velocity per axis, m/s (small vehicles do 1-2 m/s).
+    pub const MAX_DVL_SPEED: f64 = 10.0;
     /// Largest accepted effectiveness entry (and its standard error), rad/s^2 or m/s^2
     /// per unit command. A small ROV reaches about 1-20.
     pub const MAX_EFFECTIVENESS: f64 = 1e3;

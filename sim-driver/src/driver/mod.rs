@@ -27,8 +27,8 @@ use std::time::{Duration, Instant};
 use thruster_protocol::services::{Inbox, IpcConfig, IpcError, IpcNode, Port};
 use thruster_protocol::validate::{RejectCounters, RejectReason};
 use thruster_protocol::{
-    DriverStatusMsg, ImuSample, OutputState, ReconfigEvent, ThrustCommand, TruthMsg, Validate,
-    VehicleStateMsg,
+    DriverStatusMsg, DvlSample, ImuSample, OutputState, ReconfigEvent, ThrustCommand, TruthMsg,
+    Validate, VehicleStateMsg,
 };
 use tracing::{debug, error, info, warn};
 
@@ -147,6 +147,8 @@ struct Ports {
     reconfig: Port<ReconfigEvent>,
     vehicle: Port<VehicleStateMsg>,
     driver_status: Port<DriverStatusMsg>,
+    /// Only when the sensors include a DVL (no service otherwise).
+    dvl: Option<Port<DvlSample>>,
     _node: IpcNode,
     /// After the node: the last process of the namespace to stop removes iceoryx2's residue.
     _tidy: thruster_protocol::services::TidyOnDrop,
@@ -202,6 +204,9 @@ pub struct Driver {
     period_ns: u64,
     /// Seq of the newest sample taken (0 before the first).
     imu_seq: u64,
+    /// The DVL's measurement taken with the current sample, sent just before it.
+    dvl_pending: Option<DvlSample>,
+    dvl_seq: u64,
     /// The true state at the newest sample, and whether it was published.
     state: VehicleStateMsg,
     state_sent: bool,
@@ -259,6 +264,10 @@ impl Driver {
             reconfig: Port::create(&node, &ipc)?,
             vehicle: Port::create(&node, &ipc)?,
             driver_status: Port::create(&node, &ipc)?,
+            dvl: match settings.sensors.dvl {
+                Some(_) => Some(Port::create(&node, &ipc)?),
+                None => None,
+            },
             _node: node,
             _tidy: thruster_protocol::services::TidyOnDrop::new(&ipc),
         };
@@ -282,6 +291,8 @@ impl Driver {
             stop,
             period_ns,
             imu_seq: 0,
+            dvl_pending: None,
+            dvl_seq: 0,
             state: VehicleStateMsg::default(),
             state_sent: true,
             truth_seq: 0,
@@ -377,6 +388,14 @@ impl Driver {
         }
         self.imu_seq += 1;
         self.state = convert::vehicle_state(self.imu_seq, &self.sim);
+        if let Some(v) = self.sim.dvl_measurement() {
+            self.dvl_seq += 1;
+            self.dvl_pending = Some(DvlSample {
+                seq: self.dvl_seq,
+                t_ns: reading.t_ns,
+                velocity: v.into(),
+            });
+        }
         self.state_sent = false;
         let (sample, clipped) = convert::imu_sample(self.imu_seq, &reading);
         if clipped > 0 {
@@ -403,6 +422,10 @@ impl Driver {
             self.state_sent = true;
         }
         self.publish_driver_status()?;
+        // Before the IMU sample too: the daemon reads the DVL when the sample wakes it.
+        if let (Some(port), Some(d)) = (&self.ports.dvl, self.dvl_pending.take()) {
+            port.send(&d)?;
+        }
         let sent = self.ports.imu.send(sample)?;
         if let Some(stats) = &mut self.stats {
             stats.published(sample.seq);

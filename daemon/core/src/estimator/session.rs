@@ -439,6 +439,14 @@ impl Estimator {
         self.samples += 1;
     }
 
+    /// A measured body velocity (a DVL, m/s) for the dynamic method's navigation; ignored
+    /// by the static methods and before the first pulse.
+    pub fn push_velocity_fix(&mut self, measured: &Vector3<f64>) {
+        if let Some(run) = self.dynamic.as_mut() {
+            run.velocity_fix(measured);
+        }
+    }
+
     /// Close the pulse; raises the power when a sensor group kept no sample (Algorithm 1).
     pub fn end_pulse(&mut self) -> Option<PulseSummary> {
         if self.cfg.method == Method::Dynamic {

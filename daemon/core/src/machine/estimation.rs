@@ -73,6 +73,13 @@ impl EstimationRun {
             .is_some_and(|e| e.config().method == Method::Dynamic)
     }
 
+    /// A measured body velocity (a DVL) for the estimation under way.
+    pub(super) fn velocity_fix(&mut self, measured: &Vector3<f64>) {
+        if let Some(est) = self.est.as_mut() {
+            est.push_velocity_fix(measured);
+        }
+    }
+
     /// The estimator of the run under way.
     pub(super) fn estimator(&self) -> Option<&Estimator> {
         self.est.as_ref()

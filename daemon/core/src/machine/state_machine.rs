@@ -208,6 +208,15 @@ impl Machine {
         }
     }
 
+    /// A DVL's body velocity (m/s), when the vehicle has one: used by the dynamic
+    /// estimation's navigation while it excites; ignored otherwise (control does not use
+    /// velocity).
+    pub fn on_dvl(&mut self, velocity: [f64; 3]) {
+        if matches!(self.state, State::Pulse | State::Settle) {
+            self.run.velocity_fix(&Vector3::from(velocity));
+        }
+    }
+
     /// The IMU went stale (no sample within the deadline): neutral and Fault.
     pub fn on_imu_stale(&mut self, why: &str) -> Command {
         if self.state != State::Fault {

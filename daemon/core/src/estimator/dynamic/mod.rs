@@ -118,6 +118,11 @@ impl DynamicRun {
         &self.nav
     }
 
+    /// A measured body velocity (a DVL, m/s) for the navigation.
+    pub fn velocity_fix(&mut self, measured: &Vector3<f64>) {
+        self.nav.velocity_fix(measured);
+    }
+
     /// One sample at `t_s`: bias-free gyro (rad/s), specific force (m/s^2), depth (m), and the
     /// command `u` that was applied during the interval this sample ends. A sample with a
     /// non-finite value is dropped whole (the estimate is untouched).
