@@ -90,11 +90,21 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     // AMOUR's five thrusters push along x and z only: no sway.
     assert_eq!(m["actuated"]["sway"], false, "{m}");
     assert_eq!(m["actuated"]["yaw"], true, "{m}");
+    // The default (dynamic) method's other coefficients come with the model: every DOF row
+    // with all 38 terms, for this model's version.
+    assert_eq!(m["method"], "Dynamic", "{m}");
+    let d = &m["dynamics"];
+    assert_eq!(d["model_version"], 1, "{m}");
+    for row in ["roll", "pitch", "yaw", "surge", "sway", "heave"] {
+        let terms = d["per_row_term_value_and_std_err"][row].as_object();
+        assert_eq!(terms.map(|t| t.len()), Some(38), "{row}: {d}");
+    }
 
     let out = ctl(&world, &["model"]);
     expect_code(&out, 0, "model");
     assert!(text(&out.stdout).contains("NOT actuated:  sway"));
     assert!(text(&out.stdout).contains("contribution of each thruster"));
+    assert!(text(&out.stdout).contains("learned dynamics"), "{}", text(&out.stdout));
 
     let saved = world.path("saved-model.json");
     let out = ctl(&world, &["save", saved.to_str().unwrap()]);

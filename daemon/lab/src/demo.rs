@@ -11,7 +11,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Quaternion, UnitQuaternion};
-use thruster_protocol::{DynamicsMsg, ModelMsg, TruthMsg, DYNAMIC_TERM_NAMES};
+use thruster_protocol::{DynamicsMsg, ModelMsg, TruthMsg};
 
 use crate::session::{config_file, latest, Binaries, DaemonConfig, Session, SessionSpec};
 
@@ -306,7 +306,7 @@ fn report(args: &DemoArgs, s: &Summary) {
             "method": s.method,
             "estimation_max_tilt_deg": s.estimation_tilt_deg,
             "estimation_max_heading_change_deg": s.estimation_heading_deg,
-            "dynamics": s.dynamics.as_ref().map(dynamics_json),
+            "dynamics": s.dynamics.as_ref().map(thrusterctl_operator::dynamics::json),
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,
         });
@@ -331,7 +331,7 @@ fn report(args: &DemoArgs, s: &Summary) {
         println!("during estimation ({} method) the vehicle tilted up to {t:.1} deg and turned up to {h:.1} deg", s.method.to_lowercase());
     }
     if let Some(d) = &s.dynamics {
-        print_dynamics(d);
+        print!("{}", thrusterctl_operator::dynamics::report(d));
     }
     println!(
         "shutdown: {} ({} files of the namespace left)",
@@ -342,60 +342,4 @@ fn report(args: &DemoArgs, s: &Summary) {
         },
         s.leftovers
     );
-}
-
-/// The learned dynamic coefficients as JSON: per DOF row, term -> [value, standard error].
-fn dynamics_json(d: &DynamicsMsg) -> serde_json::Value {
-    let row = |r: usize| {
-        let (c, se) = (d.coefficients[r].to_terms(), d.std_err[r].to_terms());
-        let map: serde_json::Map<String, serde_json::Value> = DYNAMIC_TERM_NAMES
-            .iter()
-            .enumerate()
-            .map(|(k, name)| (name.to_string(), serde_json::json!([c[k], num(se[k])])))
-            .collect();
-        serde_json::Value::Object(map)
-    };
-    let rows: serde_json::Map<String, serde_json::Value> = DOFS
-        .iter()
-        .enumerate()
-        .map(|(r, dof)| (dof.to_string(), row(r)))
-        .collect();
-    serde_json::json!({
-        "per_row_term_value_and_std_err": rows,
-        "navigation_max_tilt_deg": d.max_tilt_rad.to_degrees(),
-        "navigation_max_heading_change_deg": d.max_heading_change_rad.to_degrees(),
-    })
-}
-
-/// A finite number, or null (JSON has no NaN).
-fn num(v: f64) -> serde_json::Value {
-    if v.is_finite() {
-        serde_json::json!(v)
-    } else {
-        serde_json::Value::Null
-    }
-}
-
-/// The rotation rows' own-axis damping and restoring, the coefficients people look for first.
-fn print_dynamics(d: &DynamicsMsg) {
-    println!("learned dynamics (per unit of the term, 1-sigma):");
-    for (r, rate) in ["p", "q", "r"].iter().enumerate() {
-        let c = d.coefficients[r].to_terms();
-        let se = d.std_err[r].to_terms();
-        let k = r;
-        let kq = 3 + r;
-        print!(
-            "  {:>5}: damping {rate} {:+.3} +- {:.3}, |{rate}|{rate} {:+.3} +- {:.3}",
-            DOFS[r], c[k], se[k], c[kq], se[kq]
-        );
-        // Roll is restored by gravity's y component, pitch by its x component.
-        if r < 2 {
-            let g = if r == 0 { 13 } else { 12 };
-            print!(
-                ", restoring {} {:+.2} +- {:.2}",
-                DYNAMIC_TERM_NAMES[g], c[g], se[g]
-            );
-        }
-        println!();
-    }
 }

@@ -5,7 +5,8 @@ use std::time::Duration;
 
 use anyhow::Result;
 use thruster_protocol::{
-    ControlRequest, DriverStatusMsg, ModelMsg, RequestKind, StatusMsg, Validate,
+    ControlRequest, DriverStatusMsg, DynamicsMsg, ModelMethod, ModelMsg, RequestKind, StatusMsg,
+    Validate,
 };
 
 use crate::checks::{model_problem, status_problem, Warner};
@@ -143,6 +144,7 @@ fn status(daemon: &Daemon, json: bool) -> Result<()> {
 
 fn model(daemon: &Daemon, json: bool) -> Result<()> {
     let inbox = daemon.inbox::<ModelMsg>()?;
+    let dynamics_inbox = daemon.inbox::<DynamicsMsg>()?;
     daemon.ensure_running()?;
     let Some(model) = wait_latest(&inbox, daemon.timeout())? else {
         return Err(Failure::new(
@@ -155,9 +157,28 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
         .into());
     };
     Warner::default().warn(model_problem(&model));
-    if json {
-        say(&serde_json::to_string(&ModelJson::from(&model))?)
+    // The dynamic method's coefficients come on their own topic right after the model.
+    let dynamics = if model.method() == Ok(ModelMethod::Dynamic) {
+        wait_latest(&dynamics_inbox, daemon.timeout().min(DYNAMICS_WAIT))?
+            .filter(|d| d.model_version == model.version && d.validate().is_ok())
     } else {
-        say(render::model_report(&model).trim_end())
+        None
+    };
+    if json {
+        let mut v = serde_json::to_value(ModelJson::from(&model))?;
+        if let Some(d) = &dynamics {
+            v["dynamics"] = crate::dynamics::json(d);
+        }
+        say(&serde_json::to_string(&v)?)
+    } else {
+        say(render::model_report(&model).trim_end())?;
+        match &dynamics {
+            Some(d) => say(crate::dynamics::report(d).trim_end()),
+            None => Ok(()),
+        }
     }
 }
+
+/// How long `model` waits for the dynamic coefficients of a dynamic model (published with
+/// it, history 1: a late joiner gets them on its first connection update).
+const DYNAMICS_WAIT: Duration = Duration::from_millis(300);

@@ -12,6 +12,7 @@ pub mod cli;
 pub mod client;
 pub mod commands;
 pub mod console;
+pub mod dynamics;
 pub mod estimate;
 pub mod exit;
 pub mod geometry;

@@ -1,0 +1,115 @@
+//! The dynamic coefficients a model came with (`DynamicsMsg`), as the operator reads them:
+//! a short text of what people look for first (each rotation's own damping and the righting
+//! moment) and a JSON object with every coefficient and its standard error.
+
+use std::fmt::Write as _;
+
+use serde_json::{json, Map, Value};
+use thruster_protocol::{Dof, DynamicsMsg, DYNAMIC_TERM_NAMES};
+
+/// Index of `down_x` / `down_y` in [`DYNAMIC_TERM_NAMES`] (roll is righted by gravity's y
+/// component in the body frame, pitch by its x component).
+const DOWN_X: usize = 12;
+const DOWN_Y: usize = 13;
+
+/// A finite number, or null (JSON has no NaN).
+fn num(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// Every coefficient: per DOF row, term -> [value, standard error]; and the excursion.
+pub fn json(d: &DynamicsMsg) -> Value {
+    let rows: Map<String, Value> = Dof::ALL
+        .iter()
+        .enumerate()
+        .map(|(r, dof)| {
+            let (c, se) = (d.coefficients[r].to_terms(), d.std_err[r].to_terms());
+            let row: Map<String, Value> = DYNAMIC_TERM_NAMES
+                .iter()
+                .enumerate()
+                .map(|(k, name)| (name.to_string(), json!([num(c[k]), num(se[k])])))
+                .collect();
+            (dof.name().to_lowercase(), Value::Object(row))
+        })
+        .collect();
+    json!({
+        "model_version": d.model_version,
+        "per_row_term_value_and_std_err": rows,
+        "navigation_max_tilt_deg": num(d.max_tilt_rad.to_degrees()),
+        "navigation_max_heading_change_deg": num(d.max_heading_change_rad.to_degrees()),
+    })
+}
+
+/// The rotation rows' own-axis damping and the roll/pitch restoring, one line each.
+pub fn report(d: &DynamicsMsg) -> String {
+    let mut s = String::from("learned dynamics (per unit of the term, 1-sigma):\n");
+    for (r, rate) in ["p", "q", "r"].iter().enumerate() {
+        let c = d.coefficients[r].to_terms();
+        let se = d.std_err[r].to_terms();
+        let (k, kq) = (r, 3 + r);
+        let _ = write!(
+            s,
+            "  {:>5}: damping {rate} {:+.3} +- {:.3}, |{rate}|{rate} {:+.3} +- {:.3}",
+            Dof::ALL[r].name().to_lowercase(),
+            c[k],
+            se[k],
+            c[kq],
+            se[kq]
+        );
+        if r < 2 {
+            let g = if r == 0 { DOWN_Y } else { DOWN_X };
+            let _ = write!(
+                s,
+                ", restoring {} {:+.2} +- {:.2}",
+                DYNAMIC_TERM_NAMES[g], c[g], se[g]
+            );
+        }
+        s.push('\n');
+    }
+    let _ = writeln!(
+        s,
+        "  while it was learned the vehicle tilted up to {:.1} deg and turned up to {:.1} deg (navigation estimate)",
+        d.max_tilt_rad.to_degrees(),
+        d.max_heading_change_rad.to_degrees()
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use thruster_protocol::DynamicsRow;
+
+    #[test]
+    fn the_righting_terms_are_named_where_they_are() {
+        assert_eq!(DYNAMIC_TERM_NAMES[DOWN_X], "down_x");
+        assert_eq!(DYNAMIC_TERM_NAMES[DOWN_Y], "down_y");
+    }
+
+    #[test]
+    fn report_and_json_carry_the_values() {
+        let mut d = DynamicsMsg {
+            model_version: 3,
+            max_tilt_rad: 0.4,
+            ..DynamicsMsg::default()
+        };
+        let mut terms = [0.0; thruster_protocol::DYNAMIC_TERMS];
+        terms[DOWN_Y] = -8.06;
+        d.coefficients[0] = DynamicsRow::from_terms(&terms);
+        d.std_err[2].rate[2] = f64::NAN;
+        let text = report(&d);
+        assert!(text.contains("restoring down_y -8.06"), "{text}");
+        assert!(text.contains("tilted up to 22.9 deg"), "{text}");
+        let v = json(&d);
+        assert_eq!(
+            v["per_row_term_value_and_std_err"]["roll"]["down_y"][0],
+            -8.06
+        );
+        assert!(v["per_row_term_value_and_std_err"]["yaw"]["r"][1].is_null());
+        assert_eq!(v["model_version"], 3);
+    }
+}
