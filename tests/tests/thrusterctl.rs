@@ -104,7 +104,11 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     expect_code(&out, 0, "model");
     assert!(text(&out.stdout).contains("NOT actuated:  sway"));
     assert!(text(&out.stdout).contains("contribution of each thruster"));
-    assert!(text(&out.stdout).contains("learned dynamics"), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stdout).contains("learned dynamics"),
+        "{}",
+        text(&out.stdout)
+    );
 
     let saved = world.path("saved-model.json");
     let out = ctl(&world, &["save", saved.to_str().unwrap()]);
