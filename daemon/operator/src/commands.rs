@@ -5,8 +5,8 @@ use std::time::Duration;
 
 use anyhow::Result;
 use thruster_protocol::{
-    ControlRequest, DriverStatusMsg, DynamicsMsg, ModelMethod, ModelMsg, RequestKind, StatusMsg,
-    Validate,
+    ControlRequest, DriverStatusMsg, DynamicsMsg, ModelMethod, ModelMsg, ModelSource, RequestKind,
+    StatusMsg, Validate,
 };
 
 use crate::checks::{model_problem, status_problem, Warner};
@@ -157,9 +157,17 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
         .into());
     };
     Warner::default().warn(model_problem(&model));
-    // The dynamic method's coefficients come on their own topic right after the model.
-    let dynamics = if model.method() == Ok(ModelMethod::Dynamic) {
-        wait_latest(&dynamics_inbox, daemon.timeout().min(DYNAMICS_WAIT))?
+    // A model the dynamic method learned (in force as estimated, or back from the cache) has
+    // its coefficients on their own topic, published with it; a late joiner gets them at the
+    // daemon's next connection update (every status round), so wait as long as for the model.
+    // A model from a file has none: the state directory keeps B only.
+    let has_dynamics = model.method() == Ok(ModelMethod::Dynamic)
+        && matches!(
+            model.source(),
+            Ok(ModelSource::Estimated) | Ok(ModelSource::Cache)
+        );
+    let dynamics = if has_dynamics {
+        wait_latest(&dynamics_inbox, daemon.timeout())?
             .filter(|d| d.model_version == model.version && d.validate().is_ok())
     } else {
         None
@@ -178,7 +186,3 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
         }
     }
 }
-
-/// How long `model` waits for the dynamic coefficients of a dynamic model (published with
-/// it, history 1: a late joiner gets them on its first connection update).
-const DYNAMICS_WAIT: Duration = Duration::from_millis(300);
