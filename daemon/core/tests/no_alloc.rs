@@ -2,18 +2,29 @@
 //! answer IMU samples while idle, pulsing and controlling.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use thrusterd_core::machine::{Geometry, ImuInput, Machine, MachineSetup, Request, State};
 
 struct Counting;
 
-static COUNTING: AtomicBool = AtomicBool::new(false);
 static ALLOCS: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    /// Counting is on for this thread only: the test harness's own threads (another test,
+    /// the result printer) allocate whenever they like, and once did inside a counted window.
+    /// Const-initialised and without a destructor, so reading it allocates nothing.
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+}
+
+fn counting(on: bool) {
+    COUNTING.with(|c| c.set(on));
+}
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
+        if COUNTING.try_with(|c| c.get()).unwrap_or(false) {
             ALLOCS.fetch_add(1, Ordering::Relaxed);
         }
         unsafe { System.alloc(layout) }
@@ -40,12 +51,12 @@ fn sample(k: u64) -> ImuInput {
 /// Allocations made by `ticks` samples starting at `k`.
 fn count(machine: &mut Machine, k: &mut u64, ticks: u64) -> u64 {
     ALLOCS.store(0, Ordering::SeqCst);
-    COUNTING.store(true, Ordering::SeqCst);
+    counting(true);
     for _ in 0..ticks {
         *k += 1;
         std::hint::black_box(machine.on_imu(&sample(*k)));
     }
-    COUNTING.store(false, Ordering::SeqCst);
+    counting(false);
     ALLOCS.load(Ordering::SeqCst)
 }
 
@@ -121,7 +132,7 @@ fn a_dynamic_sample_does_not_allocate() {
         est.push_dynamic_sample(t, &w, &f, Some(5.0));
     }
     ALLOCS.store(0, Ordering::SeqCst);
-    COUNTING.store(true, Ordering::SeqCst);
+    counting(true);
     // 3 s inside one pulse: three segment boundaries.
     for _ in 0..600 {
         k += 1;
@@ -133,13 +144,13 @@ fn a_dynamic_sample_does_not_allocate() {
             std::hint::black_box(Some(5.0)),
         );
     }
-    COUNTING.store(false, Ordering::SeqCst);
+    counting(false);
     let in_pulse = ALLOCS.load(Ordering::SeqCst);
     assert_eq!(in_pulse, 0, "push_dynamic_sample during a pulse");
 
     est.end_pulse();
     ALLOCS.store(0, Ordering::SeqCst);
-    COUNTING.store(true, Ordering::SeqCst);
+    counting(true);
     // Between pulses (thrusters at neutral), also without a depth reading.
     for i in 0..300 {
         k += 1;
@@ -147,7 +158,7 @@ fn a_dynamic_sample_does_not_allocate() {
         let depth = if i % 2 == 0 { Some(5.0) } else { None };
         est.push_dynamic_sample(t, &w, &f, std::hint::black_box(depth));
     }
-    COUNTING.store(false, Ordering::SeqCst);
+    counting(false);
     assert_eq!(
         ALLOCS.load(Ordering::SeqCst),
         0,
