@@ -212,37 +212,32 @@ fn restoring_and_damping_coefficients_match_the_simulator() {
     }
 }
 
-/// The navigation filter against the simulator's true velocity and attitude through a
-/// doublet-pair excitation (noise-free: the dead reckoning itself).
-#[test]
-fn navigation_follows_the_true_velocity() {
+/// Drives AMOUR-5 through 4 s of alternating +-,-+ pulses at `power` after a 2 s rest, with
+/// the navigation fed the IMU (and the DVL's fixes when `with_dvl`); the worst velocity error
+/// against the simulator's truth, the worst attitude error (deg) and the peak true speed.
+fn navigation_errors(
+    sensors: SensorConfig,
+    seed: u64,
+    power: f64,
+    with_dvl: bool,
+) -> (f64, f64, f64) {
     let v = vehicle("amour5");
     let n = v.thrusters.len();
-    let mut sim = Simulator::new(v, SensorConfig::ideal(200.0), 1).unwrap();
-    // A rest first, as the daemon's noise measurement: the body settles to its terminal
-    // velocity (it is not exactly neutrally buoyant), and the mean specific force is -g.
+    let mut sim = Simulator::new(v, sensors, seed).unwrap();
+    // A rest first, as the daemon's noise measurement: the mean specific force is -g.
     let mut rest = Vector3::zeros();
     let mut r0 = sim.advance_and_sample();
     for _ in 0..400 {
         r0 = sim.advance_and_sample();
         rest += Vector3::from(r0.accel) / 400.0;
     }
-    let aid = if std::env::var("NOAID").is_ok() {
-        DepthAid {
-            depth_gain: 0.0,
-            velocity_gain: 0.0,
-        }
-    } else {
-        DepthAid::default()
-    };
-    let mut nav = Navigator::at_rest(&rest, 0.0, Some(r0.depth), aid);
-    // The filter starts at zero velocity (no DVL); so does the body here.
+    // The filter starts at zero velocity (no DVL at rest); so does the body here (it is not
+    // exactly neutrally buoyant and drifts during the rest).
     let mut state = *sim.state();
     state.nu = nalgebra::Vector6::zeros();
     sim.set_state(state);
-    let mut worst_v = 0.0f64;
-    let mut worst_att = 0.0f64;
-    let mut peak_v = 0.0f64;
+    let mut nav = Navigator::at_rest(&rest, 0.0, Some(r0.depth), DepthAid::default());
+    let (mut worst_v, mut worst_att, mut peak_v) = (0.0f64, 0.0f64, 0.0f64);
     for k in 0..800 {
         let sign = if matches!(k / 20 % 4, 0 | 3) {
             1.0
@@ -252,14 +247,19 @@ fn navigation_follows_the_true_velocity() {
         let u: Vec<f64> = (0..n)
             .map(|i| {
                 if (i + k / 80) % 2 == 0 {
-                    0.8 * sign
+                    power * sign
                 } else {
-                    -0.8 * sign
+                    -power * sign
                 }
             })
             .collect();
         sim.set_commands(&u).unwrap();
         let r = sim.advance_and_sample();
+        if let Some(d) = sim.dvl_measurement() {
+            if with_dvl {
+                nav.velocity_fix(&d);
+            }
+        }
         let s = nav.update(
             r.t_ns as f64 * 1e-9,
             &Vector3::from(r.gyro),
@@ -270,6 +270,14 @@ fn navigation_follows_the_true_velocity() {
         worst_att = worst_att.max(s.attitude.angle_to(&sim.attitude()).to_degrees());
         peak_v = peak_v.max(sim.linear_velocity().norm());
     }
+    (worst_v, worst_att, peak_v)
+}
+
+/// The navigation filter against the simulator's true velocity and attitude through a
+/// doublet-pair excitation (noise-free: the dead reckoning itself).
+#[test]
+fn navigation_follows_the_true_velocity() {
+    let (worst_v, worst_att, peak_v) = navigation_errors(SensorConfig::ideal(200.0), 1, 0.8, false);
     assert!(
         peak_v > 0.1,
         "the excitation moved the vehicle ({peak_v:.3} m/s)"
@@ -338,60 +346,14 @@ fn a_non_finite_sample_mid_excitation_changes_nothing() {
 /// dead-reckoned, 0.10 m/s with the DVL.
 #[test]
 fn a_dvl_bounds_the_velocity_drift_at_the_papers_noise() {
-    let run = |with_dvl: bool| -> f64 {
-        let v = vehicle("amour5");
-        let n = v.thrusters.len();
-        let sensors = SensorConfig {
-            rate_hz: 200.0,
-            noise: NoisePreset::Paper,
-            dvl: Some(thruster_sim::DvlConfig::default()),
-            ..SensorConfig::default()
-        };
-        let mut sim = Simulator::new(v, sensors, 4).unwrap();
-        let mut rest = Vector3::zeros();
-        let mut r0 = sim.advance_and_sample();
-        for _ in 0..400 {
-            r0 = sim.advance_and_sample();
-            rest += Vector3::from(r0.accel) / 400.0;
-        }
-        let mut state = *sim.state();
-        state.nu = nalgebra::Vector6::zeros();
-        sim.set_state(state);
-        let mut nav = Navigator::at_rest(&rest, 0.0, Some(r0.depth), DepthAid::default());
-        let mut worst = 0.0f64;
-        for k in 0..800 {
-            let sign = if matches!(k / 20 % 4, 0 | 3) {
-                1.0
-            } else {
-                -1.0
-            };
-            let u: Vec<f64> = (0..n)
-                .map(|i| {
-                    if (i + k / 80) % 2 == 0 {
-                        0.6 * sign
-                    } else {
-                        -0.6 * sign
-                    }
-                })
-                .collect();
-            sim.set_commands(&u).unwrap();
-            let r = sim.advance_and_sample();
-            if let Some(d) = sim.dvl_measurement() {
-                if with_dvl {
-                    nav.velocity_fix(&d);
-                }
-            }
-            let s = nav.update(
-                r.t_ns as f64 * 1e-9,
-                &Vector3::from(r.gyro),
-                &Vector3::from(r.accel),
-                Some(r.depth),
-            );
-            worst = worst.max((s.velocity - sim.linear_velocity()).norm());
-        }
-        worst
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Paper,
+        dvl: Some(thruster_sim::DvlConfig::default()),
+        ..SensorConfig::default()
     };
-    let (without, with) = (run(false), run(true));
+    let (without, _, _) = navigation_errors(sensors.clone(), 4, 0.6, false);
+    let (with, _, _) = navigation_errors(sensors, 4, 0.6, true);
     println!("worst velocity error: {without:.3} m/s dead-reckoned, {with:.3} m/s with the DVL");
     assert!(with < 0.15, "with the DVL {with:.3} m/s");
     assert!(

@@ -26,7 +26,13 @@ impl Excursion {
         if !(norm.is_finite() && (norm - 1.0).abs() < 0.1) {
             return;
         }
-        let q = UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z));
+        self.push_attitude(&UnitQuaternion::from_quaternion(Quaternion::new(
+            w, x, y, z,
+        )));
+    }
+
+    /// One true attitude (body to NED).
+    pub fn push_attitude(&mut self, q: &UnitQuaternion<f64>) {
         let down = q.inverse_transform_vector(&Vector3::z());
         let tilt = down.z.clamp(-1.0, 1.0).acos().to_degrees();
         let heading = q.euler_angles().2;

@@ -9,12 +9,13 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::DMatrix;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::{EstimatorConfig, Excitation, Method};
 use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Request, State};
 use thrusterd_core::study::plot::{render, Grid, Panel, Series};
 
+use crate::excursion::Excursion;
 use crate::session::config_file;
 
 const ALL_VEHICLES: [&str; 6] = [
@@ -155,16 +156,13 @@ pub fn run_one(
         .on_request(Request::Estimate)
         .map_err(|e| anyhow::anyhow!("estimate refused: {}", e.0))?;
     let start = sim.time_s();
-    let yaw0 = sim.roll_pitch_yaw()[2];
-    let (mut tilt, mut heading) = (0.0f64, 0.0f64);
+    let mut excursion = Excursion::default();
+    excursion.push_attitude(&sim.attitude());
     let mut trace = Vec::new();
     let mut seen_pulses = 0;
     loop {
         tick(&mut machine, &mut sim)?;
-        let down = sim.attitude().inverse_transform_vector(&Vector3::z());
-        tilt = tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
-        let d = sim.roll_pitch_yaw()[2] - yaw0;
-        heading = heading.max(d.sin().atan2(d.cos()).abs().to_degrees());
+        excursion.push_attitude(&sim.attitude());
         if let Some(e) = machine.last_estimate() {
             if e.pulses != seen_pulses && e.excited {
                 seen_pulses = e.pulses;
@@ -189,8 +187,8 @@ pub fn run_one(
         err_acc: rel_err(&model.effectiveness, &truth, 3),
         seconds: sim.time_s() - start,
         pulses: est.pulses,
-        tilt_deg: tilt,
-        heading_deg: heading,
+        tilt_deg: excursion.max_tilt_deg,
+        heading_deg: excursion.max_heading_deg,
         bound_rot: est.rel_err_rot,
         bound_acc: est.rel_err_acc,
         trace,

@@ -419,23 +419,13 @@ impl Estimator {
         let Some(run) = self.dynamic.as_mut() else {
             return;
         };
-        let zeros = [0.0; 0];
-        let u: &[f64] = match self.pulse.as_mut() {
-            Some(p) => {
-                p.samples += 1;
-                p.kept = [p.samples; 2];
-                &p.u
-            }
-            None => &zeros,
-        };
-        if u.is_empty() {
-            // Between pulses: the thrusters are at neutral.
-            let n = run.thrusters();
-            let idle = [0.0; thruster_protocol::MAX_THRUSTERS];
-            run.push(t_s, gyro, specific_force, depth, &idle[..n]);
-        } else {
-            run.push(t_s, gyro, specific_force, depth, u);
-        }
+        // Between pulses the thrusters are at neutral.
+        let u = self.pulse.as_mut().map(|p| {
+            p.samples += 1;
+            p.kept = [p.samples; 2];
+            p.u.as_slice()
+        });
+        run.push(t_s, gyro, specific_force, depth, u);
         self.samples += 1;
     }
 
@@ -544,58 +534,53 @@ impl Estimator {
 
     /// Go on pulsing, or stop (and why).
     pub fn stop_decision(&self) -> StopDecision {
+        self.stop_gate()
+            .unwrap_or_else(|| self.bound_decision(&self.estimate()))
+    }
+
+    /// The same with the estimate of this moment already made (the machine makes one after
+    /// every pulse): the solve is not done twice.
+    pub fn stop_decision_with(&self, estimate: &Estimate) -> StopDecision {
+        self.stop_gate()
+            .unwrap_or_else(|| self.bound_decision(estimate))
+    }
+
+    /// The decision when it does not depend on the estimate; None when the bound decides.
+    fn stop_gate(&self) -> Option<StopDecision> {
         if self.pulses >= self.cfg.max_pulses {
-            return StopDecision::MaxPulses;
+            return Some(StopDecision::MaxPulses);
         }
-        match self.cfg.method {
+        let aligned = match self.cfg.method {
             Method::Paper => {
-                if self.pulses >= self.planned_pulses() {
+                return Some(if self.pulses >= self.planned_pulses() {
                     StopDecision::PlanComplete
                 } else {
                     StopDecision::Continue
-                }
+                });
             }
-            Method::Dynamic => {
-                // Stop only after a whole cycle (every pattern seen) and then at the end of a
-                // doublet pair, when the vehicle is back near rest.
-                if self.pulses < self.planned_pulses() || !self.pulses.is_multiple_of(4) {
-                    return StopDecision::Continue;
-                }
-                let e = self.dynamic_estimate();
-                if e.excited
-                    && e.rel_err_rot <= self.cfg.target_rel_err
-                    && e.rel_err_acc <= self.cfg.target_rel_err
-                {
-                    StopDecision::Converged {
-                        rel_err_rot: e.rel_err_rot,
-                        rel_err_acc: e.rel_err_acc,
-                    }
-                } else {
-                    StopDecision::Continue
-                }
+            // Stop only at the end of a cycle: mid-cycle the design is unbalanced (some
+            // thrusters pushed forward more than in reverse), which biases the symmetric model
+            // of a thruster that is weaker in reverse.
+            Method::Forward => self.pulses.is_multiple_of(self.plan.cycle_len()),
+            // After a whole cycle (every pattern seen, see planned_pulses), at the end of a
+            // doublet pair, when the vehicle is back near rest.
+            Method::Dynamic => self.pulses.is_multiple_of(4),
+        };
+        (self.pulses < self.planned_pulses() || !aligned).then_some(StopDecision::Continue)
+    }
+
+    /// Converged once both error bounds reached the target (every thruster excited).
+    fn bound_decision(&self, e: &Estimate) -> StopDecision {
+        if e.excited
+            && e.rel_err_rot <= self.cfg.target_rel_err
+            && e.rel_err_acc <= self.cfg.target_rel_err
+        {
+            StopDecision::Converged {
+                rel_err_rot: e.rel_err_rot,
+                rel_err_acc: e.rel_err_acc,
             }
-            Method::Forward => {
-                // Stop only at the end of a cycle: mid-cycle the design is unbalanced (some
-                // thrusters pushed forward more than in reverse), which biases the symmetric model
-                // of a thruster that is weaker in reverse.
-                if self.pulses < self.planned_pulses()
-                    || !self.pulses.is_multiple_of(self.plan.cycle_len())
-                {
-                    return StopDecision::Continue;
-                }
-                let e = self.forward_estimate();
-                if e.excited
-                    && e.rel_err_rot <= self.cfg.target_rel_err
-                    && e.rel_err_acc <= self.cfg.target_rel_err
-                {
-                    StopDecision::Converged {
-                        rel_err_rot: e.rel_err_rot,
-                        rel_err_acc: e.rel_err_acc,
-                    }
-                } else {
-                    StopDecision::Continue
-                }
-            }
+        } else {
+            StopDecision::Continue
         }
     }
 

@@ -187,8 +187,9 @@ impl EstimationRun {
             return PulseStep::Pulsing;
         }
         est.end_pulse();
-        let decision = est.stop_decision();
-        self.last_estimate = Some(est.estimate());
+        let estimate = est.estimate();
+        let decision = est.stop_decision_with(&estimate);
+        self.last_estimate = Some(estimate);
         if !decision.is_stop() {
             self.quiet_since_ns = None;
         }

@@ -124,23 +124,22 @@ impl DynamicRun {
     }
 
     /// One sample at `t_s`: bias-free gyro (rad/s), specific force (m/s^2), depth (m), and the
-    /// command `u` that was applied during the interval this sample ends. A sample with a
-    /// non-finite value is dropped whole (the estimate is untouched).
+    /// command `u` that was applied during the interval this sample ends (None: neutral). A
+    /// sample with a non-finite value is dropped whole (the estimate is untouched).
     pub fn push(
         &mut self,
         t_s: f64,
         gyro: &Vector3<f64>,
         specific_force: &Vector3<f64>,
         depth: Option<f64>,
-        u: &[f64],
+        u: Option<&[f64]>,
     ) {
         let finite = t_s.is_finite()
             && gyro
                 .iter()
                 .chain(specific_force.iter())
                 .all(|v| v.is_finite())
-            && u.len() == self.n
-            && u.iter().all(|v| v.is_finite());
+            && u.is_none_or(|u| u.len() == self.n && u.iter().all(|v| v.is_finite()));
         if !finite || self.last_t_s.is_some_and(|t0| t_s <= t0) {
             return;
         }
@@ -153,7 +152,8 @@ impl DynamicRun {
         };
         self.lag_prev.copy_from_slice(&self.lag);
         let mut abs_target = 0.0;
-        for (l, v) in self.lag.iter_mut().zip(u) {
+        for (i, l) in self.lag.iter_mut().enumerate() {
+            let v = u.map_or(0.0, |u| u[i]);
             *l += a * (v - *l);
             abs_target += v.abs();
         }
