@@ -10,6 +10,7 @@ use thruster_protocol::services::{IpcConfig, IpcError, DEFAULT_ROOT_BASE};
 use crate::attitude::AttitudeConfig;
 use crate::controller::ControllerConfig;
 use crate::estimator::EstimatorConfig;
+use crate::identification::IdentificationConfig;
 use crate::machine::{Geometry, MachineConfig, MachineSetup};
 use crate::model::RigidBody;
 use crate::monitor::MonitorConfig;
@@ -28,6 +29,7 @@ pub struct DaemonConfig {
     pub controller: ControllerConfig,
     pub attitude: AttitudeConfig,
     pub monitor: MonitorConfig,
+    pub identification: IdentificationConfig,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -327,6 +329,9 @@ impl DaemonConfig {
         for (key, v, range) in self.monitor.checks() {
             floats.push((key.into(), v, range));
         }
+        for (key, v, range) in self.identification.checks() {
+            floats.push((key.into(), v, range));
+        }
         for (key, v, range) in floats {
             if !range.contains(v) {
                 return Err(out_of_range(&key, range, &v));
@@ -367,6 +372,7 @@ impl DaemonConfig {
             controller: self.controller.clone(),
             attitude: self.attitude.clone(),
             monitor: self.monitor.clone(),
+            identification: self.identification.clone(),
             body: self.body.clone(),
             thrusters: self.thruster_count(),
             geometry,

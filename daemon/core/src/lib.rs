@@ -7,6 +7,7 @@ pub mod config;
 pub mod controller;
 pub mod driver_watch;
 pub mod estimator;
+pub mod identification;
 pub mod machine;
 pub mod model;
 pub mod monitor;

@@ -44,6 +44,7 @@ pub fn daemon_state(s: State) -> DaemonState {
         State::Solve => DaemonState::Solve,
         State::Active => DaemonState::Active,
         State::Fault => DaemonState::Fault,
+        State::Identify => DaemonState::Identify,
     }
 }
 

@@ -2,123 +2,16 @@
 //! estimation, control, faults and reconfiguration as the daemon runs them, against a 6-DOF
 //! vehicle with thruster lag, drag, buoyancy and gravity.
 
-use std::path::PathBuf;
-
-use nalgebra::{DMatrix, UnitQuaternion};
+use nalgebra::UnitQuaternion;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::{
-    Event, Geometry, ImuInput, Machine, MachineSetup, Mode, Reconfig, Request, State,
+    Event, Geometry, Machine, MachineSetup, Mode, Reconfig, Request, State,
 };
 use thrusterd_core::model::ModelSource;
 
-fn vehicle(name: &str) -> Vehicle {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../config/vehicles")
-        .join(format!("{name}.toml"));
-    Vehicle::load(&path).unwrap()
-}
-
-struct Run {
-    machine: Machine,
-    sim: Simulator,
-    last_mode: Mode,
-    max_abs_cmd: f64,
-}
-
-impl Run {
-    fn new(name: &str, noise: NoisePreset, seed: u64) -> Run {
-        Run::with_rate(name, noise, seed, 200.0)
-    }
-
-    /// The same with the static forward method and the settings it was tuned with.
-    fn forward(name: &str, noise: NoisePreset, seed: u64) -> Run {
-        let mut run = Run::new(name, noise, seed);
-        let mut setup = MachineSetup {
-            thrusters: run.sim.thruster_count(),
-            estimator: EstimatorConfig::forward(),
-            ..MachineSetup::default()
-        };
-        setup.machine.deadband = 0.05;
-        run.machine = Machine::new(setup);
-        run
-    }
-
-    fn with_rate(name: &str, noise: NoisePreset, seed: u64, rate_hz: f64) -> Run {
-        let v = vehicle(name);
-        let n = v.thrusters.len();
-        let sensors = SensorConfig {
-            rate_hz,
-            noise,
-            ..SensorConfig::default()
-        };
-        let sim = Simulator::new(v, sensors, seed).unwrap();
-        let mut setup = MachineSetup {
-            thrusters: n,
-            ..MachineSetup::default()
-        };
-        // No driver between machine and physics here: the daemon compensates the T200 deadband
-        // itself, as it would for a driver that does not.
-        setup.machine.deadband = 0.05;
-        let machine = Machine::new(setup);
-        Run {
-            machine,
-            sim,
-            last_mode: Mode::Neutral,
-            max_abs_cmd: 0.0,
-        }
-    }
-
-    fn tick(&mut self) {
-        let r = self.sim.advance_and_sample();
-        let cmd = self.machine.on_imu(&ImuInput {
-            seq: 0,
-            t_ns: r.t_ns,
-            gyro: r.gyro,
-            accel: r.accel,
-            mag: Some(r.mag),
-            depth: Some(r.depth),
-        });
-        assert_eq!(cmd.count, self.sim.thruster_count());
-        for v in &cmd.thrust[..cmd.count] {
-            assert!(v.is_finite() && v.abs() <= 1.0, "command {v}");
-            self.max_abs_cmd = self.max_abs_cmd.max(v.abs());
-        }
-        assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
-        self.last_mode = cmd.mode;
-        self.sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
-    }
-
-    fn run_for(&mut self, s: f64) {
-        self.run_until(s, |_| false);
-    }
-
-    fn run_until(&mut self, max_s: f64, done: impl Fn(&Machine) -> bool) -> f64 {
-        let start = self.sim.time_s();
-        while self.sim.time_s() - start < max_s {
-            self.tick();
-            if done(&self.machine) {
-                break;
-            }
-        }
-        self.sim.time_s() - start
-    }
-
-    /// Symmetric truth: the model is linear, so it learns the mean of forward and reverse gain.
-    fn truth(&self) -> DMatrix<f64> {
-        let (fwd, rev) = self.sim.truth();
-        (fwd + rev) * 0.5
-    }
-
-    fn estimate(&mut self) -> f64 {
-        self.machine.on_request(Request::Estimate).unwrap();
-        self.run_until(120.0, |m| m.state() == State::Active)
-    }
-}
-
-fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
-    (est.rows(rows, 3) - truth.rows(rows, 3)).norm() / truth.rows(rows, 3).norm()
-}
+mod common;
+use common::{rel_err, vehicle, Run};
 
 /// AMOUR-5 at the paper's noise (0.25 rad/s, 0.05 g): the learned model (the default dynamic
 /// method) is within 10 % of the truth, in 8 vehicle-s. Measured 0.046 / 0.031 in 7.8 s (seed
@@ -404,7 +297,8 @@ fn a_new_operating_point_is_not_a_mismatch() {
     assert_eq!(run.machine.state(), State::Active);
 }
 
-/// An estimation requested while the daemon holds a 20 degree pitch first levels the vehicle
+/// With closed-loop identification off: an estimation requested while the daemon holds a 20
+/// degree pitch first levels the vehicle
 /// with the model in force (thrusters driven, state MeasureNoise), then measures the noise with
 /// the thrusters neutral and the vehicle level and at rest, then pulses; without levelling
 /// (`level_max_s = 0`) the thrusters go neutral at once, with the vehicle still pitched.
@@ -412,15 +306,17 @@ fn a_new_operating_point_is_not_a_mismatch() {
 fn an_estimation_started_mid_manoeuvre_levels_the_vehicle_first() {
     for level in [true, false] {
         let mut run = Run::new("amour5", NoisePreset::Realistic, 3);
+        let mut setup = MachineSetup {
+            thrusters: 5,
+            ..MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        // The open-loop path (closed-loop identification off; see closed_loop.rs for it).
+        setup.identification.closed_loop = false;
         if !level {
-            let mut setup = MachineSetup {
-                thrusters: 5,
-                ..MachineSetup::default()
-            };
-            setup.machine.deadband = 0.05;
             setup.machine.level_max_s = 0.0;
-            run.machine = Machine::new(setup);
         }
+        run.machine = Machine::new(setup);
         run.run_for(1.0);
         run.estimate();
         pitch_steps(&mut run, 6.0, 10.0, [20.0, 20.0]);

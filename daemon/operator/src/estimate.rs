@@ -42,7 +42,7 @@ pub enum Verdict {
 pub struct Tracker {
     /// Model version before the request, when a status told us.
     baseline_version: Option<u64>,
-    /// Seen in MeasureNoise, Pulse, Settle or Solve since the request.
+    /// Seen in MeasureNoise, Pulse, Settle, Solve or Identify since the request.
     seen_running: bool,
     /// Until then a terminal state may predate the request.
     grace_until: Instant,
@@ -67,7 +67,8 @@ impl Tracker {
             DaemonState::MeasureNoise
             | DaemonState::Pulse
             | DaemonState::Settle
-            | DaemonState::Solve => {
+            | DaemonState::Solve
+            | DaemonState::Identify => {
                 self.seen_running = true;
                 return Verdict::Running;
             }
@@ -111,7 +112,7 @@ impl Progress {
     fn update(&mut self, s: &StatusMsg) {
         let done = match s.state() {
             Ok(DaemonState::Pulse) => u64::from(s.pulse),
-            Ok(DaemonState::Settle) => u64::from(s.pulse),
+            Ok(DaemonState::Settle) | Ok(DaemonState::Identify) => u64::from(s.pulse),
             Ok(DaemonState::Solve) => u64::from(s.pulses_planned),
             _ => self.bar.position(),
         };

@@ -22,6 +22,9 @@ wire_enum! {
         Active = 5,
         /// Zero thrust after a fault (stale IMU, bad input); `text` says why.
         Fault = 6,
+        /// Estimating while controlling: the model in force holds the setpoint and a dither
+        /// excites the thrusters; `pulse` counts the seconds of excitation so far.
+        Identify = 7,
     }
 }
 

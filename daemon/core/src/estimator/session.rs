@@ -18,6 +18,8 @@ use super::noise::NoiseLevels;
 use super::paper::PaperLs;
 use super::response::PulseShape;
 
+mod closed_loop;
+
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
 const MIN_RESIDUAL_DOF: u64 = 10;
 
@@ -712,7 +714,7 @@ impl Estimator {
             &sol.b,
             &sol.std_err,
             &self.max_command,
-            None,
+            sol.split.as_ref().map(|(sb, sse)| (sb, sse)),
             self.nominal.as_ref(),
             &self.cfg,
         );

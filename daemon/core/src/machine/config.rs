@@ -6,6 +6,7 @@ use super::types::Geometry;
 use crate::attitude::AttitudeConfig;
 use crate::controller::ControllerConfig;
 use crate::estimator::EstimatorConfig;
+use crate::identification::IdentificationConfig;
 use crate::model::RigidBody;
 use crate::monitor::MonitorConfig;
 
@@ -95,6 +96,7 @@ pub struct MachineSetup {
     pub controller: ControllerConfig,
     pub attitude: AttitudeConfig,
     pub monitor: MonitorConfig,
+    pub identification: IdentificationConfig,
     pub body: RigidBody,
     /// Thrusters at start.
     pub thrusters: usize,

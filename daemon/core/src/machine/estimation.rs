@@ -10,6 +10,9 @@ use crate::estimator::power::pulse_power;
 use crate::estimator::{Estimate, Estimator, Method, NoiseLevels, NoiseMeter, StopDecision};
 use crate::model::{Model, ModelSource};
 
+mod closed_loop;
+pub(super) use closed_loop::{ClosedLoop, ClosedStep};
+
 /// One IMU sample as the run uses it: the body rate and the gravity-compensated acceleration.
 pub(super) struct Motion {
     pub(super) gyro: Vector3<f64>,
@@ -40,6 +43,8 @@ pub(super) struct EstimationRun {
     quiet_since_ns: Option<u64>,
     /// Sum and count of the raw specific force during the noise measurement.
     rest_force: (Vector3<f64>, u64),
+    /// Under control (state Identify): the dither and its clock.
+    closed: Option<ClosedLoop>,
 }
 
 impl EstimationRun {
@@ -51,6 +56,7 @@ impl EstimationRun {
             last_estimate: None,
             quiet_since_ns: None,
             rest_force: (Vector3::zeros(), 0),
+            closed: None,
         }
     }
 
@@ -59,11 +65,13 @@ impl EstimationRun {
         self.noise = NoiseMeter::new();
         self.rest_force = (Vector3::zeros(), 0);
         self.est = None;
+        self.closed = None;
     }
 
     /// The run ends without a candidate (abort, fault, idle, hold, reconfiguration).
     pub(super) fn stop(&mut self) {
         self.est = None;
+        self.closed = None;
     }
 
     /// The run pulses back to back (the dynamic method fits through the motion, no settles).
@@ -225,6 +233,7 @@ impl EstimationRun {
     /// `t_ns`) and how many pulses it took. None when no run was under way.
     pub(super) fn conclude(&mut self, key: Option<u64>, t_ns: u64) -> Option<(Model, usize)> {
         let est = self.est.take()?;
+        self.closed = None;
         let estimate = est.estimate();
         let candidate = Model::from_estimate(&estimate, key, t_ns);
         self.last_estimate = Some(estimate);

@@ -6,7 +6,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::{MachineSetup, ReconfigPolicy};
-use super::estimation::{EstimationRun, Motion, PulseStep};
+use super::estimation::{ClosedStep, EstimationRun, Motion, PulseStep};
 use super::models::ModelSlot;
 use super::types::{
     finish, Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput,
@@ -205,6 +205,7 @@ impl Machine {
             State::Pulse => self.pulse_tick(s, &gyro, &accel),
             State::Settle => self.settle_tick(s, &gyro, &accel),
             State::Active => self.control_tick(s, &gyro, dt),
+            State::Identify => self.identify_tick(s, &gyro, &accel, dt),
         }
     }
 
@@ -212,7 +213,7 @@ impl Machine {
     /// estimation's navigation while it excites; ignored otherwise (control does not use
     /// velocity).
     pub fn on_dvl(&mut self, velocity: [f64; 3]) {
-        if matches!(self.state, State::Pulse | State::Settle) {
+        if matches!(self.state, State::Pulse | State::Settle | State::Identify) {
             self.run.velocity_fix(&Vector3::from(velocity));
         }
     }
@@ -277,6 +278,12 @@ impl Machine {
                     )));
                 }
                 self.run.stop();
+                if self.state == State::Identify && self.models.current().is_some() {
+                    // Under control the vehicle is held: it stays held, by the model in force.
+                    let why = self.describe_swap("estimation aborted: holding attitude");
+                    self.transition(State::Active, &why);
+                    return Ok("aborted; holding attitude".into());
+                }
                 self.transition(State::Idle, "estimation aborted: thrusters neutral");
                 Ok("aborted".into())
             }
@@ -500,8 +507,21 @@ impl Machine {
     }
 
     fn start_estimation(&mut self, t_ns: u64, why: &str) {
-        self.run.restart();
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
+        // Controlling with a model: identify under control (see `crate::identification`).
+        let controlling = matches!(self.state, State::Active | State::Identify)
+            || self.levelling.is_some();
+        if controlling
+            && self.models.current().is_some()
+            && EstimationRun::closed_loop_possible(&self.setup)
+        {
+            self.levelling = None;
+            self.run
+                .begin_closed_loop(t_ns, &self.setup.identification, self.n);
+            self.transition(State::Identify, &format!("{why}: identifying under control"));
+            return;
+        }
+        self.run.restart();
         // Controlling with a model: level the vehicle first (see MachineConfig::level_max_s).
         // A reconfiguration while levelling levels on (the vehicle is no more at rest).
         self.levelling = ((self.state == State::Active || self.levelling.is_some())
@@ -644,6 +664,91 @@ impl Machine {
             return self.start_pulse(s.t_ns);
         }
         Command::neutral(self.n)
+    }
+
+    /// Under control: the controller output with the dither on top, the estimator fed with
+    /// the total command; at a stop the new model is swapped in without a bump (the target and
+    /// the controller's state stay).
+    fn identify_tick(
+        &mut self,
+        s: &ImuInput,
+        gyro: &Vector3<f64>,
+        accel: &Vector3<f64>,
+        dt: f64,
+    ) -> Command {
+        let Some(model) = self.models.current() else {
+            self.run.stop();
+            self.transition(State::Idle, "no model to identify under: thrusters neutral");
+            return Command::neutral(self.n);
+        };
+        let meas = self.measured(s, gyro);
+        let attitude = meas.attitude;
+        let target = *self.target.get_or_insert_with(|| Target {
+            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, attitude.euler_angles().2),
+            depth: s.depth,
+        });
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Estimating;
+        let n = self.n.min(model.thrusters());
+        self.last_desired = self
+            .controller
+            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
+        let m = Motion {
+            gyro: *gyro,
+            accel: motion_accel(accel, &attitude),
+            specific_force: *accel,
+            depth: s.depth,
+        };
+        let err_deg = attitude.angle_to(&target.attitude).to_degrees();
+        let model = model.clone();
+        let step = self.run.closed_loop_sample(
+            s.t_ns,
+            &m,
+            &self.attitude.gyro_bias(),
+            err_deg,
+            &self.setup,
+            Some(&model),
+            self.n,
+            &mut cmd.thrust[..n],
+        );
+        finish(&mut cmd, self.setup.machine.deadband);
+        match step {
+            ClosedStep::Holding => self.text = "identifying under control: holding".into(),
+            ClosedStep::Exciting => {}
+            ClosedStep::Decided(d) if d.is_stop() => self.solve_under_control(d),
+            ClosedStep::Decided(_) => {
+                let excited = self.run.excited_s(s.t_ns);
+                self.text = format!("identifying under control: {excited:.0} s of dither");
+            }
+        }
+        cmd
+    }
+
+    fn solve_under_control(&mut self, decision: StopDecision) {
+        let key = self.geometry.as_ref().map(|g| g.key());
+        let t_ns = self.last_t_ns.unwrap_or(0);
+        let seconds = self.run.excited_s(t_ns);
+        let Some((candidate, _)) = self.run.conclude(key, t_ns) else {
+            return;
+        };
+        let why = match decision {
+            StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
+                "identified under control in {seconds:.1} s (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
+            ),
+            _ => format!("identification limit reached after {seconds:.1} s"),
+        };
+        match self.try_swap(candidate, ModelSource::Estimated) {
+            Ok(()) => {
+                if let Some(k) = key {
+                    self.models.remember_current(k);
+                }
+                self.transition(State::Active, &format!("{why}: new model, holding attitude"));
+            }
+            Err(e) => self.transition(
+                State::Active,
+                &format!("{why}: model rejected ({e}); old model kept"),
+            ),
+        }
     }
 
     fn solve(&mut self, decision: StopDecision) {

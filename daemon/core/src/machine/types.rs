@@ -22,6 +22,9 @@ pub enum State {
     Solve,
     Active,
     Fault,
+    /// Estimating under control: the controller holds the setpoint with the model in force
+    /// while a dither excites the thrusters (see `crate::identification`).
+    Identify,
 }
 
 impl State {
@@ -34,13 +37,14 @@ impl State {
             State::Solve => "solve",
             State::Active => "active",
             State::Fault => "fault",
+            State::Identify => "identify",
         }
     }
 
     pub fn is_estimating(self) -> bool {
         matches!(
             self,
-            State::MeasureNoise | State::Pulse | State::Settle | State::Solve
+            State::MeasureNoise | State::Pulse | State::Settle | State::Solve | State::Identify
         )
     }
 }

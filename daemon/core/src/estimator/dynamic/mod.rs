@@ -58,6 +58,9 @@ pub struct DynamicSolution {
     /// Every thruster column identified in both groups.
     pub excited: bool,
     pub terms: DynamicTerms,
+    /// With forward and reverse thrust fitted apart (`DynamicRun::split`): the 6 x 2N gains,
+    /// forward in columns 0..N, reverse in N..2N, and their standard errors.
+    pub split: Option<(DMatrix<f64>, DMatrix<f64>)>,
 }
 
 /// One dynamic-model fit in progress: navigation, thrust lag, integrals and both regressions.
@@ -65,6 +68,12 @@ pub struct DynamicSolution {
 #[derive(Debug, Clone)]
 pub struct DynamicRun {
     n: usize,
+    /// Forward and reverse command in separate columns (thrust = k_f u+ + k_r u-): needed when
+    /// the commands take many levels around zero (under control), where one symmetric column
+    /// and the mean-|command| term cannot take each thruster's asymmetry.
+    split: bool,
+    /// Thrust columns: n, or 2n when split.
+    cols: usize,
     lag_s: f64,
     segment_s: f64,
     nav: Navigator,
@@ -85,14 +94,32 @@ impl DynamicRun {
     /// A fit for `n` thrusters with spin-up time constant `lag_s`, segments of `segment_s`,
     /// starting from a rest whose mean specific force was `accel_rest`.
     pub fn new(n: usize, lag_s: f64, segment_s: f64, accel_rest: &Vector3<f64>) -> Self {
-        let k = n + TERMS;
+        Self::with_columns(n, false, lag_s, segment_s, accel_rest)
+    }
+
+    /// The same with forward and reverse thrust fitted apart (see `split`).
+    pub fn split(n: usize, lag_s: f64, segment_s: f64, accel_rest: &Vector3<f64>) -> Self {
+        Self::with_columns(n, true, lag_s, segment_s, accel_rest)
+    }
+
+    fn with_columns(
+        n: usize,
+        split: bool,
+        lag_s: f64,
+        segment_s: f64,
+        accel_rest: &Vector3<f64>,
+    ) -> Self {
+        let cols = if split { 2 * n } else { n };
+        let k = cols + TERMS;
         DynamicRun {
             n,
+            split,
+            cols,
             lag_s: lag_s.max(0.0),
             segment_s: segment_s.max(1e-3),
             nav: Navigator::at_rest(accel_rest, 0.0, None, DepthAid::default()),
-            lag: vec![0.0; n],
-            lag_prev: vec![0.0; n],
+            lag: vec![0.0; cols],
+            lag_prev: vec![0.0; cols],
             lag_abs: 0.0,
             terms: [0.0; TERMS],
             terms_prev: [0.0; TERMS],
@@ -152,12 +179,21 @@ impl DynamicRun {
         };
         self.lag_prev.copy_from_slice(&self.lag);
         let mut abs_target = 0.0;
-        for (i, l) in self.lag.iter_mut().enumerate() {
+        let n = self.n;
+        for i in 0..n {
             let v = u.map_or(0.0, |u| u[i]);
-            *l += a * (v - *l);
             abs_target += v.abs();
+            if self.split {
+                self.lag[i] += a * (v.max(0.0) - self.lag[i]);
+                self.lag[n + i] += a * (v.min(0.0) - self.lag[n + i]);
+            } else {
+                self.lag[i] += a * (v - self.lag[i]);
+            }
         }
-        self.lag_abs += a * (abs_target / self.n.max(1) as f64 - self.lag_abs);
+        // Split, the mean |command| is a sum of the thrust columns: left out (zero).
+        if !self.split {
+            self.lag_abs += a * (abs_target / n.max(1) as f64 - self.lag_abs);
+        }
         self.terms_prev = self.terms;
         terms(
             &nav.velocity,
@@ -175,16 +211,16 @@ impl DynamicRun {
             self.segment_start_s = t_s;
             self.integral.fill(0.0);
         } else {
-            let n = self.n;
-            for i in 0..n {
+            let c = self.cols;
+            for i in 0..c {
                 self.integral[i] += 0.5 * (self.lag_prev[i] + self.lag[i]) * dt;
             }
             for j in 0..TERMS {
-                self.integral[n + j] += 0.5 * (self.terms_prev[j] + self.terms[j]) * dt;
+                self.integral[c + j] += 0.5 * (self.terms_prev[j] + self.terms[j]) * dt;
             }
         }
-        self.direct[..self.n].copy_from_slice(&self.lag);
-        self.direct[self.n..].copy_from_slice(&self.terms);
+        self.direct[..self.cols].copy_from_slice(&self.lag);
+        self.direct[self.cols..].copy_from_slice(&self.terms);
         self.rot.add(&self.integral, gyro);
         let motion = specific_force + nav.down * self.nav.gravity();
         self.acc.add(&self.direct, &motion);
@@ -195,9 +231,12 @@ impl DynamicRun {
     #[allow(clippy::needless_range_loop)]
     pub fn solve(&self, rest_sigma: &[f64; 6]) -> DynamicSolution {
         let n = self.n;
+        let c = self.cols;
         let sols = [self.rot.solve(), self.acc.solve()];
         let mut b = DMatrix::zeros(6, n);
         let mut std_err = DMatrix::zeros(6, n);
+        let mut split_b = DMatrix::zeros(6, c);
+        let mut split_se = DMatrix::zeros(6, c);
         let mut coefficients = DMatrix::zeros(6, TERMS);
         let mut coef_se = DMatrix::zeros(6, TERMS);
         let mut sigma = [0.0; 6];
@@ -210,9 +249,28 @@ impl DynamicRun {
             for a in 0..3 {
                 let row = 3 * g + a;
                 sigma[row] = s[a];
-                for i in 0..n {
-                    b[(row, i)] = sol.theta[(i, a)];
+                for i in 0..c {
+                    split_b[(row, i)] = sol.theta[(i, a)];
                     let d = sol.gram_inv[(i, i)];
+                    split_se[(row, i)] = if d > 0.0 {
+                        s[a] * d.sqrt()
+                    } else {
+                        f64::INFINITY
+                    };
+                }
+                for i in 0..n {
+                    // Split: the symmetric gain is the mean of forward and reverse (what a
+                    // linear model of the thruster is, and what the truth is compared with).
+                    let (theta, d) = if self.split {
+                        let g = &sol.gram_inv;
+                        (
+                            0.5 * (sol.theta[(i, a)] + sol.theta[(n + i, a)]),
+                            0.25 * (g[(i, i)] + g[(n + i, n + i)] + 2.0 * g[(i, n + i)]),
+                        )
+                    } else {
+                        (sol.theta[(i, a)], sol.gram_inv[(i, i)])
+                    };
+                    b[(row, i)] = theta;
                     std_err[(row, i)] = if d > 0.0 {
                         s[a] * d.sqrt()
                     } else {
@@ -222,11 +280,11 @@ impl DynamicRun {
                     norm2 += b[(row, i)] * b[(row, i)];
                 }
                 for j in 0..TERMS {
-                    coefficients[(row, j)] = sol.theta[(n + j, a)];
-                    coef_se[(row, j)] = s[a] * sol.gram_inv[(n + j, n + j)].max(0.0).sqrt();
+                    coefficients[(row, j)] = sol.theta[(c + j, a)];
+                    coef_se[(row, j)] = s[a] * sol.gram_inv[(c + j, c + j)].max(0.0).sqrt();
                 }
             }
-            let identified = (0..n).all(|i| sol.gram_inv[(i, i)] > 0.0);
+            let identified = (0..c).all(|i| sol.gram_inv[(i, i)] > 0.0);
             excited &= identified;
             if identified && norm2 > 0.0 {
                 rel_err[g] = var_sum.sqrt() / norm2.sqrt();
@@ -244,6 +302,7 @@ impl DynamicRun {
                 max_tilt_rad: self.nav.max_tilt(),
                 max_heading_change_rad: self.nav.max_heading_change(),
             },
+            split: self.split.then_some((split_b, split_se)),
         }
     }
 }

@@ -1,0 +1,82 @@
+//! The estimator under control: the dynamic method fed with whatever command was sent (the
+//! controller's plus a dither), instead of its own pulses. See `crate::identification`.
+
+use nalgebra::Vector3;
+
+use super::{Estimate, Estimator, StopDecision};
+use crate::estimator::config::Method;
+use crate::estimator::dynamic::DynamicRun;
+use crate::estimator::response::GRAVITY;
+
+impl Estimator {
+    /// Start the dynamic fit now, for samples whose command the caller gives
+    /// (`push_commanded_sample`), forward and reverse thrust fitted apart (the controller's
+    /// commands take every level around zero; see `DynamicRun::split`). The navigation starts from the specific force given with
+    /// `with_rest_specific_force` (the mean while holding), at zero velocity. False, and
+    /// nothing started, for the static methods: they need pulses from rest.
+    pub fn begin_closed_loop(&mut self) -> bool {
+        if self.cfg.method != Method::Dynamic {
+            return false;
+        }
+        self.pulse = None;
+        self.dynamic = Some(DynamicRun::split(
+            self.thrusters(),
+            self.cfg.spin_up_s,
+            self.cfg.segment_s,
+            &self
+                .rest_force
+                .unwrap_or(Vector3::new(0.0, 0.0, -GRAVITY)),
+        ));
+        true
+    }
+
+    /// One sample under control at `t_s`: bias-free gyro (rad/s), the raw specific force
+    /// (m/s^2), depth (m) if measured, and `u`, the command sent during the interval this
+    /// sample ends (model units, before any deadband compensation). Ignored before
+    /// `begin_closed_loop`; a sample with a non-finite value or the wrong length is dropped.
+    pub fn push_commanded_sample(
+        &mut self,
+        t_s: f64,
+        gyro: &Vector3<f64>,
+        specific_force: &Vector3<f64>,
+        depth: Option<f64>,
+        u: &[f64],
+    ) {
+        let Some(run) = self.dynamic.as_mut() else {
+            return;
+        };
+        if u.len() != self.max_command.len() {
+            return;
+        }
+        for (m, v) in self.max_command.iter_mut().zip(u) {
+            if v.is_finite() {
+                *m = m.max(v.abs());
+            }
+        }
+        run.push(t_s, gyro, specific_force, depth, Some(u));
+        self.samples += 1;
+    }
+
+    /// One decision interval under control is over: counted like a pulse (status shows it).
+    pub fn end_interval(&mut self) {
+        self.pulses += 1;
+    }
+
+    /// Stop under control: never before `min_s`, at `max_s` whatever the bound (reported as
+    /// the limit), in between once both error bounds reached the target.
+    pub fn closed_loop_decision(
+        &self,
+        estimate: &Estimate,
+        elapsed_s: f64,
+        min_s: f64,
+        max_s: f64,
+    ) -> StopDecision {
+        if elapsed_s >= max_s {
+            return StopDecision::MaxPulses;
+        }
+        if elapsed_s < min_s {
+            return StopDecision::Continue;
+        }
+        self.bound_decision(estimate)
+    }
+}

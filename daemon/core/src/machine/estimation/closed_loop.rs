@@ -1,0 +1,148 @@
+//! The estimation run under control (state Identify): first a short hold without dither, for
+//! the navigation's starting attitude (the mean specific force) and, when no noise levels are
+//! known yet, the noise; then the dither on top of the controller's command, the estimator fed
+//! with the total command, and a stop decision every `estimator.segment_s`.
+
+use nalgebra::Vector3;
+use thruster_protocol::MAX_THRUSTERS;
+
+use super::{EstimationRun, Motion};
+use crate::estimator::{Estimator, Method, StopDecision};
+use crate::identification::{Dither, IdentificationConfig};
+use crate::machine::config::MachineSetup;
+use crate::model::{Model, ModelSource};
+
+/// Where a closed-loop run stands.
+#[derive(Debug, Clone)]
+pub(in crate::machine) struct ClosedLoop {
+    dither: Dither,
+    start_ns: u64,
+    /// When the dither started (None while holding for the noise and the starting attitude).
+    excite_from_ns: Option<u64>,
+    next_decision_ns: u64,
+    /// The command sent after the last sample: it acted during the interval the next sample
+    /// ends, and is fitted with that sample.
+    sent: [f64; MAX_THRUSTERS],
+    /// The gyro bias, frozen when the dither starts: the attitude filter's estimate wanders
+    /// with the accelerations the dither causes, and a wandering bias is motion to the fit.
+    gyro_bias: Vector3<f64>,
+}
+
+/// What one sample under control led to.
+pub(in crate::machine) enum ClosedStep {
+    /// Holding without dither, measuring.
+    Holding,
+    /// The dither was added to the command.
+    Exciting,
+    /// A decision interval ended; the decision says whether the run stops now.
+    Decided(StopDecision),
+}
+
+impl EstimationRun {
+    /// Whether a run may go on under control with this setup: the dynamic method only.
+    pub(in crate::machine) fn closed_loop_possible(setup: &MachineSetup) -> bool {
+        setup.identification.closed_loop && setup.estimator.method == Method::Dynamic
+    }
+
+    /// A new run under control begins at `t_ns`. The noise levels of an earlier run (measured
+    /// at rest) are kept: under control the gyro also sees the held motion.
+    pub(in crate::machine) fn begin_closed_loop(&mut self, t_ns: u64, cfg: &IdentificationConfig, n: usize) {
+        self.restart();
+        self.closed = Some(ClosedLoop {
+            dither: Dither::new(n, cfg.hold_s, t_ns),
+            start_ns: t_ns,
+            excite_from_ns: None,
+            next_decision_ns: u64::MAX,
+            sent: [0.0; MAX_THRUSTERS],
+            gyro_bias: Vector3::zeros(),
+        });
+    }
+
+    /// Seconds of dither so far (0 while holding or open loop).
+    pub(in crate::machine) fn excited_s(&self, t_ns: u64) -> f64 {
+        self.closed
+            .as_ref()
+            .and_then(|c| c.excite_from_ns)
+            .map_or(0.0, |t0| t_ns.saturating_sub(t0) as f64 * 1e-9)
+    }
+
+    /// One sample under control. `command` holds the controller's command (model units) for
+    /// `n` thrusters and gets the dither added, faded by the attitude error `err_deg`; `m.gyro`
+    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now.
+    #[allow(clippy::too_many_arguments)]
+    pub(in crate::machine) fn closed_loop_sample(
+        &mut self,
+        t_ns: u64,
+        m: &Motion,
+        gyro_bias: &Vector3<f64>,
+        err_deg: f64,
+        setup: &MachineSetup,
+        model: Option<&Model>,
+        n: usize,
+        command: &mut [f64],
+    ) -> ClosedStep {
+        let Some(c) = self.closed.as_mut() else {
+            return ClosedStep::Holding;
+        };
+        let t_s = t_ns as f64 * 1e-9;
+        let Some(excite_from) = c.excite_from_ns else {
+            // Holding: the mean specific force (the starting attitude) and the noise.
+            self.noise.push(&m.gyro.into(), &m.accel.into());
+            if m.specific_force.iter().all(|v| v.is_finite()) {
+                self.rest_force.0 += m.specific_force;
+                self.rest_force.1 += 1;
+            }
+            let held_s = t_ns.saturating_sub(c.start_ns) as f64 * 1e-9;
+            c.sent[..command.len()].copy_from_slice(command);
+            if held_s < setup.machine.noise_s || self.noise.samples() < 10 {
+                return ClosedStep::Holding;
+            }
+            c.gyro_bias = *gyro_bias;
+            let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
+            let mut est = Estimator::new(setup.estimator.clone(), n, levels);
+            if self.rest_force.1 > 0 {
+                est = est.with_rest_specific_force(self.rest_force.0 / self.rest_force.1 as f64);
+            }
+            if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
+                est = est.with_nominal(nominal.effectiveness.clone());
+            }
+            est.begin_closed_loop();
+            self.est = Some(est);
+            c.excite_from_ns = Some(t_ns);
+            c.next_decision_ns = t_ns + (setup.estimator.segment_s * 1e9) as u64;
+            return ClosedStep::Holding;
+        };
+        let Some(est) = self.est.as_mut() else {
+            return ClosedStep::Holding;
+        };
+        let cfg = &setup.identification;
+        let k = command.len();
+        est.push_commanded_sample(
+            t_s,
+            &(m.gyro - c.gyro_bias),
+            &m.specific_force,
+            m.depth,
+            &c.sent[..k],
+        );
+        let amplitude = cfg.dither * cfg.fade(err_deg);
+        // Balanced like the open-loop doublets: propellers push harder forward (a T200's
+        // reverse gives ~78 %), so a symmetric dither would push the vehicle off its setpoint
+        // on average and the controller would chase it.
+        let forward = setup.estimator.reverse_ratio;
+        for (u, s) in command.iter_mut().zip(c.dither.signs_at(t_s)) {
+            let d = if *s > 0.0 { forward * s } else { *s };
+            *u = (*u + amplitude * d).clamp(-1.0, 1.0);
+        }
+        c.sent[..k].copy_from_slice(command);
+        if t_ns < c.next_decision_ns {
+            return ClosedStep::Exciting;
+        }
+        c.next_decision_ns += (setup.estimator.segment_s * 1e9) as u64;
+        est.end_interval();
+        let estimate = est.estimate();
+        let elapsed = t_ns.saturating_sub(excite_from) as f64 * 1e-9;
+        let decision = est.closed_loop_decision(&estimate, elapsed, cfg.min_s, cfg.max_s);
+        self.last_estimate = Some(estimate);
+        ClosedStep::Decided(decision)
+    }
+}

@@ -1,0 +1,93 @@
+//! Closed-loop identification in one process, against the simulator's truth: AMOUR-5's top
+//! thruster is rotated 45 degrees and announced while the machine holds level; the machine
+//! swaps in the new geometry's nominal model, keeps holding with it and learns the new model
+//! from a dither on top of the controller's commands (`thrusterd_core::identification`).
+//! In-process runs are deterministic: the numbers in the comments are what these seeds gave.
+
+mod common;
+use common::{vehicle, Reestimation, Run};
+use thruster_sim::NoisePreset;
+use thrusterd_core::machine::{Mode, State};
+use thrusterd_core::model::ModelSource;
+
+/// First model open loop, then hold level for 3 s, then the announced rotation.
+fn rotate_while_holding(noise: NoisePreset, seed: u64) -> (Run, Reestimation) {
+    let v = vehicle("amour5");
+    let mut run = Run::new("amour5", noise, seed);
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(3.0);
+    assert_eq!(run.machine.state(), State::Active);
+    let r = run.announced_rotation(&v);
+    assert_eq!(r.source, ModelSource::Estimated, "{noise:?} seed {seed}: {r:?}");
+    (run, r)
+}
+
+/// Noise-free the fit is exact up to the navigation: measured 0.003 / 0.006 of the truth in
+/// 5.0 s (1 s holding, then 4 s of dither, the minimum), never more than 3.6 deg from level.
+/// Before the command was fitted with the sample that ends its interval (one sample late),
+/// this gave 0.10 / 0.08; with an uncoded random dither, 9-14 deg of tilt.
+#[test]
+fn noise_free_the_model_learned_under_control_matches_the_truth() {
+    let (_, r) = rotate_while_holding(NoisePreset::None, 1);
+    assert!(r.err_rot < 0.01 && r.err_acc < 0.02, "{r:?}");
+    assert!(r.took_s < 6.5, "{r:?}");
+    assert!(r.max_tilt_deg < 5.0, "{r:?}");
+}
+
+/// With a realistic IMU: measured over seeds 1-5 0.007 / 0.037 in 5.0 s, 3.9 deg of largest
+/// tilt, 2.1 deg mean error (the open-loop re-estimation tilted it 16-22 deg).
+#[test]
+fn with_a_realistic_imu_it_stays_near_level_and_learns_within_a_few_percent() {
+    for seed in [1, 2] {
+        let (run, r) = rotate_while_holding(NoisePreset::Realistic, seed);
+        assert!(r.err_rot < 0.03 && r.err_acc < 0.08, "seed {seed}: {r:?}");
+        assert!(r.took_s < 10.0, "seed {seed}: {r:?}");
+        assert!(r.max_tilt_deg < 6.0, "seed {seed}: {r:?}");
+        assert!(r.mean_err_deg < 4.0, "seed {seed}: {r:?}");
+        // The thrusters were driven all along: control never let go.
+        assert!(run.max_abs_cmd <= 1.0);
+    }
+}
+
+/// At the paper's noise (0.25 rad/s gyro) the 5 % target is out of reach within the 20 s
+/// limit; the best fit is then swapped in (measured over seeds 1-5: 0.081 / 0.159 after 21 s,
+/// 5.1 deg of largest tilt, 4.9 deg mean error, of which ~4.5 deg is the noise's own
+/// (holding with no dither at all)).
+#[test]
+fn at_the_papers_noise_the_limit_swaps_the_best_fit_still_near_level() {
+    let (_, r) = rotate_while_holding(NoisePreset::Paper, 1);
+    assert!(r.err_rot < 0.15, "{r:?}");
+    assert!(r.took_s < 23.0, "{r:?}");
+    assert!(r.max_tilt_deg < 10.0, "{r:?}");
+}
+
+/// The identification is a state of its own, thrusters driven throughout (never neutral),
+/// and an abort keeps holding with the model in force instead of letting go.
+#[test]
+fn identification_keeps_control_and_an_abort_keeps_holding() {
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 3);
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(2.0);
+    run.machine
+        .on_request(thrusterd_core::machine::Request::Estimate)
+        .unwrap();
+    assert_eq!(run.machine.state(), State::Identify);
+    let t0 = run.sim.time_s();
+    while run.sim.time_s() - t0 < 2.0 {
+        run.tick();
+        assert_eq!(run.last_mode, Mode::Estimating);
+        assert_eq!(run.machine.state(), State::Identify);
+    }
+    let version = run.machine.model().unwrap().version;
+    let reply = run
+        .machine
+        .on_request(thrusterd_core::machine::Request::Abort)
+        .unwrap();
+    assert!(reply.contains("holding"), "{reply}");
+    assert_eq!(run.machine.state(), State::Active);
+    assert_eq!(run.machine.model().unwrap().version, version);
+    run.run_for(1.0);
+    assert_eq!(run.last_mode, Mode::Controlling);
+}

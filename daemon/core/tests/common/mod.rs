@@ -1,0 +1,200 @@
+//! The state machine closed around the simulator's physics, in one process: the harness the
+//! in-process tests share (machine_sim.rs, closed_loop.rs).
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use nalgebra::DMatrix;
+use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
+use thrusterd_core::estimator::EstimatorConfig;
+use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Mode, Request, State};
+
+pub fn vehicle(name: &str) -> Vehicle {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config/vehicles")
+        .join(format!("{name}.toml"));
+    Vehicle::load(&path).unwrap()
+}
+
+pub struct Run {
+    pub machine: Machine,
+    pub sim: Simulator,
+    pub last_mode: Mode,
+    pub max_abs_cmd: f64,
+}
+
+impl Run {
+    pub fn new(name: &str, noise: NoisePreset, seed: u64) -> Run {
+        Run::with_rate(name, noise, seed, 200.0)
+    }
+
+    /// The same with the static forward method and the settings it was tuned with.
+    pub fn forward(name: &str, noise: NoisePreset, seed: u64) -> Run {
+        let mut run = Run::new(name, noise, seed);
+        let mut setup = MachineSetup {
+            thrusters: run.sim.thruster_count(),
+            estimator: EstimatorConfig::forward(),
+            ..MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        run.machine = Machine::new(setup);
+        run
+    }
+
+    pub fn with_rate(name: &str, noise: NoisePreset, seed: u64, rate_hz: f64) -> Run {
+        let v = vehicle(name);
+        let n = v.thrusters.len();
+        let sensors = SensorConfig {
+            rate_hz,
+            noise,
+            ..SensorConfig::default()
+        };
+        let sim = Simulator::new(v, sensors, seed).unwrap();
+        let mut setup = MachineSetup {
+            thrusters: n,
+            ..MachineSetup::default()
+        };
+        // No driver between machine and physics here: the daemon compensates the T200 deadband
+        // itself, as it would for a driver that does not.
+        setup.machine.deadband = 0.05;
+        let machine = Machine::new(setup);
+        Run {
+            machine,
+            sim,
+            last_mode: Mode::Neutral,
+            max_abs_cmd: 0.0,
+        }
+    }
+
+    pub fn tick(&mut self) {
+        let r = self.sim.advance_and_sample();
+        let cmd = self.machine.on_imu(&ImuInput {
+            seq: 0,
+            t_ns: r.t_ns,
+            gyro: r.gyro,
+            accel: r.accel,
+            mag: Some(r.mag),
+            depth: Some(r.depth),
+        });
+        assert_eq!(cmd.count, self.sim.thruster_count());
+        for v in &cmd.thrust[..cmd.count] {
+            assert!(v.is_finite() && v.abs() <= 1.0, "command {v}");
+            self.max_abs_cmd = self.max_abs_cmd.max(v.abs());
+        }
+        assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
+        self.last_mode = cmd.mode;
+        self.sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
+    }
+
+    pub fn run_for(&mut self, s: f64) {
+        self.run_until(s, |_| false);
+    }
+
+    pub fn run_until(&mut self, max_s: f64, done: impl Fn(&Machine) -> bool) -> f64 {
+        let start = self.sim.time_s();
+        while self.sim.time_s() - start < max_s {
+            self.tick();
+            if done(&self.machine) {
+                break;
+            }
+        }
+        self.sim.time_s() - start
+    }
+
+    /// Symmetric truth: the model is linear, so it learns the mean of forward and reverse gain.
+    pub fn truth(&self) -> DMatrix<f64> {
+        let (fwd, rev) = self.sim.truth();
+        (fwd + rev) * 0.5
+    }
+
+    pub fn estimate(&mut self) -> f64 {
+        self.machine.on_request(Request::Estimate).unwrap();
+        self.run_until(120.0, |m| m.state() == State::Active)
+    }
+}
+
+pub fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
+    (est.rows(rows, 3) - truth.rows(rows, 3)).norm() / truth.rows(rows, 3).norm()
+}
+
+
+/// The vehicle's declared geometry.
+pub fn geometry(v: &Vehicle) -> thrusterd_core::machine::Geometry {
+    thrusterd_core::machine::Geometry {
+        positions: v.thrusters.iter().map(|t| t.position_m).collect(),
+        directions: v.thrusters.iter().map(|t| t.direction).collect(),
+    }
+}
+
+/// What a re-estimation did to the vehicle and what it learned.
+#[derive(Debug, Clone, Copy)]
+pub struct Reestimation {
+    /// Vehicle time from its start until control with the new model, s.
+    pub took_s: f64,
+    /// Largest tilt (true attitude, angle of body z from down), deg.
+    pub max_tilt_deg: f64,
+    /// Largest heading change from where it started, deg.
+    pub max_heading_deg: f64,
+    /// Mean angle between the true attitude and level at the starting heading, deg.
+    pub mean_err_deg: f64,
+    /// The new model against the new truth, rotation and acceleration rows.
+    pub err_rot: f64,
+    pub err_acc: f64,
+    pub source: thrusterd_core::model::ModelSource,
+}
+
+impl Run {
+    /// The top thruster of AMOUR-5 rotated 45 degrees about x and announced with its new
+    /// geometry while the machine holds level: runs until control resumes with a new model
+    /// (at most 120 s) and measures the way there against the simulator's truth.
+    pub fn announced_rotation(&mut self, v: &Vehicle) -> Reestimation {
+        use nalgebra::{UnitQuaternion, Vector3};
+        self.sim
+            .apply(&thruster_sim::Action::Rotate {
+                thruster: "T".into(),
+                axis: [1.0, 0.0, 0.0],
+                angle_deg: 45.0,
+            })
+            .unwrap();
+        let mut moved = geometry(v);
+        let r = UnitQuaternion::from_euler_angles(45f64.to_radians(), 0.0, 0.0);
+        moved.directions[0] = (r * Vector3::from(moved.directions[0])).into();
+        let before = self.machine.model().map_or(0, |m| m.version);
+        self.machine.on_reconfig(thrusterd_core::machine::Reconfig {
+            count: v.thrusters.len(),
+            geometry: Some(moved),
+            what: "top thruster rotated".into(),
+        });
+        let heading = self.sim.roll_pitch_yaw()[2];
+        let level = UnitQuaternion::from_euler_angles(0.0, 0.0, heading);
+        let start = self.sim.time_s();
+        let (mut max_tilt, mut max_heading, mut err_sum, mut k) = (0.0f64, 0.0f64, 0.0, 0u64);
+        while self.sim.time_s() - start < 120.0 {
+            self.tick();
+            let q = self.sim.attitude();
+            let down = q.inverse() * Vector3::z();
+            max_tilt = max_tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
+            let dh = (q.euler_angles().2 - heading + std::f64::consts::PI)
+                .rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            max_heading = max_heading.max(dh.abs().to_degrees());
+            err_sum += q.angle_to(&level).to_degrees();
+            k += 1;
+            let m = &self.machine;
+            if m.state() == State::Active && m.model().is_some_and(|m| m.version > before + 1) {
+                break;
+            }
+        }
+        let model = self.machine.model().unwrap().clone();
+        let truth = self.truth();
+        Reestimation {
+            took_s: self.sim.time_s() - start,
+            max_tilt_deg: max_tilt,
+            max_heading_deg: max_heading,
+            mean_err_deg: err_sum / k.max(1) as f64,
+            err_rot: rel_err(&model.effectiveness, &truth, 0),
+            err_acc: rel_err(&model.effectiveness, &truth, 3),
+            source: model.source,
+        }
+    }
+}
