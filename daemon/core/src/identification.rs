@@ -63,7 +63,11 @@ impl IdentificationConfig {
     /// (key, value, allowed range) for the config checker.
     pub fn checks(&self) -> [(&'static str, f64, Range); 5] {
         [
-            ("identification.dither", self.dither, Range::closed(0.0, 1.0)),
+            (
+                "identification.dither",
+                self.dither,
+                Range::closed(0.0, 1.0),
+            ),
             ("identification.hold_s", self.hold_s, Range::above(0.0)),
             (
                 "identification.attitude_budget_deg",
@@ -71,7 +75,11 @@ impl IdentificationConfig {
                 Range::closed(0.0, 180.0),
             ),
             ("identification.min_s", self.min_s, Range::at_least(0.0)),
-            ("identification.max_s", self.max_s, Range::at_least(self.min_s)),
+            (
+                "identification.max_s",
+                self.max_s,
+                Range::at_least(self.min_s),
+            ),
         ]
     }
 

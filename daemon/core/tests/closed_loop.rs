@@ -19,7 +19,11 @@ fn rotate_while_holding(noise: NoisePreset, seed: u64) -> (Run, Reestimation) {
     run.run_for(3.0);
     assert_eq!(run.machine.state(), State::Active);
     let r = run.announced_rotation(&v);
-    assert_eq!(r.source, ModelSource::Estimated, "{noise:?} seed {seed}: {r:?}");
+    assert_eq!(
+        r.source,
+        ModelSource::Estimated,
+        "{noise:?} seed {seed}: {r:?}"
+    );
     (run, r)
 }
 

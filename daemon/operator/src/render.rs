@@ -44,10 +44,9 @@ pub fn progress(s: &StatusMsg) -> String {
             format!("settling after pulse {} of {planned}{bound}", s.pulse)
         }
         Ok(DaemonState::Solve) => format!("solving after {planned} pulses{bound}"),
-        Ok(DaemonState::Identify) => format!(
-            "identifying under control, decision {}{bound}",
-            s.pulse
-        ),
+        Ok(DaemonState::Identify) => {
+            format!("identifying under control, decision {}{bound}", s.pulse)
+        }
         Ok(DaemonState::Active) => format!("controlling with the model{bound}"),
         Ok(DaemonState::Idle) => "idle, zero thrust".to_string(),
         Ok(DaemonState::Fault) => "FAULT, zero thrust".to_string(),

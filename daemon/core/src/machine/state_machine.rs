@@ -509,8 +509,8 @@ impl Machine {
     fn start_estimation(&mut self, t_ns: u64, why: &str) {
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
         // Controlling with a model: identify under control (see `crate::identification`).
-        let controlling = matches!(self.state, State::Active | State::Identify)
-            || self.levelling.is_some();
+        let controlling =
+            matches!(self.state, State::Active | State::Identify) || self.levelling.is_some();
         if controlling
             && self.models.current().is_some()
             && EstimationRun::closed_loop_possible(&self.setup)
@@ -518,7 +518,10 @@ impl Machine {
             self.levelling = None;
             self.run
                 .begin_closed_loop(t_ns, &self.setup.identification, self.n);
-            self.transition(State::Identify, &format!("{why}: identifying under control"));
+            self.transition(
+                State::Identify,
+                &format!("{why}: identifying under control"),
+            );
             return;
         }
         self.run.restart();
@@ -742,7 +745,10 @@ impl Machine {
                 if let Some(k) = key {
                     self.models.remember_current(k);
                 }
-                self.transition(State::Active, &format!("{why}: new model, holding attitude"));
+                self.transition(
+                    State::Active,
+                    &format!("{why}: new model, holding attitude"),
+                );
             }
             Err(e) => self.transition(
                 State::Active,

@@ -117,7 +117,6 @@ pub fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
     (est.rows(rows, 3) - truth.rows(rows, 3)).norm() / truth.rows(rows, 3).norm()
 }
 
-
 /// The vehicle's declared geometry.
 pub fn geometry(v: &Vehicle) -> thrusterd_core::machine::Geometry {
     thrusterd_core::machine::Geometry {

@@ -46,7 +46,12 @@ impl EstimationRun {
 
     /// A new run under control begins at `t_ns`. The noise levels of an earlier run (measured
     /// at rest) are kept: under control the gyro also sees the held motion.
-    pub(in crate::machine) fn begin_closed_loop(&mut self, t_ns: u64, cfg: &IdentificationConfig, n: usize) {
+    pub(in crate::machine) fn begin_closed_loop(
+        &mut self,
+        t_ns: u64,
+        cfg: &IdentificationConfig,
+        n: usize,
+    ) {
         self.restart();
         self.closed = Some(ClosedLoop {
             dither: Dither::new(n, cfg.hold_s, t_ns),
