@@ -26,12 +26,20 @@ pub struct IdentificationConfig {
     /// geometry, cached or loaded) and the daemon is controlling (default true). Without a
     /// model, and with `false`, an estimation runs open loop: level, rest, pulses.
     pub closed_loop: bool,
-    /// Dither amplitude, a fraction of full command added to the controller's (default 0.3;
-    /// forward commands are scaled by `estimator.reverse_ratio` so each thruster's mean thrust
-    /// stays zero). Measured in-process on AMOUR-5 after an announced 45 degree rotation
-    /// (daemon/core/tests/closed_loop.rs, docs/experiments.md): realistic IMU, 0.2 / 0.3 of
-    /// full command gave a model in 6.3 / 5.0 s at 2.9 / 3.8 deg of largest tilt.
+    /// Dither amplitude for a quiet IMU, a fraction of full command added to the controller's
+    /// (default 0.3; forward commands are scaled by `estimator.reverse_ratio` so each
+    /// thruster's mean thrust stays zero). Measured in-process on AMOUR-5 after an announced
+    /// 45 degree rotation (daemon/core/tests/closed_loop.rs, docs/experiments.md): realistic
+    /// IMU, 0.2 / 0.3 of full command gave a model in 6.3 / 5.0 s at 2.9 / 3.8 deg of tilt.
     pub dither: f64,
+    /// Sized to the noise: the amplitude is `dither * sqrt(sigma_rot / dither_noise_ref_rad_s)`,
+    /// at least `dither` and at most `dither_max` (defaults 0.02 rad/s and 0.6). Why: the
+    /// fit's error grows with the gyro noise over the amplitude, and the attitude budget
+    /// leaves room at high noise. At the paper's noise (0.25 rad/s) 0.3 / 0.6 / 0.8 gave
+    /// 0.081 / 0.048 / 0.045 of the truth within the 20 s limit at 5.1 / 7.9 / 11.4 deg of
+    /// largest tilt (seeds 1-5).
+    pub dither_noise_ref_rad_s: f64,
+    pub dither_max: f64,
     /// Each half of a thruster's coded dither pair lasts this long, s (default 0.05: the
     /// shorter the pair, the less of it passes the control loop as tilt; 0.1 s doubled the
     /// tilt for the same model quality).
@@ -51,6 +59,8 @@ impl Default for IdentificationConfig {
         IdentificationConfig {
             closed_loop: true,
             dither: 0.3,
+            dither_noise_ref_rad_s: 0.02,
+            dither_max: 0.6,
             hold_s: 0.05,
             attitude_budget_deg: 10.0,
             min_s: 4.0,
@@ -61,12 +71,22 @@ impl Default for IdentificationConfig {
 
 impl IdentificationConfig {
     /// (key, value, allowed range) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 5] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 7] {
         [
             (
                 "identification.dither",
                 self.dither,
                 Range::closed(0.0, 1.0),
+            ),
+            (
+                "identification.dither_noise_ref_rad_s",
+                self.dither_noise_ref_rad_s,
+                Range::above(0.0),
+            ),
+            (
+                "identification.dither_max",
+                self.dither_max,
+                Range::closed(self.dither, 1.0),
             ),
             ("identification.hold_s", self.hold_s, Range::above(0.0)),
             (
@@ -81,6 +101,15 @@ impl IdentificationConfig {
                 Range::at_least(self.min_s),
             ),
         ]
+    }
+
+    /// The dither amplitude for a measured gyro noise `sigma_rot` (rad/s, RMS over the axes).
+    pub fn amplitude(&self, sigma_rot: f64) -> f64 {
+        let factor = (sigma_rot / self.dither_noise_ref_rad_s).sqrt();
+        if !factor.is_finite() {
+            return self.dither;
+        }
+        (self.dither * factor).clamp(self.dither, self.dither_max.max(self.dither))
     }
 
     /// Share of the dither applied at attitude error `err_deg`: 1 up to half the budget, then
@@ -202,5 +231,14 @@ mod tests {
         assert!((c.fade(7.5) - 0.5).abs() < 1e-12);
         assert_eq!(c.fade(10.0), 0.0);
         assert_eq!(c.fade(f64::NAN), 0.0);
+    }
+
+    #[test]
+    fn the_amplitude_grows_with_the_noise_within_its_bounds() {
+        let c = IdentificationConfig::default();
+        assert_eq!(c.amplitude(0.002), 0.3);
+        assert!((c.amplitude(0.045) - 0.45).abs() < 1e-12);
+        assert_eq!(c.amplitude(0.25), 0.6);
+        assert_eq!(c.amplitude(f64::NAN), 0.3);
     }
 }

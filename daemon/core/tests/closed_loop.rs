@@ -54,14 +54,15 @@ fn with_a_realistic_imu_it_stays_near_level_and_learns_within_a_few_percent() {
     }
 }
 
-/// At the paper's noise (0.25 rad/s gyro) the 5 % target is out of reach within the 20 s
-/// limit; the best fit is then swapped in (measured over seeds 1-5: 0.081 / 0.159 after 21 s,
-/// 5.1 deg of largest tilt, 4.9 deg mean error, of which ~4.5 deg is the noise's own
-/// (holding with no dither at all)).
+/// At the paper's noise (0.25 rad/s gyro) the dither is sized up to 0.6 of full command and
+/// the 5 % target is still out of reach within the 20 s limit; the best fit is then swapped in.
+/// Measured over seeds 1-5: 0.048 / 0.108 after 21 s (worst seed 0.054 on the rotation rows),
+/// 7.9 deg of largest tilt, 5.9 deg mean error, of which ~4.5 deg is the noise's own (holding
+/// with no dither at all). With the quiet-IMU amplitude of 0.3: 0.081 / 0.159 at 5.1 deg.
 #[test]
 fn at_the_papers_noise_the_limit_swaps_the_best_fit_still_near_level() {
     let (_, r) = rotate_while_holding(NoisePreset::Paper, 1);
-    assert!(r.err_rot < 0.15, "{r:?}");
+    assert!(r.err_rot < 0.1 && r.err_acc < 0.2, "{r:?}");
     assert!(r.took_s < 23.0, "{r:?}");
     assert!(r.max_tilt_deg < 10.0, "{r:?}");
 }

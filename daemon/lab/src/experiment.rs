@@ -824,6 +824,18 @@ fn common(out: &RunOutput) -> Value {
     })
 }
 
+/// The daemon states in which it estimates (open loop or under control).
+fn estimating(s: DaemonState) -> bool {
+    matches!(
+        s,
+        DaemonState::MeasureNoise
+            | DaemonState::Pulse
+            | DaemonState::Settle
+            | DaemonState::Solve
+            | DaemonState::Identify
+    )
+}
+
 /// hot-swap scores: before / during / after the change, the swap and recovery times.
 fn hot_swap(out: &RunOutput) -> Value {
     let t_c = out.spec.change.map_or(f64::NAN, |c| c.0);
@@ -874,7 +886,28 @@ fn hot_swap(out: &RunOutput) -> Value {
         .filter(|w| w.0 >= t_c)
         .map(|w| w.1)
         .fold(0.0, f64::max);
+    // How far the vehicle went while the daemon re-estimated (open loop: from levelling to the
+    // new model; closed loop: the identification under control), from the true attitude.
+    let mut excursion = crate::excursion::Excursion::default();
+    let mut estimating_s = 0.0;
+    let mut last_t: Option<f64> = None;
+    for r in rows.iter().filter(|r| r.t >= t_c && estimating(r.state)) {
+        let [roll, pitch, yaw] = r.tru.map(f64::to_radians);
+        excursion.push_attitude(&UnitQuaternion::from_euler_angles(roll, pitch, yaw));
+        if let Some(t0) = last_t {
+            estimating_s += (r.t - t0).min(0.1);
+        }
+        last_t = Some(r.t);
+    }
+    let reestimation = (excursion.samples > 0).then(|| {
+        json!({
+            "max_tilt_deg": num(excursion.max_tilt_deg),
+            "max_heading_change_deg": num(excursion.max_heading_deg),
+            "vehicle_s": num(estimating_s),
+        })
+    });
     json!({
+        "reestimation": reestimation,
         "t_change_s": num(t_c),
         "announced": out.spec.change.is_some_and(|c| c.1),
         "truth_changed_at_s": opt(out.truth_changes.first().copied()),
@@ -1135,6 +1168,15 @@ fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
                 fmt(&h["recovery_threshold_deg"]),
                 fmt(&h["recovered_after_s"]),
             );
+            let r = &h["reestimation"];
+            if !r.is_null() {
+                println!(
+                    "  while re-estimating ({} vehicle-s): largest tilt {} deg, heading change {} deg",
+                    fmt(&r["vehicle_s"]),
+                    fmt(&r["max_tilt_deg"]),
+                    fmt(&r["max_heading_change_deg"]),
+                );
+            }
             for part in ["before", "during", "after"] {
                 println!(
                     "    {part:>6}: mean error {} deg (max {}), |yaw error| {} deg, while pitching {} deg",

@@ -26,6 +26,8 @@ pub(in crate::machine) struct ClosedLoop {
     /// The gyro bias, frozen when the dither starts: the attitude filter's estimate wanders
     /// with the accelerations the dither causes, and a wandering bias is motion to the fit.
     gyro_bias: Vector3<f64>,
+    /// Dither amplitude, sized to the noise when the dither starts.
+    amplitude: f64,
 }
 
 /// What one sample under control led to.
@@ -60,6 +62,7 @@ impl EstimationRun {
             next_decision_ns: u64::MAX,
             sent: [0.0; MAX_THRUSTERS],
             gyro_bias: Vector3::zeros(),
+            amplitude: cfg.dither,
         });
     }
 
@@ -104,6 +107,7 @@ impl EstimationRun {
             }
             c.gyro_bias = *gyro_bias;
             let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
+            c.amplitude = setup.identification.amplitude(levels.sigma_rot());
             let mut est = Estimator::new(setup.estimator.clone(), n, levels);
             if self.rest_force.1 > 0 {
                 est = est.with_rest_specific_force(self.rest_force.0 / self.rest_force.1 as f64);
@@ -129,7 +133,7 @@ impl EstimationRun {
             m.depth,
             &c.sent[..k],
         );
-        let amplitude = cfg.dither * cfg.fade(err_deg);
+        let amplitude = c.amplitude * cfg.fade(err_deg);
         // Balanced like the open-loop doublets: propellers push harder forward (a T200's
         // reverse gives ~78 %), so a symmetric dither would push the vehicle off its setpoint
         // on average and the controller would chase it.
