@@ -145,7 +145,8 @@ fn reconfiguration_mid_control_leads_to_a_new_model() {
     let e_new = model_error(&second, &truth, 0);
     let e_old = model_error(&first, &truth, 0);
     println!("re-estimated {e_new:.3}, first model against the new truth {e_old:.3}");
-    // Measured 0.032 (the old model: 0.373 against the new truth).
+    // Measured 0.032 open loop; identified under control at this (the paper's) noise, 0.056-0.062
+    // in three runs after the 20 s limit (the old model: 0.373 against the new truth).
     assert!(e_new < 0.15, "re-estimated model vs new truth: {e_new:.3}");
     assert!(
         e_new < e_old,

@@ -889,11 +889,13 @@ fn hot_swap(out: &RunOutput) -> Value {
     // How far the vehicle went while the daemon re-estimated (open loop: from levelling to the
     // new model; closed loop: the identification under control), from the true attitude.
     let mut excursion = crate::excursion::Excursion::default();
+    let mut max_err: f64 = 0.0;
     let mut estimating_s = 0.0;
     let mut last_t: Option<f64> = None;
     for r in rows.iter().filter(|r| r.t >= t_c && estimating(r.state)) {
         let [roll, pitch, yaw] = r.tru.map(f64::to_radians);
         excursion.push_attitude(&UnitQuaternion::from_euler_angles(roll, pitch, yaw));
+        max_err = max_err.max(r.err);
         if let Some(t0) = last_t {
             estimating_s += (r.t - t0).min(0.1);
         }
@@ -903,6 +905,9 @@ fn hot_swap(out: &RunOutput) -> Value {
         json!({
             "max_tilt_deg": num(excursion.max_tilt_deg),
             "max_heading_change_deg": num(excursion.max_heading_deg),
+            // From the setpoint: the manoeuvres go on while the daemon identifies under
+            // control, so the tilt includes the commanded pitch.
+            "max_err_deg": num(max_err),
             "vehicle_s": num(estimating_s),
         })
     });
@@ -1171,10 +1176,11 @@ fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
             let r = &h["reestimation"];
             if !r.is_null() {
                 println!(
-                    "  while re-estimating ({} vehicle-s): largest tilt {} deg, heading change {} deg",
+                    "  while re-estimating ({} vehicle-s): largest tilt {} deg, heading change {} deg, error from the setpoint {} deg",
                     fmt(&r["vehicle_s"]),
                     fmt(&r["max_tilt_deg"]),
                     fmt(&r["max_heading_change_deg"]),
+                    fmt(&r["max_err_deg"]),
                 );
             }
             for part in ["before", "during", "after"] {

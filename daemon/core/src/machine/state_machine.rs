@@ -716,8 +716,9 @@ impl Machine {
         );
         finish(&mut cmd, self.setup.machine.deadband);
         match step {
-            ClosedStep::Holding => self.text = "identifying under control: holding".into(),
-            ClosedStep::Exciting => {}
+            // The text stays the transition's (why the identification began) until the
+            // first decision: a status reader must be able to see it.
+            ClosedStep::Holding | ClosedStep::Exciting => {}
             ClosedStep::Decided(d) if d.is_stop() => self.solve_under_control(d),
             ClosedStep::Decided(_) => {
                 let excited = self.run.excited_s(s.t_ns);
