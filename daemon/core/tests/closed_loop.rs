@@ -96,3 +96,54 @@ fn identification_keeps_control_and_an_abort_keeps_holding() {
     run.run_for(1.0);
     assert_eq!(run.last_mode, Mode::Controlling);
 }
+
+/// From scratch with `identification.burst_rel_err = 0.15` at the paper's noise: the open-loop
+/// pulses stop after the minimum cycle, the coarse model is swapped in, and the estimation goes
+/// on under control. Measured over seeds 1-5: first model after 4.4 s (open loop to the 5 %
+/// target: 8.1 s), final model after 25.4 s at 0.051 / 0.089 (open loop: 0.056 / 0.063), largest
+/// tilt 22.4 deg during the pulses (open loop: 23.8) and 11.2 deg under control (the vehicle
+/// still swings from the pulses when control begins). Not the default: the first cycle already
+/// tilts the vehicle as far as the whole open-loop run, and the final model comes 17 s later.
+/// With a realistic IMU the first cycle reaches the target and there is nothing to refine.
+#[test]
+fn from_scratch_a_burst_then_identification_under_control() {
+    use nalgebra::Vector3;
+    use thrusterd_core::machine::{Machine, MachineSetup, Request};
+    for (noise, refines) in [(NoisePreset::Paper, true), (NoisePreset::Realistic, false)] {
+        let mut run = Run::new("amour5", noise, 1);
+        let mut setup = MachineSetup {
+            thrusters: 5,
+            ..MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        setup.identification.burst_rel_err = 0.15;
+        run.machine = Machine::new(setup);
+        run.run_for(1.0);
+        run.machine.on_request(Request::Estimate).unwrap();
+        let t0 = run.sim.time_s();
+        let (mut first, mut identified, mut tilt_closed) = (None, false, 0.0f64);
+        while run.sim.time_s() - t0 < 60.0 && run.machine.state() != State::Active {
+            run.tick();
+            if first.is_none() && run.machine.model().is_some() {
+                first = Some(run.sim.time_s() - t0);
+            }
+            if run.machine.state() == State::Identify {
+                identified = true;
+                let down = run.sim.attitude().inverse() * Vector3::z();
+                tilt_closed = tilt_closed.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
+            }
+        }
+        let took = run.sim.time_s() - t0;
+        let model = run.machine.model().unwrap().clone();
+        let err = common::rel_err(&model.effectiveness, &run.truth(), 0);
+        println!("{noise:?}: first model {first:?} s, final {took:.1} s, err {err:.3}, tilt under control {tilt_closed:.1}");
+        assert_eq!(identified, refines, "{noise:?}");
+        assert_eq!(model.source, ModelSource::Estimated);
+        assert!(first.unwrap() < if refines { 5.5 } else { 5.0 }, "{first:?}");
+        assert!(err < 0.1, "{noise:?}: {err}");
+        if refines {
+            assert!(took > 15.0 && took < 30.0, "{took}");
+            assert!(tilt_closed < 20.0, "{tilt_closed}");
+        }
+    }
+}

@@ -45,6 +45,8 @@ pub(super) struct EstimationRun {
     rest_force: (Vector3<f64>, u64),
     /// Under control (state Identify): the dither and its clock.
     closed: Option<ClosedLoop>,
+    /// This open-loop run is a burst: its model is refined under control next.
+    burst: bool,
 }
 
 impl EstimationRun {
@@ -57,6 +59,7 @@ impl EstimationRun {
             quiet_since_ns: None,
             rest_force: (Vector3::zeros(), 0),
             closed: None,
+            burst: false,
         }
     }
 
@@ -66,6 +69,12 @@ impl EstimationRun {
         self.rest_force = (Vector3::zeros(), 0);
         self.est = None;
         self.closed = None;
+        self.burst = false;
+    }
+
+    /// Whether the run that just concluded was an open-loop burst to be refined under control.
+    pub(super) fn was_burst(&self) -> bool {
+        self.burst
     }
 
     /// The run ends without a candidate (abort, fault, idle, hold, reconfiguration).
@@ -139,6 +148,13 @@ impl EstimationRun {
             )
         }) {
             cfg.initial_power = p;
+        }
+        // From scratch with closed-loop identification: only a burst, good enough to hold.
+        self.burst = model.is_none()
+            && Self::closed_loop_possible(setup)
+            && setup.identification.burst_rel_err > cfg.target_rel_err;
+        if self.burst {
+            cfg.target_rel_err = setup.identification.burst_rel_err;
         }
         let mut est = Estimator::new(cfg, n, levels);
         if self.rest_force.1 > 0 {

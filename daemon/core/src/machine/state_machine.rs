@@ -784,6 +784,14 @@ impl Machine {
                         State::Active,
                         &format!("{why}: new model, holding attitude"),
                     );
+                    // A burst that already reached the target needs no refining.
+                    let coarse = self.models.current().is_some_and(|m| {
+                        m.rel_err_rot.max(m.rel_err_acc) > self.setup.estimator.target_rel_err
+                    });
+                    if self.run.was_burst() && coarse {
+                        let t = self.last_t_ns.unwrap_or(0);
+                        self.start_estimation(t, &format!("{why}: burst model in"));
+                    }
                 } else {
                     self.transition(State::Idle, &format!("{why}: new model"));
                 }
