@@ -14,6 +14,7 @@ use crate::identification::IdentificationConfig;
 use crate::machine::{Geometry, MachineConfig, MachineSetup};
 use crate::model::RigidBody;
 use crate::monitor::MonitorConfig;
+use crate::refinement::RefinementConfig;
 use thruster_protocol::MAX_THRUSTERS;
 
 /// The whole file.
@@ -30,6 +31,7 @@ pub struct DaemonConfig {
     pub attitude: AttitudeConfig,
     pub monitor: MonitorConfig,
     pub identification: IdentificationConfig,
+    pub refinement: RefinementConfig,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -332,6 +334,9 @@ impl DaemonConfig {
         for (key, v, range) in self.identification.checks() {
             floats.push((key.into(), v, range));
         }
+        for (key, v, range) in self.refinement.checks() {
+            floats.push((key.into(), v, range));
+        }
         for (key, v, range) in floats {
             if !range.contains(v) {
                 return Err(out_of_range(&key, range, &v));
@@ -373,6 +378,7 @@ impl DaemonConfig {
             attitude: self.attitude.clone(),
             monitor: self.monitor.clone(),
             identification: self.identification.clone(),
+            refinement: self.refinement.clone(),
             body: self.body.clone(),
             thrusters: self.thruster_count(),
             geometry,

@@ -12,6 +12,7 @@ pub mod machine;
 pub mod model;
 pub mod monitor;
 pub mod navigation;
+pub mod refinement;
 pub mod store;
 pub mod study;
 pub mod wire;

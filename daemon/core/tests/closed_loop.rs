@@ -139,7 +139,10 @@ fn from_scratch_a_burst_then_identification_under_control() {
         println!("{noise:?}: first model {first:?} s, final {took:.1} s, err {err:.3}, tilt under control {tilt_closed:.1}");
         assert_eq!(identified, refines, "{noise:?}");
         assert_eq!(model.source, ModelSource::Estimated);
-        assert!(first.unwrap() < if refines { 5.5 } else { 5.0 }, "{first:?}");
+        assert!(
+            first.unwrap() < if refines { 5.5 } else { 5.0 },
+            "{first:?}"
+        );
         assert!(err < 0.1, "{noise:?}: {err}");
         if refines {
             assert!(took > 15.0 && took < 30.0, "{took}");

@@ -9,6 +9,7 @@ use crate::estimator::EstimatorConfig;
 use crate::identification::IdentificationConfig;
 use crate::model::RigidBody;
 use crate::monitor::MonitorConfig;
+use crate::refinement::RefinementConfig;
 
 /// What a reconfiguration event leads to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -97,6 +98,7 @@ pub struct MachineSetup {
     pub attitude: AttitudeConfig,
     pub monitor: MonitorConfig,
     pub identification: IdentificationConfig,
+    pub refinement: RefinementConfig,
     pub body: RigidBody,
     /// Thrusters at start.
     pub thrusters: usize,

@@ -17,7 +17,8 @@ use crate::controller::{Controller, Measured, Target};
 use crate::estimator::response::motion_accel;
 use crate::estimator::{Estimate, NoiseLevels, StopDecision};
 use crate::model::{nominal_effectiveness, Model, ModelSource};
-use crate::monitor::{Mismatch, MismatchAction, ModelMonitor};
+use crate::monitor::{MismatchAction, ModelMonitor};
+use crate::refinement::{Refiner, Tick, WindowVerdict};
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
 struct Levelling {
@@ -42,6 +43,7 @@ pub struct Machine {
     attitude: AttitudeFilter,
     controller: Controller,
     monitor: ModelMonitor,
+    refiner: Refiner,
     target: Option<Target>,
     models: ModelSlot,
     geometry: Option<Geometry>,
@@ -70,6 +72,7 @@ impl Machine {
             attitude: AttitudeFilter::new(setup.attitude.clone()),
             controller: Controller::new(setup.controller.clone()),
             monitor: ModelMonitor::new(setup.monitor.clone(), n),
+            refiner: Refiner::new(setup.refinement.clone(), n),
             target: None,
             models: ModelSlot::default(),
             geometry: None,
@@ -109,6 +112,12 @@ impl Machine {
 
     pub fn last_estimate(&self) -> Option<&Estimate> {
         self.run.last_estimate()
+    }
+
+    /// The background refinement's last window verdict (how the closed-loop data fit the
+    /// model in force), if a window has ended since start.
+    pub fn refinement(&self) -> Option<&WindowVerdict> {
+        self.refiner.last()
     }
 
     /// The desired motion (DOF order) of the last control tick.
@@ -468,6 +477,7 @@ impl Machine {
         if to == State::Active && from != State::Active {
             // Control (re)starts: judge the model on fresh data only.
             self.monitor.reset(self.n);
+            self.refiner.reset();
         }
         if from != to {
             self.events.push(Event::StateChanged {
@@ -825,6 +835,7 @@ impl Machine {
         {
             Ok(installed) => {
                 self.monitor.reset(self.n);
+                self.refiner.reset();
                 self.events.push(Event::ModelSwapped(Box::new(installed)));
                 Ok(())
             }
@@ -862,11 +873,28 @@ impl Machine {
         self.last_desired = self
             .controller
             .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
-        // The monitor compares in model units: the command before deadband compensation.
+        let err_rad = attitude.angle_to(&target.attitude);
+        let verdict = self.refiner.observe(
+            &Tick {
+                t_ns: s.t_ns,
+                gyro,
+                gyro_bias: &self.attitude.gyro_bias(),
+                attitude: &attitude,
+                specific_force: &Vector3::from(s.accel),
+                depth: s.depth,
+                err_deg: err_rad.to_degrees(),
+            },
+            model,
+            self.run.levels(),
+            &self.setup.estimator,
+            &mut cmd.thrust[..n],
+        );
+        // The monitor compares in model units: the command sent (dither included) before
+        // deadband compensation.
         let gravity_body = attitude.inverse() * Vector3::z();
         let mismatch = self.monitor.observe(
             dt,
-            attitude.angle_to(&target.attitude),
+            err_rad,
             &meas.rate,
             &gravity_body,
             &model.effectiveness,
@@ -874,14 +902,16 @@ impl Machine {
         );
         finish(&mut cmd, self.setup.machine.deadband);
         if let Some(m) = mismatch {
-            self.on_mismatch(s.t_ns, m);
+            self.on_mismatch(s.t_ns, m.to_string());
+        } else if let Some(v) = verdict.filter(|v| v.changed) {
+            self.on_mismatch(s.t_ns, v.to_string());
         }
         cmd
     }
 
     /// The monitor found the thrusters doing something else than the model says.
-    fn on_mismatch(&mut self, t_ns: u64, m: Mismatch) {
-        let why = m.to_string();
+    fn on_mismatch(&mut self, t_ns: u64, why: String) {
+        self.refiner.reset();
         self.events.push(Event::MismatchDetected(why.clone()));
         self.monitor.reset(self.n);
         match self.monitor.action() {
