@@ -414,8 +414,8 @@ fn truth_validation() {
 fn status_validation() {
     status().validate().unwrap();
     let mut s = status();
-    s.state = 7;
-    assert_rejects(&s, RejectCategory::Other, "state has unknown value 7");
+    s.state = 8;
+    assert_rejects(&s, RejectCategory::Other, "state has unknown value 8");
     let mut s = status();
     s.power = 1.5;
     assert_rejects(&s, RejectCategory::Range, "power = 1.5 is outside [0, 1]");
@@ -555,7 +555,7 @@ fn enums_round_trip_and_reject_unknown_values() {
     check(ReconfigKind::ALL, 4);
     check(ModelSource::ALL, 4);
     check(ModelMethod::ALL, 3);
-    check(DaemonState::ALL, 7);
+    check(DaemonState::ALL, 8);
     check(RequestKind::ALL, 9);
     check(ResponseCode::ALL, 6);
     check(Dof::ALL, 6);
