@@ -10,15 +10,19 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 use system_tests::{bin, Proc, World};
 
-/// After the step, the controller has this long (vehicle time) to bring the vehicle round...
-const SETTLE_S: f64 = 3.0;
-/// ... and is then judged over this long.
+/// After the step the controller has this long (vehicle time) to turn the vehicle ...
+const SETTLE_S: f64 = 2.0;
+/// ... and is then judged for this long: the proportional response, most of the step.
 const JUDGED_S: f64 = 3.0;
-/// Largest attitude error (to the daemon's own estimate) accepted while holding the 10 deg
-/// pitch step after settling. Measured on this setup (AMOUR-5, realistic IMU, dynamic model):
-/// see docs/telemetry.md; the bound leaves room for seeds and load, not for a broken loop
-/// (the step itself is 10 deg).
-const MAX_SETTLED_ERROR_DEG: f64 = 3.0;
+/// Largest attitude error (to the daemon's own estimate) accepted in that window. Measured on
+/// this setup (AMOUR-5, realistic IMU, dynamic model, default gains): at most 2.5 deg, the
+/// restoring moment the integrator has not yet taken over (docs/telemetry.md).
+const MAX_SETTLED_ERROR_DEG: f64 = 3.5;
+/// Later, the integrator has taken the restoring moment over: judged over [LATE_S, LATE_S +
+/// JUDGED_S] after the step ...
+const LATE_S: f64 = 15.0;
+/// ... where the error measured at most 0.6 deg.
+const MAX_LATE_ERROR_DEG: f64 = 1.0;
 
 fn ctl(world: &World, args: &[&str]) -> Output {
     Command::new(bin("thrusterctl"))
@@ -40,6 +44,24 @@ fn expect_ok(out: &Output, what: &str) {
         text(&out.stdout),
         text(&out.stderr)
     );
+}
+
+/// Polls `status --json` until the daemon reads the simulator's IMU: watch, like any
+/// operator command, refuses a namespace without a daemon (exit 3).
+fn wait_for_imu(world: &World, daemon: &Proc) {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let out = ctl(world, &["status", "--json"]);
+        let samples = serde_json::from_slice::<Value>(&out.stdout)
+            .ok()
+            .and_then(|v| v["samples"].as_u64())
+            .unwrap_or(0);
+        if samples > 50 {
+            return;
+        }
+        assert!(Instant::now() < deadline, "{}", daemon.log_text());
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }
 
 /// `thrusterctl watch ARGS` in the background, its stdout (not a terminal) in a log.
@@ -102,11 +124,26 @@ fn wait_line(p: &Proc, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
 #[test]
 fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_error() {
     let world = World::new("tel");
-    let mut daemon = world.daemon(&[]);
+    // The model-mismatch monitor only reports: it once re-estimated 11-16 s into the held
+    // step (a false alarm on pitch at the realistic IMU), which is not what this test is about.
+    let config = world.path("thrusterd.toml");
+    std::fs::write(&config, "[monitor]\naction = \"report\"\n").unwrap();
+    let mut daemon = world.daemon(&["--config", config.to_str().unwrap()]);
+    // Lockstep paced at 10x real time: vehicle time runs evenly, fast enough for a short test,
+    // slow enough that the operator's commands land within a second of vehicle time.
     let mut sim = world.sim(
         "amour5",
-        &["--noise", "realistic", "--lockstep", "--duration", "100000"],
+        &[
+            "--noise",
+            "realistic",
+            "--lockstep",
+            "--pace",
+            "10",
+            "--duration",
+            "100000",
+        ],
     );
+    wait_for_imu(&world, &daemon);
     // Every message (interval 0) as JSON, and the default plain lines, both piped.
     let json = watch(&world, &["--json", "--interval-ms", "0"]);
     let plain = watch(&world, &[]);
@@ -131,7 +168,7 @@ fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_erro
     });
     let t_step = secs(&step);
     wait_line(&json, "the judged window's end", |v| {
-        secs(v) > t_step + SETTLE_S + JUDGED_S
+        secs(v) > t_step + LATE_S + JUDGED_S
     });
     let wall = wall_start.elapsed().as_secs_f64();
     let plain_log = finish_watch(plain);
@@ -181,7 +218,19 @@ fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_erro
         .iter()
         .map(|v| v["estimation"]["pulse"].as_u64().unwrap())
         .collect();
-    assert!(pulses.windows(2).all(|w| w[0] <= w[1]), "{pulses:?}");
+    // Counting up within a run; a new run (the daemon may re-estimate on its own, e.g. when
+    // its monitor finds the model off) starts again from 0.
+    let status_lines: Vec<&str> = json_log
+        .lines()
+        .filter(|l| l.starts_with('{') && !l.contains("\"telemetry\""))
+        .collect();
+    assert!(
+        pulses.windows(2).all(|w| w[0] <= w[1] || w[1] == 0),
+        "{pulses:?}\n{status_lines:#?}"
+    );
+    if pulses.windows(2).any(|w| w[1] < w[0]) {
+        eprintln!("more than one estimation ran:\n{status_lines:#?}");
+    }
     let last = est[est.len() - 1]["estimation"].clone();
     assert!(pulses[pulses.len() - 1] >= 8, "{last}");
     assert!(
@@ -214,36 +263,64 @@ fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_erro
         .unwrap()
         .to_degrees();
     assert!(ey > 0.7 * e0, "pitch part {ey} of {e0} deg");
-    // Then the controller brings the vehicle round: judged after SETTLE_S.
-    let judged: Vec<&Value> = after
-        .iter()
-        .copied()
-        .filter(|v| secs(v) >= t_step + SETTLE_S && secs(v) <= t_step + SETTLE_S + JUDGED_S)
-        .collect();
-    assert!(judged.len() >= 40, "{} lines judged", judged.len());
-    let errors: Vec<f64> = judged
-        .iter()
-        .map(|v| f(v, "attitude_error_angle_rad").to_degrees())
-        .collect();
-    let max = errors.iter().copied().fold(0.0, f64::max);
-    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-    let pitch = judged
-        .iter()
-        .map(|v| v["euler_rad"][1].as_f64().unwrap().to_degrees())
-        .sum::<f64>()
-        / judged.len() as f64;
+    // Then the controller brings the vehicle round, most of the way at once and the rest as
+    // its integrator takes the restoring moment over.
+    let window = |from: f64| -> (f64, f64, f64, usize) {
+        let w: Vec<&Value> = after
+            .iter()
+            .copied()
+            .filter(|v| secs(v) >= t_step + from && secs(v) <= t_step + from + JUDGED_S)
+            .collect();
+        assert!(
+            w.len() >= 40,
+            "{} lines from {from} s after the step",
+            w.len()
+        );
+        assert!(w
+            .iter()
+            .all(|v| v["state"] == "Active" && v["mode"] == "Controlling"));
+        let errors: Vec<f64> = w
+            .iter()
+            .map(|v| f(v, "attitude_error_angle_rad").to_degrees())
+            .collect();
+        let max = errors.iter().copied().fold(0.0, f64::max);
+        let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+        let pitch = w
+            .iter()
+            .map(|v| v["euler_rad"][1].as_f64().unwrap().to_degrees())
+            .sum::<f64>()
+            / w.len() as f64;
+        (mean, max, pitch, w.len())
+    };
+    let (mean, max, pitch, _) = window(SETTLE_S);
+    let (late_mean, late_max, late_pitch, _) = window(LATE_S);
     eprintln!(
-        "after the step: error {e0:.2} deg; settled: mean {mean:.2} max {max:.2} deg, \
-         pitch {pitch:.2} deg"
+        "attitude error after the step {e0:.2} deg; {SETTLE_S}-{} s after: mean {mean:.2} \
+         max {max:.2} deg, pitch {pitch:.2} deg; {LATE_S}-{} s after: mean {late_mean:.2} \
+         max {late_max:.2} deg, pitch {late_pitch:.2} deg",
+        SETTLE_S + JUDGED_S,
+        LATE_S + JUDGED_S
     );
     assert!(
         max < MAX_SETTLED_ERROR_DEG,
-        "settled error up to {max:.2} deg (mean {mean:.2})"
+        "error up to {max:.2} deg {SETTLE_S} s after the step"
     );
-    assert!((pitch - 10.0).abs() < 2.0, "mean pitch {pitch:.2} deg");
-    assert!(judged
-        .iter()
-        .all(|v| v["state"] == "Active" && v["mode"] == "Controlling"));
+    assert!(
+        pitch > 10.0 - MAX_SETTLED_ERROR_DEG,
+        "mean pitch {pitch:.2} deg"
+    );
+    assert!(
+        late_max < MAX_LATE_ERROR_DEG,
+        "error up to {late_max:.2} deg {LATE_S} s after the step"
+    );
+    assert!(
+        late_mean < mean,
+        "the error grew: {mean:.2} then {late_mean:.2} deg"
+    );
+    assert!(
+        (late_pitch - 10.0).abs() < MAX_LATE_ERROR_DEG,
+        "pitch {late_pitch:.2} deg"
+    );
 
     // The plain watch: state changes and the setpoint as lines, telemetry at most once a
     // second of wall clock.
@@ -293,21 +370,32 @@ fn telemetry_off_publishes_nothing() {
     std::fs::write(&config, "[telemetry]\nevery_n = 0\n").unwrap();
     let mut daemon = world.daemon(&["--config", config.to_str().unwrap()]);
     let mut sim = world.sim("amour5", &["--lockstep", "--duration", "100000"]);
+    wait_for_imu(&world, &daemon);
     let json = watch(&world, &["--json", "--interval-ms", "0"]);
-    // The daemon answers 400 samples (status counts them) while watch listens, yet no
-    // telemetry comes.
+    // Until the daemon has answered a few hundred more samples while watch listens, yet no
+    // telemetry came. (Status lines print on change only: ask for a change, which shows the
+    // counter.)
     let deadline = Instant::now() + Duration::from_secs(60);
-    loop {
-        let out = ctl(&world, &["status", "--json"]);
-        let samples = serde_json::from_slice::<Value>(&out.stdout)
-            .ok()
-            .and_then(|v| v["samples"].as_u64())
-            .unwrap_or(0);
-        if samples > 400 {
-            break;
+    let samples = |log: &str| {
+        log.lines()
+            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .filter_map(|v| v["samples"].as_u64())
+            .max()
+            .unwrap_or(0)
+    };
+    let first = loop {
+        let n = samples(&json.log_text());
+        if n > 0 {
+            break n;
         }
-        assert!(Instant::now() < deadline, "{}", daemon.log_text());
+        assert!(Instant::now() < deadline, "{}", json.log_text());
         std::thread::sleep(Duration::from_millis(50));
+    };
+    while samples(&json.log_text()) < first + 400 {
+        assert!(Instant::now() < deadline, "{}", json.log_text());
+        let _ = ctl(&world, &["estimate"]);
+        let _ = ctl(&world, &["abort"]);
+        std::thread::sleep(Duration::from_millis(20));
     }
     let log = finish_watch(json);
     assert!(telemetry(&log).is_empty(), "{log}");
