@@ -497,99 +497,100 @@ fn telemetry_valid_accepted_and_unused_entries_ignored() {
 
 #[test]
 fn telemetry_rejections() {
-    let cases: Vec<(Box<dyn Fn(&mut TelemetryMsg)>, RejectCategory, &str)> = vec![
+    type Mutation = fn(&mut TelemetryMsg);
+    let cases: Vec<(Mutation, RejectCategory, &str)> = vec![
         (
-            Box::new(|t| t.state = 99),
+            |t| t.state = 99,
             RejectCategory::Other,
             "state has unknown value 99",
         ),
         (
-            Box::new(|t| t.mode = 3),
+            |t| t.mode = 3,
             RejectCategory::Other,
             "mode has unknown value 3",
         ),
         (
-            Box::new(|t| t.flags |= 1 << 40),
+            |t| t.flags |= 1 << 40,
             RejectCategory::Other,
             "flags has unknown bits 0x10000000000",
         ),
         (
-            Box::new(|t| t.count = 17),
+            |t| t.count = 17,
             RejectCategory::Count,
             "count = 17 exceeds MAX_THRUSTERS (16)",
         ),
         (
-            Box::new(|t| t.attitude[1] = f64::NAN),
+            |t| t.attitude[1] = f64::NAN,
             RejectCategory::NonFinite,
             "attitude[1] is NaN",
         ),
         (
-            Box::new(|t| t.attitude = [0.9, 0.0, 0.0, 0.0]),
+            |t| t.attitude = [0.9, 0.0, 0.0, 0.0],
             RejectCategory::Range,
             "attitude has norm 0.9, expected 1 within 0.001",
         ),
         (
-            Box::new(|t| t.setpoint_attitude = [0.5, 0.5, 0.0, 0.0]),
+            |t| t.setpoint_attitude = [0.5, 0.5, 0.0, 0.0],
             RejectCategory::Range,
             "setpoint_attitude has norm 0.7071067811865476, expected 1 within 0.001",
         ),
         (
-            Box::new(|t| t.euler[1] = 2.0),
+            |t| t.euler[1] = 2.0,
             RejectCategory::Range,
             "euler[1] = 2 rad is outside [-1.5707963277948966, 1.5707963277948966]",
         ),
         (
-            Box::new(|t| t.setpoint_euler[2] = f64::NEG_INFINITY),
+            |t| t.setpoint_euler[2] = f64::NEG_INFINITY,
             RejectCategory::NonFinite,
             "setpoint_euler[2] is -inf",
         ),
         (
-            Box::new(|t| t.rate[2] = 60.0),
+            |t| t.rate[2] = 60.0,
             RejectCategory::Range,
             "rate[2] = 60 rad/s is outside [-50, 50]",
         ),
         (
-            Box::new(|t| t.depth = f64::NAN),
+            |t| t.depth = f64::NAN,
             RejectCategory::NonFinite,
             "depth is NaN",
         ),
         (
-            Box::new(|t| t.attitude_error_angle = -0.1),
+            |t| t.attitude_error_angle = -0.1,
             RejectCategory::Range,
             "attitude_error_angle = -0.1 rad is outside [0, 3.141592654589793]",
         ),
         (
-            Box::new(|t| t.attitude_error[0] = f64::NAN),
+            |t| t.attitude_error[0] = f64::NAN,
             RejectCategory::NonFinite,
             "attitude_error[0] is NaN",
         ),
         (
-            Box::new(|t| t.depth_error = f64::INFINITY),
+            |t| t.depth_error = f64::INFINITY,
             RejectCategory::NonFinite,
             "depth_error is inf",
         ),
         (
-            Box::new(|t| t.thrust[4] = 1.5),
+            |t| t.thrust[4] = 1.5,
             RejectCategory::Range,
             "thrust[4] = 1.5 is outside [-1, 1]",
         ),
         (
-            Box::new(|t| t.thrust[0] = f64::NAN),
+            |t| t.thrust[0] = f64::NAN,
             RejectCategory::NonFinite,
             "thrust[0] is NaN",
         ),
         (
-            Box::new(|t| t.power = 1.5),
+            |t| t.power = 1.5,
             RejectCategory::Range,
             "power = 1.5 is outside [0, 1]",
         ),
         (
-            Box::new(|t| t.error_bound = f64::NAN),
+            |t| t.error_bound = f64::NAN,
             RejectCategory::NonFinite,
             "error_bound is NaN",
         ),
         (
-            Box::new(|t| t.sigma_acc = -1.0),
+            |t| t.sigma_acc = -1.0,
             RejectCategory::Range,
             "sigma_acc = -1 m/s^2 is outside [0, 200]",
         ),

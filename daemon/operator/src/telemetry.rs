@@ -289,7 +289,7 @@ mod tests {
         t.sigma_rot = 10.0;
         t.sigma_acc = 100.0;
         t.rate = [-49.0; 3];
-        t.euler = [-3.14, -1.57, -3.14];
+        t.euler = [-3.1, -1.5, -3.1];
         let lines = dashboard(&t);
         assert_eq!(lines.len(), 8, "{lines:#?}");
         assert!(lines.iter().all(|l| l.chars().count() <= 80), "{lines:#?}");
