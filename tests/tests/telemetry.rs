@@ -83,8 +83,10 @@ fn finish_watch(mut p: Proc) -> String {
 }
 
 /// The telemetry objects among watch's JSON lines (status lines have no "telemetry" key).
+/// Complete lines only: a log read while watch writes may end in half a line.
 fn telemetry(log: &str) -> Vec<Value> {
-    log.lines()
+    log.split_inclusive('\n')
+        .filter_map(|l| l.strip_suffix('\n'))
         .filter(|l| l.starts_with('{'))
         .map(|l| serde_json::from_str::<Value>(l).unwrap_or_else(|e| panic!("{e}: {l}")))
         .filter_map(|v| v.get("telemetry").cloned())
