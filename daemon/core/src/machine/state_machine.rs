@@ -130,10 +130,12 @@ impl Machine {
         }
     }
 
+    /// For `telemetry`: the estimation run (its progress).
     pub(super) fn run(&self) -> &EstimationRun {
         &self.run
     }
 
+    /// For `telemetry`: the attitude filter's gyro bias estimate, rad/s.
     pub(super) fn gyro_bias(&self) -> Vector3<f64> {
         self.attitude.gyro_bias()
     }
