@@ -438,6 +438,170 @@ fn status_validation() {
     assert_rejects(&s, RejectCategory::Other, "text is not valid UTF-8");
 }
 
+// ---- telemetry -----------------------------------------------------------------------
+
+/// Controlling at a 10 deg pitch setpoint, 2 m depth held, 5 thrusters, mid-way through nothing.
+fn telemetry() -> TelemetryMsg {
+    let pitch = 10f64.to_radians();
+    let mut t = TelemetryMsg {
+        seq: 7,
+        t_ns: 12_000_000_000,
+        imu_seq: 2400,
+        flags: TelemetryMsg::HAS_SETPOINT
+            | TelemetryMsg::HOLD_DEPTH
+            | TelemetryMsg::HAS_DEPTH
+            | TelemetryMsg::HAS_NOISE,
+        count: 5,
+        model_version: 1,
+        attitude: [1.0, 0.0, 0.0, 0.0],
+        rate: [0.01, -0.02, 0.0],
+        depth: 2.1,
+        setpoint_attitude: [(pitch / 2.0).cos(), 0.0, (pitch / 2.0).sin(), 0.0],
+        setpoint_euler: [0.0, pitch, 0.0],
+        setpoint_depth: 2.0,
+        attitude_error: [0.0, pitch, 0.0],
+        attitude_error_angle: pitch,
+        depth_error: -0.1,
+        sigma_rot: 0.25,
+        sigma_acc: 0.49,
+        ..TelemetryMsg::default()
+    };
+    t.set_state(DaemonState::Active);
+    t.set_mode(ThrustMode::Controlling);
+    t.thrust[..5].copy_from_slice(&[0.3, -0.3, 1.0, -1.0, 0.0]);
+    t
+}
+
+#[test]
+fn telemetry_valid_accepted_and_unused_entries_ignored() {
+    telemetry().validate().unwrap();
+    TelemetryMsg::default().validate().unwrap();
+    // Beyond `count` nothing is read, so nothing is checked.
+    let mut t = telemetry();
+    t.thrust[5] = f64::NAN;
+    t.validate().unwrap();
+    // Angles computed in f64 may sit on pi itself.
+    let mut t = telemetry();
+    t.euler = [std::f64::consts::PI, 0.0, -std::f64::consts::PI];
+    t.attitude_error_angle = std::f64::consts::PI;
+    t.validate().unwrap();
+    // Without a setpoint its quaternion is not read as one (zeros are tolerated), but it
+    // must still be finite: a recorder logs every field.
+    let mut t = telemetry();
+    t.flags &= !TelemetryMsg::HAS_SETPOINT;
+    t.setpoint_attitude = [0.0; 4];
+    t.validate().unwrap();
+    t.setpoint_attitude[2] = f64::INFINITY;
+    assert_rejects(&t, RejectCategory::NonFinite, "setpoint_attitude[2] is inf");
+}
+
+#[test]
+fn telemetry_rejections() {
+    type Mutation = fn(&mut TelemetryMsg);
+    let cases: Vec<(Mutation, RejectCategory, &str)> = vec![
+        (
+            |t| t.state = 99,
+            RejectCategory::Other,
+            "state has unknown value 99",
+        ),
+        (
+            |t| t.mode = 3,
+            RejectCategory::Other,
+            "mode has unknown value 3",
+        ),
+        (
+            |t| t.flags |= 1 << 40,
+            RejectCategory::Other,
+            "flags has unknown bits 0x10000000000",
+        ),
+        (
+            |t| t.count = 17,
+            RejectCategory::Count,
+            "count = 17 exceeds MAX_THRUSTERS (16)",
+        ),
+        (
+            |t| t.attitude[1] = f64::NAN,
+            RejectCategory::NonFinite,
+            "attitude[1] is NaN",
+        ),
+        (
+            |t| t.attitude = [0.9, 0.0, 0.0, 0.0],
+            RejectCategory::Range,
+            "attitude has norm 0.9, expected 1 within 0.001",
+        ),
+        (
+            |t| t.setpoint_attitude = [0.5, 0.5, 0.0, 0.0],
+            RejectCategory::Range,
+            "setpoint_attitude has norm 0.7071067811865476, expected 1 within 0.001",
+        ),
+        (
+            |t| t.euler[1] = 2.0,
+            RejectCategory::Range,
+            "euler[1] = 2 rad is outside [-1.5707963277948966, 1.5707963277948966]",
+        ),
+        (
+            |t| t.setpoint_euler[2] = f64::NEG_INFINITY,
+            RejectCategory::NonFinite,
+            "setpoint_euler[2] is -inf",
+        ),
+        (
+            |t| t.rate[2] = 60.0,
+            RejectCategory::Range,
+            "rate[2] = 60 rad/s is outside [-50, 50]",
+        ),
+        (
+            |t| t.depth = f64::NAN,
+            RejectCategory::NonFinite,
+            "depth is NaN",
+        ),
+        (
+            |t| t.attitude_error_angle = -0.1,
+            RejectCategory::Range,
+            "attitude_error_angle = -0.1 rad is outside [0, 3.141592654589793]",
+        ),
+        (
+            |t| t.attitude_error[0] = f64::NAN,
+            RejectCategory::NonFinite,
+            "attitude_error[0] is NaN",
+        ),
+        (
+            |t| t.depth_error = f64::INFINITY,
+            RejectCategory::NonFinite,
+            "depth_error is inf",
+        ),
+        (
+            |t| t.thrust[4] = 1.5,
+            RejectCategory::Range,
+            "thrust[4] = 1.5 is outside [-1, 1]",
+        ),
+        (
+            |t| t.thrust[0] = f64::NAN,
+            RejectCategory::NonFinite,
+            "thrust[0] is NaN",
+        ),
+        (
+            |t| t.power = 1.5,
+            RejectCategory::Range,
+            "power = 1.5 is outside [0, 1]",
+        ),
+        (
+            |t| t.error_bound = f64::NAN,
+            RejectCategory::NonFinite,
+            "error_bound is NaN",
+        ),
+        (
+            |t| t.sigma_acc = -1.0,
+            RejectCategory::Range,
+            "sigma_acc = -1 m/s^2 is outside [0, 200]",
+        ),
+    ];
+    for (mutate, category, text) in cases {
+        let mut t = telemetry();
+        mutate(&mut t);
+        assert_rejects(&t, category, text);
+    }
+}
+
 #[test]
 fn status_text_truncates_at_char_boundary() {
     let mut s = StatusMsg::default();

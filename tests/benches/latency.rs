@@ -1,6 +1,8 @@
 //! IMU sample -> thrust command latency through the real daemon, beside a raw iceoryx2
 //! ping-pong of the same payloads (`thruster-sim respond`, which only validates and answers),
-//! measured in the same run, in event mode and in low-latency (spin) mode.
+//! measured in the same run, in event mode and in low-latency (spin) mode; the daemon with
+//! telemetry off, at its default (every 10th sample) and on every sample, each with a reader
+//! subscribed to it (so every message is delivered and its listener woken).
 //!
 //! Run: cargo bench -p system-tests --bench latency [-- ROUND_TRIPS]
 
@@ -8,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use system_tests::{state, Operator, Proc, World};
 use thruster_protocol::services::{Inbox, Port};
-use thruster_protocol::{DaemonState, ImuSample, RequestKind, ThrustCommand};
+use thruster_protocol::{DaemonState, ImuSample, RequestKind, TelemetryMsg, ThrustCommand};
 
 const WARMUP: usize = 2_000;
 
@@ -96,7 +98,7 @@ fn ping_pong(world: &World, n: usize, setup: impl FnOnce()) -> Vec<f64> {
     round_trips(&imu, &thrust, &mut seq, n)
 }
 
-fn daemon_config(world: &World) -> std::path::PathBuf {
+fn daemon_config(world: &World, telemetry_every_n: u32) -> std::path::PathBuf {
     // Eight declared thrusters (directions need not be unit: the daemon normalises them): the
     // daemon starts with a nominal model and can hold attitude.
     let mut text = String::from("[vehicle]\n");
@@ -112,9 +114,54 @@ fn daemon_config(world: &World) -> std::path::PathBuf {
     ] {
         text += &format!("[[vehicle.thruster]]\nposition_m = {p:?}\ndirection = {d:?}\n");
     }
+    text += &format!("[telemetry]\nevery_n = {telemetry_every_n}\n");
     let path = world.path("thrusterd.toml");
     std::fs::write(&path, text).unwrap();
     path
+}
+
+/// Round trips through `thrusterd run` holding attitude, telemetry every `every_n`-th sample
+/// (0: off) with a reader attached.
+fn through_daemon(n: usize, spin: &str, every_n: u32) -> Stats {
+    let world = World::new("lat-d");
+    let ns = world.namespace();
+    let cfg = daemon_config(&world, every_n);
+    let state_dir = world.path("state");
+    let mut peer = Proc::spawn(
+        "thrusterd",
+        &[
+            "run",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--namespace",
+            &ns,
+            "--state-dir",
+            state_dir.to_str().unwrap(),
+            "--spin-us",
+            spin,
+        ],
+        world.dir.path(),
+    );
+    let op = Operator::new(&world);
+    // A reader as `thrusterctl watch --interval-ms 0` is, with the topic's full buffer: every
+    // message is delivered and its listener notified. Read only after the run (reading here
+    // would be measured); a full buffer drops its oldest, which costs the daemon the same.
+    let telemetry: Inbox<TelemetryMsg> = Inbox::create(world.node(), world.ipc()).unwrap();
+    let us = ping_pong(&world, n, || {
+        // Hold attitude, so every sample runs the attitude filter and the controller.
+        let r = op.request(RequestKind::Hold);
+        assert!(r.is_ok(), "{}", r.text());
+        op.wait_status(Duration::from_secs(10), |s| state(s) == DaemonState::Active)
+            .expect("daemon active");
+    });
+    let got = telemetry.recv().unwrap().is_some();
+    assert_eq!(
+        got,
+        every_n > 0,
+        "telemetry every {every_n}: received {got}"
+    );
+    peer.stop();
+    stats(us)
 }
 
 fn main() {
@@ -153,46 +200,22 @@ fn main() {
             peer.stop();
             stats(us)
         };
-        let daemon = {
-            let world = World::new("lat-d");
-            let ns = world.namespace();
-            let cfg = daemon_config(&world);
-            let state_dir = world.path("state");
-            let mut peer = Proc::spawn(
-                "thrusterd",
-                &[
-                    "run",
-                    "--config",
-                    cfg.to_str().unwrap(),
-                    "--namespace",
-                    &ns,
-                    "--state-dir",
-                    state_dir.to_str().unwrap(),
-                    "--spin-us",
-                    spin,
-                ],
-                world.dir.path(),
-            );
-            let op = Operator::new(&world);
-            let us = ping_pong(&world, n, || {
-                // Hold attitude, so every sample runs the attitude filter and the controller.
-                let r = op.request(RequestKind::Hold);
-                assert!(r.is_ok(), "{}", r.text());
-                op.wait_status(Duration::from_secs(10), |s| state(s) == DaemonState::Active)
-                    .expect("daemon active");
-            });
-            peer.stop();
-            stats(us)
-        };
-        for (path, s) in [
-            ("raw iceoryx2 ping-pong", &raw),
-            ("through thrusterd (controlling)", &daemon),
+        let mut rows = vec![("raw iceoryx2 ping-pong".to_string(), raw, None)];
+        for (what, every_n) in [
+            ("telemetry off", 0),
+            ("telemetry every 10th, default", 10),
+            ("telemetry every sample", 1),
         ] {
-            let ratio = if path.starts_with("through") {
-                format!("{:.2}", daemon.p50 / raw.p50)
-            } else {
-                String::new()
-            };
+            let s = through_daemon(n, spin, every_n);
+            let ratio = s.p50 / rows[0].1.p50;
+            rows.push((
+                format!("through thrusterd (controlling, {what})"),
+                s,
+                Some(ratio),
+            ));
+        }
+        for (path, s, ratio) in &rows {
+            let ratio = ratio.map_or_else(String::new, |r| format!("{r:.2}"));
             println!(
                 "| {mode} | {path} | {:.1} | {:.1} | {:.1} | {:.1} | {ratio} |",
                 s.p50, s.p99, s.p999, s.mean

@@ -23,6 +23,7 @@ use thruster_protocol::MAX_THRUSTERS;
 pub struct DaemonConfig {
     pub ipc: IpcSection,
     pub runtime: RuntimeSection,
+    pub telemetry: TelemetrySection,
     pub vehicle: VehicleSection,
     pub body: RigidBody,
     pub machine: MachineConfig,
@@ -87,6 +88,23 @@ impl Default for RuntimeSection {
             load_model: true,
             resume_after_crash: true,
         }
+    }
+}
+
+/// `[telemetry]`: what the daemon publishes on the `telemetry` topic.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TelemetrySection {
+    /// Publish telemetry after every n-th accepted IMU sample (default 10: 20 Hz at a 200 Hz
+    /// IMU, 100 Hz at 1 kHz; 1 = every sample; 0 = off; at most 10000). Publishing never
+    /// waits for a reader (a full reader loses its oldest message), so the cost to the
+    /// control loop is one copy into shared memory and one wake-up per message.
+    pub every_n: u64,
+}
+
+impl Default for TelemetrySection {
+    fn default() -> Self {
+        TelemetrySection { every_n: 10 }
     }
 }
 
@@ -349,6 +367,7 @@ impl DaemonConfig {
             ("runtime.imu_timeout_ms", r.imu_timeout_ms, 1, 60_000),
             ("runtime.status_period_ms", r.status_period_ms, 0, 60_000),
             ("runtime.spin_us", r.spin_us, 0, 1_000_000),
+            ("telemetry.every_n", self.telemetry.every_n, 0, 10_000),
         ] {
             if !(lo..=hi).contains(&v) {
                 return Err(out_of_range(key, Range::closed(lo as f64, hi as f64), &v));
@@ -497,6 +516,14 @@ mod tests {
             (
                 "[runtime]\nspin_us = 5000000\n",
                 "d.toml:2:11: runtime.spin_us: must be in [0, 1000000], got 5000000",
+            ),
+            (
+                "[telemetry]\nevery_n = 20000\n",
+                "d.toml:2:11: telemetry.every_n: must be in [0, 10000], got 20000",
+            ),
+            (
+                "[telemetry]\nevery_n = 10\nrate_hz = 20\n",
+                "d.toml:3:1: unknown field `rate_hz`, expected `every_n`",
             ),
             (
                 "[monitor]\nwindow_s = 0.01\n",

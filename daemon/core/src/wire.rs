@@ -1,10 +1,13 @@
 //! Conversions between the pure core's types and the protocol's shared-memory messages.
 
 use nalgebra::UnitQuaternion;
+use thruster_protocol::validate::limits::{
+    MAX_ACCEL_M_S2, MAX_DEPTH_M, MAX_GYRO_RAD_S, MIN_DEPTH_M,
+};
 use thruster_protocol::{
     DaemonState, DynamicsMsg, DynamicsRow, ImuSample, ModelMethod, ModelMsg,
-    ModelSource as WireSource, ReconfigEvent, ReconfigKind, Setpoint, StatusMsg, ThrustCommand,
-    ThrustMode, DOF_COUNT, MAX_THRUSTERS,
+    ModelSource as WireSource, ReconfigEvent, ReconfigKind, Setpoint, StatusMsg, TelemetryMsg,
+    ThrustCommand, ThrustMode, DOF_COUNT, MAX_THRUSTERS,
 };
 
 use crate::estimator::Method;
@@ -157,6 +160,97 @@ pub fn setpoint(s: &Setpoint) -> crate::machine::SetpointInput {
     }
 }
 
+/// The telemetry message of `snapshot`, with the commands exactly as they went out in `sent`
+/// (after the protocol's last sanitising). Values the protocol cannot carry (a non-finite
+/// number from a broken filter) are written as unknown rather than published: the message
+/// always passes its validation.
+pub fn telemetry_msg(
+    seq: u64,
+    snapshot: &crate::machine::TelemetrySnapshot,
+    sent: &ThrustCommand,
+) -> TelemetryMsg {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    let mut m = TelemetryMsg {
+        seq,
+        t_ns: snapshot.t_ns,
+        imu_seq: snapshot.imu_seq,
+        mode: sent.mode,
+        count: sent.count.min(MAX_THRUSTERS as u32),
+        model_version: snapshot.model_version,
+        ..TelemetryMsg::default()
+    };
+    m.set_state(daemon_state(snapshot.state));
+    let n = m.count as usize;
+    m.thrust[..n].copy_from_slice(&sent.thrust[..n]);
+    thruster_protocol::validate::sanitize_thrust(&mut m.thrust[..n]);
+    let q = quaternion(&snapshot.attitude);
+    if finite(&q) {
+        m.attitude = q;
+        m.euler = euler(&snapshot.attitude);
+    }
+    let rate = [snapshot.rate.x, snapshot.rate.y, snapshot.rate.z];
+    if finite(&rate) {
+        m.rate = rate.map(|r| r.clamp(-MAX_GYRO_RAD_S, MAX_GYRO_RAD_S));
+    }
+    if let Some(d) = snapshot.depth.filter(|d| d.is_finite()) {
+        m.depth = d.clamp(MIN_DEPTH_M, MAX_DEPTH_M);
+        m.flags |= TelemetryMsg::HAS_DEPTH;
+    }
+    let err = [
+        snapshot.attitude_error.x,
+        snapshot.attitude_error.y,
+        snapshot.attitude_error.z,
+    ];
+    if let Some(sp) = snapshot.setpoint {
+        let q = quaternion(&sp.attitude);
+        if finite(&q) && finite(&err) {
+            m.flags |= TelemetryMsg::HAS_SETPOINT;
+            m.setpoint_attitude = q;
+            m.setpoint_euler = euler(&sp.attitude);
+            m.attitude_error = err;
+            m.attitude_error_angle = snapshot.attitude_error_angle();
+        }
+        if let Some(d) = sp.depth.filter(|d| d.is_finite()) {
+            m.flags |= TelemetryMsg::HOLD_DEPTH;
+            m.setpoint_depth = d.clamp(MIN_DEPTH_M, MAX_DEPTH_M);
+            if m.has(TelemetryMsg::HAS_DEPTH) {
+                m.depth_error = m.setpoint_depth - m.depth;
+            }
+        }
+    }
+    if let Some(p) = &snapshot.progress {
+        m.flags |= TelemetryMsg::ESTIMATING;
+        m.pulse = u32::try_from(p.pulses).unwrap_or(u32::MAX);
+        m.pulses_planned = u32::try_from(p.pulses_planned).unwrap_or(u32::MAX);
+        m.power = if p.power.is_finite() {
+            p.power.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        if let Some(b) = p.error_bound.filter(|b| b.is_finite() && *b >= 0.0) {
+            m.flags |= TelemetryMsg::HAS_ERROR_BOUND;
+            m.error_bound = b;
+        }
+        if let Some((rot, acc)) = p.sigma {
+            if (0.0..=MAX_GYRO_RAD_S).contains(&rot) && (0.0..=MAX_ACCEL_M_S2).contains(&acc) {
+                m.flags |= TelemetryMsg::HAS_NOISE;
+                m.sigma_rot = rot;
+                m.sigma_acc = acc;
+            }
+        }
+    }
+    m
+}
+
+fn quaternion(q: &UnitQuaternion<f64>) -> [f64; 4] {
+    [q.w, q.i, q.j, q.k]
+}
+
+fn euler(q: &UnitQuaternion<f64>) -> [f64; 3] {
+    let (r, p, y) = q.euler_angles();
+    [r, p, y]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -186,5 +280,73 @@ mod tests {
         msg.validate().unwrap();
         assert_eq!(msg.count, 3);
         assert!(msg.rel_err_acc.is_nan());
+    }
+
+    #[test]
+    fn telemetry_carries_the_commands_sent_and_never_a_non_finite_value() {
+        use crate::controller::Target;
+        use crate::machine::{Progress, State, TelemetrySnapshot};
+        use nalgebra::Vector3;
+        let pitch = UnitQuaternion::from_euler_angles(0.0, 0.2, 0.0);
+        let mut snap = TelemetrySnapshot {
+            t_ns: 5,
+            imu_seq: 9,
+            state: State::Active,
+            attitude: UnitQuaternion::identity(),
+            rate: Vector3::new(0.1, 0.0, 0.0),
+            depth: Some(2.0),
+            setpoint: Some(Target {
+                attitude: pitch,
+                depth: Some(2.5),
+            }),
+            attitude_error: Vector3::new(0.0, 0.2, 0.0),
+            depth_error: Some(0.5),
+            model_version: 3,
+            progress: Some(Progress {
+                pulses: 4,
+                pulses_planned: 16,
+                power: 0.8,
+                error_bound: Some(0.12),
+                sigma: Some((0.25, 0.49)),
+            }),
+        };
+        let mut sent = ThrustCommand::neutral(1, 9, 5, 3);
+        sent.set_mode(ThrustMode::Controlling);
+        sent.thrust[..3].copy_from_slice(&[0.5, -0.25, 1.0]);
+        let m = telemetry_msg(7, &snap, &sent);
+        m.validate().unwrap();
+        assert_eq!((m.seq, m.t_ns, m.imu_seq, m.model_version), (7, 5, 9, 3));
+        assert_eq!(m.state().unwrap(), DaemonState::Active);
+        assert_eq!(m.mode().unwrap(), ThrustMode::Controlling);
+        assert_eq!(m.thrusters(), &[0.5, -0.25, 1.0]);
+        let all = TelemetryMsg::KNOWN_FLAGS;
+        assert_eq!(m.flags, all, "{:#x}", m.flags);
+        assert!((m.setpoint_euler[1] - 0.2).abs() < 1e-12);
+        assert!((m.attitude_error_angle - 0.2).abs() < 1e-12);
+        assert_eq!((m.setpoint_depth, m.depth_error), (2.5, 0.5));
+        assert_eq!((m.pulse, m.pulses_planned, m.error_bound), (4, 16, 0.12));
+
+        // A broken filter or sensor: what cannot be carried is left out, flagged unknown.
+        snap.depth = Some(f64::NAN);
+        snap.attitude_error = Vector3::new(f64::NAN, 0.0, 0.0);
+        snap.rate = Vector3::new(f64::INFINITY, 0.0, 0.0);
+        snap.progress = Some(Progress {
+            error_bound: Some(f64::INFINITY),
+            sigma: Some((f64::NAN, 0.49)),
+            ..snap.progress.unwrap()
+        });
+        let m = telemetry_msg(8, &snap, &sent);
+        m.validate().unwrap();
+        for flag in [
+            TelemetryMsg::HAS_DEPTH,
+            TelemetryMsg::HAS_SETPOINT,
+            TelemetryMsg::HAS_ERROR_BOUND,
+            TelemetryMsg::HAS_NOISE,
+        ] {
+            assert!(!m.has(flag), "{flag:#x} in {:#x}", m.flags);
+        }
+        // The depth setpoint itself is fine; without a measured depth there is no error.
+        assert!(m.has(TelemetryMsg::HOLD_DEPTH | TelemetryMsg::ESTIMATING));
+        assert_eq!((m.rate, m.depth_error), ([0.0; 3], 0.0));
     }
 }

@@ -1,11 +1,12 @@
 //! The per-sample path allocates nothing: a counting global allocator watches the state machine
-//! answer IMU samples while idle, pulsing and controlling.
+//! answer IMU samples while idle, pulsing and controlling, and describe each for telemetry.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use thrusterd_core::machine::{Geometry, ImuInput, Machine, MachineSetup, Request, State};
+use thrusterd_core::wire;
 
 struct Counting;
 
@@ -48,13 +49,19 @@ fn sample(k: u64) -> ImuInput {
     }
 }
 
-/// Allocations made by `ticks` samples starting at `k`.
+/// Allocations made by `ticks` samples starting at `k`, each answered and described as the
+/// daemon does with `telemetry.every_n = 1`: the command, the telemetry snapshot and its
+/// message.
 fn count(machine: &mut Machine, k: &mut u64, ticks: u64) -> u64 {
     ALLOCS.store(0, Ordering::SeqCst);
     counting(true);
     for _ in 0..ticks {
         *k += 1;
-        std::hint::black_box(machine.on_imu(&sample(*k)));
+        let s = sample(*k);
+        let cmd = machine.on_imu(&s);
+        let sent = wire::thrust_command(*k, s.seq, s.t_ns, &cmd);
+        let snapshot = machine.telemetry(&s);
+        std::hint::black_box(wire::telemetry_msg(*k, &snapshot, &sent));
     }
     counting(false);
     ALLOCS.load(Ordering::SeqCst)

@@ -84,11 +84,16 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Print status lines as they change, until Ctrl-C.
+    /// Print status lines as they change and the daemon's telemetry live, until Ctrl-C: on a
+    /// terminal a small dashboard redrawn in place, otherwise plain lines.
     Watch {
-        /// One JSON object per line instead of text.
+        /// One JSON object per line instead of text (telemetry as {"telemetry": {...}}).
         #[arg(long)]
         json: bool,
+        /// Show telemetry at most every this many ms (default 100 on a terminal, 1000
+        /// otherwise; 0: every message the daemon publishes, as far as this reader keeps up).
+        #[arg(long)]
+        interval_ms: Option<u64>,
     },
     /// Announce a change of the thruster configuration (starts re-estimation).
     Reconfigure {

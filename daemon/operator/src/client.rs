@@ -121,6 +121,13 @@ impl Daemon {
             .with_context(|| format!("subscribing to {}", T::TOPIC.leaf()))
     }
 
+    /// Subscribes to `T` with a buffer of `buffer` messages (clamped to the topic's maximum),
+    /// for a reader that wants every message of a stream, not only the newest.
+    pub fn inbox_with_buffer<T: TopicMessage>(&self, buffer: usize) -> Result<Inbox<T>> {
+        Inbox::create_with_buffer(&self.node, &self.ipc, buffer)
+            .with_context(|| format!("subscribing to {}", T::TOPIC.leaf()))
+    }
+
     /// A publisher of `T` (for reconfiguration events and setpoints).
     pub fn port<T: TopicMessage>(&self) -> Result<Port<T>> {
         Port::create(&self.node, &self.ipc)

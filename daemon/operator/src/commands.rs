@@ -67,8 +67,13 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
             cli::path_request(RequestKind::Load, &path)?,
         ),
         Command::Model { json } => model(&Daemon::connect(&target, timeout)?, json),
-        Command::Watch { json } => {
-            watch::run(&Daemon::connect(&target, timeout)?, json, interrupt_flag()?)
+        Command::Watch { json, interval_ms } => {
+            let options = watch::Options::new(json, interval_ms)?;
+            watch::run(
+                &Daemon::connect(&target, timeout)?,
+                options,
+                interrupt_flag()?,
+            )
         }
         Command::Reconfigure {
             kind,

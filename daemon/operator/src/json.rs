@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 use thruster_protocol::{
-    DaemonState, Dof, DriverStatusMsg, ModelMsg, StatusMsg, DOF_COUNT, MAX_THRUSTERS,
+    DaemonState, Dof, DriverStatusMsg, ModelMsg, StatusMsg, TelemetryMsg, DOF_COUNT, MAX_THRUSTERS,
 };
 
 /// One status message.
@@ -186,6 +186,106 @@ impl From<&ModelMsg> for ModelJson {
     }
 }
 
+/// One telemetry message, as `watch --json` prints it: `{"telemetry": {...}}`, so a line is
+/// told from a status line (which never has that key) without guessing. SI units, named in
+/// the keys; what the daemon does not know (no setpoint, no depth sensor, no estimation) is
+/// null.
+#[derive(Serialize, Debug, PartialEq)]
+pub struct TelemetryLineJson {
+    pub telemetry: TelemetryJson,
+}
+
+#[derive(Serialize, Debug, PartialEq)]
+pub struct TelemetryJson {
+    pub seq: u64,
+    /// Vehicle time (the IMU sample's), ns.
+    pub t_ns: u64,
+    pub imu_seq: u64,
+    /// DaemonState name, as in status.
+    pub state: String,
+    /// ThrustMode name of the commands ("Neutral", "Estimating", "Controlling").
+    pub mode: String,
+    pub model_version: u64,
+    /// Attitude estimate `[w, x, y, z]`, body to NED.
+    pub attitude: [f64; 4],
+    /// Roll, pitch, yaw of the estimate, rad.
+    pub euler_rad: [f64; 3],
+    /// Body rate, bias removed, rad/s.
+    pub rate_rad_s: [f64; 3],
+    pub depth_m: Option<f64>,
+    /// What the controller tracks; null while it does not control.
+    pub setpoint: Option<SetpointJson>,
+    /// Rotation from estimate to setpoint, body-frame rotation vector, rad.
+    pub attitude_error_rad: Option<[f64; 3]>,
+    /// Its angle, rad.
+    pub attitude_error_angle_rad: Option<f64>,
+    /// Setpoint depth minus depth, m.
+    pub depth_error_m: Option<f64>,
+    /// The commands sent, one per thruster, in [-1, 1].
+    pub thrust: Vec<f64>,
+    pub estimation: Option<EstimationJson>,
+}
+
+#[derive(Serialize, Debug, PartialEq)]
+pub struct SetpointJson {
+    pub attitude: [f64; 4],
+    pub euler_rad: [f64; 3],
+    /// Null when depth is not held.
+    pub depth_m: Option<f64>,
+}
+
+#[derive(Serialize, Debug, PartialEq)]
+pub struct EstimationJson {
+    pub pulse: u32,
+    pub pulses_planned: u32,
+    pub power: f64,
+    pub error_bound: Option<f64>,
+    pub sigma_rot: Option<f64>,
+    pub sigma_acc: Option<f64>,
+}
+
+impl From<&TelemetryMsg> for TelemetryLineJson {
+    fn from(t: &TelemetryMsg) -> Self {
+        let has = |f| t.has(f);
+        let sp = has(TelemetryMsg::HAS_SETPOINT);
+        let noise = has(TelemetryMsg::HAS_NOISE);
+        Self {
+            telemetry: TelemetryJson {
+                seq: t.seq,
+                t_ns: t.t_ns,
+                imu_seq: t.imu_seq,
+                state: state_name(t.state),
+                mode: t
+                    .mode()
+                    .map_or_else(|e| format!("Unknown({})", e.value), |m| m.name().into()),
+                model_version: t.model_version,
+                attitude: t.attitude,
+                euler_rad: t.euler,
+                rate_rad_s: t.rate,
+                depth_m: has(TelemetryMsg::HAS_DEPTH).then_some(t.depth),
+                setpoint: sp.then(|| SetpointJson {
+                    attitude: t.setpoint_attitude,
+                    euler_rad: t.setpoint_euler,
+                    depth_m: has(TelemetryMsg::HOLD_DEPTH).then_some(t.setpoint_depth),
+                }),
+                attitude_error_rad: sp.then_some(t.attitude_error),
+                attitude_error_angle_rad: sp.then_some(t.attitude_error_angle),
+                depth_error_m: has(TelemetryMsg::HOLD_DEPTH | TelemetryMsg::HAS_DEPTH)
+                    .then_some(t.depth_error),
+                thrust: t.thrusters().to_vec(),
+                estimation: has(TelemetryMsg::ESTIMATING).then(|| EstimationJson {
+                    pulse: t.pulse,
+                    pulses_planned: t.pulses_planned,
+                    power: t.power,
+                    error_bound: has(TelemetryMsg::HAS_ERROR_BOUND).then_some(t.error_bound),
+                    sigma_rot: noise.then_some(t.sigma_rot),
+                    sigma_acc: noise.then_some(t.sigma_acc),
+                }),
+            },
+        }
+    }
+}
+
 /// Lower-case DOF name, as used in JSON keys and text output.
 pub fn dof_key(dof: Dof) -> String {
     dof.name().to_ascii_lowercase()
@@ -288,5 +388,34 @@ mod tests {
         // The text is valid JSON that round-trips through a parser.
         let text = serde_json::to_string(&ModelJson::from(&m)).unwrap();
         assert_eq!(serde_json::from_str::<Value>(&text).unwrap(), v);
+    }
+
+    #[test]
+    fn telemetry_is_one_keyed_object_with_unknowns_as_null() {
+        let mut t = TelemetryMsg {
+            seq: 4,
+            t_ns: 2_000_000_000,
+            count: 2,
+            flags: TelemetryMsg::HAS_SETPOINT | TelemetryMsg::HAS_DEPTH,
+            depth: 1.5,
+            attitude_error_angle: 0.1,
+            attitude_error: [0.0, 0.1, 0.0],
+            ..TelemetryMsg::default()
+        };
+        t.set_state(DaemonState::Active);
+        t.set_mode(thruster_protocol::ThrustMode::Controlling);
+        t.thrust[..2].copy_from_slice(&[0.5, -0.5]);
+        let v = serde_json::to_value(TelemetryLineJson::from(&t)).unwrap();
+        let tel = &v["telemetry"];
+        assert_eq!(v.as_object().unwrap().len(), 1, "{v}");
+        assert_eq!(tel["state"], "Active");
+        assert_eq!(tel["mode"], "Controlling");
+        assert_eq!(tel["thrust"], serde_json::json!([0.5, -0.5]));
+        assert_eq!(tel["depth_m"], 1.5);
+        assert_eq!(tel["attitude_error_angle_rad"], 0.1);
+        assert_eq!(tel["setpoint"]["depth_m"], serde_json::Value::Null);
+        // Depth is measured but not held: no depth error; not estimating: no estimation.
+        assert_eq!(tel["depth_error_m"], serde_json::Value::Null);
+        assert_eq!(tel["estimation"], serde_json::Value::Null);
     }
 }

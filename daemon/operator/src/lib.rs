@@ -1,5 +1,6 @@
 //! thrusterctl's operator verbs: the client that talks to a running thrusterd and the verbs
-//! that use it (status, model, estimate, watch, save/load/revert, reconfigure, setpoint).
+//! that use it (status, model, estimate, watch with live telemetry, save/load/revert, reconfigure,
+//! setpoint).
 //!
 //! It talks to the daemon only through `thruster_protocol` (control requests, published
 //! status and model, reconfiguration events and setpoints). Exit codes are in [`exit`].
@@ -20,4 +21,5 @@ pub mod json;
 pub mod number;
 pub mod publish;
 pub mod render;
+pub mod telemetry;
 pub mod watch;

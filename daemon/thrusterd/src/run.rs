@@ -3,7 +3,8 @@
 //! One thread, one WaitSet. IMU samples are validated and answered with a thrust command each;
 //! a deadline on the IMU listener turns a silent driver into Fault with neutral thrust.
 //! Reconfiguration events, setpoints and operator requests feed the machine; model swaps are
-//! published (history 1) and saved; status is published on change and periodically.
+//! published (history 1) and saved; status is published on change and periodically; telemetry
+//! after every `telemetry.every_n`-th accepted sample, right after its thrust command.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -21,7 +22,7 @@ use thruster_protocol::services::{
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
     ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample, ModelMsg, ReconfigEvent,
-    RequestKind, ResponseCode, Setpoint, StatusMsg, ThrustCommand, MAX_THRUSTERS,
+    RequestKind, ResponseCode, Setpoint, StatusMsg, TelemetryMsg, ThrustCommand, MAX_THRUSTERS,
 };
 use thrusterd_core::config::DaemonConfig;
 use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
@@ -149,6 +150,11 @@ struct Daemon {
     status_seq: u64,
     model_seq: u64,
     dynamics_seq: u64,
+    telemetry_seq: u64,
+    /// Accepted IMU samples since the last telemetry message (decimation).
+    since_telemetry: u64,
+    /// Telemetry messages that could not be published (logged sparingly).
+    telemetry_failures: u64,
     last_imu: Option<(u64, u64)>,
     pending_estimate: bool,
     /// The predecessor died while controlling (see `session`): hold with the loaded model
@@ -208,6 +214,9 @@ impl Daemon {
             status_seq: 0,
             model_seq: 0,
             dynamics_seq: 0,
+            telemetry_seq: 0,
+            since_telemetry: 0,
+            telemetry_failures: 0,
             last_imu: None,
             pending_estimate: false,
             pending_hold: false,
@@ -242,7 +251,13 @@ impl Daemon {
         // Optional: only a vehicle with a DVL publishes here. Polled each round, before the
         // IMU samples, which is when a driver sends it.
         let dvl_in = Inbox::<DvlSample>::create(&node, &self.ipc)?;
-        let thrust_out = Port::<ThrustCommand>::create(&node, &self.ipc)?;
+        let thrust = Port::<ThrustCommand>::create(&node, &self.ipc)?;
+        // Off (every_n = 0): no service at all, so nothing in the loop pays for it.
+        let telemetry = match self.cfg.telemetry.every_n {
+            0 => None,
+            _ => Some(Port::<TelemetryMsg>::create(&node, &self.ipc)?),
+        };
+        let out = Outputs { thrust, telemetry };
         let model_out = ModelPorts {
             model: Port::<ModelMsg>::create(&node, &self.ipc)?,
             dynamics: Port::<DynamicsMsg>::create(&node, &self.ipc)?,
@@ -278,7 +293,7 @@ impl Daemon {
                 let mut idle_since = Instant::now();
                 while idle_since.elapsed() < spin && housekeeping.elapsed() < HOUSEKEEPING {
                     if let Some(sample) = imu_in.recv()? {
-                        self.on_imu(&sample, &thrust_out);
+                        self.on_imu(&sample, &out);
                         self.stale_reported = false;
                         idle_since = Instant::now();
                     } else {
@@ -335,7 +350,7 @@ impl Daemon {
             // for its answer forever. An empty inbox costs one check.
             let mut got = false;
             while let Some(sample) = imu_in.recv()? {
-                self.on_imu(&sample, &thrust_out);
+                self.on_imu(&sample, &out);
                 got = true;
             }
             if got {
@@ -354,7 +369,7 @@ impl Daemon {
                 let cmd = self
                     .machine
                     .on_imu_stale(&format!("no IMU sample for {} ms", imu_timeout.as_millis()));
-                self.send_thrust(&thrust_out, &cmd);
+                self.send_thrust(&out.thrust, &cmd);
                 self.stale_reported = true;
             }
             if reconf {
@@ -474,7 +489,7 @@ impl Daemon {
         info!("shutting down: thrusters neutral");
         systemd.stopping();
         let neutral = Command::neutral(self.machine.thrusters());
-        self.send_thrust(&thrust_out, &neutral);
+        self.send_thrust(&out.thrust, &neutral);
         self.handle_events(&model_out);
         if let Some(model) = self.machine.model().cloned() {
             self.save(&model);
@@ -520,7 +535,7 @@ impl Daemon {
         self.driver_verdict = verdict;
     }
 
-    fn on_imu(&mut self, sample: &ImuSample, thrust_out: &Port<ThrustCommand>) {
+    fn on_imu(&mut self, sample: &ImuSample, out: &Outputs) {
         match self.validator.check(sample) {
             Ok(accepted) => {
                 self.last_imu = Some((sample.seq, sample.t_ns));
@@ -541,8 +556,12 @@ impl Daemon {
                         sample.seq
                     );
                 }
-                let cmd = self.machine.on_imu(&wire::imu_input(sample));
-                self.send_thrust(thrust_out, &cmd);
+                let input = wire::imu_input(sample);
+                let cmd = self.machine.on_imu(&input);
+                let sent = self.send_thrust(&out.thrust, &cmd);
+                if let Some(port) = &out.telemetry {
+                    self.publish_telemetry(port, &input, &sent);
+                }
             }
             Err(reason) => {
                 self.rejected.record(&reason);
@@ -559,12 +578,13 @@ impl Daemon {
                     wire::thrust_command(self.thrust_seq, sample.seq, sample.t_ns, &neutral);
                 self.thrust_seq += 1;
                 msg.imu_seq = sample.seq;
-                let _ = thrust_out.send(&msg);
+                let _ = out.thrust.send(&msg);
             }
         }
     }
 
-    fn send_thrust(&mut self, thrust_out: &Port<ThrustCommand>, cmd: &Command) {
+    /// Sends `cmd` for the latest sample; returns the message as it went out.
+    fn send_thrust(&mut self, thrust_out: &Port<ThrustCommand>, cmd: &Command) -> ThrustCommand {
         let (imu_seq, t_ns) = self.last_imu.unwrap_or((0, 0));
         let mut msg = wire::thrust_command(self.thrust_seq, imu_seq, t_ns, cmd);
         // The machine already sanitises; this is the protocol's own last check before the wire.
@@ -572,6 +592,33 @@ impl Daemon {
         self.thrust_seq += 1;
         if let Err(e) = thrust_out.send(&msg) {
             error!("thrust command not sent: {e}");
+        }
+        msg
+    }
+
+    /// Telemetry for every `every_n`-th accepted sample, after its thrust command went out (the
+    /// driver never waits for it). The port never blocks: iceoryx2's safe overflow drops a
+    /// slow reader's oldest message instead.
+    fn publish_telemetry(
+        &mut self,
+        port: &Port<TelemetryMsg>,
+        input: &thrusterd_core::machine::ImuInput,
+        sent: &ThrustCommand,
+    ) {
+        self.since_telemetry += 1;
+        if self.since_telemetry < self.cfg.telemetry.every_n {
+            return;
+        }
+        self.since_telemetry = 0;
+        let snapshot = self.machine.telemetry(input);
+        let msg = wire::telemetry_msg(self.telemetry_seq, &snapshot, sent);
+        self.telemetry_seq += 1;
+        if let Err(e) = port.send(&msg) {
+            self.telemetry_failures += 1;
+            let n = self.telemetry_failures;
+            if n < 5 || n.is_power_of_two() {
+                warn!(failures = n, "telemetry not published: {e}");
+            }
         }
     }
 
@@ -804,4 +851,10 @@ fn check_reconfig(e: &ReconfigEvent) -> Result<(), RejectReason> {
 struct ModelPorts {
     model: Port<ModelMsg>,
     dynamics: Port<DynamicsMsg>,
+}
+
+/// What answers an IMU sample: the thrust command, and telemetry when it is on.
+struct Outputs {
+    thrust: Port<ThrustCommand>,
+    telemetry: Option<Port<TelemetryMsg>>,
 }

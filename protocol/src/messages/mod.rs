@@ -22,6 +22,7 @@ mod model;
 mod reconfig;
 mod setpoint;
 mod status;
+mod telemetry;
 mod thrust;
 mod truth;
 
@@ -34,6 +35,7 @@ pub use model::{ModelMethod, ModelMsg, ModelSource};
 pub use reconfig::{ReconfigEvent, ReconfigKind};
 pub use setpoint::Setpoint;
 pub use status::{DaemonState, StatusMsg};
+pub use telemetry::TelemetryMsg;
 pub use thrust::{ThrustCommand, ThrustMode};
 pub use truth::{TruthMsg, VehicleStateMsg};
 

@@ -42,6 +42,9 @@ pub enum Topic {
     Dynamics,
     /// [`DvlSample`], driver -> daemon (optional: only vehicles with a DVL).
     Dvl,
+    /// [`TelemetryMsg`], daemon -> anyone: what the daemon does, every `telemetry.every_n`-th
+    /// IMU sample.
+    Telemetry,
 }
 
 /// Quality-of-service settings of a topic. Every process opens services with the same
@@ -61,7 +64,7 @@ pub struct TopicQos {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 11] = [
+    pub const ALL: [Topic; 12] = [
         Topic::Imu,
         Topic::Thrust,
         Topic::Reconfig,
@@ -73,6 +76,7 @@ impl Topic {
         Topic::DriverStatus,
         Topic::Dynamics,
         Topic::Dvl,
+        Topic::Telemetry,
     ];
 
     /// Service name below the namespace, e.g. `imu`.
@@ -89,6 +93,7 @@ impl Topic {
             Topic::DriverStatus => "driver_status",
             Topic::Dynamics => "dynamics",
             Topic::Dvl => "dvl",
+            Topic::Telemetry => "telemetry",
         }
     }
 
@@ -100,6 +105,15 @@ impl Topic {
             // overdue samples, loses nothing (16 lost 2 % of the samples in a 12-minute soak
             // on a loaded VM); no history (stale samples are useless).
             Topic::Imu | Topic::Thrust | Topic::Vehicle => TopicQos {
+                history: 0,
+                max_buffer: 128,
+                default_buffer: 128,
+            },
+            // A stream a recorder must log without loss even when the daemon publishes it at
+            // the IMU rate (`every_n = 1` at 1 kHz): buffered like the sensor streams. No
+            // history: a stale sample is no news; the next comes within a few ms. Readers
+            // that only show the newest (`thrusterctl watch`) ask for a buffer of one.
+            Topic::Telemetry => TopicQos {
                 history: 0,
                 max_buffer: 128,
                 default_buffer: 128,
@@ -169,4 +183,7 @@ impl TopicMessage for DynamicsMsg {
 }
 impl TopicMessage for DvlSample {
     const TOPIC: Topic = Topic::Dvl;
+}
+impl TopicMessage for TelemetryMsg {
+    const TOPIC: Topic = Topic::Telemetry;
 }

@@ -530,3 +530,113 @@ impl Validate for DriverStatusMsg {
         utf8_text("text", &self.text)
     }
 }
+
+impl Validate for TelemetryMsg {
+    /// State, mode and flags known, count within capacity (0 allowed: neutral before a
+    /// thruster count is known), and every float finite whatever the flags (unknown values
+    /// are written as 0, see the message): quaternions of unit length (the setpoint's only
+    /// with `HAS_SETPOINT`, identity being the unset value), angles and rates within their
+    /// ranges, commands in use within [-1, 1], power in [0, 1], bound and noise non-negative.
+    fn validate(&self) -> Result<(), RejectReason> {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        // Angles computed in f64 land on +-pi exactly, or a rounding step past it.
+        const ANGLE_SLACK: f64 = 1e-9;
+        known_enum("state", self.state())?;
+        known_enum("mode", self.mode())?;
+        known_flags("flags", self.flags, TelemetryMsg::KNOWN_FLAGS)?;
+        let n = thruster_count("count", self.count, true)?;
+        all_in_range(
+            "attitude",
+            &self.attitude,
+            1.0 + QUATERNION_NORM_TOLERANCE,
+            "",
+        )?;
+        unit_norm(
+            Field::new("attitude"),
+            &self.attitude,
+            QUATERNION_NORM_TOLERANCE,
+        )?;
+        for (name, e) in [
+            ("euler", &self.euler),
+            ("setpoint_euler", &self.setpoint_euler),
+        ] {
+            let limits = [PI, FRAC_PI_2, PI];
+            for (i, (&v, lim)) in e.iter().zip(limits).enumerate() {
+                let lim = lim + ANGLE_SLACK;
+                in_range(Field::at(name, i), v, -lim, lim, "rad")?;
+            }
+        }
+        all_in_range("rate", &self.rate, MAX_GYRO_RAD_S, "rad/s")?;
+        in_range(
+            Field::new("depth"),
+            self.depth,
+            MIN_DEPTH_M,
+            MAX_DEPTH_M,
+            "m",
+        )?;
+        all_in_range(
+            "setpoint_attitude",
+            &self.setpoint_attitude,
+            1.0 + QUATERNION_NORM_TOLERANCE,
+            "",
+        )?;
+        if self.has(TelemetryMsg::HAS_SETPOINT) {
+            unit_norm(
+                Field::new("setpoint_attitude"),
+                &self.setpoint_attitude,
+                QUATERNION_NORM_TOLERANCE,
+            )?;
+        }
+        in_range(
+            Field::new("setpoint_depth"),
+            self.setpoint_depth,
+            MIN_DEPTH_M,
+            MAX_DEPTH_M,
+            "m",
+        )?;
+        all_in_range(
+            "attitude_error",
+            &self.attitude_error,
+            PI + ANGLE_SLACK,
+            "rad",
+        )?;
+        in_range(
+            Field::new("attitude_error_angle"),
+            self.attitude_error_angle,
+            0.0,
+            PI + ANGLE_SLACK,
+            "rad",
+        )?;
+        let span = MAX_DEPTH_M - MIN_DEPTH_M;
+        in_range(
+            Field::new("depth_error"),
+            self.depth_error,
+            -span,
+            span,
+            "m",
+        )?;
+        all_in_range("thrust", &self.thrust[..n], MAX_THRUST, "")?;
+        in_range(Field::new("power"), self.power, 0.0, MAX_THRUST, "")?;
+        in_range(
+            Field::new("error_bound"),
+            self.error_bound,
+            0.0,
+            f64::MAX,
+            "",
+        )?;
+        in_range(
+            Field::new("sigma_rot"),
+            self.sigma_rot,
+            0.0,
+            MAX_GYRO_RAD_S,
+            "rad/s",
+        )?;
+        in_range(
+            Field::new("sigma_acc"),
+            self.sigma_acc,
+            0.0,
+            MAX_ACCEL_M_S2,
+            "m/s^2",
+        )
+    }
+}

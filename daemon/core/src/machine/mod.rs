@@ -10,16 +10,19 @@
 //! - `config`: the machine's settings and setup;
 //! - `models`: the model slot (the model in force, the previous one, the per-geometry cache);
 //! - `estimation`: one estimation run (noise at rest, pulses and pauses, the candidate);
-//! - `state_machine`: the machine itself (routing, state changes, faults, levelling, control).
+//! - `state_machine`: the machine itself (routing, state changes, faults, levelling, control);
+//! - `telemetry`: what the machine is doing, one snapshot per sample, for the `telemetry` topic.
 
 mod config;
 mod estimation;
 mod models;
 mod state_machine;
+mod telemetry;
 mod types;
 
 pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use state_machine::Machine;
+pub use telemetry::{Progress, TelemetrySnapshot};
 pub use types::{
     Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput, State,
     StatusSnapshot, NO_IMU_YET,

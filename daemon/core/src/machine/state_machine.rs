@@ -129,6 +129,26 @@ impl Machine {
         self.attitude.attitude()
     }
 
+    /// For `telemetry`: what the controller tracks now (levelling's target before a run, the
+    /// setpoint while holding), None while it does not control.
+    pub(super) fn tracked_target(&self) -> Option<Target> {
+        match (&self.levelling, self.state) {
+            (Some(l), State::MeasureNoise) => Some(l.target),
+            (None, State::Active) if self.models.current().is_some() => self.target,
+            _ => None,
+        }
+    }
+
+    /// For `telemetry`: the estimation run (its progress).
+    pub(super) fn run(&self) -> &EstimationRun {
+        &self.run
+    }
+
+    /// For `telemetry`: the attitude filter's gyro bias estimate, rad/s.
+    pub(super) fn gyro_bias(&self) -> Vector3<f64> {
+        self.attitude.gyro_bias()
+    }
+
     /// Events since the last call (model swaps, state changes), oldest first.
     pub fn take_events(&mut self) -> Vec<Event> {
         std::mem::take(&mut self.events)
