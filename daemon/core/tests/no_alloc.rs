@@ -67,9 +67,8 @@ fn count(machine: &mut Machine, k: &mut u64, ticks: u64) -> u64 {
     ALLOCS.load(Ordering::SeqCst)
 }
 
-#[test]
-fn answering_a_sample_does_not_allocate() {
-    let geometry = Geometry {
+fn four_thrusters() -> Geometry {
+    Geometry {
         positions: vec![
             [0.0, -0.2, 0.0],
             [0.0, 0.2, 0.0],
@@ -82,12 +81,25 @@ fn answering_a_sample_does_not_allocate() {
             [0.0, 0.0, -1.0],
             [0.0, 0.0, -1.0],
         ],
-    };
-    let mut m = Machine::new(MachineSetup {
+    }
+}
+
+/// Over `ticks` samples, how many ticks allocated at all.
+fn allocating_ticks(machine: &mut Machine, k: &mut u64, ticks: u64) -> u64 {
+    (0..ticks).filter(|_| count(machine, k, 1) > 0).count() as u64
+}
+
+#[test]
+fn answering_a_sample_does_not_allocate() {
+    let mut setup = MachineSetup {
         thrusters: 4,
-        geometry: Some(geometry),
+        geometry: Some(four_thrusters()),
         ..MachineSetup::default()
-    });
+    };
+    // Open-loop estimation here (the closed-loop one is below).
+    setup.identification.closed_loop = false;
+    setup.refinement.enabled = false;
+    let mut m = Machine::new(setup);
     let mut k = 0;
     count(&mut m, &mut k, 10); // attitude filter initialised
     assert_eq!(count(&mut m, &mut k, 200), 0, "idle");
@@ -105,6 +117,36 @@ fn answering_a_sample_does_not_allocate() {
         m.on_imu(&sample(k));
     }
     assert_eq!(count(&mut m, &mut k, 10), 0, "inside a pulse");
+}
+
+/// With the defaults (background refinement while controlling, identification under control):
+/// only the once-per-second decisions (`estimator.segment_s`) and a window's or run's start
+/// allocate; every other tick allocates nothing.
+#[test]
+fn under_control_only_the_decisions_allocate() {
+    let mut m = Machine::new(MachineSetup {
+        thrusters: 4,
+        geometry: Some(four_thrusters()),
+        ..MachineSetup::default()
+    });
+    let mut k = 0;
+    count(&mut m, &mut k, 10);
+    m.on_request(Request::Hold).unwrap();
+    count(&mut m, &mut k, 2);
+    assert_eq!(m.state(), State::Active);
+    // 10 s at 200 Hz: a window opens after 1 s settled, then at most one decision a second.
+    let active = allocating_ticks(&mut m, &mut k, 2000);
+    assert!(
+        active <= 11,
+        "controlling: {active} of 2000 ticks allocated"
+    );
+    m.on_request(Request::Estimate).unwrap();
+    assert_eq!(m.state(), State::Identify);
+    let identify = allocating_ticks(&mut m, &mut k, 1000);
+    assert!(
+        identify <= 6,
+        "identifying: {identify} of 1000 ticks allocated"
+    );
 }
 
 /// The dynamic method's per-sample path (`Estimator::push_dynamic_sample`: navigation, thruster

@@ -130,11 +130,13 @@ impl Machine {
     }
 
     /// For `telemetry`: what the controller tracks now (levelling's target before a run, the
-    /// setpoint while holding), None while it does not control.
+    /// setpoint while holding or identifying under control), None while it does not control.
     pub(super) fn tracked_target(&self) -> Option<Target> {
         match (&self.levelling, self.state) {
             (Some(l), State::MeasureNoise) => Some(l.target),
-            (None, State::Active) if self.models.current().is_some() => self.target,
+            (None, State::Active | State::Identify) if self.models.current().is_some() => {
+                self.target
+            }
             _ => None,
         }
     }
@@ -733,14 +735,13 @@ impl Machine {
             depth: s.depth,
         };
         let err_deg = attitude.angle_to(&target.attitude).to_degrees();
-        let model = model.clone();
         let step = self.run.closed_loop_sample(
             s.t_ns,
             &m,
             &self.attitude.gyro_bias(),
             err_deg,
             &self.setup,
-            Some(&model),
+            Some(model),
             self.n,
             &mut cmd.thrust[..n],
         );
