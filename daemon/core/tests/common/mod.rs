@@ -42,7 +42,11 @@ impl Run {
     }
 
     pub fn with_rate(name: &str, noise: NoisePreset, seed: u64, rate_hz: f64) -> Run {
-        let v = vehicle(name);
+        Run::with_vehicle(vehicle(name), noise, seed, rate_hz)
+    }
+
+    /// The same for a vehicle built or edited in the test.
+    pub fn with_vehicle(v: Vehicle, noise: NoisePreset, seed: u64, rate_hz: f64) -> Run {
         let n = v.thrusters.len();
         let sensors = SensorConfig {
             rate_hz,
