@@ -186,6 +186,18 @@ impl Dither {
         &self.signs[..self.n]
     }
 
+    /// Add the dither in force at `t_s`, `amplitude` of full command, to `command` (clamped
+    /// to [-1, 1]). Balanced like the open-loop doublets: the forward half is scaled by
+    /// `reverse_ratio`, since propellers push harder forward (a T200's reverse gives ~78 %) and
+    /// a symmetric dither would push the vehicle off its setpoint on average, the controller
+    /// chasing it.
+    pub fn add_to(&mut self, t_s: f64, amplitude: f64, reverse_ratio: f64, command: &mut [f64]) {
+        for (u, s) in command.iter_mut().zip(self.signs_at(t_s)) {
+            let d = if *s > 0.0 { reverse_ratio * s } else { *s };
+            *u = (*u + amplitude * d).clamp(-1.0, 1.0);
+        }
+    }
+
     fn next_bit(&mut self) -> bool {
         let mut x = self.state;
         x ^= x << 13;

@@ -232,11 +232,8 @@ impl Refiner {
         if self.cfg.dither > 0.0 {
             let fade = ((10.0 - tick.err_deg) / 5.0).clamp(0.0, 1.0);
             let a = self.cfg.dither * fade;
-            let forward = est_cfg.reverse_ratio;
-            for (u, s) in command[..n].iter_mut().zip(self.dither.signs_at(t_s)) {
-                let d = if *s > 0.0 { forward * s } else { *s };
-                *u = (*u + a * d).clamp(-1.0, 1.0);
-            }
+            self.dither
+                .add_to(t_s, a, est_cfg.reverse_ratio, &mut command[..n]);
         }
         window.sent[..n].copy_from_slice(&command[..n]);
         if tick.t_ns < window.next_decision_ns {

@@ -134,14 +134,8 @@ impl EstimationRun {
             &c.sent[..k],
         );
         let amplitude = c.amplitude * cfg.fade(err_deg);
-        // Balanced like the open-loop doublets: propellers push harder forward (a T200's
-        // reverse gives ~78 %), so a symmetric dither would push the vehicle off its setpoint
-        // on average and the controller would chase it.
-        let forward = setup.estimator.reverse_ratio;
-        for (u, s) in command.iter_mut().zip(c.dither.signs_at(t_s)) {
-            let d = if *s > 0.0 { forward * s } else { *s };
-            *u = (*u + amplitude * d).clamp(-1.0, 1.0);
-        }
+        c.dither
+            .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
         c.sent[..k].copy_from_slice(command);
         if t_ns < c.next_decision_ns {
             return ClosedStep::Exciting;
