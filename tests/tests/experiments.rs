@@ -184,6 +184,25 @@ fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
             f(s, &["after", "mean_err_deg"]),
         );
         assert!(after < before + 2.0, "before {before}, after {after}");
+        // At the paper's noise the background refinement finds it (measured over seeds 1-3:
+        // detected after 18-25 s, the new model 39-46 s after the change, 0.038-0.050 off the
+        // truth, one report each).
+        let p = &v["runs"]["silent-paper"];
+        assert_eq!(p["monitor_mismatch_reports"], 1, "{p}");
+        let ph = &p["hot_swap"];
+        assert!(f(ph, &["detection_delay_s"]) < 60.0, "{ph}");
+        assert!(f(ph, &["new_model_rel_err_rot_vs_truth"]) < 0.15, "{ph}");
+        // The oracle (the new true model loaded at the change) holds as the learned one does
+        // after re-learning (measured after 4.7-5.0 deg against before 4.6-5.0).
+        let o = &v["runs"]["oracle"]["hot_swap"];
+        let (before, after) = (
+            f(o, &["before", "mean_err_deg"]),
+            f(o, &["after", "mean_err_deg"]),
+        );
+        assert!(
+            after < before + 2.0,
+            "oracle: before {before}, after {after}"
+        );
     } else {
         // A daemon without the monitor keeps the old model: the vehicle stays controlled
         // (measured 5.5 deg after the change vs 4.6 before) but nothing is re-learned.
