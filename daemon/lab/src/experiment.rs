@@ -1354,7 +1354,7 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
         Name::ManualVsLearned => "AMOUR-5, yaw / pitch / roll steps: learned (top) and manual (bottom) model",
         Name::Misaligned => "Top thruster rotated 45 deg, pitch steps: manual (top) and re-learned (bottom) model",
         Name::Aligned => "All thrusters aligned, yaw and pitch steps: the paper's estimator (top) and ours (bottom)",
-        Name::HotSwap => "Top thruster rotated 45 deg mid-run (red line): announced (top) and silent (bottom)",
+        Name::HotSwap => "Top thruster rotated 45 deg mid-run (red line): announced, silent (realistic IMU), silent (paper noise), true model (rows, top to bottom)",
     };
     render(
         &Grid {
