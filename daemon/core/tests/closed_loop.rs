@@ -188,3 +188,33 @@ fn under_control_a_thruster_weak_in_reverse_is_diagnosed() {
         assert!(e.thruster[1].asymmetric);
     }
 }
+
+/// An operator's estimate is refused, with the reason and the key to change, while the vehicle
+/// is beyond the identification's attitude budget (here right after a 30 deg pitch setpoint),
+/// and accepted once it has settled.
+#[test]
+fn an_estimate_beyond_the_attitude_budget_is_refused_with_the_reason() {
+    use nalgebra::UnitQuaternion;
+    use thrusterd_core::machine::Request;
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 2);
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(2.0);
+    let yaw = run.sim.roll_pitch_yaw()[2];
+    run.machine.on_setpoint(
+        UnitQuaternion::from_euler_angles(0.0, 30f64.to_radians(), yaw),
+        None,
+    );
+    run.run_for(0.05);
+    let refused = run.machine.on_request(Request::Estimate).unwrap_err();
+    assert!(
+        refused.0.contains("identification.attitude_budget_deg")
+            && refused.0.contains("deg from its setpoint"),
+        "{}",
+        refused.0
+    );
+    assert_eq!(run.machine.state(), State::Active);
+    run.run_for(6.0);
+    run.machine.on_request(Request::Estimate).unwrap();
+    assert_eq!(run.machine.state(), State::Identify);
+}

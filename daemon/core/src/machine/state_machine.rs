@@ -297,6 +297,14 @@ impl Machine {
                         self.text
                     )));
                 }
+                if let Some(err_deg) = self.beyond_identification_budget() {
+                    return Err(Refused(format!(
+                        "the vehicle is {err_deg:.0} deg from its setpoint, beyond the \
+                         identification budget of {:.0} deg (identification.attitude_budget_deg): \
+                         let it settle, or hold, then estimate",
+                        self.setup.identification.attitude_budget_deg
+                    )));
+                }
                 let t = self.last_t_ns.unwrap_or(0);
                 self.start_estimation(t, "estimate requested");
                 Ok(format!("estimating {} thrusters", self.n))
@@ -699,6 +707,24 @@ impl Machine {
             return self.start_pulse(s.t_ns);
         }
         Command::neutral(self.n)
+    }
+
+    /// While controlling with closed-loop identification: the attitude error (deg) when it is
+    /// beyond the identification's budget, where no dither would be applied and the run could
+    /// not learn (an operator's request is refused then; an automatic start waits in Identify,
+    /// its dither faded out, until the vehicle is back within the budget).
+    fn beyond_identification_budget(&self) -> Option<f64> {
+        let controlling = self.state == State::Active && self.models.current().is_some();
+        if !(controlling && EstimationRun::closed_loop_possible(&self.setup)) {
+            return None;
+        }
+        let target = self.target?;
+        let err_deg = self
+            .attitude
+            .attitude()
+            .angle_to(&target.attitude)
+            .to_degrees();
+        (err_deg > self.setup.identification.attitude_budget_deg).then_some(err_deg)
     }
 
     /// Under control: the controller output with the dither on top, the estimator fed with
