@@ -43,6 +43,10 @@ pub struct DemoArgs {
     /// its namespace, state directory and thruster count are the demo's own.
     #[arg(long)]
     pub daemon_config: Option<PathBuf>,
+    /// Record the session (every topic of its namespace, from before the processes start)
+    /// to this MCAP file, as `thrusterctl record` would.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
@@ -90,17 +94,28 @@ pub fn run(args: DemoArgs) -> Result<()> {
             .clone()
             .map_or(DaemonConfig::Defaults, DaemonConfig::File),
         scenario: None,
+        record: args
+            .record
+            .clone()
+            .map(|out| thrusterctl_operator::record::options(out, None, None))
+            .transpose()?,
     };
     // Bad arguments are answered before the binaries are built or probed.
     spec.check()?;
     let bins = Binaries::locate()?;
     let mut session = Session::start(&bins, &spec)?;
     let result = drive(&args, &mut session, &vehicle);
+    let recorded = session.stop_recording();
     let shutdown = session.finish();
     let mut summary = result?;
     summary.clean_exit = shutdown.clean;
     summary.leftovers = shutdown.leftovers;
     report(&args, &summary);
+    if let Some(recorded) = recorded {
+        let recorded = recorded?;
+        // On stderr: `--json` keeps stdout one JSON object.
+        eprintln!("{}", recorded.line());
+    }
     if !shutdown.clean || shutdown.leftovers > 0 {
         bail!(
             "shutdown was not clean (exit ok: {}, files left: {})",

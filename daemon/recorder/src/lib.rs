@@ -17,7 +17,7 @@ pub mod session;
 pub mod sink;
 pub mod source;
 
-pub use session::{record, RecordOptions, RecordSummary, TopicSummary};
+pub use session::{record, record_on, RecordOptions, RecordSummary, TopicSummary};
 pub use sink::{rotated_path, McapSink};
 
 use std::path::PathBuf;

@@ -87,15 +87,17 @@ pub fn record(
             namespace: ipc.namespace().to_string(),
             source,
         })?;
-    record_on(&node, ipc, options, stop)
+    record_on(&node, ipc, options, stop, &mut || {})
 }
 
-/// As [`record`] on an existing node.
+/// As [`record`] on an existing node; `ready` is called once every topic is subscribed and
+/// the first file is open (a caller that starts the publishers after it misses nothing).
 pub fn record_on(
     node: &IpcNode,
     ipc: &IpcConfig,
     options: &RecordOptions,
     stop: &AtomicBool,
+    ready: &mut dyn FnMut(),
 ) -> Result<RecordSummary, RecordError> {
     if options.max_bytes == Some(0) {
         return Err(RecordError::Options(
@@ -104,6 +106,7 @@ pub fn record_on(
     }
     let mut sources = open_all(node, ipc)?;
     let mut sink = McapSink::create(&options.out, options.max_bytes)?;
+    ready();
     let start = Instant::now();
     let epoch_ns = SystemTime::now()
         .duration_since(UNIX_EPOCH)
