@@ -665,6 +665,8 @@ impl Session {
 
     /// SIGTERM both processes, drop every port, purge the namespace.
     pub fn finish(mut self) -> Shutdown {
+        // A recording not stopped by `stop_recording` ends here, before the namespace goes.
+        self.recording = None;
         // The simulator first: the daemon then sees no more samples and exits on its own signal.
         let clean = self.sim.stop() & self.daemon.stop();
         self.ports = None;

@@ -142,9 +142,27 @@ fn run(
         }
         if drain_all(sources, sink, now_ns)? == 0 {
             // Sleep on the IMU, the fastest stream.
-            sources[0].wait(IDLE_WAIT)?;
+            if let Err(e) = sources[0].wait(IDLE_WAIT) {
+                if interrupted(stop) {
+                    return Ok(());
+                }
+                return Err(e);
+            }
         }
     }
+}
+
+/// After a failed wait: true when SIGINT/SIGTERM caused it. The signal makes the wait fail
+/// (EINTR) at once, but ctrlc sets the stop flag from its own thread a moment later.
+fn interrupted(stop: &AtomicBool) -> bool {
+    let deadline = Instant::now() + Duration::from_millis(200);
+    while Instant::now() < deadline {
+        if stop.load(Ordering::SeqCst) {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    stop.load(Ordering::SeqCst)
 }
 
 fn drain_all(
