@@ -1,16 +1,23 @@
-//! A recording session: subscribe, drain every topic into the MCAP sink until told to stop,
-//! finish the file with the counts and losses.
+//! A recording session: subscribe, drain every topic until told to stop, finish the file
+//! with the counts and losses.
+//!
+//! Two threads: the caller's drains the subscribers (copy out of shared memory, JSON) and
+//! hands each message over an unbounded channel to a writer thread that owns the files. A
+//! slow disk (a rotation, a full page cache) then delays only the writer, never the draining
+//! of the 128-sample subscriber buffers; the memory the channel takes meanwhile is the price.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::Serialize;
 use thruster_protocol::services::{IpcConfig, IpcNode};
 
 use crate::sink::McapSink;
-use crate::source::{open_all, Source};
+use crate::source::{open_all, Item, Source};
 use crate::RecordError;
 
 /// Longest sleep when nothing came. The IMU's notification wakes the loop earlier; the
@@ -106,6 +113,16 @@ pub fn record_on(
     }
     let mut sources = open_all(node, ipc)?;
     let mut sink = McapSink::create(&options.out, options.max_bytes)?;
+    let (tx, rx) = mpsc::channel::<Command>();
+    let failed = Arc::new(AtomicBool::new(false));
+    let writer_failed = Arc::clone(&failed);
+    let writer = std::thread::Builder::new()
+        .name("mcap-writer".into())
+        .spawn(move || write_all(&mut sink, &rx, &writer_failed).and_then(|m| sink.finish(&m)))
+        .map_err(|source| RecordError::Io {
+            path: options.out.clone(),
+            source,
+        })?;
     ready();
     let start = Instant::now();
     let epoch_ns = SystemTime::now()
@@ -115,13 +132,20 @@ pub fn record_on(
     // never go backwards when the wall clock is stepped.
     let now_ns = move || epoch_ns + start.elapsed().as_nanos() as u64;
     let deadline = options.duration.map(|d| start + d);
-    let result = run(&mut sources, &mut sink, &now_ns, stop, deadline);
+    let mut out = |item: Item| {
+        // A writer that stopped (an error) has dropped its receiver: it reports why.
+        let _ = tx.send(Command::Write(item));
+    };
+    let result = run(&mut sources, &mut out, &now_ns, stop, &failed, deadline);
     // One last pass after the stop: what is buffered is recorded too.
-    let last = result.and_then(|()| drain_all(&mut sources, &mut sink, &now_ns).map(|_| ()));
+    let last = result.and_then(|()| drain_all(&mut sources, &mut out, &now_ns).map(|_| ()));
     let summary = summarise(&sources, start.elapsed());
-    let metadata = metadata(&summary);
-    // Finish the file even after an error, so what was written stays readable.
-    let files = sink.finish(&metadata);
+    // The writer finishes the file even after an error, so what was written stays readable.
+    let _ = tx.send(Command::Finish(metadata(&summary)));
+    drop(tx);
+    let files = writer
+        .join()
+        .map_err(|_| RecordError::Options("the MCAP writer thread panicked".into()))?;
     last?;
     Ok(RecordSummary {
         files: files?,
@@ -129,18 +153,68 @@ pub fn record_on(
     })
 }
 
+/// What the writer thread is told.
+enum Command {
+    Write(Item),
+    /// The end: finish the file with this metadata.
+    Finish(BTreeMap<String, String>),
+}
+
+/// The writer thread: every item into `sink` until told to finish; returns the metadata to
+/// finish with. After an error it sets `failed` (the drainer stops) and returns it.
+fn write_all(
+    sink: &mut McapSink,
+    rx: &mpsc::Receiver<Command>,
+    failed: &AtomicBool,
+) -> Result<BTreeMap<String, String>, RecordError> {
+    let mut write = |item: Item| match item {
+        Item::Channel {
+            index,
+            topic,
+            schema_name,
+            schema,
+        } => {
+            sink.add_channel(index, topic, &schema_name, &schema);
+            Ok(())
+        }
+        Item::Message {
+            index,
+            sequence,
+            log_ns,
+            publish_ns,
+            data,
+        } => sink.write(index, sequence, log_ns, publish_ns, &data),
+    };
+    for command in rx {
+        match command {
+            Command::Write(item) => {
+                if let Err(e) = write(item) {
+                    failed.store(true, Ordering::SeqCst);
+                    return Err(e);
+                }
+            }
+            Command::Finish(metadata) => return Ok(metadata),
+        }
+    }
+    Ok(BTreeMap::new())
+}
+
 fn run(
     sources: &mut [Box<dyn Source>],
-    sink: &mut McapSink,
+    out: &mut dyn FnMut(Item),
     now_ns: &dyn Fn() -> u64,
     stop: &AtomicBool,
+    failed: &AtomicBool,
     deadline: Option<Instant>,
 ) -> Result<(), RecordError> {
     loop {
-        if stop.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
+        if stop.load(Ordering::Relaxed)
+            || failed.load(Ordering::Relaxed)
+            || deadline.is_some_and(|d| Instant::now() >= d)
+        {
             return Ok(());
         }
-        if drain_all(sources, sink, now_ns)? == 0 {
+        if drain_all(sources, out, now_ns)? == 0 {
             // Sleep on the IMU, the fastest stream.
             if let Err(e) = sources[0].wait(IDLE_WAIT) {
                 if interrupted(stop) {
@@ -150,6 +224,18 @@ fn run(
             }
         }
     }
+}
+
+fn drain_all(
+    sources: &mut [Box<dyn Source>],
+    out: &mut dyn FnMut(Item),
+    now_ns: &dyn Fn() -> u64,
+) -> Result<usize, RecordError> {
+    let mut n = 0;
+    for (index, s) in sources.iter_mut().enumerate() {
+        n += s.drain(index, out, now_ns)?;
+    }
+    Ok(n)
 }
 
 /// After a failed wait: true when SIGINT/SIGTERM caused it. The signal makes the wait fail
@@ -163,18 +249,6 @@ fn interrupted(stop: &AtomicBool) -> bool {
         std::thread::sleep(Duration::from_millis(1));
     }
     stop.load(Ordering::SeqCst)
-}
-
-fn drain_all(
-    sources: &mut [Box<dyn Source>],
-    sink: &mut McapSink,
-    now_ns: &dyn Fn() -> u64,
-) -> Result<usize, RecordError> {
-    let mut n = 0;
-    for s in sources.iter_mut() {
-        n += s.drain(sink, now_ns)?;
-    }
-    Ok(n)
 }
 
 fn summarise(sources: &[Box<dyn Source>], wall: Duration) -> RecordSummary {

@@ -88,7 +88,7 @@ struct OpenFile {
 pub struct McapSink {
     first: PathBuf,
     max_bytes: Option<u64>,
-    channels: Vec<ChannelDef>,
+    channels: BTreeMap<usize, ChannelDef>,
     file: Option<OpenFile>,
     index: u32,
     written: Vec<PathBuf>,
@@ -101,7 +101,7 @@ impl McapSink {
         let mut sink = Self {
             first: first.to_path_buf(),
             max_bytes,
-            channels: Vec::new(),
+            channels: BTreeMap::new(),
             file: None,
             index: 0,
             written: Vec::new(),
@@ -144,20 +144,23 @@ impl McapSink {
         Ok(())
     }
 
-    /// Declares a channel for `topic` with the JSON Schema `schema` named `schema_name`;
-    /// returns its handle for [`McapSink::write`].
+    /// Declares channel `index` for `topic` with the JSON Schema `schema` named
+    /// `schema_name`, for [`McapSink::write`].
     pub fn add_channel(
         &mut self,
+        index: usize,
         topic: &str,
         schema_name: &str,
         schema: &serde_json::Value,
-    ) -> usize {
-        self.channels.push(ChannelDef {
-            topic: topic.to_string(),
-            schema_name: schema_name.to_string(),
-            schema: serde_json::to_vec(schema).expect("a JSON value serialises"),
-        });
-        self.channels.len() - 1
+    ) {
+        self.channels.insert(
+            index,
+            ChannelDef {
+                topic: topic.to_string(),
+                schema_name: schema_name.to_string(),
+                schema: serde_json::to_vec(schema).expect("a JSON value serialises"),
+            },
+        );
     }
 
     /// Writes one message on `channel`: `log_ns` when the recorder received it, `publish_ns`
@@ -172,11 +175,15 @@ impl McapSink {
     ) -> Result<(), RecordError> {
         if let (Some(max), Some(file)) = (self.max_bytes, &self.file) {
             if file.writer_len() >= max {
-                self.finish_file(&BTreeMap::new())?;
+                self.finish_file(&BTreeMap::new(), false)?;
                 self.open_next()?;
             }
         }
-        let def = &self.channels[channel];
+        let Some(def) = self.channels.get(&channel) else {
+            return Err(RecordError::Options(format!(
+                "message on undeclared channel {channel}"
+            )));
+        };
         let file = self.file.as_mut().expect("a file is open while recording");
         let mcap_err = |path: &Path| {
             let path = path.to_path_buf();
@@ -208,8 +215,13 @@ impl McapSink {
             .map_err(mcap_err(&file.path))
     }
 
-    /// Finishes the open file with a metadata record `name` holding `metadata`.
-    fn finish_file(&mut self, metadata: &BTreeMap<String, String>) -> Result<(), RecordError> {
+    /// Finishes the open file with a metadata record holding `metadata` (if any); `sync`:
+    /// wait until it is on disk (only at the end: an fsync can take long on a busy disk).
+    fn finish_file(
+        &mut self,
+        metadata: &BTreeMap<String, String>,
+        sync: bool,
+    ) -> Result<(), RecordError> {
         let Some(mut file) = self.file.take() else {
             return Ok(());
         };
@@ -229,7 +241,13 @@ impl McapSink {
         let mut inner = file.writer.into_inner();
         inner
             .flush()
-            .and_then(|()| inner.inner.get_ref().sync_data())
+            .and_then(|()| {
+                if sync {
+                    inner.inner.get_ref().sync_data()
+                } else {
+                    Ok(())
+                }
+            })
             .map_err(|source| RecordError::Io {
                 path: file.path.clone(),
                 source,
@@ -243,7 +261,7 @@ impl McapSink {
         mut self,
         summary: &BTreeMap<String, String>,
     ) -> Result<Vec<PathBuf>, RecordError> {
-        self.finish_file(summary)?;
+        self.finish_file(summary, true)?;
         Ok(std::mem::take(&mut self.written))
     }
 }

@@ -5,8 +5,27 @@ use thruster_protocol::services::{Inbox, IpcConfig, IpcNode, TopicMessage};
 use thruster_protocol::*;
 
 use crate::schema::json_schema;
-use crate::sink::McapSink;
 use crate::RecordError;
+
+/// What a source hands to the writer thread.
+#[derive(Debug)]
+pub enum Item {
+    /// A channel's first message is coming: its topic and JSON Schema.
+    Channel {
+        index: usize,
+        topic: &'static str,
+        schema_name: String,
+        schema: serde_json::Value,
+    },
+    /// One message, serialised.
+    Message {
+        index: usize,
+        sequence: u32,
+        log_ns: u64,
+        publish_ns: u64,
+        data: Vec<u8>,
+    },
+}
 
 /// The sequence number and sender time of a message.
 pub trait Stamped {
@@ -68,10 +87,12 @@ impl SeqTracker {
 /// A topic being recorded.
 pub trait Source {
     fn topic(&self) -> &'static str;
-    /// Writes every buffered message to `sink`; returns how many. `now_ns` gives the log time.
+    /// Hands every buffered message to `out` as channel `index`; returns how many. `now_ns`
+    /// gives the log time.
     fn drain(
         &mut self,
-        sink: &mut McapSink,
+        index: usize,
+        out: &mut dyn FnMut(Item),
         now_ns: &dyn Fn() -> u64,
     ) -> Result<usize, RecordError>;
     fn count(&self) -> u64;
@@ -84,10 +105,9 @@ pub trait Source {
 pub struct TopicSource<T: TopicMessage> {
     inbox: Inbox<T>,
     namespace: String,
-    channel: Option<usize>,
+    announced: bool,
     count: u64,
     seq: SeqTracker,
-    buf: Vec<u8>,
 }
 
 impl<T: TopicMessage + Serialize + Stamped> TopicSource<T> {
@@ -102,10 +122,9 @@ impl<T: TopicMessage + Serialize + Stamped> TopicSource<T> {
         Ok(Self {
             inbox,
             namespace: ipc.namespace().to_string(),
-            channel: None,
+            announced: false,
             count: 0,
             seq: SeqTracker::default(),
-            buf: Vec::with_capacity(1024),
         })
     }
 }
@@ -123,7 +142,8 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
 
     fn drain(
         &mut self,
-        sink: &mut McapSink,
+        index: usize,
+        out: &mut dyn FnMut(Item),
         now_ns: &dyn Fn() -> u64,
     ) -> Result<usize, RecordError> {
         let topic = self.topic();
@@ -134,23 +154,29 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
         let mut n = 0;
         while let Some(msg) = self.inbox.recv().map_err(ipc)? {
             let json = |source| RecordError::Json { topic, source };
-            let channel = match self.channel {
-                Some(c) => c,
-                None => {
-                    let value = serde_json::to_value(msg).map_err(json)?;
-                    let name = schema_name::<T>();
-                    let c = sink.add_channel(topic, &name, &json_schema(&name, &value));
-                    self.channel = Some(c);
-                    c
-                }
-            };
-            self.buf.clear();
-            serde_json::to_writer(&mut self.buf, &msg).map_err(json)?;
-            let log = now_ns();
+            if !self.announced {
+                let value = serde_json::to_value(msg).map_err(json)?;
+                let name = schema_name::<T>();
+                let schema = json_schema(&name, &value);
+                out(Item::Channel {
+                    index,
+                    topic,
+                    schema_name: name,
+                    schema,
+                });
+                self.announced = true;
+            }
+            let data = serde_json::to_vec(&msg).map_err(json)?;
+            let log_ns = now_ns();
             // Publish time: the sender's clock where the message has one (vehicle time for
             // the simulator), else the receipt.
-            let publish = msg.t_ns().unwrap_or(log);
-            sink.write(channel, msg.seq() as u32, log, publish, &self.buf)?;
+            out(Item::Message {
+                index,
+                sequence: msg.seq() as u32,
+                log_ns,
+                publish_ns: msg.t_ns().unwrap_or(log_ns),
+                data,
+            });
             self.seq.see(msg.seq());
             self.count += 1;
             n += 1;
