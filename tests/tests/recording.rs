@@ -173,3 +173,43 @@ fn a_session_at_1_khz_is_recorded_without_loss_and_read_back_by_foxglove_mcap() 
     let left = world.leftovers();
     assert!(left.is_empty(), "files of the namespace left: {left:?}");
 }
+
+/// `thrusterctl demo --record`: the demo's whole session (estimation, model swap, hold) in one
+/// file, every sample from the simulator's first, none lost (lockstep paced to 1 kHz).
+#[test]
+fn the_demo_records_its_session() {
+    system_tests::python::venv_python();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.mcap");
+    let o = Command::new(bin("thrusterctl"))
+        .args(["demo", "--json", "--hold-s", "2", "--record"])
+        .arg(&out)
+        .output()
+        .expect("thrusterctl demo runs");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("; lost 0"), "{stderr}");
+    // --json keeps stdout one JSON object: the recorder's line goes to stderr.
+    serde_json::from_slice::<Value>(&o.stdout).expect("demo --json prints one JSON object");
+    let summary = read_mcap(&[out]);
+    for topic in [
+        "imu",
+        "thrust",
+        "telemetry",
+        "model",
+        "dynamics",
+        "status",
+        "setpoint",
+        "truth",
+        "vehicle",
+    ] {
+        let c = channel(&summary, topic);
+        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}: {c}");
+        assert_eq!(c["log_time_monotonic"], true, "{topic}: {c}");
+    }
+    let imu = channel(&summary, "imu");
+    assert_eq!(imu["first_seq"], 1, "{imu}");
+    assert_eq!(imu["seq_contiguous"], true, "{imu}");
+    assert_eq!(imu["last_seq"], imu["count"], "{imu}");
+    assert_eq!(summary["metadata"]["thruster-recorder"]["lost"], "0");
+}
