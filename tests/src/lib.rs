@@ -14,6 +14,7 @@ use thruster_protocol::{
     ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
 };
 
+pub mod python;
 pub mod soak;
 
 /// Workspace root (this crate lives in tests/).

@@ -479,6 +479,7 @@ fn run_one(bins: &Binaries, args: &ExperimentArgs, spec: &RunSpec) -> Result<Run
         pace: (args.pace > 0.0).then_some(args.pace),
         daemon_config: DaemonConfig::Text(daemon_config(spec, bins, &vehicle)?),
         scenario: spec.change.map(|(t, a)| scenario(t, a)),
+        record: None,
     };
     let wall = Instant::now();
     let mut session = Session::start(bins, &session_spec)?;

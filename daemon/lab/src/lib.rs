@@ -6,6 +6,7 @@
 pub mod demo;
 pub mod excursion;
 pub mod experiment;
+pub mod recording;
 pub mod scoring;
 pub mod session;
 pub mod study;

@@ -265,6 +265,8 @@ pub struct SessionSpec {
     pub daemon_config: DaemonConfig,
     /// Scenario TOML (scripted reconfigurations), written into the session's temp folder.
     pub scenario: Option<String>,
+    /// Record the session's namespace to MCAP (`--record`), from before the processes start.
+    pub record: Option<thruster_recorder::RecordOptions>,
 }
 
 impl SessionSpec {
@@ -310,6 +312,8 @@ pub struct Shutdown {
 
 /// A running daemon + simulator pair and the ports to them.
 pub struct Session {
+    /// First: stopped (its file finished) before anything else of the session goes.
+    recording: Option<crate::recording::Recording>,
     ports: Option<Ports>,
     node: Option<IpcNode>,
     ipc: IpcConfig,
@@ -411,9 +415,15 @@ impl Session {
             std::fs::write(&p, text)?;
             sim_args.extend(["--scenario".into(), path_arg(&p)]);
         }
+        // Subscribed before the processes start: the recording holds the whole session.
+        let recording = match &spec.record {
+            Some(options) => Some(crate::recording::Recording::start(&ipc, options.clone())?),
+            None => None,
+        };
         let daemon = ChildProc::spawn("thrusterd", &bins.daemon, &daemon_args, &tmp.path)?;
         let sim = ChildProc::spawn("thruster-sim", &bins.sim, &sim_args, &tmp.path)?;
         Ok(Session {
+            recording,
             ports: Some(ports),
             node: Some(node),
             ipc,
@@ -647,8 +657,16 @@ impl Session {
         Ok(())
     }
 
+    /// Stops the recording (`--record`), if any, and returns what it wrote. Call it before
+    /// [`Session::finish`] (the processes still run; the recording ends here).
+    pub fn stop_recording(&mut self) -> Option<Result<thruster_recorder::RecordSummary>> {
+        self.recording.take().map(|mut r| r.stop())
+    }
+
     /// SIGTERM both processes, drop every port, purge the namespace.
     pub fn finish(mut self) -> Shutdown {
+        // A recording not stopped by `stop_recording` ends here, before the namespace goes.
+        self.recording = None;
         // The simulator first: the daemon then sees no more samples and exits on its own signal.
         let clean = self.sim.stop() & self.daemon.stop();
         self.ports = None;
@@ -662,6 +680,7 @@ impl Session {
 impl Drop for Session {
     fn drop(&mut self) {
         // finish() did this already on the normal path; on an error path kill first.
+        self.recording = None;
         self.daemon.kill();
         self.sim.kill();
         self.ports = None;

@@ -95,6 +95,20 @@ pub enum Command {
         #[arg(long)]
         interval_ms: Option<u64>,
     },
+    /// Record every topic of the namespace to MCAP (JSON + JSON Schema per channel, for
+    /// Foxglove) until Ctrl-C/SIGTERM or --duration-s; a subscriber only, it never slows the
+    /// daemon. Prints the message counts and sequence-gap losses at the end.
+    Record {
+        /// The MCAP file to write (rotated files: FILE-0001.mcap, FILE-0002.mcap, ...).
+        #[arg(long)]
+        out: PathBuf,
+        /// Start a new file once one holds this many MiB (default: one file).
+        #[arg(long)]
+        max_mb: Option<f64>,
+        /// Stop after this many seconds (wall clock; default: until Ctrl-C or SIGTERM).
+        #[arg(long)]
+        duration_s: Option<f64>,
+    },
     /// Announce a change of the thruster configuration (starts re-estimation).
     Reconfigure {
         /// What changed.

@@ -15,7 +15,7 @@ use crate::client::{wait_latest, Daemon, Target};
 use crate::console::{interrupt_flag, say};
 use crate::exit::{self, Failure};
 use crate::json::{DriverJson, ModelJson, StatusJson, StatusReportJson};
-use crate::{estimate, publish, render, watch};
+use crate::{estimate, publish, record, render, watch};
 
 /// The target daemon (namespace, ipc root) and the timeout, from the global options.
 pub fn target(globals: Globals) -> Result<(Target, Duration), Failure> {
@@ -74,6 +74,14 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
                 options,
                 interrupt_flag()?,
             )
+        }
+        Command::Record {
+            out,
+            max_mb,
+            duration_s,
+        } => {
+            let options = record::options(out, max_mb, duration_s)?;
+            record::run(&target, &options, interrupt_flag()?)
         }
         Command::Reconfigure {
             kind,

@@ -20,6 +20,7 @@ pub mod geometry;
 pub mod json;
 pub mod number;
 pub mod publish;
+pub mod record;
 pub mod render;
 pub mod telemetry;
 pub mod watch;

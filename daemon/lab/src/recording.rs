@@ -1,0 +1,86 @@
+//! `--record FILE.mcap` of the demo: the session's namespace recorded by the same recorder
+//! as `thrusterctl record`, in a thread of this process.
+//!
+//! A thread rather than a child `thrusterctl record` process: the recorder is subscribers
+//! only (iceoryx2's publishers never wait for a subscriber, so it cannot slow the daemon or
+//! the simulator whichever process it lives in), the session already joins the namespace,
+//! and in a thread it subscribes to every topic *before* the daemon and the simulator start
+//! (nothing of the session is missed, which a separately started process could not promise
+//! without a handshake), ends before the namespace is purged, and reports its counts
+//! without parsing another process's output.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use anyhow::{anyhow, Context, Result};
+use thruster_protocol::services::IpcConfig;
+use thruster_recorder::{RecordError, RecordOptions, RecordSummary};
+
+/// Longest wait for the recorder to subscribe.
+const READY_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// A recorder running in its own thread.
+pub struct Recording {
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<Result<RecordSummary, RecordError>>>,
+}
+
+impl Recording {
+    /// Starts recording `ipc`'s namespace; returns once every topic is subscribed.
+    pub fn start(ipc: &IpcConfig, options: RecordOptions) -> Result<Recording> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let (tx, rx) = mpsc::channel();
+        let ipc = ipc.clone();
+        let flag = Arc::clone(&stop);
+        let handle = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || {
+                // The node lives in this thread (iceoryx2 nodes are not shared across threads).
+                let node = ipc
+                    .create_node("recorder")
+                    .map_err(|source| RecordError::Ipc {
+                        namespace: ipc.namespace().to_string(),
+                        source,
+                    })?;
+                thruster_recorder::record_on(&node, &ipc, &options, &flag, &mut || {
+                    let _ = tx.send(());
+                })
+            })
+            .context("starting the recorder thread")?;
+        let mut recording = Recording {
+            stop,
+            handle: Some(handle),
+        };
+        if rx.recv_timeout(READY_TIMEOUT).is_err() {
+            // The thread ended (an error) or hangs: stop it and say why.
+            return Err(match recording.stop() {
+                Err(e) => e,
+                Ok(_) => anyhow!("the recorder did not subscribe within {READY_TIMEOUT:?}"),
+            });
+        }
+        Ok(recording)
+    }
+
+    /// Stops the recorder, which drains what is buffered and finishes its file.
+    pub fn stop(&mut self) -> Result<RecordSummary> {
+        self.stop.store(true, Ordering::Relaxed);
+        let handle = self
+            .handle
+            .take()
+            .ok_or_else(|| anyhow!("the recorder was stopped already"))?;
+        handle
+            .join()
+            .map_err(|_| anyhow!("the recorder thread panicked"))?
+            .context("recording")
+    }
+}
+
+impl Drop for Recording {
+    fn drop(&mut self) {
+        if self.handle.is_some() {
+            let _ = self.stop();
+        }
+    }
+}

@@ -1,0 +1,54 @@
+//! The recorder: subscribes to every topic of a namespace and writes MCAP.
+//!
+//! One channel per topic (named by the topic's leaf, e.g. `imu`), messages as JSON
+//! (`message_encoding = "json"`) with a JSON Schema per channel (`schema encoding =
+//! "jsonschema"`), so Foxglove plots any field without configuration. The recorder is a
+//! subscriber only: iceoryx2 publishers never block on a full subscriber buffer (safe
+//! overflow drops the subscriber's oldest sample), so a slow recorder can lose samples but
+//! never slow the daemon. Every message carries `seq` (+1 per message from its sender), so
+//! a loss shows as a gap, counted per topic ([`Losses`]) and written into the file.
+//!
+//! Modules, one job each: [`schema`] (JSON Schema of a message), [`sink`] (the MCAP files and
+//! their rotation), [`source`] (a topic's subscription and its loss count), [`session`] (the
+//! loop that ties them together).
+
+pub mod schema;
+pub mod session;
+pub mod sink;
+pub mod source;
+
+pub use session::{record, record_on, RecordOptions, RecordSummary, TopicSummary};
+pub use sink::{rotated_path, McapSink};
+
+use std::path::PathBuf;
+
+/// What can stop a recording.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("cannot write {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("MCAP writer on {path}: {source}")]
+    Mcap {
+        path: PathBuf,
+        #[source]
+        source: mcap::McapError,
+    },
+    #[error("serialising a {topic} message: {source}")]
+    Json {
+        topic: &'static str,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("subscribing on namespace {namespace}: {source}")]
+    Ipc {
+        namespace: String,
+        #[source]
+        source: thruster_protocol::services::IpcError,
+    },
+    #[error("{0}")]
+    Options(String),
+}

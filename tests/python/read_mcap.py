@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Summarise MCAP files with Foxglove's `mcap` package, as JSON on stdout.
+
+Usage: read_mcap.py FILE.mcap [FILE-0001.mcap ...]
+
+Per channel (topic): schema name and encoding, message encoding, whether the schema parses as
+JSON, message count, first and last log/publish times, whether log and publish times never go
+backwards (in file order), and the first/last `seq` of the JSON messages and whether they are
+contiguous. Also every metadata record. Used by tests/tests/recording.rs.
+"""
+
+import json
+import sys
+
+from mcap.reader import make_reader
+
+
+def summarise(paths):
+    channels = {}
+    metadata = {}
+    for path in paths:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            for schema, channel, message in reader.iter_messages(log_time_order=False):
+                c = channels.get(channel.topic)
+                if c is None:
+                    try:
+                        json.loads(schema.data) if schema else None
+                        schema_json = schema is not None
+                    except ValueError:
+                        schema_json = False
+                    c = channels[channel.topic] = {
+                        "schema_name": schema.name if schema else None,
+                        "schema_encoding": schema.encoding if schema else None,
+                        "schema_is_json": schema_json,
+                        "message_encoding": channel.message_encoding,
+                        "count": 0,
+                        "first_log_time": message.log_time,
+                        "last_log_time": message.log_time,
+                        "first_publish_time": message.publish_time,
+                        "last_publish_time": message.publish_time,
+                        "log_time_monotonic": True,
+                        "publish_time_monotonic": True,
+                        "first_seq": None,
+                        "last_seq": None,
+                        "seq_contiguous": True,
+                        "json_ok": True,
+                    }
+                if message.log_time < c["last_log_time"]:
+                    c["log_time_monotonic"] = False
+                if message.publish_time < c["last_publish_time"]:
+                    c["publish_time_monotonic"] = False
+                c["last_log_time"] = message.log_time
+                c["last_publish_time"] = message.publish_time
+                c["count"] += 1
+                try:
+                    seq = json.loads(message.data)["seq"]
+                except (ValueError, KeyError):
+                    c["json_ok"] = False
+                    continue
+                if c["first_seq"] is None:
+                    c["first_seq"] = seq
+                elif seq != c["last_seq"] + 1:
+                    c["seq_contiguous"] = False
+                c["last_seq"] = seq
+            for record in reader.iter_metadata():
+                metadata[record.name] = dict(record.metadata)
+    return {"files": len(paths), "channels": channels, "metadata": metadata}
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 2:
+        sys.exit(__doc__)
+    json.dump(summarise(sys.argv[1:]), sys.stdout, indent=1, sort_keys=True)
+    print()

@@ -1,0 +1,215 @@
+//! Recording end to end: `thrusterctl record` beside the real `thrusterd run` and
+//! `thruster-sim run --realtime --rate 1000` (1 kHz IMU, telemetry at every sample), rotating
+//! files by size, ended by SIGINT; the files read back with Foxglove's Python `mcap` package
+//! (tests/python, installed into a venv by `system_tests::python`), not with our own code.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use system_tests::python::read_mcap;
+use system_tests::{bin, Proc, World};
+use thruster_recorder::rotated_path;
+
+/// Vehicle (= wall, real time) seconds the simulator runs at 1 kHz.
+const SIM_S: u64 = 8;
+/// Rotation: small enough that the session fills several files.
+const MAX_MB: &str = "1";
+
+fn ctl(world: &World, args: &[&str]) -> Output {
+    Command::new(bin("thrusterctl"))
+        .args(["--namespace", &world.namespace(), "--timeout-ms", "5000"])
+        .args(args)
+        .output()
+        .expect("thrusterctl runs")
+}
+
+fn channel<'a>(summary: &'a Value, topic: &str) -> &'a Value {
+    let c = &summary["channels"][topic];
+    assert!(
+        c.is_object(),
+        "channel {topic} missing; channels: {:?}",
+        summary["channels"]
+            .as_object()
+            .map(|m| m.keys().collect::<Vec<_>>())
+    );
+    c
+}
+
+#[test]
+fn a_session_at_1_khz_is_recorded_without_loss_and_read_back_by_foxglove_mcap() {
+    // Install (or find) the reader first: a broken Python setup fails here, with its reason.
+    system_tests::python::venv_python();
+    let world = World::new("record");
+    let ns = world.namespace();
+    let out = world.path("session.mcap");
+    let out_arg = out.to_str().unwrap().to_string();
+    let mut recorder = Proc::spawn(
+        "thrusterctl",
+        &[
+            "--namespace",
+            &ns,
+            "record",
+            "--out",
+            &out_arg,
+            "--max-mb",
+            MAX_MB,
+        ],
+        world.dir.path(),
+    );
+    // The recorder writes the file's header once every topic is subscribed.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !out.exists() {
+        assert!(recorder.is_running(), "{}", recorder.log_text());
+        assert!(Instant::now() < deadline, "no {out_arg} after 30 s");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let config = world.path("thrusterd.toml");
+    std::fs::write(&config, "[telemetry]\nevery_n = 1\n").unwrap();
+    let mut daemon = world.daemon(&["--config", config.to_str().unwrap(), "--thrusters", "5"]);
+    let duration = SIM_S.to_string();
+    let mut sim = world.sim(
+        "amour5",
+        &["--realtime", "--rate", "1000", "--duration", &duration],
+    );
+    // Operator messages on their topics while it runs.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let o = ctl(&world, &["setpoint", "--pitch", "5"]);
+        if o.status.success() {
+            break;
+        }
+        assert!(Instant::now() < deadline, "{}", daemon.log_text());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = ctl(
+        &world,
+        &["reconfigure", "--kind", "unknown", "--count", "5"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let status = sim
+        .wait_timeout(Duration::from_secs(SIM_S * 10 + 60))
+        .unwrap_or_else(|| panic!("the simulator did not end: {}", sim.log_text()));
+    assert!(status.success(), "{}", sim.log_text());
+    recorder.signal("INT");
+    let status = recorder
+        .wait_timeout(Duration::from_secs(30))
+        .expect("the recorder ends on SIGINT");
+    let log = recorder.log_text();
+    assert!(status.success(), "{log}");
+    assert!(
+        log.contains("; lost 0"),
+        "the recorder counted losses: {log}"
+    );
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+
+    let files: Vec<PathBuf> = (0..)
+        .map(|i| rotated_path(&out, i))
+        .take_while(|p| p.exists())
+        .collect();
+    assert!(
+        files.len() >= 2,
+        "--max-mb {MAX_MB} made one file: {files:?}"
+    );
+    let summary = read_mcap(&files);
+
+    for topic in [
+        "imu",
+        "thrust",
+        "telemetry",
+        "status",
+        "setpoint",
+        "reconfig",
+        "driver_status",
+        "truth",
+        "vehicle",
+    ] {
+        let c = channel(&summary, topic);
+        assert_eq!(c["message_encoding"], "json", "{topic}: {c}");
+        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}: {c}");
+        assert_eq!(c["schema_is_json"], true, "{topic}: {c}");
+        assert!(
+            c["schema_name"].as_str().unwrap().starts_with("thrusterd."),
+            "{topic}: {c}"
+        );
+        assert_eq!(c["json_ok"], true, "{topic}: {c}");
+        assert!(c["count"].as_u64().unwrap() >= 1, "{topic}: {c}");
+        assert_eq!(c["log_time_monotonic"], true, "{topic}: {c}");
+    }
+    // The IMU: every sample the simulator published (its seq counts 1, 2, ... N), none lost.
+    let imu = channel(&summary, "imu");
+    let count = imu["count"].as_u64().unwrap();
+    assert_eq!(
+        imu["first_seq"], 1,
+        "the recording missed the first samples: {imu}"
+    );
+    assert_eq!(imu["seq_contiguous"], true, "{imu}");
+    assert_eq!(imu["last_seq"].as_u64().unwrap(), count, "{imu}");
+    assert!(
+        count >= SIM_S * 1000 * 9 / 10,
+        "{count} IMU samples for {SIM_S} s at 1 kHz: {imu}"
+    );
+    assert_eq!(imu["publish_time_monotonic"], true, "{imu}");
+    // The daemon's 1 kHz streams: no gap either.
+    for topic in ["thrust", "telemetry"] {
+        let c = channel(&summary, topic);
+        assert_eq!(c["seq_contiguous"], true, "{topic}: {c}");
+        assert!(
+            c["count"].as_u64().unwrap() >= count * 9 / 10,
+            "{topic}: {c}"
+        );
+    }
+    // The recorder's own account, in the last file's metadata record.
+    let meta = &summary["metadata"]["thruster-recorder"];
+    assert_eq!(meta["lost"], "0", "{meta}");
+    assert_eq!(meta["imu.messages"], count.to_string(), "{meta}");
+
+    drop(recorder);
+    drop(sim);
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+}
+
+/// `thrusterctl demo --record`: the demo's whole session (estimation, model swap, hold) in one
+/// file, every sample from the simulator's first, none lost (lockstep paced to 1 kHz).
+#[test]
+fn the_demo_records_its_session() {
+    system_tests::python::venv_python();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.mcap");
+    let o = Command::new(bin("thrusterctl"))
+        .args(["demo", "--json", "--hold-s", "2", "--record"])
+        .arg(&out)
+        .output()
+        .expect("thrusterctl demo runs");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("; lost 0"), "{stderr}");
+    // --json keeps stdout one JSON object: the recorder's line goes to stderr.
+    serde_json::from_slice::<Value>(&o.stdout).expect("demo --json prints one JSON object");
+    let summary = read_mcap(&[out]);
+    for topic in [
+        "imu",
+        "thrust",
+        "telemetry",
+        "model",
+        "dynamics",
+        "status",
+        "setpoint",
+        "truth",
+        "vehicle",
+    ] {
+        let c = channel(&summary, topic);
+        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}: {c}");
+        assert_eq!(c["log_time_monotonic"], true, "{topic}: {c}");
+    }
+    let imu = channel(&summary, "imu");
+    assert_eq!(imu["first_seq"], 1, "{imu}");
+    assert_eq!(imu["seq_contiguous"], true, "{imu}");
+    assert_eq!(imu["last_seq"], imu["count"], "{imu}");
+    assert_eq!(summary["metadata"]["thruster-recorder"]["lost"], "0");
+}
