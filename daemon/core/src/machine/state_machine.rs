@@ -737,17 +737,16 @@ impl Machine {
         accel: &Vector3<f64>,
         dt: f64,
     ) -> Command {
-        let Some(model) = self.models.current() else {
+        if self.models.current().is_none() {
             self.run.stop();
             self.transition(State::Idle, "no model to identify under: thrusters neutral");
             return Command::neutral(self.n);
-        };
-        let meas = self.measured(s, gyro);
+        }
+        let (meas, target) = self.measured_and_target(s, gyro);
         let attitude = meas.attitude;
-        let target = *self.target.get_or_insert_with(|| Target {
-            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, attitude.euler_angles().2),
-            depth: s.depth,
-        });
+        let Some(model) = self.models.current() else {
+            return Command::neutral(self.n);
+        };
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Estimating;
         let n = self.n.min(model.thrusters());
@@ -902,18 +901,28 @@ impl Machine {
         }
     }
 
+    /// What the controller sees of this sample, and the target it holds. Without a setpoint,
+    /// hold level at the current heading and depth: a vehicle may enter Active still swinging
+    /// from the last pulse, and that tilt is nothing to keep.
+    fn measured_and_target(&mut self, s: &ImuInput, gyro: &Vector3<f64>) -> (Measured, Target) {
+        let meas = self.measured(s, gyro);
+        let heading = meas.attitude.euler_angles().2;
+        let target = *self.target.get_or_insert_with(|| Target {
+            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, heading),
+            depth: s.depth,
+        });
+        (meas, target)
+    }
+
     fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
+        if self.models.current().is_none() {
+            return Command::neutral(self.n);
+        }
+        let (meas, target) = self.measured_and_target(s, gyro);
+        let attitude = meas.attitude;
         let Some(model) = self.models.current() else {
             return Command::neutral(self.n);
         };
-        let meas = self.measured(s, gyro);
-        let attitude = meas.attitude;
-        // Without a setpoint, hold level at the current heading and depth: a vehicle may enter
-        // Active still swinging from the last pulse, and that tilt is nothing to keep.
-        let target = *self.target.get_or_insert_with(|| Target {
-            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, attitude.euler_angles().2),
-            depth: s.depth,
-        });
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Controlling;
         let n = self.n.min(model.thrusters());
