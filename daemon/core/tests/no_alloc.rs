@@ -3,20 +3,20 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use thrusterd_core::machine::{Geometry, ImuInput, Machine, MachineSetup, Request, State};
 use thrusterd_core::wire;
 
 struct Counting;
 
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
 thread_local! {
     /// Counting is on for this thread only: the test harness's own threads (another test,
     /// the result printer) allocate whenever they like, and once did inside a counted window.
     /// Const-initialised and without a destructor, so reading it allocates nothing.
     static COUNTING: Cell<bool> = const { Cell::new(false) };
+    /// Allocations counted on this thread: the tests run in parallel, and one's decision ticks
+    /// must not land in another's window.
+    static ALLOCS: Cell<u64> = const { Cell::new(0) };
 }
 
 fn counting(on: bool) {
@@ -26,7 +26,7 @@ fn counting(on: bool) {
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if COUNTING.try_with(|c| c.get()).unwrap_or(false) {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
+            let _ = ALLOCS.try_with(|a| a.set(a.get() + 1));
         }
         unsafe { System.alloc(layout) }
     }
@@ -53,7 +53,7 @@ fn sample(k: u64) -> ImuInput {
 /// daemon does with `telemetry.every_n = 1`: the command, the telemetry snapshot and its
 /// message.
 fn count(machine: &mut Machine, k: &mut u64, ticks: u64) -> u64 {
-    ALLOCS.store(0, Ordering::SeqCst);
+    ALLOCS.with(|a| a.set(0));
     counting(true);
     for _ in 0..ticks {
         *k += 1;
@@ -64,7 +64,7 @@ fn count(machine: &mut Machine, k: &mut u64, ticks: u64) -> u64 {
         std::hint::black_box(wire::telemetry_msg(*k, &snapshot, &sent));
     }
     counting(false);
-    ALLOCS.load(Ordering::SeqCst)
+    ALLOCS.with(|a| a.get())
 }
 
 fn four_thrusters() -> Geometry {
@@ -180,7 +180,7 @@ fn a_dynamic_sample_does_not_allocate() {
         let (t, w, f) = sample(k);
         est.push_dynamic_sample(t, &w, &f, Some(5.0));
     }
-    ALLOCS.store(0, Ordering::SeqCst);
+    ALLOCS.with(|a| a.set(0));
     counting(true);
     // 3 s inside one pulse: three segment boundaries.
     for _ in 0..600 {
@@ -194,11 +194,11 @@ fn a_dynamic_sample_does_not_allocate() {
         );
     }
     counting(false);
-    let in_pulse = ALLOCS.load(Ordering::SeqCst);
+    let in_pulse = ALLOCS.with(|a| a.get());
     assert_eq!(in_pulse, 0, "push_dynamic_sample during a pulse");
 
     est.end_pulse();
-    ALLOCS.store(0, Ordering::SeqCst);
+    ALLOCS.with(|a| a.set(0));
     counting(true);
     // Between pulses (thrusters at neutral), also without a depth reading.
     for i in 0..300 {
@@ -209,7 +209,7 @@ fn a_dynamic_sample_does_not_allocate() {
     }
     counting(false);
     assert_eq!(
-        ALLOCS.load(Ordering::SeqCst),
+        ALLOCS.with(|a| a.get()),
         0,
         "push_dynamic_sample between pulses"
     );
