@@ -508,7 +508,7 @@ fn load_truth(session: &mut Session, truth: &TruthMsg) -> Result<()> {
     let b = nalgebra::DMatrix::from_fn(6, n, |j, i| truth.symmetric(j, i));
     let model = thrusterd_core::model::Model::nominal(b, None);
     let file = session.scratch_path("oracle-model.json");
-    std::fs::write(&file, thrusterd_core::store::to_json(&model))
+    std::fs::write(&file, thrusterd_core::model_file::to_json(&model))
         .with_context(|| format!("writing {}", file.display()))?;
     let request = thrusterctl_operator::cli::path_request(RequestKind::Load, &file)?;
     let r = session.request(request)?;

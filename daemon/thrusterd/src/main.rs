@@ -3,6 +3,7 @@
 mod run;
 mod saver;
 mod session;
+mod store;
 mod study;
 
 use std::path::PathBuf;
