@@ -19,6 +19,7 @@ use thruster_protocol::{
 };
 use thrusterd_core::study::plot::{render, Grid, Panel, Series};
 
+use crate::recording::{run_path, RECORD_PACE};
 use crate::scoring::{
     angle_error_deg, euler_deg, high_pass_rms, recovered_at, window_means, wrap_deg, yaw_error_deg,
     Plan, Stats, Step,
@@ -80,6 +81,11 @@ pub struct ExperimentArgs {
     /// paper's noise except hot-swap's silent run, which uses the realistic IMU).
     #[arg(long)]
     pub noise: Option<String>,
+    /// Record each run's session (every topic of its namespace) to its own MCAP file,
+    /// FILE-<run>.mcap (`top45.mcap` -> `top45-announced.mcap`, ...). The runs are then paced
+    /// to at most 5x real time so the recorder loses nothing.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 /// How a run gets its model.
@@ -476,17 +482,32 @@ fn run_one(bins: &Binaries, args: &ExperimentArgs, spec: &RunSpec) -> Result<Run
         noise: spec.noise.into(),
         seed: args.seed,
         realtime: false,
-        pace: (args.pace > 0.0).then_some(args.pace),
+        pace: match (&args.record, args.pace > 0.0) {
+            (Some(_), true) => Some(args.pace.min(RECORD_PACE)),
+            (Some(_), false) => Some(RECORD_PACE),
+            (None, true) => Some(args.pace),
+            (None, false) => None,
+        },
         daemon_config: DaemonConfig::Text(daemon_config(spec, bins, &vehicle)?),
         scenario: spec.change.map(|(t, a)| scenario(t, a)),
-        record: None,
+        record: args
+            .record
+            .as_deref()
+            .map(|out| thrusterctl_operator::record::options(run_path(out, spec.label), None, None))
+            .transpose()?,
     };
     let wall = Instant::now();
     let mut session = Session::start(bins, &session_spec)?;
     let result = drive(&mut session, spec);
+    let recorded = session.stop_recording();
     let pace = session.pace;
     let shutdown = session.finish();
     let mut out = result.with_context(|| format!("run {:?}", spec.label))?;
+    if let Some(recorded) = recorded {
+        let recorded = recorded.with_context(|| format!("recording run {:?}", spec.label))?;
+        // On stderr: `--json` keeps stdout one JSON object.
+        eprintln!("{}: {}", spec.label, recorded.line());
+    }
     out.shutdown = shutdown;
     out.wall_s = wall.elapsed().as_secs_f64();
     out.pace = pace;
