@@ -2,11 +2,16 @@
 //! holds AMOUR-5 through pitch manoeuvres, the background fit (`thrusterd_core::refinement`)
 //! must stay quiet on an unchanged vehicle and find the top thruster rotated 45 degrees, at a
 //! realistic IMU and at the paper's (where the older monitor is blind by design). The monitor's
-//! own test is off here (infinite threshold), so every mismatch is the refinement's. Measured over seeds 1-8 (in-process runs
-//! are deterministic): with a realistic IMU no false alarm in 8 x 120 s (largest move of a
-//! column 0.28 against the 0.4 threshold) and the rotation found after 2.9 s in 8 of 8; at the
-//! paper's noise no false alarm in 8 x 120 s and the rotation found after 19-50 s in 8 of 8.
-
+//! own test is off here (infinite threshold), so every mismatch is the refinement's.
+//!
+//! Measured (in-process runs are deterministic). With one window deciding and a 0.4 share, a
+//! 10-minute soak through the processes at the paper's noise (1 kHz, pitch toggled 0/10 deg
+//! every 20 s) re-estimated 10 times on an unchanged vehicle, and in process 1.3-4 false alarms
+//! per 180 s appeared (1 kHz and 200 Hz, seeds 1-3). Now a change must hold in two windows in a
+//! row (or score chi2 > 200 in one) and move the column by 55 %: no false alarm in the same
+//! 9 x 180 s; a rotation found after 2.9 s and 7.9 s with a realistic IMU (seeds 1, 4; a window
+//! that straddles the change moves the column less, so the next one decides) and after 49.5 s
+//! at the paper's noise (seed 4).
 mod common;
 use common::Run;
 use nalgebra::UnitQuaternion;
@@ -83,7 +88,8 @@ fn with_a_realistic_imu_a_rotated_thruster_is_found_within_seconds_and_nothing_e
         rotate_top(&mut run);
         let (t, why) = pitch_until_mismatch(&mut run, 30.0).expect("rotation not found");
         println!("seed {seed}: found after {t:.1} s: {why}");
-        assert!(t < 8.0, "seed {seed}: {t:.1} s");
+        // One 5 s window after the one that straddles the change: 10 s.
+        assert!(t < 10.0, "seed {seed}: {t:.1} s");
         assert!(why.contains("thruster 1"), "{why}");
         // The mismatch starts a re-estimation, under control.
         assert_eq!(run.machine.state(), State::Identify);
@@ -99,4 +105,55 @@ fn at_the_papers_noise_a_rotated_thruster_is_found_and_an_unchanged_one_is_not()
     let (t, why) = pitch_until_mismatch(&mut run, 60.0).expect("rotation not found");
     println!("found after {t:.1} s: {why}");
     assert!(why.contains("thruster 1"), "{why}");
+}
+
+/// Holding through the soak's manoeuvres (pitch 0 / 10 deg every 20 s) at 1 kHz and the
+/// paper's noise, with the shipped settings (monitor included): nothing changed, so nothing may
+/// be reported. This is where one window deciding failed (see the module docs).
+#[test]
+fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_minutes() {
+    for seed in 1..=3 {
+        let mut run = Run::with_rate("amour5", NoisePreset::Paper, seed, 1000.0);
+        run.machine = Machine::new(MachineSetup {
+            thrusters: 5,
+            ..MachineSetup::default()
+        });
+        run.run_for(1.0);
+        run.estimate();
+        run.machine.take_events();
+        let yaw = run.sim.roll_pitch_yaw()[2];
+        let depth = run.sim.position_ned().z;
+        let start = run.sim.time_s();
+        let mut step = 0;
+        let mut windows = 0;
+        while run.sim.time_s() - start < 180.0 {
+            let t = run.sim.time_s() - start;
+            if t >= 20.0 * step as f64 {
+                let p: f64 = [10.0, 0.0][step % 2];
+                run.machine.on_setpoint(
+                    UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw),
+                    Some(depth),
+                );
+                step += 1;
+            }
+            let before = run.machine.refinement().copied();
+            run.tick();
+            if run.machine.refinement().copied() != before {
+                windows += 1;
+            }
+            for e in run.machine.take_events() {
+                assert!(
+                    !matches!(e, Event::MismatchDetected(_)),
+                    "seed {seed}: false alarm at {t:.1} s: {e:?}"
+                );
+            }
+            assert_eq!(
+                run.machine.state(),
+                State::Active,
+                "seed {seed} at {t:.1} s"
+            );
+        }
+        // The refinement judged the whole time (a window every 5-30 s), it did not sleep.
+        assert!(windows >= 6, "seed {seed}: only {windows} windows in 180 s");
+    }
 }
