@@ -29,14 +29,19 @@ pub enum Item {
 
 /// The sequence number and sender time of a message.
 pub trait Stamped {
+    /// Whether consecutive messages come from one sender counting 1, 2, 3, ... so that a gap
+    /// in `seq` is a lost message. Not so for the operator's setpoint and reconfiguration:
+    /// every `thrusterctl` run is a new sender, starting from the wall clock.
+    const ONE_STREAM: bool = true;
     fn seq(&self) -> u64;
     /// The sender's time, ns, where the message has one.
     fn t_ns(&self) -> Option<u64>;
 }
 
 macro_rules! stamped {
-    ($($ty:ty: $t:expr),* $(,)?) => {$(
+    ($($ty:ty: $t:expr $(=> one_stream: $stream:literal)?),* $(,)?) => {$(
         impl Stamped for $ty {
+            $(const ONE_STREAM: bool = $stream;)?
             fn seq(&self) -> u64 {
                 self.seq
             }
@@ -58,8 +63,8 @@ stamped! {
     TruthMsg: |m: &TruthMsg| Some(m.t_ns),
     VehicleStateMsg: |m: &VehicleStateMsg| Some(m.t_ns),
     StatusMsg: |_: &StatusMsg| None,
-    Setpoint: |_: &Setpoint| None,
-    ReconfigEvent: |_: &ReconfigEvent| None,
+    Setpoint: |_: &Setpoint| None => one_stream: false,
+    ReconfigEvent: |_: &ReconfigEvent| None => one_stream: false,
     DriverStatusMsg: |_: &DriverStatusMsg| None,
 }
 
@@ -177,7 +182,9 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
                 publish_ns: msg.t_ns().unwrap_or(log_ns),
                 data,
             });
-            self.seq.see(msg.seq());
+            if T::ONE_STREAM {
+                self.seq.see(msg.seq());
+            }
             self.count += 1;
             n += 1;
         }
