@@ -61,6 +61,8 @@ stamped! {
     Setpoint: |_: &Setpoint| None,
     ReconfigEvent: |_: &ReconfigEvent| None,
     DriverStatusMsg: |_: &DriverStatusMsg| None,
+    InputMsg: |m: &InputMsg| Some(m.t_ns),
+    ConfigMsg: |_: &ConfigMsg| None,
 }
 
 /// Sequence-gap accounting of one topic.
@@ -216,6 +218,9 @@ pub fn open_all(node: &IpcNode, ipc: &IpcConfig) -> Result<Vec<Box<dyn Source>>,
         Box::new(TopicSource::<DvlSample>::open(node, ipc)?),
         Box::new(TopicSource::<TruthMsg>::open(node, ipc)?),
         Box::new(TopicSource::<VehicleStateMsg>::open(node, ipc)?),
+        // What `thrusterd replay` needs besides the IMU stream (docs/recording.md).
+        Box::new(TopicSource::<InputMsg>::open(node, ipc)?),
+        Box::new(TopicSource::<ConfigMsg>::open(node, ipc)?),
     ])
 }
 

@@ -1,5 +1,6 @@
 //! thrusterd: the thruster-configuration daemon (`run`), and its offline studies (`study`).
 
+mod journal;
 mod run;
 mod saver;
 mod session;
