@@ -1,0 +1,131 @@
+//! The channels a replay needs, decoded from one recording (a file and its rotations).
+
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+use thruster_protocol::{ConfigMsg, ImuSample, InputMsg, ModelMsg, ThrustCommand};
+
+use crate::mcap_read::{self, McapError, RawMessage};
+
+/// Why a recording cannot be replayed as read.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Mcap { path: PathBuf, source: McapError },
+    #[error("{path}: byte offset {offset}: message on channel {topic:?} is not a {ty} ({source}): corrupt")]
+    Json {
+        path: PathBuf,
+        offset: u64,
+        topic: &'static str,
+        ty: &'static str,
+        source: serde_json::Error,
+    },
+    #[error("{files}: no {topic:?} channel: {why}")]
+    MissingChannel {
+        files: String,
+        topic: &'static str,
+        why: &'static str,
+    },
+}
+
+/// What a replay reads from a recording, every channel in recording order.
+#[derive(Debug, Default, Clone)]
+pub struct Recording {
+    /// The IMU samples the driver published.
+    pub imu: Vec<ImuSample>,
+    /// The daemon's input journal.
+    pub inputs: Vec<InputMsg>,
+    /// The daemon's effective configuration, when recorded (the last one).
+    pub config: Option<ConfigMsg>,
+    /// Every model the daemon swapped in.
+    pub models: Vec<ModelMsg>,
+    /// The daemon's thrust commands (which IMU sample each answered, and the count).
+    pub thrust: Vec<ThrustCommand>,
+}
+
+/// The channels without which nothing can be replayed, and what each one is.
+const NEEDED: [(&str, &str); 3] = [
+    ("imu", "the IMU samples the machine was fed"),
+    (
+        "input",
+        "the daemon's input journal (recorded from a thrusterd that publishes one, from its start)",
+    ),
+    (
+        "thrust",
+        "the daemon's answers, which show whether the recording holds every IMU sample it got",
+    ),
+];
+
+/// Reads `paths` (a recording and its rotations, in order).
+pub fn read(paths: &[PathBuf]) -> Result<Recording, RecordingError> {
+    let mut rec = Recording::default();
+    let mut seen = std::collections::BTreeSet::new();
+    for path in paths {
+        let bytes = std::fs::read(path).map_err(|source| RecordingError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let file = mcap_read::read(&bytes).map_err(|source| RecordingError::Mcap {
+            path: path.clone(),
+            source,
+        })?;
+        for (topic, messages) in &file.topics {
+            seen.insert(topic.clone());
+            match topic.as_str() {
+                "imu" => decode(path, "imu", messages, &mut rec.imu)?,
+                "input" => decode(path, "input", messages, &mut rec.inputs)?,
+                "model" => decode(path, "model", messages, &mut rec.models)?,
+                "thrust" => decode(path, "thrust", messages, &mut rec.thrust)?,
+                "config" => {
+                    let mut configs = Vec::new();
+                    decode(path, "config", messages, &mut configs)?;
+                    rec.config = configs.pop().or(rec.config);
+                }
+                _ => {}
+            }
+        }
+    }
+    for (topic, why) in NEEDED {
+        if !seen.contains(topic) {
+            return Err(RecordingError::MissingChannel {
+                files: names(paths),
+                topic,
+                why,
+            });
+        }
+    }
+    Ok(rec)
+}
+
+/// The files, for messages.
+pub fn names(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn decode<T: DeserializeOwned>(
+    path: &Path,
+    topic: &'static str,
+    messages: &[RawMessage],
+    out: &mut Vec<T>,
+) -> Result<(), RecordingError> {
+    for m in messages {
+        let value = serde_json::from_slice(&m.data).map_err(|source| RecordingError::Json {
+            path: path.to_path_buf(),
+            offset: m.offset,
+            topic,
+            ty: std::any::type_name::<T>().rsplit("::").next().unwrap_or("message"),
+            source,
+        })?;
+        out.push(value);
+    }
+    Ok(())
+}

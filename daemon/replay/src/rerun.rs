@@ -1,0 +1,226 @@
+//! The recorded session run through the daemon's own state machine: the IMU samples the
+//! daemon accepted (the same validator decides), and every journal entry after the sample
+//! it followed in the daemon. Pure: no clock, no IPC; the machine's time is the samples'.
+
+use thruster_protocol::validate::ImuSampleValidator;
+use thruster_protocol::{ImuSample, InputKind, InputMsg, ModelMsg, RequestKind, ThrustCommand};
+use thrusterd_core::config::DaemonConfig;
+use thrusterd_core::machine::{Event, Machine, Request, State};
+use thrusterd_core::wire;
+
+/// Why the recording does not hold the session the journal describes.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RerunError {
+    #[error("input journal entry {seq} followed the daemon's IMU sample seq {daemon_seq} (its {imu_count}-th accepted), but the recording's {imu_count}-th accepted sample has seq {replay_seq}: the recording lost IMU samples or did not start with the daemon")]
+    Misplaced {
+        seq: u64,
+        imu_count: u64,
+        daemon_seq: u64,
+        replay_seq: u64,
+    },
+    #[error("the daemon answered IMU sample seq {0}, which the recording does not hold (lost by the recorder)")]
+    LostImu(u64),
+    #[error("the configuration drives {config} thrusters, the recorded daemon drove {recorded} (thrust channel): give the count the daemon ran with (--thrusters)")]
+    ThrusterCount { config: usize, recorded: usize },
+}
+
+/// What the machine did with the recorded inputs.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// Every model swapped in, as the daemon would have published it (`ModelMsg`, with the
+    /// daemon's sequence numbering).
+    pub models: Vec<ModelMsg>,
+    /// IMU samples in the recording, accepted by the validator, and rejected.
+    pub imu_recorded: usize,
+    pub imu_accepted: u64,
+    pub imu_rejected: u64,
+    /// Journal entries applied, and those after the recording's last IMU sample (not
+    /// applied: nothing followed them).
+    pub inputs_applied: usize,
+    pub inputs_after_end: usize,
+    /// Entries the daemon and the replay answered differently (refused / took): empty when
+    /// the replay follows the daemon.
+    pub divergences: Vec<String>,
+    /// The machine's state and status text at the end.
+    pub final_state: State,
+    pub final_text: String,
+    /// Vehicle seconds from the first to the last sample.
+    pub vehicle_s: f64,
+}
+
+/// Checks that the recording holds every IMU sample the daemon answered (thrust's
+/// `imu_seq`), so the stream fed below is the daemon's.
+pub fn check_complete(imu: &[ImuSample], thrust: &[ThrustCommand]) -> Result<(), RerunError> {
+    let recorded: std::collections::HashSet<u64> = imu.iter().map(|s| s.seq).collect();
+    match thrust
+        .iter()
+        .find(|t| t.imu_seq != 0 && !recorded.contains(&t.imu_seq))
+    {
+        Some(t) => Err(RerunError::LostImu(t.imu_seq)),
+        None => Ok(()),
+    }
+}
+
+/// Runs `imu` and `inputs` (a checked journal) through a machine set up from `cfg`.
+/// `recorded_thrusters`: the count the daemon drove at its first answer, when known.
+pub fn rerun(
+    cfg: &DaemonConfig,
+    imu: &[ImuSample],
+    inputs: &[InputMsg],
+    recorded_thrusters: Option<usize>,
+) -> Result<Outcome, RerunError> {
+    let mut machine = Machine::new(cfg.machine_setup());
+    if let Some(recorded) = recorded_thrusters {
+        if recorded != machine.thrusters() {
+            return Err(RerunError::ThrusterCount {
+                config: machine.thrusters(),
+                recorded,
+            });
+        }
+    }
+    let mut out = Outcome {
+        models: Vec::new(),
+        imu_recorded: imu.len(),
+        imu_accepted: 0,
+        imu_rejected: 0,
+        inputs_applied: 0,
+        inputs_after_end: 0,
+        divergences: Vec::new(),
+        final_state: State::Idle,
+        final_text: String::new(),
+        vehicle_s: 0.0,
+    };
+    let mut validator = ImuSampleValidator::default();
+    let mut next = 0;
+    let mut model_seq = 0;
+    // Entries before the first sample (the start, "no IMU yet").
+    apply_due(&mut machine, inputs, &mut next, 0, None, &mut out)?;
+    collect(&mut machine, &mut model_seq, &mut out);
+    for sample in imu {
+        if validator.check(sample).is_err() {
+            // The daemon answered it with neutral and never showed it to the machine.
+            out.imu_rejected += 1;
+            continue;
+        }
+        out.imu_accepted += 1;
+        machine.on_imu(&wire::imu_input(sample));
+        apply_due(
+            &mut machine,
+            inputs,
+            &mut next,
+            out.imu_accepted,
+            Some(sample.seq),
+            &mut out,
+        )?;
+        // The daemon publishes swaps after the round's inputs; the order of swaps is the same.
+        collect(&mut machine, &mut model_seq, &mut out);
+    }
+    out.inputs_after_end = inputs.len() - next;
+    out.final_state = machine.state();
+    out.final_text = machine.status().text;
+    if let (Some(a), Some(b)) = (imu.first(), imu.last()) {
+        out.vehicle_s = b.t_ns.saturating_sub(a.t_ns) as f64 * 1e-9;
+    }
+    Ok(out)
+}
+
+/// Applies the entries that followed the `count`-th accepted sample (seq `seq`).
+fn apply_due(
+    machine: &mut Machine,
+    inputs: &[InputMsg],
+    next: &mut usize,
+    count: u64,
+    seq: Option<u64>,
+    out: &mut Outcome,
+) -> Result<(), RerunError> {
+    while let Some(m) = inputs.get(*next).filter(|m| m.imu_count == count) {
+        if let Some(seq) = seq {
+            if m.imu_seq != seq {
+                return Err(RerunError::Misplaced {
+                    seq: m.seq,
+                    imu_count: count,
+                    daemon_seq: m.imu_seq,
+                    replay_seq: seq,
+                });
+            }
+        }
+        let refused = apply(machine, m);
+        if refused != (m.refused != 0) {
+            let verb = |r: bool| if r { "refused" } else { "took" };
+            out.divergences.push(format!(
+                "input journal entry {} ({} after IMU sample {}): the daemon {} it, the replay {} it",
+                m.seq,
+                m.kind().map(|k| k.name()).unwrap_or("?"),
+                count,
+                verb(m.refused != 0),
+                verb(refused),
+            ));
+        }
+        out.inputs_applied += 1;
+        *next += 1;
+    }
+    Ok(())
+}
+
+/// Hands one journal entry to the machine as the daemon did; true when the machine refused.
+fn apply(machine: &mut Machine, m: &InputMsg) -> bool {
+    let text = m.text.as_str();
+    match m.kind() {
+        Ok(InputKind::Request) => {
+            let request = match RequestKind::try_from(m.code) {
+                Ok(RequestKind::Estimate) => {
+                    // The daemon sets a requested power first; a refused power never reached
+                    // the journal.
+                    if m.value != 0.0 && machine.set_estimation_power(m.value).is_err() {
+                        return true;
+                    }
+                    Request::Estimate
+                }
+                Ok(RequestKind::Abort) => Request::Abort,
+                Ok(RequestKind::Hold) => Request::Hold,
+                Ok(RequestKind::Idle) => Request::Idle,
+                Ok(RequestKind::Revert) => Request::Revert,
+                // Status, save, load and shutdown never go to the machine as requests.
+                _ => return true,
+            };
+            machine.on_request(request).is_err()
+        }
+        Ok(InputKind::Setpoint) => {
+            machine.on_setpoint_input(&wire::setpoint(&m.setpoint));
+            false
+        }
+        Ok(InputKind::Reconfig) => {
+            machine.on_reconfig(wire::reconfig(&m.reconfig));
+            false
+        }
+        Ok(InputKind::Outputs) => {
+            machine.on_outputs((m.code != 0).then_some(text));
+            false
+        }
+        Ok(InputKind::ImuStale) => {
+            machine.on_imu_stale(text);
+            false
+        }
+        Ok(InputKind::NoImuYet) => {
+            machine.on_no_imu_yet(text);
+            false
+        }
+        Ok(InputKind::Dvl) => {
+            machine.on_dvl(m.dvl);
+            false
+        }
+        // Start carries nothing for the machine; Load and unknown kinds were refused by
+        // `journal::check`.
+        Ok(InputKind::Start) | Ok(InputKind::Load) | Err(_) => false,
+    }
+}
+
+/// Takes the machine's events; a swap becomes the message the daemon published.
+fn collect(machine: &mut Machine, model_seq: &mut u64, out: &mut Outcome) {
+    for event in machine.take_events() {
+        if let Event::ModelSwapped(model) = event {
+            out.models.push(wire::model_msg(*model_seq, &model));
+            *model_seq += 1;
+        }
+    }
+}
