@@ -67,8 +67,7 @@ pub struct Replayed {
 pub fn replay(rec: &Recording, cfg: &DaemonConfig) -> Result<Replayed, ReplayError> {
     let inputs = journal::check(&rec.inputs)?;
     rerun::check_complete(&rec.imu, &rec.thrust)?;
-    let recorded_thrusters = rec.thrust.first().map(|t| t.count as usize);
-    let outcome = rerun::rerun(cfg, &rec.imu, inputs, recorded_thrusters)?;
+    let outcome = rerun::rerun(cfg, &rec.imu, inputs, &rec.thrust)?;
     let difference = compare::first_difference(&outcome.models, &rec.models);
     Ok(Replayed {
         outcome,

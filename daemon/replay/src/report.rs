@@ -56,8 +56,13 @@ pub fn text(ctx: &Context, r: &Replayed) -> String {
         o.final_state.name(),
         o.final_text
     );
-    for m in &o.models {
-        let _ = writeln!(s, "{}", describe(m));
+    for (m, valid) in o.models.iter().zip(&o.models_valid) {
+        let note = if *valid {
+            ""
+        } else {
+            " [made after the commands diverged: not this setting's answer]"
+        };
+        let _ = writeln!(s, "{}{note}", describe(m));
     }
     match o.models.last() {
         Some(m) => {
@@ -80,6 +85,18 @@ pub fn text(ctx: &Context, r: &Replayed) -> String {
             let _ = writeln!(s, "no model was swapped in");
         }
     }
+    let _ = match &o.diverged_at {
+        None => writeln!(
+            s,
+            "commands: the replay answered all {} compared samples as the daemon did",
+            o.commands_compared
+        ),
+        Some(d) => writeln!(
+            s,
+            "commands: the replay's left the daemon's at accepted sample {} (seq {}, {:.3} s); from there the recorded samples answer the daemon's commands, not the replay's",
+            d.imu_count, d.imu_seq, d.t_s
+        ),
+    };
     let recorded = r.recorded_models.len();
     let _ = match &r.difference {
         None => writeln!(
@@ -122,6 +139,14 @@ pub fn json(ctx: &Context, r: &Replayed) -> Value {
         "final_text": o.final_text,
         "models": o.models,
         "model": o.models.last(),
+        "models_valid": o.models_valid,
+        "model_valid": o.models_valid.last(),
+        "commands_compared": o.commands_compared,
+        "commands_diverged_at": o.diverged_at.map(|d| json!({
+            "imu_count": d.imu_count,
+            "imu_seq": d.imu_seq,
+            "t_s": d.t_s,
+        })),
         "actuated": o.models.last().map(actuated),
         "recorded_models": r.recorded_models.len(),
         "reproduces_recording": r.difference.is_none(),

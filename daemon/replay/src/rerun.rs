@@ -46,6 +46,25 @@ pub struct Outcome {
     pub final_text: String,
     /// Vehicle seconds from the first to the last sample.
     pub vehicle_s: f64,
+    /// Accepted samples whose replayed command was compared with the daemon's recorded one.
+    pub commands_compared: u64,
+    /// The first accepted sample the replay answered with another command than the daemon
+    /// did, when one did. From there on the recorded samples show the vehicle answering the
+    /// daemon's commands, not the replay's: what the machine learns after it is not what
+    /// its settings would have learned in the water.
+    pub diverged_at: Option<Divergence>,
+    /// Per model in `models`: made before the commands diverged (what these settings would
+    /// have learned), or after (not an answer).
+    pub models_valid: Vec<bool>,
+}
+
+/// Where the replayed commands first left the recorded ones.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Divergence {
+    /// The accepted sample's number (1 = the first), seq and vehicle time since the first.
+    pub imu_count: u64,
+    pub imu_seq: u64,
+    pub t_s: f64,
 }
 
 /// Checks that the recording holds every IMU sample the daemon answered (thrust's
@@ -67,8 +86,15 @@ pub fn rerun(
     cfg: &DaemonConfig,
     imu: &[ImuSample],
     inputs: &[InputMsg],
-    recorded_thrusters: Option<usize>,
+    thrust: &[ThrustCommand],
 ) -> Result<Outcome, RerunError> {
+    let recorded_thrusters = thrust.first().map(|t| t.count as usize);
+    // The daemon's answer to each sample: the first command naming it (a later one with the
+    // same seq is the neutral of a stale deadline).
+    let mut answers = std::collections::HashMap::with_capacity(thrust.len());
+    for t in thrust {
+        answers.entry(t.imu_seq).or_insert(*t);
+    }
     let mut machine = Machine::new(cfg.machine_setup());
     if let Some(recorded) = recorded_thrusters {
         if recorded != machine.thrusters() {
@@ -89,7 +115,11 @@ pub fn rerun(
         final_state: State::Idle,
         final_text: String::new(),
         vehicle_s: 0.0,
+        commands_compared: 0,
+        diverged_at: None,
+        models_valid: Vec::new(),
     };
+    let t0 = imu.first().map_or(0, |s| s.t_ns);
     let mut validator = ImuSampleValidator::default();
     let mut next = 0;
     let mut model_seq = 0;
@@ -103,7 +133,19 @@ pub fn rerun(
             continue;
         }
         out.imu_accepted += 1;
-        machine.on_imu(&wire::imu_input(sample));
+        let cmd = machine.on_imu(&wire::imu_input(sample));
+        if out.diverged_at.is_none() {
+            if let Some(recorded) = answers.get(&sample.seq) {
+                out.commands_compared += 1;
+                if !same_command(&cmd, recorded) {
+                    out.diverged_at = Some(Divergence {
+                        imu_count: out.imu_accepted,
+                        imu_seq: sample.seq,
+                        t_s: sample.t_ns.saturating_sub(t0) as f64 * 1e-9,
+                    });
+                }
+            }
+        }
         apply_due(
             &mut machine,
             inputs,
@@ -122,6 +164,20 @@ pub fn rerun(
         out.vehicle_s = b.t_ns.saturating_sub(a.t_ns) as f64 * 1e-9;
     }
     Ok(out)
+}
+
+/// The replayed command as the daemon would have sent it, against the recorded one: count,
+/// mode and every thrust to the bit.
+fn same_command(cmd: &thrusterd_core::machine::Command, recorded: &ThrustCommand) -> bool {
+    let mut msg = wire::thrust_command(0, recorded.imu_seq, recorded.t_ns, cmd);
+    thruster_protocol::validate::sanitize_thrust(msg.thrusters_mut());
+    let n = msg.thrusters_mut().len();
+    msg.count == recorded.count
+        && msg.mode == recorded.mode
+        && msg.thrust[..n]
+            .iter()
+            .zip(&recorded.thrust[..n])
+            .all(|(a, b)| a.to_bits() == b.to_bits())
 }
 
 /// Applies the entries that followed the `count`-th accepted sample (seq `seq`).
@@ -220,6 +276,12 @@ fn collect(machine: &mut Machine, model_seq: &mut u64, out: &mut Outcome) {
     for event in machine.take_events() {
         if let Event::ModelSwapped(model) = event {
             out.models.push(wire::model_msg(*model_seq, &model));
+            // Made from samples up to this one and commands before it: still the setting's
+            // own answer if the commands diverged at this sample at the earliest.
+            out.models_valid.push(
+                out.diverged_at
+                    .is_none_or(|d| d.imu_count >= out.imu_accepted),
+            );
             *model_seq += 1;
         }
     }

@@ -60,6 +60,13 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         if let Some(d) = &replayed.difference {
             bail!("the replay with the recording's configuration differs from the recording: {d}");
         }
+        if let Some(d) = &replayed.outcome.diverged_at {
+            bail!(
+                "the replay with the recording's configuration answered accepted IMU sample {} (seq {}) with another command than the daemon",
+                d.imu_count,
+                d.imu_seq
+            );
+        }
         if let Some(d) = replayed.outcome.divergences.first() {
             bail!("the replay with the recording's configuration diverged: {d}");
         }
