@@ -53,7 +53,11 @@ fn model_difference(a: &ModelMsg, b: &ModelMsg) -> Option<String> {
     for d in 0..DOF_COUNT {
         for t in 0..n {
             for (name, x, y) in [
-                ("effectiveness", a.effectiveness[d][t], b.effectiveness[d][t]),
+                (
+                    "effectiveness",
+                    a.effectiveness[d][t],
+                    b.effectiveness[d][t],
+                ),
                 ("std_err", a.std_err[d][t], b.std_err[d][t]),
                 ("allocation", a.allocation[t][d], b.allocation[t][d]),
             ] {
@@ -76,7 +80,10 @@ fn model_difference(a: &ModelMsg, b: &ModelMsg) -> Option<String> {
 
 /// Entries compared per model: effectiveness, standard errors and allocation, 6 x count each.
 pub fn entries(models: &[ModelMsg]) -> usize {
-    models.iter().map(|m| 3 * DOF_COUNT * m.thruster_count()).sum()
+    models
+        .iter()
+        .map(|m| 3 * DOF_COUNT * m.thruster_count())
+        .sum()
 }
 
 #[cfg(test)]
@@ -96,7 +103,10 @@ mod tests {
 
     #[test]
     fn identical_models_have_no_difference() {
-        assert_eq!(first_difference(&[model(1), model(2)], &[model(1), model(2)]), None);
+        assert_eq!(
+            first_difference(&[model(1), model(2)], &[model(1), model(2)]),
+            None
+        );
         assert_eq!(entries(&[model(1)]), 54);
     }
 
@@ -105,7 +115,10 @@ mod tests {
         let mut b = model(1);
         b.effectiveness[1][2] = f64::from_bits(b.effectiveness[1][2].to_bits() + 1);
         let d = first_difference(&[model(1)], &[b]).unwrap();
-        assert!(d.starts_with("swap 1: effectiveness DOF 1 thruster 2"), "{d}");
+        assert!(
+            d.starts_with("swap 1: effectiveness DOF 1 thruster 2"),
+            "{d}"
+        );
     }
 
     #[test]

@@ -134,10 +134,7 @@ mod tests {
 
     #[test]
     fn a_late_start_is_refused() {
-        assert_eq!(
-            check(&journal()[1..]),
-            Err(JournalError::StartedLate(1))
-        );
+        assert_eq!(check(&journal()[1..]), Err(JournalError::StartedLate(1)));
         assert_eq!(check(&[]), Err(JournalError::Empty));
     }
 
@@ -165,7 +162,11 @@ mod tests {
         j.push(load);
         assert!(matches!(
             check(&j),
-            Err(JournalError::LoadedModel { seq: 4, imu_count: 1000, .. })
+            Err(JournalError::LoadedModel {
+                seq: 4,
+                imu_count: 1000,
+                ..
+            })
         ));
     }
 

@@ -91,6 +91,10 @@ mod tests {
         let text = toml::to_string(&cfg).unwrap();
         let back = DaemonConfig::from_toml_str(&text, "test").unwrap();
         assert_eq!(back, cfg);
-        assert!(text.len() < thruster_protocol::CONFIG_TEXT_CAPACITY / 4, "{}", text.len());
+        assert!(
+            text.len() < thruster_protocol::CONFIG_TEXT_CAPACITY / 4,
+            "{}",
+            text.len()
+        );
     }
 }

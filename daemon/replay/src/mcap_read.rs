@@ -101,13 +101,19 @@ impl<'a> Cursor<'a> {
     }
 
     fn u16(&mut self, what: &str) -> Result<u16, McapError> {
-        Ok(u16::from_le_bytes(self.take(2, what)?.try_into().unwrap_or_default()))
+        Ok(u16::from_le_bytes(
+            self.take(2, what)?.try_into().unwrap_or_default(),
+        ))
     }
     fn u32(&mut self, what: &str) -> Result<u32, McapError> {
-        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().unwrap_or_default()))
+        Ok(u32::from_le_bytes(
+            self.take(4, what)?.try_into().unwrap_or_default(),
+        ))
     }
     fn u64(&mut self, what: &str) -> Result<u64, McapError> {
-        Ok(u64::from_le_bytes(self.take(8, what)?.try_into().unwrap_or_default()))
+        Ok(u64::from_le_bytes(
+            self.take(8, what)?.try_into().unwrap_or_default(),
+        ))
     }
     fn string(&mut self, what: &str) -> Result<String, McapError> {
         let at = self.offset();
@@ -283,8 +289,24 @@ impl Reader {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// A whole file: one chunk with a channel per topic and its messages (JSON text).
+    pub(crate) fn file_with(topics: &[(&str, &[&str])]) -> Vec<u8> {
+        let mut inner = Vec::new();
+        for (id, (topic, messages)) in topics.iter().enumerate() {
+            inner.extend(channel(id as u16, topic));
+            for (seq, m) in messages.iter().enumerate() {
+                inner.extend(message(id as u16, seq as u32, m));
+            }
+        }
+        let mut f = MAGIC.to_vec();
+        f.extend(chunk(&inner, None));
+        f.extend(rec(OP_FOOTER, &[0u8; 20]));
+        f.extend_from_slice(MAGIC);
+        f
+    }
 
     /// A record: opcode, length, body.
     fn rec(op: u8, body: &[u8]) -> Vec<u8> {
@@ -323,7 +345,10 @@ mod tests {
         b.extend_from_slice(&0u64.to_le_bytes());
         b.extend_from_slice(&0u64.to_le_bytes());
         b.extend_from_slice(&(records.len() as u64).to_le_bytes());
-        b.extend_from_slice(&crc.unwrap_or_else(|| crc32fast::hash(records)).to_le_bytes());
+        b.extend_from_slice(
+            &crc.unwrap_or_else(|| crc32fast::hash(records))
+                .to_le_bytes(),
+        );
         b.extend(string(""));
         b.extend_from_slice(&(records.len() as u64).to_le_bytes());
         b.extend_from_slice(records);
@@ -402,6 +427,9 @@ mod tests {
 
     #[test]
     fn garbage_is_not_mcap() {
-        assert_eq!(read(b"hello world, not mcap").unwrap_err(), McapError::NotMcap);
+        assert_eq!(
+            read(b"hello world, not mcap").unwrap_err(),
+            McapError::NotMcap
+        );
     }
 }

@@ -122,10 +122,64 @@ fn decode<T: DeserializeOwned>(
             path: path.to_path_buf(),
             offset: m.offset,
             topic,
-            ty: std::any::type_name::<T>().rsplit("::").next().unwrap_or("message"),
+            ty: std::any::type_name::<T>()
+                .rsplit("::")
+                .next()
+                .unwrap_or("message"),
             source,
         })?;
         out.push(value);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mcap_read::tests::file_with;
+
+    fn write(name: &str, bytes: &[u8]) -> PathBuf {
+        let path =
+            std::env::temp_dir().join(format!("thrusterd-replay-{}-{name}", std::process::id()));
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_missing_channel_is_named() {
+        let imu = serde_json::to_string(&ImuSample::default()).unwrap();
+        let thrust = serde_json::to_string(&ThrustCommand::default()).unwrap();
+        let path = write(
+            "no-input.mcap",
+            &file_with(&[("imu", &[imu.as_str()]), ("thrust", &[thrust.as_str()])]),
+        );
+        let err = read(std::slice::from_ref(&path)).unwrap_err();
+        let _ = std::fs::remove_file(&path);
+        let text = err.to_string();
+        assert!(text.contains("no \"input\" channel"), "{text}");
+        assert!(text.contains("input journal"), "{text}");
+    }
+
+    #[test]
+    fn a_message_that_is_not_its_type_is_named_with_its_offset() {
+        let path = write("bad-json.mcap", &file_with(&[("imu", &["{\"seq\": 1}"])]));
+        let err = read(std::slice::from_ref(&path)).unwrap_err();
+        let _ = std::fs::remove_file(&path);
+        match err {
+            RecordingError::Json { offset, topic, .. } => {
+                assert_eq!(topic, "imu");
+                assert!(offset > 8);
+            }
+            e => panic!("{e}"),
+        }
+    }
+
+    #[test]
+    fn an_unreadable_file_is_named() {
+        let path = PathBuf::from("/nonexistent/thrusterd-replay.mcap");
+        let err = read(std::slice::from_ref(&path)).unwrap_err();
+        assert!(err
+            .to_string()
+            .starts_with("/nonexistent/thrusterd-replay.mcap: "));
+    }
 }

@@ -286,3 +286,134 @@ fn collect(machine: &mut Machine, model_seq: &mut u64, out: &mut Outcome) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `n` samples at rest at 200 Hz.
+    fn rest(n: u64) -> Vec<ImuSample> {
+        (1..=n)
+            .map(|seq| ImuSample {
+                seq,
+                t_ns: seq * 5_000_000,
+                gyro: [0.0; 3],
+                accel: [0.0, 0.0, -9.81],
+                mag: [0.0; 3],
+                depth: 0.0,
+                flags: 0,
+            })
+            .collect()
+    }
+
+    fn neutral_answers(imu: &[ImuSample], count: u32) -> Vec<ThrustCommand> {
+        imu.iter()
+            .map(|s| ThrustCommand::neutral(s.seq - 1, s.seq, s.t_ns, count))
+            .collect()
+    }
+
+    fn entry(seq: u64, kind: InputKind, imu_count: u64, imu_seq: u64) -> InputMsg {
+        let mut m = InputMsg {
+            seq,
+            imu_count,
+            imu_seq,
+            ..InputMsg::default()
+        };
+        m.set_kind(kind);
+        m
+    }
+
+    fn hold(seq: u64, at: u64, refused: bool) -> InputMsg {
+        let mut m = entry(seq, InputKind::Request, at, at);
+        m.code = RequestKind::Hold.as_u32();
+        m.refused = u32::from(refused);
+        m
+    }
+
+    #[test]
+    fn an_idle_session_replays_with_the_same_commands_and_answers() {
+        let cfg = DaemonConfig::default();
+        let imu = rest(50);
+        let thrust = neutral_answers(&imu, 5);
+        // Hold without a model: the daemon refused it, so must the replay.
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
+        let o = rerun(&cfg, &imu, &inputs, &thrust).unwrap();
+        assert_eq!(o.imu_accepted, 50);
+        assert_eq!(o.inputs_applied, 2);
+        assert_eq!(o.commands_compared, 50);
+        assert_eq!(o.diverged_at, None);
+        assert!(o.divergences.is_empty(), "{:?}", o.divergences);
+        assert!(o.models.is_empty());
+    }
+
+    #[test]
+    fn a_different_answer_is_reported() {
+        let imu = rest(20);
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, false)];
+        let o = rerun(&DaemonConfig::default(), &imu, &inputs, &[]).unwrap();
+        assert_eq!(o.divergences.len(), 1, "{:?}", o.divergences);
+        assert!(o.divergences[0].contains("the daemon took it, the replay refused it"));
+    }
+
+    #[test]
+    fn a_command_that_differs_marks_where_the_replay_left_the_recording() {
+        let imu = rest(30);
+        let mut thrust = neutral_answers(&imu, 5);
+        thrust[11].thrust[2] = 0.25;
+        let o = rerun(
+            &DaemonConfig::default(),
+            &imu,
+            &[entry(0, InputKind::Start, 0, 0)],
+            &thrust,
+        )
+        .unwrap();
+        let d = o.diverged_at.expect("diverged");
+        assert_eq!((d.imu_count, d.imu_seq), (12, 12));
+        assert_eq!(o.commands_compared, 12);
+    }
+
+    #[test]
+    fn an_entry_placed_after_another_sample_is_refused() {
+        let imu = rest(20);
+        // The daemon's 10th accepted sample was seq 11: the recording lost one before it.
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
+        let mut shifted = inputs;
+        shifted[1].imu_seq = 11;
+        let err = rerun(&DaemonConfig::default(), &imu, &shifted, &[]).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                RerunError::Misplaced {
+                    seq: 1,
+                    imu_count: 10,
+                    daemon_seq: 11,
+                    replay_seq: 10
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_wrong_thruster_count_is_refused() {
+        let imu = rest(5);
+        let thrust = neutral_answers(&imu, 6);
+        let err = rerun(&DaemonConfig::default(), &imu, &[], &thrust).unwrap_err();
+        assert_eq!(
+            err,
+            RerunError::ThrusterCount {
+                config: 5,
+                recorded: 6
+            }
+        );
+    }
+
+    #[test]
+    fn an_answer_to_a_sample_not_recorded_is_a_loss() {
+        let imu = rest(5);
+        let mut thrust = neutral_answers(&imu, 5);
+        thrust.push(ThrustCommand::neutral(9, 7, 0, 5));
+        assert_eq!(check_complete(&imu, &thrust), Err(RerunError::LostImu(7)));
+        assert_eq!(check_complete(&imu, &thrust[..5]), Ok(()));
+    }
+}
