@@ -56,7 +56,7 @@ fn replay(args: &[&str], file: &Path) -> Output {
 }
 
 fn replay_json(args: &[&str], file: &Path) -> Value {
-    let o = replay(args, file);
+    let o = replay(&[args, &["--json"]].concat(), file);
     assert!(
         o.status.success(),
         "thrusterd replay {args:?} failed: {}",

@@ -172,7 +172,20 @@ fn record<'a>(c: &mut Cursor<'a>) -> Result<(u8, u64, Cursor<'a>), McapError> {
     let offset = c.offset();
     let opcode = c.take(1, "a record's opcode")?[0];
     let len = c.u64("a record's length")?;
-    let what = format!("record at byte {offset} (opcode {opcode:#04x}, {len} bytes)");
+    let left = (c.bytes.len() - c.pos) as u64;
+    if len > left && !c.in_record {
+        // Named at the record's own start: that is where the file stops making sense.
+        return Err(McapError::Truncated {
+            offset,
+            what: format!("the {} record starting here", record_name(opcode)),
+            need: 9 + len,
+            size: c.size,
+        });
+    }
+    let what = format!(
+        "{} record at byte {offset} ({len} bytes)",
+        record_name(opcode)
+    );
     let body_base = c.offset();
     let body = c.take(len, &what)?;
     Ok((
@@ -186,6 +199,29 @@ fn record<'a>(c: &mut Cursor<'a>) -> Result<(u8, u64, Cursor<'a>), McapError> {
             in_record: true,
         },
     ))
+}
+
+/// The record kinds of the spec, for messages.
+fn record_name(opcode: u8) -> String {
+    let name = match opcode {
+        0x01 => "header",
+        OP_FOOTER => "footer",
+        0x03 => "schema",
+        OP_CHANNEL => "channel",
+        OP_MESSAGE => "message",
+        OP_CHUNK => "chunk",
+        0x07 => "message index",
+        0x08 => "chunk index",
+        0x09 => "attachment",
+        0x0A => "attachment index",
+        0x0B => "statistics",
+        0x0C => "metadata",
+        0x0D => "metadata index",
+        0x0E => "summary offset",
+        0x0F => "data end",
+        _ => return format!("unknown (opcode {opcode:#04x})"),
+    };
+    name.to_string()
 }
 
 #[derive(Default)]

@@ -10,20 +10,22 @@ use crate::mcap_read::{self, McapError, RawMessage};
 /// Why a recording cannot be replayed as read.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordingError {
-    #[error("{path}: {source}")]
+    // The causes are part of the message, not error sources: `thrusterd` prints the chain,
+    // and each would appear twice.
+    #[error("{path}: {reason}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        reason: std::io::Error,
     },
-    #[error("{path}: {source}")]
-    Mcap { path: PathBuf, source: McapError },
-    #[error("{path}: byte offset {offset}: message on channel {topic:?} is not a {ty} ({source}): corrupt")]
+    #[error("{path}: {reason}")]
+    Mcap { path: PathBuf, reason: McapError },
+    #[error("{path}: byte offset {offset}: message on channel {topic:?} is not a {ty} ({reason}): corrupt")]
     Json {
         path: PathBuf,
         offset: u64,
         topic: &'static str,
         ty: &'static str,
-        source: serde_json::Error,
+        reason: serde_json::Error,
     },
     #[error("{files}: no {topic:?} channel: {why}")]
     MissingChannel {
@@ -66,13 +68,13 @@ pub fn read(paths: &[PathBuf]) -> Result<Recording, RecordingError> {
     let mut rec = Recording::default();
     let mut seen = std::collections::BTreeSet::new();
     for path in paths {
-        let bytes = std::fs::read(path).map_err(|source| RecordingError::Io {
+        let bytes = std::fs::read(path).map_err(|reason| RecordingError::Io {
             path: path.clone(),
-            source,
+            reason,
         })?;
-        let file = mcap_read::read(&bytes).map_err(|source| RecordingError::Mcap {
+        let file = mcap_read::read(&bytes).map_err(|reason| RecordingError::Mcap {
             path: path.clone(),
-            source,
+            reason,
         })?;
         for (topic, messages) in &file.topics {
             seen.insert(topic.clone());
@@ -118,7 +120,7 @@ fn decode<T: DeserializeOwned>(
     out: &mut Vec<T>,
 ) -> Result<(), RecordingError> {
     for m in messages {
-        let value = serde_json::from_slice(&m.data).map_err(|source| RecordingError::Json {
+        let value = serde_json::from_slice(&m.data).map_err(|reason| RecordingError::Json {
             path: path.to_path_buf(),
             offset: m.offset,
             topic,
@@ -126,7 +128,7 @@ fn decode<T: DeserializeOwned>(
                 .rsplit("::")
                 .next()
                 .unwrap_or("message"),
-            source,
+            reason,
         })?;
         out.push(value);
     }
