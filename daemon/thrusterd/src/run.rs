@@ -242,6 +242,14 @@ impl Daemon {
         // Before the node, so it drops after it: a clean stop of the last process of the
         // namespace leaves no iceoryx2 residue behind.
         let _tidy = thruster_protocol::services::TidyOnDrop::new(&self.ipc);
+        let result = self.serve_node();
+        // The journal's port lives in `self`, beyond the node: it must go before the tidy,
+        // or its service is still open then and the namespace's global segment stays.
+        self.journal = None;
+        result
+    }
+
+    fn serve_node(&mut self) -> Result<()> {
         let node = self.ipc.create_node("thrusterd")?;
         // The control server first: it is what tells a live daemon on this namespace apart
         // from a crashed one, and the session marker of a live daemon must neither be read as
