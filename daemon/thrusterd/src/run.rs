@@ -279,7 +279,10 @@ impl Daemon {
         // The effective configuration (history 1) and the input journal: what a replay of a
         // recording needs besides the IMU stream. Before the first sample is read.
         let config_out = Port::<ConfigMsg>::create(&node, &self.ipc)?;
-        config_out.send(&crate::journal::config_msg(&self.cfg))?;
+        if let Err(e) = config_out.send(&crate::journal::config_msg(&self.cfg)) {
+            // Only a replay needs it (and then asks for --config): never worth not serving.
+            warn!("configuration not published: {e}");
+        }
         let mut journal = crate::journal::Journal::new(Port::<InputMsg>::create(&node, &self.ipc)?);
         journal.text(
             InputKind::Start,
