@@ -46,10 +46,11 @@ pub fn text(ctx: &Context, r: &Replayed) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "replay of {} with {} configuration: {} IMU samples ({} accepted), {} inputs, {:.1} vehicle-s; the machine ends {}: {}",
+        "replay of {} with {} configuration: {} IMU samples ({} reached the daemon, {} accepted), {} inputs, {:.1} vehicle-s; the machine ends {}: {}",
         ctx.files,
         config_name(ctx),
         o.imu_recorded,
+        o.imu_recorded as u64 - o.imu_not_received,
         o.imu_accepted,
         o.inputs_applied,
         o.vehicle_s,
@@ -130,6 +131,7 @@ pub fn json(ctx: &Context, r: &Replayed) -> Value {
         "files": ctx.files,
         "config": ctx.config.unwrap_or("recording"),
         "imu_samples": o.imu_recorded,
+        "imu_not_received": o.imu_not_received,
         "imu_accepted": o.imu_accepted,
         "imu_rejected": o.imu_rejected,
         "inputs_applied": o.inputs_applied,

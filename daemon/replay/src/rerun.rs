@@ -20,6 +20,8 @@ pub enum RerunError {
     },
     #[error("the daemon answered IMU sample seq {0}, which the recording does not hold (lost by the recorder)")]
     LostImu(u64),
+    #[error("the recording lost the daemon's thrust commands {from}..{to}: which IMU samples the daemon received there is unknown")]
+    LostThrust { from: u64, to: u64 },
     #[error("the configuration drives {config} thrusters, the recorded daemon drove {recorded} (thrust channel): give the count the daemon ran with (--thrusters)")]
     ThrusterCount { config: usize, recorded: usize },
 }
@@ -30,8 +32,11 @@ pub struct Outcome {
     /// Every model swapped in, as the daemon would have published it (`ModelMsg`, with the
     /// daemon's sequence numbering).
     pub models: Vec<ModelMsg>,
-    /// IMU samples in the recording, accepted by the validator, and rejected.
+    /// IMU samples in the recording; those the daemon never received (no answer: published
+    /// before it subscribed, or dropped on the way), not fed; accepted by the validator, and
+    /// rejected.
     pub imu_recorded: usize,
+    pub imu_not_received: u64,
     pub imu_accepted: u64,
     pub imu_rejected: u64,
     /// Journal entries applied, and those after the recording's last IMU sample (not
@@ -67,9 +72,16 @@ pub struct Divergence {
     pub t_s: f64,
 }
 
-/// Checks that the recording holds every IMU sample the daemon answered (thrust's
-/// `imu_seq`), so the stream fed below is the daemon's.
+/// Checks that the recording holds every thrust command the daemon sent (their `seq` counts
+/// up by one) and every IMU sample it answered (thrust's `imu_seq`): then the samples it
+/// received are exactly the answered ones, and the stream fed below is the daemon's.
 pub fn check_complete(imu: &[ImuSample], thrust: &[ThrustCommand]) -> Result<(), RerunError> {
+    if let Some(w) = thrust.windows(2).find(|w| w[1].seq != w[0].seq + 1) {
+        return Err(RerunError::LostThrust {
+            from: w[0].seq + 1,
+            to: w[1].seq.saturating_sub(1),
+        });
+    }
     let recorded: std::collections::HashSet<u64> = imu.iter().map(|s| s.seq).collect();
     match thrust
         .iter()
@@ -107,6 +119,7 @@ pub fn rerun(
     let mut out = Outcome {
         models: Vec::new(),
         imu_recorded: imu.len(),
+        imu_not_received: 0,
         imu_accepted: 0,
         imu_rejected: 0,
         inputs_applied: 0,
@@ -127,6 +140,13 @@ pub fn rerun(
     apply_due(&mut machine, inputs, &mut next, 0, None, &mut out)?;
     collect(&mut machine, &mut model_seq, &mut out);
     for sample in imu {
+        // The daemon answers every sample it receives (a command, or neutral for a rejected
+        // one): an unanswered one never reached it (a driver publishing before the daemon
+        // subscribed, or the end of the recording).
+        let Some(recorded) = answers.get(&sample.seq) else {
+            out.imu_not_received += 1;
+            continue;
+        };
         if validator.check(sample).is_err() {
             // The daemon answered it with neutral and never showed it to the machine.
             out.imu_rejected += 1;
@@ -135,15 +155,13 @@ pub fn rerun(
         out.imu_accepted += 1;
         let cmd = machine.on_imu(&wire::imu_input(sample));
         if out.diverged_at.is_none() {
-            if let Some(recorded) = answers.get(&sample.seq) {
-                out.commands_compared += 1;
-                if !same_command(&cmd, recorded) {
-                    out.diverged_at = Some(Divergence {
-                        imu_count: out.imu_accepted,
-                        imu_seq: sample.seq,
-                        t_s: sample.t_ns.saturating_sub(t0) as f64 * 1e-9,
-                    });
-                }
+            out.commands_compared += 1;
+            if !same_command(&cmd, recorded) {
+                out.diverged_at = Some(Divergence {
+                    imu_count: out.imu_accepted,
+                    imu_seq: sample.seq,
+                    t_s: sample.t_ns.saturating_sub(t0) as f64 * 1e-9,
+                });
             }
         }
         apply_due(
@@ -350,7 +368,13 @@ mod tests {
     fn a_different_answer_is_reported() {
         let imu = rest(20);
         let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, false)];
-        let o = rerun(&DaemonConfig::default(), &imu, &inputs, &[]).unwrap();
+        let o = rerun(
+            &DaemonConfig::default(),
+            &imu,
+            &inputs,
+            &neutral_answers(&imu, 5),
+        )
+        .unwrap();
         assert_eq!(o.divergences.len(), 1, "{:?}", o.divergences);
         assert!(o.divergences[0].contains("the daemon took it, the replay refused it"));
     }
@@ -379,7 +403,13 @@ mod tests {
         let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
         let mut shifted = inputs;
         shifted[1].imu_seq = 11;
-        let err = rerun(&DaemonConfig::default(), &imu, &shifted, &[]).unwrap_err();
+        let err = rerun(
+            &DaemonConfig::default(),
+            &imu,
+            &shifted,
+            &neutral_answers(&imu, 5),
+        )
+        .unwrap_err();
         assert!(
             matches!(
                 err,
@@ -412,8 +442,29 @@ mod tests {
     fn an_answer_to_a_sample_not_recorded_is_a_loss() {
         let imu = rest(5);
         let mut thrust = neutral_answers(&imu, 5);
-        thrust.push(ThrustCommand::neutral(9, 7, 0, 5));
+        thrust.push(ThrustCommand::neutral(5, 7, 0, 5));
         assert_eq!(check_complete(&imu, &thrust), Err(RerunError::LostImu(7)));
         assert_eq!(check_complete(&imu, &thrust[..5]), Ok(()));
+        let mut gap = neutral_answers(&imu, 5);
+        gap.remove(2);
+        assert_eq!(
+            check_complete(&imu, &gap),
+            Err(RerunError::LostThrust { from: 2, to: 2 })
+        );
+    }
+
+    #[test]
+    fn samples_the_daemon_never_answered_are_not_fed() {
+        // The driver published 1..=7 before the daemon subscribed: the daemon's first
+        // accepted sample is seq 8, and its journal says so.
+        let imu = rest(30);
+        let thrust = neutral_answers(&imu[7..], 5);
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
+        let mut daemon = inputs;
+        daemon[1].imu_seq = 17;
+        let o = rerun(&DaemonConfig::default(), &imu, &daemon, &thrust).unwrap();
+        assert_eq!(o.imu_not_received, 7);
+        assert_eq!(o.imu_accepted, 23);
+        assert_eq!(o.inputs_applied, 2);
     }
 }
