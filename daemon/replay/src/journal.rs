@@ -1,7 +1,8 @@
 //! The daemon's input journal, checked: one session from its start, no entry lost, nothing
 //! in it that a replay cannot reproduce. Pure.
 
-use thruster_protocol::{InputKind, InputMsg};
+use thruster_protocol::validate::Validate;
+use thruster_protocol::{DvlSample, InputKind, InputMsg, MAX_THRUSTERS};
 
 /// Why a journal cannot be replayed exactly.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -22,6 +23,8 @@ pub enum JournalError {
         imu_count: u64,
         path: String,
     },
+    #[error("input journal entry {seq}: {why}; the daemon validated it before using it, so the recording is corrupt")]
+    Invalid { seq: u64, why: String },
     #[error("input journal entry {seq}: unknown kind {kind} (a newer daemon?)")]
     UnknownKind { seq: u64, kind: u32 },
     #[error("input journal entry {seq} comes after IMU sample {imu_count}, before an earlier entry's {earlier}: out of order")]
@@ -85,7 +88,9 @@ pub fn check(inputs: &[InputMsg]) -> Result<&[InputMsg], JournalError> {
                     path: m.text.as_str().to_string(),
                 })
             }
-            Ok(_) => {}
+            Ok(kind) => {
+                payload(m, kind).map_err(|why| JournalError::Invalid { seq: m.seq, why })?
+            }
             Err(e) => {
                 return Err(JournalError::UnknownKind {
                     seq: m.seq,
@@ -95,6 +100,33 @@ pub fn check(inputs: &[InputMsg]) -> Result<&[InputMsg], JournalError> {
         }
     }
     Ok(inputs)
+}
+
+/// The daemon's own checks on an entry's payload, so a damaged recording cannot hand the
+/// machine what the daemon never would.
+fn payload(m: &InputMsg, kind: InputKind) -> Result<(), String> {
+    match kind {
+        InputKind::Setpoint => m.setpoint.validate().map_err(|r| format!("setpoint {r}")),
+        InputKind::Reconfig => {
+            m.reconfig
+                .validate()
+                .map_err(|r| format!("reconfiguration {r}"))?;
+            let n = m.reconfig.count as usize;
+            if !(1..=MAX_THRUSTERS).contains(&n) {
+                return Err(format!(
+                    "reconfiguration count {n} not in 1..={MAX_THRUSTERS}"
+                ));
+            }
+            Ok(())
+        }
+        InputKind::Dvl => DvlSample {
+            velocity: m.dvl,
+            ..DvlSample::default()
+        }
+        .validate()
+        .map_err(|r| format!("DVL velocity {r}")),
+        _ => Ok(()),
+    }
 }
 
 #[cfg(test)]
@@ -167,6 +199,23 @@ mod tests {
                 imu_count: 1000,
                 ..
             })
+        ));
+    }
+
+    #[test]
+    fn a_payload_the_daemon_would_not_have_taken_is_refused() {
+        let mut j = journal();
+        j[2].setpoint.attitude = [f64::NAN, 0.0, 0.0, 0.0];
+        assert!(matches!(
+            check(&j),
+            Err(JournalError::Invalid { seq: 2, .. })
+        ));
+        let mut j = journal();
+        j[2].set_kind(InputKind::Reconfig);
+        j[2].reconfig.count = 0;
+        assert!(matches!(
+            check(&j),
+            Err(JournalError::Invalid { seq: 2, .. })
         ));
     }
 
