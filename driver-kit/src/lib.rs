@@ -5,11 +5,17 @@
 //! thrusterctl as well.
 
 pub mod load;
+#[cfg(feature = "process")]
 pub mod logging;
+#[cfg(feature = "process")]
 pub mod pipe;
+#[cfg(feature = "process")]
 pub mod shutdown;
+#[cfg(feature = "process")]
 pub mod systemd;
 
 pub use load::{locate, parse_toml, read_text, LoadError, Range};
+#[cfg(feature = "process")]
 pub use shutdown::Shutdown;
+#[cfg(feature = "process")]
 pub use systemd::Systemd;

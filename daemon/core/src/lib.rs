@@ -1,6 +1,7 @@
 //! thrusterd's pure core: estimator, attitude filter, controller, model and the state machine,
-//! plus the paper's simulation study. No IPC, no clocks, no files in here except `store`, the
-//! one module that reads and writes the state directory.
+//! plus the paper's simulation study. No IPC, no clocks, no files: configuration and model
+//! files come in as text (`config::DaemonConfig::from_toml_str`, `model_file::from_json`), and
+//! the daemon binary reads and writes them.
 
 pub mod attitude;
 pub mod config;
@@ -10,9 +11,9 @@ pub mod estimator;
 pub mod identification;
 pub mod machine;
 pub mod model;
+pub mod model_file;
 pub mod monitor;
 pub mod navigation;
 pub mod refinement;
-pub mod store;
 pub mod study;
 pub mod wire;

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
 use thrusterd_core::config::{ConfigError, DaemonConfig};
-use thrusterd_core::store::{self, StoreError};
+use thrusterd_core::model_file::{self as store, StoreError};
 
 const CONFIG: &str = "bad.toml";
 const MODEL: &str = "bad.json";

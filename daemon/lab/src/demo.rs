@@ -50,9 +50,6 @@ pub struct DemoArgs {
     pub record: Option<PathBuf>,
 }
 
-/// How much faster than real time a recorded lockstep demo runs (see `run`).
-const RECORD_PACE: f64 = 5.0;
-
 fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
@@ -97,7 +94,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         // machine deschedules it for a few ms (measured: ~100 of 4000 IMU samples lost on a
         // busy 2-core VM). Paced to 5x real time, 1 kHz of samples at the simulator's default
         // 200 Hz IMU: the rate the recorder is specified (and tested) for.
-        pace: (args.record.is_some() && !args.realtime).then_some(RECORD_PACE),
+        pace: (args.record.is_some() && !args.realtime).then_some(crate::recording::RECORD_PACE),
         daemon_config: args
             .daemon_config
             .clone()

@@ -15,10 +15,11 @@ use clap::{Args, ValueEnum};
 use nalgebra::{Quaternion, UnitQuaternion};
 use serde_json::{json, Value};
 use thruster_protocol::{
-    DaemonState, ModelMsg, RequestKind, ThrustMode, TruthMsg, VehicleStateMsg,
+    DaemonState, ModelMsg, RequestKind, ThrustMode, TruthMsg, VehicleStateMsg, MAX_THRUSTERS,
 };
-use thrusterd_core::study::plot::{render, Grid, Panel, Series};
+use thrusterd_core::study::plot::{nice_range, render, Grid, Panel, Series};
 
+use crate::recording::{run_path, RECORD_PACE};
 use crate::scoring::{
     angle_error_deg, euler_deg, high_pass_rms, recovered_at, window_means, wrap_deg, yaw_error_deg,
     Plan, Stats, Step,
@@ -80,6 +81,11 @@ pub struct ExperimentArgs {
     /// paper's noise except hot-swap's silent run, which uses the realistic IMU).
     #[arg(long)]
     pub noise: Option<String>,
+    /// Record each run's session (every topic of its namespace) to its own MCAP file,
+    /// FILE-<run>.mcap (`top45.mcap` -> `top45-announced.mcap`, ...). The runs are then paced
+    /// to at most 5x real time so the recorder loses nothing.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 /// How a run gets its model.
@@ -419,6 +425,9 @@ struct Row {
     /// Body rates, deg/s; body velocity, m/s.
     rate: [f64; 3],
     vel: [f64; 3],
+    /// The newest thrust command when the sample was scored: `nu` thrusters, -1..1.
+    u: [f64; MAX_THRUSTERS],
+    nu: usize,
 }
 
 #[derive(Debug, Clone)]
@@ -476,17 +485,32 @@ fn run_one(bins: &Binaries, args: &ExperimentArgs, spec: &RunSpec) -> Result<Run
         noise: spec.noise.into(),
         seed: args.seed,
         realtime: false,
-        pace: (args.pace > 0.0).then_some(args.pace),
+        pace: match (&args.record, args.pace > 0.0) {
+            (Some(_), true) => Some(args.pace.min(RECORD_PACE)),
+            (Some(_), false) => Some(RECORD_PACE),
+            (None, true) => Some(args.pace),
+            (None, false) => None,
+        },
         daemon_config: DaemonConfig::Text(daemon_config(spec, bins, &vehicle)?),
         scenario: spec.change.map(|(t, a)| scenario(t, a)),
-        record: None,
+        record: args
+            .record
+            .as_deref()
+            .map(|out| thrusterctl_operator::record::options(run_path(out, spec.label), None, None))
+            .transpose()?,
     };
     let wall = Instant::now();
     let mut session = Session::start(bins, &session_spec)?;
     let result = drive(&mut session, spec);
+    let recorded = session.stop_recording();
     let pace = session.pace;
     let shutdown = session.finish();
     let mut out = result.with_context(|| format!("run {:?}", spec.label))?;
+    if let Some(recorded) = recorded {
+        let recorded = recorded.with_context(|| format!("recording run {:?}", spec.label))?;
+        // On stderr: `--json` keeps stdout one JSON object.
+        eprintln!("{}: {}", spec.label, recorded.line());
+    }
     out.shutdown = shutdown;
     out.wall_s = wall.elapsed().as_secs_f64();
     out.pace = pace;
@@ -508,7 +532,7 @@ fn load_truth(session: &mut Session, truth: &TruthMsg) -> Result<()> {
     let b = nalgebra::DMatrix::from_fn(6, n, |j, i| truth.symmetric(j, i));
     let model = thrusterd_core::model::Model::nominal(b, None);
     let file = session.scratch_path("oracle-model.json");
-    std::fs::write(&file, thrusterd_core::store::to_json(&model))
+    std::fs::write(&file, thrusterd_core::model_file::to_json(&model))
         .with_context(|| format!("writing {}", file.display()))?;
     let request = thrusterctl_operator::cli::path_request(RequestKind::Load, &file)?;
     let r = session.request(request)?;
@@ -672,6 +696,12 @@ fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> {
                 state,
                 rate: v.rate.map(f64::to_degrees),
                 vel: v.velocity,
+                u: prev_cmd.map_or([0.0; MAX_THRUSTERS], |c| {
+                    let mut u = [0.0; MAX_THRUSTERS];
+                    u[..c.thrusters().len()].copy_from_slice(c.thrusters());
+                    u
+                }),
+                nu: prev_cmd.map_or(0, |c| c.thrusters().len()),
             });
         }
         // Setpoints are decided on the newest sample, the vehicle time they are scored from.
@@ -1271,8 +1301,9 @@ fn write_out(dir: &Path, name: Name, outs: &[RunOutput], summary: &Value) -> Res
     Ok(())
 }
 
-/// Like the paper's Fig. 6: per run, roll, pitch and yaw against the setpoint over time, and
-/// the error.
+/// Like the paper's Fig. 6: per run, roll, pitch and yaw against the setpoint over time, the
+/// error and the thrust commands; estimation periods shaded. The runs of one figure share
+/// each panel's y range, so their rows compare at a glance.
 fn figure(name: Name, outs: &[RunOutput]) -> String {
     // At most ~600 points per line keeps the SVG small.
     let thin = |rows: &[Row]| -> Vec<Row> {
@@ -1284,21 +1315,34 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
         .filter_map(|o| o.rows.last().map(|r| r.t - o.hold_start))
         .fold(1.0, f64::max)
         .ceil();
+    // Shared ranges: every run's attitude (setpoint and truth) per axis, every run's error.
+    let all = || outs.iter().flat_map(|o| o.rows.iter());
+    let axis_range: Vec<(f64, f64)> = (0..3)
+        .map(|i| {
+            let (lo, hi) = all()
+                .flat_map(|r| [r.sp[i], r.tru[i]])
+                .filter(|v| v.is_finite())
+                .fold((-5.0, 5.0), |(lo, hi), v| {
+                    (f64::min(lo, v), f64::max(hi, v))
+                });
+            nice_range(lo, hi)
+        })
+        .collect();
+    let err_range = nice_range(
+        0.0,
+        all()
+            .map(|r| r.err)
+            .filter(|v| v.is_finite())
+            .fold(5.0, f64::max),
+    );
     let mut panels = Vec::new();
     for o in outs {
         let rows = thin(&o.rows);
         let x = |r: &Row| r.t - o.hold_start;
         let change = o.spec.change.map(|c| c.0 - o.hold_start);
+        let shade = estimating_intervals(&o.rows, o.hold_start);
         for (i, axis) in ["roll", "pitch", "yaw"].iter().enumerate() {
-            let lo = rows
-                .iter()
-                .flat_map(|r| [r.sp[i], r.tru[i]])
-                .fold(-5.0, f64::min);
-            let hi = rows
-                .iter()
-                .flat_map(|r| [r.sp[i], r.tru[i]])
-                .fold(5.0, f64::max);
-            let range = ((lo / 5.0).floor() * 5.0, (hi / 5.0).ceil() * 5.0);
+            let range = axis_range[i];
             let mut series = vec![
                 Series {
                     label: "setpoint".into(),
@@ -1322,10 +1366,9 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
                 title: format!("{}: {axis}, deg", o.spec.label),
                 series,
                 y_range: Some(range),
+                shade: shade.clone(),
             });
         }
-        let hi = rows.iter().map(|r| r.err).fold(5.0, f64::max).min(90.0);
-        let range = (0.0, (hi / 5.0).ceil() * 5.0);
         let mut series = vec![
             Series {
                 label: "angular error".into(),
@@ -1343,12 +1386,19 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
             },
         ];
         if let Some(c) = change {
-            series.push(vline(c, range));
+            series.push(vline(c, err_range));
         }
         panels.push(Panel {
             title: format!("{}: error, deg (blue total, orange |yaw|)", o.spec.label),
             series,
-            y_range: Some(range),
+            y_range: Some(err_range),
+            shade: shade.clone(),
+        });
+        panels.push(Panel {
+            title: format!("{}: thrust commands, -1..1", o.spec.label),
+            series: thrust_series(&rows, o.hold_start),
+            y_range: Some((-1.0, 1.0)),
+            shade,
         });
     }
     let title = match name {
@@ -1359,8 +1409,8 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
     };
     render(
         &Grid {
-            title: title.into(),
-            columns: 4,
+            title: format!("{title}; grey: estimating"),
+            columns: 5,
             x_label: "vehicle time since the hold began, s".into(),
             y_label: "deg".into(),
             x_max,
@@ -1368,6 +1418,55 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
         },
         &panels,
     )
+}
+
+/// The vehicle-time intervals (since the hold began) in which the daemon estimated: open-loop
+/// pulses and settles, or identification under control.
+fn estimating_intervals(rows: &[Row], hold_start: f64) -> Vec<(f64, f64)> {
+    let estimating = |s: DaemonState| {
+        matches!(
+            s,
+            DaemonState::MeasureNoise
+                | DaemonState::Pulse
+                | DaemonState::Settle
+                | DaemonState::Solve
+                | DaemonState::Identify
+        )
+    };
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    let mut open: Option<f64> = None;
+    for r in rows {
+        let t = r.t - hold_start;
+        match (open, estimating(r.state)) {
+            (None, true) => open = Some(t),
+            (Some(a), false) => {
+                out.push((a, t));
+                open = None;
+            }
+            _ => {}
+        }
+    }
+    if let (Some(a), Some(last)) = (open, rows.last()) {
+        out.push((a, last.t - hold_start));
+    }
+    out
+}
+
+/// One line per thruster, in a repeating palette.
+fn thrust_series(rows: &[Row], hold_start: f64) -> Vec<Series> {
+    const COLORS: [&str; 8] = [
+        "#1b6ca8", "#d1495b", "#2e8b57", "#e69f00", "#8e44ad", "#555", "#17becf", "#bcbd22",
+    ];
+    let n = rows.iter().map(|r| r.nu).max().unwrap_or(0);
+    (0..n)
+        .map(|k| Series {
+            label: format!("thruster {k}"),
+            color: COLORS[k % COLORS.len()],
+            dashed: false,
+            points: rows.iter().map(|r| (r.t - hold_start, r.u[k])).collect(),
+            band: None,
+        })
+        .collect()
 }
 
 fn vline(x: f64, range: (f64, f64)) -> Series {
@@ -1383,6 +1482,41 @@ fn vline(x: f64, range: (f64, f64)) -> Series {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn row(t: f64, state: DaemonState) -> Row {
+        Row {
+            t,
+            sp: [0.0; 3],
+            tru: [0.0; 3],
+            err: 0.0,
+            yaw_err: 0.0,
+            since_step: 0.0,
+            step: 0,
+            state,
+            rate: [0.0; 3],
+            vel: [0.0; 3],
+            u: [0.0; MAX_THRUSTERS],
+            nu: 0,
+        }
+    }
+
+    #[test]
+    fn estimation_periods_are_the_shaded_intervals() {
+        use DaemonState::*;
+        let states = [
+            Active, Pulse, Settle, Pulse, Active, Active, Identify, Identify,
+        ];
+        let rows: Vec<Row> = states
+            .iter()
+            .enumerate()
+            .map(|(k, s)| row(10.0 + k as f64, *s))
+            .collect();
+        // Open-loop pulses 1..4 s after the hold began, identification from 6 s to the end.
+        assert_eq!(
+            estimating_intervals(&rows, 10.0),
+            vec![(1.0, 4.0), (6.0, 7.0)]
+        );
+    }
 
     #[test]
     fn declared_geometry_is_from_the_centre_of_mass_with_reversal() {

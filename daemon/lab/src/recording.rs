@@ -9,6 +9,7 @@
 //! without a handshake), ends before the namespace is purged, and reports its counts
 //! without parsing another process's output.
 
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::thread::JoinHandle;
@@ -17,6 +18,27 @@ use std::time::Duration;
 use anyhow::{anyhow, Context, Result};
 use thruster_protocol::services::IpcConfig;
 use thruster_recorder::{RecordError, RecordOptions, RecordSummary};
+
+/// How much faster than real time a recorded lockstep session runs, at most. Unpaced,
+/// lockstep runs as fast as the daemon answers (tens of kHz of samples), which outruns the
+/// recorder's 128-sample buffers whenever the machine deschedules it for a few ms (measured:
+/// ~100 of 4000 IMU samples lost on a busy 2-core VM). 5x real time is 1 kHz of samples at
+/// the simulator's default 200 Hz IMU: the rate the recorder is specified (and tested) for.
+pub const RECORD_PACE: f64 = 5.0;
+
+/// Where run `label` of an experiment recorded to `out` goes: `out` with `-label` before its
+/// extension (`top45.mcap` -> `top45-announced.mcap`), so the runs never share a file.
+pub fn run_path(out: &Path, label: &str) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match out.extension() {
+        Some(ext) => format!("{stem}-{label}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-{label}"),
+    };
+    out.with_file_name(name)
+}
 
 /// Longest wait for the recorder to subscribe.
 const READY_TIMEOUT: Duration = Duration::from_secs(10);
@@ -82,5 +104,22 @@ impl Drop for Recording {
         if self.handle.is_some() {
             let _ = self.stop();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_run_gets_its_own_file_beside_the_one_named() {
+        assert_eq!(
+            run_path(Path::new("/data/top45.mcap"), "announced"),
+            Path::new("/data/top45-announced.mcap")
+        );
+        assert_eq!(
+            run_path(Path::new("session"), "oracle"),
+            Path::new("session-oracle")
+        );
     }
 }

@@ -306,11 +306,13 @@ fn figure(noise: &str, curves: &[Curve]) -> String {
             title: "rotation rows".into(),
             series: Vec::new(),
             y_range: Some((0.0, 0.5)),
+            shade: Vec::new(),
         },
         Panel {
             title: "acceleration rows".into(),
             series: Vec::new(),
             y_range: Some((0.0, 0.5)),
+            shade: Vec::new(),
         },
     ];
     let mut x_max: f64 = 1.0;

@@ -14,6 +14,11 @@
 //! iteration that woke for another client's request before our event arrived; by the
 //! second, the daemon has passed the top of its loop with our event pending, so has read
 //! our message. Two round trips cost about a millisecond.
+//!
+//! thrusterd is not the only subscriber: a recorder (`thrusterctl record`) wakes on the IMU
+//! or at least every 5 ms and must connect to our publisher too, or the recording lacks the
+//! operator's message. No answer tells us it has, so after the barrier we keep the publisher
+//! for [`OTHER_SUBSCRIBERS_GRACE`], ten of the recorder's longest sleeps.
 
 use std::path::Path;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -140,9 +145,15 @@ fn send<T: TopicMessage>(daemon: &Daemon, msg: &T) -> Result<usize> {
         )
         .into());
     }
+    if reached > 1 {
+        std::thread::sleep(OTHER_SUBSCRIBERS_GRACE);
+    }
     drop(port);
     Ok(reached)
 }
+
+/// How long the publisher outlives thrusterd's confirmation when others subscribe too.
+const OTHER_SUBSCRIBERS_GRACE: Duration = Duration::from_millis(50);
 
 /// Sequence number for our one message. Each run is a new sender; starting from the wall
 /// clock keeps successive runs increasing, should a reader ever drop repeats.

@@ -6,6 +6,7 @@ mod replay;
 mod run;
 mod saver;
 mod session;
+mod store;
 mod study;
 
 use std::path::PathBuf;

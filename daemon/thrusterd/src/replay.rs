@@ -31,7 +31,10 @@ pub struct ReplayArgs {
 pub fn run(args: ReplayArgs) -> Result<()> {
     let rec = thrusterd_replay::recording::read(&args.files)?;
     let mut cfg = match &args.config {
-        Some(path) => DaemonConfig::load(path)?,
+        Some(path) => {
+            let text = thruster_driver_kit::read_text(path)?;
+            DaemonConfig::from_toml_str(&text, &path.display().to_string())?
+        }
         None => thrusterd_replay::recorded_config(&rec)?,
     };
     if let Some(n) = args.thrusters {

@@ -16,6 +16,7 @@ use clap::Args;
 use iceoryx2::prelude::CallbackProgression;
 use tracing::{error, info, warn};
 
+use crate::store;
 use thruster_protocol::services::{
     cleanup_dead_nodes, create_waitset, ControlServer, Inbox, IpcConfig, Port,
 };
@@ -28,7 +29,6 @@ use thruster_protocol::{
 use thrusterd_core::config::DaemonConfig;
 use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
 use thrusterd_core::machine::{Command, Event, Machine, Request};
-use thrusterd_core::store;
 use thrusterd_core::wire;
 
 #[derive(Args)]
@@ -69,7 +69,10 @@ const SHUTDOWN_SAVE_WAIT: Duration = Duration::from_secs(3);
 pub fn run(args: RunArgs) -> Result<()> {
     init_logging();
     let mut cfg = match &args.config {
-        Some(path) => DaemonConfig::load(path)?,
+        Some(path) => {
+            let text = thruster_driver_kit::read_text(path)?;
+            DaemonConfig::from_toml_str(&text, &path.display().to_string())?
+        }
         None => DaemonConfig::default(),
     };
     if let Some(ns) = args.namespace {

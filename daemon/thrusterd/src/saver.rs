@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::time::{Duration, Instant};
 
+use crate::store;
 use thrusterd_core::model::Model;
-use thrusterd_core::store;
 
 /// One save to do.
 struct Job {

@@ -1,4 +1,6 @@
-//! A tiny SVG line-chart writer: panels in a grid, lines with optional +-1 sigma bands.
+//! A tiny SVG line-chart writer: panels in a grid, lines with optional +-1 sigma bands,
+//! shaded x intervals (an estimation period) and round tick values. Nothing is clipped
+//! silently: a panel whose points leave its y range says so in red, with the extreme value.
 //!
 //! Hand-written rather than a plotting crate because the charts are simple and a font-free SVG
 //! renders anywhere (browsers, GitHub) without system font libraries on the build machine.
@@ -16,13 +18,40 @@ pub struct Series {
 }
 
 /// One chart in the grid.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Panel {
     pub title: String,
     pub series: Vec<Series>,
     /// This panel's y axis (low, high) instead of the grid's 0..y_max: signed quantities
     /// (attitude angles) and panels of different scales in one figure.
     pub y_range: Option<(f64, f64)>,
+    /// x intervals shaded grey behind the lines (e.g. while the daemon estimated).
+    pub shade: Vec<(f64, f64)>,
+}
+
+/// Round tick values covering [lo, hi]: steps of 1, 2 or 5 times a power of ten, about
+/// `want` of them, starting and ending on a multiple of the step at or beyond the ends.
+pub fn nice_ticks(lo: f64, hi: f64, want: usize) -> Vec<f64> {
+    if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
+        return vec![lo];
+    }
+    let raw = (hi - lo) / want.max(1) as f64;
+    let power = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * power)
+        .find(|s| *s >= raw * (1.0 - 1e-9))
+        .unwrap_or(10.0 * power);
+    let first = (lo / step + 1e-9).floor() as i64;
+    let last = (hi / step - 1e-9).ceil() as i64;
+    // Multiples of the step, computed from integers so 0.1 * 3 prints as 0.3.
+    (first..=last).map(|k| k as f64 * step).collect()
+}
+
+/// [lo, hi] widened to the round ticks that cover it: the axis [`render`] draws for it.
+pub fn nice_range(lo: f64, hi: f64) -> (f64, f64) {
+    let t = nice_ticks(lo, hi, 5);
+    (t[0], t[t.len() - 1])
 }
 
 /// Layout and axes shared by every panel.
@@ -105,8 +134,20 @@ fn draw_panel(s: &mut String, grid: &Grid, panel: &Panel, x0: f64, y0: f64) {
         y0 - 7.0,
         esc(&panel.title)
     );
-    for k in 0..=5 {
-        let yv = y_lo + (y_hi - y_lo) * k as f64 / 5.0;
+    for (a, b) in &panel.shade {
+        let (xa, xb) = (sx(a.min(*b)), sx(a.max(*b)));
+        if xb > xa {
+            let _ = write!(
+                s,
+                r##"<rect x="{xa:.1}" y="{y0}" width="{:.1}" height="{PANEL_H}" fill="#bbb" fill-opacity="0.35" stroke="none"/>"##,
+                xb - xa
+            );
+        }
+    }
+    for yv in nice_ticks(y_lo, y_hi, 5)
+        .into_iter()
+        .filter(|v| *v >= y_lo - 1e-9 && *v <= y_hi + 1e-9)
+    {
         let y = sy(yv);
         let _ = write!(
             s,
@@ -117,8 +158,10 @@ fn draw_panel(s: &mut String, grid: &Grid, panel: &Panel, x0: f64, y0: f64) {
             trim(yv)
         );
     }
-    for k in 0..=5 {
-        let xv = grid.x_max * k as f64 / 5.0;
+    for xv in nice_ticks(0.0, grid.x_max, 5)
+        .into_iter()
+        .filter(|v| *v <= grid.x_max + 1e-9)
+    {
         let x = sx(xv);
         let _ = write!(
             s,
@@ -186,6 +229,37 @@ fn draw_panel(s: &mut String, grid: &Grid, panel: &Panel, x0: f64, y0: f64) {
             );
         }
     }
+    clipped_note(s, panel, (y_lo, y_hi), x0, y0);
+}
+
+/// Points beyond the y range are drawn at its edge; this says so, with the extreme value, so
+/// a flat line at the top is never mistaken for the data.
+fn clipped_note(s: &mut String, panel: &Panel, (y_lo, y_hi): (f64, f64), x0: f64, y0: f64) {
+    let ys = || {
+        panel
+            .series
+            .iter()
+            .flat_map(|ser| ser.points.iter().map(|p| p.1))
+            .filter(|y| y.is_finite())
+    };
+    let above = ys().filter(|y| *y > y_hi).fold(f64::NAN, f64::max);
+    let below = ys().filter(|y| *y < y_lo).fold(f64::NAN, f64::min);
+    let mut note = Vec::new();
+    if above.is_finite() {
+        note.push(format!("clipped above: max {}", trim(above)));
+    }
+    if below.is_finite() {
+        note.push(format!("clipped below: min {}", trim(below)));
+    }
+    if !note.is_empty() {
+        let _ = write!(
+            s,
+            r##"<text x="{}" y="{}" text-anchor="end" fill="#c00">{}</text>"##,
+            x0 + PANEL_W - 4.0,
+            y0 + 13.0,
+            esc(&note.join(", "))
+        );
+    }
 }
 
 fn trim(v: f64) -> String {
@@ -226,6 +300,7 @@ mod tests {
                 title: "n=2".into(),
                 series: vec![series],
                 y_range: None,
+                shade: vec![(2.0, 4.0)],
             }],
         );
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
@@ -235,5 +310,62 @@ mod tests {
         // The NaN point is dropped: exactly two coordinates in the polyline.
         let line = svg.split("<polyline points=\"").nth(1).unwrap();
         assert_eq!(line.split('"').next().unwrap().split(' ').count(), 2);
+        // The shaded interval, 2..4 of 0..10: a fifth of the panel's width.
+        assert!(
+            svg.contains(&format!(
+                r##"width="{:.1}" height="{PANEL_H}" fill="#bbb""##,
+                PANEL_W / 5.0
+            )),
+            "{svg}"
+        );
+        assert!(!svg.contains("clipped"), "nothing is beyond the range");
+    }
+
+    #[test]
+    fn ticks_are_round_and_cover_the_range() {
+        assert_eq!(
+            nice_ticks(0.0, 10.0, 5),
+            vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
+        );
+        assert_eq!(nice_ticks(0.0, 147.0, 5), vec![0.0, 50.0, 100.0, 150.0]);
+        assert_eq!(
+            nice_ticks(-23.0, 41.0, 5),
+            vec![-40.0, -20.0, 0.0, 20.0, 40.0, 60.0]
+        );
+        assert_eq!(nice_range(0.0, 0.37), (0.0, 0.4));
+        let t = nice_ticks(0.0, 0.3, 3);
+        assert_eq!(
+            t.iter().map(|v| trim(*v)).collect::<Vec<_>>(),
+            ["0", "0.1", "0.2", "0.3"]
+        );
+        assert_eq!(nice_ticks(1.0, 1.0, 5), vec![1.0]);
+    }
+
+    #[test]
+    fn points_beyond_the_range_are_reported_not_hidden() {
+        let grid = Grid {
+            title: "t".into(),
+            columns: 1,
+            x_label: "x".into(),
+            y_label: "y".into(),
+            x_max: 10.0,
+            y_max: 90.0,
+        };
+        let panel = Panel {
+            title: "error".into(),
+            series: vec![Series {
+                label: "err".into(),
+                color: "blue",
+                dashed: false,
+                points: vec![(0.0, 10.0), (5.0, 147.0), (10.0, -3.0)],
+                band: None,
+            }],
+            ..Panel::default()
+        };
+        let svg = render(&grid, &[panel]);
+        assert!(
+            svg.contains("clipped above: max 147, clipped below: min -3"),
+            "{svg}"
+        );
     }
 }

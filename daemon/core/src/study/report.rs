@@ -93,6 +93,7 @@ pub fn figures(rows: &[StudyRow]) -> Vec<(String, String)> {
                     series(&sel, "acceleration error", RED, true, true),
                 ],
                 y_range: None,
+                shade: Vec::new(),
             });
         }
     }
@@ -130,6 +131,7 @@ pub fn figures(rows: &[StudyRow]) -> Vec<(String, String)> {
                             crlb_series(&fwd, acc),
                         ],
                         y_range: None,
+                        shade: Vec::new(),
                     });
                 }
             }

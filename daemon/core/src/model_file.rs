@@ -1,9 +1,6 @@
-//! The state directory: the current model saved atomically (temp file, fsync, rename, fsync of
-//! the folder) and loaded at start. The one module of the library that touches files.
-
-use std::fs::{self, File};
-use std::io::Write;
-use std::path::{Path, PathBuf};
+//! The model file's format: a model as JSON text and back, every value checked. Writing and
+//! reading the file itself (atomically, in the state directory) is the daemon's job
+//! (thrusterd's store module): the core touches no files.
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -11,8 +8,6 @@ use serde::{Deserialize, Serialize};
 use crate::estimator::{DofMask, Method};
 use crate::model::{Model, ModelSource};
 
-/// File name of the current model inside the state directory.
-pub const MODEL_FILE: &str = "model.json";
 /// Identifies our files; a different value is someone else's file.
 pub const FORMAT: &str = "thrusterd-model";
 /// Version of the layout below; files from a newer daemon are refused, not guessed at.
@@ -179,60 +174,6 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
     })
 }
 
-/// Write `model` to `path` atomically: readers see the old file or the new one, never half.
-pub fn save_atomic(model: &Model, path: &Path) -> Result<(), StoreError> {
-    let io = |source: std::io::Error| StoreError::Io {
-        path: path.display().to_string(),
-        source,
-    };
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let tmp: PathBuf = dir.join(format!(
-        ".{}.tmp",
-        path.file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or(MODEL_FILE)
-    ));
-    let result = (|| {
-        let mut f = File::create(&tmp)?;
-        f.write_all(to_json(model).as_bytes())?;
-        f.sync_all()?;
-        drop(f);
-        fs::rename(&tmp, path)?;
-        // The rename itself must reach the disk before we call the model saved.
-        File::open(dir)?.sync_all()
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result.map_err(io)
-}
-
-/// Load the model at `path`; Ok(None) when there is none yet.
-pub fn load(path: &Path) -> Result<Option<Model>, StoreError> {
-    // Only a regular file: reading a FIFO or a device would block the caller (the daemon's
-    // loop, for an operator's load) until someone writes to it.
-    match fs::metadata(path) {
-        Ok(m) if !m.is_file() => {
-            return Err(StoreError::Corrupt {
-                path: path.display().to_string(),
-                why: "not a regular file".into(),
-            })
-        }
-        _ => {}
-    }
-    match fs::read_to_string(path) {
-        Ok(text) => from_json(&text, &path.display().to_string()).map(Some),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(source) => Err(StoreError::Io {
-            path: path.display().to_string(),
-            source,
-        }),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -251,13 +192,9 @@ mod tests {
     }
 
     #[test]
-    fn round_trip_through_a_real_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join(MODEL_FILE);
-        assert!(load(&path).unwrap().is_none());
+    fn round_trip_keeps_every_value() {
         let m = model();
-        save_atomic(&m, &path).unwrap();
-        let back = load(&path).unwrap().unwrap();
+        let back = from_json(&to_json(&m), "m.json").unwrap();
         assert_eq!(back.effectiveness, m.effectiveness);
         assert_eq!(back.allocation, m.allocation);
         assert_eq!(back.actuated, m.actuated);
@@ -265,8 +202,7 @@ mod tests {
         assert_eq!(back.geometry_key, Some(42));
         assert_eq!(back.std_err[(0, 0)], 0.01);
         assert!(back.std_err[(1, 1)].is_nan());
-        // No temp file left behind.
-        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+        assert_eq!(back.loaded_from.as_deref(), Some("m.json"));
     }
 
     #[test]
@@ -311,11 +247,5 @@ mod tests {
         assert!(e.to_string().contains("effectiveness must be 6 x 4"), "{e}");
         let e = from_json(&text.replacen("\"pitch\"", "\"pitchh\"", 1), "m.json");
         assert!(e.is_err());
-    }
-
-    #[test]
-    fn unwritable_directory_is_an_error_not_a_panic() {
-        let e = save_atomic(&model(), Path::new("/proc/thrusterd-test/model.json")).unwrap_err();
-        assert!(e.to_string().contains("/proc/thrusterd-test"), "{e}");
     }
 }
