@@ -22,8 +22,10 @@ pub fn first_difference(replayed: &[ModelMsg], recorded: &[ModelMsg]) -> Option<
         .find_map(|(i, (a, b))| model_difference(a, b).map(|d| format!("swap {}: {d}", i + 1)))
 }
 
-fn same(a: f64, b: f64) -> bool {
-    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+/// Bit for bit; a recorded NaN stands for any non-finite value (the recording's JSON writes
+/// NaN and infinities alike as `null`).
+fn same(replayed: f64, recorded: f64) -> bool {
+    replayed.to_bits() == recorded.to_bits() || (recorded.is_nan() && !replayed.is_finite())
 }
 
 fn model_difference(a: &ModelMsg, b: &ModelMsg) -> Option<String> {

@@ -113,14 +113,93 @@ pub fn names(paths: &[PathBuf]) -> String {
         .join(", ")
 }
 
-fn decode<T: DeserializeOwned>(
+/// serde_json writes a non-finite f64 as `null` (JSON has no NaN): a model's unknown bound, a
+/// driver's NaN the daemon rejected. Such a message is read with every `null` as this
+/// sentinel, which `NonFinite::restore` turns back into NaN (no field of a valid message comes
+/// near it: the protocol bounds every value far below).
+const NULL_F64: f64 = f64::MAX;
+
+/// Messages whose floats may have been written as `null`.
+pub trait NonFinite {
+    /// Turns the sentinel back into NaN.
+    fn restore(&mut self) {}
+}
+
+fn nan(x: &mut f64) {
+    if *x == NULL_F64 {
+        *x = f64::NAN;
+    }
+}
+
+impl NonFinite for ImuSample {
+    fn restore(&mut self) {
+        self.gyro
+            .iter_mut()
+            .chain(&mut self.accel)
+            .chain(&mut self.mag)
+            .chain(std::iter::once(&mut self.depth))
+            .for_each(nan);
+    }
+}
+
+impl NonFinite for ModelMsg {
+    fn restore(&mut self) {
+        self.effectiveness
+            .iter_mut()
+            .chain(&mut self.std_err)
+            .flatten()
+            .chain(self.allocation.iter_mut().flatten())
+            .chain([&mut self.rel_err_rot, &mut self.rel_err_acc])
+            .for_each(nan);
+    }
+}
+
+// The daemon validated these before sending or journaling them: always finite.
+impl NonFinite for InputMsg {}
+impl NonFinite for ThrustCommand {}
+impl NonFinite for ConfigMsg {}
+
+/// Every `null` in `v` (at any depth) replaced by the sentinel.
+fn nulls_to_sentinel(v: &mut serde_json::Value) -> bool {
+    use serde_json::Value;
+    match v {
+        Value::Null => {
+            *v = Value::from(NULL_F64);
+            true
+        }
+        Value::Array(a) => a
+            .iter_mut()
+            .fold(false, |any, x| nulls_to_sentinel(x) | any),
+        Value::Object(o) => o
+            .values_mut()
+            .fold(false, |any, x| nulls_to_sentinel(x) | any),
+        _ => false,
+    }
+}
+
+fn decode_one<T: DeserializeOwned + NonFinite>(data: &[u8]) -> Result<T, serde_json::Error> {
+    match serde_json::from_slice(data) {
+        Ok(v) => Ok(v),
+        Err(first) => {
+            let mut value: serde_json::Value = serde_json::from_slice(data)?;
+            if !nulls_to_sentinel(&mut value) {
+                return Err(first);
+            }
+            let mut msg: T = serde_json::from_value(value).map_err(|_| first)?;
+            msg.restore();
+            Ok(msg)
+        }
+    }
+}
+
+fn decode<T: DeserializeOwned + NonFinite>(
     path: &Path,
     topic: &'static str,
     messages: &[RawMessage],
     out: &mut Vec<T>,
 ) -> Result<(), RecordingError> {
     for m in messages {
-        let value = serde_json::from_slice(&m.data).map_err(|reason| RecordingError::Json {
+        let value = decode_one(&m.data).map_err(|reason| RecordingError::Json {
             path: path.to_path_buf(),
             offset: m.offset,
             topic,
@@ -174,6 +253,24 @@ mod tests {
             }
             e => panic!("{e}"),
         }
+    }
+
+    #[test]
+    fn non_finite_floats_written_as_null_come_back_as_nan() {
+        let mut m = ModelMsg {
+            count: 2,
+            ..ModelMsg::default()
+        };
+        m.std_err[1][1] = f64::NAN;
+        m.rel_err_acc = f64::INFINITY;
+        m.effectiveness[0][1] = 0.1 + 0.2;
+        let json = serde_json::to_vec(&m).unwrap();
+        let back: ModelMsg = decode_one(&json).unwrap();
+        assert!(back.std_err[1][1].is_nan() && back.rel_err_acc.is_nan());
+        assert_eq!(back.effectiveness[0][1], 0.1 + 0.2);
+        assert_eq!(back.std_err[0][0], 0.0);
+        // Other damage is still refused.
+        assert!(decode_one::<ModelMsg>(b"{\"seq\": null}").is_err());
     }
 
     #[test]
