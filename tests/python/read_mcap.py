@@ -2,6 +2,7 @@
 """Summarise MCAP files with Foxglove's `mcap` package, as JSON on stdout.
 
 Usage: read_mcap.py FILE.mcap [FILE-0001.mcap ...]
+       read_mcap.py --messages TOPIC FILE.mcap [...]   (every message of TOPIC, decoded, as a JSON list)
 
 Per channel (topic): schema name and encoding, message encoding, whether the schema parses as
 JSON, message count, first and last log/publish times, whether log and publish times never go
@@ -68,8 +69,26 @@ def summarise(paths):
     return {"files": len(paths), "channels": channels, "metadata": metadata}
 
 
+def messages(topic, paths):
+    """Every JSON message of `topic`, in file order (tests/tests/replay.rs compares them)."""
+    out = []
+    for path in paths:
+        with open(path, "rb") as f:
+            for _schema, channel, message in make_reader(f).iter_messages(
+                topics=[topic], log_time_order=False
+            ):
+                out.append(json.loads(message.data))
+    return out
+
+
 if __name__ == "__main__":
     if len(sys.argv) < 2:
         sys.exit(__doc__)
+    if sys.argv[1] == "--messages":
+        if len(sys.argv) < 4:
+            sys.exit(__doc__)
+        json.dump(messages(sys.argv[2], sys.argv[3:]), sys.stdout)
+        print()
+        sys.exit(0)
     json.dump(summarise(sys.argv[1:]), sys.stdout, indent=1, sort_keys=True)
     print()

@@ -101,3 +101,26 @@ pub fn read_mcap(files: &[PathBuf]) -> Value {
         )
     })
 }
+
+/// Every message of `topic` in `files`, decoded by Python's `mcap` and `json` (read_mcap.py
+/// --messages): what a recording holds, read without our code.
+pub fn mcap_messages(files: &[PathBuf], topic: &str) -> Vec<Value> {
+    let python = venv_python();
+    let out = Command::new(python)
+        .arg(workspace().join("tests/python/read_mcap.py"))
+        .args(["--messages", topic])
+        .args(files)
+        .output()
+        .expect("running read_mcap.py");
+    assert!(
+        out.status.success(),
+        "read_mcap.py --messages {topic} {files:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "read_mcap.py --messages printed no JSON list ({e}): {}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    })
+}

@@ -179,6 +179,32 @@ fn a_session_at_1_khz_is_recorded_without_loss_and_read_back_by_foxglove_mcap() 
     assert_eq!(meta["lost"], "0", "{meta}");
     assert_eq!(meta["imu.messages"], count.to_string(), "{meta}");
 
+    // The rotated files replay through the daemon's machine as one recording: the journal
+    // (start, the setpoint, the reconfiguration) and the configuration are in them, and every
+    // replayed command equals the daemon's answer to the same sample (docs/recording.md).
+    let o = Command::new(bin("thrusterd"))
+        .arg("replay")
+        .args(&files)
+        .arg("--json")
+        .output()
+        .expect("thrusterd replay runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: Value = serde_json::from_slice(&o.stdout).expect("replay --json prints JSON");
+    assert_eq!(r["reproduces_recording"], true, "{r}");
+    assert_eq!(r["commands_diverged_at"], Value::Null, "{r}");
+    assert_eq!(r["divergences"], serde_json::json!([]), "{r}");
+    assert!(r["inputs_applied"].as_u64().unwrap() >= 3, "{r}");
+    assert!(
+        r["commands_compared"].as_u64().unwrap() >= count * 9 / 10,
+        "{r}"
+    );
+    eprintln!(
+        "replay of {} files: {} inputs, {} commands identical",
+        files.len(),
+        r["inputs_applied"],
+        r["commands_compared"]
+    );
+
     drop(recorder);
     drop(sim);
     let mut world = world;

@@ -66,6 +66,8 @@ stamped! {
     Setpoint: |_: &Setpoint| None => one_stream: false,
     ReconfigEvent: |_: &ReconfigEvent| None => one_stream: false,
     DriverStatusMsg: |_: &DriverStatusMsg| None,
+    InputMsg: |m: &InputMsg| Some(m.t_ns),
+    ConfigMsg: |_: &ConfigMsg| None,
 }
 
 /// Sequence-gap accounting of one topic.
@@ -223,6 +225,9 @@ pub fn open_all(node: &IpcNode, ipc: &IpcConfig) -> Result<Vec<Box<dyn Source>>,
         Box::new(TopicSource::<DvlSample>::open(node, ipc)?),
         Box::new(TopicSource::<TruthMsg>::open(node, ipc)?),
         Box::new(TopicSource::<VehicleStateMsg>::open(node, ipc)?),
+        // What `thrusterd replay` needs besides the IMU stream (docs/recording.md).
+        Box::new(TopicSource::<InputMsg>::open(node, ipc)?),
+        Box::new(TopicSource::<ConfigMsg>::open(node, ipc)?),
     ])
 }
 

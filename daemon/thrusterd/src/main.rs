@@ -1,5 +1,8 @@
-//! thrusterd: the thruster-configuration daemon (`run`), and its offline studies (`study`).
+//! thrusterd: the thruster-configuration daemon (`run`), its offline studies (`study`) and the
+//! replay of a recorded session (`replay`).
 
+mod journal;
+mod replay;
 mod run;
 mod saver;
 mod session;
@@ -32,6 +35,9 @@ enum Command {
         /// The file (e.g. config/thrusterd.toml).
         file: PathBuf,
     },
+    /// Run a recording (MCAP) through the state machine and estimator offline and print the
+    /// model: the daemon's, with the recording's configuration; another's with --config.
+    Replay(replay::ReplayArgs),
     /// Offline studies of the estimator (no vehicle, no IPC).
     Study {
         #[command(subcommand)]
@@ -74,5 +80,6 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Study { study } => study::run(study),
+        Command::Replay(args) => replay::run(args),
     }
 }

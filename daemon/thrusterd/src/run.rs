@@ -22,8 +22,9 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
-    ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample, ModelMsg, ReconfigEvent,
-    RequestKind, ResponseCode, Setpoint, StatusMsg, TelemetryMsg, ThrustCommand, MAX_THRUSTERS,
+    ConfigMsg, ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample, InputKind,
+    InputMsg, ModelMsg, ReconfigEvent, RequestKind, ResponseCode, Setpoint, StatusMsg,
+    TelemetryMsg, ThrustCommand, MAX_THRUSTERS,
 };
 use thrusterd_core::config::DaemonConfig;
 use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
@@ -172,6 +173,9 @@ struct Daemon {
     /// The thruster count the latest report was judged for; `None` when a new report came.
     /// Judging again only then keeps the per-round work (and its text) off the hot path.
     driver_judged_for: Option<usize>,
+    /// Every input the machine takes besides the IMU samples, published for recordings
+    /// (`journal`); created with the other ports in `serve`.
+    journal: Option<crate::journal::Journal>,
 }
 
 impl Daemon {
@@ -228,6 +232,7 @@ impl Daemon {
             driver: DriverWatch::new(),
             driver_verdict: OutputVerdict::Usable,
             driver_judged_for: None,
+            journal: None,
         })
     }
 
@@ -240,6 +245,14 @@ impl Daemon {
         // Before the node, so it drops after it: a clean stop of the last process of the
         // namespace leaves no iceoryx2 residue behind.
         let _tidy = thruster_protocol::services::TidyOnDrop::new(&self.ipc);
+        let result = self.serve_node();
+        // The journal's port lives in `self`, beyond the node: it must go before the tidy,
+        // or its service is still open then and the namespace's global segment stays.
+        self.journal = None;
+        result
+    }
+
+    fn serve_node(&mut self) -> Result<()> {
         let node = self.ipc.create_node("thrusterd")?;
         // The control server first: it is what tells a live daemon on this namespace apart
         // from a crashed one, and the session marker of a live daemon must neither be read as
@@ -266,6 +279,21 @@ impl Daemon {
             dynamics: Port::<DynamicsMsg>::create(&node, &self.ipc)?,
         };
         let status_out = Port::<StatusMsg>::create(&node, &self.ipc)?;
+        // The effective configuration (history 1) and the input journal: what a replay of a
+        // recording needs besides the IMU stream. Before the first sample is read.
+        let config_out = Port::<ConfigMsg>::create(&node, &self.ipc)?;
+        if let Err(e) = config_out.send(&crate::journal::config_msg(&self.cfg)) {
+            // Only a replay needs it (and then asks for --config): never worth not serving.
+            warn!("configuration not published: {e}");
+        }
+        let mut journal = crate::journal::Journal::new(Port::<InputMsg>::create(&node, &self.ipc)?);
+        journal.text(
+            InputKind::Start,
+            u32::from(self.machine.model().is_some()),
+            false,
+            &format!("thrusterd {}", env!("CARGO_PKG_VERSION")),
+        );
+        self.journal = Some(journal);
 
         let waitset = create_waitset()?;
         let imu_timeout = Duration::from_millis(self.cfg.runtime.imu_timeout_ms);
@@ -340,7 +368,10 @@ impl Daemon {
             dvl_in.drain_events()?;
             while let Some(d) = dvl_in.recv()? {
                 match d.validate() {
-                    Ok(()) => self.machine.on_dvl(d.velocity),
+                    Ok(()) => {
+                        self.machine.on_dvl(d.velocity);
+                        self.journal(|j| j.record(InputKind::Dvl, false, |m| m.dvl = d.velocity));
+                    }
                     Err(reason) => {
                         self.rejected.record(&reason);
                         warn!("DVL sample rejected: {reason}");
@@ -362,16 +393,18 @@ impl Daemon {
             // Before the first sample there is nothing to go stale: the driver is not up yet.
             // Status says so, and estimation and control are refused until a sample comes.
             if stale && self.last_imu.is_none() {
-                self.machine.on_no_imu_yet(&format!(
+                let why = format!(
                     "no IMU samples from any driver for {} ms (namespace {})",
                     imu_timeout.as_millis(),
                     self.ipc.namespace()
-                ));
+                );
+                self.machine.on_no_imu_yet(&why);
+                self.journal(|j| j.text(InputKind::NoImuYet, 0, false, &why));
             }
             if stale && !got && !self.stale_reported && self.last_imu.is_some() {
-                let cmd = self
-                    .machine
-                    .on_imu_stale(&format!("no IMU sample for {} ms", imu_timeout.as_millis()));
+                let why = format!("no IMU sample for {} ms", imu_timeout.as_millis());
+                let cmd = self.machine.on_imu_stale(&why);
+                self.journal(|j| j.text(InputKind::ImuStale, 0, false, &why));
                 self.send_thrust(&out.thrust, &cmd);
                 self.stale_reported = true;
             }
@@ -379,7 +412,10 @@ impl Daemon {
                 reconfig_in.drain_events()?;
                 while let Some(e) = reconfig_in.recv()? {
                     match e.validate().and_then(|_| check_reconfig(&e)) {
-                        Ok(()) => self.machine.on_reconfig(wire::reconfig(&e)),
+                        Ok(()) => {
+                            self.machine.on_reconfig(wire::reconfig(&e));
+                            self.journal(|j| j.reconfig(&e));
+                        }
                         Err(reason) => {
                             self.rejected.record(&reason);
                             warn!("reconfiguration event rejected: {reason}");
@@ -416,6 +452,7 @@ impl Daemon {
                     match s.validate() {
                         Ok(()) => {
                             self.machine.on_setpoint_input(&wire::setpoint(&s));
+                            self.journal(|j| j.setpoint(&s));
                         }
                         Err(reason) => {
                             self.rejected.record(&reason);
@@ -456,7 +493,9 @@ impl Daemon {
                 && self.machine.state() != thrusterd_core::machine::State::Fault
             {
                 self.pending_estimate = false;
-                if let Err(e) = self.machine.on_request(Request::Estimate) {
+                let result = self.machine.on_request(Request::Estimate);
+                self.journal_request(RequestKind::Estimate, 0.0, result.is_err());
+                if let Err(e) = result {
                     warn!("start-up estimation refused: {e}");
                 }
             }
@@ -465,7 +504,9 @@ impl Daemon {
                 && self.machine.state() != thrusterd_core::machine::State::Fault
             {
                 self.pending_hold = false;
-                match self.machine.on_request(Request::Hold) {
+                let result = self.machine.on_request(Request::Hold);
+                self.journal_request(RequestKind::Hold, 0.0, result.is_err());
+                match result {
                     Ok(_) => info!("resumed control after a crash: holding attitude"),
                     Err(e) => warn!("could not resume control after a crash: {e}"),
                 }
@@ -529,10 +570,13 @@ impl Daemon {
             OutputVerdict::Blocked(why) => {
                 error!("driver outputs unusable: {why}; thrusters neutral");
                 self.machine.on_outputs(Some(why));
+                let why = why.clone();
+                self.journal(|j| j.text(InputKind::Outputs, 1, false, &why));
             }
             OutputVerdict::Usable => {
                 info!("driver outputs usable again");
                 self.machine.on_outputs(None);
+                self.journal(|j| j.text(InputKind::Outputs, 0, false, ""));
             }
         }
         self.driver_verdict = verdict;
@@ -542,6 +586,9 @@ impl Daemon {
         match self.validator.check(sample) {
             Ok(accepted) => {
                 self.last_imu = Some((sample.seq, sample.t_ns));
+                if let Some(j) = self.journal.as_mut() {
+                    j.imu(sample.seq, sample.t_ns);
+                }
                 if accepted.missed > 0 {
                     // Counted for status so no loss goes unnoticed; logged sparingly.
                     let before = self.missed;
@@ -683,10 +730,15 @@ impl Daemon {
             RequestKind::Load => {
                 let path = PathBuf::from(req.text.as_str());
                 return match store::load(&path) {
-                    Ok(Some(model)) => match self.machine.load_model(model) {
-                        Ok(()) => ControlResponse::ok(&format!("loaded {}", path.display())),
-                        Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.to_string()),
-                    },
+                    Ok(Some(model)) => {
+                        let result = self.machine.load_model(model);
+                        let shown = path.display().to_string();
+                        self.journal(|j| j.text(InputKind::Load, 0, result.is_err(), &shown));
+                        match result {
+                            Ok(()) => ControlResponse::ok(&format!("loaded {shown}")),
+                            Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.to_string()),
+                        }
+                    }
                     Ok(None) => ControlResponse::new(
                         ResponseCode::Failed,
                         &format!("{}: no such file", path.display()),
@@ -699,10 +751,29 @@ impl Daemon {
                 return ControlResponse::ok("shutting down");
             }
         };
-        match self.machine.on_request(machine_req) {
+        let result = self.machine.on_request(machine_req);
+        self.journal_request(kind, req.value, result.is_err());
+        match result {
             Ok(text) => ControlResponse::ok(&text),
             Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.0),
         }
+    }
+
+    /// Runs `f` on the input journal (there is none before `serve` created the ports).
+    fn journal(&mut self, f: impl FnOnce(&mut crate::journal::Journal)) {
+        if let Some(j) = self.journal.as_mut() {
+            f(j);
+        }
+    }
+
+    /// Journals a request the machine acted on (`value`: an estimate's power).
+    fn journal_request(&mut self, kind: RequestKind, value: f64, refused: bool) {
+        self.journal(|j| {
+            j.record(InputKind::Request, refused, |m| {
+                m.code = kind.as_u32();
+                m.value = value;
+            })
+        });
     }
 
     /// Publish and persist what the machine did; true when status should go out now.

@@ -13,11 +13,13 @@
 //! - The iceoryx2 type name carries a version (`thrusterd.<Type>.v1`): a process built
 //!   with an incompatible layout fails to open the service instead of misreading it.
 
+mod config;
 mod control;
 mod driver_status;
 mod dvl;
 mod dynamics;
 mod imu;
+mod input;
 mod model;
 mod reconfig;
 mod setpoint;
@@ -26,11 +28,13 @@ mod telemetry;
 mod thrust;
 mod truth;
 
+pub use config::{ConfigMsg, CONFIG_TEXT_CAPACITY};
 pub use control::{ControlRequest, ControlResponse, RequestKind, ResponseCode};
 pub use driver_status::{DriverStatusMsg, OutputState};
 pub use dvl::DvlSample;
 pub use dynamics::{DynamicsMsg, DynamicsRow, DYNAMIC_TERMS, DYNAMIC_TERM_NAMES};
 pub use imu::ImuSample;
+pub use input::{InputKind, InputMsg};
 pub use model::{ModelMethod, ModelMsg, ModelSource};
 pub use reconfig::{ReconfigEvent, ReconfigKind};
 pub use setpoint::Setpoint;

@@ -45,6 +45,11 @@ pub enum Topic {
     /// [`TelemetryMsg`], daemon -> anyone: what the daemon does, every `telemetry.every_n`-th
     /// IMU sample.
     Telemetry,
+    /// [`InputMsg`], daemon -> anyone: every input the state machine took besides the IMU
+    /// samples, placed by IMU sample count (the input journal a replay needs).
+    Input,
+    /// [`ConfigMsg`], daemon -> anyone, history 1: the daemon's effective configuration.
+    Config,
 }
 
 /// Quality-of-service settings of a topic. Every process opens services with the same
@@ -64,7 +69,7 @@ pub struct TopicQos {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 12] = [
+    pub const ALL: [Topic; 14] = [
         Topic::Imu,
         Topic::Thrust,
         Topic::Reconfig,
@@ -77,6 +82,8 @@ impl Topic {
         Topic::Dynamics,
         Topic::Dvl,
         Topic::Telemetry,
+        Topic::Input,
+        Topic::Config,
     ];
 
     /// Service name below the namespace, e.g. `imu`.
@@ -94,6 +101,8 @@ impl Topic {
             Topic::Dynamics => "dynamics",
             Topic::Dvl => "dvl",
             Topic::Telemetry => "telemetry",
+            Topic::Input => "input",
+            Topic::Config => "config",
         }
     }
 
@@ -124,8 +133,10 @@ impl Topic {
                 max_buffer: 16,
                 default_buffer: 8,
             },
-            // Discrete events: keep a few, but do not replay old ones to a new reader.
-            Topic::Reconfig => TopicQos {
+            // Discrete events: keep a few, but do not replay old ones to a new reader. The
+            // input journal is one of them: a journal joined late cannot be replayed anyway
+            // (the machine's state at the join is unknown).
+            Topic::Reconfig | Topic::Input => TopicQos {
                 history: 0,
                 max_buffer: 16,
                 default_buffer: 8,
@@ -136,7 +147,8 @@ impl Topic {
             | Topic::Truth
             | Topic::Setpoint
             | Topic::DriverStatus
-            | Topic::Dynamics => TopicQos {
+            | Topic::Dynamics
+            | Topic::Config => TopicQos {
                 history: 1,
                 max_buffer: 4,
                 default_buffer: 2,
@@ -186,4 +198,10 @@ impl TopicMessage for DvlSample {
 }
 impl TopicMessage for TelemetryMsg {
     const TOPIC: Topic = Topic::Telemetry;
+}
+impl TopicMessage for InputMsg {
+    const TOPIC: Topic = Topic::Input;
+}
+impl TopicMessage for ConfigMsg {
+    const TOPIC: Topic = Topic::Config;
 }

@@ -1,0 +1,100 @@
+//! `thrusterd replay`: a recorded session (MCAP from `thrusterctl record` or `demo --record`)
+//! run through the daemon's own state machine and estimator offline. With the recording's
+//! configuration it reproduces the models the daemon swapped in, bit for bit; with another
+//! it answers what that setting would have learned from the same water.
+//!
+//! - `mcap_read`: the file, every problem named with its byte offset;
+//! - `recording`: the channels a replay needs (imu, input, thrust; config, model);
+//! - `journal`: the daemon's input journal checked (one whole session, nothing lost);
+//! - `rerun`: the machine fed the samples and the journal in the daemon's order;
+//! - `compare`: replayed models against the recorded ones, entry for entry;
+//! - `report`: text and JSON.
+
+pub mod compare;
+pub mod journal;
+pub mod mcap_read;
+pub mod recording;
+pub mod report;
+pub mod rerun;
+
+use thrusterd_core::config::DaemonConfig;
+
+pub use recording::{Recording, RecordingError};
+
+/// Why a recording cannot be replayed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    #[error(transparent)]
+    Journal(#[from] journal::JournalError),
+    #[error(transparent)]
+    Rerun(#[from] rerun::RerunError),
+    #[error("no \"config\" channel: the recording does not hold the daemon's configuration; give the settings it ran with (--config FILE)")]
+    NoConfig,
+    #[error("the recorded configuration was cut to fit its message (the daemon warned): give the settings it ran with (--config FILE)")]
+    ConfigTruncated,
+    #[error(transparent)]
+    Config(#[from] thrusterd_core::config::ConfigError),
+}
+
+/// Where the recorded configuration came from, in errors.
+pub const RECORDED_CONFIG: &str = "the recording's config channel";
+
+/// The daemon's effective configuration as recorded.
+pub fn recorded_config(rec: &Recording) -> Result<DaemonConfig, ReplayError> {
+    let msg = rec.config.as_ref().ok_or(ReplayError::NoConfig)?;
+    if msg.truncated != 0 {
+        return Err(ReplayError::ConfigTruncated);
+    }
+    Ok(DaemonConfig::from_toml_str(
+        msg.toml.as_str(),
+        RECORDED_CONFIG,
+    )?)
+}
+
+/// The result of a replay.
+#[derive(Debug, Clone)]
+pub struct Replayed {
+    pub outcome: rerun::Outcome,
+    /// Models the recording holds (the daemon's `model` channel).
+    pub recorded_models: Vec<thruster_protocol::ModelMsg>,
+    /// The first difference from the recorded models, `None` when identical.
+    pub difference: Option<String>,
+}
+
+/// Replays `rec` with `cfg`.
+pub fn replay(rec: &Recording, cfg: &DaemonConfig) -> Result<Replayed, ReplayError> {
+    let inputs = journal::check(&rec.inputs)?;
+    rerun::check_complete(&rec.imu, &rec.thrust)?;
+    let outcome = rerun::rerun(cfg, &rec.imu, inputs, &rec.thrust)?;
+    let difference = compare::first_difference(&outcome.models, &rec.models);
+    Ok(Replayed {
+        outcome,
+        recorded_models: rec.models.clone(),
+        difference,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The daemon publishes `toml::to_string(&cfg)`; the replay parses it back. It must come
+    /// back as the same settings, every float to the bit (toml writes the shortest
+    /// round-trip form).
+    #[test]
+    fn the_configuration_round_trips_through_its_toml() {
+        let mut cfg = DaemonConfig::default();
+        cfg.estimator.target_rel_err = 0.1 + 0.2;
+        cfg.vehicle.thrusters = 6;
+        let text = toml::to_string(&cfg).unwrap();
+        let back = DaemonConfig::from_toml_str(&text, "test").unwrap();
+        assert_eq!(back, cfg);
+        assert!(
+            text.len() < thruster_protocol::CONFIG_TEXT_CAPACITY / 4,
+            "{}",
+            text.len()
+        );
+    }
+}

@@ -1,0 +1,470 @@
+//! The recorded session run through the daemon's own state machine: the IMU samples the
+//! daemon accepted (the same validator decides), and every journal entry after the sample
+//! it followed in the daemon. Pure: no clock, no IPC; the machine's time is the samples'.
+
+use thruster_protocol::validate::ImuSampleValidator;
+use thruster_protocol::{ImuSample, InputKind, InputMsg, ModelMsg, RequestKind, ThrustCommand};
+use thrusterd_core::config::DaemonConfig;
+use thrusterd_core::machine::{Event, Machine, Request, State};
+use thrusterd_core::wire;
+
+/// Why the recording does not hold the session the journal describes.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RerunError {
+    #[error("input journal entry {seq} followed the daemon's IMU sample seq {daemon_seq} (its {imu_count}-th accepted), but the recording's {imu_count}-th accepted sample has seq {replay_seq}: the recording lost IMU samples or did not start with the daemon")]
+    Misplaced {
+        seq: u64,
+        imu_count: u64,
+        daemon_seq: u64,
+        replay_seq: u64,
+    },
+    #[error("the daemon answered IMU sample seq {0}, which the recording does not hold (lost by the recorder)")]
+    LostImu(u64),
+    #[error("the recording lost the daemon's thrust commands {from}..{to}: which IMU samples the daemon received there is unknown")]
+    LostThrust { from: u64, to: u64 },
+    #[error("the configuration drives {config} thrusters, the recorded daemon drove {recorded} (thrust channel): give the count the daemon ran with (--thrusters)")]
+    ThrusterCount { config: usize, recorded: usize },
+}
+
+/// What the machine did with the recorded inputs.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// Every model swapped in, as the daemon would have published it (`ModelMsg`, with the
+    /// daemon's sequence numbering).
+    pub models: Vec<ModelMsg>,
+    /// IMU samples in the recording; those the daemon never received (no answer: published
+    /// before it subscribed, or dropped on the way), not fed; accepted by the validator, and
+    /// rejected.
+    pub imu_recorded: usize,
+    pub imu_not_received: u64,
+    pub imu_accepted: u64,
+    pub imu_rejected: u64,
+    /// Journal entries applied, and those after the recording's last IMU sample (not
+    /// applied: nothing followed them).
+    pub inputs_applied: usize,
+    pub inputs_after_end: usize,
+    /// Entries the daemon and the replay answered differently (refused / took): empty when
+    /// the replay follows the daemon.
+    pub divergences: Vec<String>,
+    /// The machine's state and status text at the end.
+    pub final_state: State,
+    pub final_text: String,
+    /// Vehicle seconds from the first to the last sample.
+    pub vehicle_s: f64,
+    /// Accepted samples whose replayed command was compared with the daemon's recorded one.
+    pub commands_compared: u64,
+    /// The first accepted sample the replay answered with another command than the daemon
+    /// did, when one did. From there on the recorded samples show the vehicle answering the
+    /// daemon's commands, not the replay's: what the machine learns after it is not what
+    /// its settings would have learned in the water.
+    pub diverged_at: Option<Divergence>,
+    /// Per model in `models`: made before the commands diverged (what these settings would
+    /// have learned), or after (not an answer).
+    pub models_valid: Vec<bool>,
+}
+
+/// Where the replayed commands first left the recorded ones.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Divergence {
+    /// The accepted sample's number (1 = the first), seq and vehicle time since the first.
+    pub imu_count: u64,
+    pub imu_seq: u64,
+    pub t_s: f64,
+}
+
+/// Checks that the recording holds every thrust command the daemon sent (their `seq` counts
+/// up by one) and every IMU sample it answered (thrust's `imu_seq`): then the samples it
+/// received are exactly the answered ones, and the stream fed below is the daemon's.
+pub fn check_complete(imu: &[ImuSample], thrust: &[ThrustCommand]) -> Result<(), RerunError> {
+    if let Some(w) = thrust.windows(2).find(|w| w[1].seq != w[0].seq + 1) {
+        return Err(RerunError::LostThrust {
+            from: w[0].seq + 1,
+            to: w[1].seq.saturating_sub(1),
+        });
+    }
+    let recorded: std::collections::HashSet<u64> = imu.iter().map(|s| s.seq).collect();
+    match thrust
+        .iter()
+        .find(|t| t.imu_seq != 0 && !recorded.contains(&t.imu_seq))
+    {
+        Some(t) => Err(RerunError::LostImu(t.imu_seq)),
+        None => Ok(()),
+    }
+}
+
+/// Runs `imu` and `inputs` (a checked journal) through a machine set up from `cfg`.
+/// `recorded_thrusters`: the count the daemon drove at its first answer, when known.
+pub fn rerun(
+    cfg: &DaemonConfig,
+    imu: &[ImuSample],
+    inputs: &[InputMsg],
+    thrust: &[ThrustCommand],
+) -> Result<Outcome, RerunError> {
+    let recorded_thrusters = thrust.first().map(|t| t.count as usize);
+    // The daemon's answer to each sample: the first command naming it (a later one with the
+    // same seq is the neutral of a stale deadline).
+    let mut answers = std::collections::HashMap::with_capacity(thrust.len());
+    for t in thrust {
+        answers.entry(t.imu_seq).or_insert(*t);
+    }
+    let mut machine = Machine::new(cfg.machine_setup());
+    if let Some(recorded) = recorded_thrusters {
+        if recorded != machine.thrusters() {
+            return Err(RerunError::ThrusterCount {
+                config: machine.thrusters(),
+                recorded,
+            });
+        }
+    }
+    let mut out = Outcome {
+        models: Vec::new(),
+        imu_recorded: imu.len(),
+        imu_not_received: 0,
+        imu_accepted: 0,
+        imu_rejected: 0,
+        inputs_applied: 0,
+        inputs_after_end: 0,
+        divergences: Vec::new(),
+        final_state: State::Idle,
+        final_text: String::new(),
+        vehicle_s: 0.0,
+        commands_compared: 0,
+        diverged_at: None,
+        models_valid: Vec::new(),
+    };
+    let t0 = imu.first().map_or(0, |s| s.t_ns);
+    let mut validator = ImuSampleValidator::default();
+    let mut next = 0;
+    let mut model_seq = 0;
+    // Entries before the first sample (the start, "no IMU yet").
+    apply_due(&mut machine, inputs, &mut next, 0, None, &mut out)?;
+    collect(&mut machine, &mut model_seq, &mut out);
+    for sample in imu {
+        // The daemon answers every sample it receives (a command, or neutral for a rejected
+        // one): an unanswered one never reached it (a driver publishing before the daemon
+        // subscribed, or the end of the recording).
+        let Some(recorded) = answers.get(&sample.seq) else {
+            out.imu_not_received += 1;
+            continue;
+        };
+        if validator.check(sample).is_err() {
+            // The daemon answered it with neutral and never showed it to the machine.
+            out.imu_rejected += 1;
+            continue;
+        }
+        out.imu_accepted += 1;
+        let cmd = machine.on_imu(&wire::imu_input(sample));
+        if out.diverged_at.is_none() {
+            out.commands_compared += 1;
+            if !same_command(&cmd, recorded) {
+                out.diverged_at = Some(Divergence {
+                    imu_count: out.imu_accepted,
+                    imu_seq: sample.seq,
+                    t_s: sample.t_ns.saturating_sub(t0) as f64 * 1e-9,
+                });
+            }
+        }
+        apply_due(
+            &mut machine,
+            inputs,
+            &mut next,
+            out.imu_accepted,
+            Some(sample.seq),
+            &mut out,
+        )?;
+        // The daemon publishes swaps after the round's inputs; the order of swaps is the same.
+        collect(&mut machine, &mut model_seq, &mut out);
+    }
+    out.inputs_after_end = inputs.len() - next;
+    out.final_state = machine.state();
+    out.final_text = machine.status().text;
+    if let (Some(a), Some(b)) = (imu.first(), imu.last()) {
+        out.vehicle_s = b.t_ns.saturating_sub(a.t_ns) as f64 * 1e-9;
+    }
+    Ok(out)
+}
+
+/// The replayed command as the daemon would have sent it, against the recorded one: count,
+/// mode and every thrust to the bit.
+fn same_command(cmd: &thrusterd_core::machine::Command, recorded: &ThrustCommand) -> bool {
+    let mut msg = wire::thrust_command(0, recorded.imu_seq, recorded.t_ns, cmd);
+    thruster_protocol::validate::sanitize_thrust(msg.thrusters_mut());
+    let n = msg.thrusters_mut().len();
+    msg.count == recorded.count
+        && msg.mode == recorded.mode
+        && msg.thrust[..n]
+            .iter()
+            .zip(&recorded.thrust[..n])
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+}
+
+/// Applies the entries that followed the `count`-th accepted sample (seq `seq`).
+fn apply_due(
+    machine: &mut Machine,
+    inputs: &[InputMsg],
+    next: &mut usize,
+    count: u64,
+    seq: Option<u64>,
+    out: &mut Outcome,
+) -> Result<(), RerunError> {
+    while let Some(m) = inputs.get(*next).filter(|m| m.imu_count == count) {
+        if let Some(seq) = seq {
+            if m.imu_seq != seq {
+                return Err(RerunError::Misplaced {
+                    seq: m.seq,
+                    imu_count: count,
+                    daemon_seq: m.imu_seq,
+                    replay_seq: seq,
+                });
+            }
+        }
+        let refused = apply(machine, m);
+        if refused != (m.refused != 0) {
+            let verb = |r: bool| if r { "refused" } else { "took" };
+            out.divergences.push(format!(
+                "input journal entry {} ({} after IMU sample {}): the daemon {} it, the replay {} it",
+                m.seq,
+                m.kind().map(|k| k.name()).unwrap_or("?"),
+                count,
+                verb(m.refused != 0),
+                verb(refused),
+            ));
+        }
+        out.inputs_applied += 1;
+        *next += 1;
+    }
+    Ok(())
+}
+
+/// Hands one journal entry to the machine as the daemon did; true when the machine refused.
+fn apply(machine: &mut Machine, m: &InputMsg) -> bool {
+    let text = m.text.as_str();
+    match m.kind() {
+        Ok(InputKind::Request) => {
+            let request = match RequestKind::try_from(m.code) {
+                Ok(RequestKind::Estimate) => {
+                    // The daemon sets a requested power first; a refused power never reached
+                    // the journal.
+                    if m.value != 0.0 && machine.set_estimation_power(m.value).is_err() {
+                        return true;
+                    }
+                    Request::Estimate
+                }
+                Ok(RequestKind::Abort) => Request::Abort,
+                Ok(RequestKind::Hold) => Request::Hold,
+                Ok(RequestKind::Idle) => Request::Idle,
+                Ok(RequestKind::Revert) => Request::Revert,
+                // Status, save, load and shutdown never go to the machine as requests.
+                _ => return true,
+            };
+            machine.on_request(request).is_err()
+        }
+        Ok(InputKind::Setpoint) => {
+            machine.on_setpoint_input(&wire::setpoint(&m.setpoint));
+            false
+        }
+        Ok(InputKind::Reconfig) => {
+            machine.on_reconfig(wire::reconfig(&m.reconfig));
+            false
+        }
+        Ok(InputKind::Outputs) => {
+            machine.on_outputs((m.code != 0).then_some(text));
+            false
+        }
+        Ok(InputKind::ImuStale) => {
+            machine.on_imu_stale(text);
+            false
+        }
+        Ok(InputKind::NoImuYet) => {
+            machine.on_no_imu_yet(text);
+            false
+        }
+        Ok(InputKind::Dvl) => {
+            machine.on_dvl(m.dvl);
+            false
+        }
+        // Start carries nothing for the machine; Load and unknown kinds were refused by
+        // `journal::check`.
+        Ok(InputKind::Start) | Ok(InputKind::Load) | Err(_) => false,
+    }
+}
+
+/// Takes the machine's events; a swap becomes the message the daemon published.
+fn collect(machine: &mut Machine, model_seq: &mut u64, out: &mut Outcome) {
+    for event in machine.take_events() {
+        if let Event::ModelSwapped(model) = event {
+            out.models.push(wire::model_msg(*model_seq, &model));
+            // Made from samples up to this one and commands before it: still the setting's
+            // own answer if the commands diverged at this sample at the earliest.
+            out.models_valid.push(
+                out.diverged_at
+                    .is_none_or(|d| d.imu_count >= out.imu_accepted),
+            );
+            *model_seq += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `n` samples at rest at 200 Hz.
+    fn rest(n: u64) -> Vec<ImuSample> {
+        (1..=n)
+            .map(|seq| ImuSample {
+                seq,
+                t_ns: seq * 5_000_000,
+                gyro: [0.0; 3],
+                accel: [0.0, 0.0, -9.81],
+                mag: [0.0; 3],
+                depth: 0.0,
+                flags: 0,
+            })
+            .collect()
+    }
+
+    fn neutral_answers(imu: &[ImuSample], count: u32) -> Vec<ThrustCommand> {
+        imu.iter()
+            .map(|s| ThrustCommand::neutral(s.seq - 1, s.seq, s.t_ns, count))
+            .collect()
+    }
+
+    fn entry(seq: u64, kind: InputKind, imu_count: u64, imu_seq: u64) -> InputMsg {
+        let mut m = InputMsg {
+            seq,
+            imu_count,
+            imu_seq,
+            ..InputMsg::default()
+        };
+        m.set_kind(kind);
+        m
+    }
+
+    fn hold(seq: u64, at: u64, refused: bool) -> InputMsg {
+        let mut m = entry(seq, InputKind::Request, at, at);
+        m.code = RequestKind::Hold.as_u32();
+        m.refused = u32::from(refused);
+        m
+    }
+
+    #[test]
+    fn an_idle_session_replays_with_the_same_commands_and_answers() {
+        let cfg = DaemonConfig::default();
+        let imu = rest(50);
+        let thrust = neutral_answers(&imu, 5);
+        // Hold without a model: the daemon refused it, so must the replay.
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
+        let o = rerun(&cfg, &imu, &inputs, &thrust).unwrap();
+        assert_eq!(o.imu_accepted, 50);
+        assert_eq!(o.inputs_applied, 2);
+        assert_eq!(o.commands_compared, 50);
+        assert_eq!(o.diverged_at, None);
+        assert!(o.divergences.is_empty(), "{:?}", o.divergences);
+        assert!(o.models.is_empty());
+    }
+
+    #[test]
+    fn a_different_answer_is_reported() {
+        let imu = rest(20);
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, false)];
+        let o = rerun(
+            &DaemonConfig::default(),
+            &imu,
+            &inputs,
+            &neutral_answers(&imu, 5),
+        )
+        .unwrap();
+        assert_eq!(o.divergences.len(), 1, "{:?}", o.divergences);
+        assert!(o.divergences[0].contains("the daemon took it, the replay refused it"));
+    }
+
+    #[test]
+    fn a_command_that_differs_marks_where_the_replay_left_the_recording() {
+        let imu = rest(30);
+        let mut thrust = neutral_answers(&imu, 5);
+        thrust[11].thrust[2] = 0.25;
+        let o = rerun(
+            &DaemonConfig::default(),
+            &imu,
+            &[entry(0, InputKind::Start, 0, 0)],
+            &thrust,
+        )
+        .unwrap();
+        let d = o.diverged_at.expect("diverged");
+        assert_eq!((d.imu_count, d.imu_seq), (12, 12));
+        assert_eq!(o.commands_compared, 12);
+    }
+
+    #[test]
+    fn an_entry_placed_after_another_sample_is_refused() {
+        let imu = rest(20);
+        // The daemon's 10th accepted sample was seq 11: the recording lost one before it.
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
+        let mut shifted = inputs;
+        shifted[1].imu_seq = 11;
+        let err = rerun(
+            &DaemonConfig::default(),
+            &imu,
+            &shifted,
+            &neutral_answers(&imu, 5),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                RerunError::Misplaced {
+                    seq: 1,
+                    imu_count: 10,
+                    daemon_seq: 11,
+                    replay_seq: 10
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_wrong_thruster_count_is_refused() {
+        let imu = rest(5);
+        let thrust = neutral_answers(&imu, 6);
+        let err = rerun(&DaemonConfig::default(), &imu, &[], &thrust).unwrap_err();
+        assert_eq!(
+            err,
+            RerunError::ThrusterCount {
+                config: 5,
+                recorded: 6
+            }
+        );
+    }
+
+    #[test]
+    fn an_answer_to_a_sample_not_recorded_is_a_loss() {
+        let imu = rest(5);
+        let mut thrust = neutral_answers(&imu, 5);
+        thrust.push(ThrustCommand::neutral(5, 7, 0, 5));
+        assert_eq!(check_complete(&imu, &thrust), Err(RerunError::LostImu(7)));
+        assert_eq!(check_complete(&imu, &thrust[..5]), Ok(()));
+        let mut gap = neutral_answers(&imu, 5);
+        gap.remove(2);
+        assert_eq!(
+            check_complete(&imu, &gap),
+            Err(RerunError::LostThrust { from: 2, to: 2 })
+        );
+    }
+
+    #[test]
+    fn samples_the_daemon_never_answered_are_not_fed() {
+        // The driver published 1..=7 before the daemon subscribed: the daemon's first
+        // accepted sample is seq 8, and its journal says so.
+        let imu = rest(30);
+        let thrust = neutral_answers(&imu[7..], 5);
+        let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
+        let mut daemon = inputs;
+        daemon[1].imu_seq = 17;
+        let o = rerun(&DaemonConfig::default(), &imu, &daemon, &thrust).unwrap();
+        assert_eq!(o.imu_not_received, 7);
+        assert_eq!(o.imu_accepted, 23);
+        assert_eq!(o.inputs_applied, 2);
+    }
+}
