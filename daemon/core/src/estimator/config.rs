@@ -111,6 +111,10 @@ pub struct EstimatorConfig {
     /// Dynamic method: length of a regression segment (own intercept, integrals restarted), s
     /// (default 1.0).
     pub segment_s: f64,
+    /// Dynamic method: prior 1-sigma of each axis of the accelerometer's bias in the
+    /// navigation's bias state, m/s^2 (default 0.1, MEMS turn-on bias being 0.05-0.2); 0 turns
+    /// the state off and leaves the bias folded into the starting attitude (docs/study.md).
+    pub accel_bias_std: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -145,6 +149,7 @@ impl Default for EstimatorConfig {
             diagnosis_z: 4.0,
             reverse_ratio: 0.78,
             segment_s: 1.0,
+            accel_bias_std: 0.1,
         }
     }
 }
@@ -180,7 +185,7 @@ impl EstimatorConfig {
 
     /// (key under `[estimator]`, value, allowed range) of every number; the config file's
     /// checker locates a failing one in the file.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 18] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 19] {
         [
             ("k_sigma", self.k_sigma, Range::above(0.0)),
             (
@@ -219,6 +224,11 @@ impl EstimatorConfig {
                 Range::above_to(0.0, 1.0),
             ),
             ("segment_s", self.segment_s, Range::closed(0.05, 60.0)),
+            (
+                "accel_bias_std",
+                self.accel_bias_std,
+                Range::closed(0.0, 2.0),
+            ),
             // Counted like the others so the array stays one list; always in range.
             (
                 "baseline_samples",

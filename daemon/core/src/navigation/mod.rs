@@ -1,4 +1,5 @@
-//! Navigation during an excitation: attitude and body velocity from the IMU and depth sensor.
+//! Navigation during an excitation: attitude, body velocity and the accelerometer's bias from
+//! the IMU and depth sensor.
 //!
 //! The dynamic-model estimator needs the vehicle's attitude (restoring moment, gravity in the
 //! accelerometer) and body velocity (drag, Munk moment, omega x v) while the thrusters pulse.
@@ -7,17 +8,22 @@
 //! that precedes the excitation (vehicle still, attitude from gravity, velocity zero) and then
 //! dead-reckons a few seconds:
 //! - attitude: the bias-free gyro integrated (exact rotation vector step per sample);
-//! - velocity: strapdown, v_dot = f + g_body - omega x v, the accelerometer's at-rest bias
-//!   taken out by starting from the measured gravity direction;
-//! - depth: a complementary correction of the vertical (NED z) velocity and depth from the
-//!   pressure sensor, which bounds the vertical drift that an attitude error causes.
+//! - velocity: strapdown in NED, v_dot = C (f - b) + g e_z;
+//! - depth and accelerometer bias: an error-state Kalman filter ([`bias_filter`]) on the
+//!   pressure sensor. At rest a bias across gravity looks like tilt and is folded into the
+//!   starting attitude; once the vehicle turns, the depth sees what that fold costs, and the
+//!   filter corrects bias, attitude and velocity together.
 //!
-//! Pure: time only from the samples. Horizontal velocity is not observed by anything here (no
-//! DVL), so it drifts with the attitude error; over the excitation's few seconds that drift is
-//! well below the velocities the thrusters cause at a realistic IMU (docs/study.md).
+//! Pure: time only from the samples. Horizontal velocity is observed only through the bias's
+//! cross-covariances (no DVL), so it drifts with the attitude error; over the excitation's few
+//! seconds that drift is well below the velocities the thrusters cause at a realistic IMU
+//! (docs/study.md).
+
+pub mod bias_filter;
 
 use nalgebra::{UnitQuaternion, Vector3};
 
+use self::bias_filter::{BiasFilter, FilterNoise};
 use crate::estimator::response::GRAVITY;
 
 /// Share of the difference to a DVL measurement taken per measurement. High, since a DVL is
@@ -25,22 +31,50 @@ use crate::estimator::response::GRAVITY;
 /// below 1 so one bad ping does not replace the state.
 pub const DVL_GAIN: f64 = 0.8;
 
-/// Complementary gains of the depth aid (per sample at the nominal rate; dimensionless).
+/// Settings of the depth-aided navigation (1-sigma values).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DepthAid {
-    /// Share of the depth innovation added to the depth estimate.
-    pub depth_gain: f64,
-    /// Vertical velocity correction per metre of depth innovation, 1/s.
-    pub velocity_gain: f64,
+    /// Depth sensor noise per sample, m. Default 0.005 (a Bar30 is 0.003; a little more for
+    /// waves and the lever arm).
+    pub depth_std_m: f64,
+    /// Accelerometer white noise per sample, m/s^2. Default 0.03 (the realistic IMU); the
+    /// estimator passes the noise measured at rest.
+    pub accel_std_mps2: f64,
+    /// Unmodelled acceleration, m/s^2/sqrt(Hz). Default 0.02: the attitude error that gyro
+    /// noise leaves puts a little gravity into the vertical channel.
+    pub accel_floor: f64,
+    /// Prior of each accelerometer-bias axis, m/s^2. Default 0.1 (MEMS turn-on bias is
+    /// 0.05-0.2); 0 turns the bias state off (bias folded into the starting attitude).
+    pub bias_std_mps2: f64,
+    /// Bias random walk, m/s^2/sqrt(s). Default 0.001.
+    pub bias_walk: f64,
+    /// Prior of each velocity axis at the rest, m/s. Default 0.02: a body that is not exactly
+    /// neutrally buoyant drifts during the rest.
+    pub velocity_std_mps: f64,
 }
 
 impl Default for DepthAid {
     fn default() -> Self {
-        // Measured on the simulator (docs/study.md): stiff enough to hold the vertical velocity
-        // within a few cm/s at paper noise, soft enough not to pass the depth noise through.
         DepthAid {
-            depth_gain: 0.05,
-            velocity_gain: 0.5,
+            depth_std_m: 0.005,
+            accel_std_mps2: 0.03,
+            accel_floor: 0.02,
+            bias_std_mps2: 0.1,
+            bias_walk: 0.001,
+            velocity_std_mps: 0.02,
+        }
+    }
+}
+
+impl DepthAid {
+    fn filter_noise(&self) -> FilterNoise {
+        FilterNoise {
+            depth_std_m: self.depth_std_m,
+            accel_std_mps2: self.accel_std_mps2,
+            accel_floor: self.accel_floor,
+            bias_std_mps2: self.bias_std_mps2,
+            bias_walk: self.bias_walk,
+            velocity_std_mps: self.velocity_std_mps,
         }
     }
 }
@@ -56,21 +90,25 @@ pub struct NavState {
     pub rate: Vector3<f64>,
     /// Unit gravity direction in the body frame (NED down seen from the body).
     pub down: Vector3<f64>,
+    /// The body's acceleration, body frame, m/s^2: specific force minus the estimated bias,
+    /// plus gravity.
+    pub motion: Vector3<f64>,
 }
 
 /// Dead reckoning from a rest, aided by depth.
 #[derive(Debug, Clone)]
 pub struct Navigator {
-    aid: DepthAid,
     /// Gravity, m/s^2.
     gravity: f64,
     attitude: UnitQuaternion<f64>,
-    velocity: Vector3<f64>,
+    /// NED velocity, m/s.
+    velocity_ned: Vector3<f64>,
     depth: Option<f64>,
-    /// The accelerometer's reading at rest is -g in the body frame plus its bias; starting the
-    /// attitude from that reading makes f + g_body zero at rest, bias included.
+    /// Estimated accelerometer bias, body frame, m/s^2.
+    bias: Vector3<f64>,
+    filter: BiasFilter,
     last_t_s: Option<f64>,
-    /// The previous sample's rate and motion acceleration (trapezoidal integration).
+    /// The previous sample's rate and NED acceleration (trapezoidal integration).
     last_rate: Vector3<f64>,
     last_accel: Vector3<f64>,
     /// Largest tilt (angle of body z from down) and heading change seen, rad.
@@ -89,6 +127,9 @@ impl Navigator {
         depth: Option<f64>,
         aid: DepthAid,
     ) -> Self {
+        // The accelerometer's reading at rest is -g in the body frame plus its bias; starting
+        // the attitude from that reading makes f + g_body zero at rest, bias included. The
+        // bias filter later takes back what of that was bias.
         let down = if accel_rest.norm() > 1e-6 {
             -accel_rest.normalize()
         } else {
@@ -101,11 +142,12 @@ impl Navigator {
         // exactly neutrally buoyant is still accelerating then (measured: 5x the velocity error).
         let gravity = GRAVITY;
         let mut nav = Navigator {
-            aid,
             gravity,
             attitude,
-            velocity: Vector3::zeros(),
+            velocity_ned: Vector3::zeros(),
             depth: depth.filter(|d| d.is_finite()),
+            bias: Vector3::zeros(),
+            filter: BiasFilter::at_rest(aid.filter_noise(), &attitude, gravity),
             last_t_s: None,
             last_rate: Vector3::zeros(),
             last_accel: Vector3::zeros(),
@@ -145,38 +187,47 @@ impl Navigator {
             };
             self.attitude *= UnitQuaternion::from_scaled_axis(mean_rate * dt);
             self.last_rate = *rate;
-            let g_body = self.down() * self.gravity;
-            let accel = specific_force + g_body - rate.cross(&self.velocity);
+            let f = specific_force - self.bias;
+            let c = self.attitude.to_rotation_matrix().into_inner();
+            let accel = c * f + Vector3::z() * self.gravity;
             let mean_accel = if first {
                 accel
             } else {
                 0.5 * (accel + self.last_accel)
             };
-            self.velocity += mean_accel * dt;
+            let v0 = self.velocity_ned;
+            self.velocity_ned += mean_accel * dt;
             self.last_accel = accel;
+            self.filter.predict(dt, &c, &f);
             let measured = depth.filter(|d| d.is_finite());
             if self.depth.is_none() {
                 // The first depth reading anchors the depth channel.
                 self.depth = measured;
             }
             if let (Some(z), Some(measured)) = (self.depth.as_mut(), measured) {
-                let vz = self.attitude.transform_vector(&self.velocity).z;
-                *z += vz * dt;
-                let innovation = measured - *z;
-                *z += self.aid.depth_gain * innovation;
-                let correction = Vector3::new(0.0, 0.0, self.aid.velocity_gain * innovation * dt);
-                self.velocity += self.attitude.inverse_transform_vector(&correction);
+                *z += 0.5 * (v0.z + self.velocity_ned.z) * dt;
+                let k = self.filter.update_depth(measured - *z);
+                *z += k.depth;
+                self.velocity_ned += k.velocity_ned;
+                self.bias += k.bias;
+                self.attitude = UnitQuaternion::from_scaled_axis(k.attitude) * self.attitude;
             }
             self.max_tilt = self.max_tilt.max(self.tilt());
             let heading = self.attitude.euler_angles().2 - self.heading0;
             let heading = heading.sin().atan2(heading.cos());
             self.max_heading = self.max_heading.max(heading.abs());
         }
+        let down = self.down();
         NavState {
             attitude: self.attitude,
-            velocity: self.velocity,
+            velocity: self.velocity(),
             rate: if finite { *rate } else { Vector3::zeros() },
-            down: self.down(),
+            down,
+            motion: if finite {
+                specific_force - self.bias + down * self.gravity
+            } else {
+                Vector3::zeros()
+            },
         }
     }
 
@@ -185,11 +236,27 @@ impl Navigator {
     /// Non-finite measurements are ignored.
     pub fn velocity_fix(&mut self, measured: &Vector3<f64>) {
         if measured.iter().all(|v| v.is_finite()) {
-            self.velocity += DVL_GAIN * (measured - self.velocity);
+            let pull = DVL_GAIN * (measured - self.velocity());
+            self.velocity_ned += self.attitude.transform_vector(&pull);
         }
     }
 
-    /// Gravity's magnitude as measured at rest, m/s^2.
+    /// Body velocity, m/s.
+    pub fn velocity(&self) -> Vector3<f64> {
+        self.attitude.inverse_transform_vector(&self.velocity_ned)
+    }
+
+    /// Estimated accelerometer bias, body frame, m/s^2.
+    pub fn accel_bias(&self) -> Vector3<f64> {
+        self.bias
+    }
+
+    /// 1-sigma of the bias estimate per axis, m/s^2.
+    pub fn accel_bias_std(&self) -> Vector3<f64> {
+        self.filter.bias_std()
+    }
+
+    /// Gravity used, m/s^2 (standard gravity).
     pub fn gravity(&self) -> f64 {
         self.gravity
     }
