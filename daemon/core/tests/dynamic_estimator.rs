@@ -496,7 +496,7 @@ fn realistic_with_accel_bias(bias_std: f64) -> SensorConfig {
 #[test]
 #[ignore]
 fn bias_sweep() {
-    for state in [0.0, EstimatorConfig::default().accel_bias_std] {
+    for state in [0.0, 0.02, 0.05, 0.1] {
         let cfg = EstimatorConfig {
             accel_bias_std: state,
             ..EstimatorConfig::dynamic()
@@ -529,6 +529,7 @@ fn coverage(
     let (lin, restoring) = true_terms(name);
     let mut hits = [[0usize; 3]; 2];
     let mut count = [0usize; 3];
+    let mut zs: [Vec<f64>; 3] = Default::default();
     let mut means = [0.0; 3];
     let runs = seeds.clone().count() as f64;
     for seed in seeds {
@@ -540,6 +541,7 @@ fn coverage(
         let ols_b = t.b_ols_std_err.clone();
         let mut tally = |group: usize, err: f64, se: [f64; 2]| {
             count[group] += 1;
+            zs[group].push(err.abs() / se[0]);
             for (k, se) in se.iter().enumerate() {
                 if err.abs() < 2.0 * se {
                     hits[k][group] += 1;
@@ -568,6 +570,17 @@ fn coverage(
             let (c, se, ols) = coef(row, axis);
             tally(2, c - restoring[(row, k)], [se, ols]);
         }
+    }
+    for (g, z) in zs.iter_mut().enumerate() {
+        z.sort_by(|a, b| a.total_cmp(b));
+        let q = |p: f64| z[((z.len() - 1) as f64 * p).round() as usize];
+        println!(
+            "  group {g}: |err|/se median {:.2}, 90 % {:.2}, 95 % {:.2}, max {:.2}",
+            q(0.5),
+            q(0.9),
+            q(0.95),
+            q(1.0)
+        );
     }
     let frac = |k: usize| std::array::from_fn(|g| hits[k][g] as f64 / count[g] as f64);
     (frac(0), frac(1), means)
@@ -624,5 +637,140 @@ fn paper_nav_diag() {
             let b = navigation_run(sensors.clone(), seed, 0.6, true, aid);
             println!("bias {bias} acc {acc} floor {floor} seed {seed}: worst {:.3} rms {:.3} | dvl worst {:.3} rms {:.3} | bias est err {:.3?}", a.worst_v, a.rms_v, b.worst_v, b.rms_v, a.bias_err.as_slice());
         }
+    }
+}
+
+#[test]
+#[ignore]
+fn zero_bias_nav_diag() {
+    for b in [0.0, 0.05] {
+        for seed in 1..=5 {
+            let on = navigation_run(
+                realistic_with_accel_bias(b),
+                seed,
+                0.8,
+                false,
+                DepthAid::default(),
+            );
+            let off = navigation_run(
+                realistic_with_accel_bias(b),
+                seed,
+                0.8,
+                false,
+                DepthAid {
+                    bias_std_mps2: 0.0,
+                    ..DepthAid::default()
+                },
+            );
+            println!("b {b} seed {seed}: on rms {:.3} worst {:.3} att {:.3} bias err {:.3?} | off rms {:.3} worst {:.3} att {:.3}", on.rms_v, on.worst_v, on.worst_att, on.bias_err.as_slice(), off.rms_v, off.worst_v, off.worst_att);
+        }
+    }
+}
+
+#[test]
+#[ignore]
+fn presets_sweep() {
+    for state in [0.0, 0.1] {
+        for noise in [
+            NoisePreset::None,
+            NoisePreset::Realistic,
+            NoisePreset::Paper,
+        ] {
+            let (mut rot, mut acc, mut secs) = (0.0, 0.0, 0.0);
+            for seed in 1..=5u64 {
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let cfg = EstimatorConfig {
+                    accel_bias_std: state,
+                    ..EstimatorConfig::dynamic()
+                };
+                let o = estimate_with("amour5", sensors, seed, cfg);
+                rot += o.err_rot / 5.0;
+                acc += o.err_acc / 5.0;
+                secs += o.seconds / 5.0;
+            }
+            println!("prior {state} {noise:?} seeds 1-5: err_rot {rot:.4} err_acc {acc:.4} in {secs:.2} s");
+        }
+    }
+}
+
+/// The stop threshold against the time to model at the paper's noise on AMOUR-5: mean err_rot,
+/// err_acc and vehicle seconds over seeds 1-5 (the target's seeds) and 6-10 (held out), for
+/// each `target_rel_err`. Run with
+/// `cargo test --release -p thrusterd-core --test dynamic_estimator -- --ignored stop_threshold_sweep --nocapture`.
+#[test]
+#[ignore]
+fn stop_threshold_sweep() {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Paper,
+        ..SensorConfig::default()
+    };
+    for target in [0.05, 0.055, 0.058, 0.06, 0.065] {
+        for seeds in [1..=5u64, 6..=10, 1..=20] {
+            let label = format!("{seeds:?}");
+            let runs = seeds.clone().count() as f64;
+            let (mut rot, mut acc, mut secs, mut worst) = (0.0, 0.0, 0.0, 0.0f64);
+            for seed in seeds {
+                let cfg = EstimatorConfig {
+                    target_rel_err: target,
+                    ..EstimatorConfig::dynamic()
+                };
+                let o = estimate_with("amour5", sensors.clone(), seed, cfg);
+                rot += o.err_rot / runs;
+                acc += o.err_acc / runs;
+                secs += o.seconds / runs;
+                worst = worst.max(o.err_rot);
+            }
+            println!(
+                "target {target:.3} seeds {label}: err_rot {rot:.4} (worst {worst:.4}) err_acc {acc:.4} in {secs:.2} s"
+            );
+        }
+    }
+}
+
+/// Every vehicle file at every noise preset, seeds 1-5 (the in-process equivalent of
+/// `thrusterctl study --methods dynamic --seeds 5`): per vehicle and noise, and the mean over
+/// the six. Run with
+/// `cargo test --release -p thrusterd-core --test dynamic_estimator -- --ignored vehicles_sweep --nocapture`.
+#[test]
+#[ignore]
+fn vehicles_sweep() {
+    for noise in [
+        NoisePreset::None,
+        NoisePreset::Realistic,
+        NoisePreset::Paper,
+    ] {
+        let mut all = [0.0; 4];
+        for name in VEHICLES {
+            let mut m = [0.0; 4];
+            for seed in 1..=5u64 {
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let o = estimate_with(name, sensors, seed, EstimatorConfig::dynamic());
+                m[0] += o.err_rot / 5.0;
+                m[1] += o.err_acc / 5.0;
+                m[2] += o.seconds / 5.0;
+                m[3] = f64::max(m[3], o.max_tilt_deg);
+            }
+            println!(
+                "{name} {noise:?}: {:.3} / {:.3}, {:.1} s, {:.0} deg",
+                m[0], m[1], m[2], m[3]
+            );
+            for k in 0..3 {
+                all[k] += m[k] / VEHICLES.len() as f64;
+            }
+            all[3] = f64::max(all[3], m[3]);
+        }
+        println!(
+            "all six {noise:?}: {:.3} / {:.3} in {:.1} s, largest tilt {:.0} deg",
+            all[0], all[1], all[2], all[3]
+        );
     }
 }

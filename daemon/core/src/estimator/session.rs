@@ -719,7 +719,7 @@ impl Estimator {
                 dynamics: None,
             };
         };
-        let sol = run.solve(&rest);
+        let sol = run.solve(&rest, self.cfg.model_error_floor);
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
         let alloc = allocation(&sol.b, rank.actuated, rank.rank);
         let thruster = diagnose(

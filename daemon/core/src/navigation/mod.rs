@@ -44,7 +44,8 @@ pub struct DepthAid {
     /// noise leaves puts a little gravity into the vertical channel.
     pub accel_floor: f64,
     /// Prior of each accelerometer-bias axis, m/s^2. Default 0.1 (MEMS turn-on bias is
-    /// 0.05-0.2); 0 turns the bias state off (bias folded into the starting attitude).
+    /// 0.05-0.2); 0 turns the bias state off (bias folded into the starting attitude). The
+    /// estimator passes `EstimatorConfig::accel_bias_std`, 0 by default (docs/study.md).
     pub bias_std_mps2: f64,
     /// Bias random walk, m/s^2/sqrt(s). Default 0.001.
     pub bias_walk: f64,

@@ -59,7 +59,8 @@ impl DynamicTerms {
 pub struct DynamicSolution {
     /// 6 x N effectiveness.
     pub b: DMatrix<f64>,
-    /// 6 x N standard errors (infinite for unexcited thrusters).
+    /// 6 x N standard errors (infinite for unexcited thrusters): statistical (the larger of
+    /// the i.i.d. and the segment-clustered one) and the model-error floor in quadrature.
     pub std_err: DMatrix<f64>,
     /// 1-sigma relative Frobenius error bound of the rotation and translation rows.
     pub rel_err: [f64; 2],
@@ -249,10 +250,12 @@ impl DynamicRun {
         self.acc.add(&self.direct, &nav.motion);
     }
 
-    /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer).
+    /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer);
+    /// `model_error_floor` the relative error of B that no data removes (added to B's standard
+    /// errors and bound; `EstimatorConfig::model_error_floor`).
     // Index loops: DOF row 3g + a, thruster i and term j address several matrices at once.
     #[allow(clippy::needless_range_loop)]
-    pub fn solve(&self, rest_sigma: &[f64; 6]) -> DynamicSolution {
+    pub fn solve(&self, rest_sigma: &[f64; 6], model_error_floor: f64) -> DynamicSolution {
         let n = self.n;
         let c = self.cols;
         let sols = [self.rot.solve(), self.acc.solve()];
@@ -309,6 +312,18 @@ impl DynamicRun {
             }
             let identified = (0..c).all(|i| sol.gram_inv[(i, i)] > 0.0);
             excited &= identified;
+            // The model error no amount of data removes (docs/study.md): spread evenly over the
+            // block's entries, so the block's bound gains model_error_floor in quadrature.
+            let floor2 = model_error_floor.powi(2) * norm2 / (3 * n).max(1) as f64;
+            for row in 3 * g..3 * g + 3 {
+                for i in 0..n {
+                    std_err[(row, i)] = (std_err[(row, i)].powi(2) + floor2).sqrt();
+                }
+                for i in 0..c {
+                    split_se[(row, i)] = (split_se[(row, i)].powi(2) + floor2).sqrt();
+                }
+            }
+            var_sum += floor2 * (3 * n) as f64;
             if identified && norm2 > 0.0 {
                 rel_err[g] = var_sum.sqrt() / norm2.sqrt();
             }
