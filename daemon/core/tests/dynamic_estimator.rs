@@ -525,6 +525,15 @@ fn coverage(
     sensors: &SensorConfig,
     seeds: std::ops::RangeInclusive<u64>,
 ) -> ([f64; 3], [f64; 3], [f64; 3]) {
+    coverage_and_worst(sensors, seeds).0
+}
+
+/// [`coverage`] and the largest |error| / honest standard error per group.
+#[allow(clippy::type_complexity)]
+fn coverage_and_worst(
+    sensors: &SensorConfig,
+    seeds: std::ops::RangeInclusive<u64>,
+) -> (([f64; 3], [f64; 3], [f64; 3]), [f64; 3]) {
     let name = "amour5";
     let (lin, restoring) = true_terms(name);
     let mut hits = [[0usize; 3]; 2];
@@ -583,7 +592,31 @@ fn coverage(
         );
     }
     let frac = |k: usize| std::array::from_fn(|g| hits[k][g] as f64 / count[g] as f64);
-    (frac(0), frac(1), means)
+    let worst = std::array::from_fn(|g| zs[g].last().copied().unwrap_or(0.0));
+    ((frac(0), frac(1), means), worst)
+}
+
+/// The standard errors cover the error against the simulator's truth: B's entries within 2
+/// standard errors in at least 90 % of cases at the realistic IMU (seeds 1-3; measured 1.00
+/// over seeds 1-10, the i.i.d. ones 0.64) and 80 % at the paper's noise (seeds 1-2; measured
+/// 0.90, i.i.d. 0.84). Damping and restoring are reported as measured: their standard errors
+/// still do not cover (docs/study.md), so only a loose 6-sigma bound is asserted.
+#[test]
+fn standard_errors_cover_the_error_against_the_truth() {
+    let realistic = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Realistic,
+        ..SensorConfig::default()
+    };
+    let ((honest, ols, _), worst) = coverage_and_worst(&realistic, 1..=3);
+    assert!(honest[0] >= 0.9, "realistic B coverage {:.2} (i.i.d. {:.2})", honest[0], ols[0]);
+    assert!(worst[1] < 6.0 && worst[2] < 6.0, "damping, restoring |err|/se {worst:.2?}");
+    let paper = SensorConfig {
+        noise: NoisePreset::Paper,
+        ..realistic
+    };
+    let (honest, ols, _) = coverage(&paper, 1..=2);
+    assert!(honest[0] >= 0.8, "paper B coverage {:.2} (i.i.d. {:.2})", honest[0], ols[0]);
 }
 
 /// The measurement behind docs/study.md's standard-error table: coverage at the realistic

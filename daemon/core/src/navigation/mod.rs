@@ -301,6 +301,37 @@ mod tests {
         assert!((nav.max_tilt() - f.normalize().z.abs().acos()).abs() < 1e-9);
     }
 
+    /// A vehicle that rolls in place with a biased accelerometer: the bias along gravity shows
+    /// at once, the one across it (folded into the rest's roll) once the roll turns it toward
+    /// the vertical; the one along the roll axis stays unobservable and untouched. The
+    /// velocity stays at zero.
+    #[test]
+    fn a_roll_in_place_reveals_the_accelerometer_bias() {
+        let bias = Vector3::new(0.08, 0.1, 0.05);
+        let truth_q = |t: f64| UnitQuaternion::from_euler_angles(0.5 * t.min(1.0), 0.0, 0.0);
+        let f = |t: f64| -truth_q(t).inverse_transform_vector(&Vector3::z()) * GRAVITY + bias;
+        let aid = DepthAid {
+            depth_std_m: 0.001,
+            ..DepthAid::default()
+        };
+        let mut nav = Navigator::at_rest(&f(0.0), 0.0, Some(10.0), aid);
+        let mut s = nav.update(0.0, &Vector3::zeros(), &f(0.0), Some(10.0));
+        for k in 1..=600 {
+            let t = k as f64 * 0.005;
+            let w = Vector3::new(if t <= 1.0 { 0.5 } else { 0.0 }, 0.0, 0.0);
+            s = nav.update(t, &w, &f(t), Some(10.0));
+        }
+        let b = nav.accel_bias();
+        assert!((b.y - bias.y).abs() < 0.01, "{b}");
+        assert!((b.z - bias.z).abs() < 0.01, "{b}");
+        assert!(b.x.abs() < 1e-6, "{b}");
+        assert!(s.velocity.norm() < 0.01, "{}", s.velocity);
+        // The roll that the y bias had folded in is taken back out.
+        let roll_err = s.attitude.angle_to(&truth_q(3.0)).to_degrees();
+        let unobservable = (bias.x / GRAVITY).to_degrees();
+        assert!(roll_err < unobservable + 0.05, "{roll_err} deg");
+    }
+
     #[test]
     fn a_constant_rate_turns_the_attitude_by_rate_times_time() {
         let f = Vector3::new(0.0, 0.0, -GRAVITY);

@@ -270,6 +270,44 @@ mod tests {
         assert!(s.residual_var.unwrap()[0] < 1e-12);
     }
 
+    /// Residual noise that random-walks within each segment (as the integrated rotation rows'
+    /// does) makes the clustered variance far larger than the i.i.d. one; white noise leaves
+    /// the two alike.
+    #[test]
+    fn the_clustered_variance_sees_autocorrelated_residuals() {
+        let mut state = 12345u64;
+        let mut normal = move || {
+            // Sum of uniforms: close enough to Gaussian for a variance ratio.
+            (0..12)
+                .map(|_| {
+                    state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        let ratio = |walk: bool, normal: &mut dyn FnMut() -> f64| {
+            let mut ls = SegmentedLs::new(1);
+            for _ in 0..40 {
+                let mut e = 0.0;
+                for k in 0..100 {
+                    let x = (k as f64 * 0.07).sin() + 0.3 * normal();
+                    e = if walk { e + 0.1 * normal() } else { normal() };
+                    ls.add(&[x], &Vector3::new(2.0 * x + e, 0.0, 0.0));
+                }
+                ls.close_segment();
+            }
+            let s = ls.solve();
+            let ols = s.residual_var.unwrap()[0] * s.gram_inv[(0, 0)];
+            assert_eq!(s.clusters, 40);
+            s.robust_cov[0][(0, 0)] / ols
+        };
+        let white = ratio(false, &mut normal);
+        let walk = ratio(true, &mut normal);
+        assert!((0.5..2.0).contains(&white), "white noise: ratio {white:.2}");
+        assert!(walk > 3.0, "random walk: ratio {walk:.2}");
+    }
+
     #[test]
     fn an_unexcited_column_gets_no_coefficient() {
         let mut ls = SegmentedLs::new(2);
