@@ -376,6 +376,9 @@ impl Estimator {
         DepthAid {
             accel_std_mps2: self.noise.sigma_acc(),
             bias_std_mps2: self.cfg.accel_bias_std,
+            // The bias state needs the Kalman filter; without it the complementary aid is kept
+            // (docs/study.md).
+            kalman: self.cfg.accel_bias_std > 0.0,
             ..DepthAid::default()
         }
     }
