@@ -112,16 +112,18 @@ pub struct EstimatorConfig {
     /// (default 1.0).
     pub segment_s: f64,
     /// Dynamic method: prior 1-sigma of each axis of the accelerometer's bias in the
-    /// navigation's bias state, m/s^2. Default 0: off, the bias stays folded into the starting
-    /// attitude. The state finds the bias and makes the velocity 5x better, but the model
-    /// worse (err_acc 0.015 -> 0.023 at the realistic IMU): it also absorbs the dead
-    /// reckoning's own vertical error, and its moving estimate enters the translation fit
-    /// (docs/study.md).
+    /// navigation's bias state, m/s^2 (> 0 also switches the depth aid to the Kalman filter).
+    /// Default 0: off, the bias stays folded into the starting attitude. The state finds the
+    /// bias and makes the velocity far better, but the model only at a large bias (AMOUR-5
+    /// err_acc 0.027 -> 0.023 at a 0.2 m/s^2 bias with 0.02 here) and worse without one
+    /// (0.012 -> 0.020 noise-free at 0.1): it also absorbs the dead reckoning's own vertical
+    /// error, and its moving estimate enters the translation fit (docs/study.md).
     pub accel_bias_std: f64,
     /// Dynamic method: relative error of B that no amount of data removes, added in quadrature
     /// to the standard errors (spread evenly over a block's entries) and so to the bound
     /// (default 0.02: noise-free the fit is 1.4-1.7 % off the simulator's symmetric truth on
-    /// every vehicle, the linear model of a thruster weaker in reverse; docs/study.md).
+    /// every vehicle, the linear model of a thruster weaker in reverse; docs/study.md). Not
+    /// applied under control, where forward and reverse thrust are fitted apart.
     pub model_error_floor: f64,
 }
 

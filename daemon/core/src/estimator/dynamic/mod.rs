@@ -313,8 +313,11 @@ impl DynamicRun {
             let identified = (0..c).all(|i| sol.gram_inv[(i, i)] > 0.0);
             excited &= identified;
             // The model error no amount of data removes (docs/study.md): spread evenly over the
-            // block's entries, so the block's bound gains model_error_floor in quadrature.
-            let floor2 = model_error_floor.powi(2) * norm2 / (3 * n).max(1) as f64;
+            // block's entries, so the block's bound gains model_error_floor in quadrature. It is
+            // the thrusters' asymmetry landing in one symmetric column; split, forward and
+            // reverse are fitted apart and there is no such bias.
+            let floor = if self.split { 0.0 } else { model_error_floor };
+            let floor2 = floor.powi(2) * norm2 / (3 * n).max(1) as f64;
             for row in 3 * g..3 * g + 3 {
                 for i in 0..n {
                     std_err[(row, i)] = (std_err[(row, i)].powi(2) + floor2).sqrt();
