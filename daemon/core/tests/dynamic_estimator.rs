@@ -34,6 +34,9 @@ struct Outcome {
     seconds: f64,
     max_tilt_deg: f64,
     terms: DynamicTerms,
+    /// Learned B minus the symmetric truth, its honest and its i.i.d. standard errors.
+    b_err: DMatrix<f64>,
+    b_se: DMatrix<f64>,
     rank: usize,
     actuated: usize,
 }
@@ -55,19 +58,28 @@ fn tick(machine: &mut Machine, sim: &mut Simulator) {
 }
 
 fn estimate(name: &str, noise: NoisePreset, seed: u64) -> Outcome {
-    let v = vehicle(name);
-    let n = v.thrusters.len();
     let sensors = SensorConfig {
         rate_hz: 200.0,
         noise,
         ..SensorConfig::default()
     };
+    estimate_with(name, sensors, seed, EstimatorConfig::dynamic())
+}
+
+fn estimate_with(
+    name: &str,
+    sensors: SensorConfig,
+    seed: u64,
+    estimator: EstimatorConfig,
+) -> Outcome {
+    let v = vehicle(name);
+    let n = v.thrusters.len();
     let mut sim = Simulator::new(v, sensors, seed).unwrap();
     let mut setup = MachineSetup {
         thrusters: n,
         ..MachineSetup::default()
     };
-    setup.estimator = EstimatorConfig::dynamic();
+    setup.estimator = estimator;
     assert_eq!(setup.estimator.method, Method::Dynamic);
     // No driver in between: the daemon compensates the T200 deadband itself.
     setup.machine.deadband = 0.05;
@@ -97,6 +109,8 @@ fn estimate(name: &str, noise: NoisePreset, seed: u64) -> Outcome {
         seconds: sim.time_s() - start,
         max_tilt_deg: max_tilt,
         terms: est.dynamics.clone().expect("dynamic terms"),
+        b_err: &est.effectiveness - &truth,
+        b_se: est.std_err.clone(),
         rank: est.rank.rank,
         actuated: est.rank.actuated.count(),
     }
@@ -212,33 +226,58 @@ fn restoring_and_damping_coefficients_match_the_simulator() {
     }
 }
 
+/// What the navigation got wrong against the simulator's truth through one excitation.
+struct NavErrors {
+    /// Worst body-velocity error, m/s.
+    worst_v: f64,
+    /// RMS body-velocity error, m/s.
+    rms_v: f64,
+    /// Worst attitude error, deg.
+    worst_att: f64,
+    /// Peak true speed, m/s.
+    peak_v: f64,
+    /// The filter's bias estimate minus the simulator's bias at the end, m/s^2.
+    bias_err: Vector3<f64>,
+    /// The simulator's accelerometer bias at the end, m/s^2.
+    bias_true: Vector3<f64>,
+}
+
 /// Drives AMOUR-5 through 4 s of alternating +-,-+ pulses at `power` after a 2 s rest, with
-/// the navigation fed the IMU (and the DVL's fixes when `with_dvl`); the worst velocity error
-/// against the simulator's truth, the worst attitude error (deg) and the peak true speed.
-fn navigation_errors(
+/// the navigation (settings `aid`) fed the IMU with the rest's gyro mean removed (and the
+/// DVL's fixes when `with_dvl`).
+fn navigation_run(
     sensors: SensorConfig,
     seed: u64,
     power: f64,
     with_dvl: bool,
-) -> (f64, f64, f64) {
+    aid: DepthAid,
+) -> NavErrors {
     let v = vehicle("amour5");
     let n = v.thrusters.len();
+    // The rest's gyro mean is the bias estimate only when there is a bias: without one it is
+    // noise (0.018 rad/s at the paper's level), which would tilt the attitude.
+    let noise = sensors.custom_noise.unwrap_or(sensors.noise.params());
+    let gyro_has_bias = noise.gyro_bias_init_std > 0.0;
     let mut sim = Simulator::new(v, sensors, seed).unwrap();
     // A rest first, as the daemon's noise measurement: the mean specific force is -g.
-    let mut rest = Vector3::zeros();
+    let (mut rest, mut gyro0) = (Vector3::zeros(), Vector3::zeros());
     let mut r0 = sim.advance_and_sample();
     for _ in 0..400 {
         r0 = sim.advance_and_sample();
         rest += Vector3::from(r0.accel) / 400.0;
+        if gyro_has_bias {
+            gyro0 += Vector3::from(r0.gyro) / 400.0;
+        }
     }
     // The filter starts at zero velocity (no DVL at rest); so does the body here (it is not
     // exactly neutrally buoyant and drifts during the rest).
     let mut state = *sim.state();
     state.nu = nalgebra::Vector6::zeros();
     sim.set_state(state);
-    let mut nav = Navigator::at_rest(&rest, 0.0, Some(r0.depth), DepthAid::default());
-    let (mut worst_v, mut worst_att, mut peak_v) = (0.0f64, 0.0f64, 0.0f64);
-    for k in 0..800 {
+    let mut nav = Navigator::at_rest(&rest, 0.0, Some(r0.depth), aid);
+    let (mut worst_v, mut worst_att, mut peak_v, mut sum_v2) = (0.0f64, 0.0f64, 0.0f64, 0.0);
+    let steps = 800;
+    for k in 0..steps {
         let sign = if matches!(k / 20 % 4, 0 | 3) {
             1.0
         } else {
@@ -262,15 +301,83 @@ fn navigation_errors(
         }
         let s = nav.update(
             r.t_ns as f64 * 1e-9,
-            &Vector3::from(r.gyro),
+            &(Vector3::from(r.gyro) - gyro0),
             &Vector3::from(r.accel),
             Some(r.depth),
         );
-        worst_v = worst_v.max((s.velocity - sim.linear_velocity()).norm());
+        let e = (s.velocity - sim.linear_velocity()).norm();
+        worst_v = worst_v.max(e);
+        sum_v2 += e * e / steps as f64;
         worst_att = worst_att.max(s.attitude.angle_to(&sim.attitude()).to_degrees());
         peak_v = peak_v.max(sim.linear_velocity().norm());
     }
-    (worst_v, worst_att, peak_v)
+    let bias_true = sim.sensor_biases().accel;
+    NavErrors {
+        worst_v,
+        rms_v: sum_v2.sqrt(),
+        worst_att,
+        peak_v,
+        bias_err: nav.accel_bias() - bias_true,
+        bias_true,
+    }
+}
+
+/// The worst velocity error, worst attitude error (deg) and peak true speed of
+/// [`navigation_run`] with the default navigation settings.
+fn navigation_errors(
+    sensors: SensorConfig,
+    seed: u64,
+    power: f64,
+    with_dvl: bool,
+) -> (f64, f64, f64) {
+    let e = navigation_run(sensors, seed, power, with_dvl, DepthAid::default());
+    (e.worst_v, e.worst_att, e.peak_v)
+}
+
+/// The accelerometer-bias state against the simulator's true bias and velocity: the realistic
+/// IMU with a 0.2 m/s^2 turn-on bias, seeds 1-5, the same excitation with the state on and
+/// off. The bias is observable only through the depth as the vehicle turns, so not every axis
+/// converges in 4 s; what must hold is that the estimate takes out most of the bias and the
+/// velocity gets better, not worse.
+#[test]
+fn the_bias_state_finds_the_accelerometer_bias_and_helps_the_velocity() {
+    // On: the Kalman filter with the bias state. Off: the estimator's default navigation.
+    let on = DepthAid {
+        kalman: true,
+        ..DepthAid::default()
+    };
+    let off = DepthAid::default();
+    let (mut err_on, mut err_off, mut true_norm, mut rms_on, mut rms_off) =
+        (0.0, 0.0, 0.0, 0.0, 0.0);
+    for seed in 1..=5 {
+        let on = navigation_run(realistic_with_accel_bias(0.2), seed, 0.8, false, on);
+        let without = navigation_run(realistic_with_accel_bias(0.2), seed, 0.8, false, off);
+        println!(
+            "seed {seed}: bias {:.3?} err {:.3?} (|err| {:.3} of {:.3}); velocity rms {:.3} / worst {:.3} m/s, without the state {:.3} / {:.3}",
+            on.bias_true.as_slice(),
+            on.bias_err.as_slice(),
+            on.bias_err.norm(),
+            on.bias_true.norm(),
+            on.rms_v,
+            on.worst_v,
+            without.rms_v,
+            without.worst_v,
+        );
+        err_on += on.bias_err.norm();
+        err_off += without.bias_err.norm();
+        true_norm += on.bias_true.norm();
+        rms_on += on.rms_v;
+        rms_off += without.rms_v;
+    }
+    println!("sum |bias err| {err_on:.3} (off {err_off:.3}, true {true_norm:.3}); sum rms velocity {rms_on:.3} (off {rms_off:.3})");
+    assert!(
+        err_on < 0.5 * true_norm,
+        "bias error {err_on:.3} of {true_norm:.3}"
+    );
+    assert!(
+        rms_on < rms_off,
+        "velocity rms {rms_on:.3} vs {rms_off:.3} without the state"
+    );
 }
 
 /// The navigation filter against the simulator's true velocity and attitude through a
@@ -352,12 +459,304 @@ fn a_dvl_bounds_the_velocity_drift_at_the_papers_noise() {
         dvl: Some(thruster_sim::DvlConfig::default()),
         ..SensorConfig::default()
     };
-    let (without, _, _) = navigation_errors(sensors.clone(), 4, 0.6, false);
-    let (with, _, _) = navigation_errors(sensors, 4, 0.6, true);
+    // The navigation told the accelerometer's noise, as the estimator does from the rest.
+    let aid = DepthAid {
+        accel_std_mps2: NoisePreset::Paper.params().accel_std_mps2,
+        ..DepthAid::default()
+    };
+    let without = navigation_run(sensors.clone(), 4, 0.6, false, aid).worst_v;
+    let with = navigation_run(sensors, 4, 0.6, true, aid).worst_v;
     println!("worst velocity error: {without:.3} m/s dead-reckoned, {with:.3} m/s with the DVL");
     assert!(with < 0.15, "with the DVL {with:.3} m/s");
     assert!(
         with < 0.3 * without,
         "with {with:.3} vs without {without:.3} m/s"
     );
+}
+
+/// The realistic IMU with the accelerometer's turn-on bias set to `bias_std` (m/s^2 per axis).
+fn realistic_with_accel_bias(bias_std: f64) -> SensorConfig {
+    let mut noise = NoisePreset::Realistic.params();
+    noise.accel_bias_init_std = bias_std;
+    SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Realistic,
+        custom_noise: Some(noise),
+        ..SensorConfig::default()
+    }
+}
+
+/// The measurement behind docs/study.md's accelerometer-bias table: AMOUR-5, the realistic IMU
+/// with turn-on bias 0, 0.05 (the preset) and 0.2 m/s^2, seeds 1-10. Slow; run with
+/// `cargo test --release -p thrusterd-core --test dynamic_estimator -- --ignored bias_sweep --nocapture`.
+#[test]
+#[ignore]
+fn bias_sweep() {
+    for state in [0.0, 0.02, 0.05, 0.1] {
+        let cfg = EstimatorConfig {
+            accel_bias_std: state,
+            ..EstimatorConfig::dynamic()
+        };
+        for bias in [0.0, 0.05, 0.2] {
+            let (mut rot, mut acc, mut secs) = (0.0, 0.0, 0.0);
+            let seeds = 1..=10u64;
+            let n = seeds.clone().count() as f64;
+            for seed in seeds {
+                let o = estimate_with("amour5", realistic_with_accel_bias(bias), seed, cfg.clone());
+                rot += o.err_rot / n;
+                acc += o.err_acc / n;
+                secs += o.seconds / n;
+            }
+            println!(
+                "bias state prior {state:.2}, accel bias {bias:.2}: err_rot {rot:.4} err_acc {acc:.4} in {secs:.2} s"
+            );
+        }
+    }
+}
+
+/// Fractions of |error| / standard error below 2 over `seeds` on AMOUR-5 with `sensors`, for
+/// (B entries, rotation-row rate damping, roll/pitch restoring), with the honest standard
+/// errors and with the i.i.d. ones; and the mean err_rot, err_acc, vehicle seconds.
+fn coverage(
+    sensors: &SensorConfig,
+    seeds: std::ops::RangeInclusive<u64>,
+) -> ([f64; 3], [f64; 3], [f64; 3]) {
+    coverage_and_worst(sensors, seeds).0
+}
+
+/// [`coverage`] and the largest |error| / honest standard error per group.
+#[allow(clippy::type_complexity)]
+fn coverage_and_worst(
+    sensors: &SensorConfig,
+    seeds: std::ops::RangeInclusive<u64>,
+) -> (([f64; 3], [f64; 3], [f64; 3]), [f64; 3]) {
+    let name = "amour5";
+    let (lin, restoring) = true_terms(name);
+    let mut hits = [[0usize; 3]; 2];
+    let mut count = [0usize; 3];
+    let mut zs: [Vec<f64>; 3] = Default::default();
+    let mut means = [0.0; 3];
+    let runs = seeds.clone().count() as f64;
+    for seed in seeds {
+        let o = estimate_with(name, sensors.clone(), seed, EstimatorConfig::dynamic());
+        means[0] += o.err_rot / runs;
+        means[1] += o.err_acc / runs;
+        means[2] += o.seconds / runs;
+        let t = &o.terms;
+        let ols_b = t.b_ols_std_err.clone();
+        let mut tally = |group: usize, err: f64, se: [f64; 2]| {
+            count[group] += 1;
+            zs[group].push(err.abs() / se[0]);
+            for (k, se) in se.iter().enumerate() {
+                if err.abs() < 2.0 * se {
+                    hits[k][group] += 1;
+                }
+            }
+        };
+        for (i, e) in o.b_err.iter().enumerate() {
+            tally(0, *e, [o.b_se[i], ols_b[i]]);
+        }
+        let coef = |row: usize, term: &str| {
+            let j = thrusterd_core::estimator::dynamic::regressors::TERM_NAMES
+                .iter()
+                .position(|n| *n == term)
+                .unwrap();
+            (
+                t.coefficients[(row, j)],
+                t.std_err[(row, j)],
+                t.ols_std_err[(row, j)],
+            )
+        };
+        for (row, rate) in [(0, "p"), (1, "q"), (2, "r")] {
+            let (c, se, ols) = coef(row, rate);
+            tally(1, c - lin[(row, 3 + row)], [se, ols]);
+        }
+        for (row, axis, k) in [(0, "down_y", 1), (1, "down_x", 0)] {
+            let (c, se, ols) = coef(row, axis);
+            tally(2, c - restoring[(row, k)], [se, ols]);
+        }
+    }
+    for (g, z) in zs.iter_mut().enumerate() {
+        z.sort_by(|a, b| a.total_cmp(b));
+        let q = |p: f64| z[((z.len() - 1) as f64 * p).round() as usize];
+        println!(
+            "  group {g}: |err|/se median {:.2}, 90 % {:.2}, 95 % {:.2}, max {:.2}",
+            q(0.5),
+            q(0.9),
+            q(0.95),
+            q(1.0)
+        );
+    }
+    let frac = |k: usize| std::array::from_fn(|g| hits[k][g] as f64 / count[g] as f64);
+    let worst = std::array::from_fn(|g| zs[g].last().copied().unwrap_or(0.0));
+    ((frac(0), frac(1), means), worst)
+}
+
+/// The standard errors cover the error against the simulator's truth: B's entries within 2
+/// standard errors in at least 90 % of cases at the realistic IMU (seeds 1-3; measured 1.00
+/// over seeds 1-10, the i.i.d. ones 0.55) and 80 % at the paper's noise (seeds 1-2; measured
+/// 0.90, i.i.d. 0.84). Damping and restoring are reported as measured: their standard errors
+/// still do not cover (docs/study.md), so only a loose 8-sigma bound is asserted (measured
+/// 2.5 / 6.5 over these seeds).
+#[test]
+fn standard_errors_cover_the_error_against_the_truth() {
+    let realistic = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Realistic,
+        ..SensorConfig::default()
+    };
+    let ((honest, ols, _), worst) = coverage_and_worst(&realistic, 1..=3);
+    assert!(
+        honest[0] >= 0.9,
+        "realistic B coverage {:.2} (i.i.d. {:.2})",
+        honest[0],
+        ols[0]
+    );
+    assert!(
+        worst[1] < 8.0 && worst[2] < 8.0,
+        "damping, restoring |err|/se {worst:.2?}"
+    );
+    let paper = SensorConfig {
+        noise: NoisePreset::Paper,
+        ..realistic
+    };
+    let (honest, ols, _) = coverage(&paper, 1..=2);
+    assert!(
+        honest[0] >= 0.8,
+        "paper B coverage {:.2} (i.i.d. {:.2})",
+        honest[0],
+        ols[0]
+    );
+}
+
+/// The measurement behind docs/study.md's standard-error table: coverage at the realistic
+/// IMU and the paper's noise over seeds 1-10. Slow; run with
+/// `cargo test --release -p thrusterd-core --test dynamic_estimator -- --ignored coverage_sweep --nocapture`.
+#[test]
+#[ignore]
+fn coverage_sweep() {
+    for noise in [
+        NoisePreset::None,
+        NoisePreset::Realistic,
+        NoisePreset::Paper,
+    ] {
+        let sensors = SensorConfig {
+            rate_hz: 200.0,
+            noise,
+            ..SensorConfig::default()
+        };
+        let (honest, ols, m) = coverage(&sensors, 1..=10);
+        println!(
+            "{noise:?}: |err|/se < 2 for B, damping, restoring: honest {:.2?}, i.i.d. {:.2?}; err_rot {:.4} err_acc {:.4} in {:.2} s",
+            honest, ols, m[0], m[1], m[2]
+        );
+    }
+}
+
+#[test]
+#[ignore]
+fn presets_sweep() {
+    for state in [0.0, 0.1] {
+        for noise in [
+            NoisePreset::None,
+            NoisePreset::Realistic,
+            NoisePreset::Paper,
+        ] {
+            let (mut rot, mut acc, mut secs) = (0.0, 0.0, 0.0);
+            for seed in 1..=5u64 {
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let cfg = EstimatorConfig {
+                    accel_bias_std: state,
+                    ..EstimatorConfig::dynamic()
+                };
+                let o = estimate_with("amour5", sensors, seed, cfg);
+                rot += o.err_rot / 5.0;
+                acc += o.err_acc / 5.0;
+                secs += o.seconds / 5.0;
+            }
+            println!("prior {state} {noise:?} seeds 1-5: err_rot {rot:.4} err_acc {acc:.4} in {secs:.2} s");
+        }
+    }
+}
+
+/// The stop threshold against the time to model at the paper's noise on AMOUR-5: mean err_rot,
+/// err_acc and vehicle seconds over seeds 1-5 (the target's seeds) and 6-10 (held out), for
+/// each `target_rel_err`. Run with
+/// `cargo test --release -p thrusterd-core --test dynamic_estimator -- --ignored stop_threshold_sweep --nocapture`.
+#[test]
+#[ignore]
+fn stop_threshold_sweep() {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Paper,
+        ..SensorConfig::default()
+    };
+    for target in [0.05, 0.055, 0.058, 0.06, 0.065] {
+        for seeds in [1..=5u64, 6..=10, 1..=20] {
+            let label = format!("{seeds:?}");
+            let runs = seeds.clone().count() as f64;
+            let (mut rot, mut acc, mut secs, mut worst) = (0.0, 0.0, 0.0, 0.0f64);
+            for seed in seeds {
+                let cfg = EstimatorConfig {
+                    target_rel_err: target,
+                    ..EstimatorConfig::dynamic()
+                };
+                let o = estimate_with("amour5", sensors.clone(), seed, cfg);
+                rot += o.err_rot / runs;
+                acc += o.err_acc / runs;
+                secs += o.seconds / runs;
+                worst = worst.max(o.err_rot);
+            }
+            println!(
+                "target {target:.3} seeds {label}: err_rot {rot:.4} (worst {worst:.4}) err_acc {acc:.4} in {secs:.2} s"
+            );
+        }
+    }
+}
+
+/// Every vehicle file at every noise preset, seeds 1-5 (the in-process equivalent of
+/// `thrusterctl study --methods dynamic --seeds 5`): per vehicle and noise, and the mean over
+/// the six. Run with
+/// `cargo test --release -p thrusterd-core --test dynamic_estimator -- --ignored vehicles_sweep --nocapture`.
+#[test]
+#[ignore]
+fn vehicles_sweep() {
+    for noise in [
+        NoisePreset::None,
+        NoisePreset::Realistic,
+        NoisePreset::Paper,
+    ] {
+        let mut all = [0.0; 4];
+        for name in VEHICLES {
+            let mut m = [0.0; 4];
+            for seed in 1..=5u64 {
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let o = estimate_with(name, sensors, seed, EstimatorConfig::dynamic());
+                m[0] += o.err_rot / 5.0;
+                m[1] += o.err_acc / 5.0;
+                m[2] += o.seconds / 5.0;
+                m[3] = f64::max(m[3], o.max_tilt_deg);
+            }
+            println!(
+                "{name} {noise:?}: {:.3} / {:.3}, {:.1} s, {:.0} deg",
+                m[0], m[1], m[2], m[3]
+            );
+            for k in 0..3 {
+                all[k] += m[k] / VEHICLES.len() as f64;
+            }
+            all[3] = f64::max(all[3], m[3]);
+        }
+        println!(
+            "all six {noise:?}: {:.3} / {:.3} in {:.1} s, largest tilt {:.0} deg",
+            all[0], all[1], all[2], all[3]
+        );
+    }
 }

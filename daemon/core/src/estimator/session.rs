@@ -17,6 +17,7 @@ use super::linalg::singular_right;
 use super::noise::NoiseLevels;
 use super::paper::PaperLs;
 use super::response::PulseShape;
+use crate::navigation::DepthAid;
 
 mod closed_loop;
 
@@ -350,6 +351,7 @@ impl Estimator {
                 &self
                     .rest_force
                     .unwrap_or(Vector3::new(0.0, 0.0, -super::response::GRAVITY)),
+                self.navigation_aid(),
             ));
         }
         let split = split_regressor(&u);
@@ -366,6 +368,19 @@ impl Estimator {
             kept: [0, 0],
         });
         self.pulse.as_ref().map(|p| p.u.as_slice()).unwrap_or(&[])
+    }
+
+    /// The dynamic fit's navigation settings: the accelerometer noise measured at rest, the
+    /// configured bias prior.
+    pub(crate) fn navigation_aid(&self) -> DepthAid {
+        DepthAid {
+            accel_std_mps2: self.noise.sigma_acc(),
+            bias_std_mps2: self.cfg.accel_bias_std,
+            // The bias state needs the Kalman filter; without it the complementary aid is kept
+            // (docs/study.md).
+            kalman: self.cfg.accel_bias_std > 0.0,
+            ..DepthAid::default()
+        }
     }
 
     /// Command of the pulse in progress, if any.
@@ -707,7 +722,7 @@ impl Estimator {
                 dynamics: None,
             };
         };
-        let sol = run.solve(&rest);
+        let sol = run.solve(&rest, self.cfg.model_error_floor);
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
         let alloc = allocation(&sol.b, rank.actuated, rank.rank);
         let thruster = diagnose(

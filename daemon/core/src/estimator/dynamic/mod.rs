@@ -22,14 +22,24 @@ use crate::navigation::{DepthAid, Navigator};
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
 const MIN_RESIDUAL_DOF: u64 = 10;
 
+/// The cluster-robust covariance is used once it rests on this many segments: with S clusters
+/// it has S - 1 degrees of freedom, and with one it is zero.
+const MIN_CLUSTERS: usize = 3;
+
 /// What the dynamic fit learned besides B: the coefficients of every term, per DOF row.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DynamicTerms {
     /// 6 x TERMS coefficients, rows in DOF order (rotation rows per rad/s^2, translation rows
     /// per m/s^2), columns as [`regressors::TERM_NAMES`].
     pub coefficients: DMatrix<f64>,
-    /// Their standard errors, same shape.
+    /// Their standard errors, same shape: the larger of the i.i.d. and the segment-clustered
+    /// (autocorrelation-robust) one, see [`segmented_ls`].
     pub std_err: DMatrix<f64>,
+    /// The i.i.d. least-squares standard errors sigma sqrt((X'X)^-1) of the same coefficients,
+    /// kept for comparison: they do not cover the error (docs/study.md).
+    pub ols_std_err: DMatrix<f64>,
+    /// The same for B (6 x N).
+    pub b_ols_std_err: DMatrix<f64>,
     /// Largest tilt during the excitation, rad (navigation estimate).
     pub max_tilt_rad: f64,
     /// Largest heading change during the excitation, rad.
@@ -49,7 +59,8 @@ impl DynamicTerms {
 pub struct DynamicSolution {
     /// 6 x N effectiveness.
     pub b: DMatrix<f64>,
-    /// 6 x N standard errors (infinite for unexcited thrusters).
+    /// 6 x N standard errors (infinite for unexcited thrusters): statistical (the larger of
+    /// the i.i.d. and the segment-clustered one) and the model-error floor in quadrature.
     pub std_err: DMatrix<f64>,
     /// 1-sigma relative Frobenius error bound of the rotation and translation rows.
     pub rel_err: [f64; 2],
@@ -92,14 +103,26 @@ pub struct DynamicRun {
 
 impl DynamicRun {
     /// A fit for `n` thrusters with spin-up time constant `lag_s`, segments of `segment_s`,
-    /// starting from a rest whose mean specific force was `accel_rest`.
-    pub fn new(n: usize, lag_s: f64, segment_s: f64, accel_rest: &Vector3<f64>) -> Self {
-        Self::with_columns(n, false, lag_s, segment_s, accel_rest)
+    /// starting from a rest whose mean specific force was `accel_rest`, navigating with `aid`.
+    pub fn new(
+        n: usize,
+        lag_s: f64,
+        segment_s: f64,
+        accel_rest: &Vector3<f64>,
+        aid: DepthAid,
+    ) -> Self {
+        Self::with_columns(n, false, lag_s, segment_s, accel_rest, aid)
     }
 
     /// The same with forward and reverse thrust fitted apart (see `split`).
-    pub fn split(n: usize, lag_s: f64, segment_s: f64, accel_rest: &Vector3<f64>) -> Self {
-        Self::with_columns(n, true, lag_s, segment_s, accel_rest)
+    pub fn split(
+        n: usize,
+        lag_s: f64,
+        segment_s: f64,
+        accel_rest: &Vector3<f64>,
+        aid: DepthAid,
+    ) -> Self {
+        Self::with_columns(n, true, lag_s, segment_s, accel_rest, aid)
     }
 
     fn with_columns(
@@ -108,6 +131,7 @@ impl DynamicRun {
         lag_s: f64,
         segment_s: f64,
         accel_rest: &Vector3<f64>,
+        aid: DepthAid,
     ) -> Self {
         let cols = if split { 2 * n } else { n };
         let k = cols + TERMS;
@@ -117,7 +141,7 @@ impl DynamicRun {
             cols,
             lag_s: lag_s.max(0.0),
             segment_s: segment_s.max(1e-3),
-            nav: Navigator::at_rest(accel_rest, 0.0, None, DepthAid::default()),
+            nav: Navigator::at_rest(accel_rest, 0.0, None, aid),
             lag: vec![0.0; cols],
             lag_prev: vec![0.0; cols],
             lag_abs: 0.0,
@@ -222,14 +246,16 @@ impl DynamicRun {
         self.direct[..self.cols].copy_from_slice(&self.lag);
         self.direct[self.cols..].copy_from_slice(&self.terms);
         self.rot.add(&self.integral, gyro);
-        let motion = specific_force + nav.down * self.nav.gravity();
-        self.acc.add(&self.direct, &motion);
+        // Bias removed: what of it the filter found (the rest is the segment's intercept).
+        self.acc.add(&self.direct, &nav.motion);
     }
 
-    /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer).
+    /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer);
+    /// `model_error_floor` the relative error of B that no data removes (added to B's standard
+    /// errors and bound; `EstimatorConfig::model_error_floor`).
     // Index loops: DOF row 3g + a, thruster i and term j address several matrices at once.
     #[allow(clippy::needless_range_loop)]
-    pub fn solve(&self, rest_sigma: &[f64; 6]) -> DynamicSolution {
+    pub fn solve(&self, rest_sigma: &[f64; 6], model_error_floor: f64) -> DynamicSolution {
         let n = self.n;
         let c = self.cols;
         let sols = [self.rot.solve(), self.acc.solve()];
@@ -242,6 +268,8 @@ impl DynamicRun {
         let mut sigma = [0.0; 6];
         let mut rel_err = [f64::INFINITY; 2];
         let mut excited = true;
+        let mut coef_ols = DMatrix::zeros(6, TERMS);
+        let mut b_ols = DMatrix::zeros(6, n);
         for (g, sol) in sols.iter().enumerate() {
             let s = group_sigma(sol, &rest_sigma[3 * g..3 * g + 3]);
             let mut var_sum = 0.0;
@@ -249,43 +277,56 @@ impl DynamicRun {
             for a in 0..3 {
                 let row = 3 * g + a;
                 sigma[row] = s[a];
+                let var = |w: &[(usize, f64)]| combination_var(sol, s[a], a, w);
+                // (Gram diagonal, variance): an unexcited column has no standard error.
+                let se = |d: f64, v: f64| if d > 0.0 { v.sqrt() } else { f64::INFINITY };
                 for i in 0..c {
                     split_b[(row, i)] = sol.theta[(i, a)];
-                    let d = sol.gram_inv[(i, i)];
-                    split_se[(row, i)] = if d > 0.0 {
-                        s[a] * d.sqrt()
-                    } else {
-                        f64::INFINITY
-                    };
+                    let v = var(&[(i, 1.0)]);
+                    split_se[(row, i)] = se(v.0, v.1);
                 }
                 for i in 0..n {
                     // Split: the symmetric gain is the mean of forward and reverse (what a
                     // linear model of the thruster is, and what the truth is compared with).
-                    let (theta, d) = if self.split {
-                        let g = &sol.gram_inv;
+                    let (theta, w): (f64, &[(usize, f64)]) = if self.split {
                         (
                             0.5 * (sol.theta[(i, a)] + sol.theta[(n + i, a)]),
-                            0.25 * (g[(i, i)] + g[(n + i, n + i)] + 2.0 * g[(i, n + i)]),
+                            &[(i, 0.5), (n + i, 0.5)],
                         )
                     } else {
-                        (sol.theta[(i, a)], sol.gram_inv[(i, i)])
+                        (sol.theta[(i, a)], &[(i, 1.0)])
                     };
+                    let v = var(w);
                     b[(row, i)] = theta;
-                    std_err[(row, i)] = if d > 0.0 {
-                        s[a] * d.sqrt()
-                    } else {
-                        f64::INFINITY
-                    };
-                    var_sum += s[a] * s[a] * d.max(0.0);
+                    std_err[(row, i)] = se(v.0, v.1);
+                    b_ols[(row, i)] = se(v.0, v.2);
+                    var_sum += v.1.max(0.0);
                     norm2 += b[(row, i)] * b[(row, i)];
                 }
                 for j in 0..TERMS {
                     coefficients[(row, j)] = sol.theta[(c + j, a)];
-                    coef_se[(row, j)] = s[a] * sol.gram_inv[(c + j, c + j)].max(0.0).sqrt();
+                    let v = var(&[(c + j, 1.0)]);
+                    coef_se[(row, j)] = v.1.max(0.0).sqrt();
+                    coef_ols[(row, j)] = v.2.max(0.0).sqrt();
                 }
             }
             let identified = (0..c).all(|i| sol.gram_inv[(i, i)] > 0.0);
             excited &= identified;
+            // The model error no amount of data removes (docs/study.md): spread evenly over the
+            // block's entries, so the block's bound gains model_error_floor in quadrature. It is
+            // the thrusters' asymmetry landing in one symmetric column; split, forward and
+            // reverse are fitted apart and there is no such bias.
+            let floor = if self.split { 0.0 } else { model_error_floor };
+            let floor2 = floor.powi(2) * norm2 / (3 * n).max(1) as f64;
+            for row in 3 * g..3 * g + 3 {
+                for i in 0..n {
+                    std_err[(row, i)] = (std_err[(row, i)].powi(2) + floor2).sqrt();
+                }
+                for i in 0..c {
+                    split_se[(row, i)] = (split_se[(row, i)].powi(2) + floor2).sqrt();
+                }
+            }
+            var_sum += floor2 * (3 * n) as f64;
             if identified && norm2 > 0.0 {
                 rel_err[g] = var_sum.sqrt() / norm2.sqrt();
             }
@@ -299,12 +340,41 @@ impl DynamicRun {
             terms: DynamicTerms {
                 coefficients,
                 std_err: coef_se,
+                ols_std_err: coef_ols,
+                b_ols_std_err: b_ols,
                 max_tilt_rad: self.nav.max_tilt(),
                 max_heading_change_rad: self.nav.max_heading_change(),
             },
             split: self.split.then_some((split_b, split_se)),
         }
     }
+}
+
+/// The variance of sum_i w_i theta_i on output `a`: (i.i.d. Gram diagonal, honest variance,
+/// i.i.d. variance). The honest one is the larger of the i.i.d. and the cluster-robust
+/// variance once enough segments back the latter: the robust one alone is noisy with few
+/// clusters, and never the smaller of the two in expectation when residuals are positively
+/// autocorrelated.
+fn combination_var(
+    sol: &SegmentedSolution,
+    sigma: f64,
+    a: usize,
+    w: &[(usize, f64)],
+) -> (f64, f64, f64) {
+    let (mut d, mut robust) = (0.0, 0.0);
+    for &(i, wi) in w {
+        for &(j, wj) in w {
+            d += wi * wj * sol.gram_inv[(i, j)];
+            robust += wi * wj * sol.robust_cov[a][(i, j)];
+        }
+    }
+    let ols = sigma * sigma * d.max(0.0);
+    let honest = if sol.clusters >= MIN_CLUSTERS {
+        ols.max(robust)
+    } else {
+        ols
+    };
+    (d, honest, ols)
 }
 
 /// Noise per axis: the at-rest level, or the residual level when larger and well determined.

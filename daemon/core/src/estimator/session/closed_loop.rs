@@ -24,6 +24,7 @@ impl Estimator {
             self.cfg.spin_up_s,
             self.cfg.segment_s,
             &self.rest_force.unwrap_or(Vector3::new(0.0, 0.0, -GRAVITY)),
+            self.navigation_aid(),
         ));
         true
     }
