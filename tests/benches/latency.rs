@@ -293,7 +293,7 @@ fn paced_through_daemon(n: usize, with_bridge: bool) -> (Stats, Option<BridgeCos
         let summary = log
             .lines()
             .rev()
-            .find(|l| l.contains("recorded "))
+            .find(|l| l.contains("; lost "))
             .unwrap_or("(no summary)")
             .to_string();
         BridgeCost {

@@ -24,14 +24,11 @@ pub fn forward(context: &Arc<Context>, rx: &Receiver<Message>) -> Result<u64, Br
     let mut channels: BTreeMap<usize, Arc<RawChannel>> = BTreeMap::new();
     let mut logged = 0;
     for m in rx {
-        let channel = match channels.get(&m.index) {
-            Some(c) => c,
-            None => {
-                let c = channel(context, &m)?;
-                channels.entry(m.index).or_insert(c)
-            }
-        };
-        channel.log_with_meta(
+        if !channels.contains_key(&m.index) {
+            let c = channel(context, &m)?;
+            channels.insert(m.index, c);
+        }
+        channels[&m.index].log_with_meta(
             &m.data,
             PartialMetadata {
                 log_time: Some(m.log_ns),

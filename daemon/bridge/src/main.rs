@@ -126,7 +126,7 @@ fn plan(args: &Args, c: BridgeConfig) -> Result<Plan> {
 fn run() -> Result<()> {
     let args = Args::parse();
     let c = settings(&args)?;
-    let mut plan = plan(&args, c)?;
+    let plan = plan(&args, c)?;
     // A live view without a recording still honours --duration-s: the session needs a
     // deadline, which lives in the recording options, so stop it from a timer instead.
     let stop = Arc::new(AtomicBool::new(false));
@@ -146,7 +146,7 @@ fn run() -> Result<()> {
     }
     let mut systemd = Systemd::new();
     let ns = plan.target.namespace.clone();
-    if let Some(r) = &mut plan.record {
+    if let Some(r) = &plan.record {
         if r.out.as_os_str().is_empty() || r.out.is_dir() {
             return Err(anyhow!("the recording must name a file, got {:?}", r.out));
         }

@@ -91,16 +91,24 @@ impl RecordSummary {
             .filter(|t| t.messages > 0)
             .map(|t| format!("{} {}", t.topic, t.messages))
             .collect();
+        let files = match self.files.first() {
+            Some(first) => format!(
+                "to {} file(s), first {}",
+                self.files.len(),
+                first.display()
+            ),
+            None => "(no file)".to_string(),
+        };
+        let verb = if self.files.is_empty() {
+            "streamed"
+        } else {
+            "recorded"
+        };
         let mut line = format!(
-            "recorded {} messages ({}) in {:.1} s to {} file(s), first {}; lost {}; \
-             dropped {} (writer queue full)",
+            "{verb} {} messages ({}) in {:.1} s {files}; lost {}; dropped {} (writer queue full)",
             self.messages,
             per.join(", "),
             self.wall_s,
-            self.files.len(),
-            self.files
-                .first()
-                .map_or_else(String::new, |p| p.display().to_string()),
             self.lost,
             self.dropped,
         );
