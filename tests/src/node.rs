@@ -27,9 +27,9 @@ fn install_dir() -> PathBuf {
 }
 
 fn run(cmd: &mut Command, what: &str) {
-    let out = cmd
-        .output()
-        .unwrap_or_else(|e| panic!("{what}: cannot run {cmd:?}: {e} (the bridge test needs Node 20+ and npm)"));
+    let out = cmd.output().unwrap_or_else(|e| {
+        panic!("{what}: cannot run {cmd:?}: {e} (the bridge test needs Node 20+ and npm)")
+    });
     assert!(
         out.status.success(),
         "{what} failed ({:?}): {cmd:?}\nstdout: {}\nstderr: {}\n(the bridge test needs node and \
@@ -63,7 +63,13 @@ pub fn node_modules() -> PathBuf {
         // `npm ci`: exactly the lock file's versions (and integrity hashes); no install scripts.
         run(
             Command::new("npm")
-                .args(["ci", "--ignore-scripts", "--no-audit", "--no-fund", "--loglevel=error"])
+                .args([
+                    "ci",
+                    "--ignore-scripts",
+                    "--no-audit",
+                    "--no-fund",
+                    "--loglevel=error",
+                ])
                 .current_dir(&dir),
             "npm ci (tests/node)",
         );

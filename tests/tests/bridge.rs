@@ -85,7 +85,14 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
     assert_eq!(summary["subprotocol"], "foxglove.sdk.v1", "{summary}");
     assert_eq!(summary["errors"], Value::Array(vec![]), "{summary}");
     // Channels: the recorder's, named by topic leaf, JSON with a JSON Schema.
-    for topic in ["imu", "thrust", "telemetry", "status", "driver_status", "truth"] {
+    for topic in [
+        "imu",
+        "thrust",
+        "telemetry",
+        "status",
+        "driver_status",
+        "truth",
+    ] {
         let c = &summary["channels"][topic];
         assert_eq!(c["encoding"], "json", "{topic}: {summary}");
         assert_eq!(c["schemaEncoding"], "jsonschema", "{topic}: {c}");
@@ -101,7 +108,11 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
     assert!(count("imu") >= 200, "{}", summary["counts"]);
     assert!(count("thrust") >= 200, "{}", summary["counts"]);
     assert!(count("telemetry") >= 20, "{}", summary["counts"]);
-    assert!(summary["first"]["telemetry"]["attitude"].is_array(), "{}", summary["first"]);
+    assert!(
+        summary["first"]["telemetry"]["attitude"].is_array(),
+        "{}",
+        summary["first"]
+    );
     // Services: the operator's requests.
     for name in ["estimate", "abort", "hold", "idle", "setpoint"] {
         let s = &summary["services"][format!("thrusterd/{name}")];
@@ -156,7 +167,10 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
         .expect("the bridge ends on SIGINT");
     let log = bridge.log_text();
     assert!(status.success(), "{log}");
-    assert!(log.contains("; lost 0; dropped 0 (writer queue full)"), "{log}");
+    assert!(
+        log.contains("; lost 0; dropped 0 (writer queue full)"),
+        "{log}"
+    );
     assert!(log.contains("; websocket dropped 0 (queue full)"), "{log}");
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     sim.signal("INT");
@@ -198,12 +212,19 @@ fn the_bridge_refuses_to_run_without_a_job_or_with_a_bad_config() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("nothing to do"), "{err}");
     let cfg = world.path("b.toml");
-    std::fs::write(&cfg, "namespace = \"x\"\n[websocket]\nlisten = \"nowhere\"\n").unwrap();
+    std::fs::write(
+        &cfg,
+        "namespace = \"x\"\n[websocket]\nlisten = \"nowhere\"\n",
+    )
+    .unwrap();
     let o = std::process::Command::new(bin("thruster-bridge"))
         .args(["--config", cfg.to_str().unwrap()])
         .output()
         .unwrap();
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("b.toml:3") && err.contains("websocket.listen"), "{err}");
+    assert!(
+        err.contains("b.toml:3") && err.contains("websocket.listen"),
+        "{err}"
+    );
 }

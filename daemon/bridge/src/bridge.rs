@@ -79,14 +79,10 @@ pub fn run(
     let node = ipc
         .create_node("bridge")
         .with_context(|| format!("joining namespace {ns}"))?;
-    let session = thruster_recorder::stream_on(
-        &node,
-        &ipc,
-        plan.record.as_ref(),
-        taps,
-        stop,
-        &mut || ready(addr),
-    );
+    let session =
+        thruster_recorder::stream_on(&node, &ipc, plan.record.as_ref(), taps, stop, &mut || {
+            ready(addr)
+        });
     // The session is over (a signal, or the recording's duration): stop the operator thread
     // too. The session has dropped its taps, so the live thread ends once its queue is empty.
     stop.store(true, Ordering::SeqCst);

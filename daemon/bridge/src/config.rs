@@ -214,7 +214,12 @@ pub fn parse(text: &str, origin: &str) -> Result<BridgeConfig, LoadError> {
                     ))
                 }
             },
-            queue: count("record.queue", r.queue, thruster_recorder::DEFAULT_QUEUE, 1e7)?,
+            queue: count(
+                "record.queue",
+                r.queue,
+                thruster_recorder::DEFAULT_QUEUE,
+                1e7,
+            )?,
         }),
     };
     Ok(BridgeConfig {
@@ -251,8 +256,11 @@ mod tests {
         assert!(e.to_string().contains("websocket.listen"), "{e}");
         let e = parse("[websocket]\nlisen = \"127.0.0.1:1\"\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("lisen"), "{e}");
-        let e = parse("[websocket]\nlisten = \"127.0.0.1:1\"\nbacklog = 0\n", "f.toml")
-            .unwrap_err();
+        let e = parse(
+            "[websocket]\nlisten = \"127.0.0.1:1\"\nbacklog = 0\n",
+            "f.toml",
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("f.toml:3"), "{e}");
         assert!(e.to_string().contains("websocket.backlog"), "{e}");
         let e = parse("[websocket]\nservices = false\n", "f.toml").unwrap_err();

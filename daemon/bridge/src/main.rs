@@ -96,9 +96,9 @@ fn settings(args: &Args) -> Result<BridgeConfig> {
 }
 
 fn plan(args: &Args, c: BridgeConfig) -> Result<Plan> {
-    let namespace = c
-        .namespace
-        .ok_or_else(|| anyhow!("no namespace: give --namespace or namespace = \"...\" in the config"))?;
+    let namespace = c.namespace.ok_or_else(|| {
+        anyhow!("no namespace: give --namespace or namespace = \"...\" in the config")
+    })?;
     let duration = match args.duration_s {
         None => None,
         Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),

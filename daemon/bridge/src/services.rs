@@ -32,7 +32,9 @@ pub const PREFIX: &str = "thrusterd/";
 #[derive(Debug, Clone, PartialEq)]
 pub enum Call {
     /// `value` as the excitation power in (0, 1]; 0 = the daemon's default.
-    Estimate { power: f64 },
+    Estimate {
+        power: f64,
+    },
     Abort,
     Hold,
     Idle,
@@ -101,7 +103,9 @@ pub fn parse(name: &str, payload: &[u8]) -> Result<Call, String> {
 fn request_schema(name: &str) -> serde_json::Value {
     let number = |doc: &str| json!({"type": "number", "description": doc});
     let properties = match name {
-        "estimate" => json!({"power": number("excitation power in (0, 1]; left out: the daemon's default")}),
+        "estimate" => {
+            json!({"power": number("excitation power in (0, 1]; left out: the daemon's default")})
+        }
         "setpoint" => json!({
             "roll_deg": number("roll, degrees in [-180, 180]; left out: kept"),
             "pitch_deg": number("pitch, degrees in [-90, 90]; left out: kept"),
@@ -155,8 +159,7 @@ pub fn services(queue: &SyncSender<(Call, Responder)>) -> Vec<Service> {
                     ),
                 );
             let queue = queue.clone();
-            Service::builder(format!("{PREFIX}{name}"), schema)
-                .handler(Enqueue { name, queue })
+            Service::builder(format!("{PREFIX}{name}"), schema).handler(Enqueue { name, queue })
         })
         .collect()
 }
@@ -237,7 +240,10 @@ mod tests {
 
     #[test]
     fn requests_parse_with_their_checks() {
-        assert_eq!(parse("estimate", b"").unwrap(), Call::Estimate { power: 0.0 });
+        assert_eq!(
+            parse("estimate", b"").unwrap(),
+            Call::Estimate { power: 0.0 }
+        );
         assert_eq!(
             parse("estimate", br#"{"power": 0.5}"#).unwrap(),
             Call::Estimate { power: 0.5 }

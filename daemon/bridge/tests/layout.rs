@@ -7,7 +7,10 @@ use serde_json::Value;
 use thruster_protocol::{ImuSample, ModelMsg, StatusMsg, TelemetryMsg, ThrustCommand};
 
 fn layout() -> Value {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/foxglove/thrusterd-live.json");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/foxglove/thrusterd-live.json"
+    );
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
@@ -60,7 +63,10 @@ fn every_path_and_service_of_the_layout_exists() {
             let leaf = name
                 .strip_prefix(thruster_bridge::services::PREFIX)
                 .unwrap_or_else(|| panic!("{id}: {name}"));
-            assert!(thruster_bridge::services::NAMES.contains(&leaf), "{id}: {name}");
+            assert!(
+                thruster_bridge::services::NAMES.contains(&leaf),
+                "{id}: {name}"
+            );
             let payload = config["requestPayload"].as_str().unwrap();
             thruster_bridge::services::parse(leaf, payload.as_bytes())
                 .unwrap_or_else(|e| panic!("{id}: the button's request is refused: {e}"));
@@ -70,7 +76,8 @@ fn every_path_and_service_of_the_layout_exists() {
         }
         for p in paths {
             let (topic, field) = p.split_once('.').unwrap_or_else(|| panic!("{id}: {p}"));
-            let v = resolve(&message(topic), field)
+            let msg = message(topic);
+            let v = resolve(&msg, field)
                 .unwrap_or_else(|| panic!("{id}: {p} is not a field of {topic}"));
             assert!(v.is_number(), "{id}: {p} is not a number: {v}");
             checked += 1;
@@ -80,6 +87,9 @@ fn every_path_and_service_of_the_layout_exists() {
     // Every panel of the tree is configured.
     let tree = layout["layout"].to_string();
     for id in panels.keys() {
-        assert!(tree.contains(&format!("\"{id}\"")), "{id} not placed in the layout");
+        assert!(
+            tree.contains(&format!("\"{id}\"")),
+            "{id} not placed in the layout"
+        );
     }
 }

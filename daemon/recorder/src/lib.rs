@@ -22,8 +22,8 @@ pub use session::{
     record, record_on, stream_on, RecordOptions, RecordSummary, TapSummary, TopicSummary,
     DEFAULT_QUEUE,
 };
-pub use tap::{ChannelInfo, Message, Tap};
 pub use sink::{rotated_path, McapSink};
+pub use tap::{ChannelInfo, Message, Tap};
 
 use std::path::PathBuf;
 

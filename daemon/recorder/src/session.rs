@@ -92,11 +92,7 @@ impl RecordSummary {
             .map(|t| format!("{} {}", t.topic, t.messages))
             .collect();
         let files = match self.files.first() {
-            Some(first) => format!(
-                "to {} file(s), first {}",
-                self.files.len(),
-                first.display()
-            ),
+            Some(first) => format!("to {} file(s), first {}", self.files.len(), first.display()),
             None => "(no file)".to_string(),
         };
         let verb = if self.files.is_empty() {
