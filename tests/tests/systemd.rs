@@ -72,7 +72,7 @@ fn ready_watchdog_status_and_stopping_reach_systemd() {
 /// measured 1.5 for thrusterd (no devices, no network, Unix sockets only), 2.5 for
 /// thruster-hw (it keeps device access for sysfs PWM, IIO and the MAVLink serial/UDP link) and
 /// 1.6 for thruster-bridge (Internet sockets, peers limited to loopback and private networks,
-/// no devices, /proc reduced to its own). The bounds catch a hardening line lost in an edit.
+/// no devices, other users' processes hidden). The bounds catch a hardening line lost in an edit.
 #[test]
 fn the_units_pass_systemd_analyze_security() {
     for (unit, max) in [
