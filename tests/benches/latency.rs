@@ -4,8 +4,14 @@
 //! telemetry off, at its default (every 10th sample) and on every sample, each with a reader
 //! subscribed to it (so every message is delivered and its listener woken).
 //!
+//! Then at 1 kHz (one sample per millisecond, the rate of a fast vehicle IMU), event mode,
+//! telemetry at its default: the daemon alone, and with `thruster-bridge` attached (recording
+//! to MCAP and serving the live view, one Foxglove client subscribed to every channel), runs
+//! alternated; with the bridge's CPU over the run from /proc.
+//!
 //! Run: cargo bench -p system-tests --bench latency [-- ROUND_TRIPS]
 
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use system_tests::{state, Operator, Proc, World};
@@ -44,15 +50,27 @@ fn sample(seq: u64) -> ImuSample {
     }
 }
 
-/// One round trip per sample, busy-polling for the answer. Microseconds.
+/// One round trip per sample, busy-polling for the answer, one sample per `period` (None: back
+/// to back). Microseconds.
 fn round_trips(
     imu: &Port<ImuSample>,
     thrust: &Inbox<ThrustCommand>,
     seq: &mut u64,
     count: usize,
+    period: Option<Duration>,
 ) -> Vec<f64> {
     let mut out = Vec::with_capacity(count);
-    for _ in 0..count {
+    let t0 = Instant::now();
+    for i in 0..count {
+        if let Some(p) = period {
+            // Sleep to the next tick (sleeping, not spinning: a spinning sender would take a
+            // core from the processes measured).
+            let due = t0 + p * i as u32;
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
         *seq += 1;
         let start = Instant::now();
         imu.send(&sample(*seq)).unwrap();
@@ -75,6 +93,17 @@ fn round_trips(
 
 /// Ping-pong `n` samples after a handshake, `setup` and a warm-up.
 fn ping_pong(world: &World, n: usize, setup: impl FnOnce()) -> Vec<f64> {
+    ping_pong_at(world, n, None, WARMUP, setup)
+}
+
+/// As [`ping_pong`], one sample per `period`, with `warmup` samples first.
+fn ping_pong_at(
+    world: &World,
+    n: usize,
+    period: Option<Duration>,
+    warmup: usize,
+    setup: impl FnOnce(),
+) -> Vec<f64> {
     let imu: Port<ImuSample> = Port::create(world.node(), world.ipc()).unwrap();
     let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
     let mut seq = 0u64;
@@ -94,8 +123,8 @@ fn ping_pong(world: &World, n: usize, setup: impl FnOnce()) -> Vec<f64> {
         );
     }
     setup();
-    round_trips(&imu, &thrust, &mut seq, WARMUP);
-    round_trips(&imu, &thrust, &mut seq, n)
+    round_trips(&imu, &thrust, &mut seq, warmup, period);
+    round_trips(&imu, &thrust, &mut seq, n, period)
 }
 
 fn daemon_config(world: &World, telemetry_every_n: u32) -> std::path::PathBuf {
@@ -120,14 +149,12 @@ fn daemon_config(world: &World, telemetry_every_n: u32) -> std::path::PathBuf {
     path
 }
 
-/// Round trips through `thrusterd run` holding attitude, telemetry every `every_n`-th sample
-/// (0: off) with a reader attached.
-fn through_daemon(n: usize, spin: &str, every_n: u32) -> Stats {
-    let world = World::new("lat-d");
+/// `thrusterd run` on `world` with telemetry every `every_n`-th sample.
+fn start_daemon(world: &World, spin: &str, every_n: u32) -> Proc {
     let ns = world.namespace();
-    let cfg = daemon_config(&world, every_n);
+    let cfg = daemon_config(world, every_n);
     let state_dir = world.path("state");
-    let mut peer = Proc::spawn(
+    Proc::spawn(
         "thrusterd",
         &[
             "run",
@@ -141,19 +168,28 @@ fn through_daemon(n: usize, spin: &str, every_n: u32) -> Stats {
             spin,
         ],
         world.dir.path(),
-    );
+    )
+}
+
+/// Hold attitude, so every sample runs the attitude filter and the controller.
+fn hold(op: &Operator) {
+    let r = op.request(RequestKind::Hold);
+    assert!(r.is_ok(), "{}", r.text());
+    op.wait_status(Duration::from_secs(10), |s| state(s) == DaemonState::Active)
+        .expect("daemon active");
+}
+
+/// Round trips through `thrusterd run` holding attitude, telemetry every `every_n`-th sample
+/// (0: off) with a reader attached.
+fn through_daemon(n: usize, spin: &str, every_n: u32) -> Stats {
+    let world = World::new("lat-d");
+    let mut peer = start_daemon(&world, spin, every_n);
     let op = Operator::new(&world);
     // A reader as `thrusterctl watch --interval-ms 0` is, with the topic's full buffer: every
     // message is delivered and its listener notified. Read only after the run (reading here
     // would be measured); a full buffer drops its oldest, which costs the daemon the same.
     let telemetry: Inbox<TelemetryMsg> = Inbox::create(world.node(), world.ipc()).unwrap();
-    let us = ping_pong(&world, n, || {
-        // Hold attitude, so every sample runs the attitude filter and the controller.
-        let r = op.request(RequestKind::Hold);
-        assert!(r.is_ok(), "{}", r.text());
-        op.wait_status(Duration::from_secs(10), |s| state(s) == DaemonState::Active)
-            .expect("daemon active");
-    });
+    let us = ping_pong(&world, n, || hold(&op));
     let got = telemetry.recv().unwrap().is_some();
     assert_eq!(
         got,
@@ -164,6 +200,157 @@ fn through_daemon(n: usize, spin: &str, every_n: u32) -> Stats {
     stats(us)
 }
 
+/// User + system CPU time of process `pid` so far, seconds (/proc/PID/stat fields 14 and 15).
+fn cpu_s(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("/proc/PID/stat");
+    // The command name (field 2) is in parentheses and may hold spaces: split after it.
+    let rest = &stat[stat.rfind(')').expect("stat has (comm)") + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+    // SAFETY: sysconf only reads a constant.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    ticks / hz
+}
+
+/// The topside's Foxglove client (tests/node, `--watch`): subscribed to every channel for
+/// `seconds`. Killed and reaped on drop.
+struct Topside(Child);
+
+impl Drop for Topside {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The bridge's port, from its start line `live view on ws://127.0.0.1:PORT`.
+fn bridge_port(bridge: &mut Proc) -> u16 {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let log = bridge.log_text();
+        if let Some(rest) = log.split("live view on ws://127.0.0.1:").nth(1) {
+            let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+            return digits.parse().expect("a port number");
+        }
+        assert!(bridge.is_running(), "the bridge exited: {log}");
+        assert!(Instant::now() < deadline, "no start line after 60 s: {log}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// What a paced run with the bridge attached cost the bridge.
+struct BridgeCost {
+    cpu_percent: f64,
+    summary: String,
+}
+
+/// Round trips at 1 kHz through the daemon (event mode, telemetry every 10th sample, a model in
+/// force, holding), alone or with `thruster-bridge` recording and serving one client.
+fn paced_through_daemon(n: usize, with_bridge: bool) -> (Stats, Option<BridgeCost>) {
+    let world = World::new("lat-b");
+    let mut attached = None;
+    if with_bridge {
+        let out = world.path("bench.mcap");
+        let mut bridge = Proc::spawn(
+            "thruster-bridge",
+            &[
+                "--namespace",
+                &world.namespace(),
+                "--ws",
+                "127.0.0.1:0",
+                "--record",
+                out.to_str().unwrap(),
+            ],
+            world.dir.path(),
+        );
+        let port = bridge_port(&mut bridge);
+        let seconds = (n as u64 + 1000) / 1000 + 60;
+        let client = system_tests::node::script("bridge_client.js")
+            .arg(format!("ws://127.0.0.1:{port}"))
+            .arg(seconds.to_string())
+            .arg("--watch")
+            .stdout(Stdio::null())
+            .spawn()
+            .expect("node runs the topside client");
+        attached = Some((bridge, Topside(client)));
+    }
+    let mut daemon = start_daemon(&world, "0", 10);
+    let op = Operator::new(&world);
+    let mut cpu0 = None;
+    let us = ping_pong_at(&world, n, Some(Duration::from_millis(1)), 1000, || {
+        hold(&op);
+        cpu0 = attached
+            .as_ref()
+            .map(|(b, _)| (cpu_s(b.pid()), Instant::now()));
+    });
+    let cost = attached.map(|(mut bridge, topside)| {
+        let (c0, t0) = cpu0.unwrap();
+        let cpu_percent = (cpu_s(bridge.pid()) - c0) / t0.elapsed().as_secs_f64() * 100.0;
+        drop(topside);
+        bridge.signal("INT");
+        bridge.wait_timeout(Duration::from_secs(30));
+        let log = bridge.log_text();
+        let summary = log
+            .lines()
+            .rev()
+            .find(|l| l.contains("; lost "))
+            .unwrap_or("(no summary)")
+            .to_string();
+        BridgeCost {
+            cpu_percent,
+            summary,
+        }
+    });
+    daemon.stop();
+    (stats(us), cost)
+}
+
+/// The 1 kHz comparison: runs alternated (alone, with the bridge, alone, with), so a change in
+/// the machine's load affects both sides alike.
+fn bridge_section(n: usize) {
+    let n = n.min(10_000);
+    println!();
+    println!(
+        "IMU -> thrust at 1 kHz (event mode, telemetry every 10th, holding), {n} samples per run \
+         after 1000 warm-up, 2 runs each, alternated, microseconds"
+    );
+    println!("| run | daemon | p50 | p99 | p99.9 | mean | bridge CPU (% of one core) |");
+    println!("|---|---|---|---|---|---|---|");
+    let mut alone = Vec::new();
+    let mut with = Vec::new();
+    for round in 1..=2 {
+        for with_bridge in [false, true] {
+            let (s, cost) = paced_through_daemon(n, with_bridge);
+            let what = if with_bridge {
+                "with thruster-bridge (MCAP + live view, 1 client)"
+            } else {
+                "alone"
+            };
+            let cpu = cost
+                .as_ref()
+                .map_or_else(String::new, |c| format!("{:.1}", c.cpu_percent));
+            println!(
+                "| {round} | {what} | {:.1} | {:.1} | {:.1} | {:.1} | {cpu} |",
+                s.p50, s.p99, s.p999, s.mean
+            );
+            if let Some(c) = cost {
+                println!("|   | bridge: {} | | | | | |", c.summary);
+            }
+            if with_bridge {
+                with.push(s);
+            } else {
+                alone.push(s);
+            }
+        }
+    }
+    let mean = |v: &[Stats], f: fn(&Stats) -> f64| v.iter().map(f).sum::<f64>() / v.len() as f64;
+    println!(
+        "p50 with/alone: {:.3}; p99 with/alone: {:.3} (target: within 1.10)",
+        mean(&with, |s| s.p50) / mean(&alone, |s| s.p50),
+        mean(&with, |s| s.p99) / mean(&alone, |s| s.p99),
+    );
+}
+
 fn main() {
     // Never measure a binary left from an older build.
     system_tests::build_binaries();
@@ -171,6 +358,11 @@ fn main() {
         .skip(1)
         .find_map(|a| a.parse().ok())
         .unwrap_or(20_000);
+    // Only the 1 kHz bridge comparison: BENCH_BRIDGE_ONLY=1.
+    if std::env::var_os("BENCH_BRIDGE_ONLY").is_some() {
+        bridge_section(n);
+        return;
+    }
     println!(
         "IMU sample -> thrust command round trip, {n} samples after {WARMUP} warm-up, microseconds"
     );
@@ -222,4 +414,5 @@ fn main() {
             );
         }
     }
+    bridge_section(n);
 }

@@ -14,6 +14,7 @@ use thruster_protocol::{
     ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
 };
 
+pub mod node;
 pub mod python;
 pub mod soak;
 
@@ -52,7 +53,7 @@ fn target_dir() -> PathBuf {
     }
 }
 
-/// Build thrusterd, thrusterctl, thruster-sim and thruster-hw in the running profile, once per process.
+/// Build thrusterd, thrusterctl, thruster-sim, thruster-hw and thruster-bridge in the running profile, once per process.
 /// (`-p` selects a different feature set than the whole workspace, so this can rebuild the
 /// project's own crates: that is why tests do not call it when the binaries exist.)
 pub fn build_binaries() {
@@ -71,6 +72,8 @@ pub fn build_binaries() {
             "thruster-sim",
             "-p",
             "thruster-hw",
+            "-p",
+            "thruster-bridge",
             "--bins",
         ]);
         if target_dir().ends_with("release") {

@@ -35,7 +35,7 @@ fail() {
         inside 'cat /tmp/imu-watch.log' >"$LOGS/imu-watch.log" 2>&1 || true
         cp "$WORK/console.log" "$LOGS/" 2>/dev/null || true
         echo "--- journal of both units (last 60 lines; all of it in $LOGS) ---" >&2
-        inside 'journalctl --no-pager -o short-precise -n 60 -u thrusterd -u thruster-hw' >&2 || true
+        inside 'journalctl --no-pager -o short-precise -n 60 -u thrusterd -u thruster-hw -u thruster-bridge' >&2 || true
     fi
     exit 1
 }
@@ -96,7 +96,8 @@ mount -t overlay overlay -o "lowerdir=$ROOTFS,upperdir=$WORK/upper,workdir=$WORK
 SRC=$MNT/root/thrusterd-src
 mkdir -p "$SRC/target/release"
 cp -r "$REPO/config" "$SRC/"
-cp "$BIN"/thrusterd "$BIN"/thrusterctl "$BIN"/thruster-hw "$BIN"/thruster-sim "$SRC/target/release/"
+cp "$BIN"/thrusterd "$BIN"/thrusterctl "$BIN"/thruster-hw "$BIN"/thruster-sim "$BIN"/thruster-bridge \
+    "$SRC/target/release/"
 
 say "booting systemd in the container"
 # Facts from issue 13: no host systemd/D-Bus (--register=no --keep-unit), a mixed cgroup layout
@@ -148,7 +149,8 @@ readme_block() {
 }
 INSTALL=$(readme_block 1 | grep -v '^cargo build')
 START=$(readme_block 2)
-[ -n "$INSTALL" ] && [ -n "$START" ] || fail "install: README install section not found"
+BRIDGE=$(readme_block 3)
+[ -n "$INSTALL" ] && [ -n "$START" ] && [ -n "$BRIDGE" ] || fail "install: README install section not found"
 inside "sudo() { \"\$@\"; }; set -e; cd /root/thrusterd-src; $INSTALL" \
     || fail "install: the README's install commands failed"
 
@@ -298,6 +300,20 @@ sleep 3
 st=$(status_json) || fail "refusal: the daemon stopped answering alice"
 say "refusal: root and bob exit 7 with the fix named, no file made, daemon unharmed"
 
+# The bridge (README's third block): Type=notify, READY once it listens on the shipped config's
+# loopback address; a TCP connection reaches it (bash's /dev/tcp: the rootfs has no client);
+# the daemon keeps running untouched.
+inside "sudo() { \"\$@\"; }; set -e; $BRIDGE" || fail "bridge: the README's bridge commands failed"
+s=$(inside "systemctl show -p ActiveState -p SubState -p Type thruster-bridge | sort | tr '\n' ' '")
+[ "$s" = "ActiveState=active SubState=running Type=notify " ] \
+    || fail "bridge: thruster-bridge is '$s', want active/running, Type=notify"
+inside "journalctl -u thruster-bridge --no-pager -o cat | grep -q 'live view on ws://127.0.0.1:8765'" \
+    || fail "bridge: no 'live view on ws://127.0.0.1:8765' in its journal"
+inside "exec 3<>/dev/tcp/127.0.0.1/8765" || fail "bridge: no TCP connection to 127.0.0.1:8765"
+[ "$(prop thrusterd NRestarts)" = "$NR_D" ] && [ "$(prop thrusterd MainPID)" = "$PID_D" ] \
+    || fail "bridge: thrusterd restarted when the bridge started"
+say "bridge: active after READY, listening on 127.0.0.1:8765, daemon untouched"
+
 imu_ok "$T_WATCH" "$(now)" "from the start to the daemon's kill"
 
 # kill -9 -> restart -> resume with the saved model.
@@ -342,6 +358,13 @@ say "driver watchdog: a stopped thruster-hw was killed and restarted, IMU flows 
 # The watcher ends before the stop (a status call then would only time out).
 inside "touch /tmp/imu-watch.stop; for _ in \$(seq 30); do kill -0 $WATCHER 2>/dev/null || exit 0; sleep 0.1; done; exit 1" \
     || fail "setup: the status watcher did not end within 3 s"
+
+# The bridge stops cleanly (SIGTERM: server closed, summary logged).
+inside "systemctl stop thruster-bridge"
+[ "$(prop thruster-bridge Result)" = success ] \
+    || fail "bridge: stopped with $(prop thruster-bridge Result)"
+inside "journalctl -u thruster-bridge --no-pager -o cat | grep -q 'live view logged'" \
+    || fail "bridge: no summary in its journal at stop"
 
 # systemctl stop -> neutral and model saved.
 inside "systemctl stop thrusterd"

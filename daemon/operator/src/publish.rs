@@ -113,8 +113,9 @@ pub fn reconfig_event(
     Ok(event)
 }
 
-/// Publishes `msg` and returns once thrusterd has read it (see the module docs).
-fn send<T: TopicMessage>(daemon: &Daemon, msg: &T) -> Result<usize> {
+/// Publishes `msg` and returns once thrusterd has read it (see the module docs). Also used by
+/// the Foxglove bridge's setpoint service.
+pub fn send<T: TopicMessage>(daemon: &Daemon, msg: &T) -> Result<usize> {
     let port = daemon.port::<T>()?;
     let reached = port.send(msg).map_err(|e| daemon.ipc_failure(e))?;
     if reached == 0 {
@@ -157,7 +158,7 @@ const OTHER_SUBSCRIBERS_GRACE: Duration = Duration::from_millis(50);
 
 /// Sequence number for our one message. Each run is a new sender; starting from the wall
 /// clock keeps successive runs increasing, should a reader ever drop repeats.
-fn sender_seq() -> u64 {
+pub fn sender_seq() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(1, |d| d.as_nanos() as u64)

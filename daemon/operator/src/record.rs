@@ -53,6 +53,7 @@ pub fn options(
         out,
         max_bytes,
         duration,
+        queue: thruster_recorder::DEFAULT_QUEUE,
     })
 }
 

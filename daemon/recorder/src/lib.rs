@@ -9,16 +9,21 @@
 //! a loss shows as a gap, counted per topic ([`Losses`]) and written into the file.
 //!
 //! Modules, one job each: [`schema`] (JSON Schema of a message), [`sink`] (the MCAP files and
-//! their rotation), [`source`] (a topic's subscription and its loss count), [`session`] (the
-//! loop that ties them together).
+//! their rotation), [`source`] (a topic's subscription and its loss count), [`tap`] (a
+//! consumer's bounded queue, drops counted), [`session`] (the loop that ties them together).
 
 pub mod schema;
 pub mod session;
 pub mod sink;
 pub mod source;
+pub mod tap;
 
-pub use session::{record, record_on, RecordOptions, RecordSummary, TopicSummary};
+pub use session::{
+    record, record_on, stream_on, RecordOptions, RecordSummary, TapSummary, TopicSummary,
+    DEFAULT_QUEUE,
+};
 pub use sink::{rotated_path, McapSink};
+pub use tap::{ChannelInfo, Message, Tap};
 
 use std::path::PathBuf;
 

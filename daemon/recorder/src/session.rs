@@ -1,12 +1,14 @@
-//! A recording session: subscribe, drain every topic until told to stop, finish the file
-//! with the counts and losses.
+//! A recording session: subscribe, drain every topic until told to stop, hand each message to
+//! the consumers (the MCAP writer, live views), finish the file with the counts and losses.
 //!
-//! Two threads: the caller's drains the subscribers (copy out of shared memory, JSON) and
-//! hands each message over an unbounded channel to a writer thread that owns the files. A
-//! slow disk (a rotation, a full page cache) then delays only the writer, never the draining
-//! of the 128-sample subscriber buffers; the memory the channel takes meanwhile is the price.
+//! The caller's thread drains the subscribers (copy out of shared memory, JSON once) and hands
+//! each message to every consumer through a bounded queue of its own ([`crate::tap`]): the
+//! MCAP writer thread that owns the files, and any live view (the Foxglove bridge). A slow disk
+//! (a rotation, a full page cache) or a slow network then delays only its consumer, never the
+//! draining of the 128-sample subscriber buffers; when a consumer's queue is full the message
+//! is dropped for it alone and counted, so memory stays bounded.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
@@ -17,13 +19,19 @@ use serde::Serialize;
 use thruster_protocol::services::{IpcConfig, IpcNode};
 
 use crate::sink::McapSink;
-use crate::source::{open_all, Item, Source};
+use crate::source::{open_all, Source};
+use crate::tap::{self, Message, Tap};
 use crate::RecordError;
 
 /// Longest sleep when nothing came. The IMU's notification wakes the loop earlier; the
 /// slower topics wait at most this long. Far below the 128 ms the stream buffers hold at
 /// 1 kHz, so a quiet wait never loses a sample.
 const IDLE_WAIT: Duration = Duration::from_millis(5);
+
+/// Default capacity of the queue to the MCAP writer, in messages: 16 s of a 1 kHz session
+/// with telemetry at every sample (about 4 000 messages/s, docs/recording.md), about 25 MB of
+/// JSON at most. A disk stalled for longer loses messages (counted) instead of growing memory.
+pub const DEFAULT_QUEUE: usize = 65_536;
 
 /// What to record, where, for how long.
 #[derive(Debug, Clone)]
@@ -34,6 +42,8 @@ pub struct RecordOptions {
     pub max_bytes: Option<u64>,
     /// Stop after this long (wall clock).
     pub duration: Option<Duration>,
+    /// Capacity of the queue to the writer thread, in messages ([`DEFAULT_QUEUE`]).
+    pub queue: usize,
 }
 
 /// One topic's counts.
@@ -45,6 +55,16 @@ pub struct TopicSummary {
     pub lost: u64,
     /// Times the sequence went backwards (a sender restarted or a second sender published).
     pub seq_restarts: u64,
+    /// Messages received but not written: the writer's queue was full (the disk was behind).
+    pub dropped: u64,
+}
+
+/// What a live consumer missed.
+#[derive(Debug, Clone, Serialize, PartialEq, Eq)]
+pub struct TapSummary {
+    pub name: String,
+    /// Messages dropped because its queue was full.
+    pub dropped: u64,
 }
 
 /// What a recording wrote.
@@ -54,11 +74,16 @@ pub struct RecordSummary {
     pub topics: Vec<TopicSummary>,
     pub messages: u64,
     pub lost: u64,
+    /// Messages dropped before the writer (its queue full), over every topic.
+    pub dropped: u64,
+    /// The live consumers' drops.
+    pub taps: Vec<TapSummary>,
     pub wall_s: f64,
 }
 
 impl RecordSummary {
-    /// One line for the operator: `recorded N messages (imu 1000, ...) in F file(s), lost L`.
+    /// One line for the operator: `recorded N messages (imu 1000, ...) in F file(s), lost L;
+    /// dropped D (writer queue full)`, plus each live view's drops.
     pub fn line(&self) -> String {
         let per: Vec<String> = self
             .topics
@@ -66,17 +91,27 @@ impl RecordSummary {
             .filter(|t| t.messages > 0)
             .map(|t| format!("{} {}", t.topic, t.messages))
             .collect();
-        format!(
-            "recorded {} messages ({}) in {:.1} s to {} file(s), first {}; lost {}",
+        let files = match self.files.first() {
+            Some(first) => format!("to {} file(s), first {}", self.files.len(), first.display()),
+            None => "(no file)".to_string(),
+        };
+        let verb = if self.files.is_empty() {
+            "streamed"
+        } else {
+            "recorded"
+        };
+        let mut line = format!(
+            "{verb} {} messages ({}) in {:.1} s {files}; lost {}; dropped {} (writer queue full)",
             self.messages,
             per.join(", "),
             self.wall_s,
-            self.files.len(),
-            self.files
-                .first()
-                .map_or_else(String::new, |p| p.display().to_string()),
             self.lost,
-        )
+            self.dropped,
+        );
+        for t in &self.taps {
+            line.push_str(&format!("; {} dropped {} (queue full)", t.name, t.dropped));
+        }
+        line
     }
 }
 
@@ -106,23 +141,38 @@ pub fn record_on(
     stop: &AtomicBool,
     ready: &mut dyn FnMut(),
 ) -> Result<RecordSummary, RecordError> {
-    if options.max_bytes == Some(0) {
-        return Err(RecordError::Options(
-            "the size limit must be above 0".into(),
-        ));
+    stream_on(node, ipc, Some(options), Vec::new(), stop, ready)
+}
+
+/// The general session: every topic of the namespace to the MCAP files of `record` (if any)
+/// and to each of `live` (each behind its own bounded queue, see [`crate::tap`]), until `stop`
+/// or `record`'s duration. `ready` as in [`record_on`].
+pub fn stream_on(
+    node: &IpcNode,
+    ipc: &IpcConfig,
+    record: Option<&RecordOptions>,
+    mut live: Vec<Tap<Message>>,
+    stop: &AtomicBool,
+    ready: &mut dyn FnMut(),
+) -> Result<RecordSummary, RecordError> {
+    if let Some(options) = record {
+        if options.max_bytes == Some(0) {
+            return Err(RecordError::Options(
+                "the size limit must be above 0".into(),
+            ));
+        }
+        if options.queue == 0 {
+            return Err(RecordError::Options(
+                "the writer queue must hold at least one message".into(),
+            ));
+        }
     }
     let mut sources = open_all(node, ipc)?;
-    let mut sink = McapSink::create(&options.out, options.max_bytes)?;
-    let (tx, rx) = mpsc::channel::<Command>();
     let failed = Arc::new(AtomicBool::new(false));
-    let writer_failed = Arc::clone(&failed);
-    let writer = std::thread::Builder::new()
-        .name("mcap-writer".into())
-        .spawn(move || write_all(&mut sink, &rx, &writer_failed).and_then(|m| sink.finish(&m)))
-        .map_err(|source| RecordError::Io {
-            path: options.out.clone(),
-            source,
-        })?;
+    let mut writer = match record {
+        Some(options) => Some(Writer::start(options, &failed)?),
+        None => None,
+    };
     ready();
     let start = Instant::now();
     let epoch_ns = SystemTime::now()
@@ -131,64 +181,98 @@ pub fn record_on(
     // Log time: the wall clock at the start plus the monotonic time since, so log times
     // never go backwards when the wall clock is stepped.
     let now_ns = move || epoch_ns + start.elapsed().as_nanos() as u64;
-    let deadline = options.duration.map(|d| start + d);
-    let mut out = |item: Item| {
-        // A writer that stopped (an error) has dropped its receiver: it reports why.
-        let _ = tx.send(Command::Write(item));
+    let deadline = record.and_then(|o| o.duration).map(|d| start + d);
+    let mut out = |m: Message| {
+        let topic = m.channel.topic;
+        for t in live.iter_mut() {
+            t.offer(topic, m.clone());
+        }
+        if let Some(w) = writer.as_mut() {
+            // A writer that stopped (an error) has hung up: it reports why.
+            w.tap.offer(topic, Command::Write(m));
+        }
     };
     let result = run(&mut sources, &mut out, &now_ns, stop, &failed, deadline);
     // One last pass after the stop: what is buffered is recorded too.
     let last = result.and_then(|()| drain_all(&mut sources, &mut out, &now_ns).map(|_| ()));
-    let summary = summarise(&sources, start.elapsed());
-    // The writer finishes the file even after an error, so what was written stays readable.
-    let _ = tx.send(Command::Finish(metadata(&summary)));
-    drop(tx);
-    let files = writer
-        .join()
-        .map_err(|_| RecordError::Options("the MCAP writer thread panicked".into()))?;
+    let mut summary = summarise(&sources, start.elapsed(), writer.as_ref().map(|w| &w.tap));
+    summary.taps = live
+        .iter()
+        .map(|t| TapSummary {
+            name: t.name().to_string(),
+            dropped: t.dropped_total(),
+        })
+        .collect();
+    // Hang up on the live views: their threads end once they have emptied their queues.
+    drop(live);
+    if let Some(w) = writer.take() {
+        summary.files = w.finish(&summary)?;
+    }
     last?;
-    Ok(RecordSummary {
-        files: files?,
-        ..summary
-    })
+    Ok(summary)
 }
 
 /// What the writer thread is told.
 enum Command {
-    Write(Item),
+    Write(Message),
     /// The end: finish the file with this metadata.
     Finish(BTreeMap<String, String>),
 }
 
-/// The writer thread: every item into `sink` until told to finish; returns the metadata to
-/// finish with. After an error it sets `failed` (the drainer stops) and returns it.
+/// The MCAP writer thread and the bounded queue to it.
+struct Writer {
+    tap: Tap<Command>,
+    thread: std::thread::JoinHandle<Result<Vec<PathBuf>, RecordError>>,
+}
+
+impl Writer {
+    fn start(options: &RecordOptions, failed: &Arc<AtomicBool>) -> Result<Self, RecordError> {
+        let mut sink = McapSink::create(&options.out, options.max_bytes)?;
+        let (tap, rx) = tap::bounded("mcap", options.queue);
+        let failed = Arc::clone(failed);
+        let thread = std::thread::Builder::new()
+            .name("mcap-writer".into())
+            .spawn(move || write_all(&mut sink, &rx, &failed).and_then(|m| sink.finish(&m)))
+            .map_err(|source| RecordError::Io {
+                path: options.out.clone(),
+                source,
+            })?;
+        Ok(Self { tap, thread })
+    }
+
+    /// Tells the writer to finish with the summary's metadata and waits for it.
+    fn finish(self, summary: &RecordSummary) -> Result<Vec<PathBuf>, RecordError> {
+        // The writer finishes the file even after an error, so what was written stays
+        // readable. Waiting for room is right here: the draining is over.
+        self.tap.send_blocking(Command::Finish(metadata(summary)));
+        drop(self.tap);
+        self.thread
+            .join()
+            .map_err(|_| RecordError::Options("the MCAP writer thread panicked".into()))?
+    }
+}
+
+/// The writer thread: every message into `sink` until told to finish; returns the metadata
+/// to finish with. After an error it sets `failed` (the drainer stops) and returns it.
 fn write_all(
     sink: &mut McapSink,
     rx: &mpsc::Receiver<Command>,
     failed: &AtomicBool,
 ) -> Result<BTreeMap<String, String>, RecordError> {
-    let mut write = |item: Item| match item {
-        Item::Channel {
-            index,
-            topic,
-            schema_name,
-            schema,
-        } => {
-            sink.add_channel(index, topic, &schema_name, &schema);
-            Ok(())
+    let mut declared = BTreeSet::new();
+    let mut write = |m: Message| {
+        // Declared on the first message the writer sees: the topic's first message may have
+        // been dropped (a full queue), every message carries its channel.
+        if declared.insert(m.index) {
+            let c = &m.channel;
+            sink.add_channel(m.index, c.topic, &c.schema_name, &c.schema);
         }
-        Item::Message {
-            index,
-            sequence,
-            log_ns,
-            publish_ns,
-            data,
-        } => sink.write(index, sequence, log_ns, publish_ns, &data),
+        sink.write(m.index, m.sequence, m.log_ns, m.publish_ns, &m.data)
     };
     for command in rx {
         match command {
-            Command::Write(item) => {
-                if let Err(e) = write(item) {
+            Command::Write(m) => {
+                if let Err(e) = write(m) {
                     failed.store(true, Ordering::SeqCst);
                     return Err(e);
                 }
@@ -201,7 +285,7 @@ fn write_all(
 
 fn run(
     sources: &mut [Box<dyn Source>],
-    out: &mut dyn FnMut(Item),
+    out: &mut dyn FnMut(Message),
     now_ns: &dyn Fn() -> u64,
     stop: &AtomicBool,
     failed: &AtomicBool,
@@ -228,7 +312,7 @@ fn run(
 
 fn drain_all(
     sources: &mut [Box<dyn Source>],
-    out: &mut dyn FnMut(Item),
+    out: &mut dyn FnMut(Message),
     now_ns: &dyn Fn() -> u64,
 ) -> Result<usize, RecordError> {
     let mut n = 0;
@@ -251,7 +335,11 @@ fn interrupted(stop: &AtomicBool) -> bool {
     stop.load(Ordering::SeqCst)
 }
 
-fn summarise(sources: &[Box<dyn Source>], wall: Duration) -> RecordSummary {
+fn summarise(
+    sources: &[Box<dyn Source>],
+    wall: Duration,
+    writer: Option<&Tap<Command>>,
+) -> RecordSummary {
     let topics: Vec<TopicSummary> = sources
         .iter()
         .map(|s| TopicSummary {
@@ -259,19 +347,23 @@ fn summarise(sources: &[Box<dyn Source>], wall: Duration) -> RecordSummary {
             messages: s.count(),
             lost: s.seq().lost,
             seq_restarts: s.seq().restarts,
+            dropped: writer.map_or(0, |w| w.dropped(s.topic())),
         })
         .collect();
     RecordSummary {
         files: Vec::new(),
         messages: topics.iter().map(|t| t.messages).sum(),
         lost: topics.iter().map(|t| t.lost).sum(),
+        dropped: topics.iter().map(|t| t.dropped).sum(),
+        taps: Vec::new(),
         topics,
         wall_s: wall.as_secs_f64(),
     }
 }
 
 /// The metadata record of the last file: per topic `<topic>.messages`, `<topic>.lost`,
-/// `<topic>.seq_restarts` (over the whole recording, every file), and the totals.
+/// `<topic>.seq_restarts`, `<topic>.dropped` (over the whole recording, every file), and the
+/// totals.
 fn metadata(summary: &RecordSummary) -> BTreeMap<String, String> {
     let mut m = BTreeMap::new();
     for t in &summary.topics {
@@ -281,9 +373,11 @@ fn metadata(summary: &RecordSummary) -> BTreeMap<String, String> {
             format!("{}.seq_restarts", t.topic),
             t.seq_restarts.to_string(),
         );
+        m.insert(format!("{}.dropped", t.topic), t.dropped.to_string());
     }
     m.insert("messages".into(), summary.messages.to_string());
     m.insert("lost".into(), summary.lost.to_string());
+    m.insert("dropped".into(), summary.dropped.to_string());
     m.insert("wall_s".into(), format!("{:.3}", summary.wall_s));
     m
 }

@@ -144,21 +144,15 @@ impl McapSink {
         Ok(())
     }
 
-    /// Declares channel `index` for `topic` with the JSON Schema `schema` named
+    /// Declares channel `index` for `topic` with the JSON Schema `schema` (serialised) named
     /// `schema_name`, for [`McapSink::write`].
-    pub fn add_channel(
-        &mut self,
-        index: usize,
-        topic: &str,
-        schema_name: &str,
-        schema: &serde_json::Value,
-    ) {
+    pub fn add_channel(&mut self, index: usize, topic: &str, schema_name: &str, schema: &[u8]) {
         self.channels.insert(
             index,
             ChannelDef {
                 topic: topic.to_string(),
                 schema_name: schema_name.to_string(),
-                schema: serde_json::to_vec(schema).expect("a JSON value serialises"),
+                schema: schema.to_vec(),
             },
         );
     }

@@ -1,31 +1,14 @@
 //! One topic's subscription: drains it into the sink and counts sequence gaps.
 
+use std::sync::Arc;
+
 use serde::Serialize;
 use thruster_protocol::services::{Inbox, IpcConfig, IpcNode, TopicMessage};
 use thruster_protocol::*;
 
 use crate::schema::json_schema;
+use crate::tap::{ChannelInfo, Message};
 use crate::RecordError;
-
-/// What a source hands to the writer thread.
-#[derive(Debug)]
-pub enum Item {
-    /// A channel's first message is coming: its topic and JSON Schema.
-    Channel {
-        index: usize,
-        topic: &'static str,
-        schema_name: String,
-        schema: serde_json::Value,
-    },
-    /// One message, serialised.
-    Message {
-        index: usize,
-        sequence: u32,
-        log_ns: u64,
-        publish_ns: u64,
-        data: Vec<u8>,
-    },
-}
 
 /// The sequence number and sender time of a message.
 pub trait Stamped {
@@ -99,7 +82,7 @@ pub trait Source {
     fn drain(
         &mut self,
         index: usize,
-        out: &mut dyn FnMut(Item),
+        out: &mut dyn FnMut(Message),
         now_ns: &dyn Fn() -> u64,
     ) -> Result<usize, RecordError>;
     fn count(&self) -> u64;
@@ -112,7 +95,8 @@ pub trait Source {
 pub struct TopicSource<T: TopicMessage> {
     inbox: Inbox<T>,
     namespace: String,
-    announced: bool,
+    /// Known from the first message (its JSON shape gives the schema).
+    channel: Option<Arc<ChannelInfo>>,
     count: u64,
     seq: SeqTracker,
 }
@@ -129,7 +113,7 @@ impl<T: TopicMessage + Serialize + Stamped> TopicSource<T> {
         Ok(Self {
             inbox,
             namespace: ipc.namespace().to_string(),
-            announced: false,
+            channel: None,
             count: 0,
             seq: SeqTracker::default(),
         })
@@ -150,7 +134,7 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
     fn drain(
         &mut self,
         index: usize,
-        out: &mut dyn FnMut(Item),
+        out: &mut dyn FnMut(Message),
         now_ns: &dyn Fn() -> u64,
     ) -> Result<usize, RecordError> {
         let topic = self.topic();
@@ -161,24 +145,28 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
         let mut n = 0;
         while let Some(msg) = self.inbox.recv().map_err(ipc)? {
             let json = |source| RecordError::Json { topic, source };
-            if !self.announced {
-                let value = serde_json::to_value(msg).map_err(json)?;
-                let name = schema_name::<T>();
-                let schema = json_schema(&name, &value);
-                out(Item::Channel {
-                    index,
-                    topic,
-                    schema_name: name,
-                    schema,
-                });
-                self.announced = true;
-            }
-            let data = serde_json::to_vec(&msg).map_err(json)?;
+            let channel = match &self.channel {
+                Some(c) => Arc::clone(c),
+                None => {
+                    let value = serde_json::to_value(msg).map_err(json)?;
+                    let name = schema_name::<T>();
+                    let schema = serde_json::to_vec(&json_schema(&name, &value)).map_err(json)?;
+                    let c = Arc::new(ChannelInfo {
+                        topic,
+                        schema_name: name,
+                        schema,
+                    });
+                    self.channel = Some(Arc::clone(&c));
+                    c
+                }
+            };
+            let data: Arc<[u8]> = serde_json::to_vec(&msg).map_err(json)?.into();
             let log_ns = now_ns();
             // Publish time: the sender's clock where the message has one (vehicle time for
             // the simulator), else the receipt.
-            out(Item::Message {
+            out(Message {
                 index,
+                channel,
                 sequence: msg.seq() as u32,
                 log_ns,
                 publish_ns: msg.t_ns().unwrap_or(log_ns),

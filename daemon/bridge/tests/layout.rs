@@ -1,0 +1,95 @@
+//! The shipped Foxglove layout (config/foxglove/thrusterd-live.json) names only what exists:
+//! every plotted or shown path is a field of the message its topic carries (checked on the
+//! messages' own JSON form, as the bridge sends them), every service button one of the
+//! bridge's services. A renamed field then fails here, not silently in the app.
+
+use serde_json::Value;
+use thruster_protocol::{ImuSample, ModelMsg, StatusMsg, TelemetryMsg, ThrustCommand};
+
+fn layout() -> Value {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/foxglove/thrusterd-live.json"
+    );
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// The JSON form of a message of `topic`, as the bridge sends it.
+fn message(topic: &str) -> Value {
+    match topic {
+        "imu" => serde_json::to_value(ImuSample::default()),
+        "thrust" => serde_json::to_value(ThrustCommand::default()),
+        "telemetry" => serde_json::to_value(TelemetryMsg::default()),
+        "status" => serde_json::to_value(StatusMsg::default()),
+        "model" => serde_json::to_value(ModelMsg::default()),
+        other => panic!("the layout names topic {other}, which the test does not know"),
+    }
+    .unwrap()
+}
+
+/// Resolves `field[i].sub` in `value`.
+fn resolve<'a>(value: &'a Value, path: &str) -> Option<&'a Value> {
+    let mut v = value;
+    for part in path.split('.') {
+        let (name, index) = match part.split_once('[') {
+            Some((n, i)) => (n, Some(i.trim_end_matches(']').parse::<usize>().ok()?)),
+            None => (part, None),
+        };
+        v = v.get(name)?;
+        if let Some(i) = index {
+            v = v.get(i)?;
+        }
+    }
+    Some(v)
+}
+
+#[test]
+fn every_path_and_service_of_the_layout_exists() {
+    let layout = layout();
+    let panels = layout["configById"].as_object().unwrap();
+    let mut checked = 0;
+    for (id, config) in panels {
+        let mut paths: Vec<String> = Vec::new();
+        if id.starts_with("Plot!") {
+            for p in config["paths"].as_array().unwrap() {
+                paths.push(p["value"].as_str().unwrap().to_string());
+            }
+        } else if id.starts_with("RawMessages!") {
+            let topic = config["topicPath"].as_str().unwrap();
+            message(topic);
+            checked += 1;
+        } else if id.starts_with("CallService!") {
+            let name = config["serviceName"].as_str().unwrap();
+            let leaf = name
+                .strip_prefix(thruster_bridge::services::PREFIX)
+                .unwrap_or_else(|| panic!("{id}: {name}"));
+            assert!(
+                thruster_bridge::services::NAMES.contains(&leaf),
+                "{id}: {name}"
+            );
+            let payload = config["requestPayload"].as_str().unwrap();
+            thruster_bridge::services::parse(leaf, payload.as_bytes())
+                .unwrap_or_else(|e| panic!("{id}: the button's request is refused: {e}"));
+            checked += 1;
+        } else {
+            panic!("panel {id}: not checked by this test");
+        }
+        for p in paths {
+            let (topic, field) = p.split_once('.').unwrap_or_else(|| panic!("{id}: {p}"));
+            let msg = message(topic);
+            let v = resolve(&msg, field)
+                .unwrap_or_else(|| panic!("{id}: {p} is not a field of {topic}"));
+            assert!(v.is_number(), "{id}: {p} is not a number: {v}");
+            checked += 1;
+        }
+    }
+    assert!(checked >= 20, "{checked} items checked");
+    // Every panel of the tree is configured.
+    let tree = layout["layout"].to_string();
+    for id in panels.keys() {
+        assert!(
+            tree.contains(&format!("\"{id}\"")),
+            "{id} not placed in the layout"
+        );
+    }
+}

@@ -1,0 +1,230 @@
+//! The live view end to end: the real `thrusterd run`, `thruster-sim run --realtime` and
+//! `thruster-bridge --ws 127.0.0.1:0 --record FILE` as processes on a private namespace, checked
+//! by a Foxglove WebSocket client this project did not write (`FoxgloveClient` of the npm
+//! package @foxglove/ws-protocol, tests/node, installed by `system_tests::node`): it lists the
+//! channels, receives and parses telemetry, calls the `thrusterd/estimate` service (the daemon
+//! must then estimate) and a setpoint the operator's checks refuse. The same drain records the
+//! session to MCAP, read back by Foxglove's Python `mcap` package.
+
+use std::process::Output;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use system_tests::python::read_mcap;
+use system_tests::{bin, state, Operator, Proc, World};
+use thruster_protocol::DaemonState;
+
+/// Longest the client may take: connect, wait for the daemon's status, call, watch 3 s more.
+const CLIENT_S: u64 = 60;
+
+/// The bridge's port, from its start line `live view on ws://127.0.0.1:PORT`.
+fn wait_port(bridge: &mut Proc) -> u16 {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let log = bridge.log_text();
+        if let Some(rest) = log.split("live view on ws://127.0.0.1:").nth(1) {
+            let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+            return digits.parse().expect("a port number");
+        }
+        assert!(bridge.is_running(), "the bridge exited: {log}");
+        assert!(Instant::now() < deadline, "no start line after 60 s: {log}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn client(port: u16) -> (Value, Output) {
+    let out = system_tests::node::script("bridge_client.js")
+        .arg(format!("ws://127.0.0.1:{port}"))
+        .arg(CLIENT_S.to_string())
+        .output()
+        .expect("node runs tests/node/bridge_client.js");
+    let summary = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "the client printed no JSON ({e}), exit {:?}\nstdout: {}\nstderr: {}",
+            out.status,
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (summary, out)
+}
+
+#[test]
+fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_service() {
+    // Install (or find) both readers first: a broken Node or Python setup fails here.
+    system_tests::node::node_modules();
+    system_tests::python::venv_python();
+    let world = World::new("bridge");
+    let ns = world.namespace();
+    let out = world.path("live.mcap");
+    let mut bridge = Proc::spawn(
+        "thruster-bridge",
+        &[
+            "--namespace",
+            &ns,
+            "--ws",
+            "127.0.0.1:0",
+            "--record",
+            out.to_str().unwrap(),
+        ],
+        world.dir.path(),
+    );
+    let port = wait_port(&mut bridge);
+    let mut daemon = world.daemon(&["--thrusters", "5"]);
+    let mut sim = world.sim("amour5", &["--realtime", "--duration", "120"]);
+    let operator = Operator::new(&world);
+
+    let (summary, output) = client(port);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success(),
+        "client exit {:?}: {summary}\n{stderr}\nbridge: {}",
+        output.status,
+        bridge.log_text()
+    );
+    assert_eq!(summary["subprotocol"], "foxglove.sdk.v1", "{summary}");
+    assert_eq!(summary["errors"], Value::Array(vec![]), "{summary}");
+    // Channels: the recorder's, named by topic leaf, JSON with a JSON Schema.
+    for topic in [
+        "imu",
+        "thrust",
+        "telemetry",
+        "status",
+        "driver_status",
+        "truth",
+    ] {
+        let c = &summary["channels"][topic];
+        assert_eq!(c["encoding"], "json", "{topic}: {summary}");
+        assert_eq!(c["schemaEncoding"], "jsonschema", "{topic}: {c}");
+        assert_eq!(c["schemaIsJson"], true, "{topic}: {c}");
+        assert!(
+            c["schemaName"].as_str().unwrap().starts_with("thrusterd."),
+            "{topic}: {c}"
+        );
+    }
+    // Telemetry received and parsed (200 Hz IMU, telemetry every 10th sample: 20 Hz).
+    assert_eq!(summary["json_errors"], 0, "{summary}");
+    let count = |t: &str| summary["counts"][t].as_u64().unwrap_or(0);
+    assert!(count("imu") >= 200, "{}", summary["counts"]);
+    assert!(count("thrust") >= 200, "{}", summary["counts"]);
+    assert!(count("telemetry") >= 20, "{}", summary["counts"]);
+    assert!(
+        summary["first"]["telemetry"]["attitude"].is_array(),
+        "{}",
+        summary["first"]
+    );
+    // Services: the operator's requests.
+    for name in ["estimate", "abort", "hold", "idle", "setpoint"] {
+        let s = &summary["services"][format!("thrusterd/{name}")];
+        assert!(s.is_object(), "no service {name}: {}", summary["services"]);
+    }
+    // The estimate call: accepted, and the daemon left Idle for the estimation.
+    assert_eq!(summary["estimate"]["ok"], true, "{}", summary["estimate"]);
+    let idle = DaemonState::Idle as u64;
+    assert!(
+        summary["states_before_call"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s.as_u64() == Some(idle)),
+        "{summary}"
+    );
+    let estimating = [
+        DaemonState::MeasureNoise,
+        DaemonState::Pulse,
+        DaemonState::Settle,
+        DaemonState::Solve,
+        DaemonState::Active,
+    ]
+    .map(|s| s as u64);
+    assert!(
+        summary["states_after_call"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s.as_u64().is_some_and(|s| estimating.contains(&s))),
+        "no estimation state on the live status after the call: {summary}"
+    );
+    // The test's own view of the daemon agrees.
+    let st = operator
+        .wait_status(Duration::from_secs(10), |s| state(s) != DaemonState::Idle)
+        .expect("the daemon left Idle after the estimate service");
+    assert_ne!(state(&st), DaemonState::Fault, "{st:?}");
+    // A request the operator's checks refuse fails with the reason, naming the JSON key.
+    assert_eq!(summary["bad_setpoint"]["ok"], false, "{summary}");
+    assert!(
+        summary["bad_setpoint"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("pitch_deg must be in"),
+        "{summary}"
+    );
+
+    // SIGINT: the bridge finishes the file and reports no loss, no drop.
+    bridge.signal("INT");
+    let status = bridge
+        .wait_timeout(Duration::from_secs(30))
+        .expect("the bridge ends on SIGINT");
+    let log = bridge.log_text();
+    assert!(status.success(), "{log}");
+    assert!(
+        log.contains("; lost 0; dropped 0 (writer queue full)"),
+        "{log}"
+    );
+    assert!(log.contains("; websocket dropped 0 (queue full)"), "{log}");
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+    sim.signal("INT");
+    sim.wait_timeout(Duration::from_secs(10));
+
+    // The same drain fed the file: the channels the client saw, every IMU sample in order.
+    let rec = read_mcap(&[out]);
+    for topic in ["imu", "thrust", "telemetry", "status"] {
+        let c = &rec["channels"][topic];
+        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}: {rec}");
+        assert_eq!(
+            c["schema_name"], summary["channels"][topic]["schemaName"],
+            "{topic}"
+        );
+    }
+    assert_eq!(rec["channels"]["imu"]["seq_contiguous"], true, "{rec}");
+    assert_eq!(rec["metadata"]["thruster-recorder"]["dropped"], "0");
+
+    drop(operator);
+    drop(bridge);
+    drop(daemon);
+    drop(sim);
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+}
+
+/// Neither a WebSocket address nor a recording: the bridge refuses to start, saying what to
+/// give; a bad config names the file, line and key.
+#[test]
+fn the_bridge_refuses_to_run_without_a_job_or_with_a_bad_config() {
+    let world = World::new("bridgecfg");
+    let o = std::process::Command::new(bin("thruster-bridge"))
+        .args(["--namespace", &world.namespace()])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("nothing to do"), "{err}");
+    let cfg = world.path("b.toml");
+    std::fs::write(
+        &cfg,
+        "namespace = \"x\"\n[websocket]\nlisten = \"nowhere\"\n",
+    )
+    .unwrap();
+    let o = std::process::Command::new(bin("thruster-bridge"))
+        .args(["--config", cfg.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("b.toml:3") && err.contains("websocket.listen"),
+        "{err}"
+    );
+}
