@@ -11,7 +11,8 @@
 //! row (or score chi2 > 200 in one) and move the column by 55 %: no false alarm in the same
 //! 9 x 180 s; a rotation found after 2.9 s and 7.9 s with a realistic IMU (seeds 1, 4; a window
 //! that straddles the change moves the column less, so the next one decides) and after 49.5 s
-//! at the paper's noise (seed 4).
+//! at the paper's noise (seed 4). With the estimator's honest (larger) standard errors since:
+//! 8.9 s and 7.9 s, and 79.9 s at the paper's noise.
 mod common;
 use common::Run;
 use nalgebra::UnitQuaternion;
@@ -102,7 +103,9 @@ fn at_the_papers_noise_a_rotated_thruster_is_found_and_an_unchanged_one_is_not()
     let quiet = pitch_until_mismatch(&mut run, 120.0);
     assert!(quiet.is_none(), "false alarm {quiet:?}");
     rotate_top(&mut run);
-    let (t, why) = pitch_until_mismatch(&mut run, 60.0).expect("rotation not found");
+    // Measured 79.9 s: 30 s windows (the honest standard errors keep the bound above
+    // `window_rel_err` until the limit), and the change must show in two of them.
+    let (t, why) = pitch_until_mismatch(&mut run, 120.0).expect("rotation not found");
     println!("found after {t:.1} s: {why}");
     assert!(why.contains("thruster 1"), "{why}");
 }
