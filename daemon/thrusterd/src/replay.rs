@@ -5,8 +5,6 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use clap::Args;
-use thruster_protocol::MAX_THRUSTERS;
-use thrusterd_core::config::DaemonConfig;
 use thrusterd_replay::report::{self, Context};
 
 #[derive(Args)]
@@ -31,19 +29,11 @@ pub struct ReplayArgs {
 pub fn run(args: ReplayArgs) -> Result<()> {
     let rec = thrusterd_replay::recording::read(&args.files)?;
     let mut cfg = match &args.config {
-        Some(path) => {
-            let text = thruster_driver_kit::read_text(path)?;
-            DaemonConfig::from_toml_str(&text, &path.display().to_string())?
-        }
+        Some(path) => crate::config_file::load(path)?,
         None => thrusterd_replay::recorded_config(&rec)?,
     };
     if let Some(n) = args.thrusters {
-        anyhow::ensure!(
-            (1..=MAX_THRUSTERS).contains(&n),
-            "--thrusters {n}: must be 1..{MAX_THRUSTERS}"
-        );
-        cfg.vehicle.thrusters = n;
-        cfg.vehicle.thruster.clear();
+        crate::config_file::set_thrusters(&mut cfg, n)?;
     }
     let replayed = thrusterd_replay::replay(&rec, &cfg)?;
     let files = thrusterd_replay::recording::names(&args.files);

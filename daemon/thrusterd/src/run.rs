@@ -69,10 +69,7 @@ const SHUTDOWN_SAVE_WAIT: Duration = Duration::from_secs(3);
 pub fn run(args: RunArgs) -> Result<()> {
     init_logging();
     let mut cfg = match &args.config {
-        Some(path) => {
-            let text = thruster_driver_kit::read_text(path)?;
-            DaemonConfig::from_toml_str(&text, &path.display().to_string())?
-        }
+        Some(path) => crate::config_file::load(path)?,
         None => DaemonConfig::default(),
     };
     if let Some(ns) = args.namespace {
@@ -85,12 +82,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         cfg.runtime.state_dir = dir;
     }
     if let Some(n) = args.thrusters {
-        anyhow::ensure!(
-            (1..=MAX_THRUSTERS).contains(&n),
-            "--thrusters {n}: must be 1..{MAX_THRUSTERS}"
-        );
-        cfg.vehicle.thrusters = n;
-        cfg.vehicle.thruster.clear();
+        crate::config_file::set_thrusters(&mut cfg, n)?;
     }
     if let Some(spin) = args.spin_us {
         cfg.runtime.spin_us = spin;
