@@ -8,7 +8,17 @@
 //! ```
 //!
 //! Kinds: `rotate` (axis/angle in the body frame), `set_direction`, `move`, `remove`, `add`
-//! (with a full `spec`, as a `[[thruster]]` of a vehicle file), `kill` (dead, no thrust).
+//! (with a full `spec`, as a `[[thruster]]` of a vehicle file), `kill` (dead, no thrust),
+//! `weaken` (thrust times `factor`), and `degrade` (thrust falls linearly to `to` of what it
+//! was over `over_s`: a fouled propeller or a tired motor; never announced, expanded into
+//! `weaken` steps every [`DEGRADE_STEP_S`]):
+//!
+//! ```toml
+//! [[event]]
+//! t_s = 30.0
+//! announce = false
+//! action = { kind = "degrade", thruster = "L", to = 0.7, over_s = 60 }
+//! ```
 //! This module only schedules: [`Scenario::due`] hands out the events whose time has come, the
 //! simulator applies them ([`crate::Simulator::apply`]) and the driver publishes announced ones.
 
@@ -46,7 +56,20 @@ pub enum Action {
     Add { spec: ThrusterSpec },
     /// The thruster stops producing thrust (it stays in the command vector).
     Kill { thruster: String },
+    /// Forward and reverse thrust multiplied by `factor` (> 0).
+    Weaken { thruster: String, factor: f64 },
+    /// Thrust falls linearly to `to` (0 < to <= 1) times its value at `t_s`, reached `over_s`
+    /// later. [`Scenario::new`] turns it into `weaken` steps; it must not be announced.
+    Degrade {
+        thruster: String,
+        to: f64,
+        over_s: f64,
+    },
 }
+
+/// Time between the `weaken` steps of a `degrade`, s: 10 steps a second is smooth for a
+/// controller and an estimator working over seconds.
+pub const DEGRADE_STEP_S: f64 = 0.1;
 
 impl Action {
     /// Name of the thruster the action concerns.
@@ -56,7 +79,9 @@ impl Action {
             | Action::SetDirection { thruster, .. }
             | Action::Move { thruster, .. }
             | Action::Remove { thruster }
-            | Action::Kill { thruster } => thruster,
+            | Action::Kill { thruster }
+            | Action::Weaken { thruster, .. }
+            | Action::Degrade { thruster, .. } => thruster,
             Action::Add { spec } => &spec.name,
         }
     }
@@ -91,6 +116,31 @@ impl Action {
             }
             Action::Add { spec } => spec.validate(origin, &format!("{key}.spec"))?,
             Action::Remove { .. } | Action::Kill { .. } => {}
+            Action::Weaken { factor, .. } => {
+                if !(factor.is_finite() && *factor > 0.0) {
+                    return Err(LoadError::invalid(
+                        origin,
+                        format!("{key}.factor"),
+                        format!("must be > 0, got {factor}"),
+                    ));
+                }
+            }
+            Action::Degrade { to, over_s, .. } => {
+                if !(to.is_finite() && *to > 0.0 && *to <= 1.0) {
+                    return Err(LoadError::invalid(
+                        origin,
+                        format!("{key}.to"),
+                        format!("must be in (0, 1], got {to}"),
+                    ));
+                }
+                if !(over_s.is_finite() && *over_s > 0.0 && *over_s <= 86_400.0) {
+                    return Err(LoadError::invalid(
+                        origin,
+                        format!("{key}.over_s"),
+                        format!("must be in (0, 86400] s, got {over_s}"),
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -121,6 +171,31 @@ impl Event {
     }
 }
 
+/// A `degrade` as its `weaken` steps (each the ratio of two successive points of the linear
+/// ramp, so their product follows it); any other event as itself.
+fn expand(e: Event) -> Vec<Event> {
+    let Action::Degrade {
+        thruster,
+        to,
+        over_s,
+    } = &e.action
+    else {
+        return vec![e];
+    };
+    let steps = (over_s / DEGRADE_STEP_S).ceil().max(1.0) as usize;
+    let level = |k: usize| 1.0 - (1.0 - to) * k as f64 / steps as f64;
+    (1..=steps)
+        .map(|k| Event {
+            t_s: e.t_s + over_s * k as f64 / steps as f64,
+            announce: false,
+            action: Action::Weaken {
+                thruster: thruster.clone(),
+                factor: level(k) / level(k - 1),
+            },
+        })
+        .collect()
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ScenarioFile {
@@ -148,7 +223,15 @@ impl Scenario {
                 ));
             }
             e.action.validate(origin, &format!("{key}.action"))?;
+            if e.announce && matches!(e.action, Action::Degrade { .. }) {
+                return Err(LoadError::invalid(
+                    origin,
+                    format!("{key}.announce"),
+                    "a degrade is gradual and never announced: set announce = false",
+                ));
+            }
         }
+        let mut events: Vec<Event> = events.into_iter().flat_map(expand).collect();
         events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
         Ok(Scenario { events, next: 0 })
     }
@@ -229,6 +312,39 @@ spec = { name = "X", position_m = [0, 0.2, 0], direction = [0, 1, 0] }
         assert_eq!(s.remaining(), 0);
         s.rewind();
         assert_eq!(s.remaining(), 3);
+    }
+
+    #[test]
+    fn a_degrade_is_a_linear_ramp_of_silent_weaken_steps() {
+        let text = r#"
+[[event]]
+t_s = 10.0
+announce = false
+action = { kind = "degrade", thruster = "L", to = 0.7, over_s = 60 }
+"#;
+        let s = Scenario::from_toml_str(text, "d.toml").expect("valid");
+        assert_eq!(s.events().len(), 600);
+        let mut strength = 1.0;
+        for (k, e) in s.events().iter().enumerate() {
+            let Action::Weaken { thruster, factor } = &e.action else {
+                panic!("{e:?}")
+            };
+            assert_eq!(thruster, "L");
+            assert!(!e.announce);
+            strength *= factor;
+            // Linear in time: 1 at t = 10 s, 0.7 at t = 70 s.
+            let expected = 1.0 - 0.3 * (e.t_s - 10.0) / 60.0;
+            assert!((strength - expected).abs() < 1e-12, "step {k}: {strength}");
+        }
+        assert!((s.events()[599].t_s - 70.0).abs() < 1e-9);
+        // Announced, or a level outside (0, 1]: refused, naming the key.
+        let loud = text.replace("announce = false\n", "");
+        let err = Scenario::from_toml_str(&loud, "d").unwrap_err().to_string();
+        assert!(err.contains("event[0].announce"), "{err}");
+        let err = Scenario::from_toml_str(&text.replace("0.7", "1.5"), "d")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("event[0].action.to"), "{err}");
     }
 
     #[test]

@@ -143,6 +143,8 @@ pub enum ChangeKind {
     Removed,
     /// A thruster became dead.
     Killed,
+    /// A thruster's thrust was scaled (weaken).
+    Weakened,
 }
 
 /// Result of [`Simulator::apply`].
@@ -355,6 +357,27 @@ impl Simulator {
                     index: i,
                     thruster_count: self.thrusters.len(),
                 }
+            }
+            Action::Weaken { thruster, factor } => {
+                let i = find(thruster)?;
+                let mut spec = self.vehicle.thrusters[i].clone();
+                spec.forward_max_n *= factor;
+                spec.reverse_max_n *= factor;
+                self.replace_spec(i, spec, origin)?;
+                Change {
+                    kind: ChangeKind::Weakened,
+                    index: i,
+                    thruster_count: self.thrusters.len(),
+                }
+            }
+            Action::Degrade { .. } => {
+                // Expanded into `weaken` steps when the scenario is made: applied at once,
+                // it would be a step, not a degradation.
+                return Err(SimError::Config(LoadError::invalid(
+                    origin,
+                    "kind",
+                    "a degrade is applied as its weaken steps (made by Scenario::new)",
+                )));
             }
             Action::Remove { thruster } => {
                 let i = find(thruster)?;

@@ -81,7 +81,12 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     let out = ctl(&world, &["model", "--json"]);
     expect_code(&out, 0, "model --json");
     let m: Value = serde_json::from_slice(&out.stdout).expect("model JSON");
-    assert_eq!(m["version"], 1);
+    // Version 1, or a later one the continuous refinement made from it while holding.
+    let version = m["version"].as_u64().unwrap_or(0);
+    assert!(version >= 1, "{m}");
+    if version > 1 {
+        assert!(m["provenance"].as_str().unwrap().contains("refined"), "{m}");
+    }
     assert_eq!(m["count"], 5);
     let eff = m["effectiveness"].as_array().unwrap();
     assert_eq!(eff.len(), 6);
@@ -94,7 +99,7 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     // with all 38 terms, for this model's version.
     assert_eq!(m["method"], "Dynamic", "{m}");
     let d = &m["dynamics"];
-    assert_eq!(d["model_version"], 1, "{m}");
+    assert_eq!(d["model_version"], m["version"], "{m}");
     for row in ["roll", "pitch", "yaw", "surge", "sway", "heave"] {
         let terms = d["per_row_term_value_and_std_err"][row].as_object();
         assert_eq!(terms.map(|t| t.len()), Some(38), "{row}: {d}");
@@ -139,9 +144,26 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
         ],
     );
     expect_code(&out, 0, "reconfigure");
-    wait_status(&world, "a reaction to the reconfiguration", |v| {
-        v["model_version"].as_u64().unwrap_or(0) > 1 || v["state"] != "Active"
-    });
+    // The nominal model of the declared geometry swaps in at once (a refinement may have
+    // bumped the version before, so the version alone proves nothing).
+    let start = Instant::now();
+    loop {
+        let out = ctl(&world, &["model", "--json"]);
+        let m: Value = serde_json::from_slice(&out.stdout).unwrap_or(Value::Null);
+        if m["source"] == "Nominal"
+            || m["provenance"]
+                .as_str()
+                .is_some_and(|p| p.contains("nominal"))
+        {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "no nominal model after the reconfiguration: {m}\n{}",
+            daemon.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
 
     let out = ctl(&world, &["shutdown"]);
     expect_code(&out, 0, "shutdown");

@@ -56,6 +56,9 @@ pub struct Model {
     /// excursion while it was learned; None for other methods and for models from a file
     /// (the state directory keeps B only).
     pub dynamics: Option<DynamicTerms>,
+    /// Times the continuous refinement has updated it since it was estimated (0: as solved).
+    /// `made_t_ns` is then the last update's time.
+    pub refinements: u32,
 }
 
 /// Why a candidate model was not swapped in.
@@ -117,6 +120,7 @@ impl Model {
             pulses: e.pulses,
             loaded_from: None,
             dynamics: e.dynamics.clone(),
+            refinements: 0,
             version: 0,
             source: ModelSource::Estimated,
             method: e.method,
@@ -142,6 +146,7 @@ impl Model {
             pulses: 0,
             loaded_from: None,
             dynamics: None,
+            refinements: 0,
             version: 0,
             source: ModelSource::Nominal,
             method: Method::Forward,
@@ -243,7 +248,12 @@ impl Model {
             } else {
                 String::new()
             };
-            format!("estimated{at}{pulses}")
+            let refined = match self.refinements {
+                0 => String::new(),
+                1 => ", refined once under control".to_string(),
+                k => format!(", refined {k} times under control"),
+            };
+            format!("estimated{at}{pulses}{refined}")
         } else {
             "nominal, from the declared geometry".to_string()
         };

@@ -54,6 +54,9 @@ struct ModelFile {
     /// Pulses of the estimation that made it; 0 for a nominal model (absent in older files).
     #[serde(default)]
     pulses: usize,
+    /// Times the continuous refinement updated it (absent in older files: 0).
+    #[serde(default)]
+    refinements: u32,
 }
 
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -92,6 +95,7 @@ pub fn to_json(model: &Model) -> String {
         made_t_ns: model.made_t_ns,
         estimated: Some(model.estimated),
         pulses: model.pulses,
+        refinements: model.refinements,
     };
     // Plain data with string keys: serialisation cannot fail.
     serde_json::to_string_pretty(&file).unwrap_or_default()
@@ -171,6 +175,7 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
         pulses: f.pulses,
         loaded_from: Some(origin.to_string()),
         dynamics: None,
+        refinements: f.refinements,
     })
 }
 

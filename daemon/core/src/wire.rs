@@ -82,6 +82,7 @@ pub fn model_msg(seq: u64, model: &Model) -> ModelMsg {
         version: model.version,
         t_ns: model.made_t_ns,
         pulses: u32::try_from(model.pulses).unwrap_or(u32::MAX),
+        refinements: model.refinements,
         count: n as u32,
         actuated: model.actuated.bits() as u32,
         rel_err_rot: known(model.rel_err_rot),

@@ -159,7 +159,7 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
     let inbox = daemon.inbox::<ModelMsg>()?;
     let dynamics_inbox = daemon.inbox::<DynamicsMsg>()?;
     daemon.ensure_running()?;
-    let Some(model) = wait_latest(&inbox, daemon.timeout())? else {
+    let Some(mut model) = wait_latest(&inbox, daemon.timeout())? else {
         return Err(Failure::new(
             exit::TIMEOUT,
             format!(
@@ -179,12 +179,32 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
             model.source(),
             Ok(ModelSource::Estimated) | Ok(ModelSource::Cache)
         );
-    let dynamics = if has_dynamics {
-        wait_latest(&dynamics_inbox, daemon.timeout())?
-            .filter(|d| d.model_version == model.version && d.validate().is_ok())
-    } else {
-        None
-    };
+    let mut dynamics = None;
+    if has_dynamics {
+        // The daemon may swap in a newer version between the two reads (the refinement does
+        // every few seconds while it controls): then read the model again, so the pair
+        // printed belongs together. A few rounds at most; each waits at most the timeout.
+        for _ in 0..4 {
+            match wait_latest(&dynamics_inbox, daemon.timeout())? {
+                Some(d) if d.model_version > model.version => {
+                    match wait_latest(&inbox, daemon.timeout())? {
+                        Some(newer) => model = newer,
+                        None => break,
+                    }
+                    if d.model_version == model.version && d.validate().is_ok() {
+                        dynamics = Some(d);
+                        break;
+                    }
+                }
+                Some(d) => {
+                    dynamics =
+                        (d.model_version == model.version && d.validate().is_ok()).then_some(d);
+                    break;
+                }
+                None => break,
+            }
+        }
+    }
     if json {
         let mut v = serde_json::to_value(ModelJson::from(&model))?;
         if let Some(d) = &dynamics {

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use clap::Args;
 use iceoryx2::prelude::CallbackProgression;
-use tracing::{error, info, warn};
+use tracing::{debug, error, info, warn};
 
 use crate::store;
 use thruster_protocol::services::{
@@ -57,6 +57,8 @@ pub struct RunArgs {
     estimate: bool,
 }
 
+/// Least vehicle time between two saves of a refined model, ns (a minute).
+const REFINED_SAVE_EVERY_NS: u64 = 60_000_000_000;
 /// In low-latency mode, other inputs and status are looked at least this often.
 const HOUSEKEEPING: Duration = Duration::from_millis(1);
 /// How long an operator's `save` request may wait for the saving thread inside the loop: a
@@ -140,6 +142,9 @@ struct Daemon {
     /// Why the model in use is not on disk (the last save to `model_path` failed), until a
     /// save there succeeds: appended to the status text, so an operator sees it without the log.
     save_error: Option<String>,
+    /// Vehicle time of the last refined model saved, ns: refinements (every 5-30 s) are
+    /// saved at most every [`REFINED_SAVE_EVERY_NS`], not to wear a vehicle's flash.
+    refined_saved_t_ns: Option<u64>,
     /// Saves run here, off the loop (see `saver`).
     saver: crate::saver::Saver,
     thrust_seq: u64,
@@ -208,6 +213,7 @@ impl Daemon {
             refused,
             missed: 0,
             save_error: None,
+            refined_saved_t_ns: None,
             saver: crate::saver::Saver::spawn().context("starting the model-saving thread")?,
             thrust_seq: 0,
             status_seq: 0,
@@ -775,9 +781,20 @@ impl Daemon {
         for event in events {
             match event {
                 Event::ModelSwapped(model) => {
-                    info!(version = model.version, source = ?model.source, actuated = ?model.actuated.names(), "model swapped in");
+                    if model.refinements == 0 {
+                        info!(version = model.version, source = ?model.source, actuated = ?model.actuated.names(), "model swapped in");
+                    } else {
+                        debug!(
+                            version = model.version,
+                            refinements = model.refinements,
+                            rel_err_rot = model.rel_err_rot,
+                            "model refined"
+                        );
+                    }
                     self.publish_model(model_out, &model);
-                    if model.source == thrusterd_core::model::ModelSource::Estimated {
+                    if model.source == thrusterd_core::model::ModelSource::Estimated
+                        && self.refined_save_due(&model)
+                    {
                         self.save(&model);
                     }
                 }
@@ -839,6 +856,22 @@ impl Daemon {
 
     /// Queues a save of `model` to the state directory; the outcome comes back through
     /// [`Daemon::poll_saves`]. Never blocks the loop.
+    /// A new estimate is always saved; a refinement of one only when the last refined save
+    /// is [`REFINED_SAVE_EVERY_NS`] old.
+    fn refined_save_due(&mut self, model: &thrusterd_core::model::Model) -> bool {
+        if model.refinements == 0 {
+            self.refined_saved_t_ns = None;
+            return true;
+        }
+        let due = self
+            .refined_saved_t_ns
+            .is_none_or(|t| model.made_t_ns.saturating_sub(t) >= REFINED_SAVE_EVERY_NS);
+        if due {
+            self.refined_saved_t_ns = Some(model.made_t_ns);
+        }
+        due
+    }
+
     fn save(&mut self, model: &thrusterd_core::model::Model) {
         let path = self.model_path.clone();
         self.saver.submit(model, &path);

@@ -77,8 +77,12 @@ pub struct ModelMsg {
     pub rel_err_acc: f64,
     /// Pulses of the estimation that made the model; 0 for a nominal one. (v2)
     pub pulses: u32,
-    /// Padding, written as zero. (v2)
-    pub reserved: u32,
+    /// Times the daemon's continuous refinement has updated this model since it was
+    /// estimated (0: as solved). A refined model comes with a new `version` like any swap;
+    /// this tells it from a new estimation. (This was the padding field `reserved`, always
+    /// written as zero: the layout is unchanged, and recordings of an older daemon read 0.)
+    #[serde(alias = "reserved")]
+    pub refinements: u32,
     /// Where the model came from, in words: "estimated at vehicle time 16.5 s from 16
     /// pulses", "loaded from /var/lib/thrusterd/model.json (...)", "nominal, from the
     /// declared geometry". (v2)

@@ -92,7 +92,7 @@ pub fn reconfig_kind(kind: ChangeKind) -> ReconfigKind {
         ChangeKind::Moved => ReconfigKind::ThrusterMoved,
         ChangeKind::Added => ReconfigKind::ThrusterAdded,
         ChangeKind::Removed => ReconfigKind::ThrusterRemoved,
-        ChangeKind::Killed => ReconfigKind::Unknown,
+        ChangeKind::Killed | ChangeKind::Weakened => ReconfigKind::Unknown,
     }
 }
 
@@ -111,7 +111,7 @@ pub fn reconfig_event(seq: u64, change: &Change, vehicle: &Vehicle) -> ReconfigE
         ..ReconfigEvent::default()
     };
     ev.set_kind(kind);
-    if change.kind != ChangeKind::Killed {
+    if !matches!(change.kind, ChangeKind::Killed | ChangeKind::Weakened) {
         ev.has_geometry = 1;
         let cg = vehicle.body.cg_m;
         for (i, t) in vehicle.thrusters.iter().take(MAX_THRUSTERS).enumerate() {

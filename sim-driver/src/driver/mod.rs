@@ -661,5 +661,7 @@ pub fn action_name(action: &Action) -> &'static str {
         Action::Remove { .. } => "remove",
         Action::Add { .. } => "add",
         Action::Kill { .. } => "kill",
+        Action::Weaken { .. } => "weaken",
+        Action::Degrade { .. } => "degrade",
     }
 }

@@ -961,8 +961,32 @@ impl Machine {
             self.on_mismatch(s.t_ns, m.to_string());
         } else if let Some(v) = verdict.filter(|v| v.changed) {
             self.on_mismatch(s.t_ns, v.to_string());
+        } else if let Some(fused) = self.refiner.take_refined() {
+            self.install_refined(fused.model);
         }
         cmd
+    }
+
+    /// A model the continuous refinement updated: checked like every other and swapped in.
+    /// The monitor and the refiner keep going: the model moved by a window's worth of drift,
+    /// not to a new vehicle.
+    fn install_refined(&mut self, model: Model) {
+        match self.models.swap(
+            model,
+            ModelSource::Estimated,
+            self.n,
+            self.setup.machine.max_swap_rel_err,
+        ) {
+            Ok(installed) => {
+                if let Some(k) = installed.geometry_key {
+                    self.models.remember_current(k);
+                }
+                self.events.push(Event::ModelSwapped(Box::new(installed)));
+            }
+            Err(e) => self
+                .events
+                .push(Event::ModelRejected(format!("refined model: {e}"))),
+        }
     }
 
     /// The monitor found the thrusters doing something else than the model says.

@@ -1,0 +1,201 @@
+//! The continuous refinement's model update (`refinement.update`), in one process against the
+//! simulator's truth: while the machine holds AMOUR-5 through pitch manoeuvres, a thruster
+//! loses 30 % of its thrust over a minute (the simulator's `degrade`), and the model in force
+//! must follow it without a re-estimation; on an unchanged vehicle the updates must not make
+//! the model worse.
+mod common;
+use common::{rel_err, Run};
+use nalgebra::UnitQuaternion;
+use thruster_sim::{NoisePreset, Scenario};
+use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
+
+fn holding(noise: NoisePreset, seed: u64, update: bool, rate_hz: f64) -> Run {
+    let mut run = Run::with_rate("amour5", noise, seed, rate_hz);
+    let mut setup = MachineSetup {
+        thrusters: 5,
+        ..MachineSetup::default()
+    };
+    setup.machine.deadband = 0.05;
+    setup.refinement.update = update;
+    if let Ok(v) = std::env::var("RU_SCALE") {
+        setup.refinement.window_se_scale = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("RU_DRIFT") {
+        setup.refinement.drift_per_sqrt_s = v.parse().unwrap();
+    }
+    run.machine = Machine::new(setup);
+    run.run_for(1.0);
+    run.estimate();
+    run.machine.take_events();
+    run
+}
+
+/// What a run did: the model's error against the truth at the end, and what happened.
+#[derive(Debug)]
+struct Tracked {
+    err_rot_start: f64,
+    err_rot: f64,
+    err_acc: f64,
+    refinements: u32,
+    mismatches: usize,
+    /// Each window's (rotation bound, length in s).
+    windows: Vec<(f64, f64)>,
+}
+
+/// Holds through pitch steps of +-10 deg every 5 s for `seconds`, applying the scenario's
+/// events as they fall due (times from the start of this call).
+fn fly(run: &mut Run, mut scenario: Scenario, seconds: f64) -> Tracked {
+    let yaw = run.sim.roll_pitch_yaw()[2];
+    let depth = run.sim.position_ned().z;
+    let start = run.sim.time_s();
+    let model = |run: &Run| run.machine.model().expect("a model").clone();
+    let err_rot_start = rel_err(&model(run).effectiveness, &run.truth(), 0);
+    let mut step = 0;
+    let mut mismatches = 0;
+    let mut windows = Vec::new();
+    while run.sim.time_s() - start < seconds {
+        let t = run.sim.time_s() - start;
+        if t >= 5.0 * step as f64 {
+            let p: f64 = [10.0, -10.0][step % 2];
+            run.machine.on_setpoint(
+                UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw),
+                Some(depth),
+            );
+            step += 1;
+        }
+        let due: Vec<_> = scenario.due((t * 1e9) as u64).to_vec();
+        for e in due {
+            run.sim.apply(&e.action).unwrap();
+        }
+        let before = run.machine.refinement().copied();
+        run.tick();
+        if let Some(v) = run
+            .machine
+            .refinement()
+            .copied()
+            .filter(|v| Some(*v) != before)
+        {
+            windows.push((v.rel_err_rot, v.window_s));
+        }
+        for e in run.machine.take_events() {
+            if matches!(e, Event::MismatchDetected(_)) {
+                mismatches += 1;
+            }
+        }
+    }
+    let m = model(run);
+    Tracked {
+        err_rot_start,
+        err_rot: rel_err(&m.effectiveness, &run.truth(), 0),
+        err_acc: rel_err(&m.effectiveness, &run.truth(), 3),
+        refinements: m.refinements,
+        mismatches,
+        windows,
+    }
+}
+
+fn degrade(thruster: &str) -> Scenario {
+    let text = format!(
+        "[[event]]\nt_s = 10\nannounce = false\naction = {{ kind = \"degrade\", thruster = \"{thruster}\", to = 0.7, over_s = 60 }}\n"
+    );
+    Scenario::from_toml_str(&text, "degrade").unwrap()
+}
+
+/// The sweep behind the settings (prints; run with --ignored --nocapture).
+#[test]
+#[ignore]
+fn update_sweep() {
+    for noise in [
+        NoisePreset::None,
+        NoisePreset::Realistic,
+        NoisePreset::Paper,
+    ] {
+        for thruster in ["L", "T"] {
+            for update in [false, true] {
+                for seed in [1, 2] {
+                    let mut run = holding(noise, seed, update, 200.0);
+                    let r = fly(&mut run, degrade(thruster), 100.0);
+                    println!(
+                        "{noise:?} {thruster} update={update} seed {seed}: {r:?} state {:?}",
+                        run.machine.state()
+                    );
+                }
+            }
+        }
+        for seed in [1, 2] {
+            let mut run = holding(noise, seed, true, 200.0);
+            let r = fly(&mut run, Scenario::default(), 180.0);
+            let w: Vec<String> = r
+                .windows
+                .iter()
+                .map(|(e, s)| format!("{e:.3}/{s:.0}s"))
+                .collect();
+            println!(
+                "{noise:?} unchanged seed {seed}: rot {:.3} -> {:.3}, acc {:.3}, {} refinements; windows {}",
+                r.err_rot_start, r.err_rot, r.err_acc, r.refinements, w.join(" ")
+            );
+        }
+    }
+}
+
+/// Noise-free first, then a realistic IMU (seeds 1, 2), thrusters L and T: the model follows
+/// a 30 % loss over a minute by refinements alone (no mismatch, no re-estimation) and ends,
+/// 30 s after the loss is complete, within 0.05 of the truth (the bound). Measured:
+/// noise-free 0.029 / 0.023 (L) and 0.026 / 0.023 (T); realistic 0.019-0.027 / 0.030-0.040.
+/// Without updates the same runs end 0.12-0.15 off at the paper's noise, and with a realistic
+/// IMU the monitor re-estimates instead.
+#[test]
+fn a_thruster_losing_30_percent_in_a_minute_is_followed_without_a_re_estimation() {
+    let cases = [
+        (NoisePreset::None, "L", 1),
+        (NoisePreset::None, "T", 1),
+        (NoisePreset::Realistic, "L", 1),
+        (NoisePreset::Realistic, "L", 2),
+        (NoisePreset::Realistic, "T", 1),
+        (NoisePreset::Realistic, "T", 2),
+    ];
+    for (noise, thruster, seed) in cases {
+        let mut run = holding(noise, seed, true, 200.0);
+        let r = fly(&mut run, degrade(thruster), 100.0);
+        let what = format!("{noise:?} {thruster} seed {seed}: {r:?}");
+        println!("{what}");
+        assert_eq!(r.mismatches, 0, "{what}");
+        assert_eq!(run.machine.state(), State::Active, "{what}");
+        // A window every 5 s, each folded in.
+        assert!(r.refinements >= 10, "{what}");
+        assert!(r.err_rot <= 0.05 && r.err_acc <= 0.05, "{what}");
+    }
+}
+
+/// On an unchanged vehicle the updates may not make the model much worse: with a realistic
+/// IMU it stays within 0.05 (measured 0.013 -> 0.013 and 0.016 -> 0.033; the closed-loop
+/// windows' own bias, 0.015 -> 0.024 noise-free, is the floor); at the paper's noise no
+/// window is confident enough to update it (windows end at their 0.15 bound, above
+/// `update_rel_err`), so the model stays as learned.
+#[test]
+fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
+    for seed in [1, 2] {
+        let mut run = holding(NoisePreset::Realistic, seed, true, 200.0);
+        let r = fly(&mut run, Scenario::default(), 180.0);
+        assert_eq!(r.mismatches, 0, "seed {seed}: {r:?}");
+        assert!(r.refinements >= 20, "seed {seed}: {r:?}");
+        assert!(r.err_rot <= 0.05 && r.err_acc <= 0.05, "seed {seed}: {r:?}");
+        // The published bound shrank with the evidence, and the model passes every check.
+        let m = run.machine.model().unwrap();
+        assert!(
+            m.rel_err_rot.is_finite() && m.rel_err_rot < 0.1,
+            "{}",
+            m.rel_err_rot
+        );
+        assert!(m.provenance().contains("refined"), "{}", m.provenance());
+    }
+    let mut run = holding(NoisePreset::Paper, 1, true, 200.0);
+    let before = run.machine.model().unwrap().clone();
+    let r = fly(&mut run, Scenario::default(), 180.0);
+    assert_eq!(r.refinements, 0, "{r:?}");
+    assert!(r.windows.len() >= 5, "the refinement judged: {r:?}");
+    assert_eq!(
+        run.machine.model().unwrap().effectiveness,
+        before.effectiveness
+    );
+}
