@@ -304,7 +304,9 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
                     change: Some((t_change, true)),
                     monitor: "report",
                     plan: Plan {
-                        steps: steps(&[("level", [0.0; 3], 5.0)]),
+                        // The entry, then level again and again (a plan repeats the steps
+                        // after its first).
+                        steps: steps(&[("level", [0.0; 3], 4.0), ("level", [0.0; 3], 5.0)]),
                         ..swap.plan.clone()
                     },
                     ..swap.clone()
