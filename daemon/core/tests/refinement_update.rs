@@ -8,8 +8,19 @@ use common::{rel_err, Run};
 use nalgebra::UnitQuaternion;
 use thruster_sim::{NoisePreset, Scenario};
 use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
+use thrusterd_core::refinement::RefinementConfig;
 
 fn holding(noise: NoisePreset, seed: u64, update: bool, rate_hz: f64) -> Run {
+    holding_tuned(noise, seed, update, rate_hz, |_| {})
+}
+
+fn holding_tuned(
+    noise: NoisePreset,
+    seed: u64,
+    update: bool,
+    rate_hz: f64,
+    tune: impl FnOnce(&mut RefinementConfig),
+) -> Run {
     let mut run = Run::with_rate("amour5", noise, seed, rate_hz);
     let mut setup = MachineSetup {
         thrusters: 5,
@@ -17,12 +28,7 @@ fn holding(noise: NoisePreset, seed: u64, update: bool, rate_hz: f64) -> Run {
     };
     setup.machine.deadband = 0.05;
     setup.refinement.update = update;
-    if let Ok(v) = std::env::var("RU_SCALE") {
-        setup.refinement.window_se_scale = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("RU_DRIFT") {
-        setup.refinement.drift_per_sqrt_s = v.parse().unwrap();
-    }
+    tune(&mut setup.refinement);
     run.machine = Machine::new(setup);
     run.run_for(1.0);
     run.estimate();
@@ -101,10 +107,20 @@ fn degrade(thruster: &str) -> Scenario {
     Scenario::from_toml_str(&text, "degrade").unwrap()
 }
 
-/// The sweep behind the settings (prints; run with --ignored --nocapture).
+/// The sweep behind the settings (prints; run with --ignored --nocapture; `RU_SCALE` and
+/// `RU_DRIFT` set `window_se_scale` and `drift_per_sqrt_s`).
 #[test]
 #[ignore]
 fn update_sweep() {
+    let tune = |r: &mut RefinementConfig| {
+        if let Ok(v) = std::env::var("RU_SCALE") {
+            r.window_se_scale = v.parse().expect("RU_SCALE is a number");
+        }
+        if let Ok(v) = std::env::var("RU_DRIFT") {
+            r.drift_per_sqrt_s = v.parse().expect("RU_DRIFT is a number");
+        }
+    };
+    let holding = |noise, seed, update, rate| holding_tuned(noise, seed, update, rate, tune);
     for noise in [
         NoisePreset::None,
         NoisePreset::Realistic,
