@@ -3,17 +3,23 @@
 
 Usage: read_mcap.py FILE.mcap [FILE-0001.mcap ...]
        read_mcap.py --messages TOPIC FILE.mcap [...]   (every message of TOPIC, decoded, as a JSON list)
+       read_mcap.py --recover FILE.mcap [...]   (what a linear read recovers from each file)
 
 Per channel (topic): schema name and encoding, message encoding, whether the schema parses as
 JSON, message count, first and last log/publish times, whether log and publish times never go
 backwards (in file order), and the first/last `seq` of the JSON messages and whether they are
 contiguous. Also every metadata record. Used by tests/tests/recording.rs.
+
+--recover: each file read from its start (no index needed), chunk CRCs checked, until its end
+or the first error (a file cut short by a full disk has no summary and ends in a partial
+chunk): per file the messages per topic, whether it read to its end, and the error that
+stopped it; the IMU's `seq` over all files and whether it is contiguous.
 """
 
 import json
 import sys
 
-from mcap.reader import make_reader
+from mcap.reader import NonSeekingReader, make_reader
 
 
 def summarise(paths):
@@ -81,6 +87,40 @@ def messages(topic, paths):
     return out
 
 
+def recover(paths):
+    files = []
+    imu = {"first_seq": None, "last_seq": None, "seq_contiguous": True}
+    for path in paths:
+        topics = {}
+        error = None
+        with open(path, "rb") as f:
+            reader = NonSeekingReader(f, validate_crcs=True)
+            try:
+                for _schema, channel, message in reader.iter_messages(
+                    log_time_order=False
+                ):
+                    topics[channel.topic] = topics.get(channel.topic, 0) + 1
+                    if channel.topic == "imu":
+                        seq = json.loads(message.data)["seq"]
+                        if imu["first_seq"] is None:
+                            imu["first_seq"] = seq
+                        elif seq != imu["last_seq"] + 1:
+                            imu["seq_contiguous"] = False
+                        imu["last_seq"] = seq
+            except Exception as e:  # noqa: BLE001 - where the readable part ends, and why
+                error = f"{type(e).__name__}: {e}"
+        files.append(
+            {
+                "path": path,
+                "messages": sum(topics.values()),
+                "topics": topics,
+                "complete": error is None,
+                "error": error,
+            }
+        )
+    return {"files": files, "messages": sum(f["messages"] for f in files), "imu": imu}
+
+
 if __name__ == "__main__":
     if len(sys.argv) < 2:
         sys.exit(__doc__)
@@ -88,6 +128,12 @@ if __name__ == "__main__":
         if len(sys.argv) < 4:
             sys.exit(__doc__)
         json.dump(messages(sys.argv[2], sys.argv[3:]), sys.stdout)
+        print()
+        sys.exit(0)
+    if sys.argv[1] == "--recover":
+        if len(sys.argv) < 3:
+            sys.exit(__doc__)
+        json.dump(recover(sys.argv[2:]), sys.stdout, indent=1, sort_keys=True)
         print()
         sys.exit(0)
     json.dump(summarise(sys.argv[1:]), sys.stdout, indent=1, sort_keys=True)

@@ -14,6 +14,7 @@ use thruster_protocol::{
     ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
 };
 
+pub mod mount;
 pub mod node;
 pub mod python;
 pub mod soak;

@@ -82,45 +82,42 @@ pub fn venv_python() -> PathBuf {
     python
 }
 
-/// tests/python/read_mcap.py's JSON summary of `files` (one recording, in order).
-pub fn read_mcap(files: &[PathBuf]) -> Value {
-    let python = venv_python();
-    let mut cmd = Command::new(python);
-    cmd.arg(workspace().join("tests/python/read_mcap.py"))
-        .args(files);
-    let out = cmd.output().expect("running read_mcap.py");
-    assert!(
-        out.status.success(),
-        "read_mcap.py {files:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "read_mcap.py printed no JSON ({e}): {}",
-            String::from_utf8_lossy(&out.stdout)
-        )
-    })
-}
-
-/// Every message of `topic` in `files`, decoded by Python's `mcap` and `json` (read_mcap.py
-/// --messages): what a recording holds, read without our code.
-pub fn mcap_messages(files: &[PathBuf], topic: &str) -> Vec<Value> {
+/// tests/python/read_mcap.py run with `args` then `files`: its JSON output.
+fn reader(args: &[&str], files: &[PathBuf]) -> Value {
     let python = venv_python();
     let out = Command::new(python)
         .arg(workspace().join("tests/python/read_mcap.py"))
-        .args(["--messages", topic])
+        .args(args)
         .args(files)
         .output()
         .expect("running read_mcap.py");
     assert!(
         out.status.success(),
-        "read_mcap.py --messages {topic} {files:?} failed: {}",
+        "read_mcap.py {args:?} {files:?} failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
         panic!(
-            "read_mcap.py --messages printed no JSON list ({e}): {}",
+            "read_mcap.py {args:?} printed no JSON ({e}): {}",
             String::from_utf8_lossy(&out.stdout)
         )
     })
+}
+
+/// tests/python/read_mcap.py's JSON summary of `files` (one recording, in order).
+pub fn read_mcap(files: &[PathBuf]) -> Value {
+    reader(&[], files)
+}
+
+/// Every message of `topic` in `files`, decoded by Python's `mcap` and `json` (read_mcap.py
+/// --messages): what a recording holds, read without our code.
+pub fn mcap_messages(files: &[PathBuf], topic: &str) -> Vec<Value> {
+    serde_json::from_value(reader(&["--messages", topic], files))
+        .expect("read_mcap.py --messages prints a JSON list")
+}
+
+/// What Python's `mcap` recovers from `files` read from their start up to the first error
+/// (read_mcap.py --recover): the messages of files cut short (no summary), CRC-checked.
+pub fn recover_mcap(files: &[PathBuf]) -> Value {
+    reader(&["--recover"], files)
 }

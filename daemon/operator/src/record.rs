@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use thruster_protocol::services::{check_access, owns_root, IpcConfig, IpcError, TidyOnDrop};
-use thruster_recorder::RecordOptions;
+use thruster_recorder::{RecordError, RecordOptions};
 
 use crate::client::Target;
 use crate::console::say;
@@ -59,7 +59,9 @@ pub fn options(
 
 /// Records `target`'s namespace until `stop` (Ctrl-C/SIGTERM) or the duration; prints the
 /// summary line (counts and losses) at the end. A daemon need not run: the recorder waits for
-/// whatever is published.
+/// whatever is published. A write error (a full disk) ends the recording at once: the summary
+/// line (how many messages reached the files) is printed, then the error naming the file and
+/// the OS error (exit 1).
 pub fn run(target: &Target, options: &RecordOptions, stop: Arc<AtomicBool>) -> Result<()> {
     let ipc = IpcConfig::with_root_base(&target.namespace, &target.root_base)
         .map_err(|e| Failure::usage(format!("--namespace/--ipc-root: {e}")))?;
@@ -75,8 +77,17 @@ pub fn run(target: &Target, options: &RecordOptions, stop: Arc<AtomicBool>) -> R
     // Declared before the recording's node, so it drops after it: the last process to leave
     // the namespace removes iceoryx2's residue.
     let _tidy = TidyOnDrop::new(&ipc);
-    let summary = thruster_recorder::record(&ipc, options, &stop)
-        .with_context(|| format!("recording namespace {}", target.namespace))?;
+    let summary = match thruster_recorder::record(&ipc, options, &stop) {
+        Ok(summary) => summary,
+        Err(e) => {
+            if let RecordError::Stopped { summary, .. } = &e {
+                // What was recorded before the error stays accounted for; the error matters more
+                // than a closed stdout.
+                let _ = say(&summary.line());
+            }
+            return Err(e).with_context(|| format!("recording namespace {}", target.namespace));
+        }
+    };
     say(&summary.line())
 }
 

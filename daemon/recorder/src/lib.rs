@@ -28,27 +28,32 @@ pub use tap::{ChannelInfo, Message, Tap};
 use std::path::PathBuf;
 
 /// What can stop a recording.
+///
+/// Each message names the object and leaves its cause to [`std::error::Error::source`], so an
+/// `anyhow` chain printed with `{:#}` reads `cannot write FILE: No space left on device (os
+/// error 28)`, once (a message repeating its source printed the OS error twice).
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
-    #[error("cannot write {path}: {source}")]
+    /// A file could not be created or written (a full disk: `ENOSPC`).
+    #[error("cannot write {path}")]
     Io {
         path: PathBuf,
         #[source]
         source: std::io::Error,
     },
-    #[error("MCAP writer on {path}: {source}")]
+    #[error("MCAP writer on {path}")]
     Mcap {
         path: PathBuf,
         #[source]
         source: mcap::McapError,
     },
-    #[error("serialising a {topic} message: {source}")]
+    #[error("serialising a {topic} message")]
     Json {
         topic: &'static str,
         #[source]
         source: serde_json::Error,
     },
-    #[error("subscribing on namespace {namespace}: {source}")]
+    #[error("subscribing on namespace {namespace}")]
     Ipc {
         namespace: String,
         #[source]
@@ -56,4 +61,16 @@ pub enum RecordError {
     },
     #[error("{0}")]
     Options(String),
+    /// The session had started and stopped on `source`; `summary` accounts for what it received
+    /// and what reached the files before that ([`RecordSummary::written`]).
+    #[error(
+        "stopped with {} messages in {} file(s)",
+        .summary.written,
+        .summary.files.len()
+    )]
+    Stopped {
+        summary: Box<RecordSummary>,
+        #[source]
+        source: Box<RecordError>,
+    },
 }

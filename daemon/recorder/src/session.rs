@@ -7,6 +7,10 @@
 //! (a rotation, a full page cache) or a slow network then delays only its consumer, never the
 //! draining of the 128-sample subscriber buffers; when a consumer's queue is full the message
 //! is dropped for it alone and counted, so memory stays bounded.
+//!
+//! A write error (a full disk) stops the writer, and with it the session: the error comes back
+//! as [`RecordError::Stopped`] with the summary of what was received and what reached the
+//! files before it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
@@ -79,11 +83,16 @@ pub struct RecordSummary {
     /// The live consumers' drops.
     pub taps: Vec<TapSummary>,
     pub wall_s: f64,
+    /// Messages in the files: every message handed to the writer (`messages - dropped`) when
+    /// it finished; after a write error ([`RecordError::Stopped`]) those in the chunks
+    /// finished before it, which a reader recovers (at least these). 0 without files.
+    pub written: u64,
 }
 
 impl RecordSummary {
     /// One line for the operator: `recorded N messages (imu 1000, ...) in F file(s), lost L;
-    /// dropped D (writer queue full)`, plus each live view's drops.
+    /// dropped D (writer queue full)`, plus each live view's drops. When writing failed:
+    /// `recorded W of N messages (...) ...; U not written (writing failed)`.
     pub fn line(&self) -> String {
         let per: Vec<String> = self
             .topics
@@ -95,19 +104,26 @@ impl RecordSummary {
             Some(first) => format!("to {} file(s), first {}", self.files.len(), first.display()),
             None => "(no file)".to_string(),
         };
-        let verb = if self.files.is_empty() {
-            "streamed"
+        // What the writer was handed: anything short of it in the files was not written.
+        let handed = self.messages.saturating_sub(self.dropped);
+        let unwritten = handed.saturating_sub(self.written);
+        let (verb, count) = if self.files.is_empty() {
+            ("streamed", self.messages.to_string())
+        } else if unwritten > 0 {
+            ("recorded", format!("{} of {}", self.written, self.messages))
         } else {
-            "recorded"
+            ("recorded", self.messages.to_string())
         };
         let mut line = format!(
-            "{verb} {} messages ({}) in {:.1} s {files}; lost {}; dropped {} (writer queue full)",
-            self.messages,
+            "{verb} {count} messages ({}) in {:.1} s {files}; lost {}; dropped {} (writer queue full)",
             per.join(", "),
             self.wall_s,
             self.lost,
             self.dropped,
         );
+        if !self.files.is_empty() && unwritten > 0 {
+            line.push_str(&format!("; {unwritten} not written (writing failed)"));
+        }
         for t in &self.taps {
             line.push_str(&format!("; {} dropped {} (queue full)", t.name, t.dropped));
         }
@@ -205,11 +221,21 @@ pub fn stream_on(
         .collect();
     // Hang up on the live views: their threads end once they have emptied their queues.
     drop(live);
+    let mut write_error = None;
     if let Some(w) = writer.take() {
-        summary.files = w.finish(&summary)?;
+        let written = w.finish(&summary)?;
+        summary.files = written.files;
+        summary.written = written.messages;
+        write_error = written.error;
     }
-    last?;
-    Ok(summary)
+    // The writer's error first: it is what stopped the session.
+    match write_error.or(last.err()) {
+        None => Ok(summary),
+        Some(source) => Err(RecordError::Stopped {
+            summary: Box::new(summary),
+            source: Box::new(source),
+        }),
+    }
 }
 
 /// What the writer thread is told.
@@ -219,10 +245,18 @@ enum Command {
     Finish(BTreeMap<String, String>),
 }
 
+/// What the writer thread leaves: every file it created, the messages in them
+/// ([`McapSink::messages_in_files`]) and the error that stopped it, if one did.
+struct Written {
+    files: Vec<PathBuf>,
+    messages: u64,
+    error: Option<RecordError>,
+}
+
 /// The MCAP writer thread and the bounded queue to it.
 struct Writer {
     tap: Tap<Command>,
-    thread: std::thread::JoinHandle<Result<Vec<PathBuf>, RecordError>>,
+    thread: std::thread::JoinHandle<Written>,
 }
 
 impl Writer {
@@ -232,7 +266,14 @@ impl Writer {
         let failed = Arc::clone(failed);
         let thread = std::thread::Builder::new()
             .name("mcap-writer".into())
-            .spawn(move || write_all(&mut sink, &rx, &failed).and_then(|m| sink.finish(&m)))
+            .spawn(move || {
+                let result = write_all(&mut sink, &rx, &failed).and_then(|m| sink.finish(&m));
+                Written {
+                    files: sink.files().to_vec(),
+                    messages: sink.messages_in_files(),
+                    error: result.err(),
+                }
+            })
             .map_err(|source| RecordError::Io {
                 path: options.out.clone(),
                 source,
@@ -240,15 +281,16 @@ impl Writer {
         Ok(Self { tap, thread })
     }
 
-    /// Tells the writer to finish with the summary's metadata and waits for it.
-    fn finish(self, summary: &RecordSummary) -> Result<Vec<PathBuf>, RecordError> {
-        // The writer finishes the file even after an error, so what was written stays
-        // readable. Waiting for room is right here: the draining is over.
+    /// Tells the writer to finish with the summary's metadata and waits for it. Err only when
+    /// the thread panicked.
+    fn finish(self, summary: &RecordSummary) -> Result<Written, RecordError> {
+        // Waiting for room is right here: the draining is over. A writer stopped by an error
+        // has hung up already (the send fails); its files keep the chunks finished before it.
         self.tap.send_blocking(Command::Finish(metadata(summary)));
         drop(self.tap);
         self.thread
             .join()
-            .map_err(|_| RecordError::Options("the MCAP writer thread panicked".into()))?
+            .map_err(|_| RecordError::Options("the MCAP writer thread panicked".into()))
     }
 }
 
@@ -358,6 +400,7 @@ fn summarise(
         taps: Vec::new(),
         topics,
         wall_s: wall.as_secs_f64(),
+        written: 0,
     }
 }
 

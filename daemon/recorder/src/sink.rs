@@ -4,6 +4,10 @@
 //! it is finished (a complete, indexed MCAP file) and the recording goes on in `run-0001.mcap`,
 //! then `run-0002.mcap`, and so on ([`rotated_path`]). Every file is self-contained: the
 //! channels and schemas a file uses are written into it again.
+//!
+//! A write error (a full disk) stops the sink: the files keep every chunk completed before it
+//! ([`McapSink::messages_in_files`] counts their messages), the last file has no summary (no
+//! room for it), and a reader recovers its chunks by reading it from the start.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -13,7 +17,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use mcap::records::{MessageHeader, Metadata};
-use mcap::{WriteOptions, Writer};
+use mcap::{McapError, WriteOptions, Writer};
 
 use crate::RecordError;
 
@@ -21,8 +25,10 @@ use crate::RecordError;
 pub const MESSAGE_ENCODING: &str = "json";
 /// Schema encoding of every channel.
 pub const SCHEMA_ENCODING: &str = "jsonschema";
-/// Chunk size: small enough that a recording killed by SIGKILL loses little (a reader
-/// recovers every finished chunk), large enough to keep the index small.
+/// Chunk size: small enough that a recording killed by SIGKILL, or stopped by a full disk,
+/// loses little (a reader recovers every finished chunk), large enough to keep the index small.
+/// The sink closes the chunks itself (not the MCAP writer), so it knows which messages are in
+/// finished chunks.
 const CHUNK_BYTES: u64 = 256 * 1024;
 
 /// The path of file number `index` of a recording to `first` (index 0 is `first` itself):
@@ -82,6 +88,8 @@ struct OpenFile {
     len: Arc<AtomicU64>,
     /// Channel id in this file per recording-wide channel index.
     ids: BTreeMap<usize, u16>,
+    /// File length where the open chunk began.
+    chunk_start: u64,
 }
 
 /// Writes the recording, one file after another.
@@ -92,6 +100,10 @@ pub struct McapSink {
     file: Option<OpenFile>,
     index: u32,
     written: Vec<PathBuf>,
+    /// Messages in finished chunks, handed to the OS (every file).
+    in_files: u64,
+    /// Messages in the open chunk.
+    in_chunk: u64,
 }
 
 impl McapSink {
@@ -105,6 +117,8 @@ impl McapSink {
             file: None,
             index: 0,
             written: Vec::new(),
+            in_files: 0,
+            in_chunk: 0,
         };
         sink.open_next()?;
         Ok(sink)
@@ -125,18 +139,17 @@ impl McapSink {
         };
         let writer = WriteOptions::new()
             .compression(None)
-            .chunk_size(Some(CHUNK_BYTES))
+            // Closed by `write` (CHUNK_BYTES), which then counts their messages as written.
+            .chunk_size(None)
             .profile("")
             .library(concat!("thruster-recorder ", env!("CARGO_PKG_VERSION")))
             .create(counting)
-            .map_err(|source| RecordError::Mcap {
-                path: path.clone(),
-                source,
-            })?;
+            .map_err(mcap_error(&path))?;
         self.written.push(path.clone());
         self.file = Some(OpenFile {
             path,
             writer,
+            chunk_start: len.load(Ordering::Relaxed),
             len,
             ids: BTreeMap::new(),
         });
@@ -158,7 +171,8 @@ impl McapSink {
     }
 
     /// Writes one message on `channel`: `log_ns` when the recorder received it, `publish_ns`
-    /// the sender's time. Rotates first when the file is over the size limit.
+    /// the sender's time. Rotates first when the file is over the size limit; closes the chunk
+    /// once it holds [`CHUNK_BYTES`].
     pub fn write(
         &mut self,
         channel: usize,
@@ -179,21 +193,17 @@ impl McapSink {
             )));
         };
         let file = self.file.as_mut().expect("a file is open while recording");
-        let mcap_err = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| RecordError::Mcap { path, source }
-        };
         let id = match file.ids.get(&channel) {
             Some(id) => *id,
             None => {
                 let schema_id = file
                     .writer
                     .add_schema(&def.schema_name, SCHEMA_ENCODING, &def.schema)
-                    .map_err(mcap_err(&file.path))?;
+                    .map_err(mcap_error(&file.path))?;
                 let id = file
                     .writer
                     .add_channel(schema_id, &def.topic, MESSAGE_ENCODING, &BTreeMap::new())
-                    .map_err(mcap_err(&file.path))?;
+                    .map_err(mcap_error(&file.path))?;
                 file.ids.insert(channel, id);
                 id
             }
@@ -206,7 +216,27 @@ impl McapSink {
         };
         file.writer
             .write_to_known_channel(&header, data)
-            .map_err(mcap_err(&file.path))
+            .map_err(mcap_error(&file.path))?;
+        self.in_chunk += 1;
+        if file.writer_len() - file.chunk_start >= CHUNK_BYTES {
+            // Finishes the chunk and hands it to the OS: its messages are in the file.
+            file.writer.flush().map_err(mcap_error(&file.path))?;
+            self.in_files += std::mem::take(&mut self.in_chunk);
+            file.chunk_start = file.writer_len();
+        }
+        Ok(())
+    }
+
+    /// Messages in finished chunks handed to the OS, over every file: after a write error,
+    /// what a reader recovers from the files (at least; the chunk being closed when the disk
+    /// filled may be complete too). After [`McapSink::finish`], every message written.
+    pub fn messages_in_files(&self) -> u64 {
+        self.in_files
+    }
+
+    /// Every file created so far, in order.
+    pub fn files(&self) -> &[PathBuf] {
+        &self.written
     }
 
     /// Finishes the open file with a metadata record holding `metadata` (if any); `sync`:
@@ -219,19 +249,15 @@ impl McapSink {
         let Some(mut file) = self.file.take() else {
             return Ok(());
         };
-        let mcap_err = |source| RecordError::Mcap {
-            path: file.path.clone(),
-            source,
-        };
         if !metadata.is_empty() {
             file.writer
                 .write_metadata(&Metadata {
                     name: METADATA_NAME.into(),
                     metadata: metadata.clone(),
                 })
-                .map_err(mcap_err)?;
+                .map_err(mcap_error(&file.path))?;
         }
-        file.writer.finish().map_err(mcap_err)?;
+        file.writer.finish().map_err(mcap_error(&file.path))?;
         let mut inner = file.writer.into_inner();
         inner
             .flush()
@@ -246,17 +272,29 @@ impl McapSink {
                 path: file.path.clone(),
                 source,
             })?;
+        self.in_files += std::mem::take(&mut self.in_chunk);
         Ok(())
     }
 
     /// Finishes the last file, writing `summary` into it as a metadata record named
-    /// [`METADATA_NAME`]; returns every file written, in order.
-    pub fn finish(
-        mut self,
-        summary: &BTreeMap<String, String>,
-    ) -> Result<Vec<PathBuf>, RecordError> {
-        self.finish_file(summary, true)?;
-        Ok(std::mem::take(&mut self.written))
+    /// [`METADATA_NAME`]. [`McapSink::files`] are then every file written, in order.
+    pub fn finish(&mut self, summary: &BTreeMap<String, String>) -> Result<(), RecordError> {
+        self.finish_file(summary, true)
+    }
+}
+
+/// An error of the MCAP writer on `path`: an I/O error (a full disk) as [`RecordError::Io`],
+/// which names the file and the OS error; anything else as [`RecordError::Mcap`].
+fn mcap_error(path: &Path) -> impl FnOnce(McapError) -> RecordError + '_ {
+    move |error| match error {
+        McapError::Io(source) => RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        source => RecordError::Mcap {
+            path: path.to_path_buf(),
+            source,
+        },
     }
 }
 
@@ -282,5 +320,62 @@ mod tests {
         assert_eq!(rotated_path(first, 1), Path::new("/tmp/out/run-0001.mcap"));
         assert_eq!(rotated_path(first, 12), Path::new("/tmp/out/run-0012.mcap"));
         assert_eq!(rotated_path(Path::new("run"), 2), Path::new("run-0002"));
+    }
+
+    /// The error and its sources, as `anyhow`'s `{:#}` prints them.
+    fn chain(e: &dyn std::error::Error) -> String {
+        let mut text = e.to_string();
+        let mut source = e.source();
+        while let Some(s) = source {
+            text.push_str(&format!(": {s}"));
+            source = s.source();
+        }
+        text
+    }
+
+    #[test]
+    fn a_full_disk_is_an_io_error_naming_the_file_and_the_os_error_once() {
+        // /dev/full: every write fails with ENOSPC, for any user.
+        let full = Path::new("/dev/full");
+        let mut sink = McapSink::create(full, None).expect("opening /dev/full");
+        sink.add_channel(0, "imu", "thrusterd.ImuSample", b"{}");
+        let e = (0..10_000)
+            .find_map(|i| sink.write(0, i, 1, 1, b"{\"seq\":1}").err())
+            .expect("a write to /dev/full fails");
+        assert!(
+            matches!(&e, RecordError::Io { path, source }
+                if path == full && source.raw_os_error() == Some(28)),
+            "{e:?}"
+        );
+        assert_eq!(
+            chain(&e),
+            "cannot write /dev/full: No space left on device (os error 28)"
+        );
+        assert_eq!(sink.messages_in_files(), 0);
+        assert_eq!(sink.files(), [full]);
+    }
+
+    #[test]
+    fn messages_count_as_in_the_file_once_their_chunk_is_finished() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.mcap");
+        let mut sink = McapSink::create(&path, None).unwrap();
+        sink.add_channel(0, "imu", "thrusterd.ImuSample", b"{}");
+        let data = [b' '; 1000];
+        for i in 0..100 {
+            sink.write(0, i, 1, 1, &data).unwrap();
+        }
+        // 100 kB: the first chunk is still open.
+        assert_eq!(sink.messages_in_files(), 0);
+        for i in 100..1000 {
+            sink.write(0, i, 1, 1, &data).unwrap();
+        }
+        // Three chunks of 256 KiB finished, each handed to the OS.
+        let finished = sink.messages_in_files();
+        assert!((700..800).contains(&finished), "{finished}");
+        assert!(std::fs::metadata(&path).unwrap().len() >= finished * 1000);
+        sink.finish(&BTreeMap::new()).unwrap();
+        assert_eq!(sink.messages_in_files(), 1000);
+        assert_eq!(sink.files(), [path]);
     }
 }
