@@ -215,3 +215,39 @@ fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
         before.effectiveness
     );
 }
+
+/// Noise-free, every vehicle file, 60 s of pitch steps with the updates on (prints; run with
+/// --ignored --nocapture). Measured: aligned 0.014 -> 0.009, amour5 0.015 -> 0.035,
+/// amour5_top45 0.014 -> 0.027, eight_vectored 0.015 -> 0.065: the closed-loop windows' bias
+/// walks the model away from the truth on some vehicles, which is why `update` is off by
+/// default.
+#[test]
+#[ignore]
+fn every_vehicle_noise_free_sweep() {
+    for name in [
+        "aligned",
+        "amour5",
+        "amour5_top45",
+        "eight_vectored",
+        "four_up",
+        "six_dof",
+    ] {
+        let v = common::vehicle(name);
+        let n = v.thrusters.len();
+        let mut run = Run::with_vehicle(v, NoisePreset::None, 1, 200.0);
+        let mut setup = MachineSetup {
+            thrusters: n,
+            ..MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        run.machine = Machine::new(setup);
+        run.run_for(1.0);
+        run.estimate();
+        run.machine.take_events();
+        let r = fly(&mut run, Scenario::default(), 60.0);
+        println!(
+            "{name}: rot {:.3} -> {:.3}, acc {:.3}, {} refinements, {} mismatches",
+            r.err_rot_start, r.err_rot, r.err_acc, r.refinements, r.mismatches
+        );
+    }
+}

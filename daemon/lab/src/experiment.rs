@@ -152,7 +152,7 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
         monitor: "report",
         change: None,
         action: ROTATE_TOP,
-        refine: true,
+        refine: false,
         noise: "paper",
         plan: Plan {
             steps: Vec::new(),
@@ -422,9 +422,7 @@ fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> Result<Stri
     if bins.daemon_monitor {
         let _ = writeln!(t, "[monitor]\naction = \"{}\"", spec.monitor);
     }
-    if !spec.refine {
-        let _ = writeln!(t, "[refinement]\nupdate = false");
-    }
+    let _ = writeln!(t, "[refinement]\nupdate = {}", spec.refine);
     Ok(t)
 }
 

@@ -158,7 +158,6 @@ fn block_bound(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimator::Method;
 
     fn learned(b: DMatrix<f64>, se: f64) -> Model {
         let n = b.ncols();
@@ -170,28 +169,7 @@ mod tests {
     }
 
     fn window(b: DMatrix<f64>, se: f64) -> Estimate {
-        let n = b.ncols();
-        let model = Model::nominal(b.clone(), None);
-        Estimate {
-            method: Method::Dynamic,
-            thrusters: n,
-            pulses: 0,
-            samples: 0,
-            std_err: DMatrix::from_element(6, n, se),
-            allocation: model.allocation.clone(),
-            rel_err_rot: 0.05,
-            rel_err_acc: 0.05,
-            sigma: [0.0; 6],
-            rank: crate::estimator::analysis::rank_report(
-                &b,
-                &DMatrix::zeros(6, n),
-                &EstimatorConfig::default(),
-            ),
-            thruster: Vec::new(),
-            excited: true,
-            dynamics: None,
-            effectiveness: b,
-        }
+        crate::refinement::test_window_estimate(b, se)
     }
 
     fn b() -> DMatrix<f64> {

@@ -1,6 +1,6 @@
 //! The `degrade` experiment: thruster L loses 30 % of its thrust over a minute, unannounced
 //! (a fouled propeller, a tired motor), while the vehicle holds through pitch steps. The
-//! continuously refined model (`[refinement] update = true`, the default) against the model
+//! continuously refined model (`[refinement] update = true`, off by default) against the model
 //! learned at the start (`update = false`) and the simulator's true model, with a realistic
 //! IMU: at the paper's noise the refinement's windows are too uncertain to update the model
 //! (docs/experiments.md).
@@ -34,6 +34,7 @@ pub(super) fn runs(base: RunSpec, t_change: f64) -> Vec<RunSpec> {
         // Only the refinement may answer: the monitor's re-estimation would hide the
         // difference between a refined and a fixed model.
         monitor: "report",
+        refine: true,
         plan,
         ..base
     };
