@@ -240,6 +240,7 @@ fn every_vehicle_noise_free_sweep() {
             ..MachineSetup::default()
         };
         setup.machine.deadband = 0.05;
+        setup.refinement.update = true;
         run.machine = Machine::new(setup);
         run.run_for(1.0);
         run.estimate();
