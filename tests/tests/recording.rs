@@ -551,9 +551,62 @@ fn a_full_disk_stops_the_recorder_with_file_and_os_error_and_the_daemon_serves_o
         state(&after),
     );
 
+    // 3. The bridge recording on the same disk, emptied: it stops on the full disk too, exit 1,
+    // and its stdout still carries the summary of what reached the files.
+    for f in &files {
+        std::fs::remove_file(f).unwrap();
+    }
+    let bridge_out = disk.join("bridge.mcap");
+    let mut bridge = Proc::spawn(
+        "thruster-bridge",
+        &[
+            "--namespace",
+            &ns,
+            "--record",
+            bridge_out.to_str().unwrap(),
+            "--max-mb",
+            MAX_MB,
+        ],
+        world.dir.path(),
+    );
+    let t1 = Instant::now();
+    let bridge_exit = loop {
+        if let Some(exit) = bridge.wait_timeout(Duration::from_millis(50)) {
+            break exit;
+        }
+        assert!(
+            t1.elapsed() < Duration::from_secs(60),
+            "the bridge still records after 60 s on a 4 MiB disk\n{}",
+            bridge.log_text()
+        );
+    };
+    let bridge_log = bridge.log_text();
+    assert_eq!(bridge_exit.code(), Some(1), "{bridge_exit:?}\n{bridge_log}");
+    let bridge_summary = bridge_log
+        .lines()
+        .find(|l| l.starts_with("recorded "))
+        .unwrap_or_else(|| panic!("no summary line from the bridge\n{bridge_log}"));
+    let b_written = number_after(bridge_summary, "recorded ");
+    let b_received = number_after(bridge_summary, " of ");
+    let b_dropped = number_after(bridge_summary, "; dropped ");
+    let b_not_written = number_after(bridge_summary, "(writer queue full); ");
+    assert_eq!(
+        b_written + b_dropped + b_not_written,
+        b_received,
+        "{bridge_summary}"
+    );
+    assert!(b_written > 0 && b_not_written > 0, "{bridge_summary}");
+    assert_eq!(
+        bridge_log.matches(os_error).count(),
+        1,
+        "the bridge's error once, naming the OS error\n{bridge_log}"
+    );
+    println!("  the bridge on the same disk: exit 1, {bridge_summary}");
+
     assert!(sim.stop().success(), "{}", sim.log_text());
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     drop(recorder);
+    drop(bridge);
     drop(op);
     drop(mount);
     let mounts = std::fs::read_to_string("/proc/mounts").unwrap();

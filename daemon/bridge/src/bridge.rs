@@ -91,6 +91,11 @@ pub fn run(
         None => 0,
     };
     drop(node);
+    if let Some(partial) = session.as_ref().err().and_then(|e| e.summary()) {
+        // What reached the files before the error, on stdout as a finished session's summary
+        // is: the error (a full disk) follows on stderr.
+        println!("{}", partial.line());
+    }
     let summary = session.with_context(|| format!("streaming namespace {ns}"))?;
     Ok(Outcome {
         summary,

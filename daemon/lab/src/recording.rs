@@ -95,7 +95,11 @@ impl Recording {
         handle
             .join()
             .map_err(|_| anyhow!("the recorder thread panicked"))?
-            .context("recording")
+            .map_err(|e| {
+                // A session stopped by an error (a full disk) still says what it wrote.
+                let line = e.summary().map(|s| format!(": {}", s.line()));
+                anyhow::Error::new(e).context(format!("recording{}", line.unwrap_or_default()))
+            })
     }
 }
 

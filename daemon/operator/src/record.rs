@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use thruster_protocol::services::{check_access, owns_root, IpcConfig, IpcError, TidyOnDrop};
-use thruster_recorder::{RecordError, RecordOptions};
+use thruster_recorder::RecordOptions;
 
 use crate::client::Target;
 use crate::console::say;
@@ -80,7 +80,7 @@ pub fn run(target: &Target, options: &RecordOptions, stop: Arc<AtomicBool>) -> R
     let summary = match thruster_recorder::record(&ipc, options, &stop) {
         Ok(summary) => summary,
         Err(e) => {
-            if let RecordError::Stopped { summary, .. } = &e {
+            if let Some(summary) = e.summary() {
                 // What was recorded before the error stays accounted for; the error matters more
                 // than a closed stdout.
                 let _ = say(&summary.line());

@@ -74,3 +74,15 @@ pub enum RecordError {
         source: Box<RecordError>,
     },
 }
+
+impl RecordError {
+    /// What a session that had started received and wrote before it stopped on this error
+    /// (None: it never started). Every front end prints its line, so a failed recording still
+    /// says how much of it is on disk.
+    pub fn summary(&self) -> Option<&RecordSummary> {
+        match self {
+            RecordError::Stopped { summary, .. } => Some(summary),
+            _ => None,
+        }
+    }
+}

@@ -27,10 +27,13 @@ use crate::source::{open_all, Source};
 use crate::tap::{self, Message, Tap};
 use crate::RecordError;
 
-/// Longest sleep when nothing came. The IMU's notification wakes the loop earlier; the
-/// slower topics wait at most this long. Far below the 128 ms the stream buffers hold at
-/// 1 kHz, so a quiet wait never loses a sample.
-const IDLE_WAIT: Duration = Duration::from_millis(5);
+/// The recorder drains every topic on its own clock, this often, and is never woken by a
+/// sample. Woken by each IMU sample (as it was), it competed with the daemon for a core at
+/// the very moment the daemon had to answer: on the 2-core bench machine the daemon's median
+/// IMU -> thrust latency rose by 20-50 % with the bridge attached (docs/recording.md). Ten
+/// samples per topic per drain at 1 kHz, far below the 128 the stream buffers hold, so a
+/// drain that comes late by 100 ms still loses nothing.
+pub const DRAIN_PERIOD: Duration = Duration::from_millis(10);
 
 /// Default capacity of the queue to the MCAP writer, in messages: 16 s of a 1 kHz session
 /// with telemetry at every sample (about 4 000 messages/s, docs/recording.md), about 25 MB of
@@ -333,6 +336,7 @@ fn run(
     failed: &AtomicBool,
     deadline: Option<Instant>,
 ) -> Result<(), RecordError> {
+    let mut next = Instant::now();
     loop {
         if stop.load(Ordering::Relaxed)
             || failed.load(Ordering::Relaxed)
@@ -340,15 +344,11 @@ fn run(
         {
             return Ok(());
         }
-        if drain_all(sources, out, now_ns)? == 0 {
-            // Sleep on the IMU, the fastest stream.
-            if let Err(e) = sources[0].wait(IDLE_WAIT) {
-                if interrupted(stop) {
-                    return Ok(());
-                }
-                return Err(e);
-            }
-        }
+        drain_all(sources, out, now_ns)?;
+        // The next tick of a fixed schedule; after a late drain (a busy machine) the next
+        // comes one period on, not at once for every tick missed.
+        next = (next + DRAIN_PERIOD).max(Instant::now());
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
 }
 
@@ -362,19 +362,6 @@ fn drain_all(
         n += s.drain(index, out, now_ns)?;
     }
     Ok(n)
-}
-
-/// After a failed wait: true when SIGINT/SIGTERM caused it. The signal makes the wait fail
-/// (EINTR) at once, but ctrlc sets the stop flag from its own thread a moment later.
-fn interrupted(stop: &AtomicBool) -> bool {
-    let deadline = Instant::now() + Duration::from_millis(200);
-    while Instant::now() < deadline {
-        if stop.load(Ordering::SeqCst) {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
-    stop.load(Ordering::SeqCst)
 }
 
 fn summarise(

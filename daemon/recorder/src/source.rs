@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use serde::Serialize;
-use thruster_protocol::services::{Inbox, IpcConfig, IpcNode, TopicMessage};
+use thruster_protocol::services::{IpcConfig, IpcNode, Reader, TopicMessage};
 use thruster_protocol::*;
 
 use crate::schema::json_schema;
@@ -87,13 +87,13 @@ pub trait Source {
     ) -> Result<usize, RecordError>;
     fn count(&self) -> u64;
     fn seq(&self) -> SeqTracker;
-    /// The listener to sleep on, for the topic that paces the loop.
-    fn wait(&self, timeout: std::time::Duration) -> Result<bool, RecordError>;
 }
 
-/// The subscription to `T`'s topic with the largest buffer the topic allows.
+/// The subscription to `T`'s topic with the largest buffer the topic allows, without a
+/// listener: the recorder polls on its own clock ([`crate::session`]), so no publisher
+/// notifies it and no sample wakes it.
 pub struct TopicSource<T: TopicMessage> {
-    inbox: Inbox<T>,
+    reader: Reader<T>,
     namespace: String,
     /// Known from the first message (its JSON shape gives the schema).
     channel: Option<Arc<ChannelInfo>>,
@@ -103,15 +103,15 @@ pub struct TopicSource<T: TopicMessage> {
 
 impl<T: TopicMessage + Serialize + Stamped> TopicSource<T> {
     pub fn open(node: &IpcNode, ipc: &IpcConfig) -> Result<Self, RecordError> {
-        let inbox =
-            Inbox::create_with_buffer(node, ipc, T::TOPIC.qos().max_buffer).map_err(|source| {
+        let reader =
+            Reader::create_with_buffer(node, ipc, T::TOPIC.qos().max_buffer).map_err(|source| {
                 RecordError::Ipc {
                     namespace: ipc.namespace().to_string(),
                     source,
                 }
             })?;
         Ok(Self {
-            inbox,
+            reader,
             namespace: ipc.namespace().to_string(),
             channel: None,
             count: 0,
@@ -143,7 +143,7 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
             source,
         };
         let mut n = 0;
-        while let Some(msg) = self.inbox.recv().map_err(ipc)? {
+        while let Some(msg) = self.reader.recv().map_err(ipc)? {
             let json = |source| RecordError::Json { topic, source };
             let channel = match &self.channel {
                 Some(c) => Arc::clone(c),
@@ -188,17 +188,9 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
     fn seq(&self) -> SeqTracker {
         self.seq
     }
-
-    fn wait(&self, timeout: std::time::Duration) -> Result<bool, RecordError> {
-        self.inbox.wait(timeout).map_err(|source| RecordError::Ipc {
-            namespace: self.namespace.clone(),
-            source,
-        })
-    }
 }
 
-/// Every topic of the protocol, subscribed on `node`. The first is the IMU (it paces the
-/// loop).
+/// Every topic of the protocol, subscribed on `node`.
 pub fn open_all(node: &IpcNode, ipc: &IpcConfig) -> Result<Vec<Box<dyn Source>>, RecordError> {
     Ok(vec![
         Box::new(TopicSource::<ImuSample>::open(node, ipc)?),

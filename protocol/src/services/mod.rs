@@ -36,7 +36,7 @@ pub use config::{IpcConfig, CONNECTION_TIMEOUT, DEFAULT_ROOT_BASE, MAX_NAMESPACE
 pub use control::{ControlClient, ControlServer, ServeCount, CONTROL_LEAF};
 pub use error::{AccessDenied, IpcError};
 pub use ports::{
-    bounded_wait_timeout, create_waitset, open_event, open_topic, Inbox, Port, MIN_WAIT,
+    bounded_wait_timeout, create_waitset, open_event, open_topic, Inbox, Port, Reader, MIN_WAIT,
 };
 pub use topics::{
     Topic, TopicMessage, TopicQos, EVENT_SUFFIX, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS,

@@ -152,9 +152,8 @@ impl<T: TopicMessage> Port<T> {
 /// Messages are returned unvalidated: validate them (see [`crate::validate`]).
 #[derive(Debug)]
 pub struct Inbox<T: TopicMessage> {
-    subscriber: Subscriber<Ipc, T, ()>,
+    reader: Reader<T>,
     listener: Listener<Ipc>,
-    service: String,
 }
 
 impl<T: TopicMessage> Inbox<T> {
@@ -171,35 +170,18 @@ impl<T: TopicMessage> Inbox<T> {
         ipc: &IpcConfig,
         buffer: usize,
     ) -> Result<Self, IpcError> {
-        let (service, factory) = open_topic::<T>(node, ipc)?;
-        let qos = T::TOPIC.qos();
-        let buffer = buffer.clamp(1, qos.max_buffer);
-        let subscriber = factory
-            .subscriber_builder()
-            .buffer_size(buffer)
-            // The history request may not exceed the buffer.
-            .history_request(qos.history.min(buffer))
-            .create()
-            .map_err(ice("create subscriber", &service))?;
-        let listener = open_event(node, &service)?
+        let reader = Reader::create_with_buffer(node, ipc, buffer)?;
+        let listener = open_event(node, &reader.service)?
             .listener_builder()
             .create()
-            .map_err(ice("create listener", &service))?;
-        Ok(Self {
-            subscriber,
-            listener,
-            service,
-        })
+            .map_err(ice("create listener", &reader.service))?;
+        Ok(Self { reader, listener })
     }
 
     /// The next buffered message (oldest first), copied out of shared memory so the
     /// sample is released at once; `None` when the buffer is empty.
     pub fn recv(&self) -> Result<Option<T>, IpcError> {
-        let sample = self
-            .subscriber
-            .receive()
-            .map_err(ice("receive", &self.service))?;
-        Ok(sample.map(|s| *s.payload()))
+        self.reader.recv()
     }
 
     /// Drains the buffer and returns the newest message, if any.
@@ -215,7 +197,7 @@ impl<T: TopicMessage> Inbox<T> {
     pub fn drain_events(&self) -> Result<u64, IpcError> {
         self.listener
             .try_wait(|_| {})
-            .map_err(ice("drain listener", &self.service))
+            .map_err(ice("drain listener", &self.reader.service))
     }
 
     /// Blocks until notified or `timeout` passes, consuming the notifications; true when
@@ -227,13 +209,13 @@ impl<T: TopicMessage> Inbox<T> {
             None => self.listener.try_wait(|_| {}),
             Some(t) => self.listener.timed_wait(|_| {}, t),
         }
-        .map_err(ice("wait on listener", &self.service))?;
+        .map_err(ice("wait on listener", &self.reader.service))?;
         Ok(n > 0)
     }
 
     /// Full service name, e.g. `veh1/imu`.
     pub fn service_name(&self) -> &str {
-        &self.service
+        &self.reader.service
     }
 
     /// The listener to attach to a wait set.
@@ -243,7 +225,57 @@ impl<T: TopicMessage> Inbox<T> {
 
     /// The subscriber, for zero-copy reads of large messages.
     pub fn subscriber(&self) -> &Subscriber<Ipc, T, ()> {
-        &self.subscriber
+        &self.reader.subscriber
+    }
+}
+
+/// Receiving end of a topic without a listener: for a reader that polls on its own clock
+/// (the recorder, the bridge). Publishers notify only the listeners of their event service,
+/// so a `Reader` costs the publisher's path nothing beyond the sample delivery: no
+/// notification is sent to it and no wake-up of its process competes with the daemon for a
+/// core at the moment a sample arrives. Poll it more often than its buffer fills (128
+/// samples at 1 kHz: 128 ms). Not `Send`.
+#[derive(Debug)]
+pub struct Reader<T: TopicMessage> {
+    subscriber: Subscriber<Ipc, T, ()>,
+    service: String,
+}
+
+impl<T: TopicMessage> Reader<T> {
+    /// Opens or creates `T`'s topic and subscribes with a buffer of `buffer` samples (clamped
+    /// to 1..=the topic's maximum).
+    pub fn create_with_buffer(
+        node: &IpcNode,
+        ipc: &IpcConfig,
+        buffer: usize,
+    ) -> Result<Self, IpcError> {
+        let (service, factory) = open_topic::<T>(node, ipc)?;
+        let qos = T::TOPIC.qos();
+        let buffer = buffer.clamp(1, qos.max_buffer);
+        let subscriber = factory
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .history_request(qos.history.min(buffer))
+            .create()
+            .map_err(ice("create subscriber", &service))?;
+        Ok(Self {
+            subscriber,
+            service,
+        })
+    }
+
+    /// The next buffered message (oldest first), copied out; `None` when the buffer is empty.
+    pub fn recv(&self) -> Result<Option<T>, IpcError> {
+        let sample = self
+            .subscriber
+            .receive()
+            .map_err(ice("receive", &self.service))?;
+        Ok(sample.map(|s| *s.payload()))
+    }
+
+    /// Full service name, e.g. `veh1/imu`.
+    pub fn service_name(&self) -> &str {
+        &self.service
     }
 }
 
