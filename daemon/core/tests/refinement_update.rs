@@ -59,6 +59,8 @@ fn fly(run: &mut Run, mut scenario: Scenario, seconds: f64) -> Tracked {
     let mut step = 0;
     let mut mismatches = 0;
     let mut windows = Vec::new();
+    // RU_DVL=1: a perfect DVL (the decisive run for the navigation's share of the bias).
+    let dvl = std::env::var_os("RU_DVL").is_some();
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
         if t >= 5.0 * step as f64 {
@@ -74,6 +76,11 @@ fn fly(run: &mut Run, mut scenario: Scenario, seconds: f64) -> Tracked {
             run.sim.apply(&e.action).unwrap();
         }
         let before = run.machine.refinement().copied();
+        if dvl {
+            // The true body velocity, as a perfect DVL would give it.
+            let v = run.sim.linear_velocity();
+            run.machine.on_dvl([v.x, v.y, v.z]);
+        }
         run.tick();
         if let Some(v) = run
             .machine
@@ -119,13 +126,30 @@ fn update_sweep() {
         if let Ok(v) = std::env::var("RU_DRIFT") {
             r.drift_per_sqrt_s = v.parse().expect("RU_DRIFT is a number");
         }
+        if let Ok(v) = std::env::var("RU_FLOOR") {
+            r.window_floor = v.parse().expect("RU_FLOOR is a number");
+        }
+        if let Ok(v) = std::env::var("RU_UPDATE_REL") {
+            r.update_rel_err = v.parse().expect("RU_UPDATE_REL is a number");
+        }
+        if let Ok(v) = std::env::var("RU_INFLATE") {
+            r.inflate_above = v.parse().expect("RU_INFLATE is a number");
+        }
     };
     let holding = |noise, seed, update, rate| holding_tuned(noise, seed, update, rate, tune);
+    // RU_NOISE=paper (or none, realistic) narrows the noise levels.
+    let only = std::env::var("RU_NOISE").ok();
     for noise in [
         NoisePreset::None,
         NoisePreset::Realistic,
         NoisePreset::Paper,
     ] {
+        if only
+            .as_ref()
+            .is_some_and(|o| !format!("{noise:?}").eq_ignore_ascii_case(o))
+        {
+            continue;
+        }
         for thruster in ["L", "T"] {
             for update in [false, true] {
                 for seed in [1, 2] {
@@ -224,6 +248,8 @@ fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
 #[test]
 #[ignore]
 fn every_vehicle_noise_free_sweep() {
+    // RU_VEHICLES (comma-separated) narrows the list; RU_DITHER sets the refinement's dither.
+    let only = std::env::var("RU_VEHICLES").ok();
     for name in [
         "aligned",
         "amour5",
@@ -232,6 +258,12 @@ fn every_vehicle_noise_free_sweep() {
         "four_up",
         "six_dof",
     ] {
+        if only
+            .as_ref()
+            .is_some_and(|o| !o.split(',').any(|v| v == name))
+        {
+            continue;
+        }
         let v = common::vehicle(name);
         let n = v.thrusters.len();
         let mut run = Run::with_vehicle(v, NoisePreset::None, 1, 200.0);
@@ -241,6 +273,21 @@ fn every_vehicle_noise_free_sweep() {
         };
         setup.machine.deadband = 0.05;
         setup.refinement.update = true;
+        if let Ok(v) = std::env::var("RU_DITHER") {
+            setup.refinement.dither = v.parse().expect("RU_DITHER is a number");
+        }
+        if let Ok(v) = std::env::var("RU_DRIFT") {
+            setup.refinement.drift_per_sqrt_s = v.parse().expect("RU_DRIFT is a number");
+        }
+        if let Ok(v) = std::env::var("RU_FLOOR") {
+            setup.refinement.window_floor = v.parse().expect("RU_FLOOR is a number");
+        }
+        if let Ok(v) = std::env::var("RU_INFLATE") {
+            setup.refinement.inflate_above = v.parse().expect("RU_INFLATE is a number");
+        }
+        if let Ok(v) = std::env::var("RU_SCALE") {
+            setup.refinement.window_se_scale = v.parse().expect("RU_SCALE is a number");
+        }
         run.machine = Machine::new(setup);
         run.run_for(1.0);
         run.estimate();

@@ -241,11 +241,14 @@ impl Machine {
     }
 
     /// A DVL's body velocity (m/s), when the vehicle has one: used by the dynamic
-    /// estimation's navigation while it excites; ignored otherwise (control does not use
-    /// velocity).
+    /// estimation's navigation while it excites, and by the refinement's window while it
+    /// controls; ignored otherwise (control does not use velocity).
     pub fn on_dvl(&mut self, velocity: [f64; 3]) {
-        if matches!(self.state, State::Pulse | State::Settle | State::Identify) {
-            self.run.velocity_fix(&Vector3::from(velocity));
+        let v = Vector3::from(velocity);
+        match self.state {
+            State::Pulse | State::Settle | State::Identify => self.run.velocity_fix(&v),
+            State::Active => self.refiner.velocity_fix(&v),
+            _ => {}
         }
     }
 

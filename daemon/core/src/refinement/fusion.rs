@@ -9,6 +9,13 @@
 //! scalar Kalman step per entry; the model's standard errors become the posterior's, so the
 //! published bound says how sure the refined model is.
 //!
+//! Two guards keep an unchanged model from following each window's own error. A window's
+//! entries are never trusted beyond `window_floor` of their column's norm: noise-free, a
+//! closed-loop window is 0.02-0.06 off the truth while its standard errors say 0.001. And the
+//! drift rate is slow; a thruster that really changes faster shows as an innovation (window
+//! minus model) beyond what prior and window allow, and its column's prior is widened to
+//! match (covariance matching, `inflate_above`), so the model catches up in a window or two.
+//!
 //! A window in which a column moved by more than the detector's `min_change` is not used at
 //! all: that is a changed thruster, which the detector reports and a re-estimation answers. Only models that
 //! carry standard errors (learned ones) are refined: a nominal model has no uncertainty to
@@ -28,6 +35,14 @@ pub struct FusionSettings {
     pub window_se_scale: f64,
     /// A column whose rotation part moved by more than this share is not fused.
     pub max_change: f64,
+    /// Each window entry's error is at least this share of its column's norm (added in
+    /// quadrature to its scaled standard error): what a closed-loop window gets wrong however
+    /// clean the data.
+    pub window_floor: f64,
+    /// A column whose innovation (window minus model, over the block's three rows) scores a
+    /// chi-square above this has its prior widened to match it: the model is behind a real
+    /// change, and follows it at once instead of at the slow drift rate.
+    pub inflate_above: f64,
 }
 
 /// What a fusion made.
@@ -90,22 +105,58 @@ pub fn fuse(
             // in (the other columns were fitted together with the changed one).
             return None;
         }
-        let mut updated = false;
-        for (g, rows) in BLOCKS.iter().enumerate() {
-            // A thruster with (almost) no part in a block still drifts by a share of the
-            // block's largest column, or its entries could never move.
+        let usable = |j: usize| {
+            let (w, se) = (e.effectiveness[(j, i)], e.std_err[(j, i)]);
+            w.is_finite() && se.is_finite() && se > 0.0
+        };
+        // Per block: the drift since the model (q) and the window's floor, both a share of
+        // the column's norm in that block. A thruster with (almost) no part in a block still
+        // drifts by a share of the block's largest column, or its entries could never move.
+        let per_block: [(f64, f64); 2] = std::array::from_fn(|g| {
+            let rows = &BLOCKS[g];
             let norm = b
                 .view((rows.start, i), (3, 1))
                 .norm()
                 .max(0.05 * biggest[g]);
-            let q = (settings.drift_per_sqrt_s * norm).powi(2) * since_s;
+            (
+                (settings.drift_per_sqrt_s * norm).powi(2) * since_s,
+                (settings.window_floor * norm).powi(2),
+            )
+        });
+        let block_of = |j: usize| usize::from(j >= 3);
+        let r_of = |j: usize| {
+            (settings.window_se_scale * e.std_err[(j, i)]).powi(2) + per_block[block_of(j)].1
+        };
+        // Covariance matching, per column: an innovation far beyond what prior and window
+        // allow (in either block) means the thruster has changed faster than the drift rate
+        // says; both blocks' priors widen by the excess, so the model catches up in a window
+        // or two. A weakening thruster scales its whole column, and the rotation rows, the
+        // better determined, see it first.
+        let widen = BLOCKS
+            .iter()
+            .map(|rows| {
+                let (mut nis, mut dof) = (0.0, 0);
+                for j in rows.clone().filter(|&j| usable(j)) {
+                    let d = e.effectiveness[(j, i)] - b[(j, i)];
+                    nis += d * d / (var[(j, i)] + per_block[block_of(j)].0 + r_of(j));
+                    dof += 1;
+                }
+                if dof > 0 && nis > settings.inflate_above {
+                    nis / dof as f64
+                } else {
+                    1.0
+                }
+            })
+            .fold(1.0, f64::max);
+        let mut updated = false;
+        for rows in BLOCKS.iter() {
             for j in rows.clone() {
-                let (w, se) = (e.effectiveness[(j, i)], e.std_err[(j, i)]);
-                if !(w.is_finite() && se.is_finite() && se > 0.0) {
+                if !usable(j) {
                     continue;
                 }
-                let prior = var[(j, i)] + q;
-                let r = (settings.window_se_scale * se).powi(2);
+                let w = e.effectiveness[(j, i)];
+                let prior = (var[(j, i)] + per_block[block_of(j)].0) * widen;
+                let r = r_of(j);
                 let gain = prior / (prior + r);
                 out[(j, i)] = b[(j, i)] + gain * (w - b[(j, i)]);
                 var[(j, i)] = (1.0 - gain) * prior;
@@ -184,6 +235,8 @@ mod tests {
         drift_per_sqrt_s: 0.01,
         window_se_scale: 1.0,
         max_change: 0.55,
+        window_floor: 0.0,
+        inflate_above: f64::INFINITY,
     };
 
     #[test]
@@ -233,6 +286,63 @@ mod tests {
         assert!(fuse(&model, &window(rotated, 0.02), t, 1.0, &SETTINGS, &cfg).is_none());
         let nominal = Model::nominal(b(), None);
         assert!(fuse(&nominal, &window(b(), 0.02), t, 1.0, &SETTINGS, &cfg).is_none());
+    }
+
+    #[test]
+    fn a_window_is_never_trusted_beyond_its_floor() {
+        let model = learned(b(), 0.02);
+        let mut off = b();
+        off[(0, 0)] = 1.05;
+        let settings = FusionSettings {
+            window_floor: 0.04,
+            drift_per_sqrt_s: 0.0,
+            ..SETTINGS
+        };
+        // The window claims 1e-6; the floor makes it 0.04 (column norm 1): gain
+        // 0.0004 / (0.0004 + 0.0016) = 0.2.
+        let f = fuse(
+            &model,
+            &window(off, 1e-6),
+            2_000_000_000,
+            1.0,
+            &settings,
+            &EstimatorConfig::default(),
+        )
+        .unwrap();
+        assert!((f.model.effectiveness[(0, 0)] - 1.01).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_column_far_outside_its_bounds_is_followed_at_once() {
+        let model = learned(b(), 0.01);
+        let mut weak = b();
+        weak.column_mut(0).scale_mut(0.8);
+        let slow = FusionSettings {
+            drift_per_sqrt_s: 0.0,
+            window_floor: 0.02,
+            ..SETTINGS
+        };
+        let fast = FusionSettings {
+            inflate_above: 7.8,
+            ..slow
+        };
+        let cfg = EstimatorConfig::default();
+        let w = window(weak, 0.01);
+        let t = 2_000_000_000;
+        let step = |s: &FusionSettings| {
+            1.0 - fuse(&model, &w, t, 1.0, s, &cfg)
+                .unwrap()
+                .model
+                .effectiveness[(0, 0)]
+        };
+        // Without widening: prior 0.0001 against 0.0001 + 0.0004, gain 1/6 of the 0.2 drop.
+        assert!((step(&slow) - 0.2 / 6.0).abs() < 1e-9, "{}", step(&slow));
+        // The innovation's chi-square on thruster 1's rotation rows: 0.2^2 / 0.0006 = 67 over
+        // three rows, so the prior widens 22-fold (gain 0.82) and the model takes most of the
+        // drop at once; the unchanged column stays.
+        assert!(step(&fast) > 0.15, "{}", step(&fast));
+        let f = fuse(&model, &w, t, 1.0, &fast, &cfg).unwrap();
+        assert!((f.model.effectiveness[(1, 1)] - 1.0).abs() < 1e-12);
     }
 
     #[test]

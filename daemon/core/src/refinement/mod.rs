@@ -35,9 +35,9 @@ use crate::model::Model;
 pub struct RefinementConfig {
     /// Refine in the background while controlling (default true; the dynamic method only).
     pub enabled: bool,
-    /// Dither added while controlling, a fraction of full command (default 0: the controller's
-    /// own commands during manoeuvres are the excitation; a thruster they do not move cannot be
-    /// judged, and is not).
+    /// Dither added while controlling, a fraction of full command (default 0.1; 0: the
+    /// controller's own commands during manoeuvres are the only excitation, and a thruster
+    /// they do not move cannot be judged, and is not).
     pub dither: f64,
     /// Each half of the coded dither pair, s (default 0.05).
     pub hold_s: f64,
@@ -65,11 +65,14 @@ pub struct RefinementConfig {
     /// alarms 25-57, so a clear case is reported at once.
     pub chi2_single_window: f64,
     /// Fold each window that finds no change into the model in force, so it follows slow
-    /// changes (default false: noise-free, the closed-loop windows' bias walked the model of
-    /// eight_vectored from 0.015 to 0.065 off the truth in 60 s; docs/experiments.md).
+    /// changes (default true). It was off while the updates took each window at its own
+    /// standard error: noise-free those say 0.001 while the windows are 0.02-0.06 off, and the
+    /// model of eight_vectored followed them from 0.015 to 0.065 off the truth in 60 s. With
+    /// `window_floor` and the slower drift it averages them instead (0.015 -> 0.012).
     pub update: bool,
-    /// How fast a thruster may drift: each entry's standard deviation grows by this share
-    /// of its column's norm per sqrt(s) (default 0.01: 10 % in 100 s).
+    /// How fast a thruster may drift unseen: each entry's standard deviation grows by this
+    /// share of its column's norm per sqrt(s) (default 0.003: 3 % in 100 s). Faster changes
+    /// are followed through `inflate_above`; 0.01 made the model follow every window.
     pub drift_per_sqrt_s: f64,
     /// A window's standard errors are multiplied by this before it is weighed against the
     /// model (default 2: the window fits' own errors understate their real error, the same
@@ -78,6 +81,16 @@ pub struct RefinementConfig {
     /// ... and only a window whose rotation bound is at most this updates it (default 0.1:
     /// with a realistic IMU windows end at 0.01-0.06, at the paper's noise at 0.15).
     pub update_rel_err: f64,
+    /// A window's entries are never trusted to better than this share of their column's norm
+    /// (default 0.04): noise-free, closed-loop windows are 0.02-0.06 off the truth while their
+    /// standard errors say 0.001, and weighed by those alone the model followed each window.
+    pub window_floor: f64,
+    /// A column whose window-minus-model chi-square (three rows of a block) exceeds this has
+    /// its prior widened to match (default 7.8, the 95 % point of chi-square with 3 degrees
+    /// of freedom): a thruster losing strength is followed within a window or two, while an
+    /// unchanged one is averaged at the slow `drift_per_sqrt_s`. At the 99 % point (11.3)
+    /// the acceleration rows of a thruster losing 30 % in a minute lagged to 0.044-0.049.
+    pub inflate_above: f64,
 }
 
 impl Default for RefinementConfig {
@@ -93,17 +106,19 @@ impl Default for RefinementConfig {
             chi2: 25.0,
             confirm_windows: 2,
             chi2_single_window: 200.0,
-            update: false,
-            drift_per_sqrt_s: 0.01,
+            update: true,
+            drift_per_sqrt_s: 0.003,
             window_se_scale: 2.0,
             update_rel_err: 0.1,
+            window_floor: 0.04,
+            inflate_above: 7.8,
         }
     }
 }
 
 impl RefinementConfig {
     /// (key, value, allowed range) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 12] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 14] {
         [
             ("refinement.dither", self.dither, Range::closed(0.0, 1.0)),
             ("refinement.hold_s", self.hold_s, Range::above(0.0)),
@@ -148,6 +163,16 @@ impl RefinementConfig {
                 "refinement.update_rel_err",
                 self.update_rel_err,
                 Range::closed(0.0, 1.0),
+            ),
+            (
+                "refinement.window_floor",
+                self.window_floor,
+                Range::closed(0.0, 1.0),
+            ),
+            (
+                "refinement.inflate_above",
+                self.inflate_above,
+                Range::at_least(1.0),
             ),
         ]
     }
@@ -258,6 +283,13 @@ impl Refiner {
         }
     }
 
+    /// A measured body velocity (a DVL, m/s) for the window under way's navigation.
+    pub fn velocity_fix(&mut self, measured: &Vector3<f64>) {
+        if let Some(w) = self.window.as_mut() {
+            w.est.push_velocity_fix(measured);
+        }
+    }
+
     /// The last window's verdict, if any.
     pub fn last(&self) -> Option<&WindowVerdict> {
         self.last.as_ref()
@@ -348,6 +380,8 @@ impl Refiner {
                 drift_per_sqrt_s: self.cfg.drift_per_sqrt_s,
                 window_se_scale: self.cfg.window_se_scale,
                 max_change: self.cfg.min_change,
+                window_floor: self.cfg.window_floor,
+                inflate_above: self.cfg.inflate_above,
             };
             fusion::fuse(model, &e, tick.t_ns, elapsed, &settings, est_cfg)
         } else {
