@@ -230,18 +230,17 @@ fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
 }
 
 /// Thruster L loses 30 % over a minute, unannounced, realistic IMU: the refined model follows
-/// it without a re-estimation (measured seeds 1-5: 0.020-0.036 / 0.028-0.039 off the truth at
-/// the end, 22-23 refinements, no new model; seed 1 run 8 times: 0.015-0.049 / 0.033-0.048,
-/// the processes' scheduling moves the windows), the model learned at the start ends
-/// 0.12 / 0.17 off; the oracle reloads the truth as it moves (0.004 / 0.005). The bound is
-/// the 0.05 plus room for that scatter on a loaded CI machine; the in-process test
-/// (daemon/core/tests/refinement_update.rs, deterministic) holds 0.05.
+/// it without a re-estimation (measured seeds 1-5: 0.014-0.018 / 0.015-0.025 off the truth at
+/// the end, 23 refinements, no new model; seed 1 run 5 times: 0.015-0.020 / 0.013-0.019; before
+/// the fusion's floor, slow drift and widening it was 0.020-0.036 / 0.028-0.039 and seed 1
+/// scattered to 0.049), the model learned at the start ends 0.12 / 0.17 off; the oracle
+/// reloads the truth as it moves. The bound is the 0.05, twice the largest measured.
 #[test]
 fn degrade_the_refined_model_follows_a_weakening_thruster() {
     let v = experiment("degrade");
     let h = &v["headline"];
-    assert!(f(h, &["refined_err_rot"]) <= 0.07, "{h}");
-    assert!(f(h, &["refined_err_acc"]) <= 0.07, "{h}");
+    assert!(f(h, &["refined_err_rot"]) <= 0.05, "{h}");
+    assert!(f(h, &["refined_err_acc"]) <= 0.05, "{h}");
     assert_eq!(h["refined_new_models"], 0, "{h}");
     assert!(f(h, &["refined_refinements"]) >= 10.0, "{h}");
     // The fixed model is the contrast: the loss is visible in it.

@@ -68,7 +68,7 @@ pub struct RefinementConfig {
     /// changes (default true). It was off while the updates took each window at its own
     /// standard error: noise-free those say 0.001 while the windows are 0.02-0.06 off, and the
     /// model of eight_vectored followed them from 0.015 to 0.065 off the truth in 60 s. With
-    /// `window_floor` and the slower drift it averages them instead (0.015 -> 0.012).
+    /// `window_floor`, the slower drift and the two-window rule it stays (0.015 -> 0.017).
     pub update: bool,
     /// How fast a thruster may drift unseen: each entry's standard deviation grows by this
     /// share of its column's norm per sqrt(s) (default 0.003: 3 % in 100 s). Faster changes
@@ -85,10 +85,10 @@ pub struct RefinementConfig {
     /// (default 0.04): noise-free, closed-loop windows are 0.02-0.06 off the truth while their
     /// standard errors say 0.001, and weighed by those alone the model followed each window.
     pub window_floor: f64,
-    /// A column whose window-minus-model chi-square (three rows of a block) exceeds this has
-    /// its prior widened to match (default 7.8, the 95 % point of chi-square with 3 degrees
-    /// of freedom): a thruster losing strength is followed within a window or two, while an
-    /// unchanged one is averaged at the slow `drift_per_sqrt_s`. At the 99 % point (11.3)
+    /// A column whose window-minus-model chi-square (three rows of a block) exceeds this in
+    /// two windows in a row has its prior widened to match (default 7.8, the 95 % point of
+    /// chi-square with 3 degrees of freedom): a thruster losing strength is followed within a
+    /// window or two, while an unchanged one is averaged at the slow `drift_per_sqrt_s`. At the 99 % point (11.3)
     /// the acceleration rows of a thruster losing 30 % in a minute lagged to 0.044-0.049.
     pub inflate_above: f64,
 }
@@ -240,6 +240,9 @@ pub struct Refiner {
     last: Option<WindowVerdict>,
     /// The model refined by the last window, for the machine to install.
     refined: Option<fusion::Fused>,
+    /// Per thruster: the last window's innovation was beyond `inflate_above` (a second one in
+    /// a row widens the prior; see `fusion::fuse`).
+    exceeded: [bool; MAX_THRUSTERS],
 }
 
 /// What one control tick brings the refiner.
@@ -264,6 +267,7 @@ impl Refiner {
             window: None,
             last: None,
             refined: None,
+            exceeded: [false; MAX_THRUSTERS],
         }
     }
 
@@ -277,6 +281,7 @@ impl Refiner {
         self.window = None;
         self.refined = None;
         self.settled_since_ns = None;
+        self.exceeded = [false; MAX_THRUSTERS];
         // A streak against the old model says nothing about the new one.
         if let Some(last) = self.last.as_mut() {
             last.in_a_row = 0;
@@ -383,7 +388,15 @@ impl Refiner {
                 window_floor: self.cfg.window_floor,
                 inflate_above: self.cfg.inflate_above,
             };
-            fusion::fuse(model, &e, tick.t_ns, elapsed, &settings, est_cfg)
+            fusion::fuse(
+                model,
+                &e,
+                tick.t_ns,
+                elapsed,
+                &settings,
+                est_cfg,
+                &mut self.exceeded,
+            )
         } else {
             None
         };
