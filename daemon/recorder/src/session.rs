@@ -213,7 +213,7 @@ pub fn stream_on(
     };
     let result = run(&mut sources, &mut out, &now_ns, stop, &failed, deadline);
     // One last pass after the stop: what is buffered is recorded too.
-    let last = result.and_then(|()| drain_all(&mut sources, &mut out, &now_ns).map(|_| ()));
+    let last = result.and_then(|()| drain_all(&mut sources, &mut out, &now_ns));
     let mut summary = summarise(&sources, start.elapsed(), writer.as_ref().map(|w| &w.tap));
     summary.taps = live
         .iter()
@@ -356,12 +356,11 @@ fn drain_all(
     sources: &mut [Box<dyn Source>],
     out: &mut dyn FnMut(Message),
     now_ns: &dyn Fn() -> u64,
-) -> Result<usize, RecordError> {
-    let mut n = 0;
+) -> Result<(), RecordError> {
     for (index, s) in sources.iter_mut().enumerate() {
-        n += s.drain(index, out, now_ns)?;
+        s.drain(index, out, now_ns)?;
     }
-    Ok(n)
+    Ok(())
 }
 
 fn summarise(

@@ -93,21 +93,22 @@ pub fn fuse(
             .map(|i| b.view((BLOCKS[g].start, i), (3, 1)).norm())
             .fold(0.0, f64::max)
     });
+    // A changed thruster: the window saw another vehicle. Nothing of it is folded in (the
+    // other columns were fitted together with the changed one), and nothing is remembered.
+    let changed = (0..n).any(|i| {
+        let rot_norm = b.view((0, i), (3, 1)).norm();
+        let moved = (e.effectiveness.view((0, i), (3, 1)) - b.view((0, i), (3, 1))).norm();
+        rot_norm > 0.05 * biggest[0] && moved / rot_norm > settings.max_change
+    });
+    if changed {
+        return None;
+    }
     let mut out = b.clone();
     let mut var = model.std_err.map(|s| s * s);
     let mut columns = 0;
     let mut largest_step = 0.0f64;
     for i in 0..n {
         let rot_norm = b.view((0, i), (3, 1)).norm();
-        let moved = (0..3)
-            .map(|j| (e.effectiveness[(j, i)] - b[(j, i)]).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        if rot_norm > 0.05 * biggest[0] && moved / rot_norm > settings.max_change {
-            // A changed thruster: the window saw another vehicle. Nothing of it is folded
-            // in (the other columns were fitted together with the changed one).
-            return None;
-        }
         let usable = |j: usize| {
             let (w, se) = (e.effectiveness[(j, i)], e.std_err[(j, i)]);
             w.is_finite() && se.is_finite() && se > 0.0
@@ -152,40 +153,38 @@ pub fn fuse(
             })
             .fold(1.0, f64::max);
         // Only the second window in a row beyond the bound widens: a real change persists,
-        // while one stray window (noise-free, eight_vectored's are up to ~0.1 off now and
-        // then) would otherwise be taken at face value.
-        let before = exceeded.get(i).copied().unwrap_or(false);
+        // while one stray window (noise-free, eight_vectored's are up to ~0.06 off) would
+        // otherwise be taken at face value.
+        let armed = exceeded.get(i).copied().unwrap_or(false);
         if let Some(flag) = exceeded.get_mut(i) {
             *flag = widen_now > 1.0;
         }
-        let widen = if before { widen_now } else { 1.0 };
+        let widen = if armed { widen_now } else { 1.0 };
         let mut updated = false;
-        // The thruster's gain as the rotation rows (updated first) now see it: a thruster that
-        // weakens scales its whole column, and the rotation rows are the better determined,
-        // so the acceleration rows start from the model scaled by it. Without this their
-        // noisier windows left them lagging a 30 % loss (0.04-0.06 off through the processes
-        // while the rotation rows were within 0.02). Only for a column with a real moment.
-        let mut scale = 1.0;
-        for (g, rows) in BLOCKS.iter().enumerate() {
-            if g == 1 && rot_norm > 0.25 * biggest[0] {
-                let before = b.view((0, i), (3, 1));
-                scale =
-                    (out.view((0, i), (3, 1)).dot(&before) / (rot_norm * rot_norm)).clamp(0.5, 1.5);
-            }
-            for j in rows.clone() {
-                if !usable(j) {
-                    continue;
-                }
-                let w = e.effectiveness[(j, i)];
+        // One block's Kalman steps, each entry starting from the model's value times `scale`.
+        let mut fold = |rows: &std::ops::Range<usize>, scale: f64, out: &mut DMatrix<f64>| {
+            for j in rows.clone().filter(|&j| usable(j)) {
                 let prior = (var[(j, i)] + per_block[block_of(j)].0) * widen;
-                let r = r_of(j);
-                let gain = prior / (prior + r);
-                let predicted = b[(j, i)] * if g == 1 { scale } else { 1.0 };
-                out[(j, i)] = predicted + gain * (w - predicted);
+                let gain = prior / (prior + r_of(j));
+                let predicted = b[(j, i)] * scale;
+                out[(j, i)] = predicted + gain * (e.effectiveness[(j, i)] - predicted);
                 var[(j, i)] = (1.0 - gain) * prior;
                 updated = true;
             }
-        }
+        };
+        fold(&BLOCKS[0], 1.0, &mut out);
+        // The thruster's gain as the rotation rows now see it: a thruster that weakens scales
+        // its whole column, and the rotation rows are the better determined, so the
+        // acceleration rows start from the model scaled by it. Without this their noisier
+        // windows left them lagging a 30 % loss (0.04-0.06 off through the processes while the
+        // rotation rows were within 0.02). Only for a column with a real moment.
+        let scale = if rot_norm > 0.25 * biggest[0] {
+            let rot = b.view((0, i), (3, 1));
+            (out.view((0, i), (3, 1)).dot(&rot) / (rot_norm * rot_norm)).clamp(0.5, 1.5)
+        } else {
+            1.0
+        };
+        fold(&BLOCKS[1], scale, &mut out);
         if updated {
             columns += 1;
             if rot_norm > 0.0 {
