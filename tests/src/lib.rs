@@ -4,6 +4,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Once;
 use std::time::{Duration, Instant};
 
@@ -103,11 +104,18 @@ impl Proc {
 
     /// As `spawn`, with extra environment variables.
     pub fn spawn_with_env(name: &str, args: &[&str], env: &[(&str, &str)], logs: &Path) -> Proc {
+        // One file per process: two of the same binary (say, two `thrusterctl watch`) in one
+        // test must not share a log, or each truncates and interleaves the other's lines.
+        static NEXT_LOG: AtomicU64 = AtomicU64::new(0);
         let log = logs.join(format!(
             "{name}-{}.log",
-            Instant::now().elapsed().as_nanos() ^ std::process::id() as u128
+            NEXT_LOG.fetch_add(1, Ordering::Relaxed)
         ));
-        let out = File::create(&log).unwrap();
+        let out = File::options()
+            .write(true)
+            .create_new(true)
+            .open(&log)
+            .unwrap_or_else(|e| panic!("creating {}: {e}", log.display()));
         let err = out.try_clone().unwrap();
         let child = Command::new(bin(name))
             .args(args)
