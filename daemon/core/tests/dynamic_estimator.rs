@@ -569,10 +569,22 @@ fn coverage_and_worst(
         };
         for (row, rate) in [(0, "p"), (1, "q"), (2, "r")] {
             let (c, se, ols) = coef(row, rate);
+            if std::env::var("COV_VERBOSE").is_ok() {
+                println!(
+                    "    seed {seed} {rate}: est {c:.4} true {:.4} se {se:.4} ols {ols:.4}",
+                    lin[(row, 3 + row)]
+                );
+            }
             tally(1, c - lin[(row, 3 + row)], [se, ols]);
         }
         for (row, axis, k) in [(0, "down_y", 1), (1, "down_x", 0)] {
             let (c, se, ols) = coef(row, axis);
+            if std::env::var("COV_VERBOSE").is_ok() {
+                println!(
+                    "    seed {seed} {axis}: est {c:.4} true {:.4} se {se:.4} ols {ols:.4}",
+                    restoring[(row, k)]
+                );
+            }
             tally(2, c - restoring[(row, k)], [se, ols]);
         }
     }
@@ -758,5 +770,55 @@ fn vehicles_sweep() {
             "all six {noise:?}: {:.3} / {:.3} in {:.1} s, largest tilt {:.0} deg",
             all[0], all[1], all[2], all[3]
         );
+    }
+}
+
+/// Noise-free, per vehicle: the learned rotation-row rate damping and roll/pitch restoring
+/// against the simulator's, relative, with the honest standard errors. Run with
+/// `cargo test --release -p thrusterd-core --test dynamic_estimator -- --ignored coefficient_error_by_vehicle --nocapture`.
+#[test]
+#[ignore]
+fn coefficient_error_by_vehicle() {
+    let noise = match std::env::var("COEF_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::None,
+    };
+    for name in VEHICLES {
+        let (lin, restoring) = true_terms(name);
+        for seed in 1..=3u64 {
+            let sensors = SensorConfig {
+                rate_hz: 200.0,
+                noise,
+                ..SensorConfig::default()
+            };
+            let mut cfg = EstimatorConfig::dynamic();
+            if let Ok(lag) = std::env::var("COEF_LAG") {
+                cfg.spin_up_s = lag.parse().unwrap();
+            }
+            let o = estimate_with(name, sensors, seed, cfg);
+            let mut line = format!(
+                "{name:15} seed {seed}: rot {:.4} acc {:.4}",
+                o.err_rot, o.err_acc
+            );
+            for (row, term, truth) in [
+                (0, "p", lin[(0, 3)]),
+                (1, "q", lin[(1, 4)]),
+                (2, "r", lin[(2, 5)]),
+                (0, "down_y", restoring[(0, 1)]),
+                (1, "down_x", restoring[(1, 0)]),
+            ] {
+                let (c, se) = o.terms.get(row, term).unwrap();
+                line += &format!(
+                    " {term} {:+.3} ({:.1} se)",
+                    (c - truth) / truth.abs().max(1e-9),
+                    (c - truth).abs() / se
+                );
+            }
+            println!("{line}");
+            if noise == NoisePreset::None {
+                break;
+            }
+        }
     }
 }
