@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use super::config::EstimatorConfig;
 use super::dof::{Dof, DofMask};
-use super::linalg::{pinv, singular_left, singular_right};
+use super::linalg::{pinv_keep, singular_left};
 
 /// Singular values below this fraction of the largest are round-off, whatever the noise says.
 const NUMERICAL_REL_TOL: f64 = 1e-9;
@@ -179,17 +179,8 @@ pub fn allocation(b: &DMatrix<f64>, actuated: DofMask, rank: usize) -> DMatrix<f
         return out;
     }
     let sub = b.select_rows(rows.iter());
-    let keep = rank.min(rows.len()).min(n);
-    let (sv, _) = singular_right(&sub);
-    // Keep exactly `keep` singular values: everything at or below the keep-th largest's
-    // successor is dropped, independent of absolute scale.
-    let cut = if keep < sv.len() { sv[keep] } else { 0.0 };
-    let rel_tol = if sv[0] > 0.0 {
-        (cut / sv[0]).max(NUMERICAL_REL_TOL)
-    } else {
-        1.0
-    };
-    let sub_pinv = pinv(&sub, rel_tol);
+    // Exactly the `rank` largest singular values, independent of absolute scale.
+    let sub_pinv = pinv_keep(&sub, rank, NUMERICAL_REL_TOL);
     for (c, &row) in rows.iter().enumerate() {
         out.set_column(row, &sub_pinv.column(c));
     }
