@@ -236,6 +236,8 @@ pub struct Estimator {
     dynamic: Option<DynamicRun>,
     /// Mean specific force at rest (m/s^2, body): where the dynamic method's navigation starts.
     rest_force: Option<Vector3<f64>>,
+    /// The vertical velocity at the end of that rest (NED, m/s), from the depth.
+    rest_velocity_down: Option<f64>,
 }
 
 impl Estimator {
@@ -259,6 +261,7 @@ impl Estimator {
             nominal: None,
             dynamic: None,
             rest_force: None,
+            rest_velocity_down: None,
             noise,
             cfg,
         }
@@ -278,6 +281,16 @@ impl Estimator {
     pub fn with_rest_specific_force(mut self, f: Vector3<f64>) -> Self {
         if f.iter().all(|v| v.is_finite()) {
             self.rest_force = Some(f);
+        }
+        self
+    }
+
+    /// The vertical velocity (NED, m/s) the rest ended with, from the depth sensor
+    /// (`navigation::rest_drift`): the dynamic method's navigation starts from it, since a
+    /// buoyant vehicle is rising by then. Without it the navigation starts from zero.
+    pub fn with_rest_velocity_down(mut self, velocity_down: f64) -> Self {
+        if velocity_down.is_finite() {
+            self.rest_velocity_down = Some(velocity_down);
         }
         self
     }
@@ -344,7 +357,7 @@ impl Estimator {
             })
             .collect();
         if self.cfg.method == Method::Dynamic && self.dynamic.is_none() {
-            self.dynamic = Some(DynamicRun::new(
+            let mut run = DynamicRun::new(
                 self.thrusters(),
                 self.cfg.spin_up_s,
                 self.cfg.segment_s,
@@ -352,7 +365,11 @@ impl Estimator {
                     .rest_force
                     .unwrap_or(Vector3::new(0.0, 0.0, -super::response::GRAVITY)),
                 self.navigation_aid(),
-            ));
+            );
+            if let Some(w) = self.rest_velocity_down {
+                run.start_sinking_at(w);
+            }
+            self.dynamic = Some(run);
         }
         let split = split_regressor(&u);
         for (m, v) in self.max_command.iter_mut().zip(&u) {

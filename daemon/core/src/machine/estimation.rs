@@ -9,6 +9,7 @@ use super::config::MachineSetup;
 use crate::estimator::power::pulse_power;
 use crate::estimator::{Estimate, Estimator, Method, NoiseLevels, NoiseMeter, StopDecision};
 use crate::model::{Model, ModelSource};
+use crate::navigation::rest_drift::RestDrift;
 
 mod closed_loop;
 pub(super) use closed_loop::{ClosedLoop, ClosedStep};
@@ -43,6 +44,8 @@ pub(super) struct EstimationRun {
     quiet_since_ns: Option<u64>,
     /// Sum and count of the raw specific force during the noise measurement.
     rest_force: (Vector3<f64>, u64),
+    /// The depth over the same samples: how fast the vehicle rises at the rest's end.
+    rest_drift: RestDrift,
     /// Under control (state Identify): the dither and its clock.
     closed: Option<ClosedLoop>,
     /// This open-loop run is a burst: its model is refined under control next.
@@ -58,6 +61,7 @@ impl EstimationRun {
             last_estimate: None,
             quiet_since_ns: None,
             rest_force: (Vector3::zeros(), 0),
+            rest_drift: RestDrift::new(),
             closed: None,
             burst: false,
         }
@@ -67,6 +71,7 @@ impl EstimationRun {
     pub(super) fn restart(&mut self) {
         self.noise = NoiseMeter::new();
         self.rest_force = (Vector3::zeros(), 0);
+        self.rest_drift = RestDrift::new();
         self.est = None;
         self.closed = None;
         self.burst = false;
@@ -127,6 +132,9 @@ impl EstimationRun {
             self.rest_force.0 += m.specific_force;
             self.rest_force.1 += 1;
         }
+        if let Some(d) = m.depth {
+            self.rest_drift.push(elapsed_s, d);
+        }
         if !(elapsed_s >= setup.machine.noise_s && self.noise.samples() >= 10) {
             return false;
         }
@@ -156,10 +164,11 @@ impl EstimationRun {
         if self.burst {
             cfg.target_rel_err = setup.identification.burst_rel_err;
         }
-        let mut est = Estimator::new(cfg, n, levels);
-        if self.rest_force.1 > 0 {
-            est = est.with_rest_specific_force(self.rest_force.0 / self.rest_force.1 as f64);
-        }
+        let mut est = with_rest(
+            &self.rest_force,
+            &self.rest_drift,
+            Estimator::new(cfg, n, levels),
+        );
         if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
             est = est.with_nominal(nominal.effectiveness.clone());
         }
@@ -255,4 +264,16 @@ impl EstimationRun {
         self.last_estimate = Some(estimate);
         Some((candidate, est.pulses()))
     }
+}
+
+/// What the rest measured, for the estimator's navigation: the mean specific force (the
+/// starting attitude) and the vertical velocity at its end.
+fn with_rest(rest_force: &(Vector3<f64>, u64), drift: &RestDrift, mut est: Estimator) -> Estimator {
+    if rest_force.1 > 0 {
+        est = est.with_rest_specific_force(rest_force.0 / rest_force.1 as f64);
+    }
+    if let Some(w) = drift.velocity_down() {
+        est = est.with_rest_velocity_down(w);
+    }
+    est
 }

@@ -11,21 +11,26 @@ use crate::estimator::response::GRAVITY;
 impl Estimator {
     /// Start the dynamic fit now, for samples whose command the caller gives
     /// (`push_commanded_sample`), forward and reverse thrust fitted apart (the controller's
-    /// commands take every level around zero; see `DynamicRun::split`). The navigation starts from the specific force given with
-    /// `with_rest_specific_force` (the mean while holding), at zero velocity. False, and
+    /// commands take every level around zero; see `DynamicRun::split`). The navigation starts
+    /// from the specific force given with `with_rest_specific_force` (the mean while holding)
+    /// and the vertical velocity given with `with_rest_velocity_down` (else zero). False, and
     /// nothing started, for the static methods: they need pulses from rest.
     pub fn begin_closed_loop(&mut self) -> bool {
         if self.cfg.method != Method::Dynamic {
             return false;
         }
         self.pulse = None;
-        self.dynamic = Some(DynamicRun::split(
+        let mut run = DynamicRun::split(
             self.thrusters(),
             self.cfg.spin_up_s,
             self.cfg.segment_s,
             &self.rest_force.unwrap_or(Vector3::new(0.0, 0.0, -GRAVITY)),
             self.navigation_aid(),
-        ));
+        );
+        if let Some(w) = self.rest_velocity_down {
+            run.start_sinking_at(w);
+        }
+        self.dynamic = Some(run);
         true
     }
 

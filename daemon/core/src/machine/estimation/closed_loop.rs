@@ -101,6 +101,9 @@ impl EstimationRun {
                 self.rest_force.1 += 1;
             }
             let held_s = t_ns.saturating_sub(c.start_ns) as f64 * 1e-9;
+            if let Some(d) = m.depth {
+                self.rest_drift.push(held_s, d);
+            }
             c.sent[..command.len()].copy_from_slice(command);
             if held_s < setup.machine.noise_s || self.noise.samples() < 10 {
                 return ClosedStep::Holding;
@@ -108,10 +111,11 @@ impl EstimationRun {
             c.gyro_bias = *gyro_bias;
             let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
             c.amplitude = setup.identification.amplitude(levels.sigma_rot());
-            let mut est = Estimator::new(setup.estimator.clone(), n, levels);
-            if self.rest_force.1 > 0 {
-                est = est.with_rest_specific_force(self.rest_force.0 / self.rest_force.1 as f64);
-            }
+            let mut est = super::with_rest(
+                &self.rest_force,
+                &self.rest_drift,
+                Estimator::new(setup.estimator.clone(), n, levels),
+            );
             if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
                 est = est.with_nominal(nominal.effectiveness.clone());
             }
