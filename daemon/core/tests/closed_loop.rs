@@ -7,23 +7,47 @@
 mod common;
 use common::{vehicle, Reestimation, Run};
 use thruster_sim::NoisePreset;
-use thrusterd_core::machine::{Mode, State};
+use thrusterd_core::estimator::EstimatorConfig;
+use thrusterd_core::identification::IdentificationConfig;
+use thrusterd_core::machine::{Machine, MachineSetup, Mode, State};
 use thrusterd_core::model::ModelSource;
 
 /// First model open loop, then hold level for 3 s, then the announced rotation.
 fn rotate_while_holding(noise: NoisePreset, seed: u64) -> (Run, Reestimation) {
-    let v = vehicle("amour5");
-    let mut run = Run::new("amour5", noise, seed);
-    run.run_for(1.0);
-    run.estimate();
-    run.run_for(3.0);
-    assert_eq!(run.machine.state(), State::Active);
-    let r = run.announced_rotation(&v);
+    let (run, r) = rotate_while_holding_with(noise, seed, None, |_, _| {});
     assert_eq!(
         r.source,
         ModelSource::Estimated,
         "{noise:?} seed {seed}: {r:?}"
     );
+    (run, r)
+}
+
+/// The same with the machine's identification section replaced (None: the defaults), calling
+/// `observe` after every sample of the re-estimation.
+fn rotate_while_holding_with(
+    noise: NoisePreset,
+    seed: u64,
+    identification: Option<IdentificationConfig>,
+    observe: impl FnMut(&Machine, f64),
+) -> (Run, Reestimation) {
+    let v = vehicle("amour5");
+    let mut run = Run::new("amour5", noise, seed);
+    if let Some(identification) = identification {
+        // As Run builds it, with only the identification section changed.
+        let mut setup = MachineSetup {
+            thrusters: v.thrusters.len(),
+            identification,
+            ..MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        run.machine = Machine::new(setup);
+    }
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(3.0);
+    assert_eq!(run.machine.state(), State::Active);
+    let r = run.announced_rotation_observed(&v, observe);
     (run, r)
 }
 
@@ -108,7 +132,7 @@ fn identification_keeps_control_and_an_abort_keeps_holding() {
 #[test]
 fn from_scratch_a_burst_then_identification_under_control() {
     use nalgebra::Vector3;
-    use thrusterd_core::machine::{Machine, MachineSetup, Request};
+    use thrusterd_core::machine::Request;
     for (noise, refines) in [(NoisePreset::Paper, true), (NoisePreset::Realistic, false)] {
         let mut run = Run::new("amour5", noise, 1);
         let mut setup = MachineSetup {
@@ -217,4 +241,200 @@ fn an_estimate_beyond_the_attitude_budget_is_refused_with_the_reason() {
     run.run_for(6.0);
     run.machine.on_request(Request::Estimate).unwrap();
     assert_eq!(run.machine.state(), State::Identify);
+}
+
+/// A comma-separated list from the environment (`1-5` also for integer ranges), or `default`.
+fn env_list<T: std::str::FromStr + Copy>(key: &str, default: &[T]) -> Vec<T> {
+    let Ok(text) = std::env::var(key) else {
+        return default.to_vec();
+    };
+    let mut out = Vec::new();
+    for item in text.split(',').map(str::trim).filter(|t| !t.is_empty()) {
+        if let Some((a, b)) = item.split_once('-') {
+            if let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) {
+                for k in a..=b {
+                    out.push(
+                        k.to_string()
+                            .parse()
+                            .unwrap_or_else(|_| panic!("{key}: {k}")),
+                    );
+                }
+                continue;
+            }
+        }
+        out.push(item.parse().unwrap_or_else(|_| panic!("{key}: {item}")));
+    }
+    out
+}
+
+/// The bounds of the estimates made during one re-estimation (every `estimator.segment_s`).
+#[derive(Debug, Default)]
+struct Bounds {
+    /// The estimate in place at the announcement (the first model's): not this run's.
+    stale: Option<(f64, f64)>,
+    started: bool,
+    fresh: bool,
+    /// The last estimate's error bounds, rotation and acceleration rows.
+    last: (f64, f64),
+    /// Seconds after the announcement when each bound first reached the stop target.
+    t_rot: Option<f64>,
+    t_acc: Option<f64>,
+}
+
+impl Bounds {
+    fn observe(&mut self, m: &Machine, t: f64, target: f64) {
+        let now = m.last_estimate().map(|e| (e.rel_err_rot, e.rel_err_acc));
+        if !self.started {
+            self.started = true;
+            self.stale = now;
+        }
+        // Not only in Identify: the estimate that stops the run is made on the sample the
+        // machine leaves Identify.
+        let Some((r, a)) = now else { return };
+        if !self.fresh && now == self.stale {
+            return;
+        }
+        self.fresh = true;
+        self.last = (r, a);
+        if r <= target && self.t_rot.is_none() {
+            self.t_rot = Some(t);
+        }
+        if a <= target && self.t_acc.is_none() {
+            self.t_acc = Some(t);
+        }
+    }
+}
+
+/// A measuring tool, not a check: the announced rotation with the identification section
+/// overridden from the environment, every combination of the lists given, one row per seed and
+/// the mean. Knobs (comma lists; unset: the default): ID_NOISE (none|realistic|paper, default
+/// paper), ID_SEEDS (default 1-5), ID_HOLD_S, ID_DITHER, ID_DITHER_MAX, ID_BUDGET, ID_MIN_S,
+/// ID_MAX_S. Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
+/// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
+/// `-` never; the mean row's over the seeds that did, counted after it): which rows hold the
+/// stop back.
+///   cargo test --release -p thrusterd-core --test closed_loop -- --ignored sweep_identification --nocapture
+#[test]
+#[ignore]
+fn sweep_identification() {
+    let d = IdentificationConfig::default();
+    let target = EstimatorConfig::default().target_rel_err;
+    let noises: Vec<String> = std::env::var("ID_NOISE")
+        .unwrap_or_else(|_| "paper".into())
+        .split(',')
+        .map(|s| s.trim().to_lowercase())
+        .collect();
+    let seeds: Vec<u64> = env_list("ID_SEEDS", &[1, 2, 3, 4, 5]);
+    let mut cfgs = vec![d.clone()];
+    let mut vary = |key: &str, default: f64, set: fn(&mut IdentificationConfig, f64)| {
+        cfgs = env_list(key, &[default])
+            .into_iter()
+            .flat_map(|v| {
+                cfgs.iter().map(move |c| {
+                    let mut c = c.clone();
+                    set(&mut c, v);
+                    c
+                })
+            })
+            .collect();
+    };
+    vary("ID_MAX_S", d.max_s, |c, v| c.max_s = v);
+    vary("ID_MIN_S", d.min_s, |c, v| c.min_s = v);
+    vary("ID_BUDGET", d.attitude_budget_deg, |c, v| {
+        c.attitude_budget_deg = v
+    });
+    vary("ID_DITHER", d.dither, |c, v| c.dither = v);
+    vary("ID_DITHER_MAX", d.dither_max, |c, v| c.dither_max = v);
+    vary("ID_HOLD_S", d.hold_s, |c, v| c.hold_s = v);
+    for name in &noises {
+        let noise = match name.as_str() {
+            "none" => NoisePreset::None,
+            "realistic" => NoisePreset::Realistic,
+            "paper" => NoisePreset::Paper,
+            other => panic!("ID_NOISE: {other}"),
+        };
+        for cfg in &cfgs {
+            println!(
+                "== noise {name} hold_s {} dither {} dither_max {} budget {} min_s {} max_s {} \
+                 (stop target {target})",
+                cfg.hold_s,
+                cfg.dither,
+                cfg.dither_max,
+                cfg.attitude_budget_deg,
+                cfg.min_s,
+                cfg.max_s
+            );
+            println!(
+                "{:>5} {:>6} {:>7} {:>7} {:>8} {:>8} {:>6} {:>6} {:>7} {:>7} source",
+                "seed",
+                "took_s",
+                "err_rot",
+                "err_acc",
+                "max_tilt",
+                "mean_err",
+                "b_rot",
+                "b_acc",
+                "t_rot",
+                "t_acc"
+            );
+            let mut sum = [0.0f64; 7];
+            let (mut t_rot, mut t_acc) = ((0.0, 0), (0.0, 0));
+            for &seed in &seeds {
+                let mut b = Bounds::default();
+                // The defaults: the machine exactly as Run builds it.
+                let ident = (*cfg != d).then(|| cfg.clone());
+                let (_, r) =
+                    rotate_while_holding_with(noise, seed, ident, |m, s| b.observe(m, s, target));
+                let row = [
+                    r.took_s,
+                    r.err_rot,
+                    r.err_acc,
+                    r.max_tilt_deg,
+                    r.mean_err_deg,
+                    b.last.0,
+                    b.last.1,
+                ];
+                println!(
+                    "{}{:?}",
+                    line(&seed.to_string(), &row, b.t_rot, b.t_acc),
+                    r.source
+                );
+                for (s, v) in sum.iter_mut().zip(row) {
+                    *s += v;
+                }
+                for (acc, reached) in [(&mut t_rot, b.t_rot), (&mut t_acc, b.t_acc)] {
+                    if let Some(v) = reached {
+                        acc.0 += v;
+                        acc.1 += 1;
+                    }
+                }
+            }
+            let k = seeds.len().max(1) as f64;
+            let m = sum.map(|s| s / k);
+            let mean_t = |(s, n): (f64, usize)| (n > 0).then(|| s / n as f64);
+            println!(
+                "{} (t_rot, t_acc: mean over the {} / {} seeds that reached the target)",
+                line("mean", &m, mean_t(t_rot), mean_t(t_acc)),
+                t_rot.1,
+                t_acc.1
+            );
+        }
+    }
+}
+
+/// One row of the sweep: took_s, err_rot, err_acc, max_tilt, mean_err, b_rot, b_acc, t_rot, t_acc.
+fn line(label: &str, v: &[f64; 7], t_rot: Option<f64>, t_acc: Option<f64>) -> String {
+    let t = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.1}"));
+    format!(
+        "{label:>5} {:>6.1} {:>7.3} {:>7.3} {:>8.1} {:>8.1} {:>6.3} {:>6.3} {:>7} {:>7} ",
+        v[0],
+        v[1],
+        v[2],
+        v[3],
+        v[4],
+        v[5],
+        v[6],
+        t(t_rot),
+        t(t_acc)
+    )
 }

@@ -151,6 +151,16 @@ impl Run {
     /// geometry while the machine holds level: runs until control resumes with a new model
     /// (at most 120 s) and measures the way there against the simulator's truth.
     pub fn announced_rotation(&mut self, v: &Vehicle) -> Reestimation {
+        self.announced_rotation_observed(v, |_, _| {})
+    }
+
+    /// The same, calling `observe` with the machine and the seconds since the announcement
+    /// after every sample (the sweep in closed_loop.rs watches the error bounds with it).
+    pub fn announced_rotation_observed(
+        &mut self,
+        v: &Vehicle,
+        mut observe: impl FnMut(&Machine, f64),
+    ) -> Reestimation {
         use nalgebra::{UnitQuaternion, Vector3};
         self.sim
             .apply(&thruster_sim::Action::Rotate {
@@ -183,6 +193,7 @@ impl Run {
             max_heading = max_heading.max(dh.abs().to_degrees());
             err_sum += q.angle_to(&level).to_degrees();
             k += 1;
+            observe(&self.machine, self.sim.time_s() - start);
             let m = &self.machine;
             if m.state() == State::Active && m.model().is_some_and(|m| m.version > before + 1) {
                 break;
