@@ -257,14 +257,15 @@ fn assert_coefficients(o: &Outcome, damping: f64, restoring_tol: f64) {
     }
 }
 
-/// What the fit learns besides B is the vehicle's, noise-free: the rate damping within 20 %
-/// (measured roll 10.6 %, pitch 2.9 %, yaw 11.1 %; 22 / 21 / 26 % before the integrals'
-/// curvature correction) and the roll and pitch restoring within 10 % (1.6 % and 8.9 %). What
-/// is left comes from the inputs, not the fit: see the next test.
+/// What the fit learns besides B is the vehicle's, noise-free: the rate damping within 15 %
+/// (measured roll 1.4 %, pitch 10.8 %, yaw 1.7 %; 22 / 21 / 26 % before the integrals'
+/// curvature correction and the rest's vertical velocity) and the roll and pitch restoring
+/// within 3 % (0.5 % and 1.4 %; pitch was 8.9 % off). What is left comes from the inputs, not
+/// the fit: see the next test.
 #[test]
 fn restoring_and_damping_coefficients_match_the_simulator() {
     let o = estimate("amour5", NoisePreset::None, 1);
-    assert_coefficients(&o, 0.2, 0.1);
+    assert_coefficients(&o, 0.15, 0.03);
 }
 
 /// With ideal inputs (symmetric thrusters, the true body velocity) the fit itself is exact
@@ -684,12 +685,14 @@ fn coverage_and_worst(
     ((frac(0), frac(1), means), worst)
 }
 
-/// The standard errors cover the error against the simulator's truth: B's entries within 2
-/// standard errors in at least 90 % of cases at the realistic IMU (seeds 1-3; measured 1.00
-/// over seeds 1-10, the i.i.d. ones 0.55) and 80 % at the paper's noise (seeds 1-2; measured
-/// 0.90, i.i.d. 0.84). Damping and restoring are reported as measured: their standard errors
-/// still do not cover (docs/study.md), so only a loose 8-sigma bound is asserted (measured
-/// 2.5 / 6.5 over these seeds).
+/// The standard errors cover the error against the simulator's truth (within 2 standard
+/// errors), seeds 1-10 at the realistic IMU and 1-5 at the paper's noise. Measured with the
+/// defaults: realistic B 1.00 (the i.i.d. ones 0.65), rate damping 0.93, roll/pitch restoring
+/// 0.90, at most 3.7 / 3.0 standard errors; before the navigation started from the rest's
+/// vertical velocity and kept the accelerometer-bias state, damping and restoring were at
+/// 0.50 / 0.65 and up to 4.9 / 7.6 standard errors (docs/study.md). Paper noise, seeds 1-10:
+/// B 0.90, damping 0.87, restoring 0.85. Noise-free there is nothing to cover: the standard
+/// errors go to zero while the navigation's few-percent error remains.
 #[test]
 fn standard_errors_cover_the_error_against_the_truth() {
     let realistic = SensorConfig {
@@ -697,27 +700,33 @@ fn standard_errors_cover_the_error_against_the_truth() {
         noise: NoisePreset::Realistic,
         ..SensorConfig::default()
     };
-    let ((honest, ols, _), worst) = coverage_and_worst(&realistic, 1..=3);
+    let ((honest, ols, _), worst) = coverage_and_worst(&realistic, 1..=10);
+    println!("realistic: coverage {honest:.2?} (i.i.d. {ols:.2?}), largest |err|/se {worst:.2?}");
     assert!(
         honest[0] >= 0.9,
-        "realistic B coverage {:.2} (i.i.d. {:.2})",
-        honest[0],
-        ols[0]
+        "realistic B coverage {honest:.2?} (i.i.d. {ols:.2?})"
     );
     assert!(
-        worst[1] < 8.0 && worst[2] < 8.0,
+        honest[1] >= 0.85 && honest[2] >= 0.85,
+        "realistic damping, restoring coverage {honest:.2?}"
+    );
+    assert!(
+        worst[1] < 5.0 && worst[2] < 5.0,
         "damping, restoring |err|/se {worst:.2?}"
     );
     let paper = SensorConfig {
         noise: NoisePreset::Paper,
         ..realistic
     };
-    let (honest, ols, _) = coverage(&paper, 1..=2);
+    let ((honest, ols, _), worst) = coverage_and_worst(&paper, 1..=5);
+    println!("paper: coverage {honest:.2?} (i.i.d. {ols:.2?}), largest |err|/se {worst:.2?}");
     assert!(
         honest[0] >= 0.8,
-        "paper B coverage {:.2} (i.i.d. {:.2})",
-        honest[0],
-        ols[0]
+        "paper B coverage {honest:.2?} (i.i.d. {ols:.2?})"
+    );
+    assert!(
+        honest[1] >= 0.7 && honest[2] >= 0.7,
+        "paper damping, restoring coverage {honest:.2?}"
     );
 }
 

@@ -414,8 +414,14 @@ fn open_window(
     // from the attitude filter's attitude instead of a rest.
     let down = tick.attitude.inverse_transform_vector(&Vector3::z());
     let levels = levels.unwrap_or(NoiseLevels::isotropic(1e-3, 1e-2));
-    let mut est =
-        Estimator::new(est_cfg.clone(), n, levels).with_rest_specific_force(-down * GRAVITY);
+    // No accelerometer-bias state in the windows: they start mid-manoeuvre, not from a rest
+    // whose tilt the state could unfold, and with it the rotated top thruster was found after
+    // 11.9 s instead of 7.9 s (tests/refinement.rs, seed 4).
+    let cfg = EstimatorConfig {
+        accel_bias_std: 0.0,
+        ..est_cfg.clone()
+    };
+    let mut est = Estimator::new(cfg, n, levels).with_rest_specific_force(-down * GRAVITY);
     est.begin_closed_loop();
     Window {
         est,
