@@ -46,13 +46,14 @@ pub struct DepthAid {
     pub accel_floor: f64,
     /// Prior of each accelerometer-bias axis, m/s^2. Default 0.1 (MEMS turn-on bias is
     /// 0.05-0.2); 0 turns the bias state off (bias folded into the starting attitude). Only
-    /// with `kalman`. The estimator passes `EstimatorConfig::accel_bias_std`, 0 by default
-    /// (docs/study.md).
+    /// with `kalman`. The estimator passes `EstimatorConfig::accel_bias_std`, 0.02 by default
+    /// (0 in the refinement's windows; docs/study.md).
     pub bias_std_mps2: f64,
     /// Bias random walk, m/s^2/sqrt(s). Default 0.001.
     pub bias_walk: f64,
-    /// Depth aiding by the Kalman filter (true) or by the complementary gains below (false,
-    /// the default). The filter is needed for the bias state; without it, it was better in
+    /// Depth aiding by the Kalman filter (true: whenever the bias state is on, which the
+    /// estimator's default is) or by the complementary gains below (false, this struct's
+    /// default). The filter is needed for the bias state; without it, it was better in
     /// open loop (err_acc 0.018 -> 0.015 at the realistic IMU) but under control it made the
     /// refinement blame the wrong thruster and raise a false alarm (tests/refinement.rs), so
     /// it is not the default (docs/study.md).
