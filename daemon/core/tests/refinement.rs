@@ -19,11 +19,18 @@ use nalgebra::UnitQuaternion;
 use thruster_sim::NoisePreset;
 use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
 use thrusterd_core::monitor::MismatchAction;
+use thrusterd_core::refinement::RefinementConfig;
 
 fn holding(noise: NoisePreset, seed: u64) -> Run {
+    holding_with(noise, seed, RefinementConfig::default())
+}
+
+/// [`holding`] with the refinement's settings replaced.
+fn holding_with(noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> Run {
     let mut run = Run::new("amour5", noise, seed);
     let mut setup = MachineSetup {
         thrusters: 5,
+        refinement,
         ..MachineSetup::default()
     };
     setup.machine.deadband = 0.05;
@@ -40,21 +47,40 @@ fn holding(noise: NoisePreset, seed: u64) -> Run {
 
 /// Pitch steps of +-20 deg every 4 s for `seconds`; the first mismatch's time, if any.
 fn pitch_until_mismatch(run: &mut Run, seconds: f64) -> Option<(f64, String)> {
+    pitch_scored(run, seconds).0
+}
+
+/// [`pitch_until_mismatch`], and the mean angle between the true attitude and the setpoint
+/// over the samples flown, deg.
+fn pitch_scored(run: &mut Run, seconds: f64) -> (Option<(f64, String)>, f64) {
+    let (mut sum, mut k) = (0.0, 0u64);
+    let found = pitch_with(run, seconds, |sp, run| {
+        sum += run.sim.attitude().angle_to(sp).to_degrees();
+        k += 1;
+    });
+    (found, sum / k.max(1) as f64)
+}
+
+fn pitch_with(
+    run: &mut Run,
+    seconds: f64,
+    mut each: impl FnMut(&UnitQuaternion<f64>, &Run),
+) -> Option<(f64, String)> {
     let yaw = run.sim.roll_pitch_yaw()[2];
     let depth = run.sim.position_ned().z;
     let start = run.sim.time_s();
     let mut step = 0;
+    let mut sp = UnitQuaternion::identity();
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
         if t >= 4.0 * step as f64 {
             let p: f64 = [20.0, -20.0][step % 2];
-            run.machine.on_setpoint(
-                UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw),
-                Some(depth),
-            );
+            sp = UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw);
+            run.machine.on_setpoint(sp, Some(depth));
             step += 1;
         }
         run.tick();
+        each(&sp, run);
         for e in run.machine.take_events() {
             if let Event::MismatchDetected(why) = e {
                 return Some((t, why));
@@ -158,5 +184,62 @@ fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_m
         }
         // The refinement judged the whole time (a window every 5-30 s), it did not sleep.
         assert!(windows >= 6, "seed {seed}: only {windows} windows in 180 s");
+    }
+}
+
+/// The refinement's dither against detection and hold at a given noise: for each seed, 120 s
+/// of pitch steps on the unchanged vehicle (a false alarm ends it), then the top thruster
+/// rotated and up to 120 s more. Prints the first alarm, the detection time and the mean
+/// angle from the setpoint. A measuring tool; knobs RF_NOISE (paper, realistic), RF_SEEDS
+/// (comma list), RF_DITHER (comma list). Run with
+/// `cargo test --release -p thrusterd-core --test refinement -- --ignored dither_sweep --nocapture`.
+#[test]
+#[ignore]
+fn dither_sweep() {
+    let noise = match std::env::var("RF_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        _ => NoisePreset::Paper,
+    };
+    let list = |key: &str, default: &str| -> Vec<f64> {
+        std::env::var(key)
+            .unwrap_or_else(|_| default.into())
+            .split(',')
+            .map(|v| v.trim().parse().unwrap_or_else(|_| panic!("{key}: {v}")))
+            .collect()
+    };
+    for dither in list("RF_DITHER", "0.1") {
+        let (mut found_sum, mut found_n, mut alarms, mut err_sum) = (0.0, 0, 0, 0.0);
+        let seeds = list("RF_SEEDS", "1,2,3,4");
+        for &seed in &seeds {
+            let cfg = RefinementConfig {
+                dither,
+                ..RefinementConfig::default()
+            };
+            let mut run = holding_with(noise, seed as u64, cfg);
+            let (quiet, err) = pitch_scored(&mut run, 120.0);
+            err_sum += err;
+            let found = if quiet.is_none() {
+                rotate_top(&mut run);
+                pitch_until_mismatch(&mut run, 120.0)
+            } else {
+                alarms += 1;
+                None
+            };
+            if let Some((t, _)) = &found {
+                found_sum += t;
+                found_n += 1;
+            }
+            println!(
+                "dither {dither} seed {seed}: false alarm {:?}, found after {:?}, mean error {err:.2} deg",
+                quiet.map(|q| q.0),
+                found.map(|f| f.0)
+            );
+        }
+        println!(
+            "dither {dither}: {alarms} false alarms in {} x 120 s, found in {found_n} (mean {:.1} s), mean error {:.2} deg",
+            seeds.len(),
+            found_sum / found_n.max(1) as f64,
+            err_sum / seeds.len() as f64
+        );
     }
 }
