@@ -295,6 +295,29 @@ impl Estimator {
         self
     }
 
+    /// A dynamic fit whose navigation starts from the rest measured before the run (level and
+    /// still without one); `split` fits forward and reverse thrust apart.
+    fn dynamic_run(&self, split: bool) -> DynamicRun {
+        let rest = self
+            .rest_force
+            .unwrap_or(Vector3::new(0.0, 0.0, -super::response::GRAVITY));
+        let (n, lag, segment, aid) = (
+            self.thrusters(),
+            self.cfg.spin_up_s,
+            self.cfg.segment_s,
+            self.navigation_aid(),
+        );
+        let mut run = if split {
+            DynamicRun::split(n, lag, segment, &rest, aid)
+        } else {
+            DynamicRun::new(n, lag, segment, &rest, aid)
+        };
+        if let Some(w) = self.rest_velocity_down {
+            run.start_sinking_at(w);
+        }
+        run
+    }
+
     pub fn thrusters(&self) -> usize {
         self.plan.thrusters()
     }
@@ -357,19 +380,7 @@ impl Estimator {
             })
             .collect();
         if self.cfg.method == Method::Dynamic && self.dynamic.is_none() {
-            let mut run = DynamicRun::new(
-                self.thrusters(),
-                self.cfg.spin_up_s,
-                self.cfg.segment_s,
-                &self
-                    .rest_force
-                    .unwrap_or(Vector3::new(0.0, 0.0, -super::response::GRAVITY)),
-                self.navigation_aid(),
-            );
-            if let Some(w) = self.rest_velocity_down {
-                run.start_sinking_at(w);
-            }
-            self.dynamic = Some(run);
+            self.dynamic = Some(self.dynamic_run(false));
         }
         let split = split_regressor(&u);
         for (m, v) in self.max_command.iter_mut().zip(&u) {

@@ -42,10 +42,8 @@ pub(super) struct EstimationRun {
     est: Option<Estimator>,
     last_estimate: Option<Estimate>,
     quiet_since_ns: Option<u64>,
-    /// Sum and count of the raw specific force during the noise measurement.
-    rest_force: (Vector3<f64>, u64),
-    /// The depth over the same samples: how fast the vehicle rises at the rest's end.
-    rest_drift: RestDrift,
+    /// What the noise measurement (or the hold before an identification) saw.
+    rest: Rest,
     /// Under control (state Identify): the dither and its clock.
     closed: Option<ClosedLoop>,
     /// This open-loop run is a burst: its model is refined under control next.
@@ -60,8 +58,7 @@ impl EstimationRun {
             est: None,
             last_estimate: None,
             quiet_since_ns: None,
-            rest_force: (Vector3::zeros(), 0),
-            rest_drift: RestDrift::new(),
+            rest: Rest::default(),
             closed: None,
             burst: false,
         }
@@ -70,8 +67,7 @@ impl EstimationRun {
     /// A new run begins: the noise is measured afresh.
     pub(super) fn restart(&mut self) {
         self.noise = NoiseMeter::new();
-        self.rest_force = (Vector3::zeros(), 0);
-        self.rest_drift = RestDrift::new();
+        self.rest = Rest::default();
         self.est = None;
         self.closed = None;
         self.burst = false;
@@ -128,13 +124,7 @@ impl EstimationRun {
         n: usize,
     ) -> bool {
         self.noise.push(&m.gyro.into(), &m.accel.into());
-        if m.specific_force.iter().all(|v| v.is_finite()) {
-            self.rest_force.0 += m.specific_force;
-            self.rest_force.1 += 1;
-        }
-        if let Some(d) = m.depth {
-            self.rest_drift.push(elapsed_s, d);
-        }
+        self.rest.push(m, elapsed_s);
         if !(elapsed_s >= setup.machine.noise_s && self.noise.samples() >= 10) {
             return false;
         }
@@ -164,11 +154,7 @@ impl EstimationRun {
         if self.burst {
             cfg.target_rel_err = setup.identification.burst_rel_err;
         }
-        let mut est = with_rest(
-            &self.rest_force,
-            &self.rest_drift,
-            Estimator::new(cfg, n, levels),
-        );
+        let mut est = self.rest.start(Estimator::new(cfg, n, levels));
         if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
             est = est.with_nominal(nominal.effectiveness.clone());
         }
@@ -266,14 +252,35 @@ impl EstimationRun {
     }
 }
 
-/// What the rest measured, for the estimator's navigation: the mean specific force (the
-/// starting attitude) and the vertical velocity at its end.
-fn with_rest(rest_force: &(Vector3<f64>, u64), drift: &RestDrift, mut est: Estimator) -> Estimator {
-    if rest_force.1 > 0 {
-        est = est.with_rest_specific_force(rest_force.0 / rest_force.1 as f64);
+/// What the rest before an estimation measured, for its navigation: the mean raw specific
+/// force (the starting attitude) and the depth's trend (the vertical velocity at its end).
+#[derive(Debug, Default)]
+pub(super) struct Rest {
+    force_sum: Vector3<f64>,
+    force_samples: u64,
+    drift: RestDrift,
+}
+
+impl Rest {
+    /// One sample `t_s` into the rest.
+    pub(super) fn push(&mut self, m: &Motion, t_s: f64) {
+        if m.specific_force.iter().all(|v| v.is_finite()) {
+            self.force_sum += m.specific_force;
+            self.force_samples += 1;
+        }
+        if let Some(d) = m.depth {
+            self.drift.push(t_s, d);
+        }
     }
-    if let Some(w) = drift.velocity_down() {
-        est = est.with_rest_velocity_down(w);
+
+    /// `est`, told where its navigation starts.
+    pub(super) fn start(&self, mut est: Estimator) -> Estimator {
+        if self.force_samples > 0 {
+            est = est.with_rest_specific_force(self.force_sum / self.force_samples as f64);
+        }
+        if let Some(w) = self.drift.velocity_down() {
+            est = est.with_rest_velocity_down(w);
+        }
+        est
     }
-    est
 }

@@ -265,9 +265,6 @@ impl Navigator {
         }
     }
 
-    /// A measured body velocity (a DVL, m/s): the estimate moves `DVL_GAIN` of the way to it.
-    /// Horizontal velocity is otherwise not observed at all; a DVL at 5 Hz bounds its drift.
-    /// Non-finite measurements are ignored.
     /// The vertical velocity (NED, m/s, positive sinking) the rest ended with
     /// ([`rest_drift::RestDrift`]): the body velocity starts from it instead of zero.
     pub fn start_sinking_at(&mut self, velocity_down: f64) {
@@ -278,6 +275,9 @@ impl Navigator {
         }
     }
 
+    /// A measured body velocity (a DVL, m/s): the estimate moves `DVL_GAIN` of the way to it.
+    /// Horizontal velocity is otherwise not observed at all; a DVL at 5 Hz bounds its drift.
+    /// Non-finite measurements are ignored.
     pub fn velocity_fix(&mut self, measured: &Vector3<f64>) {
         if measured.iter().all(|v| v.is_finite()) {
             self.velocity += DVL_GAIN * (measured - self.velocity);

@@ -5,8 +5,6 @@ use nalgebra::Vector3;
 
 use super::{Estimate, Estimator, StopDecision};
 use crate::estimator::config::Method;
-use crate::estimator::dynamic::DynamicRun;
-use crate::estimator::response::GRAVITY;
 
 impl Estimator {
     /// Start the dynamic fit now, for samples whose command the caller gives
@@ -20,17 +18,7 @@ impl Estimator {
             return false;
         }
         self.pulse = None;
-        let mut run = DynamicRun::split(
-            self.thrusters(),
-            self.cfg.spin_up_s,
-            self.cfg.segment_s,
-            &self.rest_force.unwrap_or(Vector3::new(0.0, 0.0, -GRAVITY)),
-            self.navigation_aid(),
-        );
-        if let Some(w) = self.rest_velocity_down {
-            run.start_sinking_at(w);
-        }
-        self.dynamic = Some(run);
+        self.dynamic = Some(self.dynamic_run(true));
         true
     }
 

@@ -94,16 +94,10 @@ impl EstimationRun {
         };
         let t_s = t_ns as f64 * 1e-9;
         let Some(excite_from) = c.excite_from_ns else {
-            // Holding: the mean specific force (the starting attitude) and the noise.
+            // Holding: the rest (starting attitude and vertical velocity) and the noise.
             self.noise.push(&m.gyro.into(), &m.accel.into());
-            if m.specific_force.iter().all(|v| v.is_finite()) {
-                self.rest_force.0 += m.specific_force;
-                self.rest_force.1 += 1;
-            }
             let held_s = t_ns.saturating_sub(c.start_ns) as f64 * 1e-9;
-            if let Some(d) = m.depth {
-                self.rest_drift.push(held_s, d);
-            }
+            self.rest.push(m, held_s);
             c.sent[..command.len()].copy_from_slice(command);
             if held_s < setup.machine.noise_s || self.noise.samples() < 10 {
                 return ClosedStep::Holding;
@@ -111,11 +105,9 @@ impl EstimationRun {
             c.gyro_bias = *gyro_bias;
             let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
             c.amplitude = setup.identification.amplitude(levels.sigma_rot());
-            let mut est = super::with_rest(
-                &self.rest_force,
-                &self.rest_drift,
-                Estimator::new(setup.estimator.clone(), n, levels),
-            );
+            let mut est = self
+                .rest
+                .start(Estimator::new(setup.estimator.clone(), n, levels));
             if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
                 est = est.with_nominal(nominal.effectiveness.clone());
             }
