@@ -228,21 +228,6 @@ impl Drop for Topside {
     }
 }
 
-/// The bridge's port, from its start line `live view on ws://127.0.0.1:PORT`.
-fn bridge_port(bridge: &mut Proc) -> u16 {
-    let deadline = Instant::now() + Duration::from_secs(60);
-    loop {
-        let log = bridge.log_text();
-        if let Some(rest) = log.split("live view on ws://127.0.0.1:").nth(1) {
-            let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
-            return digits.parse().expect("a port number");
-        }
-        assert!(bridge.is_running(), "the bridge exited: {log}");
-        assert!(Instant::now() < deadline, "no start line after 60 s: {log}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 /// `thruster-bridge` recording to `out` and serving one topside client, attached to `world`.
 struct Attached {
     bridge: Proc,
@@ -250,19 +235,7 @@ struct Attached {
 }
 
 fn attach(world: &World, out: &std::path::Path, seconds: u64) -> Attached {
-    let mut bridge = Proc::spawn(
-        "thruster-bridge",
-        &[
-            "--namespace",
-            &world.namespace(),
-            "--ws",
-            "127.0.0.1:0",
-            "--record",
-            out.to_str().unwrap(),
-        ],
-        world.dir.path(),
-    );
-    let port = bridge_port(&mut bridge);
+    let (bridge, port) = world.live_bridge(out);
     let client = system_tests::node::script("bridge_client.js")
         .arg(format!("ws://127.0.0.1:{port}"))
         .arg(seconds.to_string())

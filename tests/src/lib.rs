@@ -276,6 +276,32 @@ impl World {
         Proc::spawn("thruster-sim", &args, self.dir.path())
     }
 
+    /// `thruster-bridge` on this namespace serving the live view on a free local port and
+    /// recording to `out`; returns once its start line names the port.
+    pub fn live_bridge(&self, out: &Path) -> (Proc, u16) {
+        let ns = self.namespace();
+        let args = [
+            "--namespace",
+            ns.as_str(),
+            "--ws",
+            "127.0.0.1:0",
+            "--record",
+            out.to_str().unwrap(),
+        ];
+        let mut bridge = Proc::spawn("thruster-bridge", &args, self.dir.path());
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            let log = bridge.log_text();
+            if let Some(rest) = log.split("live view on ws://127.0.0.1:").nth(1) {
+                let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+                return (bridge, digits.parse().expect("a port number"));
+            }
+            assert!(bridge.is_running(), "the bridge exited: {log}");
+            assert!(Instant::now() < deadline, "no start line after 60 s: {log}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// Files of this namespace still on disk (after every process has exited).
     pub fn leftovers(&self) -> Vec<PathBuf> {
         thruster_protocol::services::purge_namespace(&self.ns).unwrap();

@@ -7,30 +7,15 @@
 //! session to MCAP, read back by Foxglove's Python `mcap` package.
 
 use std::process::Output;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serde_json::Value;
 use system_tests::python::read_mcap;
-use system_tests::{bin, state, Operator, Proc, World};
+use system_tests::{bin, state, Operator, World};
 use thruster_protocol::DaemonState;
 
 /// Longest the client may take: connect, wait for the daemon's status, call, watch 3 s more.
 const CLIENT_S: u64 = 60;
-
-/// The bridge's port, from its start line `live view on ws://127.0.0.1:PORT`.
-fn wait_port(bridge: &mut Proc) -> u16 {
-    let deadline = Instant::now() + Duration::from_secs(60);
-    loop {
-        let log = bridge.log_text();
-        if let Some(rest) = log.split("live view on ws://127.0.0.1:").nth(1) {
-            let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
-            return digits.parse().expect("a port number");
-        }
-        assert!(bridge.is_running(), "the bridge exited: {log}");
-        assert!(Instant::now() < deadline, "no start line after 60 s: {log}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
 
 fn client(port: u16) -> (Value, Output) {
     let out = system_tests::node::script("bridge_client.js")
@@ -55,21 +40,8 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
     system_tests::node::node_modules();
     system_tests::python::venv_python();
     let world = World::new("bridge");
-    let ns = world.namespace();
     let out = world.path("live.mcap");
-    let mut bridge = Proc::spawn(
-        "thruster-bridge",
-        &[
-            "--namespace",
-            &ns,
-            "--ws",
-            "127.0.0.1:0",
-            "--record",
-            out.to_str().unwrap(),
-        ],
-        world.dir.path(),
-    );
-    let port = wait_port(&mut bridge);
+    let (mut bridge, port) = world.live_bridge(&out);
     let mut daemon = world.daemon(&["--thrusters", "5"]);
     let mut sim = world.sim("amour5", &["--realtime", "--duration", "120"]);
     let operator = Operator::new(&world);
