@@ -11,7 +11,9 @@ use thruster_protocol::{
 };
 
 use crate::estimator::Method;
-use crate::machine::{Command, Geometry, ImuInput, Mode, Reconfig, State, StatusSnapshot};
+use crate::machine::{
+    Command, Geometry, ImuInput, Mode, Reconfig, State, StatusSnapshot, ThrusterChange,
+};
 use crate::model::{Model, ModelSource};
 
 pub fn imu_input(s: &ImuSample) -> ImuInput {
@@ -142,9 +144,17 @@ pub fn reconfig(e: &ReconfigEvent) -> Reconfig {
         directions: e.direction[..count].to_vec(),
     });
     let kind = e.kind().unwrap_or(ReconfigKind::Unknown);
+    let i = e.thruster as usize;
+    let change = match kind {
+        ReconfigKind::Unknown => ThrusterChange::Unknown,
+        ReconfigKind::ThrusterAdded => ThrusterChange::Added(i),
+        ReconfigKind::ThrusterRemoved => ThrusterChange::Removed(i),
+        ReconfigKind::ThrusterMoved => ThrusterChange::Moved(i),
+    };
     Reconfig {
         count,
         geometry,
+        change,
         what: format!("reconfiguration ({}, thruster {})", kind.name(), e.thruster),
     }
 }
@@ -258,6 +268,27 @@ mod tests {
     use crate::machine::{Machine, MachineSetup};
     use crate::model::{nominal_effectiveness, RigidBody};
     use thruster_protocol::validate::Validate;
+
+    #[test]
+    fn a_reconfiguration_says_which_thruster_changed_and_how() {
+        let mut e = ReconfigEvent {
+            thruster: 2,
+            count: 5,
+            ..ReconfigEvent::default()
+        };
+        for (kind, change) in [
+            (ReconfigKind::ThrusterMoved, ThrusterChange::Moved(2)),
+            (ReconfigKind::ThrusterAdded, ThrusterChange::Added(2)),
+            (ReconfigKind::ThrusterRemoved, ThrusterChange::Removed(2)),
+            (ReconfigKind::Unknown, ThrusterChange::Unknown),
+        ] {
+            e.set_kind(kind);
+            assert_eq!(reconfig(&e).change, change);
+        }
+        // A kind from a newer sender: re-estimate everything.
+        e.kind = 99;
+        assert_eq!(reconfig(&e).change, ThrusterChange::Unknown);
+    }
 
     #[test]
     fn what_the_daemon_publishes_passes_the_protocols_checks() {

@@ -117,6 +117,7 @@ fn reconfiguration_swaps_nominal_at_once_then_refines_and_cache_swaps_back() {
     run.machine.on_reconfig(Reconfig {
         count: 5,
         geometry: Some(geometry(&v)),
+        change: thrusterd_core::machine::ThrusterChange::Unknown,
         what: "declared".into(),
     });
     let nominal = run.machine.model().unwrap().clone();
@@ -138,6 +139,7 @@ fn reconfiguration_swaps_nominal_at_once_then_refines_and_cache_swaps_back() {
     run.machine.on_reconfig(Reconfig {
         count: 5,
         geometry: Some(moved),
+        change: thrusterd_core::machine::ThrusterChange::Moved(0),
         what: "top thruster rotated".into(),
     });
     assert_eq!(run.machine.model().unwrap().source, ModelSource::Nominal);
@@ -147,6 +149,7 @@ fn reconfiguration_swaps_nominal_at_once_then_refines_and_cache_swaps_back() {
     run.machine.on_reconfig(Reconfig {
         count: 5,
         geometry: Some(geometry(&v)),
+        change: thrusterd_core::machine::ThrusterChange::Moved(0),
         what: "top thruster back".into(),
     });
     let back = run.machine.model().unwrap();
@@ -164,6 +167,7 @@ fn count_change_without_geometry_drops_the_model_until_estimated() {
     run.machine.on_reconfig(Reconfig {
         count: 4,
         geometry: None,
+        change: thrusterd_core::machine::ThrusterChange::Unknown,
         what: "thruster removed".into(),
     });
     assert!(

@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, Vector3};
 use super::analysis::{allocation, diagnose, rank_report, RankReport, ThrusterDiagnosis};
 use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
+use super::dynamic::prior::DynamicPrior;
 use super::dynamic::{DynamicRun, DynamicTerms};
 use super::excitation::ExcitationPlan;
 use super::forward::{ForwardLs, ForwardSolution};
@@ -232,6 +233,9 @@ pub struct Estimator {
     paper: [PaperLs; 2],
     max_command: Vec<f64>,
     nominal: Option<DMatrix<f64>>,
+    /// Coefficients known before the run (carried over from the model in force when only
+    /// part of the vehicle changed): the dynamic fit weighs its data against them.
+    prior: Option<DynamicPrior>,
     /// The dynamic method's fit, built at the first pulse.
     dynamic: Option<DynamicRun>,
     /// Mean specific force at rest (m/s^2, body): where the dynamic method's navigation starts.
@@ -259,6 +263,7 @@ impl Estimator {
             paper: [PaperLs::new(n), PaperLs::new(n)],
             max_command: vec![0.0; n],
             nominal: None,
+            prior: None,
             dynamic: None,
             rest_force: None,
             rest_velocity_down: None,
@@ -273,6 +278,20 @@ impl Estimator {
             self.nominal = Some(nominal);
         }
         self
+    }
+
+    /// Coefficients known before the run, for the dynamic method (see
+    /// [`DynamicPrior`]); ignored when its shape does not fit N thrusters.
+    pub fn with_prior(mut self, prior: DynamicPrior) -> Self {
+        if prior.fits(self.thrusters()) {
+            self.prior = Some(prior);
+        }
+        self
+    }
+
+    /// Whether the run starts from carried-over coefficients.
+    pub fn has_prior(&self) -> bool {
+        self.prior.is_some()
     }
 
     /// The mean specific force measured at rest just before the run (m/s^2, body frame, the
@@ -750,7 +769,7 @@ impl Estimator {
                 dynamics: None,
             };
         };
-        let sol = run.solve(&rest, self.cfg.model_error_floor);
+        let sol = run.solve(&rest, self.cfg.model_error_floor, self.prior.as_ref());
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
         let alloc = allocation(&sol.b, rank.actuated, rank.rank);
         let thruster = diagnose(

@@ -6,8 +6,12 @@ use nalgebra::Vector3;
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::MachineSetup;
+use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::power::pulse_power;
-use crate::estimator::{Estimate, Estimator, Method, NoiseLevels, NoiseMeter, StopDecision};
+use crate::estimator::{
+    Estimate, Estimator, EstimatorConfig, Method, NoiseLevels, NoiseMeter, StopDecision,
+};
+use crate::identification::IdentificationConfig;
 use crate::model::{Model, ModelSource};
 use crate::navigation::rest_drift::RestDrift;
 
@@ -48,6 +52,8 @@ pub(super) struct EstimationRun {
     closed: Option<ClosedLoop>,
     /// This open-loop run is a burst: its model is refined under control next.
     burst: bool,
+    /// What the run keeps from the model before a known change (`identification::carry_over`).
+    prior: Option<DynamicPrior>,
 }
 
 impl EstimationRun {
@@ -61,7 +67,40 @@ impl EstimationRun {
             rest: Rest::default(),
             closed: None,
             burst: false,
+            prior: None,
         }
+    }
+
+    /// The run about to start keeps these coefficients as its prior (None: learns everything).
+    /// Under control, the dither then goes to the thrusters the prior knows nothing about, at
+    /// `identification.focus_gain` times the amplitude and the others' at `focus_others` times.
+    pub(super) fn carry(&mut self, prior: Option<DynamicPrior>, cfg: &IdentificationConfig) {
+        if let (Some(p), Some(c)) = (&prior, self.closed.as_mut()) {
+            if cfg.focus_gain > 0.0 {
+                c.dither
+                    .focus(&p.unknown_thrusters(), cfg.focus_gain, cfg.focus_others);
+            }
+        }
+        self.prior = prior;
+    }
+
+    /// The estimator for this run, with the nominal model of a declared geometry (to check
+    /// directions against) and the carried-over prior.
+    fn new_estimator(
+        &self,
+        cfg: EstimatorConfig,
+        n: usize,
+        levels: NoiseLevels,
+        model: Option<&Model>,
+    ) -> Estimator {
+        let mut est = self.rest.start(Estimator::new(cfg, n, levels));
+        if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
+            est = est.with_nominal(nominal.effectiveness.clone());
+        }
+        if let Some(p) = &self.prior {
+            est = est.with_prior(p.clone());
+        }
+        est
     }
 
     /// A new run begins: the noise is measured afresh.
@@ -71,6 +110,7 @@ impl EstimationRun {
         self.est = None;
         self.closed = None;
         self.burst = false;
+        self.prior = None;
     }
 
     /// Whether the run that just concluded was an open-loop burst to be refined under control.
@@ -154,11 +194,7 @@ impl EstimationRun {
         if self.burst {
             cfg.target_rel_err = setup.identification.burst_rel_err;
         }
-        let mut est = self.rest.start(Estimator::new(cfg, n, levels));
-        if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
-            est = est.with_nominal(nominal.effectiveness.clone());
-        }
-        self.est = Some(est);
+        self.est = Some(self.new_estimator(cfg, n, levels, model));
         true
     }
 

@@ -25,5 +25,5 @@ pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};
 pub use types::{
     Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput, State,
-    StatusSnapshot, NO_IMU_YET,
+    StatusSnapshot, ThrusterChange, NO_IMU_YET,
 };

@@ -14,8 +14,10 @@ use super::types::{
 };
 use crate::attitude::AttitudeFilter;
 use crate::controller::{Controller, Measured, Target};
+use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::response::motion_accel;
 use crate::estimator::{Estimate, NoiseLevels, StopDecision};
+use crate::identification::carry_over::{carried_over, ThrusterChange};
 use crate::model::{nominal_effectiveness, Model, ModelSource};
 use crate::monitor::{MismatchAction, ModelMonitor};
 use crate::refinement::{Refiner, Tick, WindowVerdict};
@@ -407,6 +409,8 @@ impl Machine {
         self.geometry = r.geometry.clone().filter(|g| g.positions.len() == count);
         let t = self.last_t_ns.unwrap_or(0);
         let mut estimate = self.setup.machine.on_reconfig == ReconfigPolicy::Estimate;
+        // Before any swap: what the learned model in force says about the unchanged rest.
+        let prior = self.carry_over(r.change, count);
         if self.state.is_estimating() {
             self.run.stop();
         }
@@ -436,7 +440,7 @@ impl Machine {
             }
         }
         if estimate {
-            self.start_estimation(t, &format!("{}: re-estimating", r.what));
+            self.start_estimation_with(t, &format!("{}: re-estimating", r.what), prior);
         } else if self.models.current().is_some() && self.state != State::Fault {
             if self.state.is_estimating() || self.state == State::Active {
                 self.transition(State::Active, &format!("{}: model swapped", r.what));
@@ -549,7 +553,32 @@ impl Machine {
         }
     }
 
+    /// What an estimation after `change` (now `count` thrusters) keeps from the model in force.
+    fn carry_over(&self, change: ThrusterChange, count: usize) -> Option<DynamicPrior> {
+        let cfg = &self.setup.identification;
+        if !cfg.carry_over {
+            return None;
+        }
+        carried_over(
+            self.models.current()?,
+            change,
+            count,
+            cfg.carry_over_se_scale,
+        )
+    }
+
     fn start_estimation(&mut self, t_ns: u64, why: &str) {
+        self.start_estimation_with(t_ns, why, None);
+    }
+
+    /// An estimation starts, keeping `prior` (see `identification::carry_over`).
+    fn start_estimation_with(&mut self, t_ns: u64, why: &str, prior: Option<DynamicPrior>) {
+        let kept = if prior.is_some() {
+            "; the other thrusters' columns and the hull's dynamics are kept"
+        } else {
+            ""
+        };
+        let why = &format!("{why}{kept}");
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
         // Controlling with a model: identify under control (see `crate::identification`).
         let controlling =
@@ -561,6 +590,7 @@ impl Machine {
             self.levelling = None;
             self.run
                 .begin_closed_loop(t_ns, &self.setup.identification, self.n);
+            self.run.carry(prior, &self.setup.identification);
             self.transition(
                 State::Identify,
                 &format!("{why}: identifying under control"),
@@ -568,6 +598,7 @@ impl Machine {
             return;
         }
         self.run.restart();
+        self.run.carry(prior, &self.setup.identification);
         // Controlling with a model: level the vehicle first (see MachineConfig::level_max_s).
         // A reconfiguration while levelling levels on (the vehicle is no more at rest).
         self.levelling = ((self.state == State::Active || self.levelling.is_some())
@@ -961,9 +992,9 @@ impl Machine {
         );
         finish(&mut cmd, self.setup.machine.deadband);
         if let Some(m) = mismatch {
-            self.on_mismatch(s.t_ns, m.to_string());
+            self.on_mismatch(s.t_ns, m.to_string(), ThrusterChange::Unknown);
         } else if let Some(v) = verdict.filter(|v| v.changed) {
-            self.on_mismatch(s.t_ns, v.to_string());
+            self.on_mismatch(s.t_ns, v.to_string(), ThrusterChange::Moved(v.thruster));
         } else if let Some(fused) = self.refiner.take_refined() {
             self.install_refined(fused.model);
         }
@@ -992,14 +1023,16 @@ impl Machine {
         }
     }
 
-    /// The monitor found the thrusters doing something else than the model says.
-    fn on_mismatch(&mut self, t_ns: u64, why: String) {
+    /// The monitor (or the refinement, which names the thruster: `change`) found the
+    /// thrusters doing something else than the model says.
+    fn on_mismatch(&mut self, t_ns: u64, why: String, change: ThrusterChange) {
         self.refiner.reset();
         self.events.push(Event::MismatchDetected(why.clone()));
         self.monitor.reset(self.n);
         match self.monitor.action() {
             MismatchAction::Estimate => {
-                self.start_estimation(t_ns, &format!("{why}: re-estimating"))
+                let prior = self.carry_over(change, self.n);
+                self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior)
             }
             MismatchAction::Report | MismatchAction::Off => {
                 self.text = format!("holding attitude; {why}");

@@ -134,11 +134,16 @@ pub enum Request {
 #[error("{0}")]
 pub struct Refused(pub String);
 
+pub use crate::identification::carry_over::ThrusterChange;
+
 /// A reconfiguration event, validated.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reconfig {
     pub count: usize,
     pub geometry: Option<Geometry>,
+    /// Which thruster changed and how, when the sender says (the re-estimation then keeps
+    /// the rest of the learned model, see `identification::carry_over`).
+    pub change: ThrusterChange,
     pub what: String,
 }
 

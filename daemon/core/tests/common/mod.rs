@@ -176,6 +176,7 @@ impl Run {
         self.machine.on_reconfig(thrusterd_core::machine::Reconfig {
             count: v.thrusters.len(),
             geometry: Some(moved),
+            change: thrusterd_core::machine::ThrusterChange::Moved(0),
             what: "top thruster rotated".into(),
         });
         let heading = self.sim.roll_pitch_yaw()[2];

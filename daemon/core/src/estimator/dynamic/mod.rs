@@ -10,11 +10,13 @@
 //! Both are linear in the unknowns, so the fit stays incremental (normal equations, one
 //! intercept per segment) and gives covariances like the static forward model.
 
+pub mod prior;
 pub mod regressors;
 pub mod segmented_ls;
 
 use nalgebra::{DMatrix, Vector3};
 
+use self::prior::DynamicPrior;
 use self::regressors::{terms, TERMS};
 use self::segmented_ls::{SegmentedLs, SegmentedSolution};
 use crate::navigation::{DepthAid, Navigator};
@@ -282,13 +284,31 @@ impl DynamicRun {
 
     /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer);
     /// `model_error_floor` the relative error of B that no data removes (added to B's standard
-    /// errors and bound; `EstimatorConfig::model_error_floor`).
+    /// errors and bound; `EstimatorConfig::model_error_floor`). With a `prior` (coefficients
+    /// carried over from the model in force), the data is weighed against it.
     // Index loops: DOF row 3g + a, thruster i and term j address several matrices at once.
     #[allow(clippy::needless_range_loop)]
-    pub fn solve(&self, rest_sigma: &[f64; 6], model_error_floor: f64) -> DynamicSolution {
+    pub fn solve(
+        &self,
+        rest_sigma: &[f64; 6],
+        model_error_floor: f64,
+        prior: Option<&DynamicPrior>,
+    ) -> DynamicSolution {
         let n = self.n;
         let c = self.cols;
-        let sols = [self.rot.solve(), self.acc.solve()];
+        let prior = prior.filter(|p| p.fits(n));
+        let sols: [SegmentedSolution; 2] = std::array::from_fn(|g| {
+            let ls = if g == 0 { &self.rot } else { &self.acc };
+            let sol = ls.solve();
+            match prior {
+                Some(p) => {
+                    let sigma = group_sigma(&sol, &rest_sigma[3 * g..3 * g + 3]);
+                    let entries = std::array::from_fn(|a| p.entries(3 * g + a, self.split));
+                    ls.solve_with_prior(&entries, &sigma)
+                }
+                None => sol,
+            }
+        });
         let mut b = DMatrix::zeros(6, n);
         let mut std_err = DMatrix::zeros(6, n);
         let mut split_b = DMatrix::zeros(6, c);
@@ -340,7 +360,7 @@ impl DynamicRun {
                     coef_ols[(row, j)] = v.2.max(0.0).sqrt();
                 }
             }
-            let identified = (0..c).all(|i| sol.gram_inv[(i, i)] > 0.0);
+            let identified = (0..3).all(|a| (0..c).all(|i| sol.inverse(a)[(i, i)] > 0.0));
             excited &= identified;
             // The model error no amount of data removes (docs/study.md): spread evenly over the
             // block's entries, so the block's bound gains model_error_floor in quadrature. It is
@@ -394,7 +414,7 @@ fn combination_var(
     let (mut d, mut robust) = (0.0, 0.0);
     for &(i, wi) in w {
         for &(j, wj) in w {
-            d += wi * wj * sol.gram_inv[(i, j)];
+            d += wi * wj * sol.inverse(a)[(i, j)];
             robust += wi * wj * sol.robust_cov[a][(i, j)];
         }
     }

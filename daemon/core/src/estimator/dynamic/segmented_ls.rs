@@ -18,6 +18,7 @@
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
+use super::prior::PriorEntry;
 use crate::estimator::linalg::sym_pinv;
 
 /// Cluster slots kept for the robust covariance (each at least one segment, 1 s by default).
@@ -30,6 +31,9 @@ pub struct SegmentedSolution {
     pub theta: DMatrix<f64>,
     /// K x K inverse Gram matrix (covariance / sigma^2).
     pub gram_inv: DMatrix<f64>,
+    /// With a prior (`SegmentedLs::solve_with_prior`): per output, the inverse of the Gram
+    /// matrix with that output's prior information added, which replaces `gram_inv` there.
+    pub output_inv: Option<[DMatrix<f64>; 3]>,
     /// Numerical rank of the Gram matrix.
     pub rank: usize,
     /// Residual variance per output, once there are degrees of freedom left.
@@ -39,6 +43,13 @@ pub struct SegmentedSolution {
     /// the small-sample factor S / (S - 1)), and S, the clusters it rests on.
     pub robust_cov: [DMatrix<f64>; 3],
     pub clusters: usize,
+}
+
+impl SegmentedSolution {
+    /// The inverse Gram matrix that holds for output `a` (the prior's, when there is one).
+    pub fn inverse(&self, a: usize) -> &DMatrix<f64> {
+        self.output_inv.as_ref().map_or(&self.gram_inv, |o| &o[a])
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -170,8 +181,9 @@ impl SegmentedLs {
         self.seg_y = Vector3::zeros();
     }
 
-    /// The fit over every row so far (the open segment counted as if closed now).
-    pub fn solve(&self) -> SegmentedSolution {
+    /// The normal equations over every row so far (the open segment counted as if closed
+    /// now), the Gram matrix made symmetric.
+    fn normal_equations(&self) -> Normal {
         let k = self.k;
         let mut g = self.gram.clone();
         let mut xy = self.xy.clone();
@@ -192,18 +204,36 @@ impl SegmentedLs {
                 g[(i, j)] = g[(j, i)];
             }
         }
-        // Jacobi scaling: unit diagonal (unexcited columns stay zero).
-        let d = DVector::from_fn(k, |i, _| {
-            let v = g[(i, i)];
-            if v > 0.0 {
-                1.0 / v.sqrt()
-            } else {
-                0.0
-            }
-        });
-        let scaled = DMatrix::from_fn(k, k, |i, j| g[(i, j)] * d[i] * d[j]);
-        let (inv_s, rank) = sym_pinv(&scaled);
-        let gram_inv = DMatrix::from_fn(k, k, |i, j| inv_s[(i, j)] * d[i] * d[j]);
+        Normal {
+            g,
+            xy,
+            yy,
+            segments,
+            open,
+        }
+    }
+
+    /// Every cluster's centred (Gram matrix, cross products): each closed slot and the open
+    /// segment.
+    fn clusters<'a>(
+        &'a self,
+        open: &'a Option<(DMatrix<f64>, DMatrix<f64>)>,
+    ) -> impl Iterator<Item = (&'a DMatrix<f64>, &'a DMatrix<f64>)> {
+        let used = (self.segments.min(CLUSTERS as u64)) as usize;
+        let stored = (0..used).map(|s| (&self.cluster_gram[s], &self.cluster_xy[s]));
+        stored.chain(open.as_ref().map(|(og, oxy)| (og, oxy)))
+    }
+
+    /// The fit over every row so far (the open segment counted as if closed now).
+    pub fn solve(&self) -> SegmentedSolution {
+        let Normal {
+            g,
+            xy,
+            yy,
+            segments,
+            open,
+        } = self.normal_equations();
+        let (gram_inv, rank) = scaled_pinv(&g);
         let theta = &gram_inv * &xy;
         let residual_dof = self.rows.saturating_sub(segments + rank as u64);
         let residual_var = (residual_dof > 0).then(|| {
@@ -213,12 +243,10 @@ impl SegmentedLs {
             })
         });
         // Cluster-robust covariance: each closed slot and the open segment is one cluster.
-        let mut robust_cov: [DMatrix<f64>; 3] = std::array::from_fn(|_| DMatrix::zeros(k, k));
-        let used = (self.segments.min(CLUSTERS as u64)) as usize;
-        let stored = (0..used).map(|s| (&self.cluster_gram[s], &self.cluster_xy[s]));
-        let clusters_iter = stored.chain(open.as_ref().map(|(og, oxy)| (og, oxy)));
+        let mut robust_cov: [DMatrix<f64>; 3] =
+            std::array::from_fn(|_| DMatrix::zeros(self.k, self.k));
         let mut clusters = 0;
-        for (cg, cxy) in clusters_iter {
+        for (cg, cxy) in self.clusters(&open) {
             clusters += 1;
             for (a, cov) in robust_cov.iter_mut().enumerate() {
                 let h = cxy.column(a) - cg * theta.column(a);
@@ -226,20 +254,121 @@ impl SegmentedLs {
                 cov.ger(1.0, &u, &u, 1.0);
             }
         }
-        if clusters > 1 {
-            let c = clusters as f64 / (clusters as f64 - 1.0);
-            for cov in robust_cov.iter_mut() {
-                *cov *= c;
-            }
-        }
+        scale_small_sample(&mut robust_cov, clusters);
         SegmentedSolution {
             theta,
             gram_inv,
+            output_inv: None,
             rank,
             residual_var,
             residual_dof,
             robust_cov,
             clusters,
+        }
+    }
+
+    /// The fit with prior knowledge of some coefficients: per output `a`, `priors[a]` (linear
+    /// combinations with a value and a standard error), weighed against the data at that
+    /// output's noise `sigma[a]`: the normal equations gain sigma^2 / se^2 w w' and
+    /// sigma^2 / se^2 w value (the information form of a Gaussian prior). The residual level
+    /// and degrees of freedom stay the data's. The robust covariance is the data clusters'
+    /// sandwich plus the prior's own share, G_a^-1 sigma^2 P_a G_a^-1, so a coefficient the data
+    /// barely touches keeps the prior's standard error rather than none.
+    pub fn solve_with_prior(
+        &self,
+        priors: &[Vec<PriorEntry>; 3],
+        sigma: &[f64; 3],
+    ) -> SegmentedSolution {
+        let base = self.solve();
+        let Normal { g, xy, open, .. } = self.normal_equations();
+        let k = self.k;
+        let mut theta = DMatrix::zeros(k, 3);
+        let mut robust_cov: [DMatrix<f64>; 3] = std::array::from_fn(|_| DMatrix::zeros(k, k));
+        let mut output_inv: [DMatrix<f64>; 3] = std::array::from_fn(|_| DMatrix::zeros(k, k));
+        for a in 0..3 {
+            let s2 = sigma[a] * sigma[a];
+            let mut ga = g.clone();
+            let mut ra = xy.column(a).clone_owned();
+            let mut pa = DMatrix::zeros(k, k);
+            for e in &priors[a] {
+                if !(e.std_err > 0.0 && e.std_err.is_finite() && e.value.is_finite()) {
+                    continue;
+                }
+                let w = s2 / (e.std_err * e.std_err);
+                for &(i, wi) in &e.weights {
+                    if wi == 0.0 || i >= k {
+                        continue;
+                    }
+                    ra[i] += w * wi * e.value;
+                    for &(j, wj) in &e.weights {
+                        if wj != 0.0 && j < k {
+                            pa[(i, j)] += w * wi * wj;
+                        }
+                    }
+                }
+            }
+            ga += &pa;
+            let (inv, _) = scaled_pinv(&ga);
+            let th = &inv * &ra;
+            let mut meat = &pa * s2;
+            let mut data = DMatrix::zeros(k, k);
+            for (cg, cxy) in self.clusters(&open) {
+                let h = cxy.column(a) - cg * &th;
+                data.ger(1.0, &h, &h, 1.0);
+            }
+            if base.clusters > 1 {
+                data *= base.clusters as f64 / (base.clusters as f64 - 1.0);
+            }
+            meat += data;
+            robust_cov[a] = &inv * meat * &inv;
+            theta.set_column(a, &th);
+            output_inv[a] = inv;
+        }
+        SegmentedSolution {
+            theta,
+            output_inv: Some(output_inv),
+            robust_cov,
+            ..base
+        }
+    }
+}
+
+/// The normal equations of a [`SegmentedLs`] and its open segment's centred sums.
+struct Normal {
+    g: DMatrix<f64>,
+    xy: DMatrix<f64>,
+    yy: Vector3<f64>,
+    segments: u64,
+    open: Option<(DMatrix<f64>, DMatrix<f64>)>,
+}
+
+/// Pseudo-inverse of a Gram matrix, scaled to a unit diagonal first (Jacobi): the regressors
+/// (commands, rates, squared velocities, products) span many orders of magnitude. Unexcited
+/// columns stay zero.
+fn scaled_pinv(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+    let k = g.nrows();
+    let d = DVector::from_fn(k, |i, _| {
+        let v = g[(i, i)];
+        if v > 0.0 {
+            1.0 / v.sqrt()
+        } else {
+            0.0
+        }
+    });
+    let scaled = DMatrix::from_fn(k, k, |i, j| g[(i, j)] * d[i] * d[j]);
+    let (inv_s, rank) = sym_pinv(&scaled);
+    (
+        DMatrix::from_fn(k, k, |i, j| inv_s[(i, j)] * d[i] * d[j]),
+        rank,
+    )
+}
+
+/// The cluster-robust covariance's small-sample factor S / (S - 1).
+fn scale_small_sample(cov: &mut [DMatrix<f64>; 3], clusters: usize) {
+    if clusters > 1 {
+        let c = clusters as f64 / (clusters as f64 - 1.0);
+        for m in cov.iter_mut() {
+            *m *= c;
         }
     }
 }

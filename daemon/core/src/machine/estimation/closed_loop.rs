@@ -7,15 +7,15 @@ use nalgebra::Vector3;
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::{EstimationRun, Motion};
-use crate::estimator::{Estimator, Method, StopDecision};
+use crate::estimator::{Method, StopDecision};
 use crate::identification::{Dither, IdentificationConfig};
 use crate::machine::config::MachineSetup;
-use crate::model::{Model, ModelSource};
+use crate::model::Model;
 
 /// Where a closed-loop run stands.
 #[derive(Debug, Clone)]
 pub(in crate::machine) struct ClosedLoop {
-    dither: Dither,
+    pub(super) dither: Dither,
     start_ns: u64,
     /// When the dither started (None while holding for the noise and the starting attitude).
     excite_from_ns: Option<u64>,
@@ -103,18 +103,13 @@ impl EstimationRun {
                 return ClosedStep::Holding;
             }
             c.gyro_bias = *gyro_bias;
-            let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
-            c.amplitude = setup.identification.amplitude(levels.sigma_rot());
-            let mut est = self
-                .rest
-                .start(Estimator::new(setup.estimator.clone(), n, levels));
-            if let Some(nominal) = model.filter(|m| m.source == ModelSource::Nominal) {
-                est = est.with_nominal(nominal.effectiveness.clone());
-            }
-            est.begin_closed_loop();
-            self.est = Some(est);
             c.excite_from_ns = Some(t_ns);
             c.next_decision_ns = t_ns + (setup.estimator.segment_s * 1e9) as u64;
+            let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
+            c.amplitude = setup.identification.amplitude(levels.sigma_rot());
+            let mut est = self.new_estimator(setup.estimator.clone(), n, levels, model);
+            est.begin_closed_loop();
+            self.est = Some(est);
             return ClosedStep::Holding;
         };
         let Some(est) = self.est.as_mut() else {

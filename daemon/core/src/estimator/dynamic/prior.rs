@@ -1,0 +1,148 @@
+//! What is known before a dynamic fit starts: coefficients carried over from the model in
+//! force when only part of the vehicle changed (one thruster moved, added or removed), each
+//! with its standard error. The fit weighs them like measurements (a Gaussian prior, the
+//! information form of a Kalman update), so the data only has to teach it what changed.
+//!
+//! Why: after an announced change of one thruster, re-learning every column from nothing
+//! spends the attitude budget on what is already known. At the paper's noise a full
+//! closed-loop fit needed 15 s for the rotation rows and about 55 s for the acceleration rows
+//! (docs/experiments.md); the moved thruster's column alone is six unknowns, not 6 N.
+
+use nalgebra::DMatrix;
+
+use super::regressors::{TERMS, TERM_NAMES};
+
+/// Known coefficients of a dynamic fit for N thrusters. Entries with an infinite or NaN
+/// standard error (or a NaN value) are unknown and left to the data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DynamicPrior {
+    /// 6 x N effectiveness, DOF rows (the symmetric gain: the mean of forward and reverse).
+    pub b: DMatrix<f64>,
+    /// 6 x N standard errors of `b`.
+    pub b_std_err: DMatrix<f64>,
+    /// 6 x TERMS coefficients of the other terms and their standard errors, when known.
+    pub terms: Option<(DMatrix<f64>, DMatrix<f64>)>,
+}
+
+/// Terms that belong to one run rather than to the vehicle, never carried over: the constant
+/// takes the gyro bias left after the rest and a slow drift, and the mean |command| takes the
+/// excitation's imbalance.
+pub const RUN_TERMS: [&str; 2] = ["const", "mean_abs_command"];
+
+/// One prior on a linear combination `sum w_i theta_i` of one output's coefficients.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PriorEntry {
+    /// (coefficient index, weight); a second weight of 0 is unused.
+    pub weights: [(usize, f64); 2],
+    pub value: f64,
+    pub std_err: f64,
+}
+
+impl DynamicPrior {
+    /// Thrusters in the prior.
+    pub fn thrusters(&self) -> usize {
+        self.b.ncols()
+    }
+
+    /// Thrusters with nothing known about them (every entry of their column unknown): the
+    /// ones the run has to learn.
+    pub fn unknown_thrusters(&self) -> Vec<usize> {
+        (0..self.thrusters())
+            .filter(|&i| self.b_std_err.column(i).iter().all(|s| !s.is_finite()))
+            .collect()
+    }
+
+    /// Whether the shapes fit a fit of `n` thrusters.
+    pub fn fits(&self, n: usize) -> bool {
+        let terms_ok = self
+            .terms
+            .as_ref()
+            .is_none_or(|(c, s)| c.shape() == (6, TERMS) && s.shape() == (6, TERMS));
+        self.b.shape() == (6, n) && self.b_std_err.shape() == (6, n) && terms_ok
+    }
+
+    /// The prior entries of DOF row `row` for a fit whose coefficient vector is the thrust
+    /// columns (`n`, or `2 n` forward then reverse when `split`) followed by the terms.
+    pub fn entries(&self, row: usize, split: bool) -> Vec<PriorEntry> {
+        let n = self.thrusters();
+        let cols = if split { 2 * n } else { n };
+        let usable = |v: f64, se: f64| v.is_finite() && se.is_finite() && se > 0.0;
+        let mut out = Vec::new();
+        for i in 0..n {
+            let (v, se) = (self.b[(row, i)], self.b_std_err[(row, i)]);
+            if !usable(v, se) {
+                continue;
+            }
+            // Split, the model's gain is the mean of forward and reverse: the prior is on that
+            // mean, and the data alone tells them apart.
+            let weights = if split {
+                [(i, 0.5), (n + i, 0.5)]
+            } else {
+                [(i, 1.0), (i, 0.0)]
+            };
+            out.push(PriorEntry {
+                weights,
+                value: v,
+                std_err: se,
+            });
+        }
+        if let Some((coef, se)) = &self.terms {
+            for (j, name) in TERM_NAMES.iter().enumerate() {
+                let (v, s) = (coef[(row, j)], se[(row, j)]);
+                if RUN_TERMS.contains(name) || !usable(v, s) {
+                    continue;
+                }
+                out.push(PriorEntry {
+                    weights: [(cols + j, 1.0), (cols + j, 0.0)],
+                    value: v,
+                    std_err: s,
+                });
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prior(n: usize) -> DynamicPrior {
+        let mut se = DMatrix::from_element(6, n, 0.1);
+        se.column_mut(1).fill(f64::INFINITY);
+        DynamicPrior {
+            b: DMatrix::from_element(6, n, 2.0),
+            b_std_err: se,
+            terms: Some((
+                DMatrix::from_element(6, TERMS, -1.0),
+                DMatrix::from_element(6, TERMS, 0.5),
+            )),
+        }
+    }
+
+    #[test]
+    fn unknown_columns_and_run_terms_are_left_to_the_data() {
+        let p = prior(3);
+        let e = p.entries(4, false);
+        // Thrusters 0 and 2, and every term but the two run terms.
+        assert_eq!(e.len(), 2 + TERMS - 2);
+        assert_eq!(e[0].weights[0], (0, 1.0));
+        assert_eq!(e[1].weights[0], (2, 1.0));
+        assert!(e.iter().all(|x| x.weights[0].0 != 1));
+        let const_at = 3 + TERM_NAMES.iter().position(|n| *n == "const").unwrap();
+        assert!(e.iter().all(|x| x.weights[0].0 != const_at));
+    }
+
+    #[test]
+    fn split_the_prior_is_on_the_mean_of_forward_and_reverse() {
+        let e = prior(3).entries(0, true);
+        assert_eq!(e[1].weights, [(2, 0.5), (5, 0.5)]);
+        assert_eq!(e[2].weights[0].0, 6);
+    }
+
+    #[test]
+    fn shapes_are_checked() {
+        assert!(prior(3).fits(3));
+        assert!(!prior(3).fits(4));
+    }
+}

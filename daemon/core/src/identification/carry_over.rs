@@ -1,0 +1,161 @@
+//! What an identification may keep from the model in force when it knows what changed: after
+//! one thruster moved, was added or was removed, every other thruster's column and the hull's
+//! own dynamics (damping, restoring, Coriolis) are still what was learned, to within their
+//! standard errors. They become the fit's prior (`estimator::dynamic::prior`), and the data
+//! only has to teach it the changed thruster.
+//!
+//! Only a learned model is carried over (a nominal one has no standard errors: it is a guess,
+//! not knowledge), and only when the thruster counts agree with the change. An unknown change
+//! keeps nothing.
+
+use nalgebra::DMatrix;
+
+use crate::estimator::dynamic::prior::DynamicPrior;
+use crate::model::Model;
+
+/// What changed in the thruster configuration, as far as the sender could say.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ThrusterChange {
+    /// Something changed, nobody says what: nothing is carried over.
+    #[default]
+    Unknown,
+    /// Thruster `i` (0-based, in the new numbering) was added.
+    Added(usize),
+    /// Thruster `i` (in the old numbering) was removed; those after it shift down by one.
+    Removed(usize),
+    /// Thruster `i` was moved or re-oriented (or found changed under control).
+    Moved(usize),
+}
+
+impl ThrusterChange {
+    /// For each thruster of the new configuration (`new_count` of them), the old thruster it
+    /// is, or None for the changed one; None overall when the change does not fit the counts.
+    pub fn old_index(&self, old_count: usize, new_count: usize) -> Option<Vec<Option<usize>>> {
+        match *self {
+            ThrusterChange::Unknown => None,
+            ThrusterChange::Moved(k) => (new_count == old_count && k < new_count)
+                .then(|| (0..new_count).map(|i| (i != k).then_some(i)).collect()),
+            ThrusterChange::Added(k) => (new_count == old_count + 1 && k < new_count).then(|| {
+                (0..new_count)
+                    .map(|i| match i.cmp(&k) {
+                        std::cmp::Ordering::Less => Some(i),
+                        std::cmp::Ordering::Equal => None,
+                        std::cmp::Ordering::Greater => Some(i - 1),
+                    })
+                    .collect()
+            }),
+            ThrusterChange::Removed(k) => {
+                (new_count + 1 == old_count && k < old_count).then(|| {
+                    (0..new_count)
+                        .map(|i| Some(if i < k { i } else { i + 1 }))
+                        .collect()
+                })
+            }
+        }
+    }
+}
+
+/// The prior the model in force gives a fit of `new_count` thrusters after `change`, its
+/// standard errors multiplied by `se_scale` (at least 1: the model may have drifted since it
+/// was learned). None when nothing can be carried over.
+pub fn carried_over(
+    model: &Model,
+    change: ThrusterChange,
+    new_count: usize,
+    se_scale: f64,
+) -> Option<DynamicPrior> {
+    if !model.estimated {
+        return None;
+    }
+    let old = model.effectiveness.ncols();
+    let map = change.old_index(old, new_count)?;
+    if model.std_err.shape() != (6, old) {
+        return None;
+    }
+    let scale = if se_scale.is_finite() {
+        se_scale.max(1.0)
+    } else {
+        1.0
+    };
+    let mut b = DMatrix::from_element(6, new_count, f64::NAN);
+    let mut se = DMatrix::from_element(6, new_count, f64::INFINITY);
+    for (i, from) in map.iter().enumerate() {
+        let Some(j) = *from else { continue };
+        for r in 0..6 {
+            let (v, s) = (model.effectiveness[(r, j)], model.std_err[(r, j)]);
+            if v.is_finite() && s.is_finite() && s > 0.0 {
+                b[(r, i)] = v;
+                se[(r, i)] = s * scale;
+            }
+        }
+    }
+    if se.iter().all(|s| !s.is_finite()) {
+        return None;
+    }
+    let terms = model
+        .dynamics
+        .as_ref()
+        .map(|d| (d.coefficients.clone(), &d.std_err * scale));
+    Some(DynamicPrior {
+        b,
+        b_std_err: se,
+        terms,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ModelSource;
+
+    #[test]
+    fn the_changed_thruster_is_left_out_and_the_others_follow_their_numbering() {
+        assert_eq!(
+            ThrusterChange::Moved(1).old_index(3, 3),
+            Some(vec![Some(0), None, Some(2)])
+        );
+        assert_eq!(
+            ThrusterChange::Added(1).old_index(2, 3),
+            Some(vec![Some(0), None, Some(1)])
+        );
+        assert_eq!(
+            ThrusterChange::Removed(0).old_index(3, 2),
+            Some(vec![Some(1), Some(2)])
+        );
+        // Counts that do not fit the change, and an unknown change: nothing is kept.
+        assert_eq!(ThrusterChange::Moved(0).old_index(3, 4), None);
+        assert_eq!(ThrusterChange::Added(5).old_index(2, 3), None);
+        assert_eq!(ThrusterChange::Unknown.old_index(3, 3), None);
+    }
+
+    fn learned(n: usize) -> Model {
+        let b = DMatrix::from_fn(6, n, |r, c| (r * 10 + c) as f64 + 1.0);
+        let mut m = Model::nominal(b, None);
+        m.source = ModelSource::Estimated;
+        m.estimated = true;
+        m.std_err = DMatrix::from_element(6, n, 0.5);
+        m
+    }
+
+    #[test]
+    fn a_learned_model_carries_its_other_columns_with_their_scaled_errors() {
+        let p = carried_over(&learned(3), ThrusterChange::Added(0), 4, 2.0).unwrap();
+        assert!(p.b.column(0).iter().all(|v| v.is_nan()));
+        assert!(p.b_std_err.column(0).iter().all(|s| s.is_infinite()));
+        // New thruster 1 is the old thruster 0.
+        assert_eq!(p.b[(2, 1)], 21.0);
+        assert_eq!(p.b_std_err[(2, 1)], 1.0);
+        assert_eq!(p.b[(5, 3)], 53.0);
+    }
+
+    #[test]
+    fn a_nominal_model_or_an_unknown_change_carries_nothing() {
+        let mut nominal = learned(3);
+        nominal.estimated = false;
+        assert!(carried_over(&nominal, ThrusterChange::Moved(0), 3, 1.0).is_none());
+        assert!(carried_over(&learned(3), ThrusterChange::Unknown, 3, 1.0).is_none());
+        let mut unknown_se = learned(3);
+        unknown_se.std_err.fill(f64::NAN);
+        assert!(carried_over(&unknown_se, ThrusterChange::Moved(0), 3, 1.0).is_none());
+    }
+}
