@@ -51,7 +51,7 @@ fn rotate_while_holding_with(
     (run, r)
 }
 
-/// Noise-free the fit is exact up to the navigation: measured 0.005 / 0.010 of the truth in
+/// Noise-free the fit is exact up to the navigation: measured 0.004 / 0.010 of the truth in
 /// 5.0 s (1 s holding, then 4 s of dither, the minimum), never more than 4.1 deg from level
 /// (0.003 / 0.006 and 3.6 deg learning every column anew, before `carry_over`).
 /// Before the command was fitted with the sample that ends its interval (one sample late),
@@ -64,7 +64,7 @@ fn noise_free_the_model_learned_under_control_matches_the_truth() {
     assert!(r.max_tilt_deg < 5.0, "{r:?}");
 }
 
-/// With a realistic IMU: measured over seeds 1-10 0.014 / 0.019 in 5.0 s, 4.1 deg of largest
+/// With a realistic IMU: measured over seeds 1-10 0.013 / 0.019 in 5.0 s, 4.1 deg of largest
 /// tilt, 1.8 deg mean error (the open-loop re-estimation tilted it 16-22 deg).
 #[test]
 fn with_a_realistic_imu_it_stays_near_level_and_learns_within_a_few_percent() {
@@ -82,8 +82,8 @@ fn with_a_realistic_imu_it_stays_near_level_and_learns_within_a_few_percent() {
 /// At the paper's noise (0.25 rad/s gyro). The announcement names the moved thruster, so the
 /// other columns and the hull's dynamics are kept from the first model
 /// (`identification::carry_over`) and the dither goes to the moved thruster at full command,
-/// the others at 0.1 of the amplitude. Measured over seeds 1-10: the new model after 11.2 s
-/// (8-16 s), 0.053 / 0.061 off the truth, 7.8 deg of largest tilt, 5.4 deg mean error.
+/// the others at 0.1 of the amplitude. Measured over seeds 1-10: the new model after 11.8 s,
+/// 0.054 / 0.061 off the truth, 7.8 deg of largest tilt, 5.5 deg mean error.
 /// Learning everything anew (carry_over off), the 5 % target is out of reach within the 20 s
 /// limit and the best fit is swapped in at 21 s: 0.047 / 0.110 over seeds 1-5 (docs/experiments.md).
 #[test]
@@ -105,7 +105,7 @@ fn at_the_papers_noise_a_known_change_is_learned_within_12_s_near_level() {
 
 /// Without some dither on the thrusters the prior covers, their commands are the controller's
 /// reaction to the motion alone, confounded with the damping and restoring terms: noise-free
-/// the fit then ended 0.089 / 0.111 off the truth (0.005 / 0.010 with 0.1 of the amplitude).
+/// the fit then ended 0.016 / 0.095 off the truth (0.004 / 0.010 with 0.1 of the amplitude).
 #[test]
 fn noise_free_the_thrusters_the_prior_covers_keep_some_dither() {
     let none = IdentificationConfig {
@@ -113,7 +113,7 @@ fn noise_free_the_thrusters_the_prior_covers_keep_some_dither() {
         ..IdentificationConfig::default()
     };
     let (_, r) = rotate_while_holding_with(NoisePreset::None, 1, Some(none), |_, _| {});
-    assert!(r.err_rot > 0.03, "no dither on the others: {r:?}");
+    assert!(r.err_acc > 0.05, "no dither on the others: {r:?}");
     let (_, r) = rotate_while_holding(NoisePreset::None, 1);
     assert!(r.err_rot < 0.01 && r.err_acc < 0.02, "{r:?}");
 }
@@ -475,5 +475,115 @@ fn line(label: &str, v: &[f64; 7], t_rot: Option<f64>, t_acc: Option<f64>) -> St
         v[6],
         t(t_rot),
         t(t_acc)
+    )
+}
+
+/// A silent change, found by the refinement while the vehicle flies +-20 deg pitch steps with a
+/// realistic IMU: the verdict names the thruster, so the re-estimation keeps the others'
+/// columns. Measured, seeds 1-5: 0.012-0.019 / 0.013-0.045 off the truth after 9.5-13.5 s;
+/// keeping nothing, 0.013-0.058 / 0.037-0.053 after 11.5-16.5 s; keeping the hull's dynamics
+/// too, 0.016-0.116 (they were learned near level and do not extrapolate). Knobs for the
+/// sweep of these figures: P_SEEDS, P_SCALE (carry_over_se_scale), P_OTHERS (focus_others),
+/// P_CARRY (1/0).
+#[test]
+fn a_silent_change_found_under_pitch_steps_keeps_the_other_columns() {
+    let seeds = env_list("P_SEEDS", &[1u64, 3]);
+    let scales = env_list("P_SCALE", &[1.0]);
+    let others = env_list("P_OTHERS", &[0.1]);
+    let carry = env_list("P_CARRY", &[1u8]);
+    let mut cases = Vec::new();
+    for &seed in &seeds {
+        for &scale in &scales {
+            for &other in &others {
+                for &carry in &carry {
+                    cases.push((seed, scale, other, carry));
+                }
+            }
+        }
+    }
+    for (seed, scale, other, carry) in cases {
+        let identification = IdentificationConfig {
+            carry_over: carry == 1,
+            carry_over_se_scale: scale,
+            focus_others: other,
+            ..IdentificationConfig::default()
+        };
+        let (err_rot, err_acc, took_s, why) = silent_rotation_while_pitching(seed, identification);
+        println!(
+            "seed {seed} carry {carry} se_scale {scale} others {other}: {err_rot:.3} / \
+             {err_acc:.3} after {took_s:.1} s; {why}"
+        );
+        assert!(why.contains("thruster"), "seed {seed}: {why}");
+        if carry == 1 && scale == 1.0 && other == 0.1 {
+            assert!(
+                err_rot < 0.03 && err_acc < 0.05,
+                "seed {seed}: {err_rot} / {err_acc}"
+            );
+            assert!(took_s < 16.0, "seed {seed}: {took_s}");
+        }
+    }
+}
+
+/// AMOUR-5 with a realistic IMU learns its first model, holds, then flies +-20 deg pitch steps
+/// while its top thruster is rotated 45 degrees unannounced. Returns the model in force at
+/// the end against the truth (rotation, acceleration rows), the seconds from the rotation to
+/// that model, and the mismatch report.
+fn silent_rotation_while_pitching(
+    seed: u64,
+    identification: IdentificationConfig,
+) -> (f64, f64, f64, String) {
+    use nalgebra::UnitQuaternion;
+    use thrusterd_core::machine::Event;
+    let v = vehicle("amour5");
+    let mut run = Run::new("amour5", NoisePreset::Realistic, seed);
+    let mut setup = MachineSetup {
+        thrusters: v.thrusters.len(),
+        identification,
+        ..MachineSetup::default()
+    };
+    setup.machine.deadband = 0.05;
+    run.machine = Machine::new(setup);
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(3.0);
+    run.sim
+        .apply(&thruster_sim::Action::Rotate {
+            thruster: "T".into(),
+            axis: [1.0, 0.0, 0.0],
+            angle_deg: 45.0,
+        })
+        .unwrap();
+    let before = run.machine.model().unwrap().version;
+    let yaw = run.sim.roll_pitch_yaw()[2];
+    let start = run.sim.time_s();
+    let mut step = 0;
+    let mut why = String::new();
+    while run.sim.time_s() - start < 90.0 {
+        let t = run.sim.time_s() - start;
+        if t >= 4.0 * step as f64 {
+            let p: f64 = [20.0, -20.0][step % 2];
+            let sp = UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw);
+            run.machine.on_setpoint(sp, None);
+            step += 1;
+        }
+        run.tick();
+        for e in run.machine.take_events() {
+            if let Event::MismatchDetected(w) = e {
+                why = format!("at {t:.1} s: {w}");
+            }
+        }
+        let m = run.machine.model().unwrap();
+        let new = m.version > before && m.source == ModelSource::Estimated;
+        if run.machine.state() == State::Active && new && !why.is_empty() {
+            break;
+        }
+    }
+    let m = run.machine.model().unwrap();
+    let truth = run.truth();
+    (
+        common::rel_err(&m.effectiveness, &truth, 0),
+        common::rel_err(&m.effectiveness, &truth, 3),
+        run.sim.time_s() - start,
+        why,
     )
 }

@@ -60,9 +60,9 @@ pub struct IdentificationConfig {
     /// open-loop run goes to the target itself; see docs/experiments.md for the trade).
     pub burst_rel_err: f64,
     /// When the change is known (one thruster moved, added or removed, announced or found by
-    /// the refinement), the other thrusters' columns and the hull's dynamics of the learned
-    /// model in force are kept as the fit's prior ([`carry_over`]), and only the changed
-    /// thruster is learned from nothing (default true).
+    /// the refinement), the other thrusters' columns of the learned model in force are kept as
+    /// the fit's prior ([`carry_over`]), and only the changed thruster is learned from nothing
+    /// (default true).
     pub carry_over: bool,
     /// The kept coefficients' standard errors are multiplied by this (default 1, at least 1):
     /// room for what may have drifted since they were learned.
@@ -71,11 +71,11 @@ pub struct IdentificationConfig {
     /// the amplitude (at most full command; default 1.7, which is full command at the paper's
     /// noise) and the others at `focus_others` times (default 0.1); `focus_gain` 0: every
     /// thruster keeps the plain dither. Measured in-process, AMOUR-5 top thruster rotated 45
-    /// degrees and announced, paper noise, seeds 1-5 (docs/experiments.md): the new model
-    /// after 11.2 s (21.0 s without carry-over and focus, 20 s limit) at 7.7 deg of largest
-    /// tilt. Why the others keep a little: with none, their commands are the controller's
-    /// reaction to the motion alone, confounded with the damping and restoring terms, and
-    /// noise-free the fit ended 0.09 off the truth (0.005 with 0.1).
+    /// degrees and announced, paper noise, seeds 1-10 (docs/experiments.md): the new model
+    /// after 11.8 s (21.0 s without carry-over and focus, the 20 s limit) at 7.8 deg of
+    /// largest tilt. Why the others keep a little: with none, their commands are the
+    /// controller's reaction to the motion alone, confounded with the damping and restoring
+    /// terms, and noise-free the fit ended 0.016 / 0.095 off the truth (0.004 / 0.010 with 0.1).
     pub focus_gain: f64,
     pub focus_others: f64,
 }

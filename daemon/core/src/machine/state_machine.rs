@@ -574,7 +574,7 @@ impl Machine {
     /// An estimation starts, keeping `prior` (see `identification::carry_over`).
     fn start_estimation_with(&mut self, t_ns: u64, why: &str, prior: Option<DynamicPrior>) {
         let kept = if prior.is_some() {
-            "; the other thrusters' columns and the hull's dynamics are kept"
+            "; the other thrusters' columns are kept"
         } else {
             ""
         };

@@ -1,6 +1,6 @@
-//! What is known before a dynamic fit starts: coefficients carried over from the model in
+//! What is known before a dynamic fit starts: thruster columns carried over from the model in
 //! force when only part of the vehicle changed (one thruster moved, added or removed), each
-//! with its standard error. The fit weighs them like measurements (a Gaussian prior, the
+//! entry with its standard error. The fit weighs them like measurements (a Gaussian prior, the
 //! information form of a Kalman update), so the data only has to teach it what changed.
 //!
 //! Why: after an announced change of one thruster, re-learning every column from nothing
@@ -10,8 +10,6 @@
 
 use nalgebra::DMatrix;
 
-use super::regressors::{TERMS, TERM_NAMES};
-
 /// Known coefficients of a dynamic fit for N thrusters. Entries with an infinite or NaN
 /// standard error (or a NaN value) are unknown and left to the data.
 #[derive(Debug, Clone, PartialEq)]
@@ -20,14 +18,7 @@ pub struct DynamicPrior {
     pub b: DMatrix<f64>,
     /// 6 x N standard errors of `b`.
     pub b_std_err: DMatrix<f64>,
-    /// 6 x TERMS coefficients of the other terms and their standard errors, when known.
-    pub terms: Option<(DMatrix<f64>, DMatrix<f64>)>,
 }
-
-/// Terms that belong to one run rather than to the vehicle, never carried over: the constant
-/// takes the gyro bias left after the rest and a slow drift, and the mean |command| takes the
-/// excitation's imbalance.
-pub const RUN_TERMS: [&str; 2] = ["const", "mean_abs_command"];
 
 /// One prior on a linear combination `sum w_i theta_i` of one output's coefficients.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,18 +45,13 @@ impl DynamicPrior {
 
     /// Whether the shapes fit a fit of `n` thrusters.
     pub fn fits(&self, n: usize) -> bool {
-        let terms_ok = self
-            .terms
-            .as_ref()
-            .is_none_or(|(c, s)| c.shape() == (6, TERMS) && s.shape() == (6, TERMS));
-        self.b.shape() == (6, n) && self.b_std_err.shape() == (6, n) && terms_ok
+        self.b.shape() == (6, n) && self.b_std_err.shape() == (6, n)
     }
 
-    /// The prior entries of DOF row `row` for a fit whose coefficient vector is the thrust
-    /// columns (`n`, or `2 n` forward then reverse when `split`) followed by the terms.
+    /// The prior entries of DOF row `row` for a fit whose coefficient vector starts with the
+    /// thrust columns (`n`, or `2 n` forward then reverse when `split`).
     pub fn entries(&self, row: usize, split: bool) -> Vec<PriorEntry> {
         let n = self.thrusters();
-        let cols = if split { 2 * n } else { n };
         let usable = |v: f64, se: f64| v.is_finite() && se.is_finite() && se > 0.0;
         let mut out = Vec::new();
         for i in 0..n {
@@ -86,19 +72,6 @@ impl DynamicPrior {
                 std_err: se,
             });
         }
-        if let Some((coef, se)) = &self.terms {
-            for (j, name) in TERM_NAMES.iter().enumerate() {
-                let (v, s) = (coef[(row, j)], se[(row, j)]);
-                if RUN_TERMS.contains(name) || !usable(v, s) {
-                    continue;
-                }
-                out.push(PriorEntry {
-                    weights: [(cols + j, 1.0), (cols + j, 0.0)],
-                    value: v,
-                    std_err: s,
-                });
-            }
-        }
         out
     }
 }
@@ -113,31 +86,24 @@ mod tests {
         DynamicPrior {
             b: DMatrix::from_element(6, n, 2.0),
             b_std_err: se,
-            terms: Some((
-                DMatrix::from_element(6, TERMS, -1.0),
-                DMatrix::from_element(6, TERMS, 0.5),
-            )),
         }
     }
 
     #[test]
-    fn unknown_columns_and_run_terms_are_left_to_the_data() {
+    fn unknown_columns_are_left_to_the_data() {
         let p = prior(3);
         let e = p.entries(4, false);
-        // Thrusters 0 and 2, and every term but the two run terms.
-        assert_eq!(e.len(), 2 + TERMS - 2);
+        assert_eq!(e.len(), 2);
         assert_eq!(e[0].weights[0], (0, 1.0));
         assert_eq!(e[1].weights[0], (2, 1.0));
-        assert!(e.iter().all(|x| x.weights[0].0 != 1));
-        let const_at = 3 + TERM_NAMES.iter().position(|n| *n == "const").unwrap();
-        assert!(e.iter().all(|x| x.weights[0].0 != const_at));
+        assert_eq!(e[1].std_err, 0.1);
+        assert_eq!(p.unknown_thrusters(), vec![1]);
     }
 
     #[test]
     fn split_the_prior_is_on_the_mean_of_forward_and_reverse() {
         let e = prior(3).entries(0, true);
         assert_eq!(e[1].weights, [(2, 0.5), (5, 0.5)]);
-        assert_eq!(e[2].weights[0].0, 6);
     }
 
     #[test]
