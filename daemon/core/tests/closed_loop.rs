@@ -103,6 +103,24 @@ fn at_the_papers_noise_a_known_change_is_learned_within_12_s_near_level() {
     assert!(r.err_rot < 0.1 && r.err_acc < 0.2, "{r:?}");
 }
 
+/// The announcement names the wrong thruster (1, while the top thruster 0 turned): the data
+/// contradicts the carried-over column of thruster 0 and it is learned anew instead of pinned.
+#[test]
+fn a_change_announced_for_the_wrong_thruster_is_not_pinned_on_the_old_column() {
+    use thrusterd_core::machine::ThrusterChange;
+    for noise in [NoisePreset::None, NoisePreset::Realistic] {
+        let v = vehicle("amour5");
+        let mut run = Run::new("amour5", noise, 1);
+        run.run_for(1.0);
+        run.estimate();
+        run.run_for(3.0);
+        let r = run.announced_rotation_as(&v, ThrusterChange::Moved(1), |_, _| {});
+        println!("{noise:?}: {r:?}");
+        assert_eq!(r.source, ModelSource::Estimated, "{noise:?}: {r:?}");
+        assert!(r.err_rot < 0.05 && r.err_acc < 0.08, "{noise:?}: {r:?}");
+    }
+}
+
 /// Without some dither on the thrusters the prior covers, their commands are the controller's
 /// reaction to the motion alone, confounded with the damping and restoring terms: noise-free
 /// the fit then ended 0.016 / 0.095 off the truth (0.004 / 0.010 with 0.1 of the amplitude).

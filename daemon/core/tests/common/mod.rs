@@ -159,6 +159,17 @@ impl Run {
     pub fn announced_rotation_observed(
         &mut self,
         v: &Vehicle,
+        observe: impl FnMut(&Machine, f64),
+    ) -> Reestimation {
+        let top = thrusterd_core::machine::ThrusterChange::Moved(0);
+        self.announced_rotation_as(v, top, observe)
+    }
+
+    /// The same, the announcement saying `change` (which may name the wrong thruster).
+    pub fn announced_rotation_as(
+        &mut self,
+        v: &Vehicle,
+        change: thrusterd_core::machine::ThrusterChange,
         mut observe: impl FnMut(&Machine, f64),
     ) -> Reestimation {
         use nalgebra::{UnitQuaternion, Vector3};
@@ -176,7 +187,7 @@ impl Run {
         self.machine.on_reconfig(thrusterd_core::machine::Reconfig {
             count: v.thrusters.len(),
             geometry: Some(moved),
-            change: thrusterd_core::machine::ThrusterChange::Moved(0),
+            change,
             what: "top thruster rotated".into(),
         });
         let heading = self.sim.roll_pitch_yaw()[2];

@@ -296,19 +296,23 @@ impl DynamicRun {
     ) -> DynamicSolution {
         let n = self.n;
         let c = self.cols;
-        let prior = prior.filter(|p| p.fits(n));
-        let sols: [SegmentedSolution; 2] = std::array::from_fn(|g| {
-            let ls = if g == 0 { &self.rot } else { &self.acc };
-            let sol = ls.solve();
-            match prior {
-                Some(p) => {
-                    let sigma = group_sigma(&sol, &rest_sigma[3 * g..3 * g + 3]);
-                    let entries = std::array::from_fn(|a| p.entries(3 * g + a, self.split));
-                    ls.solve_with_prior(&entries, &sigma)
-                }
-                None => sol,
+        let base: [SegmentedSolution; 2] = [self.rot.solve(), self.acc.solve()];
+        let sigmas: [[f64; 3]; 2] =
+            std::array::from_fn(|g| group_sigma(&base[g], &rest_sigma[3 * g..3 * g + 3]));
+        let prior = prior
+            .filter(|p| p.fits(n))
+            .map(|p| self.uncontradicted(p, &base, &sigmas));
+        let sols: [SegmentedSolution; 2] = match &prior {
+            Some(p) => {
+                let [rot, acc] = base;
+                let entries = |g: usize| std::array::from_fn(|a| p.entries(3 * g + a, self.split));
+                [
+                    self.rot.solve_with_prior(rot, &entries(0), &sigmas[0]),
+                    self.acc.solve_with_prior(acc, &entries(1), &sigmas[1]),
+                ]
             }
-        });
+            None => base,
+        };
         let mut b = DMatrix::zeros(6, n);
         let mut std_err = DMatrix::zeros(6, n);
         let mut split_b = DMatrix::zeros(6, c);
@@ -336,17 +340,8 @@ impl DynamicRun {
                     split_se[(row, i)] = se(v.0, v.1);
                 }
                 for i in 0..n {
-                    // Split: the symmetric gain is the mean of forward and reverse (what a
-                    // linear model of the thruster is, and what the truth is compared with).
-                    let (theta, w): (f64, &[(usize, f64)]) = if self.split {
-                        (
-                            0.5 * (sol.theta[(i, a)] + sol.theta[(n + i, a)]),
-                            &[(i, 0.5), (n + i, 0.5)],
-                        )
-                    } else {
-                        (sol.theta[(i, a)], &[(i, 1.0)])
-                    };
-                    let v = var(w);
+                    let (theta, w) = self.symmetric_gain(sol, a, i);
+                    let v = var(&w);
                     b[(row, i)] = theta;
                     std_err[(row, i)] = se(v.0, v.1);
                     b_ols[(row, i)] = se(v.0, v.2);
@@ -397,6 +392,54 @@ impl DynamicRun {
             },
             split: self.split.then_some((split_b, split_se)),
         }
+    }
+}
+
+impl DynamicRun {
+    /// Thruster `i`'s gain on output `a` of `sol` and the weights that make it of the
+    /// coefficients (the second weight 0 when not split). Split, the symmetric gain is the
+    /// mean of forward and reverse (what a linear model of the thruster is, and what the truth
+    /// is compared with).
+    fn symmetric_gain(
+        &self,
+        sol: &SegmentedSolution,
+        a: usize,
+        i: usize,
+    ) -> (f64, [(usize, f64); 2]) {
+        if self.split {
+            let n = self.n;
+            let theta = 0.5 * (sol.theta[(i, a)] + sol.theta[(n + i, a)]);
+            (theta, [(i, 0.5), (n + i, 0.5)])
+        } else {
+            (sol.theta[(i, a)], [(i, 1.0), (i, 0.0)])
+        }
+    }
+
+    /// `prior` without the thruster columns the data alone contradicts (see
+    /// [`DynamicPrior::without_contradicted`]): the data-only gains of `base` and their honest
+    /// variances, at the noise `sigmas`.
+    fn uncontradicted(
+        &self,
+        prior: &DynamicPrior,
+        base: &[SegmentedSolution; 2],
+        sigmas: &[[f64; 3]; 2],
+    ) -> DynamicPrior {
+        let n = self.n;
+        let mut b = DMatrix::zeros(6, n);
+        let mut var = DMatrix::from_element(6, n, f64::INFINITY);
+        for (g, sol) in base.iter().enumerate() {
+            for a in 0..3 {
+                for i in 0..n {
+                    let (theta, w) = self.symmetric_gain(sol, a, i);
+                    let (d, honest, _) = combination_var(sol, sigmas[g][a], a, &w);
+                    b[(3 * g + a, i)] = theta;
+                    if d > 0.0 {
+                        var[(3 * g + a, i)] = honest;
+                    }
+                }
+            }
+        }
+        prior.without_contradicted(&b, &var)
     }
 }
 

@@ -274,12 +274,13 @@ impl SegmentedLs {
     /// and degrees of freedom stay the data's. The robust covariance is the data clusters'
     /// sandwich plus the prior's own share, G_a^-1 sigma^2 P_a G_a^-1, so a coefficient the data
     /// barely touches keeps the prior's standard error rather than none.
+    /// `base` is this fit's own `solve()`, already at hand where the prior is checked.
     pub fn solve_with_prior(
         &self,
+        base: SegmentedSolution,
         priors: &[Vec<PriorEntry>; 3],
         sigma: &[f64; 3],
     ) -> SegmentedSolution {
-        let base = self.solve();
         let Normal { g, xy, open, .. } = self.normal_equations();
         let k = self.k;
         let mut theta = DMatrix::zeros(k, 3);
