@@ -118,6 +118,20 @@ fn bench(c: &mut Criterion) {
         c.bench_with_input(BenchmarkId::new("dynamic_stop_decision", n), &n, |b, _| {
             b.iter(|| black_box(dynamic.stop_decision()))
         });
+        // The same with every column but thruster 0's carried over (an identification after a
+        // known change): three more Gram solves per group, and the contradiction check.
+        let mut se = nalgebra::DMatrix::from_element(6, n, 0.05);
+        se.column_mut(0).fill(f64::INFINITY);
+        let prior = thrusterd_core::estimator::dynamic::prior::DynamicPrior {
+            b: nalgebra::DMatrix::from_element(6, n, 1.0),
+            b_std_err: se,
+        };
+        let carried = dynamic.clone().with_prior(prior);
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_estimate_with_prior", n),
+            &n,
+            |b, _| b.iter(|| black_box(carried.estimate())),
+        );
     }
 }
 
