@@ -121,6 +121,80 @@ fn a_change_announced_for_the_wrong_thruster_is_not_pinned_on_the_old_column() {
     }
 }
 
+/// A measuring tool, not a check: on every vehicle file, noise-free, thruster K (CO_THRUSTER,
+/// default 0) turned 45 degrees about an axis across its direction and announced, with the
+/// carry-over on and off. Knobs: CO_NOISE (none|realistic|paper), CO_SEEDS.
+#[test]
+#[ignore]
+fn carry_over_on_every_vehicle() {
+    use nalgebra::Vector3;
+    use thrusterd_core::machine::ThrusterChange;
+    let k: usize = std::env::var("CO_THRUSTER").map_or(0, |v| v.parse().unwrap());
+    let noise = match std::env::var("CO_NOISE").as_deref() {
+        Ok("paper") => NoisePreset::Paper,
+        Ok("realistic") => NoisePreset::Realistic,
+        _ => NoisePreset::None,
+    };
+    let seeds = env_list("CO_SEEDS", &[1u64]);
+    println!(
+        "{noise:?}, thruster {k} turned 45 deg; err_rot / err_acc vs truth, took, largest tilt"
+    );
+    for name in [
+        "aligned",
+        "amour5",
+        "amour5_top45",
+        "eight_vectored",
+        "four_up",
+        "six_dof",
+    ] {
+        for carry in [true, false] {
+            let mut sum = [0.0; 4];
+            for &seed in &seeds {
+                let v = vehicle(name);
+                let mut run = Run::with_vehicle(v.clone(), noise, seed, 200.0);
+                let mut setup = MachineSetup {
+                    thrusters: v.thrusters.len(),
+                    identification: IdentificationConfig {
+                        carry_over: carry,
+                        ..IdentificationConfig::default()
+                    },
+                    ..MachineSetup::default()
+                };
+                setup.machine.deadband = 0.05;
+                run.machine = Machine::new(setup);
+                run.run_for(1.0);
+                run.estimate();
+                run.run_for(3.0);
+                let d = Vector3::from(v.thrusters[k].direction);
+                let across = if d.x.abs() < 0.9 {
+                    Vector3::x()
+                } else {
+                    Vector3::y()
+                };
+                let axis = d.cross(&across).normalize();
+                let r = run.announced_turn(
+                    &v,
+                    k,
+                    axis.into(),
+                    45.0,
+                    ThrusterChange::Moved(k),
+                    |_, _| {},
+                );
+                for (s, x) in sum
+                    .iter_mut()
+                    .zip([r.err_rot, r.err_acc, r.took_s, r.max_tilt_deg])
+                {
+                    *s += x / seeds.len() as f64;
+                }
+            }
+            println!(
+                "{name:>15} carry {carry:>5}: {:.3} / {:.3} in {:.1} s, {:.1} deg",
+                sum[0], sum[1], sum[2], sum[3]
+            );
+        }
+    }
+}
+
 /// Without some dither on the thrusters the prior covers, their commands are the controller's
 /// reaction to the motion alone, confounded with the damping and restoring terms: noise-free
 /// the fit then ended 0.016 / 0.095 off the truth (0.004 / 0.010 with 0.1 of the amplitude).

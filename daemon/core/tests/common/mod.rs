@@ -170,19 +170,36 @@ impl Run {
         &mut self,
         v: &Vehicle,
         change: thrusterd_core::machine::ThrusterChange,
+        observe: impl FnMut(&Machine, f64),
+    ) -> Reestimation {
+        self.announced_turn(v, 0, [1.0, 0.0, 0.0], 45.0, change, observe)
+    }
+
+    /// Thruster `index` of `v` turned by `angle_deg` about `axis` (body frame) and announced
+    /// as `change` with the new geometry, the machine holding level: as [`Self::announced_rotation`].
+    pub fn announced_turn(
+        &mut self,
+        v: &Vehicle,
+        index: usize,
+        axis: [f64; 3],
+        angle_deg: f64,
+        change: thrusterd_core::machine::ThrusterChange,
         mut observe: impl FnMut(&Machine, f64),
     ) -> Reestimation {
-        use nalgebra::{UnitQuaternion, Vector3};
+        use nalgebra::{Unit, UnitQuaternion, Vector3};
         self.sim
             .apply(&thruster_sim::Action::Rotate {
-                thruster: "T".into(),
-                axis: [1.0, 0.0, 0.0],
-                angle_deg: 45.0,
+                thruster: v.thrusters[index].name.clone(),
+                axis,
+                angle_deg,
             })
             .unwrap();
         let mut moved = geometry(v);
-        let r = UnitQuaternion::from_euler_angles(45f64.to_radians(), 0.0, 0.0);
-        moved.directions[0] = (r * Vector3::from(moved.directions[0])).into();
+        let r = UnitQuaternion::from_axis_angle(
+            &Unit::new_normalize(Vector3::from(axis)),
+            angle_deg.to_radians(),
+        );
+        moved.directions[index] = (r * Vector3::from(moved.directions[index])).into();
         let before = self.machine.model().map_or(0, |m| m.version);
         self.machine.on_reconfig(thrusterd_core::machine::Reconfig {
             count: v.thrusters.len(),
