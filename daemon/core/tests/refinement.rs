@@ -424,9 +424,24 @@ fn change_test_soak() {
 /// threshold of `DB_THRESH` is the first time a thruster's statistic passes it (and whether
 /// that thruster is the rotated one). Knobs: DB_NOISE (none, realistic, paper), DB_SEEDS,
 /// DB_DITHER (comma lists), DB_MANOEUVRE (level: hold level; pitch: +-20 deg every 4 s),
-/// DB_TAU_ORACLE / DB_TAU_LEARNED (observer time constants, s), DB_HORIZON (s of candidate
-/// change times), DB_SPACING (s between them), DB_THRESH. Run with
+/// DB_TAU_ORACLE / DB_TAU_LEARNED (observer time constants, s; defaults 0.5 / 0.2),
+/// DB_HORIZON (s of candidate change times), DB_SPACING (s between them), DB_THRESH,
+/// DB_BEFORE / DB_AFTER (s), DB_SIGMA_FLOOR (least noise assumed, rad/s; 0.01 makes the
+/// noise-free run readable), DB_REFERENCE (s: test the window against the recent past
+/// instead of against the model), DB_MODEL_FLOOR (the module's `change_model_floor`),
+/// DB_LEARNED_TRUE_VEL (the simulator's body velocity in the learned model's terms),
+/// DB_DEBUG (print the learned and true B). Run with
 /// `cargo test --release -p thrusterd-core --test refinement -- --ignored detection_bound --nocapture`.
+///
+/// Measured (paper noise, hold level, 10 min unchanged, seeds 1-10; the threshold the next of
+/// 30, 40, 50, 60, 70, 80, 100, 120 above the largest unchanged statistic; detection by any
+/// thruster, mean / worst): oracle (true state) 0.74 / 0.87, 0.81 / 1.01, 0.72 / 0.92,
+/// 0.59 / 0.84 s at dither 0 / 0.1 / 0.2 / 0.3 (largest unchanged 32-33); learned 2.6 / 5.7
+/// (2 of 10 never within 30 s), 3.5 / 4.9, 3.5 / 4.5, 2.5 / 3.2 s (largest unchanged 39, 51,
+/// 80, 119). The oracle with the attitude filter's attitude and tau 2 s reached 100-400 on
+/// the unchanged vehicle: the filter's error, which the controller acts on, correlates with
+/// the commands; a short tau removes it. Through pitch steps the learned statistic reaches
+/// 800-2100 unchanged.
 #[test]
 #[ignore]
 fn detection_bound() {
@@ -447,9 +462,9 @@ fn detection_bound() {
     let before_s = list("DB_BEFORE", "60")[0];
     let after_s = list("DB_AFTER", "30")[0];
     let tau = [
-        list("DB_TAU_ORACLE", "2")[0],
-        list("DB_TAU_ORACLE", "2")[0],
-        list("DB_TAU_LEARNED", "0.5")[0],
+        list("DB_TAU_ORACLE", "0.5")[0],
+        list("DB_TAU_ORACLE", "0.5")[0],
+        list("DB_TAU_LEARNED", "0.2")[0],
     ];
     let horizon = list("DB_HORIZON", "10")[0];
     let spacing = list("DB_SPACING", "0.25")[0];
@@ -488,7 +503,7 @@ fn detection_bound() {
             let mut trace: Vec<(f64, [Stat; VARIANTS])> = Vec::new();
             flight.fly(&mut run, after_s, Some(&mut trace));
             let rms_after = flight.rms();
-            for (v, name) in NAMES.iter().enumerate() {
+            for (v, name) in NAMES.iter().enumerate().take(3) {
                 println!(
                     "dither {dither} seed {seed} {name:14}: innovation rms before {:.3?} after {:.3?}",
                     rms_before[v], rms_after[v]
