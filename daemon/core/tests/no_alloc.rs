@@ -149,6 +149,37 @@ fn under_control_only_the_decisions_allocate() {
     );
 }
 
+/// The refinement's per-sample change test (`refinement.change_test`, off by default) adds no
+/// allocation: with it on, controlling allocates on exactly as many ticks as without it.
+#[test]
+fn the_change_test_does_not_allocate() {
+    let active = |change_test: bool| {
+        let mut setup = MachineSetup {
+            thrusters: 4,
+            geometry: Some(four_thrusters()),
+            ..MachineSetup::default()
+        };
+        setup.refinement.change_test = change_test;
+        // Judge every sample from the first on; never decide (these samples follow no model,
+        // and a mismatch would start an estimation, which allocates once).
+        setup.refinement.change_warmup_s = 0.0;
+        setup.refinement.change_max_error_deg = 180.0;
+        setup.refinement.change_chi2 = f64::INFINITY;
+        let mut m = Machine::new(setup);
+        let mut k = 0;
+        count(&mut m, &mut k, 10);
+        m.on_request(Request::Hold).unwrap();
+        count(&mut m, &mut k, 2);
+        assert_eq!(m.state(), State::Active);
+        allocating_ticks(&mut m, &mut k, 2000)
+    };
+    let (with, without) = (active(true), active(false));
+    assert_eq!(
+        with, without,
+        "change test on: {with} allocating ticks, off: {without}"
+    );
+}
+
 /// The dynamic method's per-sample path (`Estimator::push_dynamic_sample`: navigation, thruster
 /// lag, regressors, two segmented least-squares updates) allocates nothing, at the 16-thruster
 /// capacity, during a pulse and between pulses, across segment boundaries (every 1 s).

@@ -1,0 +1,485 @@
+//! The per-sample change test: a generalized-likelihood-ratio (GLR) test, on every control
+//! tick, of "thruster i's rotation column changed at time t0" against "nothing changed", for
+//! every thruster and a sliding set of candidate change times t0.
+//!
+//! An observer predicts the body rates from the commands sent with the model in force (its
+//! effectiveness on the commands through the thrusters' spin-up lag, and its damping,
+//! restoring and Coriolis terms with the body velocity taken as zero: the vehicle holds), and
+//! is corrected towards the gyro by the share `dt / tau_s` of its innovation
+//! `e = gyro - predicted` each sample. While the model holds, `e` is the gyro's noise plus the
+//! model's error. A change `d` (3 rows, rad/s^2 per unit command) of thruster i's rotation
+//! column from t0 on adds `phi_i(t) d` to the innovation, with `phi_i(t0) = 0` and
+//! `phi_i <- (1 - dt / tau_s) phi_i + dt u_i` (u_i the thruster's lagged command). The
+//! least-squares `d` on each axis, with an unknown constant innovation per candidate (the
+//! model's bias is not a change), is `S / F`, S and F the centred sums of `phi e` and `phi^2`;
+//! the statistic is `chi2 = sum over the 3 axes of S^2 / (F sigma^2)`, sigma^2 the innovation's
+//! variance (a slow running estimate). A thruster changed when its chi2 passes `chi2` and its
+//! estimated move `|d|` is at least `min_share` of the model's column.
+//!
+//! Why the gyro: it measures the rates the torque changes, white noise per sample; the
+//! attitude sees the same torque integrated once more with less noise at low frequencies, but
+//! the attitude filter's error is what the controller acts on, so the commands are correlated
+//! with it: a predictor that took its restoring moment from the filter's attitude and
+//! integrated slowly (tau 2 s) saw "changes" of chi2 100-400 on an unchanged vehicle at the
+//! paper's noise (tests/refinement.rs, `detection_bound`). Why a short `tau_s`: the observer's
+//! correction is a high-pass filter, which keeps the dither's and the controller's fast
+//! command changes (0.05 s holds) and drops the slow errors of the model and of the attitude.
+//!
+//! Cost: O(candidates x thrusters) per sample (40 x 5 with the defaults), no allocation after
+//! `new`. Pure: samples and time in, a verdict out.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use thruster_protocol::MAX_THRUSTERS;
+
+use crate::estimator::dynamic::regressors::{terms, TERMS};
+use crate::model::Model;
+
+/// The change test's settings (documented on `RefinementConfig`'s `change_*` keys).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChangeSettings {
+    pub tau_s: f64,
+    pub horizon_s: f64,
+    pub spacing_s: f64,
+    pub chi2: f64,
+    pub min_share: f64,
+    pub noise_s: f64,
+    pub warmup_s: f64,
+    /// The model's own error assumed for every entry, a share of its column's norm.
+    pub model_floor: f64,
+    /// The thrusters' spin-up time constant the model was fitted with, s.
+    pub lag_s: f64,
+}
+
+/// The test's largest statistic at one sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChangeStat {
+    /// Thruster, 0-based.
+    pub thruster: usize,
+    /// Chi-square of its column's change since the candidate time, 3 rows.
+    pub chi2: f64,
+    /// The estimated move as a share of the model's rotation column.
+    pub share: f64,
+    /// Seconds since the candidate change time.
+    pub since_s: f64,
+}
+
+/// One candidate change time and the regression since then, per thruster.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    live: bool,
+    start_ns: u64,
+    count: f64,
+    sum_e: [f64; 3],
+    phi: [f64; MAX_THRUSTERS],
+    sum_phi: [f64; MAX_THRUSTERS],
+    sum_phi2: [f64; MAX_THRUSTERS],
+    sum_phi_e: [[f64; 3]; MAX_THRUSTERS],
+}
+
+impl Candidate {
+    const EMPTY: Candidate = Candidate {
+        live: false,
+        start_ns: 0,
+        count: 0.0,
+        sum_e: [0.0; 3],
+        phi: [0.0; MAX_THRUSTERS],
+        sum_phi: [0.0; MAX_THRUSTERS],
+        sum_phi2: [0.0; MAX_THRUSTERS],
+        sum_phi_e: [[0.0; 3]; MAX_THRUSTERS],
+    };
+}
+
+/// The test's state: observer, noise statistics and candidates.
+#[derive(Debug, Clone)]
+pub struct ChangeTest {
+    s: ChangeSettings,
+    candidates: Vec<Candidate>,
+    next: usize,
+    next_candidate_ns: u64,
+    started_ns: Option<u64>,
+    last_ns: Option<u64>,
+    /// Predicted body rate, rad/s.
+    rate: Vector3<f64>,
+    lag: [f64; MAX_THRUSTERS],
+    lag_abs: f64,
+    terms: [f64; TERMS],
+    mean: [f64; 3],
+    var: [f64; 3],
+    seen: u64,
+    last_stat: Option<ChangeStat>,
+    /// The model version the candidates were judged against.
+    version: u64,
+}
+
+impl ChangeTest {
+    /// The candidates' storage is allocated here, once: `horizon_s / spacing_s` of them.
+    pub fn new(s: ChangeSettings) -> Self {
+        let count = if s.spacing_s > 0.0 && s.horizon_s.is_finite() {
+            (s.horizon_s / s.spacing_s).ceil().clamp(1.0, 1000.0) as usize
+        } else {
+            1
+        };
+        ChangeTest {
+            s,
+            candidates: vec![Candidate::EMPTY; count],
+            next: 0,
+            next_candidate_ns: 0,
+            started_ns: None,
+            last_ns: None,
+            rate: Vector3::zeros(),
+            lag: [0.0; MAX_THRUSTERS],
+            lag_abs: 0.0,
+            terms: [0.0; TERMS],
+            mean: [0.0; 3],
+            var: [0.0; 3],
+            seen: 0,
+            last_stat: None,
+            version: 0,
+        }
+    }
+
+    /// Start over (a new model, control restarted): the observer restarts from the next
+    /// gyro sample and the test waits `warmup_s` before it judges.
+    pub fn reset(&mut self) {
+        for c in self.candidates.iter_mut() {
+            c.live = false;
+        }
+        self.next = 0;
+        self.started_ns = None;
+        self.last_ns = None;
+        self.seen = 0;
+        self.last_stat = None;
+    }
+
+    /// The thrusters' spin-up time constant of the model's fit, s.
+    pub fn set_lag_s(&mut self, lag_s: f64) {
+        self.s.lag_s = lag_s;
+    }
+
+    /// The largest statistic of the last sample (whether or not it passed), for telemetry
+    /// and the tests.
+    pub fn last_stat(&self) -> Option<ChangeStat> {
+        self.last_stat
+    }
+
+    /// One control tick: `rate` the bias-free gyro (rad/s) now, `attitude` the filter's,
+    /// `sent` the commands sent from now on (model units, dither included; at most the
+    /// model's thrusters). `sigma_floor` (rad/s, per axis) is the least noise assumed.
+    /// `steady`: the vehicle is near its setpoint; a sample taken while it is not (a
+    /// manoeuvre, where the model's neglected terms are largest) is not judged, the observer
+    /// still follows it, and judging resumes `warmup_s` after the vehicle is steady again.
+    /// Returns the change found, if any.
+    // Indexing by thruster and axis over several fixed-size arrays at once reads clearer than
+    // zipped iterators here.
+    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+    pub fn observe(
+        &mut self,
+        t_ns: u64,
+        rate: &Vector3<f64>,
+        attitude: &UnitQuaternion<f64>,
+        model: &Model,
+        sent: &[f64],
+        sigma_floor: &[f64; 3],
+        steady: bool,
+    ) -> Option<ChangeStat> {
+        let n = sent.len().min(model.thrusters()).min(MAX_THRUSTERS);
+        let finite = rate.iter().all(|v| v.is_finite()) && sent[..n].iter().all(|v| v.is_finite());
+        if !finite || n == 0 {
+            return None;
+        }
+        if model.version != self.version {
+            // A new model (the refinement's update included): the candidates were judged
+            // against the old one, and its switch is a step in the prediction. Noise-free, an
+            // update installed mid-flight was "a change" 0.4 s later.
+            self.version = model.version;
+            for c in self.candidates.iter_mut() {
+                c.live = false;
+            }
+            self.started_ns = None;
+        }
+        let Some(last) = self.last_ns else {
+            // The first sample: the observer starts at the gyro, the lag at the command.
+            self.started_ns = Some(t_ns);
+            self.last_ns = Some(t_ns);
+            self.rate = *rate;
+            self.lag[..n].copy_from_slice(&sent[..n]);
+            self.lag_abs = sent[..n].iter().map(|v| v.abs()).sum::<f64>() / n as f64;
+            self.mean = [0.0; 3];
+            self.var = [0.0; 3];
+            self.next_candidate_ns = t_ns;
+            return None;
+        };
+        if t_ns <= last {
+            return None;
+        }
+        let dt = ((t_ns - last) as f64 * 1e-9).min(0.1);
+        self.last_ns = Some(t_ns);
+        let gain = (dt / self.s.tau_s).clamp(0.0, 1.0);
+        let e = rate - self.rate;
+
+        // Judge this sample's innovation against every candidate, once the vehicle has been
+        // steady for `warmup_s` in a row (after a re-estimation it swings back first).
+        if !steady {
+            // Candidates from before a manoeuvre would mix two flights: start afresh.
+            if self.started_ns.is_some() {
+                for c in self.candidates.iter_mut() {
+                    c.live = false;
+                }
+            }
+            self.started_ns = None;
+        } else if self.started_ns.is_none() {
+            self.started_ns = Some(t_ns);
+        }
+        let warm = self
+            .started_ns
+            .is_some_and(|t0| (t_ns - t0) as f64 * 1e-9 >= self.s.warmup_s);
+        let mut best: Option<ChangeStat> = None;
+        let mut found: Option<ChangeStat> = None;
+        if warm && steady {
+            if t_ns >= self.next_candidate_ns {
+                self.candidates[self.next] = Candidate {
+                    live: true,
+                    start_ns: t_ns,
+                    ..Candidate::EMPTY
+                };
+                self.next = (self.next + 1) % self.candidates.len();
+                self.next_candidate_ns = t_ns + (self.s.spacing_s * 1e9) as u64;
+            }
+            let mut z = [0.0; 3];
+            let mut inv = [0.0; 3];
+            for j in 0..3 {
+                z[j] = e[j] - self.mean[j];
+                let floor = sigma_floor[j].max(1e-6);
+                inv[j] = 1.0 / self.var[j].max(floor * floor);
+            }
+            let b = &model.effectiveness;
+            let mut col_norm = [0.0; MAX_THRUSTERS];
+            let mut biggest: f64 = 0.0;
+            for (i, c) in col_norm.iter_mut().enumerate().take(n) {
+                *c = b.fixed_view::<3, 1>(0, i).norm();
+                biggest = biggest.max(*c);
+            }
+            for c in self.candidates.iter_mut().filter(|c| c.live) {
+                c.count += 1.0;
+                for j in 0..3 {
+                    c.sum_e[j] += z[j];
+                }
+                let since_s = (t_ns - c.start_ns) as f64 * 1e-9;
+                for i in 0..n {
+                    let p = c.phi[i];
+                    c.sum_phi[i] += p;
+                    c.sum_phi2[i] += p * p;
+                    for j in 0..3 {
+                        c.sum_phi_e[i][j] += p * z[j];
+                    }
+                    // A thruster with (almost) no moment in the model: its share means nothing.
+                    if c.count < 3.0 || col_norm[i] < 0.05 * biggest {
+                        continue;
+                    }
+                    let f = c.sum_phi2[i] - c.sum_phi[i] * c.sum_phi[i] / c.count;
+                    if f.is_nan() || f <= (1e-12 * c.sum_phi2[i]).max(0.0) {
+                        continue;
+                    }
+                    // The move over its variance: the regression's (sigma^2 / F) and the model's
+                    // own error (a model wrong by a few percent under large commands is no
+                    // change). Not the model's standard errors: at the paper's noise they are
+                    // 5-10 % of a column and the rotation was then never found.
+                    let floor = self.s.model_floor * col_norm[i];
+                    let (mut chi2, mut d2) = (0.0, 0.0);
+                    for j in 0..3 {
+                        let s = c.sum_phi_e[i][j] - c.sum_phi[i] * c.sum_e[j] / c.count;
+                        let d = s / f;
+                        chi2 += d * d / (1.0 / (inv[j] * f) + floor * floor);
+                        d2 += d * d;
+                    }
+                    let stat = ChangeStat {
+                        thruster: i,
+                        chi2,
+                        share: d2.sqrt() / col_norm[i],
+                        since_s,
+                    };
+                    if best.is_none_or(|b| chi2 > b.chi2) {
+                        best = Some(stat);
+                    }
+                    if chi2 > self.s.chi2
+                        && stat.share >= self.s.min_share
+                        && found.is_none_or(|b| chi2 > b.chi2)
+                    {
+                        found = Some(stat);
+                    }
+                }
+            }
+        }
+        self.last_stat = best;
+
+        // The innovation's statistics (steady samples only): the first samples average, then
+        // a slow forgetting.
+        if steady {
+            let w = (1.0 / (self.seen + 1) as f64).max(dt / self.s.noise_s.max(dt));
+            for j in 0..3 {
+                let d = e[j] - self.mean[j];
+                self.mean[j] += w * d;
+                self.var[j] += w * (d * d - self.var[j]);
+            }
+            self.seen += 1;
+        }
+
+        // The observer: correct, then predict the next sample with the commands sent now.
+        self.rate += e * gain;
+        let a = if self.s.lag_s > 0.0 {
+            1.0 - (-dt / self.s.lag_s).exp()
+        } else {
+            1.0
+        };
+        let mut abs = 0.0;
+        for (l, u) in self.lag.iter_mut().zip(&sent[..n]) {
+            *l += a * (u - *l);
+            abs += u.abs();
+        }
+        self.lag_abs += a * (abs / n as f64 - self.lag_abs);
+        let down = attitude.inverse_transform_vector(&Vector3::z());
+        terms(
+            &Vector3::zeros(),
+            &self.rate,
+            &down,
+            self.lag_abs,
+            &mut self.terms,
+        );
+        let b = &model.effectiveness;
+        let mut accel = Vector3::<f64>::zeros();
+        for j in 0..3 {
+            for i in 0..n {
+                accel[j] += b[(j, i)] * self.lag[i];
+            }
+            if let Some(d) = &model.dynamics {
+                if d.coefficients.ncols() == TERMS {
+                    for (k, t) in self.terms.iter().enumerate() {
+                        accel[j] += d.coefficients[(j, k)] * t;
+                    }
+                }
+            }
+        }
+        if accel.iter().all(|v| v.is_finite()) {
+            self.rate += accel * dt;
+        }
+        if !self.rate.iter().all(|v| v.is_finite()) {
+            self.rate = *rate;
+        }
+        let keep = 1.0 - gain;
+        for c in self.candidates.iter_mut().filter(|c| c.live) {
+            for i in 0..n {
+                c.phi[i] = keep * c.phi[i] + dt * self.lag[i];
+            }
+        }
+        found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+
+    fn settings() -> ChangeSettings {
+        ChangeSettings {
+            tau_s: 0.2,
+            horizon_s: 10.0,
+            spacing_s: 0.25,
+            chi2: 50.0,
+            min_share: 0.3,
+            noise_s: 30.0,
+            warmup_s: 5.0,
+            model_floor: 0.0,
+            lag_s: 0.0,
+        }
+    }
+
+    /// A pure-B model of a vehicle with a little damping, driven by a random binary command
+    /// (+-0.2, 0.05 s holds), gyro noise `noise` per sample at 200 Hz; thruster 2's column
+    /// changes at `change_s`. Returns the first detection.
+    fn simulate(change_s: f64, noise: f64, seconds: f64) -> Option<(f64, ChangeStat)> {
+        use rand::{Rng, SeedableRng};
+        use rand_distr::StandardNormal;
+        let b = DMatrix::from_row_slice(
+            6,
+            2,
+            &[
+                10.0, 0.0, 0.0, 10.0, 0.0, 0.0, //
+                0.0, 0.0, 0.0, 0.0, 1.0, 1.0,
+            ],
+        );
+        let model = Model::nominal(b.clone(), None);
+        let mut moved = b.clone();
+        moved[(2, 1)] = 7.0; // thruster 2 now also yaws: 70 % of its column
+        let mut test = ChangeTest::new(settings());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut rate = Vector3::zeros();
+        let dt = 0.005;
+        let mut u = [0.0; 2];
+        for k in 0..(seconds / dt) as u64 {
+            let t = k as f64 * dt;
+            let truth = if t >= change_s { &moved } else { &b };
+            for j in 0..3 {
+                rate[j] += dt * (truth[(j, 0)] * u[0] + truth[(j, 1)] * u[1]);
+                // A little damping in the truth keeps the rates bounded (the observer's
+                // correction absorbs it as model error).
+                rate[j] *= 1.0 - 0.5 * dt;
+            }
+            let noisy =
+                rate + Vector3::from_fn(|_, _| noise * rng.sample::<f64, _>(StandardNormal));
+            // Commands held 0.05 s: random binary on both thrusters.
+            if k % 10 == 0 {
+                u = [
+                    if rng.random::<bool>() { 0.2 } else { -0.2 },
+                    if rng.random::<bool>() { 0.2 } else { -0.2 },
+                ];
+            }
+            let found = test.observe(
+                (t * 1e9) as u64,
+                &noisy,
+                &UnitQuaternion::identity(),
+                &model,
+                &u,
+                &[1e-3; 3],
+                true,
+            );
+            if let Some(f) = found {
+                return Some((t, f));
+            }
+        }
+        None
+    }
+
+    #[test]
+    fn an_unchanged_model_is_quiet_and_a_moved_column_is_found_at_once() {
+        assert_eq!(simulate(f64::INFINITY, 0.25, 120.0), None);
+        let (t, f) = simulate(20.0, 0.25, 60.0).expect("change not found");
+        assert_eq!(f.thruster, 1, "{f:?}");
+        // Measured 21.4 s (chi2 grows about 30 per second here).
+        assert!(t > 20.0 && t < 24.0, "found at {t:.2} s: {f:?}");
+        assert!(f.share > 0.3, "{f:?}");
+    }
+
+    #[test]
+    fn nothing_is_judged_during_the_warm_up_and_after_a_reset() {
+        let b = DMatrix::from_row_slice(6, 1, &[10.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let model = Model::nominal(b, None);
+        let mut test = ChangeTest::new(settings());
+        for k in 0..800u64 {
+            // A rate the model does not predict at all.
+            let r = Vector3::new(k as f64, 0.0, 0.0);
+            test.observe(
+                k * 5_000_000,
+                &r,
+                &UnitQuaternion::identity(),
+                &model,
+                &[0.1],
+                &[1e-3; 3],
+                true,
+            );
+            assert!(test.last_stat().is_none(), "judged at sample {k}");
+        }
+        test.reset();
+        assert!(test.last_stat().is_none());
+    }
+}
