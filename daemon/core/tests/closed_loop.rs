@@ -34,14 +34,7 @@ fn rotate_while_holding_with(
     let v = vehicle("amour5");
     let mut run = Run::new("amour5", noise, seed);
     if let Some(identification) = identification {
-        // As Run builds it, with only the identification section changed.
-        let mut setup = MachineSetup {
-            thrusters: v.thrusters.len(),
-            identification,
-            ..MachineSetup::default()
-        };
-        setup.machine.deadband = 0.05;
-        run.machine = Machine::new(setup);
+        run.with_identification(identification);
     }
     run.run_for(1.0);
     run.estimate();
@@ -139,29 +132,16 @@ fn carry_over_on_every_vehicle() {
     println!(
         "{noise:?}, thruster {k} turned 45 deg; err_rot / err_acc vs truth, took, largest tilt"
     );
-    for name in [
-        "aligned",
-        "amour5",
-        "amour5_top45",
-        "eight_vectored",
-        "four_up",
-        "six_dof",
-    ] {
+    for name in common::VEHICLES {
         for carry in [true, false] {
             let mut sum = [0.0; 4];
             for &seed in &seeds {
                 let v = vehicle(name);
                 let mut run = Run::with_vehicle(v.clone(), noise, seed, 200.0);
-                let mut setup = MachineSetup {
-                    thrusters: v.thrusters.len(),
-                    identification: IdentificationConfig {
-                        carry_over: carry,
-                        ..IdentificationConfig::default()
-                    },
-                    ..MachineSetup::default()
-                };
-                setup.machine.deadband = 0.05;
-                run.machine = Machine::new(setup);
+                run.with_identification(IdentificationConfig {
+                    carry_over: carry,
+                    ..IdentificationConfig::default()
+                });
                 run.run_for(1.0);
                 run.estimate();
                 run.run_for(3.0);
@@ -626,25 +606,12 @@ fn silent_rotation_while_pitching(
 ) -> (f64, f64, f64, String) {
     use nalgebra::UnitQuaternion;
     use thrusterd_core::machine::Event;
-    let v = vehicle("amour5");
     let mut run = Run::new("amour5", NoisePreset::Realistic, seed);
-    let mut setup = MachineSetup {
-        thrusters: v.thrusters.len(),
-        identification,
-        ..MachineSetup::default()
-    };
-    setup.machine.deadband = 0.05;
-    run.machine = Machine::new(setup);
+    run.with_identification(identification);
     run.run_for(1.0);
     run.estimate();
     run.run_for(3.0);
-    run.sim
-        .apply(&thruster_sim::Action::Rotate {
-            thruster: "T".into(),
-            axis: [1.0, 0.0, 0.0],
-            angle_deg: 45.0,
-        })
-        .unwrap();
+    run.rotate_top();
     let before = run.machine.model().unwrap().version;
     let yaw = run.sim.roll_pitch_yaw()[2];
     let start = run.sim.time_s();

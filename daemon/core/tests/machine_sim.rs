@@ -245,13 +245,7 @@ fn silent_rotation_of_the_top_thruster_is_detected_and_re_estimated() {
         assert_eq!(run.machine.state(), State::Active);
 
         let changed_at = run.sim.time_s();
-        run.sim
-            .apply(&thruster_sim::Action::Rotate {
-                thruster: "T".into(),
-                axis: [1.0, 0.0, 0.0],
-                angle_deg: 45.0,
-            })
-            .unwrap();
+        run.rotate_top();
         let seen = pitch_manoeuvres(&mut run, 30.0);
         let (t, why) = seen.first().expect("the rotation was not detected");
         let delay = t - changed_at;

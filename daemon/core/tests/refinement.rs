@@ -95,16 +95,6 @@ fn pitch_with(
     None
 }
 
-fn rotate_top(run: &mut Run) {
-    run.sim
-        .apply(&thruster_sim::Action::Rotate {
-            thruster: "T".into(),
-            axis: [1.0, 0.0, 0.0],
-            angle_deg: 45.0,
-        })
-        .unwrap();
-}
-
 #[test]
 fn with_a_realistic_imu_a_rotated_thruster_is_found_within_seconds_and_nothing_else() {
     for seed in [1, 4] {
@@ -112,7 +102,7 @@ fn with_a_realistic_imu_a_rotated_thruster_is_found_within_seconds_and_nothing_e
         let quiet = pitch_until_mismatch(&mut run, 60.0);
         assert!(quiet.is_none(), "seed {seed}: false alarm {quiet:?}");
         assert!(run.machine.refinement().is_some(), "no window ended");
-        rotate_top(&mut run);
+        run.rotate_top();
         let (t, why) = pitch_until_mismatch(&mut run, 30.0).expect("rotation not found");
         println!("seed {seed}: found after {t:.1} s: {why}");
         // One 5 s window after the one that straddles the change: 10 s.
@@ -128,7 +118,7 @@ fn at_the_papers_noise_a_rotated_thruster_is_found_and_an_unchanged_one_is_not()
     let mut run = holding(NoisePreset::Paper, 4);
     let quiet = pitch_until_mismatch(&mut run, 120.0);
     assert!(quiet.is_none(), "false alarm {quiet:?}");
-    rotate_top(&mut run);
+    run.rotate_top();
     // Measured 79.9 s: 30 s windows (the honest standard errors keep the bound above
     // `window_rel_err` until the limit), and the change must show in two of them.
     let (t, why) = pitch_until_mismatch(&mut run, 120.0).expect("rotation not found");
@@ -219,7 +209,7 @@ fn dither_sweep() {
             let (quiet, err) = pitch_scored(&mut run, 120.0);
             err_sum += err;
             let found = if quiet.is_none() {
-                rotate_top(&mut run);
+                run.rotate_top();
                 pitch_until_mismatch(&mut run, 120.0)
             } else {
                 alarms += 1;
@@ -313,7 +303,7 @@ fn noise_free_the_change_test_is_quiet_then_finds_a_rotated_thruster_within_seco
     let mut run = holding_with(NoisePreset::None, 1, with_change_test());
     let quiet = level_until_mismatch(&mut run, 60.0);
     assert!(quiet.is_none(), "false alarm {quiet:?}");
-    rotate_top(&mut run);
+    run.rotate_top();
     let (t, why) = level_until_mismatch(&mut run, 10.0).expect("rotation not found");
     println!("found after {t:.2} s: {why}");
     // Measured 1.76 s, and named thruster 2 (LB, which takes up the new roll moment in
@@ -339,7 +329,7 @@ fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds()
         let mut run = holding_with(NoisePreset::Paper, seed, with_change_test());
         let quiet = level_until_mismatch(&mut run, 120.0);
         assert!(quiet.is_none(), "seed {seed}: false alarm {quiet:?}");
-        rotate_top(&mut run);
+        run.rotate_top();
         let found = level_until_mismatch(&mut run, 30.0);
         println!("seed {seed}: found after {found:?}");
         results.push((seed, found));
@@ -392,7 +382,7 @@ fn change_test_soak() {
             alarms.push((seed, level, pitch));
             continue;
         }
-        rotate_top(&mut run);
+        run.rotate_top();
         let (mut tilt, mut n, mut over) = (0.0f64, 0u64, 0u64);
         let found = level_with(&mut run, 60.0, |run| {
             let down = run.machine.attitude().inverse() * nalgebra::Vector3::z();
@@ -499,7 +489,7 @@ fn detection_bound() {
             flight.rms();
             let max_before = flight.fly(&mut run, before_s, None);
             let rms_before = flight.rms();
-            rotate_top(&mut run);
+            run.rotate_top();
             let mut trace: Vec<(f64, [Stat; VARIANTS])> = Vec::new();
             flight.fly(&mut run, after_s, Some(&mut trace));
             let rms_after = flight.rms();

@@ -251,14 +251,7 @@ fn every_vehicle_noise_free_sweep() {
     let tuned = std::env::vars().any(|(k, _)| k.starts_with("RU_"));
     // RU_VEHICLES (comma-separated) narrows the list; RU_DITHER sets the refinement's dither.
     let only = std::env::var("RU_VEHICLES").ok();
-    for name in [
-        "aligned",
-        "amour5",
-        "amour5_top45",
-        "eight_vectored",
-        "four_up",
-        "six_dof",
-    ] {
+    for name in common::VEHICLES {
         if only
             .as_ref()
             .is_some_and(|o| !o.split(',').any(|v| v == name))

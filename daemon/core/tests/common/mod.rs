@@ -9,6 +9,16 @@ use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Mode, Request, State};
 
+/// Every vehicle file in config/vehicles, for sweeps over all of them.
+pub const VEHICLES: [&str; 6] = [
+    "aligned",
+    "amour5",
+    "amour5_top45",
+    "eight_vectored",
+    "four_up",
+    "six_dof",
+];
+
 pub fn vehicle(name: &str) -> Vehicle {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../config/vehicles")
@@ -147,6 +157,32 @@ pub struct Reestimation {
 }
 
 impl Run {
+    /// AMOUR-5's top thruster "T" rotated 45 degrees about x, unannounced.
+    pub fn rotate_top(&mut self) {
+        self.sim
+            .apply(&thruster_sim::Action::Rotate {
+                thruster: "T".into(),
+                axis: [1.0, 0.0, 0.0],
+                angle_deg: 45.0,
+            })
+            .unwrap();
+    }
+
+    /// A new machine as `Run` builds it (the vehicle's thruster count, deadband 0.05), with
+    /// the identification section replaced.
+    pub fn with_identification(
+        &mut self,
+        identification: thrusterd_core::identification::IdentificationConfig,
+    ) {
+        let mut setup = thrusterd_core::machine::MachineSetup {
+            thrusters: self.sim.thruster_count(),
+            identification,
+            ..thrusterd_core::machine::MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        self.machine = Machine::new(setup);
+    }
+
     /// The top thruster of AMOUR-5 rotated 45 degrees about x and announced with its new
     /// geometry while the machine holds level: runs until control resumes with a new model
     /// (at most 120 s) and measures the way there against the simulator's truth.
