@@ -155,6 +155,21 @@ fn status(daemon: &Daemon, json: bool) -> Result<()> {
     }
 }
 
+/// The dynamics message if it passes the protocol's checks; otherwise None, with a warning
+/// saying why (not silently: the operator would see a dynamic model without coefficients).
+fn checked_dynamics(d: DynamicsMsg) -> Option<DynamicsMsg> {
+    match d.validate() {
+        Ok(()) => Some(d),
+        Err(reason) => {
+            Warner::default().warn(Some(format!(
+                "the daemon's dynamic coefficients for model version {} fail the protocol's checks and are not shown: {reason}",
+                d.model_version
+            )));
+            None
+        }
+    }
+}
+
 fn model(daemon: &Daemon, json: bool) -> Result<()> {
     let inbox = daemon.inbox::<ModelMsg>()?;
     let dynamics_inbox = daemon.inbox::<DynamicsMsg>()?;
@@ -191,14 +206,15 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
                         Some(newer) => model = newer,
                         None => break,
                     }
-                    if d.model_version == model.version && d.validate().is_ok() {
-                        dynamics = Some(d);
+                    if d.model_version == model.version {
+                        dynamics = checked_dynamics(d);
                         break;
                     }
                 }
                 Some(d) => {
-                    dynamics =
-                        (d.model_version == model.version && d.validate().is_ok()).then_some(d);
+                    if d.model_version == model.version {
+                        dynamics = checked_dynamics(d);
+                    }
                     break;
                 }
                 None => break,

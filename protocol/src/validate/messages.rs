@@ -37,7 +37,8 @@ fn in_range(
 }
 
 /// As [`in_range`], but NaN passes: it means "not known yet" in the fields that allow it
-/// (status error bound and noise levels, model standard errors). Infinity never does.
+/// (status error bound and noise levels, model standard errors, dynamic coefficients).
+/// Infinity never does.
 fn in_range_or_unknown(
     field: Field,
     value: f64,
@@ -474,12 +475,12 @@ impl Validate for DvlSample {
 }
 
 impl Validate for DynamicsMsg {
-    /// Coefficients finite and within the physical bound of an effectiveness entry, standard
-    /// errors non-negative or NaN (unknown), excursions finite and non-negative.
+    /// Coefficients within the physical bound of an effectiveness entry or NaN (unknown),
+    /// standard errors non-negative or NaN (unknown), excursions finite and non-negative.
     fn validate(&self) -> Result<(), RejectReason> {
         for (i, row) in self.coefficients.iter().enumerate() {
             for (j, v) in row.to_terms().iter().enumerate() {
-                in_range(
+                in_range_or_unknown(
                     Field::at2("coefficients", i, j),
                     *v,
                     -MAX_EFFECTIVENESS,
