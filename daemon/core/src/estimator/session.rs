@@ -289,11 +289,6 @@ impl Estimator {
         self
     }
 
-    /// Whether the run starts from carried-over coefficients.
-    pub fn has_prior(&self) -> bool {
-        self.prior.is_some()
-    }
-
     /// The mean specific force measured at rest just before the run (m/s^2, body frame, the
     /// raw accelerometer): the dynamic method starts its navigation from it. Without it the
     /// vehicle is taken as level.
