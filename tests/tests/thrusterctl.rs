@@ -128,6 +128,11 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     assert!(text(&out.stdout).starts_with("setpoint sent to 1 subscriber(s)"));
 
     // A declared geometry swaps in its nominal model at once: proof the event arrived.
+    let before = {
+        let out = ctl(&world, &["model", "--json"]);
+        let m: Value = serde_json::from_slice(&out.stdout).expect("model JSON");
+        m["version"].as_u64().expect("model version")
+    };
     let vehicle = workspace().join("config/vehicles/amour5_top45.toml");
     let out = ctl(
         &world,
@@ -150,10 +155,15 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     loop {
         let out = ctl(&world, &["model", "--json"]);
         let m: Value = serde_json::from_slice(&out.stdout).unwrap_or(Value::Null);
+        // Or already the model identified under control after it: the moved thruster alone
+        // is learned (the others' columns kept), which at this noise took 8 s in one CI run,
+        // so the nominal one may be gone before a poll sees it. Its version then counts the
+        // nominal swap and the new model (a refinement is not a new estimation).
+        let version = m["version"].as_u64().unwrap_or(0);
+        let provenance = m["provenance"].as_str().unwrap_or("");
         if m["source"] == "Nominal"
-            || m["provenance"]
-                .as_str()
-                .is_some_and(|p| p.contains("nominal"))
+            || provenance.contains("nominal")
+            || (version >= before + 2 && !provenance.contains("refined"))
         {
             break;
         }
