@@ -197,13 +197,15 @@ fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
             f(s, &["after", "mean_err_deg"]),
         );
         assert!(after < before + 2.0, "before {before}, after {after}");
-        // At the paper's noise the background refinement finds it (measured over seeds 1-3:
-        // detected after 18-25 s, the new model 39-46 s after the change, 0.038-0.050 off the
-        // truth, one report each).
+        // At the paper's noise the refinement's change test finds it through the pitch steps
+        // (measured over seeds 1-5: detected after 3.1-5.1 s, mean 4.1, thruster 1 every
+        // time, the new model 13-19 s after the change, 0.052-0.061 off the truth, one report
+        // each; the windows alone took 42.6-50.6 s). 12 s fails the windows alone and leaves
+        // room for CI.
         let p = &v["runs"]["silent-paper"];
         assert_eq!(p["monitor_mismatch_reports"], 1, "{p}");
         let ph = &p["hot_swap"];
-        assert!(f(ph, &["detection_delay_s"]) < 60.0, "{ph}");
+        assert!(f(ph, &["detection_delay_s"]) < 12.0, "{ph}");
         assert!(f(ph, &["new_model_rel_err_rot_vs_truth"]) < 0.15, "{ph}");
         // The oracle (the new true model loaded at the change) holds as the learned one does
         // after re-learning (measured after 4.7-5.0 deg against before 4.6-5.0).

@@ -27,13 +27,22 @@ fn holding(noise: NoisePreset, seed: u64) -> Run {
 
 /// [`holding`] with the refinement's settings replaced.
 fn holding_with(noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> Run {
-    let mut run = Run::new("amour5", noise, seed);
+    holding_on("amour5", noise, seed, refinement)
+}
+
+/// [`holding_with`] on another vehicle file.
+fn holding_on(vehicle: &str, noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> Run {
+    let mut run = Run::new(vehicle, noise, seed);
     let mut setup = MachineSetup {
-        thrusters: 5,
+        thrusters: run.sim.thruster_count(),
         refinement,
         ..MachineSetup::default()
     };
     setup.machine.deadband = 0.05;
+    // The estimator's terms prior, for `detection_bound`'s decisive runs (default off).
+    if let Ok(v) = std::env::var("DB_TERM_PRIOR") {
+        setup.estimator.term_prior_sd = v.parse().expect("DB_TERM_PRIOR");
+    }
     // The monitor's own test never fires (infinite threshold); its action still decides what
     // a mismatch does: re-estimate.
     setup.monitor.action = MismatchAction::Estimate;
@@ -131,12 +140,21 @@ fn at_the_papers_noise_a_rotated_thruster_is_found_and_an_unchanged_one_is_not()
 /// be reported. This is where one window deciding failed (see the module docs).
 #[test]
 fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_minutes() {
-    for seed in 1..=3 {
+    let seeds: Vec<u64> = std::env::var("KHZ_SEEDS").map_or(vec![1, 2, 3], |v| {
+        v.split(',').map(|x| x.trim().parse().unwrap()).collect()
+    });
+    for seed in seeds {
         let mut run = Run::with_rate("amour5", NoisePreset::Paper, seed, 1000.0);
-        run.machine = Machine::new(MachineSetup {
+        let mut setup = MachineSetup {
             thrusters: 5,
             ..MachineSetup::default()
-        });
+        };
+        // No driver in between: the machine compensates the T200 deadband itself, as
+        // thruster-sim's driver does in the daemon's setup (and `holding_with` here). With the
+        // deadband left in (KHZ_DEADBAND=0), the model is linear where the thrust is not, and
+        // the change test took that for a yaw thruster's change after 13 s (seed 1).
+        setup.machine.deadband = std::env::var("KHZ_DEADBAND").map_or(0.05, |v| v.parse().unwrap());
+        run.machine = Machine::new(setup);
         run.run_for(1.0);
         run.estimate();
         run.machine.take_events();
@@ -145,7 +163,8 @@ fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_m
         let start = run.sim.time_s();
         let mut step = 0;
         let mut windows = 0;
-        while run.sim.time_s() - start < 180.0 {
+        let seconds: f64 = std::env::var("KHZ_SECONDS").map_or(180.0, |v| v.parse().unwrap());
+        while run.sim.time_s() - start < seconds {
             let t = run.sim.time_s() - start;
             if t >= 20.0 * step as f64 {
                 let p: f64 = [10.0, 0.0][step % 2];
@@ -292,6 +311,15 @@ fn with_change_test() -> RefinementConfig {
     if let Ok(v) = std::env::var("CT_CHI2") {
         c.change_chi2 = v.parse().unwrap();
     }
+    if let Ok(v) = std::env::var("CT_TERM_Z") {
+        c.change_term_z = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("CT_WARMUP") {
+        c.change_warmup_s = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("CT_MAX_ERROR") {
+        c.change_max_error_deg = v.parse().unwrap();
+    }
     c
 }
 
@@ -306,19 +334,20 @@ fn noise_free_the_change_test_is_quiet_then_finds_a_rotated_thruster_within_seco
     run.rotate_top();
     let (t, why) = level_until_mismatch(&mut run, 10.0).expect("rotation not found");
     println!("found after {t:.2} s: {why}");
-    // Measured 1.76 s, and named thruster 2 (LB, which takes up the new roll moment in
-    // closed loop): noise-free the statistic is the move over `change_model_floor`, so the
-    // largest relative move wins. At the paper's noise it names thruster 1.
-    assert!(t < 2.5, "{t:.2} s: {why}");
+    // Measured 3.78 s, naming thruster 1 (the joint fit; one thruster at a time it named
+    // thruster 2, LB, which takes up the new roll moment in closed loop): a candidate is judged
+    // once it is `change_min_age_s` (2 s) old; at 1 s it was found after 2.53 s.
+    assert!(t < 4.5, "{t:.2} s: {why}");
+    assert!(why.contains("thruster 1"), "{why}");
     assert!(why.contains("change test"), "{why}");
     assert_eq!(run.machine.state(), State::Identify);
 }
 
 /// Issue 12's target is a silent hot swap detected at the paper's noise within 5 s. Holding
 /// level with the learned model and the shipped settings (0.1 dither), the change test on,
-/// after two quiet minutes: measured 6.4, 6.4, 2.6, 3.7, 6.1 s for seeds 1-5 (mean 5.0 s; seeds
-/// 6-10: 6.7, 7.4, 1.5, 1.5, 8.0 s), all naming thruster 1 but seed 8 (thruster 5). So the
-/// target is met on average, not in every run. The windows alone took 74 s here.
+/// after two quiet minutes: measured 3.9, 5.0, 2.6, 3.2, 3.9 s for seeds 1-5 (mean 3.7 s), all
+/// naming thruster 1 (before the rows, the significant terms and the joint fit: 6.4, 6.4, 2.6,
+/// 3.7, 6.1 s, mean 5.0 s). The windows alone took 74 s here.
 #[test]
 fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds() {
     let seeds: Vec<u64> = std::env::var("CT_SEEDS").map_or(vec![1, 2, 3, 4, 5], |v| {
@@ -341,6 +370,9 @@ fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds()
             .unwrap_or_else(|| panic!("seed {seed}: rotation not found"));
         assert!(*t < 10.0, "seed {seed}: {t:.2} s: {why}");
         assert!(why.contains("change test"), "seed {seed}: {why}");
+        // The joint fit names the turned thruster (one thruster at a time, the controller's
+        // answer to it made thruster 5 look moved in 4 of 5 seeds of `detection_bound`).
+        assert!(why.contains("thruster 1:"), "seed {seed}: {why}");
         sum += t;
     }
     let mean = sum / results.len() as f64;
@@ -383,22 +415,73 @@ fn change_test_soak() {
             continue;
         }
         run.rotate_top();
-        let (mut tilt, mut n, mut over) = (0.0f64, 0u64, 0u64);
-        let found = level_with(&mut run, 60.0, |run| {
+        let mut tilt = 0.0f64;
+        let mut track = |run: &Run| {
             let down = run.machine.attitude().inverse() * nalgebra::Vector3::z();
-            let t = down.z.clamp(-1.0, 1.0).acos().to_degrees();
-            tilt = tilt.max(t);
-            n += 1;
-            if t > RefinementConfig::default().change_max_tilt_deg {
-                over += 1;
-            }
-        });
+            tilt = tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
+        };
+        // CT_AFTER: the flight after the change, pitch steps (the hot-swap experiment's) or
+        // level (default).
+        let after = std::env::var("CT_AFTER").unwrap_or_else(|_| "level".into());
+        let found = if after == "pitch" {
+            pitch_with(&mut run, 60.0, |_, run| track(run))
+        } else {
+            level_with(&mut run, 60.0, &mut track)
+        };
         println!(
-            "seed {seed}: rotated top thruster found after {found:?}; largest tilt (filter) {tilt:.1} deg, {:.0} % of samples beyond the test's tilt gate",
-            100.0 * over as f64 / n.max(1) as f64
+            "seed {seed}: rotated top thruster found ({after}) after {found:?}; largest tilt (filter) {tilt:.1} deg"
         );
     }
     assert!(alarms.is_empty(), "false alarms: {alarms:?}");
+}
+
+/// The change test (`with_change_test`) on every vehicle file: `CT_MINUTES` (default 5) of pitch
+/// steps (+-20 deg every 4 s) then as long holding level, unchanged, at each noise of
+/// `CT_NOISES` (default none,realistic,paper), seeds `CT_SEEDS` (default 1; CT_VEHICLES a
+/// subset, CT_CHANGE_TEST=0 the windows alone); prints every
+/// mismatch reported (a false alarm) and fails on any. A measuring tool: `cargo test --release
+/// -p thrusterd-core --test refinement -- --ignored change_test_on_every_vehicle --nocapture`.
+#[test]
+#[ignore = "measuring tool: minutes of vehicle time per vehicle and noise"]
+fn change_test_on_every_vehicle() {
+    let minutes: f64 = std::env::var("CT_MINUTES").map_or(5.0, |v| v.parse().unwrap());
+    let list = |key: &str, default: &str| -> Vec<String> {
+        std::env::var(key)
+            .unwrap_or_else(|_| default.into())
+            .split(',')
+            .map(|v| v.trim().to_string())
+            .collect()
+    };
+    let mut alarms = Vec::new();
+    for vehicle in list("CT_VEHICLES", &common::VEHICLES.join(",")) {
+        for noise in list("CT_NOISES", "none,realistic,paper") {
+            let preset = match noise.as_str() {
+                "none" => NoisePreset::None,
+                "realistic" => NoisePreset::Realistic,
+                _ => NoisePreset::Paper,
+            };
+            for seed in list("CT_SEEDS", "1") {
+                let seed: u64 = seed.parse().unwrap();
+                // CT_CHANGE_TEST=0: the windows alone (is an alarm the change test's?).
+                let cfg = RefinementConfig {
+                    change_test: std::env::var("CT_CHANGE_TEST").map_or(true, |v| v != "0"),
+                    ..with_change_test()
+                };
+                let mut run = holding_on(&vehicle, preset, seed, cfg);
+                let pitch = pitch_until_mismatch(&mut run, minutes * 60.0);
+                let level = if pitch.is_none() {
+                    level_until_mismatch(&mut run, minutes * 60.0)
+                } else {
+                    None
+                };
+                println!("{vehicle} {noise} seed {seed}: pitch steps {pitch:?}, level {level:?}");
+                if pitch.is_some() || level.is_some() {
+                    alarms.push((vehicle.clone(), noise.clone(), seed, pitch, level));
+                }
+            }
+        }
+    }
+    assert!(alarms.is_empty(), "false alarms: {alarms:#?}");
 }
 
 /// The best detection time any detector could reach, measured: a generalized-likelihood-ratio
@@ -419,8 +502,14 @@ fn change_test_soak() {
 /// DB_BEFORE / DB_AFTER (s), DB_SIGMA_FLOOR (least noise assumed, rad/s; 0.01 makes the
 /// noise-free run readable), DB_REFERENCE (s: test the window against the recent past
 /// instead of against the model), DB_MODEL_FLOOR (the module's `change_model_floor`),
+/// DB_TERM_PRIOR (the estimator's `term_prior_sd` for the learned model),
 /// DB_LEARNED_TRUE_VEL (the simulator's body velocity in the learned model's terms),
-/// DB_DEBUG (print the learned and true B). Run with
+/// DB_LEARNED_B_TRUE (the learned predictor with the simulator's true B instead of the
+/// learned one: is it B or the other terms?), DB_LEARNED_SKIP (indices of the learned terms
+/// left out, e.g. `14,36`), DB_AXES (the rows the three GLRs judge, e.g. `0,2`), the module's
+/// DB_MIN_SHARE / DB_CHI2 / DB_WARMUP / DB_MAX_TILT and DB_MODULE_ALWAYS (judged whatever the error from
+/// the setpoint; its first verdicts before and after the change are printed), DB_DEBUG
+/// (print the learned and true B and terms; the learned innovation's mean). Run with
 /// `cargo test --release -p thrusterd-core --test refinement -- --ignored detection_bound --nocapture`.
 ///
 /// Measured (paper noise, hold level, 10 min unchanged, seeds 1-10; the threshold the next of
@@ -487,12 +576,25 @@ fn detection_bound() {
             // Warm-up: the observers converge, the noise statistics fill.
             flight.fly(&mut run, 10.0, None);
             flight.rms();
+            flight.module_found = None;
             let max_before = flight.fly(&mut run, before_s, None);
             let rms_before = flight.rms();
+            println!(
+                "dither {dither} seed {seed} module verdict on the unchanged vehicle: {:?}",
+                flight.module_found.take()
+            );
             run.rotate_top();
             let mut trace: Vec<(f64, [Stat; VARIANTS])> = Vec::new();
             flight.fly(&mut run, after_s, Some(&mut trace));
             let rms_after = flight.rms();
+            println!(
+                "dither {dither} seed {seed} module verdict after the change: {:?}",
+                flight.module_found.take()
+            );
+            println!(
+                "dither {dither} seed {seed} learned innovation mean now {:.3?}",
+                flight.learned_mean()
+            );
             for (v, name) in NAMES.iter().enumerate().take(3) {
                 println!(
                     "dither {dither} seed {seed} {name:14}: innovation rms before {:.3?} after {:.3?}",
@@ -606,6 +708,8 @@ mod bound {
         refr: Cand,
         phi_ref: [f64; MAX_N],
         ref_w: f64,
+        /// The rows judged (DB_AXES, e.g. `0,2`: roll and yaw only; default all three).
+        axes: [bool; 3],
     }
 
     impl Glr {
@@ -634,6 +738,10 @@ mod bound {
                     .ok()
                     .and_then(|v| v.parse::<f64>().ok())
                     .map_or(0.0, |t| if t > 0.0 { dt / t } else { 0.0 }),
+                axes: std::env::var("DB_AXES").map_or([true; 3], |v| {
+                    let on: Vec<usize> = v.split(',').filter_map(|a| a.parse().ok()).collect();
+                    [0, 1, 2].map(|a| on.contains(&a))
+                }),
             }
         }
 
@@ -705,6 +813,9 @@ mod bound {
                             continue;
                         }
                         for j in 0..3 {
+                            if !self.axes[j] {
+                                continue;
+                            }
                             let sc = c.s[i][j] - c.sp[i] * c.sz[j] / c.count;
                             chi2 += sc * sc * inv[j];
                         }
@@ -876,7 +987,15 @@ mod bound {
                 Vector3::zeros()
             };
             terms(&v, &self.w, &down, self.lag_abs, &mut self.terms);
-            let b = &model.effectiveness;
+            let truth = run.truth();
+            let b = if std::env::var("DB_LEARNED_B_TRUE").is_ok() {
+                &truth
+            } else {
+                &model.effectiveness
+            };
+            let skip: Vec<usize> = std::env::var("DB_LEARNED_SKIP")
+                .map(|v| v.split(',').filter_map(|k| k.parse().ok()).collect())
+                .unwrap_or_default();
             let mut wd = Vector3::zeros();
             for j in 0..3 {
                 for i in 0..n {
@@ -884,7 +1003,9 @@ mod bound {
                 }
                 if let Some(d) = &model.dynamics {
                     for (k, t) in self.terms.iter().enumerate() {
-                        wd[j] += d.coefficients[(j, k)] * t;
+                        if !skip.contains(&k) {
+                            wd[j] += d.coefficients[(j, k)] * t;
+                        }
                     }
                 }
             }
@@ -910,6 +1031,8 @@ mod bound {
         /// Sum of squared innovations per variant and axis, and their count (since `rms`).
         sq: [[f64; 3]; VARIANTS],
         count: u64,
+        /// The module's first verdict (seconds into the `fly`, the statistic), if any.
+        pub module_found: Option<(f64, thrusterd_core::refinement::change_test::ChangeStat)>,
     }
 
     impl Flight {
@@ -927,6 +1050,15 @@ mod bound {
                     if let Ok(v) = std::env::var("DB_MODEL_FLOOR") {
                         c.change_model_floor = v.parse().unwrap();
                     }
+                    if let Ok(v) = std::env::var("DB_MIN_SHARE") {
+                        c.change_min_share = v.parse().unwrap();
+                    }
+                    if let Ok(v) = std::env::var("DB_CHI2") {
+                        c.change_chi2 = v.parse().unwrap();
+                    }
+                    if let Ok(v) = std::env::var("DB_WARMUP") {
+                        c.change_warmup_s = v.parse().unwrap();
+                    }
                     c.change_settings(0.1)
                 }),
                 model_units: vec![0.0; n],
@@ -938,7 +1070,13 @@ mod bound {
                 s: vec![0.0; n],
                 sq: [[0.0; 3]; VARIANTS],
                 count: 0,
+                module_found: None,
             }
+        }
+
+        /// The learned predictor's innovation mean (the test's slow running estimate), rad/s.
+        pub fn learned_mean(&self) -> [f64; 3] {
+            self.glr[2].mean_out
         }
 
         /// RMS innovation per variant and axis since the last call, rad/s.
@@ -999,16 +1137,36 @@ mod bound {
                         0.0
                     };
                 }
-                self.module.observe(
+                let found = self.module.observe(
                     r.t_ns,
                     &gyro,
                     &run.machine.attitude(),
                     run.machine.model().unwrap(),
                     &self.model_units,
                     &[1e-3; 3],
-                    run.machine.attitude().angle_to(&self.sp).to_degrees()
-                        <= RefinementConfig::default().change_max_error_deg,
+                    {
+                        let cfg = RefinementConfig::default();
+                        let err = (run.machine.attitude().inverse() * self.sp)
+                            .scaled_axis()
+                            .map(|v| v.to_degrees().abs());
+                        let tilt =
+                            run.machine
+                                .attitude()
+                                .angle_to(&UnitQuaternion::from_euler_angles(
+                                    0.0,
+                                    0.0,
+                                    run.machine.attitude().euler_angles().2,
+                                ));
+                        let max_tilt = std::env::var("DB_MAX_TILT")
+                            .map_or(cfg.change_max_tilt_deg, |v| v.parse().unwrap());
+                        let level = tilt.to_degrees() <= max_tilt;
+                        let always = std::env::var("DB_MODULE_ALWAYS").is_ok();
+                        [0, 1, 2].map(|j| always || (level && err[j] <= cfg.change_max_error_deg))
+                    },
                 );
+                if let (Some(f), None) = (found, self.module_found) {
+                    self.module_found = Some((run.sim.time_s() - start, f));
+                }
                 if let Some(m) = self.module.last_stat() {
                     stats[3] = Stat {
                         chi2: m.chi2,

@@ -128,6 +128,16 @@ pub struct EstimatorConfig {
     /// every vehicle, the linear model of a thruster weaker in reverse; docs/study.md). Not
     /// applied under control, where forward and reverse thrust are fitted apart.
     pub model_error_floor: f64,
+    /// Dynamic method: standard deviation of a zero-mean Gaussian prior on every damping,
+    /// restoring and Coriolis coefficient (all terms but the constant and the mean |command|),
+    /// per unit term; 0 turns it off (the default). Why it exists: an estimation near level
+    /// leaves collinear pairs (down_z with the constant, |v|v with v^2) free to cancel at
+    /// hundreds per unit, which predict nonsense away from level; a prior of 3 brings the
+    /// roll and yaw rows' innovation through +-20 deg pitch steps from 0.32-0.67 to
+    /// 0.25-0.48 rad/s (the oracle's 0.25) but the pitch row's from 0.32-0.44 to 0.58-0.67:
+    /// one width for all terms is wrong for the large real ones (the Munk moment's 33).
+    /// Measured in docs/experiments.md ("Why the learned model is blind through manoeuvres").
+    pub term_prior_sd: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -164,6 +174,7 @@ impl Default for EstimatorConfig {
             segment_s: 1.0,
             accel_bias_std: 0.02,
             model_error_floor: 0.02,
+            term_prior_sd: 0.0,
         }
     }
 }
@@ -199,7 +210,7 @@ impl EstimatorConfig {
 
     /// (key under `[estimator]`, value, allowed range) of every number; the config file's
     /// checker locates a failing one in the file.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 20] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 21] {
         [
             ("k_sigma", self.k_sigma, Range::above(0.0)),
             (
@@ -248,6 +259,7 @@ impl EstimatorConfig {
                 self.model_error_floor,
                 Range::closed(0.0, 1.0),
             ),
+            ("term_prior_sd", self.term_prior_sd, Range::closed(0.0, 1e6)),
             // Counted like the others so the array stays one list; always in range.
             (
                 "baseline_samples",

@@ -764,7 +764,12 @@ impl Estimator {
                 dynamics: None,
             };
         };
-        let sol = run.solve(&rest, self.cfg.model_error_floor, self.prior.as_ref());
+        let sol = run.solve(
+            &rest,
+            self.cfg.model_error_floor,
+            self.cfg.term_prior_sd,
+            self.prior.as_ref(),
+        );
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
         let alloc = allocation(&sol.b, rank.actuated, rank.rank);
         let thruster = diagnose(

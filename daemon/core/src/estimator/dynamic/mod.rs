@@ -16,7 +16,7 @@ pub mod segmented_ls;
 
 use nalgebra::{DMatrix, Vector3};
 
-use self::prior::DynamicPrior;
+use self::prior::{DynamicPrior, PriorEntry};
 use self::regressors::{terms, TERMS};
 use self::segmented_ls::{SegmentedLs, SegmentedSolution};
 use crate::navigation::{DepthAid, Navigator};
@@ -284,14 +284,17 @@ impl DynamicRun {
 
     /// The fit so far. `rest_sigma` is the at-rest noise per DOF row (gyro, accelerometer);
     /// `model_error_floor` the relative error of B that no data removes (added to B's standard
-    /// errors and bound; `EstimatorConfig::model_error_floor`). With a `prior` (coefficients
-    /// carried over from the model in force), the data is weighed against it.
+    /// errors and bound; `EstimatorConfig::model_error_floor`); `term_prior_sd` the width of a
+    /// zero-mean prior on the damping, restoring and Coriolis terms (0: none;
+    /// `EstimatorConfig::term_prior_sd`). With a `prior` (coefficients carried over from the
+    /// model in force), the data is weighed against it.
     // Index loops: DOF row 3g + a, thruster i and term j address several matrices at once.
     #[allow(clippy::needless_range_loop)]
     pub fn solve(
         &self,
         rest_sigma: &[f64; 6],
         model_error_floor: f64,
+        term_prior_sd: f64,
         prior: Option<&DynamicPrior>,
     ) -> DynamicSolution {
         let n = self.n;
@@ -302,16 +305,38 @@ impl DynamicRun {
         let prior = prior
             .filter(|p| p.fits(n))
             .map(|p| self.uncontradicted(p, &base, &sigmas));
-        let sols: [SegmentedSolution; 2] = match &prior {
-            Some(p) => {
-                let [rot, acc] = base;
-                let entries = |g: usize| std::array::from_fn(|a| p.entries(3 * g + a, self.split));
-                [
-                    self.rot.solve_with_prior(rot, &entries(0), &sigmas[0]),
-                    self.acc.solve_with_prior(acc, &entries(1), &sigmas[1]),
-                ]
+        // The terms' prior (`term_prior_sd`): the constant and the mean |command| (the last
+        // two terms) carry offsets and the thrust asymmetry, not physics that shrinks to 0.
+        let ridge = (term_prior_sd > 0.0 && term_prior_sd.is_finite()).then_some(term_prior_sd);
+        let ridge_entries = |out: &mut Vec<PriorEntry>| {
+            if let Some(sd) = ridge {
+                for j in 0..TERMS - 2 {
+                    out.push(PriorEntry {
+                        weights: [(c + j, 1.0), (c + j, 0.0)],
+                        value: 0.0,
+                        std_err: sd,
+                    });
+                }
             }
-            None => base,
+        };
+        let sols: [SegmentedSolution; 2] = if prior.is_some() || ridge.is_some() {
+            let [rot, acc] = base;
+            let entries = |g: usize| -> [Vec<PriorEntry>; 3] {
+                std::array::from_fn(|a| {
+                    let mut e = prior
+                        .as_ref()
+                        .map(|p| p.entries(3 * g + a, self.split))
+                        .unwrap_or_default();
+                    ridge_entries(&mut e);
+                    e
+                })
+            };
+            [
+                self.rot.solve_with_prior(rot, &entries(0), &sigmas[0]),
+                self.acc.solve_with_prior(acc, &entries(1), &sigmas[1]),
+            ]
+        } else {
+            base
         };
         let mut b = DMatrix::zeros(6, n);
         let mut std_err = DMatrix::zeros(6, n);
