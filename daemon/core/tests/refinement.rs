@@ -137,7 +137,10 @@ fn at_the_papers_noise_a_rotated_thruster_is_found_and_an_unchanged_one_is_not()
 
 /// Holding through the soak's manoeuvres (pitch 0 / 10 deg every 20 s) at 1 kHz and the
 /// paper's noise, with the shipped settings (monitor included): nothing changed, so nothing may
-/// be reported. This is where one window deciding failed (see the module docs).
+/// be reported. This is where one window deciding failed (see the module docs). Knobs for the
+/// change test's runs in docs/experiments.md: KHZ_CHANGE_TEST=1 (turn it on), KHZ_SEEDS,
+/// KHZ_SECONDS, KHZ_DEADBAND, and RUN_LATENCY_US (common::Run: the command takes effect that
+/// long after its sample).
 #[test]
 fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_minutes() {
     let seeds: Vec<u64> = std::env::var("KHZ_SEEDS").map_or(vec![1, 2, 3], |v| {
@@ -154,6 +157,8 @@ fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_m
         // deadband left in (KHZ_DEADBAND=0), the model is linear where the thrust is not, and
         // the change test took that for a yaw thruster's change after 13 s (seed 1).
         setup.machine.deadband = std::env::var("KHZ_DEADBAND").map_or(0.05, |v| v.parse().unwrap());
+        // KHZ_CHANGE_TEST=1: with the change test on (off by default).
+        setup.refinement.change_test = std::env::var("KHZ_CHANGE_TEST").is_ok_and(|v| v == "1");
         run.machine = Machine::new(setup);
         run.run_for(1.0);
         run.estimate();
@@ -286,6 +291,19 @@ fn level_with(run: &mut Run, seconds: f64, mut each: impl FnMut(&Run)) -> Option
     None
 }
 
+/// The false-alarm flight of the soaks: `seconds` of pitch steps, then (if nothing was
+/// reported) as long holding level; the mismatch of each part, if any.
+type Mismatch = Option<(f64, String)>;
+fn quiet_flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
+    let pitch = pitch_until_mismatch(run, seconds);
+    let level = if pitch.is_none() {
+        level_until_mismatch(run, seconds)
+    } else {
+        None
+    };
+    (pitch, level)
+}
+
 /// The shipped refinement settings with the per-sample change test on (it is off by
 /// default: see `RefinementConfig::change_test`).
 fn with_change_test() -> RefinementConfig {
@@ -296,29 +314,20 @@ fn with_change_test() -> RefinementConfig {
     if let Ok(v) = std::env::var("CT_UPDATE") {
         c.update = v == "1";
     }
-    if let Ok(v) = std::env::var("CT_FLOOR") {
-        c.change_model_floor = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("CT_SHARE") {
-        c.change_min_share = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("CT_NOISE_S") {
-        c.change_noise_s = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("CT_TAU") {
-        c.change_tau_s = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("CT_CHI2") {
-        c.change_chi2 = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("CT_TERM_Z") {
-        c.change_term_z = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("CT_WARMUP") {
-        c.change_warmup_s = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("CT_MAX_ERROR") {
-        c.change_max_error_deg = v.parse().unwrap();
+    // Overrides for the measuring runs: (variable, the setting it replaces).
+    for (key, field) in [
+        ("CT_FLOOR", &mut c.change_model_floor),
+        ("CT_SHARE", &mut c.change_min_share),
+        ("CT_NOISE_S", &mut c.change_noise_s),
+        ("CT_TAU", &mut c.change_tau_s),
+        ("CT_CHI2", &mut c.change_chi2),
+        ("CT_TERM_Z", &mut c.change_term_z),
+        ("CT_WARMUP", &mut c.change_warmup_s),
+        ("CT_MAX_ERROR", &mut c.change_max_error_deg),
+    ] {
+        if let Ok(v) = std::env::var(key) {
+            *field = v.parse().unwrap_or_else(|_| panic!("{key}: {v}"));
+        }
     }
     c
 }
@@ -403,12 +412,7 @@ fn change_test_soak() {
             _ => NoisePreset::Paper,
         };
         let mut run = holding_with(noise, seed, with_change_test());
-        let pitch = pitch_until_mismatch(&mut run, minutes * 60.0);
-        let level = if pitch.is_none() {
-            level_until_mismatch(&mut run, minutes * 60.0)
-        } else {
-            None
-        };
+        let (pitch, level) = quiet_flight(&mut run, minutes * 60.0);
         println!("seed {seed}: pitch steps {pitch:?}, level {level:?}");
         if level.is_some() || pitch.is_some() {
             alarms.push((seed, level, pitch));
@@ -468,12 +472,7 @@ fn change_test_on_every_vehicle() {
                     ..with_change_test()
                 };
                 let mut run = holding_on(&vehicle, preset, seed, cfg);
-                let pitch = pitch_until_mismatch(&mut run, minutes * 60.0);
-                let level = if pitch.is_none() {
-                    level_until_mismatch(&mut run, minutes * 60.0)
-                } else {
-                    None
-                };
+                let (pitch, level) = quiet_flight(&mut run, minutes * 60.0);
                 println!("{vehicle} {noise} seed {seed}: pitch steps {pitch:?}, level {level:?}");
                 if pitch.is_some() || level.is_some() {
                     alarms.push((vehicle.clone(), noise.clone(), seed, pitch, level));

@@ -81,7 +81,10 @@ impl Run {
     }
 
     pub fn tick(&mut self) {
-        let r = self.sim.advance_and_sample();
+        // The next sample on the sensor's grid (a command may have arrived mid-period).
+        let period = self.sim.sample_period_ns();
+        self.sim.step_to((self.sim.time_ns() / period + 1) * period);
+        let r = self.sim.sample();
         let cmd = self.machine.on_imu(&ImuInput {
             seq: 0,
             t_ns: r.t_ns,
@@ -97,6 +100,14 @@ impl Run {
         }
         assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
         self.last_mode = cmd.mode;
+        // RUN_LATENCY_US: the command takes effect this long after the sample, as through the
+        // driver in real time (thruster-sim steps the physics to the command's arrival).
+        if let Some(us) = std::env::var("RUN_LATENCY_US")
+            .ok()
+            .and_then(|v| v.parse::<u64>().ok())
+        {
+            self.sim.step_to(r.t_ns + us * 1000);
+        }
         self.sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
     }
 
