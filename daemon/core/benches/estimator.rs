@@ -1,5 +1,6 @@
 //! Per-pulse update and solve costs of the estimator, N = 8 and N = 16: the static forward
-//! method (`EstimatorConfig::forward()`) and the dynamic method (the default).
+//! method (`EstimatorConfig::forward()`) and the dynamic method (the default); and the
+//! refinement's per-sample change test, one sample with every candidate live.
 //! Run: cargo bench -p thrusterd-core --bench estimator
 
 use criterion::{black_box, criterion_group, criterion_main, BenchmarkId, Criterion};
@@ -135,5 +136,40 @@ fn bench(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench);
+/// The change test's cost per control tick (`refinement::change_test`, shipped settings: 40
+/// candidate change times), N = 8 and 16, every candidate live and every row judged.
+fn change_test(c: &mut Criterion) {
+    use nalgebra::{DMatrix, UnitQuaternion};
+    use thrusterd_core::model::Model;
+    use thrusterd_core::refinement::{change_test::ChangeTest, RefinementConfig};
+    for n in [8usize, 16] {
+        let b = DMatrix::from_fn(6, n, |r, i| ((r * 7 + i * 3) % 11) as f64 - 5.0);
+        let model = Model::nominal(b, None);
+        let mut test = ChangeTest::new(RefinementConfig::default().change_settings(0.1));
+        let u: Vec<f64> = (0..n).map(|i| 0.1 * (i as f64 - 3.0)).collect();
+        let mut k = 0u64;
+        let tick = |test: &mut ChangeTest, k: &mut u64| {
+            *k += 1;
+            let w = Vector3::new(0.01 * (*k % 7) as f64, -0.02, 0.005 * (*k % 3) as f64);
+            test.observe(
+                *k * 5_000_000,
+                &w,
+                &UnitQuaternion::identity(),
+                &model,
+                &u,
+                &[0.01; 3],
+                [true; 3],
+            )
+        };
+        // Past the warm-up (5 s) and the horizon (10 s) at 200 Hz.
+        for _ in 0..4000 {
+            tick(&mut test, &mut k);
+        }
+        c.bench_with_input(BenchmarkId::new("change_test_observe", n), &n, |bch, _| {
+            bch.iter(|| black_box(tick(&mut test, &mut k)))
+        });
+    }
+}
+
+criterion_group!(benches, bench, change_test);
 criterion_main!(benches);
