@@ -101,11 +101,15 @@ impl Run {
         assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
         self.last_mode = cmd.mode;
         // RUN_LATENCY_US: the command takes effect this long after the sample, as through the
-        // driver in real time (thruster-sim steps the physics to the command's arrival).
-        if let Some(us) = std::env::var("RUN_LATENCY_US")
-            .ok()
-            .and_then(|v| v.parse::<u64>().ok())
-        {
+        // driver in real time (thruster-sim steps the physics to the command's arrival); `A-B`
+        // draws it uniformly from A to B us for every sample (a deterministic hash of its time).
+        if let Ok(v) = std::env::var("RUN_LATENCY_US") {
+            let (lo, hi) = match v.split_once('-') {
+                Some((a, b)) => (a.parse::<u64>().unwrap(), b.parse::<u64>().unwrap()),
+                None => (v.parse::<u64>().unwrap(), v.parse::<u64>().unwrap()),
+            };
+            let h = r.t_ns.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
+            let us = lo + h % (hi - lo + 1);
             self.sim.step_to(r.t_ns + us * 1000);
         }
         self.sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
