@@ -964,10 +964,6 @@ impl Machine {
             .controller
             .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
         let err_rad = attitude.angle_to(&target.attitude);
-        let err_axes_deg = (attitude.inverse() * target.attitude)
-            .scaled_axis()
-            .map(|v| v.to_degrees().abs())
-            .into();
         let verdict = self.refiner.observe(
             &Tick {
                 t_ns: s.t_ns,
@@ -977,7 +973,6 @@ impl Machine {
                 specific_force: &Vector3::from(s.accel),
                 depth: s.depth,
                 err_deg: err_rad.to_degrees(),
-                err_axes_deg,
                 setpoint: &target.attitude,
             },
             model,

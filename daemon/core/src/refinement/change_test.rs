@@ -92,9 +92,9 @@ struct Candidate {
     sum_e: [f64; 3],
     phi: [f64; MAX_THRUSTERS],
     sum_phi: [f64; MAX_THRUSTERS],
-    sum_phi2: [f64; MAX_THRUSTERS],
     sum_phi_e: [[f64; 3]; MAX_THRUSTERS],
-    /// Sums of `phi_i phi_k` (i <= k): the joint fit that names the thruster.
+    /// Sums of `phi_i phi_k` (i <= k): the diagonal is each thruster's own regression, the
+    /// rest the joint fit that names the thruster.
     sum_cross: [[f64; MAX_THRUSTERS]; MAX_THRUSTERS],
 }
 
@@ -107,7 +107,6 @@ impl Candidate {
         sum_e: [0.0; 3],
         phi: [0.0; MAX_THRUSTERS],
         sum_phi: [0.0; MAX_THRUSTERS],
-        sum_phi2: [0.0; MAX_THRUSTERS],
         sum_phi_e: [[0.0; 3]; MAX_THRUSTERS],
         sum_cross: [[0.0; MAX_THRUSTERS]; MAX_THRUSTERS],
     };
@@ -313,7 +312,6 @@ impl ChangeTest {
                 for i in 0..n {
                     let p = c.phi[i];
                     c.sum_phi[i] += p;
-                    c.sum_phi2[i] += p * p;
                     for j in 0..3 {
                         c.sum_phi_e[i][j] += p * z[j];
                     }
@@ -323,8 +321,9 @@ impl ChangeTest {
                     if c.count < 3.0 || col_norm[i] < 0.05 * biggest || since_s < self.s.min_age_s {
                         continue;
                     }
-                    let f = c.sum_phi2[i] - c.sum_phi[i] * c.sum_phi[i] / c.count;
-                    if f.is_nan() || f <= (1e-12 * c.sum_phi2[i]).max(0.0) {
+                    let phi2 = c.sum_cross[i][i];
+                    let f = phi2 - c.sum_phi[i] * c.sum_phi[i] / c.count;
+                    if f.is_nan() || f <= (1e-12 * phi2).max(0.0) {
                         continue;
                     }
                     // The move over its variance: the regression's (sigma^2 / F) and the model's

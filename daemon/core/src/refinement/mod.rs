@@ -461,9 +461,6 @@ pub struct Tick<'a> {
     pub depth: Option<f64>,
     /// Attitude error from the setpoint, deg (the dither fades out towards 10 deg).
     pub err_deg: f64,
-    /// The same error per body axis (roll, pitch, yaw: the rotation vector from the attitude
-    /// to the setpoint, body frame), deg, magnitudes.
-    pub err_axes_deg: [f64; 3],
     /// The attitude setpoint now.
     pub setpoint: &'a UnitQuaternion<f64>,
 }
@@ -554,12 +551,13 @@ impl Refiner {
             (p.inverse() * tick.setpoint).scaled_axis()
         });
         self.last_setpoint = Some(*tick.setpoint);
-        let mut held = [false; 3];
-        for (j, h) in held.iter_mut().enumerate() {
-            *h = level
-                && tick.err_axes_deg[j] <= self.cfg.change_max_error_deg
-                && moved[j].abs().to_degrees() < SETPOINT_STEP_DEG;
-        }
+        // The error per body axis: the rotation vector from the attitude to the setpoint.
+        let err = (tick.attitude.inverse() * tick.setpoint).scaled_axis();
+        let held = [0, 1, 2].map(|j| {
+            level
+                && err[j].abs().to_degrees() <= self.cfg.change_max_error_deg
+                && moved[j].abs().to_degrees() < SETPOINT_STEP_DEG
+        });
         let found = self.change.observe(
             tick.t_ns,
             &rate,
