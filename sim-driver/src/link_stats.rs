@@ -269,6 +269,12 @@ pub struct StatsLine {
     pub rejected: u64,
     /// Sample -> answer latency of the answers since the previous line.
     pub latency: LatencyHistogram,
+    /// How late each sample since the previous line was published after its due instant
+    /// (wall clock against vehicle time): the driver's own pacing. Added when a sleep on a
+    /// socket timeout was found to oversleep 1 kHz deadlines by ~7 ms, invisibly to
+    /// `latency` (a burst of overdue samples is answered quickly). Absent in older files.
+    #[serde(default)]
+    pub pacing: LatencyHistogram,
 }
 
 #[cfg(test)]

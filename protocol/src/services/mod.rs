@@ -35,9 +35,7 @@ pub use cleanup::{
 pub use config::{IpcConfig, CONNECTION_TIMEOUT, DEFAULT_ROOT_BASE, MAX_NAMESPACE_LEN, SHM_DIR};
 pub use control::{ControlClient, ControlServer, ServeCount, CONTROL_LEAF};
 pub use error::{AccessDenied, IpcError};
-pub use ports::{
-    bounded_wait_timeout, create_waitset, open_event, open_topic, Inbox, Port, Reader, MIN_WAIT,
-};
+pub use ports::{create_waitset, open_event, open_topic, Inbox, Port, Reader};
 pub use topics::{
     Topic, TopicMessage, TopicQos, EVENT_SUFFIX, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS,
 };

@@ -5,7 +5,9 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::{ServiceName, SignalHandlingMode, WaitSet, WaitSetBuilder};
+use iceoryx2::prelude::{
+    FileDescriptor, FileDescriptorBased, ServiceName, SignalHandlingMode, WaitSet, WaitSetBuilder,
+};
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 
@@ -203,14 +205,33 @@ impl<T: TopicMessage> Inbox<T> {
     /// Blocks until notified or `timeout` passes, consuming the notifications; true when
     /// notified. For simple single-input loops; use a wait set for several inputs.
     ///
-    /// Every timeout is honoured, however short: see [`bounded_wait_timeout`].
+    /// The timeout is kept to the kernel's high-resolution timers (tens of microseconds),
+    /// however short, zero included. Not iceoryx2's `timed_wait`: it blocks in `recvfrom`
+    /// under a socket timeout (`SO_RCVTIMEO`), which the kernel counts in scheduler ticks,
+    /// so every wait shorter than a tick lasted one to two ticks (4-10 ms). A real-time
+    /// simulator pacing 1 kHz on it overslept each deadline by ~7 ms and then published
+    /// the overdue samples in bursts of eight: the daemon answered eight samples at once,
+    /// and seven of its eight commands never reached the plant (see
+    /// docs/experiments.md, "the 1 kHz false alarms").
     pub fn wait(&self, timeout: Duration) -> Result<bool, IpcError> {
-        let n = match bounded_wait_timeout(timeout) {
-            None => self.listener.try_wait(|_| {}),
-            Some(t) => self.listener.timed_wait(|_| {}, t),
+        let drain = || {
+            self.listener
+                .try_wait(|_| {})
+                .map_err(ice("wait on listener", &self.reader.service))
+        };
+        // A notification already pending (iceoryx2 marks the listener notified and then
+        // skips the notifier's syscall, so there may be nothing to poll on): take it now.
+        // Draining also re-arms the notifiers, so the next notification writes to the socket.
+        if drain()? > 0 {
+            return Ok(true);
         }
-        .map_err(ice("wait on listener", &self.reader.service))?;
-        Ok(n > 0)
+        if timeout.is_zero() {
+            return Ok(false);
+        }
+        if !poll_readable(self.listener.file_descriptor(), timeout) {
+            return Ok(false);
+        }
+        Ok(drain()? > 0)
     }
 
     /// Full service name, e.g. `veh1/imu`.
@@ -279,22 +300,24 @@ impl<T: TopicMessage> Reader<T> {
     }
 }
 
-/// The shortest blocking wait iceoryx2 can express: its listener turns the timeout into a
-/// socket `SO_RCVTIMEO` of whole microseconds.
-pub const MIN_WAIT: Duration = Duration::from_micros(1);
-
-/// The timeout to hand iceoryx2's `timed_wait` for a requested `timeout`, or `None` when
-/// the wait must not block at all.
-///
-/// iceoryx2 0.10 converts the timeout into a `timeval` of whole microseconds, and the
-/// kernel reads a socket timeout of `{0, 0}` as "block forever": a computed remainder
-/// such as `deadline - now` of a few hundred nanoseconds would hang the caller for good
-/// (a real-time simulator was found blocked in `recvfrom` that way). Zero becomes a
-/// non-blocking poll; anything else below [`MIN_WAIT`] is rounded up to it.
-pub fn bounded_wait_timeout(timeout: Duration) -> Option<Duration> {
-    if timeout.is_zero() {
-        None
-    } else {
-        Some(timeout.max(MIN_WAIT))
-    }
+/// True when `fd` became readable within `timeout` (`ppoll`: the high-resolution timer,
+/// not a socket timeout's scheduler ticks). An interrupted wait (a signal) or a poll error is
+/// a wake-up (false): the caller looks at its inbox and stop flag and waits again.
+fn poll_readable(fd: &FileDescriptor, timeout: Duration) -> bool {
+    // SAFETY: the descriptor is the listener's own and outlives this call; ppoll only
+    // reads it.
+    let raw = unsafe { fd.native_handle() };
+    let mut pfd = libc::pollfd {
+        fd: raw,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ts = libc::timespec {
+        tv_sec: libc::time_t::try_from(timeout.as_secs()).unwrap_or(libc::time_t::MAX),
+        // Below 1e9: fits a c_long everywhere.
+        tv_nsec: timeout.subsec_nanos() as libc::c_long,
+    };
+    // SAFETY: one valid pollfd, a valid timespec, no signal mask change.
+    let rc = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+    rc > 0 && pfd.revents & libc::POLLIN != 0
 }

@@ -10,7 +10,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use crate::link_stats::{AnswerTracker, StatsLine};
+use crate::link_stats::{AnswerTracker, LatencyHistogram, StatsLine};
 
 /// How often a line is written, wall time.
 const PERIOD: Duration = Duration::from_secs(1);
@@ -30,6 +30,7 @@ pub struct StatsFile {
     path: PathBuf,
     out: BufWriter<File>,
     tracker: AnswerTracker,
+    pacing: LatencyHistogram,
     origin: Instant,
     next_write: Instant,
 }
@@ -46,6 +47,7 @@ impl StatsFile {
             path: path.to_path_buf(),
             out: BufWriter::new(file),
             tracker: AnswerTracker::default(),
+            pacing: LatencyHistogram::default(),
             origin: now,
             next_write: now + PERIOD,
         })
@@ -59,6 +61,12 @@ impl StatsFile {
     pub fn published(&mut self, seq: u64) {
         let t = self.now_ns();
         self.tracker.published(seq, t);
+    }
+
+    /// A sample was published `late` after its due instant.
+    pub fn paced(&mut self, late: Duration) {
+        self.pacing
+            .record(u64::try_from(late.as_nanos()).unwrap_or(u64::MAX));
     }
 
     /// A valid command answering `imu_seq` arrived at `at`.
@@ -94,6 +102,7 @@ impl StatsFile {
             stale,
             rejected,
             latency: self.tracker.take_window(),
+            pacing: std::mem::take(&mut self.pacing),
         };
         // Serialising plain numbers cannot fail; writing can.
         let text = serde_json::to_string(&line).unwrap_or_default();
