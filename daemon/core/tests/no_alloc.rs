@@ -149,7 +149,7 @@ fn under_control_only_the_decisions_allocate() {
     );
 }
 
-/// The refinement's per-sample change test (`refinement.change_test`, off by default) adds no
+/// The refinement's per-sample change test (`refinement.change_test`, on by default) adds no
 /// allocation: with it on, controlling allocates on exactly as many ticks as without it.
 #[test]
 fn the_change_test_does_not_allocate() {

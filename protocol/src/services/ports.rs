@@ -208,11 +208,11 @@ impl<T: TopicMessage> Inbox<T> {
     /// The timeout is kept to the kernel's high-resolution timers (tens of microseconds),
     /// however short, zero included. Not iceoryx2's `timed_wait`: it blocks in `recvfrom`
     /// under a socket timeout (`SO_RCVTIMEO`), which the kernel counts in scheduler ticks,
-    /// so every wait shorter than a tick lasted one to two ticks (4-10 ms). A real-time
-    /// simulator pacing 1 kHz on it overslept each deadline by ~7 ms and then published
-    /// the overdue samples in bursts of eight: the daemon answered eight samples at once,
-    /// and seven of its eight commands never reached the plant (see
-    /// docs/experiments.md, "the 1 kHz false alarms").
+    /// so a wait shorter than a tick lasted a tick or two (a 500 us wait: 8 ms on the
+    /// development VM). A real-time simulator pacing 1 kHz on it overslept each deadline by
+    /// ~7 ms and then published the overdue samples in bursts of eight: the daemon answered
+    /// eight samples at once, and seven of its eight commands never reached the plant (see
+    /// docs/experiments.md, "Soak through the processes").
     pub fn wait(&self, timeout: Duration) -> Result<bool, IpcError> {
         let drain = || {
             self.listener
