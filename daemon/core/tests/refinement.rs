@@ -352,6 +352,24 @@ fn noise_free_the_change_test_is_quiet_then_finds_a_rotated_thruster_within_seco
     assert_eq!(run.machine.state(), State::Identify);
 }
 
+/// The two false alarms the change test raised over every vehicle file (seeds 1-6, 10 minutes
+/// each), flown again up to just past the moment each came: on four_up, whose four thrusters
+/// the controller commands together, a one-at-a-time move of 50 % was "jointly" 463 columns of
+/// another thruster (after 39 s of pitch steps, realistic IMU, seed 4; now capped at 3 columns);
+/// on aligned the learned model's terms, counted from 3 standard errors, "moved" thruster 2 by
+/// 47 % (after 134 s, seed 1; now from 4). Both unchanged vehicles must stay quiet.
+#[test]
+fn thrusters_commanded_together_and_weak_terms_are_not_a_change() {
+    for (vehicle, seed, seconds) in [("four_up", 4, 50.0), ("aligned", 1, 145.0)] {
+        let mut run = holding_on(vehicle, NoisePreset::Realistic, seed, with_change_test());
+        let alarm = pitch_until_mismatch(&mut run, seconds);
+        assert!(
+            alarm.is_none(),
+            "{vehicle}, seed {seed}, unchanged: {alarm:?}"
+        );
+    }
+}
+
 /// Issue 12's target is a silent hot swap detected at the paper's noise within 5 s. Holding
 /// level with the learned model and the shipped settings (0.1 dither), the change test on,
 /// after two quiet minutes: measured 3.9, 5.0, 2.6, 3.2, 3.9 s for seeds 1-5 (mean 3.7 s), all
