@@ -170,6 +170,29 @@ fn setpoint(seq: u64, pitch_deg: f64) -> Setpoint {
     }
 }
 
+/// "p50 .. us, p99 .. us, p99.9 .. us, max .. us (N" of a histogram (the caller names N).
+fn quantiles_text(h: &LatencyHistogram) -> String {
+    format!(
+        "p50 {} us, p99 {} us, p99.9 {} us, max {} us ({}",
+        fmt_us(h.quantile_us(0.5)),
+        fmt_us(h.quantile_us(0.99)),
+        fmt_us(h.quantile_us(0.999)),
+        fmt_us(h.max_us()),
+        h.count()
+    )
+}
+
+/// The same figures for summary.json.
+fn quantiles_json(h: &LatencyHistogram) -> serde_json::Value {
+    serde_json::json!({
+        "p50": h.quantile_us(0.5),
+        "p99": h.quantile_us(0.99),
+        "p999": h.quantile_us(0.999),
+        "max": h.max_us(),
+        "count": h.count(),
+    })
+}
+
 fn fmt_us(v: Option<f64>) -> String {
     v.map_or("-".into(), |v| format!("{v:.0}"))
 }
@@ -441,23 +464,17 @@ fn run(args: &Args) -> Result<ExitCode> {
         "estimates requested {estimates}, model swaps seen {swaps}, setpoints sent {setpoint_seq}, false alarms (mismatch verdicts on the unchanged vehicle) {false_alarms}"
     );
     println!(
-        "latency over the run: p50 {} us, p99 {} us, p99.9 {} us, max {} us ({} answers); per-minute p50 {}, p99 {}",
-        fmt_us(total_latency.quantile_us(0.5)),
-        fmt_us(total_latency.quantile_us(0.99)),
-        fmt_us(total_latency.quantile_us(0.999)),
-        fmt_us(total_latency.max_us()),
-        total_latency.count(),
-        spread(rows.iter().map(|r| r.p50_us)).map_or("-".into(), |(a, b)| format!("{a:.0}-{b:.0} us")),
-        spread(rows.iter().map(|r| r.p99_us)).map_or("-".into(), |(a, b)| format!("{a:.0}-{b:.0} us")),
+        "latency over the run: {} answers); per-minute p50 {}, p99 {}",
+        quantiles_text(&total_latency),
+        spread(rows.iter().map(|r| r.p50_us))
+            .map_or("-".into(), |(a, b)| format!("{a:.0}-{b:.0} us")),
+        spread(rows.iter().map(|r| r.p99_us))
+            .map_or("-".into(), |(a, b)| format!("{a:.0}-{b:.0} us")),
     );
     let pacing = &stats.pacing;
     println!(
-        "simulator pacing (sample published after its due instant): p50 {} us, p99 {} us, p99.9 {} us, max {} us ({} samples)",
-        fmt_us(pacing.quantile_us(0.5)),
-        fmt_us(pacing.quantile_us(0.99)),
-        fmt_us(pacing.quantile_us(0.999)),
-        fmt_us(pacing.max_us()),
-        pacing.count(),
+        "simulator pacing (sample published after its due instant): {} samples)",
+        quantiles_text(pacing)
     );
     for (name, g) in [("daemon", &daemon_growth), ("sim", &sim_growth)] {
         match g {
@@ -529,20 +546,8 @@ fn run(args: &Args) -> Result<ExitCode> {
                 "estimates": estimates,
                 "swaps": swaps,
                 "false_alarms": false_alarms,
-                "latency_total_us": {
-                    "p50": total_latency.quantile_us(0.5),
-                    "p99": total_latency.quantile_us(0.99),
-                    "p999": total_latency.quantile_us(0.999),
-                    "max": total_latency.max_us(),
-                    "count": total_latency.count(),
-                },
-                "pacing_us": {
-                    "p50": stats.pacing.quantile_us(0.5),
-                    "p99": stats.pacing.quantile_us(0.99),
-                    "p999": stats.pacing.quantile_us(0.999),
-                    "max": stats.pacing.max_us(),
-                    "count": stats.pacing.count(),
-                },
+                "latency_total_us": quantiles_json(&total_latency),
+                "pacing_us": quantiles_json(&stats.pacing),
                 "growth_limit": limit,
                 "daemon_growth": daemon_growth,
                 "sim_growth": sim_growth,
