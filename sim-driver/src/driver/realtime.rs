@@ -75,13 +75,12 @@ impl Driver {
             self.apply_due_events()?;
             let sample = self.take_sample()?;
             self.send_sample(&sample)?;
+            let due = origin + Duration::from_nanos(self.sim.time_ns());
             if let Some(stats) = &mut self.stats {
-                let due = origin + Duration::from_nanos(self.sim.time_ns());
                 stats.paced(Instant::now().saturating_duration_since(due));
             }
             self.housekeeping()?;
             self.write_stats(false)?;
-            let due = origin + Duration::from_nanos(self.sim.time_ns());
             let lag = Instant::now().saturating_duration_since(due);
             if lag > MAX_LAG {
                 warn!(

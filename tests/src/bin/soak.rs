@@ -5,8 +5,10 @@
 //! Per minute it reports samples published / answered / unanswered (simulator side), accepted /
 //! rejected (the daemon's status counters) and the samples lost without being counted, the
 //! sample -> thrust latency seen by the simulator (p50 / p99 / p99.9 / max), and the RSS of
-//! both processes. Exit status 1 when a sample was lost uncounted, memory grew beyond the limit,
-//! the daemon reported a model mismatch (the vehicle never changes) or a process died; 130 when interrupted (the table so far is still printed).
+//! both processes, and over the run the simulator's pacing and the daemon's model-mismatch
+//! reports. Exit status 1 when a sample was lost uncounted, memory grew beyond the limit, the
+//! pacing p99 passed one period, the daemon reported a model mismatch (the vehicle never
+//! changes) or a process died; 130 when interrupted (the table so far is still printed).
 //!
 //! Run (see docs/reliability.md):
 //!   cargo build --release -p thrusterd -p thruster-sim --bins
@@ -170,10 +172,10 @@ fn setpoint(seq: u64, pitch_deg: f64) -> Setpoint {
     }
 }
 
-/// "p50 .. us, p99 .. us, p99.9 .. us, max .. us (N" of a histogram (the caller names N).
-fn quantiles_text(h: &LatencyHistogram) -> String {
+/// "p50 .. us, p99 .. us, p99.9 .. us, max .. us (N `what`)" of a histogram.
+fn quantiles_text(h: &LatencyHistogram, what: &str) -> String {
     format!(
-        "p50 {} us, p99 {} us, p99.9 {} us, max {} us ({}",
+        "p50 {} us, p99 {} us, p99.9 {} us, max {} us ({} {what})",
         fmt_us(h.quantile_us(0.5)),
         fmt_us(h.quantile_us(0.99)),
         fmt_us(h.quantile_us(0.999)),
@@ -464,8 +466,8 @@ fn run(args: &Args) -> Result<ExitCode> {
         "estimates requested {estimates}, model swaps seen {swaps}, setpoints sent {setpoint_seq}, false alarms (mismatch verdicts on the unchanged vehicle) {false_alarms}"
     );
     println!(
-        "latency over the run: {} answers); per-minute p50 {}, p99 {}",
-        quantiles_text(&total_latency),
+        "latency over the run: {}; per-minute p50 {}, p99 {}",
+        quantiles_text(&total_latency, "answers"),
         spread(rows.iter().map(|r| r.p50_us))
             .map_or("-".into(), |(a, b)| format!("{a:.0}-{b:.0} us")),
         spread(rows.iter().map(|r| r.p99_us))
@@ -473,8 +475,8 @@ fn run(args: &Args) -> Result<ExitCode> {
     );
     let pacing = &stats.pacing;
     println!(
-        "simulator pacing (sample published after its due instant): {} samples)",
-        quantiles_text(pacing)
+        "simulator pacing (sample published after its due instant): {}",
+        quantiles_text(pacing, "samples")
     );
     for (name, g) in [("daemon", &daemon_growth), ("sim", &sim_growth)] {
         match g {

@@ -292,6 +292,9 @@ impl ChangeTest {
                 *c = b.fixed_view::<3, 1>(0, i).norm();
                 biggest = biggest.max(*c);
             }
+            // A thruster with (almost) no moment in the model is never named, alone or
+            // jointly: its share would be a move over a column of nearly nothing.
+            let nameable = col_norm.map(|c| c > 0.0 && c >= MIN_COLUMN * biggest);
             let mut found_in: Option<usize> = None;
             for (ci, c) in self
                 .candidates
@@ -315,13 +318,9 @@ impl ChangeTest {
                     for j in 0..3 {
                         c.sum_phi_e[i][j] += p * z[j];
                     }
-                    // A thruster with (almost) no moment in the model: its share means nothing.
                     // A candidate younger than `min_age_s`: its signatures have barely risen
                     // and cannot be told apart (see `RefinementConfig::change_min_age_s`).
-                    if c.count < 3.0
-                        || col_norm[i] < MIN_COLUMN * biggest
-                        || since_s < self.s.min_age_s
-                    {
+                    if c.count < 3.0 || !nameable[i] || since_s < self.s.min_age_s {
                         continue;
                     }
                     let phi2 = c.sum_cross[i][i];
@@ -373,7 +372,7 @@ impl ChangeTest {
             // joint moves of 40 % with a chi-square of 0 were "changes".
             if let (Some(f), Some(ci)) = (found.as_mut(), found_in) {
                 let rows = self.candidates[ci].rows.iter().filter(|&&r| r).count();
-                match attribute(&self.candidates[ci], n, &inv, &col_norm) {
+                match attribute(&self.candidates[ci], n, &inv, &col_norm, &nameable) {
                     Some((thruster, chi2, share))
                         if (self.s.min_share..=MAX_JOINT_SHARE).contains(&share)
                             && chi2 >= JOINT_CHI2_99[rows] =>
@@ -502,6 +501,7 @@ fn attribute(
     n: usize,
     inv_var: &[f64; 3],
     col_norm: &[f64; MAX_THRUSTERS],
+    nameable: &[bool; MAX_THRUSTERS],
 ) -> Option<(usize, f64, f64)> {
     use nalgebra::SMatrix;
     if n == 0 || c.count < 3.0 {
@@ -526,12 +526,10 @@ fn attribute(
         g[(i, i)] += 1e-9 * trace / n as f64;
     }
     let ginv = g.cholesky()?.inverse();
-    // Every thruster's move is fitted, but one with (almost) no moment is never named, as in
-    // the one-at-a-time test: its share would be a move over a column of nearly nothing.
-    let biggest = col_norm[..n].iter().fold(0.0_f64, |a, &b| a.max(b));
+    // Every thruster's move is fitted; only a nameable one is named.
     let mut best: Option<(usize, f64, f64)> = None;
     for i in 0..n {
-        if col_norm[i] <= 0.0 || col_norm[i] < MIN_COLUMN * biggest || ginv[(i, i)] <= 0.0 {
+        if !nameable[i] || ginv[(i, i)] <= 0.0 {
             continue;
         }
         let (mut chi2, mut d2) = (0.0, 0.0);
