@@ -3,6 +3,7 @@
 
 mod config_file;
 mod journal;
+mod reaper;
 mod replay;
 mod run;
 mod saver;

@@ -243,6 +243,10 @@ impl Daemon {
         // Before the node, so it drops after it: a clean stop of the last process of the
         // namespace leaves no iceoryx2 residue behind.
         let _tidy = thruster_protocol::services::TidyOnDrop::new(&self.ipc);
+        // Dead clients' files, while running (not only at the next start); stopped before
+        // the tidy runs.
+        let _reaper = crate::reaper::Reaper::start(&self.ipc, crate::reaper::REAP_EVERY)
+            .context("starting the dead-node reaper")?;
         let result = self.serve_node();
         // The journal's port lives in `self`, beyond the node: it must go before the tidy,
         // or its service is still open then and the namespace's global segment stays.

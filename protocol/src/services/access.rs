@@ -57,6 +57,25 @@ pub fn owns_root(ipc: &IpcConfig) -> bool {
     }
 }
 
+/// Makes the shared memory segments this process creates belong to the group of the
+/// namespace's root base when that directory is setgid and this process is a member of its
+/// group (`/run/thrusterd`, `thrusterd:thrusterd`, 2770): the same rule the kernel applies to
+/// the files created below a setgid directory, which POSIX shared memory in /dev/shm does not
+/// get. With iceoryx2's files at 0660 (vendor/iceoryx2-cal, `group_permissions`) an operator
+/// whose primary group is their own would otherwise create segments the daemon cannot open.
+/// Otherwise segments keep the creator's group (tests, a root under /tmp).
+pub fn adopt_root_group(ipc: &IpcConfig) {
+    iceoryx2_cal::dynamic_storage::posix_shared_memory::set_group_owner(root_group(ipc));
+}
+
+/// The group [`adopt_root_group`] gives segments: the root base's, if it is setgid and this
+/// process is a member of it.
+pub fn root_group(ipc: &IpcConfig) -> Option<u32> {
+    let meta = std::fs::metadata(ipc.root_base()).ok()?;
+    let setgid = meta.mode() & libc::S_ISGID as u32 != 0;
+    (setgid && Credentials::current().groups.contains(&meta.gid())).then_some(meta.gid())
+}
+
 /// Effective user and groups of a process.
 #[derive(Debug, Clone)]
 pub(crate) struct Credentials {

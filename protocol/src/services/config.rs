@@ -174,6 +174,7 @@ impl IpcConfig {
     /// stale resources of dead nodes of this namespace (iceoryx2 default).
     pub fn create_node(&self, name: &str) -> Result<IpcNode, IpcError> {
         let node_name = NodeName::new(name).map_err(ice("make node name", name))?;
+        super::access::adopt_root_group(self);
         retry_creation(|| {
             NodeBuilder::new()
                 .name(&node_name)

@@ -27,7 +27,7 @@ mod ports;
 mod retry;
 mod topics;
 
-pub use access::{check_access, owns_root};
+pub use access::{adopt_root_group, check_access, owns_root, root_group};
 pub use cleanup::{
     cleanup_dead_nodes, namespace_files, purge_namespace, tidy_residue, NamespaceGuard, NodeCensus,
     PurgeReport, TidyOnDrop,

@@ -1,0 +1,80 @@
+//! The dead-node reaper: removes what killed or crashed processes of the namespace left (an
+//! operator's `thrusterctl` killed with -9 mid-call, a recorder that lost power), on a thread
+//! of its own so that listing and removing files never delays a control tick.
+//!
+//! Why the daemon: iceoryx2 removes a dead node's files only when another node of the
+//! namespace is created or asks. Operators of another user than the daemon's must not try
+//! (`IpcConfig::without_dead_node_cleanup`), and nothing else may come for hours, so without
+//! this a killed client's segments stayed in /dev/shm until the daemon's next start. Under the
+//! shipped unit the daemon holds CAP_FOWNER, so it may remove another user's files in the
+//! sticky /dev/shm.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use thruster_protocol::services::{cleanup_dead_nodes, IpcConfig, NodeCensus};
+use tracing::{debug, info, warn};
+
+/// How often the namespace is searched for dead nodes: a killed client's files are gone
+/// within this, and a search (a directory listing and one file-lock probe per node) costs a
+/// few hundred microseconds off the control thread.
+pub const REAP_EVERY: Duration = Duration::from_secs(2);
+/// How often the reaper looks at the stop flag between two searches.
+const STOP_POLL: Duration = Duration::from_millis(50);
+
+/// A running reaper; stops (and is joined) when dropped.
+pub struct Reaper {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Reaper {
+    /// Starts searching `ipc` every `every`.
+    pub fn start(ipc: &IpcConfig, every: Duration) -> std::io::Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let ipc = ipc.clone();
+        let flag = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name("reaper".into())
+            .spawn(move || reap_until(&ipc, every, &flag))?;
+        Ok(Self {
+            stop,
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for Reaper {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(t) = self.thread.take() {
+            // At most one search plus one poll: bounded.
+            let _ = t.join();
+        }
+    }
+}
+
+fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
+    let mut next = Instant::now() + every;
+    while !stop.load(Ordering::SeqCst) {
+        if Instant::now() < next {
+            std::thread::sleep(STOP_POLL.min(next.saturating_duration_since(Instant::now())));
+            continue;
+        }
+        next = Instant::now() + every;
+        match cleanup_dead_nodes(ipc) {
+            Ok(NodeCensus {
+                dead_cleaned: 0,
+                dead_failed: 0,
+                ..
+            }) => {}
+            Ok(census) if census.dead_failed > 0 => {
+                warn!(?census, "dead nodes whose files could not be removed")
+            }
+            Ok(census) => info!(?census, "removed the files of dead nodes"),
+            Err(e) => debug!("dead-node search failed: {e}"),
+        }
+    }
+}
