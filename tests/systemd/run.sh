@@ -292,6 +292,22 @@ for who in root bob; do
     echo "$out" | grep -q "$IPC" && echo "$out" | grep -q "usermod -aG thrusterd" \
         || fail "refusal: message for $who names neither $IPC nor the fix: $out"
 done
+# Access (issue 25): bob, outside the group, can open none of the namespace's files (as root
+# lists them: /dev/shm/thr_NS_* and everything under the ipc root) and cannot publish a
+# setpoint with a raw iceoryx2 publisher (no thrusterctl, no check_access). alice, a member,
+# runs the same probe as the control: it must find files it can open and publish.
+cp "$BIN/ipc-intruder" "$MNT/usr/local/bin/"
+inside "(ls -d /dev/shm/thr_${NS}_* ; find $IPC) >/tmp/ipc-paths; chmod 0644 /tmp/ipc-paths"
+npaths=$(inside "wc -l </tmp/ipc-paths")
+intrude() { inside "runuser -u $1 -- ipc-intruder --namespace $NS --ipc-root $IPC --paths-from /tmp/ipc-paths $2 2>/dev/null"; }
+out=$(intrude bob) || fail "access: ipc-intruder as bob did not run: $out"
+echo "$out" | grep -q '"readable":0,' && echo "$out" | grep -q '"writable":0,' \
+    && echo "$out" | grep -q '"published":false' \
+    || fail "access: bob (outside the group) reached the vehicle's IPC: $out"
+ctl=$(intrude alice "--pitch-deg 0") || fail "access: ipc-intruder as alice did not run: $ctl"
+echo "$ctl" | grep -q '"published":true' && ! echo "$ctl" | grep -q '"readable":0,' \
+    || fail "access: the probe found nothing alice (group member) may open; it would miss a leak: $ctl"
+say "access: bob opened 0 of $npaths IPC files for reading or writing and could not publish ($(echo "$out" | sed 's/.*"error":"\([^"]*\)".*/\1/' | cut -c1-80)); alice, a member, could (control)"
 inside "find $IPC /dev/shm -mindepth 1 \\( -user root -o -user bob \\) -print" >"$WORK/foreign"
 [ ! -s "$WORK/foreign" ] || fail "refusal: files of root/bob appeared: $(head -3 "$WORK/foreign")"
 sleep 3
@@ -358,6 +374,31 @@ say "driver watchdog: a stopped thruster-hw was killed and restarted, IMU flows 
 # The watcher ends before the stop (a status call then would only time out).
 inside "touch /tmp/imu-watch.stop; for _ in \$(seq 30); do kill -0 $WATCHER 2>/dev/null || exit 0; sleep 0.1; done; exit 1" \
     || fail "setup: the status watcher did not end within 3 s"
+
+# No leaks (issue 25): 100 operator calls leave /dev/shm and the ipc root as they were, and a
+# client killed with -9 leaves nothing after the daemon's next dead-node search (every 2 s).
+ipc_usage() { inside "set -e; n=\$(ls /dev/shm | grep -c '^thr_${NS}_' || true)
+    b=\$(cat /dev/shm/thr_${NS}_* 2>/dev/null | wc -c)
+    rn=\$(find $IPC | wc -l); rb=\$(find $IPC -type f -printf '%s\\n' | awk '{s += \$1} END {print s + 0}')
+    echo \"\$n files \$((b / 1024)) KiB in /dev/shm, \$rn entries \$((rb / 1024)) KiB under $IPC\""; }
+sleep 1
+before=$(ipc_usage)
+inside "for i in \$(seq 100); do runuser -u alice -- thrusterctl --namespace $NS --ipc-root $IPC status >/dev/null || exit 1; done" \
+    || fail "leaks: an operator status call failed"
+sleep 1
+after=$(ipc_usage)
+say "leaks: 100 operator status calls: before $before; after $after"
+[ "$before" = "$after" ] || fail "leaks: 100 status calls changed the namespace's files: before $before, after $after"
+# setpriv execs (runuser forks), so $! is thrusterctl itself.
+KILLED=$(inside "nohup setpriv --reuid alice --regid alice --init-groups thrusterctl --namespace $NS --ipc-root $IPC watch </dev/null >/dev/null 2>&1 & echo \$!")
+sleep 2
+during=$(ipc_usage)
+[ "$during" != "$before" ] || fail "leaks: a running watch made no files; the check would miss a leak"
+inside "kill -9 $KILLED" || fail "leaks: could not kill the watch (pid $KILLED)"
+for _ in $(seq 40); do [ "$(ipc_usage)" = "$before" ] && break; sleep 0.25; done
+[ "$(ipc_usage)" = "$before" ] \
+    || fail "leaks: a watch killed with -9 left files 10 s later: before $before, now $(ipc_usage)"
+say "leaks: a watch killed with -9 ($during while it ran) left nothing once the daemon searched for dead nodes"
 
 # The bridge stops cleanly (SIGTERM: server closed, summary logged).
 inside "systemctl stop thruster-bridge"
