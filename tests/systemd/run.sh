@@ -299,15 +299,15 @@ done
 cp "$BIN/ipc-intruder" "$MNT/usr/local/bin/"
 inside "(ls -d /dev/shm/thr_${NS}_* ; find $IPC) >/tmp/ipc-paths; chmod 0644 /tmp/ipc-paths"
 npaths=$(inside "wc -l </tmp/ipc-paths")
-intrude() { inside "runuser -u $1 -- ipc-intruder --namespace $NS --ipc-root $IPC --paths-from /tmp/ipc-paths $2 2>/dev/null"; }
-out=$(intrude bob) || fail "access: ipc-intruder as bob did not run: $out"
-echo "$out" | grep -q '"readable":0,' && echo "$out" | grep -q '"writable":0,' \
+intrude() { inside "runuser -u $1 -- ipc-intruder --namespace $NS --ipc-root $IPC --paths-from /tmp/ipc-paths ${2:-} 2>/tmp/intruder-$1.err"; }
+out=$(intrude bob) || fail "access: ipc-intruder as bob did not run: $out $(inside 'cat /tmp/intruder-bob.err')"
+echo "$out" | grep -Eq '"readable":0[,}]' && echo "$out" | grep -Eq '"writable":0[,}]' \
     && echo "$out" | grep -q '"published":false' \
     || fail "access: bob (outside the group) reached the vehicle's IPC: $out"
-ctl=$(intrude alice "--pitch-deg 0") || fail "access: ipc-intruder as alice did not run: $ctl"
-echo "$ctl" | grep -q '"published":true' && ! echo "$ctl" | grep -q '"readable":0,' \
+ctl=$(intrude alice "--pitch-deg 0") || fail "access: ipc-intruder as alice did not run: $ctl $(inside 'cat /tmp/intruder-alice.err')"
+echo "$ctl" | grep -q '"published":true' && ! echo "$ctl" | grep -Eq '"readable":0[,}]' \
     || fail "access: the probe found nothing alice (group member) may open; it would miss a leak: $ctl"
-say "access: bob opened 0 of $npaths IPC files for reading or writing and could not publish ($(echo "$out" | sed 's/.*"error":"\([^"]*\)".*/\1/' | cut -c1-80)); alice, a member, could (control)"
+say "access: bob opened 0 of $npaths IPC files for reading or writing and could not publish ($(echo "$out" | sed 's/.*"error":"//; s/","paths".*//' | cut -c1-100)); alice, a member, could (control)"
 inside "find $IPC /dev/shm -mindepth 1 \\( -user root -o -user bob \\) -print" >"$WORK/foreign"
 [ ! -s "$WORK/foreign" ] || fail "refusal: files of root/bob appeared: $(head -3 "$WORK/foreign")"
 sleep 3

@@ -69,9 +69,9 @@ fn ready_watchdog_status_and_stopping_reach_systemd() {
 
 /// The shipped units' hardening as `systemd-analyze security` scores it (offline: the unit
 /// files themselves, no running systemd needed). Exposure 0 = locked down, 10 = unprotected;
-/// measured 1.8 for thrusterd (no devices, no network, Unix sockets only), 2.7 for
+/// measured 1.9 for thrusterd (no devices, no network, Unix sockets only), 2.9 for
 /// thruster-hw (it keeps device access for sysfs PWM, IIO and the MAVLink serial/UDP link) and
-/// 1.8 for thruster-bridge (Internet sockets, peers limited to loopback and private networks,
+/// 2.0 for thruster-bridge (Internet sockets, peers limited to loopback and private networks,
 /// no devices, other users' processes hidden). The bounds catch a hardening line lost in an edit.
 #[test]
 fn the_units_pass_systemd_analyze_security() {
