@@ -72,7 +72,7 @@ pub fn adopt_root_group(ipc: &IpcConfig) {
 /// process is a member of it.
 pub fn root_group(ipc: &IpcConfig) -> Option<u32> {
     let meta = std::fs::metadata(ipc.root_base()).ok()?;
-    let setgid = meta.mode() & libc::S_ISGID as u32 != 0;
+    let setgid = meta.mode() & 0o2000 != 0; // S_ISGID
     (setgid && Credentials::current().groups.contains(&meta.gid())).then_some(meta.gid())
 }
 
