@@ -438,3 +438,69 @@ fn a_clean_stop_of_every_process_leaves_nothing_of_the_namespace() {
     let files = thruster_protocol::services::namespace_files(world.ipc()).unwrap();
     assert!(files.is_empty(), "left behind by thrusterctl: {files:?}");
 }
+
+/// An operator killed with -9 mid-session (a `watch`, which polls status and reads the
+/// telemetry) leaves its node, ports and shared memory; the daemon removes them within its
+/// next dead-node search (every 2 s, on a thread of its own), with no other client arriving to
+/// do it. Before the reaper they stayed until the daemon's next start.
+#[test]
+fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
+    let mut world = World::new("ctlkill");
+    // No node of the test's own: only the daemon (and the simulator, which never searches)
+    // may remove the dead client's files.
+    world.node = None;
+    let mut daemon = world.daemon(&[]);
+    let mut sim = world.sim("amour5", &["--lockstep", "--noise", "none"]);
+    wait_status(&world, "samples", |v| {
+        v["samples"].as_u64().unwrap_or(0) > 0
+    });
+    let files = || thruster_protocol::services::namespace_files(world.ipc()).unwrap();
+    let before = files();
+
+    let mut client = Command::new(bin("thrusterctl"))
+        .args(["--namespace", &world.namespace(), "watch"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("thrusterctl runs");
+    // The client's own files: those that appeared while it ran.
+    let mut theirs: Vec<std::path::PathBuf> = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while theirs.len() < 5 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+        theirs = files().into_iter().filter(|p| !before.contains(p)).collect();
+    }
+    assert!(theirs.len() >= 5, "the client made too few files to judge: {theirs:?}");
+    assert!(
+        client.try_wait().unwrap().is_none(),
+        "the watch ended by itself: the kill would test nothing"
+    );
+    client.kill().unwrap();
+    client.wait().unwrap();
+    let killed = Instant::now();
+
+    let deadline = killed + Duration::from_secs(10);
+    let left = || -> Vec<std::path::PathBuf> {
+        let now = files();
+        theirs.iter().filter(|p| now.contains(p)).cloned().collect()
+    };
+    while !left().is_empty() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let left = left();
+    eprintln!(
+        "{} files before, {} of the client's, {} left {:.1} s after the kill",
+        before.len(),
+        theirs.len(),
+        left.len(),
+        killed.elapsed().as_secs_f64()
+    );
+    assert!(left.is_empty(), "the killed client's files stayed: {left:?}");
+    assert!(
+        daemon.log_text().contains("removed the files of dead nodes"),
+        "the daemon did not say it removed them: {}",
+        daemon.log_text()
+    );
+    assert!(sim.stop().success(), "{}", sim.log_text());
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+}

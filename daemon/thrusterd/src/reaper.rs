@@ -64,7 +64,9 @@ fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
             continue;
         }
         next = Instant::now() + every;
-        match cleanup_dead_nodes(ipc) {
+        let census = cleanup_dead_nodes(ipc);
+        debug!(?census, "dead-node search");
+        match census {
             Ok(NodeCensus {
                 dead_cleaned: 0,
                 dead_failed: 0,
