@@ -3,10 +3,12 @@
 
 mod config_file;
 mod journal;
+mod loader;
 mod replay;
 mod run;
 mod saver;
 mod session;
+mod solver;
 mod store;
 mod study;
 
