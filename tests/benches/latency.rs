@@ -13,7 +13,7 @@
 //! 1 kHz, 8 and 16 declared thrusters, while holding attitude (idle control), during an
 //! open-loop estimation (a solve after every pulse) and during a closed-loop identification
 //! (a solve every second of dither), low-latency mode; p50 / p99 / p99.9 / max. Alone:
-//! `BENCH_SOLVES_ONLY=1`.
+//! `BENCH_SOLVES_ONLY=1`; beside another build's daemon: `BENCH_BASELINE_THRUSTERD=PATH`.
 //!
 //! Run: cargo bench -p system-tests --bench latency [-- ROUND_TRIPS]
 
@@ -48,20 +48,27 @@ fn stats(mut us: Vec<f64>) -> Stats {
 
 /// Vehicle time between samples, ns (the sample's `t_ns` follows its `seq`): 1 kHz unless the
 /// solve section sets another rate.
-static SAMPLE_PERIOD_NS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1_000_000);
+static SAMPLE_PERIOD_NS: std::sync::atomic::AtomicU64 =
+    std::sync::atomic::AtomicU64::new(1_000_000);
 
 fn sample(seq: u64) -> ImuSample {
     // A little deterministic noise (a hash of seq): an estimation measures the noise at rest
     // first, and a perfectly still gyro would make it zero.
     let h = |k: u64| {
-        let x = seq.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(k.wrapping_mul(0xBF58_476D_1CE4_E5B9));
+        let x = seq
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add(k.wrapping_mul(0xBF58_476D_1CE4_E5B9));
         ((x >> 40) as f64 / (1u64 << 24) as f64) - 0.5
     };
     let period = SAMPLE_PERIOD_NS.load(std::sync::atomic::Ordering::Relaxed);
     ImuSample {
         seq,
         t_ns: 1_000_000_000 + seq * period,
-        gyro: [0.001 + 0.01 * h(1), -0.002 + 0.01 * h(2), 0.0005 + 0.01 * h(3)],
+        gyro: [
+            0.001 + 0.01 * h(1),
+            -0.002 + 0.01 * h(2),
+            0.0005 + 0.01 * h(3),
+        ],
         accel: [0.05 * h(4), 0.05 * h(5), -9.80665 + 0.05 * h(6)],
         mag: [20.0, 0.0, 45.0],
         depth: 5.0 + 0.001 * h(7),
@@ -402,7 +409,12 @@ fn bridge_section(n: usize) {
 /// IMU -> thrust while the daemon holds, estimates and identifies, at `rate_hz` with
 /// `thrusters` declared thrusters. One daemon (low-latency mode, spinning for two periods so
 /// it never blocks between samples), paced samples, each phase measured for `seconds`.
-fn solve_phases(rate_hz: u64, thrusters: usize, seconds: f64) -> Vec<(&'static str, Stats)> {
+fn solve_phases(
+    daemon_bin: Option<&std::path::Path>,
+    rate_hz: u64,
+    thrusters: usize,
+    seconds: f64,
+) -> Vec<(&'static str, Stats)> {
     let period_ns = 1_000_000_000 / rate_hz;
     SAMPLE_PERIOD_NS.store(period_ns, std::sync::atomic::Ordering::Relaxed);
     let period = Duration::from_nanos(period_ns);
@@ -413,21 +425,21 @@ fn solve_phases(rate_hz: u64, thrusters: usize, seconds: f64) -> Vec<(&'static s
     let cfg = daemon_config_with(&world, 10, thrusters, "[runtime]\nimu_timeout_ms = 10000\n");
     let spin = (2 * period_ns / 1000).to_string();
     let state_dir = world.path("state");
-    let mut daemon = Proc::spawn(
-        "thrusterd",
-        &[
-            "run",
-            "--config",
-            cfg.to_str().unwrap(),
-            "--namespace",
-            &world.namespace(),
-            "--state-dir",
-            state_dir.to_str().unwrap(),
-            "--spin-us",
-            &spin,
-        ],
-        world.dir.path(),
-    );
+    let args = [
+        "run",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--namespace",
+        &world.namespace(),
+        "--state-dir",
+        state_dir.to_str().unwrap(),
+        "--spin-us",
+        &spin,
+    ];
+    let mut daemon = match daemon_bin {
+        Some(path) => Proc::spawn_path(path, "thrusterd", &args, &[], world.dir.path()),
+        None => Proc::spawn("thrusterd", &args, world.dir.path()),
+    };
     let op = Operator::new(&world);
     let (imu, thrust, mut seq) = handshake(&world);
     hold(&op);
@@ -442,7 +454,13 @@ fn solve_phases(rate_hz: u64, thrusters: usize, seconds: f64) -> Vec<(&'static s
     assert!(r.is_ok(), "{}", r.text());
     let r = op.request(RequestKind::Estimate);
     assert!(r.is_ok(), "{}", r.text());
-    round_trips(&imu, &thrust, &mut seq, (1.2 * rate_hz as f64) as usize, Some(period));
+    round_trips(
+        &imu,
+        &thrust,
+        &mut seq,
+        (1.2 * rate_hz as f64) as usize,
+        Some(period),
+    );
     let est = round_trips(&imu, &thrust, &mut seq, count, Some(period));
     out.push(("estimating (open loop)", stats(est)));
     // What the daemon was doing at the end of the phase (it must still be estimating).
@@ -466,28 +484,38 @@ fn solve_phases(rate_hz: u64, thrusters: usize, seconds: f64) -> Vec<(&'static s
     out
 }
 
-/// The solve section's table.
+/// The solve section's table. With `BENCH_BASELINE_THRUSTERD=PATH` (another build's
+/// binary, e.g. the commit before the solver thread), each setting runs on that daemon first and
+/// then on this build's, back to back, so both see the same background load.
 fn solve_section(seconds: f64) {
+    let baseline = std::env::var_os("BENCH_BASELINE_THRUSTERD").map(std::path::PathBuf::from);
     println!();
     println!(
         "IMU -> thrust while holding, estimating and identifying (low-latency mode, paced, \
          {seconds} s per phase), microseconds"
     );
-    println!("| rate | N | phase | p50 | p99 | p99.9 | max | p99.9 / holding's |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("| daemon | rate | N | phase | p50 | p99 | p99.9 | max | p99.9 / holding's |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for rate in [200u64, 1000] {
         for n in [8usize, 16] {
-            let phases = solve_phases(rate, n, seconds);
-            let idle = phases[0].1.p999;
-            for (phase, s) in &phases {
-                println!(
-                    "| {rate} Hz | {n} | {phase} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
-                    s.p50,
-                    s.p99,
-                    s.p999,
-                    s.max,
-                    s.p999 / idle
-                );
+            let mut runs = Vec::new();
+            if let Some(b) = &baseline {
+                runs.push(("baseline", Some(b.as_path())));
+            }
+            runs.push(("this build", None));
+            for (label, bin) in runs {
+                let phases = solve_phases(bin, rate, n, seconds);
+                let idle = phases[0].1.p999;
+                for (phase, s) in &phases {
+                    println!(
+                        "| {label} | {rate} Hz | {n} | {phase} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
+                        s.p50,
+                        s.p99,
+                        s.p999,
+                        s.max,
+                        s.p999 / idle
+                    );
+                }
             }
         }
     }

@@ -820,7 +820,7 @@ fn a_model_load_never_stops_control() {
         flags: 0,
     };
     // One round trip: the answer's latency (None: none within 2 s).
-    let mut round_trip = |seq: &mut u64| -> Option<Duration> {
+    let round_trip = |seq: &mut u64| -> Option<Duration> {
         *seq += 1;
         let start = Instant::now();
         imu.send(&sample(*seq)).unwrap();
@@ -852,6 +852,9 @@ fn a_model_load_never_stops_control() {
             f.write_all(&spaces).unwrap();
         }
         f.write_all(b"{\"format\": \"not a model\"}").unwrap();
+        // On disk before the load: writing back 256 MB of dirty pages meanwhile would stall
+        // whichever process the kernel throttles, and this test would measure that instead.
+        f.into_inner().unwrap().sync_all().unwrap();
     }
     for (what, path, expect) in [
         ("a FIFO nobody writes to", &fifo, "not a regular file"),

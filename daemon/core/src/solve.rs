@@ -365,7 +365,10 @@ mod tests {
                     id
                 })
                 .collect();
-            assert!(ids.iter().all(|id| owner_of(*id) == owner), "{owner}: {ids:?}");
+            assert!(
+                ids.iter().all(|id| owner_of(*id) == owner),
+                "{owner}: {ids:?}"
+            );
         }
         assert_ne!(Solver::new(0.0, 0).next_id, Solver::new(0.0, 1).next_id);
     }

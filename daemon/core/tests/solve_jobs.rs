@@ -57,8 +57,7 @@ impl Drop for Worker {
 /// The next sample of `run`'s simulator.
 fn next_sample(run: &mut Run) -> ImuInput {
     let period = run.sim.sample_period_ns();
-    run.sim
-        .step_to((run.sim.time_ns() / period + 1) * period);
+    run.sim.step_to((run.sim.time_ns() / period + 1) * period);
     let r = run.sim.sample();
     ImuInput {
         seq: 0,
@@ -156,7 +155,11 @@ fn a_solver_thread_and_inline_solving_give_the_same_models_at_the_same_samples()
         run.machine.on_request(Request::Estimate).unwrap();
     }
     let (swaps, jobs) = lockstep_pair(&mut inline, &mut external, &worker, 25.0);
-    assert_eq!(inline.machine.state(), State::Active, "estimated and holding");
+    assert_eq!(
+        inline.machine.state(),
+        State::Active,
+        "estimated and holding"
+    );
     assert!(swaps >= 1 && jobs >= 20, "{swaps} swaps, {jobs} jobs");
 
     // The top thruster turned and announced: identification under control with the other
@@ -280,7 +283,11 @@ fn results_are_applied_at_their_due_sample_not_when_they_come() {
         let s = rest(k);
         m.on_imu(&s);
         if s.t_ns < due {
-            assert!(m.last_estimate().is_none(), "applied before due at {}", s.t_ns);
+            assert!(
+                m.last_estimate().is_none(),
+                "applied before due at {}",
+                s.t_ns
+            );
         } else {
             assert!(m.last_estimate().is_some(), "not applied at the due sample");
             break;

@@ -59,7 +59,7 @@ pub enum Progress {
     Done {
         token: u64,
         path: PathBuf,
-        result: Result<PreparedModel, LoadError>,
+        result: Box<Result<PreparedModel, LoadError>>,
         answered: bool,
     },
 }
@@ -94,6 +94,8 @@ impl Loader {
         std::thread::Builder::new()
             .name("thrusterd-load".into())
             .spawn(move || {
+                // Parsing a large file is seconds of CPU: never at the control thread's cost.
+                crate::solver::lower_priority();
                 let _ = tx.send(read(&owned, &cfg));
             })
             .map_err(|e| format!("cannot start a thread to read {}: {e}", path.display()))?;
@@ -132,7 +134,7 @@ impl Loader {
         Progress::Done {
             token: f.token,
             path: f.path,
-            result,
+            result: Box::new(result),
             answered: f.answered,
         }
     }

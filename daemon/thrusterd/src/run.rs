@@ -756,7 +756,7 @@ impl Daemon {
                 answered,
             } => {
                 let shown = path.display().to_string();
-                let outcome = result.and_then(|model| {
+                let outcome = (*result).and_then(|model| {
                     let r = self.machine.load_prepared(model);
                     self.journal(|j| j.text(InputKind::Load, 0, r.is_err(), &shown));
                     r.map_err(|e| LoadError::Rejected(e.0))

@@ -11,9 +11,7 @@
 //! the machine (neutral) with the panic's message, and starts a fresh thread for what comes
 //! next.
 
-use std::sync::mpsc::{
-    self, Receiver, RecvTimeoutError, SyncSender, TryRecvError, TrySendError,
-};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TryRecvError, TrySendError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -23,8 +21,8 @@ use thrusterd_core::machine::{SolveJob, SolveResult};
 /// rule), so a full queue means the thread stopped taking work.
 const QUEUE: usize = 8;
 
-/// Niceness of the solver thread (0 is the control thread's): a solve that shares a core
-/// with the control thread runs in the control thread's idle time.
+/// Niceness of the solver and loading threads (0 is the control thread's): their work, when
+/// it shares a core with the control thread, runs in the control thread's idle time.
 const NICE: i32 = 10;
 
 /// The solver is gone or cannot take work; the text says why.
@@ -152,8 +150,8 @@ impl Drop for SolverThread {
 }
 
 /// Lowers the calling thread's scheduling priority to [`NICE`]. Best effort: without it the
-/// solves still run, they only compete with the control thread on equal terms.
-fn lower_priority() {
+/// work still runs, it only competes with the control thread on equal terms.
+pub fn lower_priority() {
     // SAFETY: gettid and setpriority only read their integer arguments; on Linux
     // PRIO_PROCESS with a thread id applies to that thread alone.
     let rc = unsafe {

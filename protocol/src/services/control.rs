@@ -147,7 +147,9 @@ impl ControlServer {
                     match handler(kind, &request) {
                         Reply::Now(response) => response,
                         Reply::Later(token) => {
-                            self.deferred.borrow_mut().push((token, request.seq, active));
+                            self.deferred
+                                .borrow_mut()
+                                .push((token, request.seq, active));
                             continue;
                         }
                     }

@@ -21,8 +21,8 @@ mod state_machine;
 mod telemetry;
 mod types;
 
-pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use crate::solve::{SolveJob, SolveResult, SolverMode};
+pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};
 pub use types::{

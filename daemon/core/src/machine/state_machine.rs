@@ -6,10 +6,9 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::{MachineSetup, ReconfigPolicy};
+use super::estimation::ESTIMATION;
 use super::estimation::{ClosedStep, EstimationRun, Motion, PulseStep};
 use super::models::ModelSlot;
-use super::estimation::ESTIMATION;
-use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 use super::types::{
     finish, Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput,
     State, StatusSnapshot, NO_IMU_YET,
@@ -23,6 +22,7 @@ use crate::identification::carry_over::{carried_over, ThrusterChange};
 use crate::model::{nominal_effectiveness, Model, ModelSource, PreparedModel};
 use crate::monitor::{MismatchAction, ModelMonitor};
 use crate::refinement::{Refiner, Tick, WindowVerdict};
+use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
 struct Levelling {
@@ -798,7 +798,8 @@ impl Machine {
                 pulses,
             } if d.is_stop() => {
                 // A limit: the run's model is solved while the thrusters rest.
-                self.run.submit_pulse(s.t_ns, Purpose::Conclude, self.geometry_key());
+                self.run
+                    .submit_pulse(s.t_ns, Purpose::Conclude, self.geometry_key());
                 self.state = State::Solve;
                 self.phase_start_ns = s.t_ns;
                 self.text = format!("solving the model of {pulses} pulses");
@@ -814,8 +815,7 @@ impl Machine {
                 } else {
                     Purpose::Decide
                 };
-                self.run
-                    .submit_pulse(s.t_ns, purpose, self.geometry_key());
+                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
                 return self.start_pulse(s.t_ns);
             }
             PulseStep::Ended { gate, pulses } => {
@@ -826,8 +826,7 @@ impl Machine {
                     // budget by default) does not end before the decision is applied.
                     Purpose::Decide
                 };
-                self.run
-                    .submit_pulse(s.t_ns, purpose, self.geometry_key());
+                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
                 self.state = State::Settle;
                 self.phase_start_ns = s.t_ns;
                 self.text = format!("settling after pulse {pulses}");
@@ -961,7 +960,8 @@ impl Machine {
             ClosedStep::Holding | ClosedStep::Exciting => {}
             ClosedStep::Decide { elapsed_s } => {
                 let key = self.geometry_key();
-                self.run.submit_interval(s.t_ns, elapsed_s, &self.setup, key);
+                self.run
+                    .submit_interval(s.t_ns, elapsed_s, &self.setup, key);
             }
         }
         cmd

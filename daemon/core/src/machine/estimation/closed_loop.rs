@@ -7,11 +7,11 @@ use nalgebra::Vector3;
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::{EstimationRun, Motion};
-use crate::solve::Purpose;
 use crate::estimator::Method;
 use crate::identification::{Dither, IdentificationConfig};
 use crate::machine::config::MachineSetup;
 use crate::model::Model;
+use crate::solve::Purpose;
 
 /// Where a closed-loop run stands.
 #[derive(Debug, Clone)]
