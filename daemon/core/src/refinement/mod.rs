@@ -709,7 +709,16 @@ impl Refiner {
         if e.rel_err_rot > self.cfg.window_rel_err && elapsed < self.cfg.window_max_s {
             return None;
         }
-        let mut verdict = judge(&e, model, &self.cfg, elapsed);
+        let (mut verdict, failed) = judge(&e, model, &self.cfg, elapsed);
+        if failed {
+            // A failed fit: no verdict on any thruster, nothing folded in, the streak broken.
+            verdict.changed = false;
+            verdict.in_a_row = 0;
+            self.last = Some(verdict);
+            self.window = None;
+            self.refined = None;
+            return Some(verdict);
+        }
         verdict.in_a_row = match self.last {
             Some(prev)
                 if verdict.changed && prev.in_a_row > 0 && prev.thruster == verdict.thruster =>
@@ -779,8 +788,22 @@ fn open_window(
     }
 }
 
-/// Compare the window's rotation rows with the model's, column by column.
-fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> WindowVerdict {
+/// A window whose fit moves a column by more than this share of the model's column names nobody
+/// and refines nothing: a thruster turned around moves its column by 200 %, a dead one by 100 %;
+/// more is a failed fit. On four_up, whose four thrusters the controller commands together, a
+/// noise-free window "moved" thruster 2 by 50,300 % (chi2 681) once the solve budget
+/// (`machine.solve_budget_s`) had moved its windows by 20 ms, and re-estimated an unchanged
+/// vehicle into a model 70 % off. The change test caps a joint move the same way.
+const MAX_PLAUSIBLE_CHANGE: f64 = 3.0;
+
+/// Compare the window's rotation rows with the model's, column by column. Also whether the
+/// fit failed (a column moved beyond [`MAX_PLAUSIBLE_CHANGE`]).
+fn judge(
+    e: &Estimate,
+    model: &Model,
+    cfg: &RefinementConfig,
+    window_s: f64,
+) -> (WindowVerdict, bool) {
     let b = &model.effectiveness;
     let n = e.effectiveness.ncols().min(b.ncols());
     let biggest = (0..n)
@@ -796,6 +819,7 @@ fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> 
         window_s,
         change_test: false,
     };
+    let mut failed = false;
     for i in 0..n {
         let norm = b.fixed_view::<3, 1>(0, i).norm();
         // A thruster with (almost) no moment in the model: its share is meaningless.
@@ -821,6 +845,10 @@ fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> 
             }
         }
         let change = d2.sqrt() / norm;
+        if change > MAX_PLAUSIBLE_CHANGE {
+            failed = true;
+            continue;
+        }
         let changed = change > cfg.min_change && chi2 > cfg.chi2;
         if (changed && !worst.changed) || (changed == worst.changed && chi2 > worst.chi2) {
             worst = WindowVerdict {
@@ -832,7 +860,7 @@ fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> 
             };
         }
     }
-    worst
+    (worst, failed)
 }
 
 /// A window's estimate with effectiveness `b` and every standard error `se` (tests of the
@@ -884,16 +912,25 @@ mod tests {
         let cfg = RefinementConfig::default();
         let mut moved = b.clone();
         moved[(0, 1)] = 0.7; // thruster 2 now also rolls: 70 % of its column
-        let v = judge(&estimate(moved.clone(), 0.05), &model, &cfg, 5.0);
-        assert!(v.changed && v.thruster == 1, "{v:?}");
+        let (v, failed) = judge(&estimate(moved.clone(), 0.05), &model, &cfg, 5.0);
+        assert!(v.changed && v.thruster == 1 && !failed, "{v:?}");
         assert!((v.change - 0.7).abs() < 1e-12);
         // The same move within the noise: not significant.
-        let v = judge(&estimate(moved, 0.5), &model, &cfg, 5.0);
+        let (v, _) = judge(&estimate(moved, 0.5), &model, &cfg, 5.0);
         assert!(!v.changed, "{v:?}");
         // A small, significant move (a model's own bias): not a change.
         let mut biased = b.clone();
         biased[(0, 0)] = 1.1;
-        let v = judge(&estimate(biased, 0.001), &model, &cfg, 5.0);
+        let (v, _) = judge(&estimate(biased, 0.001), &model, &cfg, 5.0);
         assert!(!v.changed, "{v:?}");
+        // Turned around (200 %): a change; 500x (50,000 %): a failed fit, naming nobody.
+        let mut reversed = b.clone();
+        reversed[(0, 0)] = -1.0;
+        let (v, failed) = judge(&estimate(reversed, 0.05), &model, &cfg, 5.0);
+        assert!(v.changed && v.thruster == 0 && !failed, "{v:?}");
+        let mut absurd = b.clone();
+        absurd[(0, 1)] = 500.0;
+        let (v, failed) = judge(&estimate(absurd, 0.05), &model, &cfg, 5.0);
+        assert!(failed && !v.changed, "{v:?}");
     }
 }
