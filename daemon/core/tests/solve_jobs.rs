@@ -1,4 +1,4 @@
-//! The machine's solves as jobs (`machine::solve`): a machine whose solves run on another
+//! The machine's solves as jobs (`thrusterd_core::solve`): a machine whose solves run on another
 //! thread reaches the same commands and the same models at the same samples as one that
 //! solves inline, whenever the results come back before they are due (the due-time rule);
 //! a result not back in time is applied late, counted, and the machine never blocks; a lost

@@ -606,7 +606,7 @@ impl Estimator {
 
     /// The decision when it does not depend on the estimate; None when the bound decides.
     /// Cheap (counts only): the machine asks it on the control thread and leaves the solve
-    /// for the estimate to a job (`machine::solve`).
+    /// for the estimate to a job (`crate::solve`).
     pub fn stop_gate(&self) -> Option<StopDecision> {
         if self.pulses >= self.cfg.max_pulses {
             return Some(StopDecision::MaxPulses);

@@ -40,7 +40,7 @@ pub(super) enum PulseStep {
     Pulsing,
     /// The pulse ended. `gate`: the stop decision when the counts alone make it (see
     /// `Estimator::stop_gate`); None when the estimate's error bound decides, which takes a
-    /// solve (a job, `machine::solve`).
+    /// solve (a job, `crate::solve`).
     Ended {
         gate: Option<StopDecision>,
         pulses: usize,

@@ -172,7 +172,7 @@ impl Machine {
     }
 
     /// A job's result is back. It is applied at the first sample at or after the job's due
-    /// time (see `machine::solve`); a result for a job the machine no longer waits for (the
+    /// time (see `crate::solve`); a result for a job the machine no longer waits for (the
     /// run was aborted, faulted, restarted) is dropped.
     pub fn deliver(&mut self, result: SolveResult) {
         if owner_of(result.id()) == ESTIMATION {
@@ -283,7 +283,7 @@ impl Machine {
         self.attitude
             .update_with(&gyro, &accel, mag.as_ref(), dt, correct);
         // Solves due by this sample's time, before the state acts on it (the due-time rule,
-        // `machine::solve`).
+        // `crate::solve`).
         while let Some((purpose, result)) = self.run.solver().take_due(s.t_ns) {
             self.apply_solve(purpose, result);
         }
@@ -839,7 +839,7 @@ impl Machine {
         self.geometry.as_ref().map(|g| g.key())
     }
 
-    /// A solve's result at its due sample (see `machine::solve`). The queue is emptied when
+    /// A solve's result at its due sample (see `crate::solve`). The queue is emptied when
     /// a run stops, so every result applied belongs to the run under way.
     fn apply_solve(&mut self, purpose: Purpose, result: SolveResult) {
         let decision = result.decision;

@@ -17,8 +17,8 @@
 //! segments, which is still a valid (coarser) cluster.
 //!
 //! The slots are shared (`Arc`) between copies: the daemon hands a copy of a running fit to its
-//! solver thread after every pulse (`machine::solve`), and copying 32 closed slots of a
-//! 70-wide fit was 2.5 MB on the control thread. A closed slot changes only when a segment
+//! solver thread after every pulse (`crate::solve`), and copying the 32 closed slots of both
+//! 70-wide fits (N = 16, under control) was 2.5 MB on the control thread. A closed slot changes only when a segment
 //! closes into it, and only then is it copied, if a job still holds it.
 
 use std::sync::Arc;

@@ -38,7 +38,7 @@ pub(in crate::machine) enum ClosedStep {
     /// The dither was added to the command.
     Exciting,
     /// A decision interval ended, `elapsed_s` into the dither: its estimate and decision
-    /// are a solve (a job, `machine::solve`); the run goes on until its result is applied.
+    /// are a solve (a job, `crate::solve`); the run goes on until its result is applied.
     Decide { elapsed_s: f64 },
 }
 
