@@ -9,6 +9,12 @@
 //! to MCAP and serving the live view, one Foxglove client subscribed to every channel), runs
 //! alternated; with the bridge's CPU over the run from /proc.
 //!
+//! Then the control thread under the daemon's long computations: IMU -> thrust at 200 Hz and
+//! 1 kHz, 8 and 16 declared thrusters, while holding attitude (idle control), during an
+//! open-loop estimation (a solve after every pulse) and during a closed-loop identification
+//! (a solve every second of dither), low-latency mode; p50 / p99 / p99.9 / max. Alone:
+//! `BENCH_SOLVES_ONLY=1`; beside another build's daemon: `BENCH_BASELINE_THRUSTERD=PATH`.
+//!
 //! Run: cargo bench -p system-tests --bench latency [-- ROUND_TRIPS]
 
 use std::process::{Child, Stdio};
@@ -25,6 +31,7 @@ struct Stats {
     p99: f64,
     p999: f64,
     mean: f64,
+    max: f64,
 }
 
 fn stats(mut us: Vec<f64>) -> Stats {
@@ -35,17 +42,36 @@ fn stats(mut us: Vec<f64>) -> Stats {
         p99: q(0.99),
         p999: q(0.999),
         mean: us.iter().sum::<f64>() / us.len() as f64,
+        max: us[us.len() - 1],
     }
 }
 
+/// Vehicle time between samples, ns (the sample's `t_ns` follows its `seq`): 1 kHz unless the
+/// solve section sets another rate.
+static SAMPLE_PERIOD_NS: std::sync::atomic::AtomicU64 =
+    std::sync::atomic::AtomicU64::new(1_000_000);
+
 fn sample(seq: u64) -> ImuSample {
+    // A little deterministic noise (a hash of seq): an estimation measures the noise at rest
+    // first, and a perfectly still gyro would make it zero.
+    let h = |k: u64| {
+        let x = seq
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add(k.wrapping_mul(0xBF58_476D_1CE4_E5B9));
+        ((x >> 40) as f64 / (1u64 << 24) as f64) - 0.5
+    };
+    let period = SAMPLE_PERIOD_NS.load(std::sync::atomic::Ordering::Relaxed);
     ImuSample {
         seq,
-        t_ns: 1_000_000_000 + seq * 1_000_000,
-        gyro: [0.001, -0.002, 0.0005],
-        accel: [0.0, 0.0, -9.80665],
+        t_ns: 1_000_000_000 + seq * period,
+        gyro: [
+            0.001 + 0.01 * h(1),
+            -0.002 + 0.01 * h(2),
+            0.0005 + 0.01 * h(3),
+        ],
+        accel: [0.05 * h(4), 0.05 * h(5), -9.80665 + 0.05 * h(6)],
         mag: [20.0, 0.0, 45.0],
-        depth: 5.0,
+        depth: 5.0 + 0.001 * h(7),
         flags: ImuSample::HAS_MAG | ImuSample::HAS_DEPTH,
     }
 }
@@ -133,10 +159,21 @@ fn ping_pong_at(
 }
 
 fn daemon_config(world: &World, telemetry_every_n: u32) -> std::path::PathBuf {
+    daemon_config_with(world, telemetry_every_n, 8, "")
+}
+
+/// `thrusters` declared thrusters (8, or 16: the eight again, farther out), telemetry every
+/// `telemetry_every_n`-th sample, and `extra` TOML appended.
+fn daemon_config_with(
+    world: &World,
+    telemetry_every_n: u32,
+    thrusters: usize,
+    extra: &str,
+) -> std::path::PathBuf {
     // Eight declared thrusters (directions need not be unit: the daemon normalises them): the
     // daemon starts with a nominal model and can hold attitude.
     let mut text = String::from("[vehicle]\n");
-    for (p, d) in [
+    let eight = [
         ([0.15, -0.1, 0.0], [1.0, 1.0, 0.0]),
         ([0.15, 0.1, 0.0], [1.0, -1.0, 0.0]),
         ([-0.15, -0.1, 0.0], [1.0, -1.0, 0.0]),
@@ -145,10 +182,15 @@ fn daemon_config(world: &World, telemetry_every_n: u32) -> std::path::PathBuf {
         ([0.12, 0.22, 0.0], [0.0, 0.0, -1.0]),
         ([-0.12, -0.22, 0.0], [0.0, 0.0, -1.0]),
         ([-0.12, 0.22, 0.0], [0.0, 0.0, 1.0]),
-    ] {
+    ];
+    for k in 0..thrusters {
+        let (p, d) = eight[k % 8];
+        let s = 1.0 + (k / 8) as f64 * 0.5;
+        let p = [p[0] * s, p[1] * s, p[2] + 0.05 * (k / 8) as f64];
         text += &format!("[[vehicle.thruster]]\nposition_m = {p:?}\ndirection = {d:?}\n");
     }
     text += &format!("[telemetry]\nevery_n = {telemetry_every_n}\n");
+    text += extra;
     let path = world.path("thrusterd.toml");
     std::fs::write(&path, text).unwrap();
     path
@@ -364,9 +406,134 @@ fn bridge_section(n: usize) {
     );
 }
 
+/// IMU -> thrust while the daemon holds, estimates and identifies, at `rate_hz` with
+/// `thrusters` declared thrusters. One daemon (low-latency mode, spinning for two periods so
+/// it never blocks between samples), paced samples, each phase measured for `seconds`.
+fn solve_phases(
+    daemon_bin: Option<&std::path::Path>,
+    rate_hz: u64,
+    thrusters: usize,
+    seconds: f64,
+) -> Vec<(&'static str, Stats)> {
+    let period_ns = 1_000_000_000 / rate_hz;
+    SAMPLE_PERIOD_NS.store(period_ns, std::sync::atomic::Ordering::Relaxed);
+    let period = Duration::from_nanos(period_ns);
+    let count = (seconds * rate_hz as f64) as usize;
+    let world = World::new("lat-s");
+    // The IMU watchdog off the bench's way: between phases the bench sends nothing while it
+    // talks to the daemon.
+    let cfg = daemon_config_with(&world, 10, thrusters, "[runtime]\nimu_timeout_ms = 10000\n");
+    let spin = (2 * period_ns / 1000).to_string();
+    let state_dir = world.path("state");
+    let args = [
+        "run",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--namespace",
+        &world.namespace(),
+        "--state-dir",
+        state_dir.to_str().unwrap(),
+        "--spin-us",
+        &spin,
+    ];
+    let mut daemon = match daemon_bin {
+        Some(path) => Proc::spawn_path(path, "thrusterd", &args, &[], world.dir.path()),
+        None => Proc::spawn("thrusterd", &args, world.dir.path()),
+    };
+    let op = Operator::new(&world);
+    let (imu, thrust, mut seq) = handshake(&world);
+    hold(&op);
+    round_trips(&imu, &thrust, &mut seq, rate_hz as usize, Some(period));
+    let mut out = Vec::new();
+    let idle = round_trips(&imu, &thrust, &mut seq, count, Some(period));
+    out.push(("holding (idle control)", stats(idle)));
+
+    // Open loop: from Idle, the noise at rest (1 s, skipped), then pulses with a solve after
+    // each (the synthetic vehicle never answers the thrust, so the run goes to its limit).
+    let r = op.request(RequestKind::Idle);
+    assert!(r.is_ok(), "{}", r.text());
+    let r = op.request(RequestKind::Estimate);
+    assert!(r.is_ok(), "{}", r.text());
+    round_trips(
+        &imu,
+        &thrust,
+        &mut seq,
+        (1.2 * rate_hz as f64) as usize,
+        Some(period),
+    );
+    let est = round_trips(&imu, &thrust, &mut seq, count, Some(period));
+    out.push(("estimating (open loop)", stats(est)));
+    // What the daemon was doing at the end of the phase (it must still be estimating).
+    let after_estimation = op.request(RequestKind::Status).text().to_string();
+
+    // Closed loop: holding, then an estimate request identifies under control, a solve every
+    // second of dither (the first 0.5 s, the hold before the dither, skipped).
+    let r = op.request(RequestKind::Hold);
+    assert!(r.is_ok(), "{}", r.text());
+    round_trips(&imu, &thrust, &mut seq, rate_hz as usize, Some(period));
+    let r = op.request(RequestKind::Estimate);
+    assert!(r.is_ok(), "{}", r.text());
+    round_trips(&imu, &thrust, &mut seq, rate_hz as usize / 2, Some(period));
+    let ident = round_trips(&imu, &thrust, &mut seq, count, Some(period));
+    out.push(("identifying (closed loop)", stats(ident)));
+    let after_identification = op.request(RequestKind::Status).text().to_string();
+    println!(
+        "    ({rate_hz} Hz, N = {thrusters}: after estimating \"{after_estimation}\"; after identifying \"{after_identification}\")"
+    );
+    daemon.stop();
+    out
+}
+
+/// The solve section's table. With `BENCH_BASELINE_THRUSTERD=PATH` (another build's
+/// binary, e.g. the commit before the solver thread), each setting runs on that daemon first and
+/// then on this build's, back to back, so both see the same background load.
+fn solve_section(seconds: f64) {
+    let baseline = std::env::var_os("BENCH_BASELINE_THRUSTERD").map(std::path::PathBuf::from);
+    println!();
+    println!(
+        "IMU -> thrust while holding, estimating and identifying (low-latency mode, paced, \
+         {seconds} s per phase), microseconds"
+    );
+    println!("| daemon | rate | N | phase | p50 | p99 | p99.9 | max | p99.9 / holding's |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for rate in [200u64, 1000] {
+        for n in [8usize, 16] {
+            let mut runs = Vec::new();
+            if let Some(b) = &baseline {
+                runs.push(("baseline", Some(b.as_path())));
+            }
+            runs.push(("this build", None));
+            for (label, bin) in runs {
+                let phases = solve_phases(bin, rate, n, seconds);
+                let idle = phases[0].1.p999;
+                for (phase, s) in &phases {
+                    println!(
+                        "| {label} | {rate} Hz | {n} | {phase} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
+                        s.p50,
+                        s.p99,
+                        s.p999,
+                        s.max,
+                        s.p999 / idle
+                    );
+                }
+            }
+        }
+    }
+    SAMPLE_PERIOD_NS.store(1_000_000, std::sync::atomic::Ordering::Relaxed);
+}
+
 fn main() {
     // Never measure a binary left from an older build.
     system_tests::build_binaries();
+    // Only the solve section: BENCH_SOLVES_ONLY=1 (BENCH_SOLVE_S: seconds per phase, 8).
+    let solve_s: f64 = std::env::var("BENCH_SOLVE_S")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(8.0);
+    if std::env::var_os("BENCH_SOLVES_ONLY").is_some() {
+        solve_section(solve_s);
+        return;
+    }
     let n: usize = std::env::args()
         .skip(1)
         .find_map(|a| a.parse().ok())
@@ -428,4 +595,5 @@ fn main() {
         }
     }
     bridge_section(n);
+    solve_section(solve_s);
 }

@@ -85,6 +85,7 @@ fn main() {
                 "--estimate",
                 "--spin-us",
                 "500",
+                "--lockstep",
             ]);
             let seed_s = seed.to_string();
             let wall = Instant::now();

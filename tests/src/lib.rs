@@ -104,6 +104,17 @@ impl Proc {
 
     /// As `spawn`, with extra environment variables.
     pub fn spawn_with_env(name: &str, args: &[&str], env: &[(&str, &str)], logs: &Path) -> Proc {
+        Proc::spawn_path(&bin(name), name, args, env, logs)
+    }
+
+    /// As `spawn_with_env`, the binary at `path` (a bench comparing another build's binary).
+    pub fn spawn_path(
+        path: &Path,
+        name: &str,
+        args: &[&str],
+        env: &[(&str, &str)],
+        logs: &Path,
+    ) -> Proc {
         // One file per process: two of the same binary (say, two `thrusterctl watch`) in one
         // test must not share a log, or each truncates and interleaves the other's lines.
         static NEXT_LOG: AtomicU64 = AtomicU64::new(0);
@@ -117,7 +128,7 @@ impl Proc {
             .open(&log)
             .unwrap_or_else(|e| panic!("creating {}: {e}", log.display()));
         let err = out.try_clone().unwrap();
-        let child = Command::new(bin(name))
+        let child = Command::new(path)
             .args(args)
             .stdin(Stdio::null())
             .stdout(out)

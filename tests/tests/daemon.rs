@@ -16,7 +16,7 @@ const LONG: Duration = Duration::from_secs(60);
 fn estimation_from_request_to_swapped_model_and_restart_loads_it() {
     let world = World::new("est");
     let op = Operator::new(&world);
-    let mut daemon = world.daemon(&[]);
+    let mut daemon = world.daemon(&["--lockstep"]);
     let mut sim = world.sim(
         "amour5",
         &["--noise", "paper", "--lockstep", "--duration", "100000"],
@@ -114,7 +114,7 @@ fn reconfiguration_mid_control_leads_to_a_new_model() {
         "[[event]]\nt_s = 120.0\nannounce = true\naction = { kind = \"rotate\", thruster = \"T\", axis = [1, 0, 0], angle_deg = 45 }\n",
     )
     .unwrap();
-    let mut daemon = world.daemon(&["--estimate"]);
+    let mut daemon = world.daemon(&["--estimate", "--lockstep"]);
     let mut sim = world.sim(
         "amour5",
         &[
@@ -348,7 +348,7 @@ fn nothing_is_left_behind() {
     let world = World::new("clean");
     {
         let op = Operator::new(&world);
-        let mut daemon = world.daemon(&[]);
+        let mut daemon = world.daemon(&["--lockstep"]);
         let mut sim = world.sim("amour5", &["--lockstep", "--duration", "5"]);
         op.wait_status(LONG, |s| s.samples > 10).expect("running");
         let _ = sim.wait_timeout(Duration::from_secs(30));

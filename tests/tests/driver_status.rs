@@ -23,7 +23,9 @@ const LONG: Duration = Duration::from_secs(60);
 
 /// thrusterd (with `daemon_args`) and a lockstep, noise-free AMOUR-5 (5 thrusters).
 fn daemon_and_sim(world: &World, daemon_args: &[&str]) -> (Proc, Proc) {
-    let daemon = world.daemon(daemon_args);
+    let mut args = daemon_args.to_vec();
+    args.push("--lockstep");
+    let daemon = world.daemon(&args);
     let sim = world.sim(
         "amour5",
         &["--noise", "none", "--lockstep", "--duration", "100000"],

@@ -65,7 +65,7 @@ fn drain<T: thruster_protocol::services::TopicMessage>(inbox: &Inbox<T>) -> Vec<
 /// thrusterd estimating on a lockstep AMOUR-5 at the paper's noise, until it controls with its
 /// first model.
 fn daemon_active_on_sim(world: &World, op: &Operator) -> (Proc, Proc) {
-    let daemon = world.daemon(&["--estimate"]);
+    let daemon = world.daemon(&["--estimate", "--lockstep"]);
     let sim = world.sim(
         "amour5",
         &["--noise", "paper", "--lockstep", "--duration", "100000"],
@@ -792,4 +792,120 @@ fn a_stalled_disk_never_stalls_control() {
         assert!(sim.stop().success());
     }
     assert_nothing_left(world);
+}
+
+/// An operator's `load` never stops control. The test is the driver: it sends an IMU sample
+/// every 5 ms and times each answer while `thrusterctl load` runs, for a FIFO nobody writes to
+/// (refused with a clear error at once, never opened) and for a 256 MB file (read and parsed
+/// on the daemon's loading thread; on the control thread, as before issue 25, it held the
+/// sample answered after it for the whole read, about half a second here).
+#[test]
+fn a_model_load_never_stops_control() {
+    use std::process::Child;
+    use thruster_protocol::services::Port;
+    use thruster_protocol::ImuSample;
+
+    let world = World::new("ldstall");
+    let mut daemon = world.daemon(&["--thrusters", "5"]);
+    let imu: Port<ImuSample> = Port::create(world.node(), world.ipc()).unwrap();
+    let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
+    let mut seq = 0u64;
+    let sample = |seq: u64| ImuSample {
+        seq,
+        t_ns: 1_000_000_000 + seq * 5_000_000,
+        gyro: [0.0; 3],
+        accel: [0.0, 0.0, -9.80665],
+        mag: [0.0; 3],
+        depth: 0.0,
+        flags: 0,
+    };
+    // One round trip: the answer's latency (None: none within 2 s).
+    let round_trip = |seq: &mut u64| -> Option<Duration> {
+        *seq += 1;
+        let start = Instant::now();
+        imu.send(&sample(*seq)).unwrap();
+        while start.elapsed() < Duration::from_secs(2) {
+            if let Some(c) = thrust.recv().unwrap() {
+                if c.imu_seq == *seq {
+                    return Some(start.elapsed());
+                }
+            }
+            std::thread::sleep(Duration::from_micros(50));
+        }
+        None
+    };
+    let up = Instant::now();
+    while round_trip(&mut seq).is_none() {
+        assert!(up.elapsed() < LONG, "no answer\n{}", daemon.log_text());
+    }
+
+    let fifo = world.path("model.fifo");
+    let c_path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: mkfifo(3) on a NUL-terminated path we own.
+    assert_eq!(unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) }, 0);
+    let big = world.path("big.json");
+    {
+        use std::io::Write;
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&big).unwrap());
+        let spaces = vec![b' '; 1 << 20];
+        for _ in 0..256 {
+            f.write_all(&spaces).unwrap();
+        }
+        f.write_all(b"{\"format\": \"not a model\"}").unwrap();
+        // On disk before the load: writing back 256 MB of dirty pages meanwhile would stall
+        // whichever process the kernel throttles, and this test would measure that instead.
+        f.into_inner().unwrap().sync_all().unwrap();
+    }
+    for (what, path, expect) in [
+        ("a FIFO nobody writes to", &fifo, "not a regular file"),
+        ("a 256 MB file", &big, "big.json"),
+    ] {
+        let mut load: Child = Command::new(bin("thrusterctl"))
+            .args(["--namespace", &world.namespace(), "load"])
+            .arg(path)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        let mut worst = Duration::ZERO;
+        let mut answered = 0;
+        // Samples while the load is under way, and half a second beyond.
+        let mut done_at = None;
+        while done_at.is_none_or(|t: Instant| t.elapsed() < Duration::from_millis(500)) {
+            assert!(start.elapsed() < CTL_BOUND, "thrusterctl load {what} hung");
+            let latency = round_trip(&mut seq)
+                .unwrap_or_else(|| panic!("sample {seq} unanswered during the load of {what}"));
+            worst = worst.max(latency);
+            answered += 1;
+            if done_at.is_none() && load.try_wait().unwrap().is_some() {
+                done_at = Some(Instant::now());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let out = load.wait_with_output().unwrap();
+        let text = String::from_utf8_lossy(&out.stderr).into_owned()
+            + &String::from_utf8_lossy(&out.stdout);
+        println!(
+            "load of {what}: thrusterctl exit {:?} after {:.2} s ({}); {answered} samples \
+             answered meanwhile, the slowest in {:.1} ms",
+            out.status.code(),
+            (done_at.unwrap() - start).as_secs_f64(),
+            text.trim(),
+            worst.as_secs_f64() * 1e3
+        );
+        assert!(!out.status.success(), "{what} loaded: {text}");
+        assert!(text.contains(expect), "{what}: {text}");
+        // Event mode on a shared 2-core VM answers within a millisecond or two; a load on
+        // the loop held one sample for the whole read.
+        assert!(
+            worst < Duration::from_millis(150),
+            "a sample waited {worst:?} during the load of {what}"
+        );
+    }
+    assert!(daemon.is_running(), "{}", daemon.log_text());
+    let r = Operator::new(&world).request(RequestKind::Status);
+    assert!(r.is_ok(), "{}", r.text());
+    daemon.stop();
 }

@@ -133,7 +133,7 @@ fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_erro
     // step (a false alarm on pitch at the realistic IMU), which is not what this test is about.
     let config = world.path("thrusterd.toml");
     std::fs::write(&config, "[monitor]\naction = \"report\"\n").unwrap();
-    let mut daemon = world.daemon(&["--config", config.to_str().unwrap()]);
+    let mut daemon = world.daemon(&["--config", config.to_str().unwrap(), "--lockstep"]);
     // Lockstep paced at 10x real time: vehicle time runs evenly, fast enough for a short test,
     // slow enough that the operator's commands land within a second of vehicle time.
     let mut sim = world.sim(
@@ -373,7 +373,7 @@ fn telemetry_off_publishes_nothing() {
     let world = World::new("teloff");
     let config = world.path("thrusterd.toml");
     std::fs::write(&config, "[telemetry]\nevery_n = 0\n").unwrap();
-    let mut daemon = world.daemon(&["--config", config.to_str().unwrap()]);
+    let mut daemon = world.daemon(&["--config", config.to_str().unwrap(), "--lockstep"]);
     let mut sim = world.sim("amour5", &["--lockstep", "--duration", "100000"]);
     wait_for_imu(&world, &daemon);
     let json = watch(&world, &["--json", "--interval-ms", "0"]);

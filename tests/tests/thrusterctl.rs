@@ -55,7 +55,7 @@ fn wait_status(world: &World, what: &str, pred: impl Fn(&Value) -> bool) -> Valu
 #[test]
 fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     let world = World::new("ctl");
-    let mut daemon = world.daemon(&[]);
+    let mut daemon = world.daemon(&["--lockstep"]);
     let mut sim = world.sim(
         "amour5",
         &["--noise", "paper", "--lockstep", "--duration", "100000"],
@@ -324,6 +324,7 @@ fn an_ipc_root_on_the_command_line_is_used_by_daemon_simulator_and_operator() {
             &root_s,
             "--state-dir",
             state.to_str().unwrap(),
+            "--lockstep",
         ],
         world.dir.path(),
     );

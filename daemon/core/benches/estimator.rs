@@ -119,6 +119,11 @@ fn bench(c: &mut Criterion) {
         c.bench_with_input(BenchmarkId::new("dynamic_stop_decision", n), &n, |b, _| {
             b.iter(|| black_box(dynamic.stop_decision()))
         });
+        // What the control thread pays when it hands that solve out (`solve::SolveJob`): a copy
+        // of the running estimator, the segmented fits' closed cluster slots shared, not copied.
+        c.bench_with_input(BenchmarkId::new("dynamic_job_copy", n), &n, |b, _| {
+            b.iter(|| black_box(Box::new(dynamic.clone())))
+        });
         // The same with every column but thruster 0's carried over (an identification after a
         // known change): three more Gram solves per group, and the contradiction check.
         let mut se = nalgebra::DMatrix::from_element(6, n, 0.05);

@@ -76,6 +76,18 @@ pub struct RuntimeSection {
     /// true: a vehicle in the water must not drift). false: start idle whatever happened,
     /// e.g. on a bench or where an operator must confirm.
     pub resume_after_crash: bool,
+    /// The driver runs in lockstep (default false): it waits for the answer to each sample
+    /// before it steps (`thruster-sim run --lockstep`, the lab, the tests). Vehicle time then
+    /// runs as fast as the daemon answers, so a solve's result could be late by vehicle time
+    /// however fast the solver thread is: in lockstep the loop waits for a result due by a
+    /// sample's time before it handles the sample (up to `lockstep_wait_ms`), and one seed
+    /// gives one outcome under any load. In real time (false) it never waits: a late result is
+    /// applied when it comes and counted. `thrusterd run --lockstep` sets it.
+    pub lockstep: bool,
+    /// In lockstep, the longest wait for a due solve, ms of wall time (default 1000, at most
+    /// 1500: below the simulator's 2000 ms answer timeout, so it never steps past a waiting
+    /// daemon). Past it the machine faults (neutral), saying so.
+    pub lockstep_wait_ms: u64,
 }
 
 impl Default for RuntimeSection {
@@ -87,6 +99,8 @@ impl Default for RuntimeSection {
             spin_us: 0,
             load_model: true,
             resume_after_crash: true,
+            lockstep: false,
+            lockstep_wait_ms: 1000,
         }
     }
 }
@@ -280,6 +294,16 @@ impl DaemonConfig {
                 m.deadband,
                 Range::from_below(0.0, 0.5),
             ),
+            (
+                "machine.solve_budget_s".into(),
+                m.solve_budget_s,
+                Range {
+                    lo: 0.0,
+                    hi: 1.0,
+                    lo_open: true,
+                    hi_open: false,
+                },
+            ),
             ("body.mass_kg".into(), b.mass_kg, Range::above(0.0)),
             (
                 "body.max_thrust_n".into(),
@@ -362,6 +386,7 @@ impl DaemonConfig {
             ("runtime.imu_timeout_ms", r.imu_timeout_ms, 1, 60_000),
             ("runtime.status_period_ms", r.status_period_ms, 0, 60_000),
             ("runtime.spin_us", r.spin_us, 0, 1_000_000),
+            ("runtime.lockstep_wait_ms", r.lockstep_wait_ms, 1, 1_500),
             ("telemetry.every_n", self.telemetry.every_n, 0, 10_000),
         ] {
             if !(lo..=hi).contains(&v) {

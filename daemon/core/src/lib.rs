@@ -15,5 +15,6 @@ pub mod model_file;
 pub mod monitor;
 pub mod navigation;
 pub mod refinement;
+pub mod solve;
 pub mod study;
 pub mod wire;

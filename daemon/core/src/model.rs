@@ -173,6 +173,16 @@ impl Model {
         self
     }
 
+    /// The same, checked against the physical bounds too, as a value the machine installs
+    /// without deriving again: a caller may prepare a model off the control thread (the rank
+    /// report is an SVD) and hand it over (`Machine::load_prepared`).
+    pub fn prepared(self, cfg: &EstimatorConfig) -> Result<PreparedModel, SwapRejection> {
+        let model = self.with_derived_allocation(cfg);
+        // The count is the machine's business at install time; everything else is checked now.
+        model.check(model.thrusters(), f64::INFINITY)?;
+        Ok(PreparedModel(model))
+    }
+
     /// Checks before a hot swap: right size, finite, within the protocol's physical bounds,
     /// actuates something, confident enough. Every model passes it, learned, nominal,
     /// cached or loaded. `max_rel_err` applies to estimated models (nominal and paper models
@@ -457,5 +467,21 @@ mod tests {
         assert_eq!(k, geometry_key(&[[0.1000001, 0.2, 0.3]], &dir));
         assert_ne!(k, geometry_key(&[[0.11, 0.2, 0.3]], &dir));
         assert_ne!(k, geometry_key(&pos, &[[0.0, 1.0, 0.0]]));
+    }
+}
+
+/// A model from outside (a file) with its actuated DOFs and allocation derived again by
+/// [`Model::prepared`], never taken from the file. Only that function makes one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PreparedModel(Model);
+
+impl PreparedModel {
+    /// The model.
+    pub fn model(&self) -> &Model {
+        &self.0
+    }
+
+    pub(crate) fn into_model(self) -> Model {
+        self.0
     }
 }

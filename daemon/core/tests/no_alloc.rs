@@ -120,8 +120,9 @@ fn answering_a_sample_does_not_allocate() {
 }
 
 /// With the defaults (background refinement while controlling, identification under control):
-/// only the once-per-second decisions (`estimator.segment_s`) and a window's or run's start
-/// allocate; every other tick allocates nothing.
+/// only the once-per-second decisions (`estimator.segment_s`: the tick that hands out the
+/// solve job, and the tick its result is applied at, `machine.solve_budget_s` later) and a
+/// window's or run's start allocate; every other tick allocates nothing.
 #[test]
 fn under_control_only_the_decisions_allocate() {
     let mut m = Machine::new(MachineSetup {
@@ -143,8 +144,10 @@ fn under_control_only_the_decisions_allocate() {
     m.on_request(Request::Estimate).unwrap();
     assert_eq!(m.state(), State::Identify);
     let identify = allocating_ticks(&mut m, &mut k, 1000);
+    // 5 s: the start, at most four decisions and their results (the status text says how
+    // long the dither has run).
     assert!(
-        identify <= 6,
+        identify <= 10,
         "identifying: {identify} of 1000 ticks allocated"
     );
 }

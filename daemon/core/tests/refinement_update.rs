@@ -91,7 +91,8 @@ fn fly(run: &mut Run, mut scenario: Scenario, seconds: f64) -> Tracked {
             windows.push((v.rel_err_rot, v.window_s));
         }
         for e in run.machine.take_events() {
-            if matches!(e, Event::MismatchDetected(_)) {
+            if let Event::MismatchDetected(why) = &e {
+                println!("mismatch at {:.2} s: {why}", run.sim.time_s());
                 mismatches += 1;
             }
         }

@@ -111,6 +111,8 @@ pub struct Binaries {
     pub sim_pace: bool,
     /// The daemon's config accepts a `[monitor]` table (the model-mismatch monitor).
     pub daemon_monitor: bool,
+    /// `thrusterd run --lockstep` exists (waits for a due solve in lockstep).
+    pub daemon_lockstep: bool,
 }
 
 impl Binaries {
@@ -162,11 +164,17 @@ impl Binaries {
             .map(|o| String::from_utf8_lossy(&o.stdout).contains("--pace"))
             .unwrap_or(false);
         let daemon_monitor = probe_config(&daemon, "[monitor]\naction = \"report\"\n");
+        let daemon_lockstep = Command::new(&daemon)
+            .args(["run", "--help"])
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).contains("--lockstep"))
+            .unwrap_or(false);
         Ok(Binaries {
             daemon,
             sim,
             sim_pace,
             daemon_monitor,
+            daemon_lockstep,
         })
     }
 }
@@ -376,9 +384,14 @@ impl Session {
             daemon_args.extend(["--thrusters".into(), count]);
         }
         // In lockstep the simulator waits for every answer: the daemon's low-latency mode
-        // (poll before blocking) saves a wake-up per sample.
+        // (poll before blocking) saves a wake-up per sample, and the daemon waits (bounded)
+        // for a solve due by a sample's time, so one seed gives one outcome however busy the
+        // machine is (`runtime.lockstep`).
         if !spec.realtime {
             daemon_args.extend(["--spin-us".into(), "500".into()]);
+            if bins.daemon_lockstep {
+                daemon_args.push("--lockstep".into());
+            }
         }
         match &spec.daemon_config {
             DaemonConfig::Defaults => {}

@@ -3,11 +3,13 @@
 
 mod config_file;
 mod journal;
+mod loader;
 mod reaper;
 mod replay;
 mod run;
 mod saver;
 mod session;
+mod solver;
 mod store;
 mod study;
 

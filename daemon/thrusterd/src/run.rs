@@ -5,6 +5,10 @@
 //! Reconfiguration events, setpoints and operator requests feed the machine; model swaps are
 //! published (history 1) and saved; status is published on change and periodically; telemetry
 //! after every `telemetry.every_n`-th accepted sample, right after its thrust command.
+//!
+//! The control thread only controls: the machine's solves go to the solver thread
+//! (`solver.rs`) and come back to be applied at their due sample; an operator's model load is
+//! read and prepared on a thread of its own (`loader.rs`) and answered when it is back.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -18,7 +22,7 @@ use tracing::{debug, error, info, warn};
 
 use crate::store;
 use thruster_protocol::services::{
-    cleanup_dead_nodes, create_waitset, ControlServer, Inbox, IpcConfig, Port,
+    cleanup_dead_nodes, create_waitset, ControlServer, Inbox, IpcConfig, Port, Reply,
 };
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
@@ -28,7 +32,10 @@ use thruster_protocol::{
 };
 use thrusterd_core::config::DaemonConfig;
 use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
-use thrusterd_core::machine::{Command, Event, Machine, Request};
+use thrusterd_core::machine::{Command, Event, Machine, Request, SolverMode};
+
+use crate::loader::{LoadError, Loader, Progress};
+use crate::solver::SolverThread;
 use thrusterd_core::wire;
 
 #[derive(Args)]
@@ -55,6 +62,10 @@ pub struct RunArgs {
     /// Start an estimation as soon as the IMU is up.
     #[arg(long)]
     estimate: bool,
+    /// The driver runs in lockstep (sets `runtime.lockstep`): wait, bounded, for a solve
+    /// due by a sample's time before handling the sample.
+    #[arg(long)]
+    lockstep: bool,
 }
 
 /// Least vehicle time between two saves of a refined model, ns (a minute).
@@ -88,6 +99,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
     if let Some(spin) = args.spin_us {
         cfg.runtime.spin_us = spin;
+    }
+    if args.lockstep {
+        cfg.runtime.lockstep = true;
     }
 
     // Refused here, before anything is created, with the command line applied: a state_dir
@@ -173,6 +187,14 @@ struct Daemon {
     /// Every input the machine takes besides the IMU samples, published for recordings
     /// (`journal`); created with the other ports in `serve`.
     journal: Option<crate::journal::Journal>,
+    /// Runs the machine's solves off this thread.
+    solver: SolverThread,
+    /// Late solves already logged (the machine counts them).
+    late_logged: u64,
+    /// Reads operators' model files off this thread.
+    loader: Loader,
+    /// Number of the next deferred request (a load).
+    next_token: u64,
 }
 
 impl Daemon {
@@ -182,7 +204,9 @@ impl Daemon {
             None => IpcConfig::new(&cfg.ipc.namespace),
         }
         .with_context(|| format!("ipc.namespace {:?}", cfg.ipc.namespace))?;
-        let mut machine = Machine::new(cfg.machine_setup());
+        let setup = cfg.machine_setup();
+        let loader = Loader::new(setup.estimator.clone());
+        let mut machine = Machine::new(setup);
         let model_path = cfg.runtime.state_dir.join(store::MODEL_FILE);
         // A refused saved model counts like a refused Load request, so status shows it.
         let mut refused = 0u32;
@@ -202,9 +226,16 @@ impl Daemon {
                 }
             }
         }
+        // From here on the machine's solves go to the solver thread (the start-up load above
+        // made none).
+        machine.set_solver_mode(SolverMode::External);
         Ok(Daemon {
             cfg: cfg.clone(),
             machine,
+            solver: SolverThread::spawn().context("starting the solver thread")?,
+            late_logged: 0,
+            loader,
+            next_token: 1,
             shutdown,
             model_path,
             ipc,
@@ -392,6 +423,9 @@ impl Daemon {
             if got {
                 self.stale_reported = false;
             }
+            // Results that came back while no sample did (handed over now, applied at their
+            // due sample).
+            self.collect_solves();
             // Before the first sample there is nothing to go stale: the driver is not up yet.
             // Status says so, and estimation and control are refused until a sample comes.
             if stale && self.last_imu.is_none() {
@@ -474,13 +508,15 @@ impl Daemon {
             {
                 // Count every refusal (invalid request, wrong state, failure) for status.
                 let mut refused = 0u32;
-                let served = control.serve(|kind, req| {
-                    let response = self.on_request(kind, req);
-                    if !response.is_ok() {
-                        refused += 1;
-                        warn!(?kind, "operator request refused: {}", response.text());
+                let served = control.serve_deferring(|kind, req| {
+                    let reply = self.on_request(kind, req);
+                    if let Reply::Now(response) = &reply {
+                        if !response.is_ok() {
+                            refused += 1;
+                            warn!(?kind, "operator request refused: {}", response.text());
+                        }
                     }
-                    response
+                    reply
                 })?;
                 if served.invalid > 0 {
                     warn!(invalid = served.invalid, "invalid operator request refused");
@@ -513,6 +549,7 @@ impl Daemon {
                     Err(e) => warn!("could not resume control after a crash: {e}"),
                 }
             }
+            self.poll_load(&control);
             let changed = self.handle_events(&model_out);
             self.poll_saves();
             systemd.tick();
@@ -609,8 +646,14 @@ impl Daemon {
                     );
                 }
                 let input = wire::imu_input(sample);
+                self.collect_solves();
+                if self.cfg.runtime.lockstep {
+                    self.wait_for_due_solves(input.t_ns);
+                }
                 let cmd = self.machine.on_imu(&input);
                 let sent = self.send_thrust(&out.thrust, &cmd);
+                // After the answer went out: the sample's own latency does not include it.
+                self.dispatch_solves();
                 if let Some(port) = &out.telemetry {
                     self.publish_telemetry(port, &input, &sent);
                 }
@@ -631,6 +674,115 @@ impl Daemon {
                 self.thrust_seq += 1;
                 msg.imu_seq = sample.seq;
                 let _ = out.thrust.send(&msg);
+            }
+        }
+    }
+
+    /// Hands the machine the solve results that are back (never waits).
+    fn collect_solves(&mut self) {
+        loop {
+            match self.solver.try_result() {
+                Ok(Some(r)) => self.machine.deliver(r),
+                Ok(None) => return,
+                Err(lost) => return self.solver_lost(&lost.0),
+            }
+        }
+    }
+
+    /// Lockstep: the results due by `t_ns` are waited for, each up to
+    /// `runtime.lockstep_wait_ms`, so the outcome is the inline one (see `runtime.lockstep`).
+    fn wait_for_due_solves(&mut self, t_ns: u64) {
+        let wait = Duration::from_millis(self.cfg.runtime.lockstep_wait_ms.clamp(1, 1_500));
+        while let Some(id) = self.machine.awaiting_result(t_ns) {
+            match self.solver.wait_result(wait) {
+                Ok(Some(r)) => self.machine.deliver(r),
+                Ok(None) => {
+                    let why = format!(
+                        "solve {id} not back after {} ms in lockstep (runtime.lockstep_wait_ms)",
+                        wait.as_millis()
+                    );
+                    return self.solver_lost(&why);
+                }
+                Err(lost) => return self.solver_lost(&lost.0),
+            }
+        }
+    }
+
+    /// Gives the solver thread the jobs the last sample made; logs late results.
+    fn dispatch_solves(&mut self) {
+        while let Some(job) = self.machine.take_job() {
+            if let Err(lost) = self.solver.submit(job) {
+                return self.solver_lost(&lost.0);
+            }
+        }
+        let late = self.machine.late_solves();
+        if late > self.late_logged {
+            // Logged sparingly: on a machine that cannot keep up, every solve is late.
+            if self.late_logged < 10 || late.ilog2() != self.late_logged.ilog2() {
+                warn!(
+                    late,
+                    "a solve's result was not back by its due sample (machine.solve_budget_s): applied when it comes"
+                );
+            }
+            self.late_logged = late;
+        }
+    }
+
+    /// The solver thread died or did not answer: what waited for it faults (neutral), and a
+    /// fresh thread takes what comes next.
+    fn solver_lost(&mut self, why: &str) {
+        error!("{why}; thrusters neutral");
+        self.machine.on_solver_lost(why);
+        if let Err(e) = self.solver.restart() {
+            error!("the solver thread could not be restarted: {e}");
+        }
+    }
+
+    /// A load in flight: answered when its file is read and installed, or told after
+    /// `loader::ANSWER_WAIT` that it is still being read.
+    fn poll_load(&mut self, control: &ControlServer) {
+        match self.loader.poll() {
+            Progress::Nothing => {}
+            Progress::Slow { token, path } => {
+                let text = format!(
+                    "still reading {} after {:.1} s (a slow or stalled disk?): installed when read, \
+                     see status and the log",
+                    path.display(),
+                    crate::loader::ANSWER_WAIT.as_secs_f64()
+                );
+                warn!("{text}");
+                control.answer(token, ControlResponse::new(ResponseCode::Busy, &text));
+            }
+            Progress::Done {
+                token,
+                path,
+                result,
+                answered,
+            } => {
+                let shown = path.display().to_string();
+                let outcome = (*result).and_then(|model| {
+                    let r = self.machine.load_prepared(model);
+                    self.journal(|j| j.text(InputKind::Load, 0, r.is_err(), &shown));
+                    r.map_err(|e| LoadError::Rejected(e.0))
+                });
+                let response = match &outcome {
+                    Ok(()) => {
+                        info!(path = %shown, "model loaded");
+                        ControlResponse::ok(&format!("loaded {shown}"))
+                    }
+                    Err(e) => {
+                        self.refused = self.refused.saturating_add(1);
+                        warn!("operator request refused: load {shown}: {e}");
+                        let code = match e {
+                            LoadError::Failed(_) => ResponseCode::Failed,
+                            LoadError::Rejected(_) => ResponseCode::Rejected,
+                        };
+                        ControlResponse::new(code, &e.to_string())
+                    }
+                };
+                if !answered {
+                    control.answer(token, response);
+                }
             }
         }
     }
@@ -674,7 +826,22 @@ impl Daemon {
         }
     }
 
-    fn on_request(
+    fn on_request(&mut self, kind: RequestKind, req: &thruster_protocol::ControlRequest) -> Reply {
+        if kind == RequestKind::Load {
+            // Answered when the file is read (`poll_load`), never on this thread's time.
+            let path = PathBuf::from(req.text.as_str());
+            let token = self.next_token;
+            self.next_token += 1;
+            return match self.loader.start(token, &path) {
+                Ok(()) => Reply::Later(token),
+                Err(busy) => Reply::Now(ControlResponse::new(ResponseCode::Busy, &busy)),
+            };
+        }
+        Reply::Now(self.on_immediate_request(kind, req))
+    }
+
+    /// Every request but a load: answered at once.
+    fn on_immediate_request(
         &mut self,
         kind: RequestKind,
         req: &thruster_protocol::ControlRequest,
@@ -730,23 +897,7 @@ impl Daemon {
                 };
             }
             RequestKind::Load => {
-                let path = PathBuf::from(req.text.as_str());
-                return match store::load(&path) {
-                    Ok(Some(model)) => {
-                        let result = self.machine.load_model(model);
-                        let shown = path.display().to_string();
-                        self.journal(|j| j.text(InputKind::Load, 0, result.is_err(), &shown));
-                        match result {
-                            Ok(()) => ControlResponse::ok(&format!("loaded {shown}")),
-                            Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.to_string()),
-                        }
-                    }
-                    Ok(None) => ControlResponse::new(
-                        ResponseCode::Failed,
-                        &format!("{}: no such file", path.display()),
-                    ),
-                    Err(e) => ControlResponse::new(ResponseCode::Failed, &e.to_string()),
-                };
+                unreachable!("loads are answered by poll_load")
             }
             RequestKind::Shutdown => {
                 self.shutdown.store(true, Ordering::SeqCst);
@@ -922,6 +1073,12 @@ impl Daemon {
         self.rejected.write_to(&mut msg);
         msg.requests_refused = self.refused;
         msg.samples_missed = self.missed;
+        let late = self.machine.late_solves();
+        if late > 0 {
+            // Before the save note: it is rarer and more urgent, so it goes first.
+            let text = format!("{late} late solves | {}", msg.text());
+            msg.set_text(&text);
+        }
         if let Some(why) = &self.save_error {
             // First, since the text is bounded (128 bytes) and the state has its own field: the
             // machine's words are what gets cut.

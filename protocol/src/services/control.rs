@@ -1,6 +1,7 @@
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::time::{Duration, Instant};
 
+use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::client::Client;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -58,6 +59,18 @@ pub struct ServeCount {
     pub invalid: usize,
 }
 
+/// A handler's answer to one request (see [`ControlServer::serve_deferring`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Reply {
+    /// Answer now.
+    Now(ControlResponse),
+    /// Answer later, with [`ControlServer::answer`] and this token (the handler's own
+    /// number for the operation): the request is kept open meanwhile.
+    Later(u64),
+}
+
+type Active = ActiveRequest<Ipc, ControlRequest, (), ControlResponse, ()>;
+
 /// The daemon's end of the control service: server plus the listener that client
 /// requests notify. Not `Send`.
 #[derive(Debug)]
@@ -65,6 +78,9 @@ pub struct ControlServer {
     server: Server<Ipc, ControlRequest, (), ControlResponse, ()>,
     listener: Listener<Ipc>,
     service: String,
+    /// Requests answered later, by token: an operation that must not block the caller's loop
+    /// (a model file read on another thread) answers when it is done.
+    deferred: RefCell<Vec<(u64, u64, Active)>>,
 }
 
 impl ControlServer {
@@ -84,6 +100,7 @@ impl ControlServer {
             server,
             listener,
             service,
+            deferred: RefCell::new(Vec::new()),
         })
     }
 
@@ -107,6 +124,16 @@ impl ControlServer {
     where
         F: FnMut(RequestKind, &ControlRequest) -> ControlResponse,
     {
+        self.serve_deferring(|kind, request| Reply::Now(handler(kind, request)))
+    }
+
+    /// As [`ControlServer::serve`], but the handler may keep a request open
+    /// ([`Reply::Later`]) and answer it with [`ControlServer::answer`] in a later round; the
+    /// client waits for it up to its own timeout.
+    pub fn serve_deferring<F>(&self, mut handler: F) -> Result<ServeCount, IpcError>
+    where
+        F: FnMut(RequestKind, &ControlRequest) -> Reply,
+    {
         let mut count = ServeCount::default();
         while let Some(active) = self
             .server
@@ -114,24 +141,53 @@ impl ControlServer {
             .map_err(ice("receive request", &self.service))?
         {
             let request = *active.payload();
-            let mut response = match decode(&request) {
+            let response = match decode(&request) {
                 Ok(kind) => {
                     count.answered += 1;
-                    handler(kind, &request)
+                    match handler(kind, &request) {
+                        Reply::Now(response) => response,
+                        Reply::Later(token) => {
+                            self.deferred
+                                .borrow_mut()
+                                .push((token, request.seq, active));
+                            continue;
+                        }
+                    }
                 }
                 Err(reason) => {
                     count.invalid += 1;
                     ControlResponse::new(ResponseCode::InvalidRequest, &reason)
                 }
             };
-            response.seq = request.seq;
-            // A client that gave up (timed out and dropped its pending response) makes
-            // this fail; that must not stop the daemon from serving the others.
-            if let Err(e) = active.send_copy(response) {
-                tracing::debug!(service = %self.service, error = ?e, "control response not delivered");
-            }
+            self.send(active, request.seq, response);
         }
         Ok(count)
+    }
+
+    /// Answers every request kept open with `token`; false when there was none.
+    pub fn answer(&self, token: u64, response: ControlResponse) -> bool {
+        let mut answered = false;
+        let mut deferred = self.deferred.borrow_mut();
+        while let Some(i) = deferred.iter().position(|(t, _, _)| *t == token) {
+            let (_, seq, active) = deferred.swap_remove(i);
+            self.send(active, seq, response);
+            answered = true;
+        }
+        answered
+    }
+
+    /// Requests kept open, not yet answered.
+    pub fn deferred(&self) -> usize {
+        self.deferred.borrow().len()
+    }
+
+    fn send(&self, active: Active, seq: u64, mut response: ControlResponse) {
+        response.seq = seq;
+        // A client that gave up (timed out and dropped its pending response) makes
+        // this fail; that must not stop the daemon from serving the others.
+        if let Err(e) = active.send_copy(response) {
+            tracing::debug!(service = %self.service, error = ?e, "control response not delivered");
+        }
     }
 
     /// Full service name.

@@ -33,7 +33,7 @@ pub use cleanup::{
     PurgeReport, TidyOnDrop,
 };
 pub use config::{IpcConfig, CONNECTION_TIMEOUT, DEFAULT_ROOT_BASE, MAX_NAMESPACE_LEN, SHM_DIR};
-pub use control::{ControlClient, ControlServer, ServeCount, CONTROL_LEAF};
+pub use control::{ControlClient, ControlServer, Reply, ServeCount, CONTROL_LEAF};
 pub use error::{AccessDenied, IpcError};
 pub use ports::{create_waitset, open_event, open_topic, Inbox, Port, Reader};
 pub use topics::{

@@ -605,7 +605,9 @@ impl Estimator {
     }
 
     /// The decision when it does not depend on the estimate; None when the bound decides.
-    fn stop_gate(&self) -> Option<StopDecision> {
+    /// Cheap (counts only): the machine asks it on the control thread and leaves the solve
+    /// for the estimate to a job (`crate::solve`).
+    pub fn stop_gate(&self) -> Option<StopDecision> {
         if self.pulses >= self.cfg.max_pulses {
             return Some(StopDecision::MaxPulses);
         }

@@ -66,6 +66,16 @@ pub struct MachineConfig {
     /// does not, a command u != 0 goes out as sign(u) (deadband + (1 - deadband) |u|), so thrust
     /// stays proportional to what the estimator and controller asked for.
     pub deadband: f64,
+    /// Vehicle time a solve (the estimate after a pulse, a stop decision, an interval's
+    /// decision under control, the final model, a refinement window's fit) is given, s
+    /// (default 0.02). Its result is applied at the first sample at or after submission +
+    /// this, whoever computed it, so the daemon (a solver thread) and replay (inline) reach
+    /// the same models at the same samples. 20 ms is over 5x the slowest solve (3.6 ms at
+    /// N = 16 with a carried-over prior) and 4 samples at 200 Hz; longer delays every
+    /// decision by as much (the run goes on pulsing or dithering meanwhile; at 30 ms the
+    /// change test's noise-free detection moved from 3.8 s to the window's 6.5 s, through the
+    /// vehicle's slightly different path). In (0, 1].
+    pub solve_budget_s: f64,
 }
 
 impl Default for MachineConfig {
@@ -85,6 +95,7 @@ impl Default for MachineConfig {
             max_sample_gap_s: 0.1,
             recover_samples: 20,
             deadband: 0.0,
+            solve_budget_s: 0.02,
         }
     }
 }

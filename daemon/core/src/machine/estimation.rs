@@ -18,6 +18,11 @@ use crate::navigation::rest_drift::RestDrift;
 mod closed_loop;
 pub(super) use closed_loop::{ClosedLoop, ClosedStep};
 
+use crate::solve::{Purpose, SolveResult, Solver};
+
+/// The estimation run's owner number for its solver (see `solve::owner_of`).
+pub(super) const ESTIMATION: u64 = 0;
+
 /// One IMU sample as the run uses it: the body rate and the gravity-compensated acceleration.
 pub(super) struct Motion {
     pub(super) gyro: Vector3<f64>,
@@ -33,9 +38,11 @@ pub(super) enum PulseStep {
     NoRun,
     /// The pulse goes on (its thrust was written).
     Pulsing,
-    /// The pulse ended; the decision says whether the run stops now.
+    /// The pulse ended. `gate`: the stop decision when the counts alone make it (see
+    /// `Estimator::stop_gate`); None when the estimate's error bound decides, which takes a
+    /// solve (a job, `crate::solve`).
     Ended {
-        decision: StopDecision,
+        gate: Option<StopDecision>,
         pulses: usize,
     },
 }
@@ -54,11 +61,14 @@ pub(super) struct EstimationRun {
     burst: bool,
     /// What the run keeps from the model before a known change (`identification::carry_over`).
     prior: Option<DynamicPrior>,
+    /// The run's solves, out as jobs and back as results applied at their due sample.
+    solver: Solver,
 }
 
 impl EstimationRun {
-    pub(super) fn new() -> Self {
+    pub(super) fn new(solve_budget_s: f64) -> Self {
         EstimationRun {
+            solver: Solver::new(solve_budget_s, ESTIMATION),
             noise: NoiseMeter::new(),
             levels: None,
             est: None,
@@ -105,6 +115,7 @@ impl EstimationRun {
 
     /// A new run begins: the noise is measured afresh.
     pub(super) fn restart(&mut self) {
+        self.solver.cancel();
         self.noise = NoiseMeter::new();
         self.rest = Rest::default();
         self.est = None;
@@ -120,8 +131,64 @@ impl EstimationRun {
 
     /// The run ends without a candidate (abort, fault, idle, hold, reconfiguration).
     pub(super) fn stop(&mut self) {
+        self.solver.cancel();
         self.est = None;
         self.closed = None;
+    }
+
+    /// The run's solves (jobs out, results in).
+    pub(super) fn solver(&mut self) -> &mut Solver {
+        &mut self.solver
+    }
+
+    /// The job a sample at `t_ns` needs and whose result is not back.
+    pub(super) fn awaiting(&self, t_ns: u64) -> Option<u64> {
+        self.solver.awaiting(t_ns)
+    }
+
+    pub(super) fn late_solves(&self) -> u64 {
+        self.solver.late()
+    }
+
+    /// Whether the run waits for a result of this kind.
+    pub(super) fn waiting_for(&self, purpose: Purpose) -> bool {
+        self.solver.waiting_for(purpose)
+    }
+
+    /// Submit a solve of the run as it stands at `t_ns` (after a pulse, `purpose` saying what
+    /// the result is for). False when there is no run, or (a progress estimate only) when the
+    /// queue is full: a progress estimate is skipped then, status shows the previous one.
+    pub(super) fn submit_pulse(&mut self, t_ns: u64, purpose: Purpose, key: Option<u64>) -> bool {
+        let Some(est) = self.est.as_ref() else {
+            return false;
+        };
+        if purpose == Purpose::Progress && !self.solver.has_room() {
+            return false;
+        }
+        self.solver.submit_pulse(est, t_ns, purpose, key);
+        true
+    }
+
+    /// Submit a decision interval's solve under control (see `closed_loop_sample`).
+    pub(super) fn submit_interval(
+        &mut self,
+        t_ns: u64,
+        elapsed_s: f64,
+        setup: &MachineSetup,
+        key: Option<u64>,
+    ) -> bool {
+        let Some(est) = self.est.as_ref() else {
+            return false;
+        };
+        let cfg = &setup.identification;
+        self.solver
+            .submit_interval(est, t_ns, (elapsed_s, cfg.min_s, cfg.max_s), key);
+        true
+    }
+
+    /// A result applied: its estimate is the run's latest.
+    pub(super) fn keep_estimate(&mut self, estimate: Estimate) {
+        self.last_estimate = Some(estimate);
     }
 
     /// The run pulses back to back (the dynamic method fits through the motion, no settles).
@@ -242,14 +309,10 @@ impl EstimationRun {
             return PulseStep::Pulsing;
         }
         est.end_pulse();
-        let estimate = est.estimate();
-        let decision = est.stop_decision_with(&estimate);
-        self.last_estimate = Some(estimate);
-        if !decision.is_stop() {
-            self.quiet_since_ns = None;
-        }
+        // The estimate and the decision it makes are a solve: the machine submits it as a job.
+        self.quiet_since_ns = None;
         PulseStep::Ended {
-            decision,
+            gate: est.stop_gate(),
             pulses: est.pulses(),
         }
     }
@@ -276,15 +339,20 @@ impl EstimationRun {
         )
     }
 
-    /// The run ends with its estimate: the candidate model (for the geometry `key`, made at
-    /// `t_ns`) and how many pulses it took. None when no run was under way.
-    pub(super) fn conclude(&mut self, key: Option<u64>, t_ns: u64) -> Option<(Model, usize)> {
-        let est = self.est.take()?;
+    /// The run ends with the result that stopped it: its candidate model (made by the job)
+    /// and how many pulses it took. None when the result has no candidate.
+    pub(super) fn conclude(&mut self, result: SolveResult) -> Option<(Model, usize)> {
+        self.solver.cancel();
+        self.est = None;
         self.closed = None;
-        let estimate = est.estimate();
-        let candidate = Model::from_estimate(&estimate, key, t_ns);
+        let SolveResult {
+            estimate,
+            candidate,
+            pulses,
+            ..
+        } = result;
         self.last_estimate = Some(estimate);
-        Some((candidate, est.pulses()))
+        Some((candidate?, pulses))
     }
 }
 

@@ -9,7 +9,8 @@
 //! - `types`: what goes in and out (states, inputs, the command, events, status);
 //! - `config`: the machine's settings and setup;
 //! - `models`: the model slot (the model in force, the previous one, the per-geometry cache);
-//! - `estimation`: one estimation run (noise at rest, pulses and pauses, the candidate);
+//! - `estimation`: one estimation run (noise at rest, pulses and pauses, the candidate), its
+//!   solves handed out as jobs with a due time (`crate::solve`);
 //! - `state_machine`: the machine itself (routing, state changes, faults, levelling, control);
 //! - `telemetry`: what the machine is doing, one snapshot per sample, for the `telemetry` topic.
 
@@ -20,6 +21,7 @@ mod state_machine;
 mod telemetry;
 mod types;
 
+pub use crate::solve::{SolveJob, SolveResult, SolverMode};
 pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};

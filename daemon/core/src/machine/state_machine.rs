@@ -6,6 +6,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::{MachineSetup, ReconfigPolicy};
+use super::estimation::ESTIMATION;
 use super::estimation::{ClosedStep, EstimationRun, Motion, PulseStep};
 use super::models::ModelSlot;
 use super::types::{
@@ -18,9 +19,10 @@ use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::response::motion_accel;
 use crate::estimator::{Estimate, NoiseLevels, StopDecision};
 use crate::identification::carry_over::{carried_over, ThrusterChange};
-use crate::model::{nominal_effectiveness, Model, ModelSource};
+use crate::model::{nominal_effectiveness, Model, ModelSource, PreparedModel};
 use crate::monitor::{MismatchAction, ModelMonitor};
 use crate::refinement::{Refiner, Tick, WindowVerdict};
+use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
 struct Levelling {
@@ -78,7 +80,7 @@ impl Machine {
             target: None,
             models: ModelSlot::default(),
             geometry: None,
-            run: EstimationRun::new(),
+            run: EstimationRun::new(setup.machine.solve_budget_s),
             levelling: None,
             resume: Resume::Idle,
             good_samples: 0,
@@ -90,6 +92,7 @@ impl Machine {
             output_block: None,
             setup,
         };
+        m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);
         if let Some(g) = m.setup.geometry.clone() {
             if g.positions.len() == n {
                 m.geometry = Some(g.clone());
@@ -153,6 +156,68 @@ impl Machine {
         self.attitude.gyro_bias()
     }
 
+    /// Who runs the solve jobs (default `Inline`: the machine itself, on the sample that
+    /// submits them). The daemon sets `External` and runs them on its worker thread.
+    pub fn set_solver_mode(&mut self, mode: SolverMode) {
+        self.run.solver().set_mode(mode);
+        self.refiner.set_solver_mode(mode);
+    }
+
+    /// The next solve job to run (`External` mode; None inline or when there is none).
+    pub fn take_job(&mut self) -> Option<SolveJob> {
+        self.run
+            .solver()
+            .take_job()
+            .or_else(|| self.refiner.take_job())
+    }
+
+    /// A job's result is back. It is applied at the first sample at or after the job's due
+    /// time (see `crate::solve`); a result for a job the machine no longer waits for (the
+    /// run was aborted, faulted, restarted) is dropped.
+    pub fn deliver(&mut self, result: SolveResult) {
+        if owner_of(result.id()) == ESTIMATION {
+            self.run.solver().deliver(result);
+        } else {
+            self.refiner.deliver(result);
+        }
+    }
+
+    /// The job a sample at `t_ns` would need and whose result is not back: a caller that must
+    /// reproduce the inline outcome (lockstep) waits for it before handing over the sample.
+    pub fn awaiting_result(&self, t_ns: u64) -> Option<u64> {
+        // The refinement's only matters where a control tick will judge it.
+        let refining = self.state == State::Active;
+        self.run
+            .awaiting(t_ns)
+            .or_else(|| self.refiner.awaiting(t_ns).filter(|_| refining))
+    }
+
+    /// Solves whose result was not back by their due sample, since start (applied late:
+    /// such a run is not reproduced exactly by an inline replay).
+    pub fn late_solves(&self) -> u64 {
+        self.run.late_solves() + self.refiner.late_solves()
+    }
+
+    /// The solver is gone (the worker thread died, or in lockstep a result did not come back
+    /// in time): whatever was waiting for it cannot go on. Fault, thrusters neutral; the
+    /// fault clears as after any other, but an interrupted estimation is not restarted on
+    /// its own (it would need the solver again): idle, or holding when a model is in force.
+    pub fn on_solver_lost(&mut self, why: &str) {
+        let t = self.last_t_ns.unwrap_or(0);
+        if self.state != State::Fault {
+            self.fault(t, why);
+        } else {
+            self.run.stop();
+        }
+        if self.resume == Resume::Estimate {
+            self.resume = if self.models.current().is_some() {
+                Resume::Active
+            } else {
+                Resume::Idle
+            };
+        }
+    }
+
     /// Events since the last call (model swaps, state changes), oldest first.
     pub fn take_events(&mut self) -> Vec<Event> {
         std::mem::take(&mut self.events)
@@ -163,6 +228,17 @@ impl Machine {
     /// as any swap, the physical bounds included.
     pub fn load_model(&mut self, model: Model) -> Result<(), Refused> {
         let model = model.with_derived_allocation(&self.setup.estimator);
+        self.install_loaded(model)
+    }
+
+    /// The same for a model already prepared off the control thread
+    /// ([`Model::prepared`], with the same estimator settings): only the checks against the
+    /// machine (thruster count, confidence) and the swap are left.
+    pub fn load_prepared(&mut self, model: PreparedModel) -> Result<(), Refused> {
+        self.install_loaded(model.into_model())
+    }
+
+    fn install_loaded(&mut self, model: Model) -> Result<(), Refused> {
         self.try_swap(model, ModelSource::Loaded)
             .map_err(|e| Refused(format!("model not used: {e}")))?;
         self.describe_swap("model loaded");
@@ -206,6 +282,11 @@ impl Machine {
         let correct = self.state != State::Pulse;
         self.attitude
             .update_with(&gyro, &accel, mag.as_ref(), dt, correct);
+        // Solves due by this sample's time, before the state acts on it (the due-time rule,
+        // `crate::solve`).
+        while let Some((purpose, result)) = self.run.solver().take_due(s.t_ns) {
+            self.apply_solve(purpose, result);
+        }
 
         match self.state {
             State::Idle | State::Solve => Command::neutral(self.n),
@@ -712,15 +793,78 @@ impl Machine {
                 finish(&mut cmd, self.setup.machine.deadband);
                 return cmd;
             }
-            PulseStep::Ended { decision, .. } if decision.is_stop() => self.solve(decision),
-            PulseStep::Ended { .. } if self.run.back_to_back() => return self.start_pulse(s.t_ns),
-            PulseStep::Ended { pulses, .. } => {
+            PulseStep::Ended {
+                gate: Some(d),
+                pulses,
+            } if d.is_stop() => {
+                // A limit: the run's model is solved while the thrusters rest.
+                self.run
+                    .submit_pulse(s.t_ns, Purpose::Conclude, self.geometry_key());
+                self.state = State::Solve;
+                self.phase_start_ns = s.t_ns;
+                self.text = format!("solving the model of {pulses} pulses");
+            }
+            PulseStep::Ended { gate, .. } if self.run.back_to_back() => {
+                // Back to back the excitation goes on while the decision is out, as it did
+                // when the decision was made on this sample: a stop applied at its due sample
+                // ends the next pulse early and swaps in the model of the data up to here, the
+                // same model as then (a rest at neutral instead changed every later pulse's
+                // excitation, and with it every model learned after the first stop point).
+                let purpose = if gate.is_some() {
+                    Purpose::Progress
+                } else {
+                    Purpose::Decide
+                };
+                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
+                return self.start_pulse(s.t_ns);
+            }
+            PulseStep::Ended { gate, pulses } => {
+                let purpose = if gate.is_some() {
+                    Purpose::Progress
+                } else {
+                    // The bound decides: the pause after the pulse (longer than the solve's
+                    // budget by default) does not end before the decision is applied.
+                    Purpose::Decide
+                };
+                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
                 self.state = State::Settle;
                 self.phase_start_ns = s.t_ns;
                 self.text = format!("settling after pulse {pulses}");
             }
         }
         Command::neutral(self.n)
+    }
+
+    fn geometry_key(&self) -> Option<u64> {
+        self.geometry.as_ref().map(|g| g.key())
+    }
+
+    /// A solve's result at its due sample (see `crate::solve`). The queue is emptied when
+    /// a run stops, so every result applied belongs to the run under way.
+    fn apply_solve(&mut self, purpose: Purpose, result: SolveResult) {
+        let decision = result.decision;
+        match purpose {
+            Purpose::Progress => self.run.keep_estimate(result.estimate),
+            Purpose::Decide | Purpose::Conclude if decision.is_stop() => {
+                self.solve(decision, result)
+            }
+            Purpose::Decide => self.run.keep_estimate(result.estimate),
+            Purpose::Conclude => {
+                // A limit that is no stop cannot come from the estimator; never leave the
+                // run stuck in Solve.
+                self.run.stop();
+                self.transition(State::Idle, "internal: a concluding solve did not stop");
+            }
+            Purpose::Interval if decision.is_stop() => self.solve_under_control(decision, result),
+            // The refinement's own (see `Refiner::observe`); never the run's.
+            Purpose::Window => {}
+            Purpose::Interval => {
+                self.run.keep_estimate(result.estimate);
+                let t = self.last_t_ns.unwrap_or(0);
+                let excited = self.run.excited_s(t);
+                self.text = format!("identifying under control: {excited:.0} s of dither");
+            }
+        }
     }
 
     fn settle_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, accel: &Vector3<f64>) -> Command {
@@ -735,6 +879,11 @@ impl Machine {
         let Some(quiet_for) = self.run.settle_sample(s.t_ns, &m, k) else {
             return Command::neutral(self.n);
         };
+        if self.run.waiting_for(Purpose::Decide) {
+            // The stop decision is out: the pause goes on at neutral (the samples feed the
+            // fit) until it is applied.
+            return Command::neutral(self.n);
+        }
         let m = &self.setup.machine;
         if (elapsed >= m.settle_min_s && quiet_for >= m.settle_quiet_s) || elapsed >= m.settle_max_s
         {
@@ -809,20 +958,20 @@ impl Machine {
             // The text stays the transition's (why the identification began) until the
             // first decision: a status reader must be able to see it.
             ClosedStep::Holding | ClosedStep::Exciting => {}
-            ClosedStep::Decided(d) if d.is_stop() => self.solve_under_control(d),
-            ClosedStep::Decided(_) => {
-                let excited = self.run.excited_s(s.t_ns);
-                self.text = format!("identifying under control: {excited:.0} s of dither");
+            ClosedStep::Decide { elapsed_s } => {
+                let key = self.geometry_key();
+                self.run
+                    .submit_interval(s.t_ns, elapsed_s, &self.setup, key);
             }
         }
         cmd
     }
 
-    fn solve_under_control(&mut self, decision: StopDecision) {
-        let key = self.geometry.as_ref().map(|g| g.key());
+    fn solve_under_control(&mut self, decision: StopDecision, result: SolveResult) {
+        let key = self.geometry_key();
         let t_ns = self.last_t_ns.unwrap_or(0);
         let seconds = self.run.excited_s(t_ns);
-        let Some((candidate, _)) = self.run.conclude(key, t_ns) else {
+        let Some((candidate, _)) = self.run.conclude(result) else {
             return;
         };
         let why = match decision {
@@ -848,10 +997,11 @@ impl Machine {
         }
     }
 
-    fn solve(&mut self, decision: StopDecision) {
+    fn solve(&mut self, decision: StopDecision, result: SolveResult) {
         self.state = State::Solve;
-        let key = self.geometry.as_ref().map(|g| g.key());
-        let Some((candidate, pulses)) = self.run.conclude(key, self.last_t_ns.unwrap_or(0)) else {
+        let key = self.geometry_key();
+        let Some((candidate, pulses)) = self.run.conclude(result) else {
+            self.transition(State::Idle, "internal: a stopping solve made no model");
             return;
         };
         let why = match decision {

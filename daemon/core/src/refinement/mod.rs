@@ -38,6 +38,7 @@ use crate::estimator::{Estimate, Estimator};
 use crate::estimator::{EstimatorConfig, Method, NoiseLevels};
 use crate::identification::Dither;
 use crate::model::Model;
+use crate::solve::{Purpose, SolveJob, SolveResult, Solver, SolverMode};
 use change_test::{ChangeSettings, ChangeStat, ChangeTest};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -452,7 +453,13 @@ pub struct Refiner {
     exceeded: [bool; MAX_THRUSTERS],
     /// The per-sample change test (built even when off: it allocates only here).
     change: ChangeTest,
+    /// A window's fit (~1 ms) is a job, not a control tick's work (`crate::solve`); its result
+    /// is judged at the first tick at or after its due time.
+    solver: Solver,
 }
+
+/// The refinement's owner number for its solver (see `solve::owner_of`).
+const REFINEMENT: u64 = 1;
 
 /// What one control tick brings the refiner.
 pub struct Tick<'a> {
@@ -481,7 +488,39 @@ impl Refiner {
             last: None,
             refined: None,
             exceeded: [false; MAX_THRUSTERS],
+            solver: Solver::new(0.0, REFINEMENT),
         }
+    }
+
+    /// Window fits due `budget_s` of vehicle time after the window's decision point
+    /// (`machine.solve_budget_s`; 0, the default of a bare refiner, applies them at once).
+    pub fn set_solve_budget(&mut self, budget_s: f64) {
+        self.solver.set_budget(budget_s);
+    }
+
+    /// Who runs the window fits (see `crate::solve::SolverMode`).
+    pub fn set_solver_mode(&mut self, mode: SolverMode) {
+        self.solver.set_mode(mode);
+    }
+
+    /// The next window fit to run (`External` mode).
+    pub fn take_job(&mut self) -> Option<SolveJob> {
+        self.solver.take_job()
+    }
+
+    /// A window fit's result (dropped when the window is gone).
+    pub fn deliver(&mut self, result: SolveResult) {
+        self.solver.deliver(result);
+    }
+
+    /// A window fit due at `t_ns` whose result is not back.
+    pub fn awaiting(&self, t_ns: u64) -> Option<u64> {
+        self.solver.awaiting(t_ns)
+    }
+
+    /// Window fits not back by their due tick, since start.
+    pub fn late_solves(&self) -> u64 {
+        self.solver.late()
     }
 
     /// The model refined by the last window (`update` on, no change found), taken once.
@@ -491,6 +530,7 @@ impl Refiner {
 
     /// Start over (a new model, control restarted): the next tick opens a fresh window.
     pub fn reset(&mut self) {
+        self.solver.cancel();
         self.window = None;
         self.refined = None;
         self.settled_since_ns = None;
@@ -597,6 +637,12 @@ impl Refiner {
         command: &mut [f64],
     ) -> Option<WindowVerdict> {
         let n = command.len().min(model.thrusters()).min(MAX_THRUSTERS);
+        // A window fit due now is judged before this tick's sample goes in.
+        if let Some((_, result)) = self.solver.take_due(tick.t_ns) {
+            if let Some(verdict) = self.judge_window(result, model, est_cfg) {
+                return Some(verdict);
+            }
+        }
         let window = match self.window.as_mut() {
             Some(w) if w.est.thrusters() == n => w,
             _ => {
@@ -635,17 +681,44 @@ impl Refiner {
         if tick.t_ns < window.next_decision_ns {
             return None;
         }
+        if self.solver.waiting_for(Purpose::Window) {
+            // The last decision point's fit is still out: decide once it is judged.
+            return None;
+        }
         window.next_decision_ns += (est_cfg.segment_s * 1e9) as u64;
         window.est.end_interval();
         let elapsed = tick.t_ns.saturating_sub(window.start_ns) as f64 * 1e-9;
         if elapsed < self.cfg.window_min_s {
             return None;
         }
-        let e = window.est.estimate();
+        // The fit is a job; the window goes on taking samples until its result is judged.
+        self.solver.submit_window(&window.est, tick.t_ns, elapsed);
+        None
+    }
+
+    /// A window's fit is back (at its due tick): not yet confident and not at its longest, the
+    /// window goes on; otherwise the verdict, and the window ends (the samples since the fit's
+    /// decision point are dropped with it).
+    fn judge_window(
+        &mut self,
+        result: SolveResult,
+        model: &Model,
+        est_cfg: &EstimatorConfig,
+    ) -> Option<WindowVerdict> {
+        let (e, elapsed, t_ns) = (result.estimate, result.elapsed_s, result.made_t_ns);
         if e.rel_err_rot > self.cfg.window_rel_err && elapsed < self.cfg.window_max_s {
             return None;
         }
-        let mut verdict = judge(&e, model, &self.cfg, elapsed);
+        let (mut verdict, failed) = judge(&e, model, &self.cfg, elapsed);
+        if failed {
+            // A failed fit: no verdict on any thruster, nothing folded in, the streak broken.
+            verdict.changed = false;
+            verdict.in_a_row = 0;
+            self.last = Some(verdict);
+            self.window = None;
+            self.refined = None;
+            return Some(verdict);
+        }
         verdict.in_a_row = match self.last {
             Some(prev)
                 if verdict.changed && prev.in_a_row > 0 && prev.thruster == verdict.thruster =>
@@ -674,7 +747,7 @@ impl Refiner {
             fusion::fuse(
                 model,
                 &e,
-                tick.t_ns,
+                t_ns,
                 elapsed,
                 &settings,
                 est_cfg,
@@ -715,8 +788,22 @@ fn open_window(
     }
 }
 
-/// Compare the window's rotation rows with the model's, column by column.
-fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> WindowVerdict {
+/// A window whose fit moves a column by more than this share of the model's column names nobody
+/// and refines nothing: a thruster turned around moves its column by 200 %, a dead one by 100 %;
+/// more is a failed fit. On four_up, whose four thrusters the controller commands together, a
+/// noise-free window "moved" thruster 2 by 50,300 % (chi2 681) once the solve budget
+/// (`machine.solve_budget_s`) had moved its windows by 20 ms, and re-estimated an unchanged
+/// vehicle into a model 70 % off. The change test caps a joint move the same way.
+const MAX_PLAUSIBLE_CHANGE: f64 = 3.0;
+
+/// Compare the window's rotation rows with the model's, column by column. Also whether the
+/// fit failed (a column moved beyond [`MAX_PLAUSIBLE_CHANGE`]).
+fn judge(
+    e: &Estimate,
+    model: &Model,
+    cfg: &RefinementConfig,
+    window_s: f64,
+) -> (WindowVerdict, bool) {
     let b = &model.effectiveness;
     let n = e.effectiveness.ncols().min(b.ncols());
     let biggest = (0..n)
@@ -732,6 +819,7 @@ fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> 
         window_s,
         change_test: false,
     };
+    let mut failed = false;
     for i in 0..n {
         let norm = b.fixed_view::<3, 1>(0, i).norm();
         // A thruster with (almost) no moment in the model: its share is meaningless.
@@ -757,6 +845,10 @@ fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> 
             }
         }
         let change = d2.sqrt() / norm;
+        if change > MAX_PLAUSIBLE_CHANGE {
+            failed = true;
+            continue;
+        }
         let changed = change > cfg.min_change && chi2 > cfg.chi2;
         if (changed && !worst.changed) || (changed == worst.changed && chi2 > worst.chi2) {
             worst = WindowVerdict {
@@ -768,7 +860,7 @@ fn judge(e: &Estimate, model: &Model, cfg: &RefinementConfig, window_s: f64) -> 
             };
         }
     }
-    worst
+    (worst, failed)
 }
 
 /// A window's estimate with effectiveness `b` and every standard error `se` (tests of the
@@ -820,16 +912,25 @@ mod tests {
         let cfg = RefinementConfig::default();
         let mut moved = b.clone();
         moved[(0, 1)] = 0.7; // thruster 2 now also rolls: 70 % of its column
-        let v = judge(&estimate(moved.clone(), 0.05), &model, &cfg, 5.0);
-        assert!(v.changed && v.thruster == 1, "{v:?}");
+        let (v, failed) = judge(&estimate(moved.clone(), 0.05), &model, &cfg, 5.0);
+        assert!(v.changed && v.thruster == 1 && !failed, "{v:?}");
         assert!((v.change - 0.7).abs() < 1e-12);
         // The same move within the noise: not significant.
-        let v = judge(&estimate(moved, 0.5), &model, &cfg, 5.0);
+        let (v, _) = judge(&estimate(moved, 0.5), &model, &cfg, 5.0);
         assert!(!v.changed, "{v:?}");
         // A small, significant move (a model's own bias): not a change.
         let mut biased = b.clone();
         biased[(0, 0)] = 1.1;
-        let v = judge(&estimate(biased, 0.001), &model, &cfg, 5.0);
+        let (v, _) = judge(&estimate(biased, 0.001), &model, &cfg, 5.0);
         assert!(!v.changed, "{v:?}");
+        // Turned around (200 %): a change; 500x (50,000 %): a failed fit, naming nobody.
+        let mut reversed = b.clone();
+        reversed[(0, 0)] = -1.0;
+        let (v, failed) = judge(&estimate(reversed, 0.05), &model, &cfg, 5.0);
+        assert!(v.changed && v.thruster == 0 && !failed, "{v:?}");
+        let mut absurd = b.clone();
+        absurd[(0, 1)] = 500.0;
+        let (v, failed) = judge(&estimate(absurd, 0.05), &model, &cfg, 5.0);
+        assert!(failed && !v.changed, "{v:?}");
     }
 }

@@ -15,6 +15,13 @@
 //! which needs each segment's centred Gram matrix G_s and cross products r_s. They are kept in
 //! `CLUSTERS` slots allocated up front; past that many segments, slot s % CLUSTERS sums several
 //! segments, which is still a valid (coarser) cluster.
+//!
+//! The slots are shared (`Arc`) between copies: the daemon hands a copy of a running fit to its
+//! solver thread after every pulse (`crate::solve`), and copying the 32 closed slots of both
+//! 70-wide fits (N = 16, under control) was 2.5 MB on the control thread. A closed slot changes only when a segment
+//! closes into it, and only then is it copied, if a job still holds it.
+
+use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
@@ -68,8 +75,8 @@ pub struct SegmentedLs {
     seg_x: DVector<f64>,
     seg_y: Vector3<f64>,
     // Closed segments' centred sums, slot s % CLUSTERS (full symmetric Gram matrices).
-    cluster_gram: Vec<DMatrix<f64>>,
-    cluster_xy: Vec<DMatrix<f64>>,
+    cluster_gram: Vec<Arc<DMatrix<f64>>>,
+    cluster_xy: Vec<Arc<DMatrix<f64>>>,
 }
 
 impl SegmentedLs {
@@ -87,8 +94,13 @@ impl SegmentedLs {
             seg_yy: Vector3::zeros(),
             seg_x: DVector::zeros(k),
             seg_y: Vector3::zeros(),
-            cluster_gram: vec![DMatrix::zeros(k, k); CLUSTERS],
-            cluster_xy: vec![DMatrix::zeros(k, 3); CLUSTERS],
+            // One matrix per slot (not one shared by all): a slot is written in place.
+            cluster_gram: (0..CLUSTERS)
+                .map(|_| Arc::new(DMatrix::zeros(k, k)))
+                .collect(),
+            cluster_xy: (0..CLUSTERS)
+                .map(|_| Arc::new(DMatrix::zeros(k, 3)))
+                .collect(),
         }
     }
 
@@ -168,8 +180,9 @@ impl SegmentedLs {
         self.yy += self.seg_yy - self.seg_y.component_mul(&self.seg_y) / n;
         self.gram += &g;
         self.xy += &xy;
-        self.cluster_gram[slot] += &g;
-        self.cluster_xy[slot] += &xy;
+        // In place unless a solve job still holds this slot (then it is copied first).
+        *Arc::make_mut(&mut self.cluster_gram[slot]) += &g;
+        *Arc::make_mut(&mut self.cluster_xy[slot]) += &xy;
         g.fill(0.0);
         xy.fill(0.0);
         self.seg_gram = g;
@@ -220,7 +233,7 @@ impl SegmentedLs {
         open: &'a Option<(DMatrix<f64>, DMatrix<f64>)>,
     ) -> impl Iterator<Item = (&'a DMatrix<f64>, &'a DMatrix<f64>)> {
         let used = (self.segments.min(CLUSTERS as u64)) as usize;
-        let stored = (0..used).map(|s| (&self.cluster_gram[s], &self.cluster_xy[s]));
+        let stored = (0..used).map(|s| (&*self.cluster_gram[s], &*self.cluster_xy[s]));
         stored.chain(open.as_ref().map(|(og, oxy)| (og, oxy)))
     }
 

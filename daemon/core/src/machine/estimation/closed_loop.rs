@@ -7,10 +7,11 @@ use nalgebra::Vector3;
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::{EstimationRun, Motion};
-use crate::estimator::{Method, StopDecision};
+use crate::estimator::Method;
 use crate::identification::{Dither, IdentificationConfig};
 use crate::machine::config::MachineSetup;
 use crate::model::Model;
+use crate::solve::Purpose;
 
 /// Where a closed-loop run stands.
 #[derive(Debug, Clone)]
@@ -36,8 +37,9 @@ pub(in crate::machine) enum ClosedStep {
     Holding,
     /// The dither was added to the command.
     Exciting,
-    /// A decision interval ended; the decision says whether the run stops now.
-    Decided(StopDecision),
+    /// A decision interval ended, `elapsed_s` into the dither: its estimate and decision
+    /// are a solve (a job, `crate::solve`); the run goes on until its result is applied.
+    Decide { elapsed_s: f64 },
 }
 
 impl EstimationRun {
@@ -76,7 +78,9 @@ impl EstimationRun {
 
     /// One sample under control. `command` holds the controller's command (model units) for
     /// `n` thrusters and gets the dither added, faded by the attitude error `err_deg`; `m.gyro`
-    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now.
+    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now. A decision
+    /// interval that ends while the last one's solve is still out waits for it (the next
+    /// sample asks again): decisions are made in order, one at a time.
     #[allow(clippy::too_many_arguments)]
     pub(in crate::machine) fn closed_loop_sample(
         &mut self,
@@ -128,15 +132,12 @@ impl EstimationRun {
         c.dither
             .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
         c.sent[..k].copy_from_slice(command);
-        if t_ns < c.next_decision_ns {
+        if t_ns < c.next_decision_ns || self.solver.waiting_for(Purpose::Interval) {
             return ClosedStep::Exciting;
         }
         c.next_decision_ns += (setup.estimator.segment_s * 1e9) as u64;
         est.end_interval();
-        let estimate = est.estimate();
-        let elapsed = t_ns.saturating_sub(excite_from) as f64 * 1e-9;
-        let decision = est.closed_loop_decision(&estimate, elapsed, cfg.min_s, cfg.max_s);
-        self.last_estimate = Some(estimate);
-        ClosedStep::Decided(decision)
+        let elapsed_s = t_ns.saturating_sub(excite_from) as f64 * 1e-9;
+        ClosedStep::Decide { elapsed_s }
     }
 }

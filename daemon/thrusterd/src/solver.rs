@@ -1,0 +1,252 @@
+//! The solver thread: runs the machine's solve jobs (`thrusterd_core::machine::SolveJob`: an
+//! estimate, a stop decision, a final model; 0.5-4 ms each) off the control thread, so the
+//! sample that ends a pulse is answered as fast as any other.
+//!
+//! Two bounded queues: jobs in (`try_send`, the loop never waits to hand one over), results
+//! out (the loop takes them with `try_recv`, or in lockstep waits for a due one with a
+//! timeout). The thread runs at a lower scheduling priority than the control thread: on a
+//! small computer they share a core, and the control thread's sample must win.
+//!
+//! A panic in a job ends the thread; the loop learns it from the closed result queue, faults
+//! the machine (neutral) with the panic's message, and starts a fresh thread for what comes
+//! next.
+
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TryRecvError, TrySendError};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use thrusterd_core::machine::{SolveJob, SolveResult};
+
+/// Jobs and results in flight at most: the machine keeps at most 8 outstanding (one is the
+/// rule), so a full queue means the thread stopped taking work.
+const QUEUE: usize = 8;
+
+/// Niceness of the solver and loading threads (0 is the control thread's): their work, when
+/// it shares a core with the control thread, runs in the control thread's idle time.
+const NICE: i32 = 10;
+
+/// The solver is gone or cannot take work; the text says why.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SolverLost(pub String);
+
+impl std::fmt::Display for SolverLost {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// What runs a job (the real one is `SolveJob::run`; tests put in one that panics).
+pub type Runner = fn(SolveJob) -> SolveResult;
+
+pub struct SolverThread {
+    jobs: Option<SyncSender<SolveJob>>,
+    results: Receiver<SolveResult>,
+    handle: Option<JoinHandle<()>>,
+    runner: Runner,
+}
+
+impl SolverThread {
+    /// The solver thread, running each job with `SolveJob::run`.
+    pub fn spawn() -> std::io::Result<Self> {
+        Self::spawn_with(SolveJob::run)
+    }
+
+    /// The solver thread, running each job with `runner`.
+    pub fn spawn_with(runner: Runner) -> std::io::Result<Self> {
+        let (jobs, job_rx) = mpsc::sync_channel::<SolveJob>(QUEUE);
+        let (result_tx, results) = mpsc::sync_channel::<SolveResult>(QUEUE);
+        let handle = std::thread::Builder::new()
+            .name("thrusterd-solve".into())
+            .spawn(move || {
+                lower_priority();
+                // Ends when the loop drops its sender (shutdown) or stops reading results.
+                for job in job_rx {
+                    if result_tx.send(runner(job)).is_err() {
+                        break;
+                    }
+                }
+            })?;
+        Ok(SolverThread {
+            jobs: Some(jobs),
+            results,
+            handle: Some(handle),
+            runner,
+        })
+    }
+
+    /// Hands `job` over without waiting.
+    pub fn submit(&mut self, job: SolveJob) -> Result<(), SolverLost> {
+        let Some(jobs) = self.jobs.as_ref() else {
+            return Err(SolverLost("the solver thread is stopped".into()));
+        };
+        match jobs.try_send(job) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(_)) => Err(SolverLost(format!(
+                "the solver thread has {QUEUE} jobs queued and takes no more"
+            ))),
+            Err(TrySendError::Disconnected(_)) => Err(self.lost()),
+        }
+    }
+
+    /// A result, if one is back (never waits).
+    pub fn try_result(&mut self) -> Result<Option<SolveResult>, SolverLost> {
+        match self.results.try_recv() {
+            Ok(r) => Ok(Some(r)),
+            Err(TryRecvError::Empty) => Ok(None),
+            Err(TryRecvError::Disconnected) => Err(self.lost()),
+        }
+    }
+
+    /// A result, waiting up to `timeout` for one (None: none came).
+    pub fn wait_result(&mut self, timeout: Duration) -> Result<Option<SolveResult>, SolverLost> {
+        match self.results.recv_timeout(timeout) {
+            Ok(r) => Ok(Some(r)),
+            Err(RecvTimeoutError::Timeout) => Ok(None),
+            Err(RecvTimeoutError::Disconnected) => Err(self.lost()),
+        }
+    }
+
+    /// A fresh thread in place of a dead one (jobs of the old one are gone with it).
+    pub fn restart(&mut self) -> std::io::Result<()> {
+        self.stop();
+        *self = Self::spawn_with(self.runner)?;
+        Ok(())
+    }
+
+    /// Why the thread is gone: its panic message when it panicked.
+    fn lost(&mut self) -> SolverLost {
+        let why = match self.handle.take().map(JoinHandle::join) {
+            Some(Err(panic)) => {
+                let msg = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "no message".into());
+                format!("the solver thread panicked: {msg}")
+            }
+            _ => "the solver thread ended".into(),
+        };
+        SolverLost(why)
+    }
+
+    /// Lets the thread end: no more jobs; it finishes the one under way and ends when it
+    /// finds the job queue closed or its results unread (the receiver replaced or dropped).
+    /// Never waits for it: a job that does not return (the reason a lockstep wait gave up)
+    /// must not hold the control thread too; such a thread is left to itself.
+    fn stop(&mut self) {
+        self.jobs = None;
+        if let Some(h) = self.handle.take() {
+            if h.is_finished() {
+                let _ = h.join();
+            }
+        }
+    }
+}
+
+impl Drop for SolverThread {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// Lowers the calling thread's scheduling priority to [`NICE`]. Best effort: without it the
+/// work still runs, it only competes with the control thread on equal terms.
+pub fn lower_priority() {
+    // SAFETY: gettid and setpriority only read their integer arguments; on Linux
+    // PRIO_PROCESS with a thread id applies to that thread alone.
+    let rc = unsafe {
+        let tid = libc::gettid();
+        libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, NICE)
+    };
+    if rc != 0 {
+        tracing::debug!(
+            "solver thread priority unchanged: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Request, SolverMode};
+
+    /// The first job of a real estimation: a machine for four thrusters at rest (a noisy
+    /// gyro), asked to estimate, up to the end of its first pulse.
+    fn job() -> SolveJob {
+        let mut m = Machine::new(MachineSetup {
+            thrusters: 4,
+            ..MachineSetup::default()
+        });
+        m.set_solver_mode(SolverMode::External);
+        let mut noise = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            noise ^= noise << 13;
+            noise ^= noise >> 7;
+            noise ^= noise << 17;
+            (noise >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for k in 1..=2_000u64 {
+            let s = ImuInput {
+                seq: k,
+                t_ns: k * 5_000_000,
+                gyro: [0.01 * next(), 0.01 * next(), 0.01 * next()],
+                accel: [0.05 * next(), 0.05 * next(), -9.80665 + 0.05 * next()],
+                mag: None,
+                depth: Some(2.0 + 0.001 * next()),
+            };
+            m.on_imu(&s);
+            if k == 1 {
+                m.on_request(Request::Estimate).unwrap();
+            }
+            if let Some(job) = m.take_job() {
+                return job;
+            }
+        }
+        panic!("no job after 10 s of estimation");
+    }
+
+    fn panicking(_: SolveJob) -> SolveResult {
+        panic!("singular matrix in a test job");
+    }
+
+    #[test]
+    fn a_panicking_job_reports_the_thread_lost_with_its_message_and_a_restart_works() {
+        let job = job();
+        let mut solver = SolverThread::spawn_with(panicking).unwrap();
+        solver.submit(job.clone()).unwrap();
+        let lost = solver
+            .wait_result(Duration::from_secs(10))
+            .expect_err("the thread died");
+        assert!(
+            lost.0.contains("panicked: singular matrix in a test job"),
+            "{lost}"
+        );
+        assert!(solver.submit(job.clone()).is_err(), "no thread takes work");
+        solver.runner = SolveJob::run;
+        solver.restart().unwrap();
+        solver.submit(job.clone()).unwrap();
+        let r = solver
+            .wait_result(Duration::from_secs(10))
+            .unwrap()
+            .expect("a result");
+        assert_eq!(r.id(), job.id());
+    }
+
+    #[test]
+    fn results_equal_the_inline_run_of_the_same_job() {
+        let job = job();
+        let inline = job.clone().run();
+        let mut solver = SolverThread::spawn().unwrap();
+        solver.submit(job).unwrap();
+        let r = solver
+            .wait_result(Duration::from_secs(10))
+            .unwrap()
+            .expect("a result");
+        assert_eq!(
+            r.estimate().effectiveness,
+            inline.estimate().effectiveness,
+            "bit for bit"
+        );
+    }
+}
