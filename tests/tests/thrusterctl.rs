@@ -469,9 +469,15 @@ fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
     let deadline = Instant::now() + Duration::from_secs(20);
     while theirs.len() < 5 && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(100));
-        theirs = files().into_iter().filter(|p| !before.contains(p)).collect();
+        theirs = files()
+            .into_iter()
+            .filter(|p| !before.contains(p))
+            .collect();
     }
-    assert!(theirs.len() >= 5, "the client made too few files to judge: {theirs:?}");
+    assert!(
+        theirs.len() >= 5,
+        "the client made too few files to judge: {theirs:?}"
+    );
     assert!(
         client.try_wait().unwrap().is_none(),
         "the watch ended by itself: the kill would test nothing"
@@ -496,9 +502,14 @@ fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
         left.len(),
         killed.elapsed().as_secs_f64()
     );
-    assert!(left.is_empty(), "the killed client's files stayed: {left:?}");
     assert!(
-        daemon.log_text().contains("removed the files of dead nodes"),
+        left.is_empty(),
+        "the killed client's files stayed: {left:?}"
+    );
+    assert!(
+        daemon
+            .log_text()
+            .contains("removed the files of dead nodes"),
         "the daemon did not say it removed them: {}",
         daemon.log_text()
     );
