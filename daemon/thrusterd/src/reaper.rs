@@ -18,8 +18,8 @@ use thruster_protocol::services::{cleanup_dead_nodes, IpcConfig, NodeCensus};
 use tracing::{debug, info, warn};
 
 /// How often the namespace is searched for dead nodes: a killed client's files are gone
-/// within this, and a search (a directory listing and one file-lock probe per node) costs a
-/// few hundred microseconds off the control thread.
+/// within this. A search is a directory listing and one file-lock probe per node, on this
+/// thread, never the control thread's.
 pub const REAP_EVERY: Duration = Duration::from_secs(2);
 /// How often the reaper looks at the stop flag between two searches.
 const STOP_POLL: Duration = Duration::from_millis(50);
