@@ -88,12 +88,16 @@ struct Args {
     /// ... or this share of it, whichever is larger.
     #[arg(long, default_value_t = 0.10)]
     rss_rel: f64,
-    /// Open descriptors may exceed the first checkpoint's by this many.
-    #[arg(long, default_value_t = 16)]
+    /// Open descriptors at the end (no client left) may exceed the start's by this many.
+    #[arg(long, default_value_t = 8)]
     fd_slack: u64,
     /// Write summary.json, table.md and the processes' logs here.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Run nothing: judge the rows of an earlier run's summary.json with the current rules
+    /// and the limits given here, print the verdict (exit status as a run's).
+    #[arg(long, value_name = "SUMMARY_JSON")]
+    rejudge: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -318,7 +322,41 @@ struct Tally {
     inproc_wall: Duration,
 }
 
+fn limits(args: &Args) -> Limits {
+    Limits {
+        rss_abs_kib: args.rss_abs_kib,
+        rss_rel: args.rss_rel,
+        fd_slack: args.fd_slack,
+        ..Limits::default()
+    }
+}
+
+fn rejudge(path: &Path, limits: &Limits) -> Result<ExitCode> {
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
+    )?;
+    let rows: Vec<Row> = serde_json::from_value(summary["rows"].clone()).context("rows")?;
+    println!("{HEADER}");
+    for r in &rows {
+        println!("{}", row_text(r));
+    }
+    let findings = verdict(&rows, limits);
+    if findings.is_empty() {
+        println!("verdict of the rows: PASS");
+        Ok(ExitCode::SUCCESS)
+    } else {
+        println!("verdict of the rows: FAIL");
+        for f in &findings {
+            println!("  - {}: {}", f.what, f.detail);
+        }
+        Ok(ExitCode::FAILURE)
+    }
+}
+
 fn run(args: &Args) -> Result<ExitCode> {
+    if let Some(path) = &args.rejudge {
+        return rejudge(path, &limits(args));
+    }
     let plan = Plan::pool_day(args.hours).scaled(args.scale);
     plan.validate().map_err(anyhow::Error::msg)?;
     anyhow::ensure!(
@@ -702,12 +740,7 @@ fn run(args: &Args) -> Result<ExitCode> {
     let _ = tidy_residue(&ipc);
     let left: Vec<PathBuf> = namespace_files(&ipc)?;
 
-    let limits = Limits {
-        rss_abs_kib: args.rss_abs_kib,
-        rss_rel: args.rss_rel,
-        fd_slack: args.fd_slack,
-        ..Limits::default()
-    };
+    let limits = limits(args);
     let findings = verdict(&rows, &limits);
     let mut failures: Vec<String> = findings
         .iter()
