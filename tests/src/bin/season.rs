@@ -252,9 +252,35 @@ impl Pollers {
     }
 
     fn join(mut self) {
+        self.stop();
+    }
+
+    fn stop(&mut self) {
         self.jobs = None;
         for t in self.threads.drain(..) {
             let _ = t.join();
+        }
+    }
+}
+
+/// However `run` returns (an error included), the poll threads drop their nodes before the
+/// world purges the namespace (a live node makes the purge refuse and leaves files).
+impl Drop for Pollers {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// Poll processes in flight, killed and reaped when dropped (std's `Child` does neither: one
+/// left running keeps its node alive and the namespace could not be purged).
+#[derive(Default)]
+struct Inflight(Vec<(Child, Instant)>);
+
+impl Drop for Inflight {
+    fn drop(&mut self) {
+        for (c, _) in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
         }
     }
 }
@@ -512,7 +538,7 @@ fn run(args: &Args) -> Result<ExitCode> {
     let mut checkpoints = Ticker::new(plan.checkpoint_s, plan.checkpoint_s, plan.duration_s);
     let mut poll_lag = Lag::default();
     let mut action_lag = Lag::default();
-    let mut inflight: Vec<(Child, Instant)> = Vec::new();
+    let mut inflight = Inflight::default();
     let mut pollers = Pollers::new(&ipc, args.poll_threads);
     let mut watches: Vec<Watch> = Vec::new();
     let mut recording: Option<Recording> = None;
@@ -548,31 +574,35 @@ fn run(args: &Args) -> Result<ExitCode> {
         }
 
         // Poll processes that finished.
-        inflight.retain_mut(|(child, since)| match child.try_wait() {
-            Ok(Some(st)) => {
-                if !st.success() {
-                    tally.polls_failed += 1;
-                    tally.poll_errors.push(format!("thrusterctl status: {st}"));
+        inflight
+            .0
+            .retain_mut(|(child, since)| match child.try_wait() {
+                Ok(Some(st)) => {
+                    if !st.success() {
+                        tally.polls_failed += 1;
+                        tally.poll_errors.push(format!("thrusterctl status: {st}"));
+                    }
+                    false
                 }
-                false
-            }
-            Ok(None) if since.elapsed() > Duration::from_secs(30) => {
-                let _ = child.kill();
-                let _ = child.wait();
-                tally.polls_failed += 1;
-                tally
-                    .poll_errors
-                    .push("thrusterctl status hung 30 s".into());
-                false
-            }
-            Ok(None) => true,
-            Err(_) => false,
-        });
+                Ok(None) if since.elapsed() > Duration::from_secs(30) => {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    tally.polls_failed += 1;
+                    tally
+                        .poll_errors
+                        .push("thrusterctl status hung 30 s".into());
+                    false
+                }
+                Ok(None) => true,
+                Err(_) => false,
+            });
 
         while let Some((k, due)) = polls.due(now) {
             poll_lag.record(due, now);
-            if k % args.process_every == 0 && inflight.len() < args.max_inflight {
-                inflight.push((ctl_quiet(&ns, &["status", "--json"])?, Instant::now()));
+            if k % args.process_every == 0 && inflight.0.len() < args.max_inflight {
+                inflight
+                    .0
+                    .push((ctl_quiet(&ns, &["status", "--json"])?, Instant::now()));
                 tally.polls_process += 1;
             } else {
                 tally.polls_inproc += 1;
@@ -676,7 +706,7 @@ fn run(args: &Args) -> Result<ExitCode> {
     pollers.collect(&mut tally, true);
     let max_queued = pollers.max_pending;
     pollers.join();
-    for (mut child, _) in inflight.drain(..) {
+    for (mut child, _) in inflight.0.drain(..) {
         match child.wait() {
             Ok(st) if st.success() => {}
             other => {
