@@ -165,7 +165,8 @@ fn file_names(ipc: &IpcConfig) -> std::collections::BTreeSet<String> {
 
 /// One operator poll the way `thrusterctl status` does it, in this process: a fresh node,
 /// control client and status inbox, a Status request, the published status; all dropped.
-fn poll_in_process(ipc: &IpcConfig) -> Result<()> {
+/// Returns the vehicle time the answer carries (when the poll was served).
+fn poll_in_process(ipc: &IpcConfig) -> Result<u64> {
     let node = ipc.create_node("season-poll")?;
     let inbox: Inbox<StatusMsg> = Inbox::create_with_buffer(&node, ipc, 1)?;
     let client = ControlClient::create(&node, ipc)?;
@@ -174,11 +175,8 @@ fn poll_in_process(ipc: &IpcConfig) -> Result<()> {
         Duration::from_secs(2),
     )?;
     anyhow::ensure!(r.is_ok(), "status refused: {}", r.text());
-    anyhow::ensure!(
-        wait_for(&inbox, Duration::from_secs(2), |_| true).is_some(),
-        "no status published"
-    );
-    Ok(())
+    let s = wait_for(&inbox, Duration::from_secs(2), |_| true).context("no status published")?;
+    Ok(s.vehicle_time_ns)
 }
 
 /// In-process polls run on worker threads, each with its own fresh node per poll (iceoryx2
@@ -187,7 +185,7 @@ fn poll_in_process(ipc: &IpcConfig) -> Result<()> {
 /// per vehicle-second at 20x.
 struct Pollers {
     jobs: Option<std::sync::mpsc::Sender<u64>>,
-    results: std::sync::mpsc::Receiver<(u64, Duration, Result<(), String>)>,
+    results: std::sync::mpsc::Receiver<(u64, Duration, Result<u64, String>)>,
     threads: Vec<std::thread::JoinHandle<()>>,
     pending: u64,
     max_pending: u64,
@@ -240,6 +238,9 @@ impl Pollers {
             let Some((due, took, r)) = r else { return };
             self.pending -= 1;
             tally.inproc_wall += took;
+            if let Ok(served_ns) = r {
+                tally.served_lag.record(due, served_ns);
+            }
             if let Err(e) = r {
                 tally.polls_failed += 1;
                 if tally.poll_errors.len() < 20 {
@@ -346,6 +347,9 @@ struct Tally {
     poll_errors: Vec<String>,
     /// Wall time spent in in-process polls.
     inproc_wall: Duration,
+    /// In-process polls: from the due vehicle time to the vehicle time of the status that
+    /// answered (the served poll, not only its dispatch).
+    served_lag: Lag,
 }
 
 fn limits(args: &Args) -> Limits {
@@ -824,8 +828,10 @@ fn run(args: &Args) -> Result<ExitCode> {
         action_lag.max_s
     );
     println!(
-        "in-process poll: {:.1} ms wall each (mean), at most {max_queued} queued or running",
-        tally.inproc_wall.as_secs_f64() * 1e3 / tally.polls_inproc.max(1) as f64
+        "in-process poll: {:.1} ms wall each (mean), at most {max_queued} queued or running; served {:.2} vehicle-s after its due second on average, at most {:.2} s",
+        tally.inproc_wall.as_secs_f64() * 1e3 / tally.polls_inproc.max(1) as f64,
+        tally.served_lag.mean_s(),
+        tally.served_lag.max_s
     );
     for e in tally.poll_errors.iter().take(5) {
         println!("  poll error: {e}");
@@ -880,6 +886,7 @@ fn run(args: &Args) -> Result<ExitCode> {
                 "swaps": swaps,
                 "poll_lag": poll_lag,
                 "action_lag": action_lag,
+                "poll_served_lag": tally.served_lag,
                 "recorded_bytes": tally.recorded_bytes,
                 "poll_errors": tally.poll_errors,
                 "sim_summary": sim_summary,
