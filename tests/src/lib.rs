@@ -18,6 +18,7 @@ use thruster_protocol::{
 pub mod mount;
 pub mod node;
 pub mod python;
+pub mod season;
 pub mod soak;
 
 /// Workspace root (this crate lives in tests/).
@@ -33,7 +34,14 @@ pub fn workspace() -> PathBuf {
 /// `cargo test --workspace` (what CI runs) builds every binary before any test starts. Run
 /// alone (`cargo test -p system-tests`) a binary may be missing: it is built then. Benches call
 /// [`build_binaries`] first, since a binary left from an older build would measure old code.
+///
+/// With `THRUSTER_BIN_DIR` set, the binaries are taken from that folder as they are (the
+/// season soak copies them there first: a run of an hour must not pick up a binary that a
+/// build in the shared target folder replaced meanwhile).
 pub fn bin(name: &str) -> PathBuf {
+    if let Some(dir) = std::env::var_os(BIN_DIR_ENV) {
+        return Path::new(&dir).join(name);
+    }
     let path = target_dir().join(name);
     if !path.exists() {
         build_binaries();
@@ -41,6 +49,9 @@ pub fn bin(name: &str) -> PathBuf {
     assert!(path.exists(), "{} not built", path.display());
     path
 }
+
+/// Environment variable naming a folder to take the binaries from instead (see [`bin`]).
+pub const BIN_DIR_ENV: &str = "THRUSTER_BIN_DIR";
 
 /// target/<profile> of the running test, bench or tool.
 fn target_dir() -> PathBuf {
