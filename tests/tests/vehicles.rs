@@ -22,7 +22,7 @@ fn estimate(vehicle: &str, seed: u64) -> (ModelMsg, f64, f64) {
     let world = World::new("veh");
     let op = Operator::new(&world);
     let n = thruster_count(vehicle).to_string();
-    let mut daemon = world.daemon(&["--estimate", "--thrusters", &n]);
+    let mut daemon = world.daemon(&["--estimate", "--thrusters", &n, "--lockstep"]);
     let seed = seed.to_string();
     let mut sim = world.sim(
         vehicle,

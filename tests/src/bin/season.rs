@@ -407,7 +407,7 @@ fn run(args: &Args) -> Result<ExitCode> {
     let recordings = world.path("rec");
     std::fs::create_dir_all(&recordings)?;
 
-    let mut daemon = world.daemon(&["--thrusters", "5"]);
+    let mut daemon = world.daemon(&["--thrusters", "5", "--lockstep"]);
     let pace = args.pace.to_string();
     let rate = args.rate.to_string();
     let seed = args.seed.to_string();
