@@ -207,6 +207,13 @@ impl Proc {
     }
 }
 
+/// The name of the first of `procs` that is no longer running, if any (a soak stops there).
+pub fn first_exited<'a>(procs: &mut [(&'a str, &mut Proc)]) -> Option<&'a str> {
+    procs
+        .iter_mut()
+        .find_map(|(name, p)| (!p.is_running()).then_some(*name))
+}
+
 impl Drop for Proc {
     fn drop(&mut self) {
         if let Some(mut c) = self.child.take() {

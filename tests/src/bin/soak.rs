@@ -342,12 +342,11 @@ fn run(args: &Args) -> Result<ExitCode> {
                 interrupted = true;
                 break;
             }
-            if !daemon.is_running() || !sim.is_running() {
-                died = Some(if daemon.is_running() {
-                    "thruster-sim"
-                } else {
-                    "thrusterd"
-                });
+            died = system_tests::first_exited(&mut [
+                ("thrusterd", &mut daemon),
+                ("thruster-sim", &mut sim),
+            ]);
+            if died.is_some() {
                 break;
             }
             std::thread::sleep(Duration::from_millis(100));
