@@ -112,6 +112,17 @@ impl Model {
         self.effectiveness.ncols()
     }
 
+    /// The thrusters' spin-up time constant this model's estimation learned, s; None when it
+    /// was configured or the model did not come from the dynamic method. Whatever fits
+    /// against this model (the refinement's windows and change test, identification under
+    /// control) uses it instead of `estimator.spin_up_s`.
+    pub fn learned_spin_up_s(&self) -> Option<f64> {
+        self.dynamics
+            .as_ref()
+            .filter(|d| d.spin_up_learned && d.spin_up_s.is_finite())
+            .map(|d| d.spin_up_s)
+    }
+
     /// A model from an estimate solved at vehicle time `t_ns` (version assigned at swap time).
     pub fn from_estimate(e: &Estimate, geometry_key: Option<u64>, t_ns: u64) -> Model {
         Model {

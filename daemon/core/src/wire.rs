@@ -144,6 +144,8 @@ pub fn dynamics_msg(seq: u64, model: &Model) -> Option<DynamicsMsg> {
         std_err: std::array::from_fn(|r| row(r, false)),
         max_tilt_rad: d.max_tilt_rad,
         max_heading_change_rad: d.max_heading_change_rad,
+        spin_up_s: d.spin_up_s,
+        spin_up_learned: u32::from(d.spin_up_learned),
     })
 }
 
@@ -299,6 +301,8 @@ mod tests {
             b_ols_std_err: nalgebra::DMatrix::zeros(6, 3),
             max_tilt_rad: 0.3,
             max_heading_change_rad: 0.2,
+            spin_up_s: 0.07,
+            spin_up_learned: true,
         });
         let d = dynamics_msg(0, &m).unwrap();
         assert!(d.validate().is_ok(), "{:?}", d.validate());

@@ -33,6 +33,10 @@ struct Outcome {
     err_acc: f64,
     seconds: f64,
     max_tilt_deg: f64,
+    /// The lag the model was fitted with, s (learned unless learning is off).
+    spin_up_s: f64,
+    /// The daemon's own error bounds, rotation and acceleration rows.
+    bound: [f64; 2],
     terms: DynamicTerms,
     /// Learned B minus the symmetric truth, its honest and its i.i.d. standard errors.
     b_err: DMatrix<f64>,
@@ -95,7 +99,18 @@ fn estimate_ideal(
     estimator: EstimatorConfig,
     ideal: Ideal,
 ) -> Outcome {
-    let mut v = vehicle(name);
+    estimate_on(vehicle(name), sensors, seed, estimator, ideal)
+}
+
+/// The same on a vehicle given whole (its hidden constants changed by the caller).
+fn estimate_on(
+    mut v: Vehicle,
+    sensors: SensorConfig,
+    seed: u64,
+    estimator: EstimatorConfig,
+    ideal: Ideal,
+) -> Outcome {
+    let name = v.name.clone();
     let mut estimator = estimator;
     if ideal.symmetric_thrusters {
         for t in &mut v.thrusters {
@@ -145,6 +160,8 @@ fn estimate_ideal(
         err_acc: err(3),
         seconds: sim.time_s() - start,
         max_tilt_deg: max_tilt,
+        spin_up_s: est.dynamics.as_ref().map_or(f64::NAN, |d| d.spin_up_s),
+        bound: [est.rel_err_rot, est.rel_err_acc],
         terms: est.dynamics.clone().expect("dynamic terms"),
         b_err: &est.effectiveness - &truth,
         b_se: est.std_err.clone(),
@@ -921,6 +938,90 @@ fn coefficient_error_by_vehicle() {
             if noise == NoisePreset::None {
                 break;
             }
+        }
+    }
+}
+
+/// A vehicle whose every thruster spins up with time constant `tau_s` (the daemon is not told).
+fn with_lag(name: &str, tau_s: f64) -> Vehicle {
+    let mut v = vehicle(name);
+    for t in &mut v.thrusters {
+        t.time_constant_s = tau_s;
+    }
+    v
+}
+
+#[test]
+#[ignore]
+fn lag_sweep() {
+    let noise = match std::env::var("LAG_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::None,
+    };
+    let learn = std::env::var("LAG_LEARN").map_or(true, |v| v != "0");
+    let names = std::env::var("LAG_VEHICLES").unwrap_or("amour5,eight_vectored".into());
+    let n_seeds: u64 = std::env::var("LAG_SEEDS").map_or(1, |s| s.parse().unwrap());
+    let seeds = 1..=n_seeds;
+    let taus = std::env::var("LAG_TAUS").unwrap_or("0.03,0.05,0.08,0.1,0.15,0.2".into());
+    for name in names.split(',') {
+        for tau in taus.split(',').map(|t| t.parse::<f64>().unwrap()) {
+          for seed in seeds.clone() {
+            let mut sensors = SensorConfig {
+                rate_hz: 200.0,
+                noise,
+                ..SensorConfig::default()
+            };
+            if let Ok(g) = std::env::var("LAG_GYRO_ONLY") {
+                let mut n = NoisePreset::Paper.params();
+                n.gyro_std_radps = 0.0;
+                n.accel_std_mps2 = 0.0;
+                if let Ok(v) = g.parse::<f64>() {
+                    n.gyro_std_radps = v;
+                } else if g == "gyro" {
+                    n.gyro_std_radps = 0.25;
+                } else {
+                    n.accel_std_mps2 = 0.49;
+                }
+                sensors.custom_noise = Some(n);
+            }
+            let mut cfg = EstimatorConfig::dynamic();
+            cfg.learn_spin_up = learn;
+            if let Ok(p) = std::env::var("LAG_MIN_POWER") {
+                cfg.min_power = p.parse().unwrap();
+            }
+            if let Ok(b) = std::env::var("LAG_BIAS_STD") {
+                cfg.accel_bias_std = b.parse().unwrap();
+            }
+            if let Ok(t) = std::env::var("LAG_TARGET") {
+                cfg.target_rel_err = t.parse().unwrap();
+            }
+            if let Ok(p) = std::env::var("LAG_PULSES") {
+                cfg.max_pulses = p.parse().unwrap();
+            }
+            if std::env::var("LAG_TOLD").is_ok() {
+                // The decisive comparison: the true lag given, nothing learned.
+                cfg.learn_spin_up = false;
+                cfg.spin_up_s = tau;
+            }
+            let t0 = std::time::Instant::now();
+            let ideal = Ideal {
+                true_velocity: std::env::var("LAG_DVL").is_ok(),
+                symmetric_thrusters: std::env::var("LAG_SYM").is_ok(),
+                ..Ideal::default()
+            };
+            let o = estimate_on(with_lag(name, tau), sensors, seed, cfg, ideal);
+            println!(
+                "{name} tau {tau:.3} seed {seed}: learned {:.4} err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",
+                o.spin_up_s,
+                o.err_rot,
+                o.err_acc,
+                o.bound[0],
+                o.bound[1],
+                o.seconds,
+                t0.elapsed().as_secs_f64()
+            );
+          }
         }
     }
 }

@@ -74,6 +74,9 @@ struct Summary {
     estimation_heading_deg: Option<f64>,
     /// What the dynamic method learned besides B.
     dynamics: Option<DynamicsMsg>,
+    /// The simulated thrusters' mean spin-up time constant, s, from the vehicle file (the
+    /// daemon is not told it).
+    spin_up_true_s: Option<f64>,
     clean_exit: bool,
     leftovers: usize,
 }
@@ -261,9 +264,17 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
         estimation_tilt_deg: excursion.map(|e| e.max_tilt_deg),
         estimation_heading_deg: excursion.map(|e| e.max_heading_deg),
         dynamics,
+        spin_up_true_s: true_spin_up_s(vehicle),
         clean_exit: false,
         leftovers: 0,
     })
+}
+
+/// The mean time constant of the vehicle file's thrusters, s (None when it cannot be read).
+fn true_spin_up_s(vehicle: &Path) -> Option<f64> {
+    let v = thruster_sim::Vehicle::load(vehicle).ok()?;
+    let n = v.thrusters.len();
+    (n > 0).then(|| v.thrusters.iter().map(|t| t.time_constant_s).sum::<f64>() / n as f64)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -328,6 +339,9 @@ fn report(args: &DemoArgs, s: &Summary) {
             "estimation_max_tilt_deg": s.estimation_tilt_deg,
             "estimation_max_heading_change_deg": s.estimation_heading_deg,
             "dynamics": s.dynamics.as_ref().map(thrusterctl_operator::dynamics::json),
+            "spin_up_s": s.dynamics.as_ref().map(|d| d.spin_up_s).filter(|v| v.is_finite()),
+            "spin_up_learned": s.dynamics.as_ref().map(|d| d.spin_up_learned == 1),
+            "spin_up_true_s": s.spin_up_true_s,
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,
         });
@@ -353,6 +367,9 @@ fn report(args: &DemoArgs, s: &Summary) {
     }
     if let Some(d) = &s.dynamics {
         print!("{}", thrusterctl_operator::dynamics::report(d));
+        if let Some(t) = s.spin_up_true_s.filter(|_| d.spin_up_s.is_finite()) {
+            println!("  (the simulated thrusters' true time constant: {t:.3} s)");
+        }
     }
     println!(
         "shutdown: {} ({} files of the namespace left)",

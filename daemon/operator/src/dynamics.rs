@@ -41,6 +41,8 @@ pub fn json(d: &DynamicsMsg) -> Value {
         "per_row_term_value_and_std_err": rows,
         "navigation_max_tilt_deg": num(d.max_tilt_rad.to_degrees()),
         "navigation_max_heading_change_deg": num(d.max_heading_change_rad.to_degrees()),
+        "spin_up_s": num(d.spin_up_s),
+        "spin_up_learned": d.spin_up_learned == 1,
     })
 }
 
@@ -76,6 +78,18 @@ pub fn report(d: &DynamicsMsg) -> String {
         d.max_tilt_rad.to_degrees(),
         d.max_heading_change_rad.to_degrees()
     );
+    if d.spin_up_s.is_finite() {
+        let how = if d.spin_up_learned == 1 {
+            "learned from the pulses"
+        } else {
+            "configured, not learned"
+        };
+        let _ = writeln!(
+            s,
+            "  thruster spin-up time constant {:.3} s ({how})",
+            d.spin_up_s
+        );
+    }
     s
 }
 
@@ -95,6 +109,8 @@ mod tests {
         let mut d = DynamicsMsg {
             model_version: 3,
             max_tilt_rad: 0.4,
+            spin_up_s: 0.052,
+            spin_up_learned: 1,
             ..DynamicsMsg::default()
         };
         let mut terms = [0.0; thruster_protocol::DYNAMIC_TERMS];
@@ -104,6 +120,10 @@ mod tests {
         let text = report(&d);
         assert!(text.contains("restoring down_y -8.06"), "{text}");
         assert!(text.contains("tilted up to 22.9 deg"), "{text}");
+        assert!(
+            text.contains("spin-up time constant 0.052 s (learned from the pulses)"),
+            "{text}"
+        );
         let v = json(&d);
         assert_eq!(
             v["per_row_term_value_and_std_err"]["roll"]["down_y"][0],
@@ -111,5 +131,7 @@ mod tests {
         );
         assert!(v["per_row_term_value_and_std_err"]["yaw"]["r"][1].is_null());
         assert_eq!(v["model_version"], 3);
+        assert_eq!(v["spin_up_s"], 0.052);
+        assert_eq!(v["spin_up_learned"], true);
     }
 }

@@ -112,7 +112,7 @@ impl DynamicsRow {
 /// moved while it was being excited.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.DynamicsMsg.v1")]
+#[type_name("thrusterd.DynamicsMsg.v2")]
 pub struct DynamicsMsg {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -131,6 +131,10 @@ pub struct DynamicsMsg {
     pub max_tilt_rad: f64,
     /// Largest heading change during the excitation, rad.
     pub max_heading_change_rad: f64,
+    /// The thrusters' spin-up time constant the model was fitted with, s; NaN when unknown.
+    pub spin_up_s: f64,
+    /// 1 when `spin_up_s` was learned from the excitation's data, 0 when configured (v2).
+    pub spin_up_learned: u32,
 }
 
 #[cfg(test)]

@@ -515,7 +515,11 @@ impl Validate for DynamicsMsg {
             0.0,
             std::f64::consts::PI,
             "rad",
-        )
+        )?;
+        if !self.spin_up_s.is_nan() {
+            in_range(Field::new("spin_up_s"), self.spin_up_s, 0.0, 2.0, "s")?;
+        }
+        zero_or_one("spin_up_learned", self.spin_up_learned).map(|_| ())
     }
 }
 

@@ -11,6 +11,7 @@ use super::analysis::{allocation, diagnose, rank_report, RankReport, ThrusterDia
 use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
 use super::dynamic::prior::DynamicPrior;
+use super::dynamic::lag_search::{learn_common_lag, LagRange};
 use super::dynamic::{DynamicRun, DynamicTerms};
 use super::excitation::ExcitationPlan;
 use super::forward::{ForwardLs, ForwardSolution};
@@ -242,6 +243,8 @@ pub struct Estimator {
     rest_force: Option<Vector3<f64>>,
     /// The vertical velocity at the end of that rest (NED, m/s), from the depth.
     rest_velocity_down: Option<f64>,
+    /// `cfg.spin_up_s` is a lag an earlier run learned (`with_learned_lag`).
+    lag_inherited: bool,
 }
 
 impl Estimator {
@@ -267,9 +270,22 @@ impl Estimator {
             dynamic: None,
             rest_force: None,
             rest_velocity_down: None,
+            lag_inherited: false,
             noise,
             cfg,
         }
+    }
+
+    /// The thrusters' lag an earlier run learned (the model in force's), s: used in place of
+    /// `spin_up_s` and reported as learned. For runs that cannot learn it themselves (under
+    /// control, see `dynamic_run`).
+    pub fn with_learned_lag(mut self, lag_s: f64) -> Self {
+        if lag_s.is_finite() && lag_s >= 0.0 {
+            self.cfg.spin_up_s = lag_s;
+            self.shape.lag_s = lag_s;
+            self.lag_inherited = true;
+        }
+        self
     }
 
     /// Declared model (6 x N) to check thruster directions against.
@@ -326,6 +342,15 @@ impl Estimator {
         } else {
             DynamicRun::new(n, lag, segment, &rest, aid)
         };
+        // Open loop only: the log keeps one command per pulse, and under control (split) the
+        // command changes every sample; there the lag is the model's (`EstimatorConfig::
+        // spin_up_s` set from it by the caller).
+        if !split && self.learns_lag() {
+            run = run.with_log(self.cfg.max_pulses + 1);
+        }
+        if self.lag_inherited {
+            run.mark_lag_learned();
+        }
         if let Some(w) = self.rest_velocity_down {
             run.start_sinking_at(w);
         }
@@ -334,6 +359,25 @@ impl Estimator {
 
     pub fn thrusters(&self) -> usize {
         self.plan.thrusters()
+    }
+
+    /// Whether this run learns the thrusters' lag: asked to, and the gyro quiet enough for
+    /// the learned lag to be trusted (`EstimatorConfig::spin_up_max_gyro_sigma`).
+    pub fn learns_lag(&self) -> bool {
+        self.cfg.method == Method::Dynamic
+            && self.cfg.learn_spin_up
+            && !self.lag_inherited
+            && self.noise.sigma_rot() <= self.cfg.spin_up_max_gyro_sigma
+    }
+
+    /// Where the dynamic method searches the thrusters' lag.
+    fn lag_range(&self) -> LagRange {
+        let [min_s, max_s] = self.cfg.spin_up_range_s;
+        LagRange {
+            min_s,
+            max_s,
+            ..LagRange::default()
+        }
     }
 
     pub fn config(&self) -> &EstimatorConfig {
@@ -766,12 +810,24 @@ impl Estimator {
                 dynamics: None,
             };
         };
-        let sol = run.solve(
-            &rest,
-            self.cfg.model_error_floor,
-            self.cfg.term_prior_sd,
-            self.prior.as_ref(),
-        );
+        // The lag learned from the data when asked (and the data decides), else the configured.
+        let learned = self
+            .learns_lag()
+            .then(|| learn_common_lag(run, &self.lag_range()))
+            .flatten();
+        let run = learned.as_ref().map_or(run, |l| &l.run);
+        let solve = |run: &DynamicRun| {
+            run.solve(
+                &rest,
+                self.cfg.model_error_floor,
+                self.cfg.term_prior_sd,
+                self.prior.as_ref(),
+            )
+        };
+        let mut sol = solve(run);
+        if let Some(l) = &learned {
+            l.widen(&mut sol, &solve(&l.above), &solve(&l.below));
+        }
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
         let alloc = allocation(&sol.b, rank.actuated, rank.rank);
         let thruster = diagnose(

@@ -583,7 +583,8 @@ impl Refiner {
         let floor = levels.map_or([CHANGE_SIGMA_FLOOR; 3], |l| {
             l.gyro_sigma.map(|s| s.max(CHANGE_SIGMA_FLOOR))
         });
-        self.change.set_lag_s(est_cfg.spin_up_s);
+        self.change
+            .set_lag_s(model.learned_spin_up_s().unwrap_or(est_cfg.spin_up_s));
         let down = tick.attitude.inverse_transform_vector(&Vector3::z());
         let tilt_deg = down.z.clamp(-1.0, 1.0).acos().to_degrees();
         let level = tilt_deg <= self.cfg.change_max_tilt_deg;
@@ -657,7 +658,7 @@ impl Refiner {
                 if settled_s < SETTLE_S {
                     return None;
                 }
-                self.window = Some(open_window(tick, n, levels, est_cfg));
+                self.window = Some(open_window(tick, n, levels, est_cfg, model));
                 let w = self.window.as_mut()?;
                 w.sent[..n].copy_from_slice(&command[..n]);
                 return None;
@@ -765,6 +766,7 @@ fn open_window(
     n: usize,
     levels: Option<NoiseLevels>,
     est_cfg: &EstimatorConfig,
+    model: &Model,
 ) -> Window {
     // The specific force a vehicle at rest in this attitude would read: the navigation starts
     // from the attitude filter's attitude instead of a rest.
@@ -778,6 +780,9 @@ fn open_window(
         ..est_cfg.clone()
     };
     let mut est = Estimator::new(cfg, n, levels).with_rest_specific_force(-down * GRAVITY);
+    if let Some(lag_s) = model.learned_spin_up_s() {
+        est = est.with_learned_lag(lag_s);
+    }
     est.begin_closed_loop();
     Window {
         est,

@@ -10,16 +10,19 @@
 //! Both are linear in the unknowns, so the fit stays incremental (normal equations, one
 //! intercept per segment) and gives covariances like the static forward model.
 
+pub mod lag_search;
 pub mod prior;
 pub mod regressors;
+pub mod sample_log;
 pub mod segmented_ls;
 
 use nalgebra::{DMatrix, Vector3};
 
 use self::prior::{DynamicPrior, PriorEntry};
 use self::regressors::{terms, TERMS};
+use self::sample_log::{Navigated, SampleLog};
 use self::segmented_ls::{SegmentedLs, SegmentedSolution};
-use crate::navigation::{DepthAid, Navigator};
+use crate::navigation::{DepthAid, NavState, Navigator};
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
 const MIN_RESIDUAL_DOF: u64 = 10;
@@ -46,6 +49,11 @@ pub struct DynamicTerms {
     pub max_tilt_rad: f64,
     /// Largest heading change during the excitation, rad.
     pub max_heading_change_rad: f64,
+    /// The thrusters' spin-up time constant the fit used, s: learned
+    /// ([`lag_search`]) or the configured `estimator.spin_up_s`.
+    pub spin_up_s: f64,
+    /// Whether `spin_up_s` was learned from this run's data.
+    pub spin_up_learned: bool,
 }
 
 impl DynamicTerms {
@@ -87,7 +95,10 @@ pub struct DynamicRun {
     split: bool,
     /// Thrust columns: n, or 2n when split.
     cols: usize,
-    lag_s: f64,
+    /// Each thruster's spin-up time constant, s (the split columns i and n + i share one).
+    lags: Vec<f64>,
+    /// Whether `lags` were learned ([`lag_search`]) rather than configured.
+    lags_learned: bool,
     segment_s: f64,
     nav: Navigator,
     lag: Vec<f64>,
@@ -104,6 +115,10 @@ pub struct DynamicRun {
     segment_start_s: f64,
     rot: SegmentedLs,
     acc: SegmentedLs,
+    /// The navigated samples, kept when the lag is to be learned (`with_log`).
+    log: Option<SampleLog>,
+    /// The log's index of the command the last sample was taken under.
+    last_command: u32,
 }
 
 impl DynamicRun {
@@ -144,7 +159,8 @@ impl DynamicRun {
             n,
             split,
             cols,
-            lag_s: lag_s.max(0.0),
+            lags: vec![lag_s.max(0.0); n],
+            lags_learned: false,
             segment_s: segment_s.max(1e-3),
             nav: Navigator::at_rest(accel_rest, 0.0, None, aid),
             lag: vec![0.0; cols],
@@ -159,7 +175,66 @@ impl DynamicRun {
             segment_start_s: 0.0,
             rot: SegmentedLs::new(k),
             acc: SegmentedLs::new(k),
+            log: None,
+            last_command: u32::MAX,
         }
+    }
+
+    /// Keep every navigated sample (room for `max_commands` distinct commands, one per
+    /// pulse), so the fit can be made again with other lags ([`Self::refit`]). Allocates the
+    /// whole log now.
+    pub fn with_log(mut self, max_commands: usize) -> Self {
+        self.log = Some(SampleLog::new(self.n, max_commands));
+        self
+    }
+
+    /// The samples kept, if logging.
+    pub fn log(&self) -> Option<&SampleLog> {
+        self.log.as_ref()
+    }
+
+    /// Report the lags in use as learned (they came from an earlier run that learned them).
+    pub fn mark_lag_learned(&mut self) {
+        self.lags_learned = true;
+    }
+
+    /// Each thruster's spin-up time constant in use, s.
+    pub fn lags(&self) -> &[f64] {
+        &self.lags
+    }
+
+    /// The same fit made again from the log with thruster lags `lags` (s, one per thruster, or
+    /// one for all), marked learned; None without a log. The navigation is not run again (it
+    /// does not depend on the lag): its excursion figures are this run's.
+    pub fn refit(&self, lags: &[f64]) -> Option<DynamicRun> {
+        let log = self.log.as_ref()?;
+        let mut run = DynamicRun {
+            lags: (0..self.n)
+                .map(|i| lags.get(i).or(lags.last()).copied().unwrap_or(0.0).max(0.0))
+                .collect(),
+            lags_learned: true,
+            log: None,
+            ..Self::with_columns(
+                self.n,
+                self.split,
+                0.0,
+                self.segment_s,
+                &Vector3::new(0.0, 0.0, -1.0),
+                DepthAid::default(),
+            )
+        };
+        run.nav = self.nav.clone();
+        for s in log.iter() {
+            let nav = NavState {
+                attitude: nalgebra::UnitQuaternion::identity(),
+                velocity: s.velocity,
+                rate: s.rate,
+                down: s.down,
+                motion: s.motion,
+            };
+            run.fit(s.t_s, &s.gyro, &nav, log.command(s.command));
+        }
+        Some(run)
     }
 
     pub fn thrusters(&self) -> usize {
@@ -206,16 +281,42 @@ impl DynamicRun {
             return;
         }
         let nav = self.nav.update(t_s, gyro, specific_force, depth);
+        if let Some(log) = self.log.as_mut() {
+            let command = match u {
+                None => u32::MAX,
+                Some(u) if log.command(self.last_command) == Some(u) => self.last_command,
+                Some(u) => log.add_command(u),
+            };
+            self.last_command = command;
+            log.push(Navigated {
+                t_s,
+                gyro: *gyro,
+                velocity: nav.velocity,
+                rate: nav.rate,
+                down: nav.down,
+                motion: nav.motion,
+                command,
+            });
+        }
+        self.fit(t_s, gyro, &nav, u);
+    }
+
+    /// The fit's part of a sample: thrust lag, terms, integrals, both regressions. `nav` is
+    /// the navigation's state at `t_s` (only velocity, rate, down and motion are read).
+    fn fit(&mut self, t_s: f64, gyro: &Vector3<f64>, nav: &NavState, u: Option<&[f64]>) {
         let dt = self.last_t_s.map(|t0| (t_s - t0).min(0.1)).unwrap_or(0.0);
-        let a = if self.lag_s > 0.0 {
-            1.0 - (-dt / self.lag_s).exp()
-        } else {
-            1.0
-        };
         self.lag_prev.copy_from_slice(&self.lag);
         let mut abs_target = 0.0;
+        let mut a_mean = 0.0;
         let n = self.n;
         for i in 0..n {
+            let lag_s = self.lags[i];
+            let a = if lag_s > 0.0 {
+                1.0 - (-dt / lag_s).exp()
+            } else {
+                1.0
+            };
+            a_mean += a / n.max(1) as f64;
             let v = u.map_or(0.0, |u| u[i]);
             abs_target += v.abs();
             if self.split {
@@ -227,7 +328,8 @@ impl DynamicRun {
         }
         // Split, the mean |command| is a sum of the thrust columns: left out (zero).
         if !self.split {
-            self.lag_abs += a * (abs_target / n.max(1) as f64 - self.lag_abs);
+            // One filter for the mean: with lags that differ, their mean rate (exact when equal).
+            self.lag_abs += a_mean * (abs_target / n.max(1) as f64 - self.lag_abs);
         }
         self.terms_prev = self.terms;
         terms(
@@ -277,6 +379,7 @@ impl DynamicRun {
         }
         self.direct[..self.cols].copy_from_slice(&self.lag);
         self.direct[self.cols..].copy_from_slice(&self.terms);
+
         self.rot.add(&self.integral, gyro);
         // Bias removed: what of it the filter found (the rest is the segment's intercept).
         self.acc.add(&self.direct, &nav.motion);
@@ -414,6 +517,8 @@ impl DynamicRun {
                 b_ols_std_err: b_ols,
                 max_tilt_rad: self.nav.max_tilt(),
                 max_heading_change_rad: self.nav.max_heading_change(),
+                spin_up_s: self.lags.iter().sum::<f64>() / n.max(1) as f64,
+                spin_up_learned: self.lags_learned,
             },
             split: self.split.then_some((split_b, split_se)),
         }

@@ -112,6 +112,10 @@ impl EstimationRun {
             let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
             c.amplitude = setup.identification.amplitude(levels.sigma_rot());
             let mut est = self.new_estimator(setup.estimator.clone(), n, levels, model);
+            // The lag the model in force learned, if it did (its own run learned it open loop).
+            if let Some(lag_s) = model.and_then(|m| m.learned_spin_up_s()) {
+                est = est.with_learned_lag(lag_s);
+            }
             est.begin_closed_loop();
             self.est = Some(est);
             return ClosedStep::Holding;

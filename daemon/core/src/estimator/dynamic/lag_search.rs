@@ -1,0 +1,197 @@
+//! Learning the thrusters' spin-up time constant: the one unknown the dynamic regression is
+//! not linear in.
+//!
+//! Why it must be learned: B is the thrust's gain through a first-order lag, and a lag that is
+//! wrong by 20 ms moves AMOUR-5's learned B by 20-25 % noise-free (issue 29: 0.05 s true against
+//! 0.1 s assumed gave err_rot 1.05). Nobody knows a real thruster's lag to 20 ms.
+//!
+//! How: for a given lag the fit is linear, so the lag is found by its profile likelihood. With
+//! Gaussian residuals of unknown variance per output, the likelihood maximised over every
+//! other coefficient is -(n/2) sum_a ln(residual variance_a), so the lag that minimises
+//! sum_a ln(s_a^2) over the six outputs is the maximum-likelihood lag. It is searched on a
+//! log-spaced grid over the allowed range (the profile is not guaranteed unimodal over a
+//! decade, and the grid finds the right valley), then by golden section inside the best
+//! grid cell. Each evaluation refits the logged samples ([`super::sample_log`]); the search
+//! runs in the solve job, off the control thread.
+
+use super::DynamicRun;
+
+/// Where and how finely the lag is searched.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LagRange {
+    /// Smallest and largest lag considered, s.
+    pub min_s: f64,
+    pub max_s: f64,
+    /// Grid points over the range before the golden section (>= 3).
+    pub grid: usize,
+    /// Stop when the bracket is this narrow, as a ratio of its ends minus 1 (0.005: 0.5 %).
+    pub tolerance: f64,
+}
+
+impl Default for LagRange {
+    /// 10 ms to 0.5 s (an ESC-driven thruster spins up in 30-200 ms), 8 grid points (a ratio
+    /// of 1.75 between neighbours), to 0.5 %.
+    fn default() -> Self {
+        LagRange {
+            min_s: 0.01,
+            max_s: 0.5,
+            grid: 8,
+            tolerance: 0.005,
+        }
+    }
+}
+
+/// The learned lag and the fit made with it.
+#[derive(Debug, Clone)]
+pub struct LagFit {
+    /// The maximum-likelihood lag, s.
+    pub lag_s: f64,
+    /// The fit at that lag.
+    pub run: DynamicRun,
+    /// The fits at the lag times and divided by `exp(STEP)`: B's sensitivity to the lag.
+    pub above: DynamicRun,
+    pub below: DynamicRun,
+    /// One standard deviation of ln(lag), from the profile's curvature (infinite when the
+    /// profile is flat there).
+    pub sd_ln: f64,
+    /// (lag s, score) of every evaluation, in the order made: the profile, for reports.
+    pub profile: Vec<(f64, f64)>,
+}
+
+/// The step in ln(lag) of the curvature and sensitivity differences (10 %).
+pub const STEP: f64 = 0.0953;
+
+impl LagFit {
+    /// Widen `sol` (the fit at the learned lag) by what the lag's uncertainty does to B:
+    /// dB/dln(lag) from `above_sol` and `below_sol` (the fits at the neighbouring lags),
+    /// times `sd_ln`, added in quadrature to every standard error and to both bounds. Why:
+    /// at a realistic IMU after 4 s the lag is known to +-10-20 %, which moves B by several
+    /// per cent, and a bound without it claimed 2 % on a model 7 % off (eight_vectored, lag
+    /// 0.2 s).
+    pub fn widen(
+        &self,
+        sol: &mut super::DynamicSolution,
+        above_sol: &super::DynamicSolution,
+        below_sol: &super::DynamicSolution,
+    ) {
+        let sd = if self.sd_ln.is_finite() {
+            self.sd_ln
+        } else {
+            // Flat: the lag is anywhere in the range; a factor e either way.
+            1.0
+        };
+        let db = (&above_sol.b - &below_sol.b) / (2.0 * STEP) * sd;
+        let n = sol.b.ncols();
+        for g in 0..2 {
+            let rows = 3 * g..3 * g + 3;
+            let norm2: f64 = rows
+                .clone()
+                .flat_map(|r| (0..n).map(move |i| (r, i)))
+                .map(|(r, i)| sol.b[(r, i)].powi(2))
+                .sum();
+            let mut extra = 0.0;
+            for r in rows {
+                for i in 0..n {
+                    let e = db[(r, i)];
+                    if e.is_finite() {
+                        sol.std_err[(r, i)] = (sol.std_err[(r, i)].powi(2) + e * e).sqrt();
+                        extra += e * e;
+                    }
+                }
+            }
+            if norm2 > 0.0 && sol.rel_err[g].is_finite() {
+                sol.rel_err[g] = (sol.rel_err[g].powi(2) + extra / norm2).sqrt();
+            }
+        }
+    }
+}
+
+/// The profile score of a fit: sum over the six outputs of ln(residual variance). None while
+/// an output has no residual degrees of freedom.
+pub fn profile_score(run: &DynamicRun) -> Option<f64> {
+    let mut score = 0.0;
+    for ls in [&run.rot, &run.acc] {
+        let var = ls.residual_variance()?;
+        // A noise-free fit can leave an exactly zero residual: floored, not -inf.
+        score += var.iter().map(|v| v.max(1e-300).ln()).sum::<f64>();
+    }
+    Some(score)
+}
+
+/// The common lag of all thrusters that best explains `run`'s logged samples, searched over
+/// `range`. None without a log or before the fit has residual degrees of freedom.
+pub fn learn_common_lag(run: &DynamicRun, range: &LagRange) -> Option<LagFit> {
+    run.log()?;
+    let (lo, hi) = (
+        range.min_s.max(1e-4).ln(),
+        range.max_s.max(range.min_s * 1.01).ln(),
+    );
+    let grid = range.grid.max(3);
+    let mut profile = Vec::with_capacity(grid + 24);
+    let mut best: Option<(f64, f64, DynamicRun)> = None;
+    let eval = |x: f64, profile: &mut Vec<(f64, f64)>, best: &mut Option<(f64, f64, DynamicRun)>| {
+        let lag = x.exp();
+        let fit = run.refit(&[lag])?;
+        let score = profile_score(&fit)?;
+        profile.push((lag, score));
+        if best.as_ref().is_none_or(|(_, s, _)| score < *s) {
+            *best = Some((x, score, fit));
+        }
+        Some(score)
+    };
+    let step = (hi - lo) / (grid - 1) as f64;
+    let mut scores = Vec::with_capacity(grid);
+    for k in 0..grid {
+        scores.push(eval(lo + step * k as f64, &mut profile, &mut best)?);
+    }
+    let k_best = (0..grid)
+        .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+        .unwrap_or(0);
+    // Golden section inside the best point's neighbours (one side only at an end of the range).
+    let (mut a, mut b) = (
+        lo + step * k_best.saturating_sub(1) as f64,
+        lo + step * (k_best + 1).min(grid - 1) as f64,
+    );
+    let phi = 0.5 * (5f64.sqrt() - 1.0);
+    let tol = (1.0 + range.tolerance.max(1e-6)).ln();
+    let (mut c, mut d) = (b - phi * (b - a), a + phi * (b - a));
+    let (mut fc, mut fd) = (
+        eval(c, &mut profile, &mut best)?,
+        eval(d, &mut profile, &mut best)?,
+    );
+    while b - a > tol {
+        if fc < fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - phi * (b - a);
+            fc = eval(c, &mut profile, &mut best)?;
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + phi * (b - a);
+            fd = eval(d, &mut profile, &mut best)?;
+        }
+    }
+    let (x, s0, fit) = best?;
+    let above = run.refit(&[(x + STEP).exp()])?;
+    let below = run.refit(&[(x - STEP).exp()])?;
+    let (sa, sb) = (profile_score(&above)?, profile_score(&below)?);
+    let rows = fit.samples() as f64;
+    // ln L = -(rows / 2) * score, so var(ln lag) = 2 / (rows * score'').
+    let curvature = (sa + sb - 2.0 * s0) / (STEP * STEP);
+    let sd_ln = if curvature > 0.0 && rows > 0.0 {
+        (2.0 / (rows * curvature)).sqrt()
+    } else {
+        f64::INFINITY
+    };
+    Some(LagFit {
+        lag_s: x.exp(),
+        run: fit,
+        above,
+        below,
+        sd_ln,
+        profile,
+    })
+}

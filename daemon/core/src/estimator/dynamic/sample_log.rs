@@ -1,0 +1,201 @@
+//! The dynamic fit's inputs after navigation, kept so that the fit can be made again with
+//! another thruster lag ([`super::lag_search`]): the lag is the one unknown the regression is
+//! not linear in, so it is found by refitting, and a refit needs the samples.
+//!
+//! The per-sample path must not allocate and a solve job's snapshot must not copy the whole
+//! log on the control thread. So the log is made of fixed chunks allocated once, when the run
+//! starts: full chunks are shared (`Arc`) with snapshots and never written again; only the open
+//! chunk is written, and a snapshot copies just its filled part (a job's creation allocates
+//! anyway). When every chunk is full the log stops growing and says so: the lag is then learned
+//! from the first [`CAPACITY`] samples, which at 1 kHz is 32 s of excitation.
+
+use std::sync::Arc;
+
+use nalgebra::Vector3;
+
+/// Samples per chunk.
+const CHUNK: usize = 512;
+
+/// Chunks allocated when the log is made.
+const CHUNKS: usize = 64;
+
+/// Samples the log holds at most (~4.3 MB).
+pub const CAPACITY: usize = CHUNK * CHUNKS;
+
+/// One sample as the fit sees it, after the navigation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Navigated {
+    /// Vehicle time, s.
+    pub t_s: f64,
+    /// Bias-free gyro, rad/s (the rotation rows' output).
+    pub gyro: Vector3<f64>,
+    /// The navigation's body velocity, rate and gravity direction (the terms' inputs).
+    pub velocity: Vector3<f64>,
+    pub rate: Vector3<f64>,
+    pub down: Vector3<f64>,
+    /// The body's acceleration (the translation rows' output).
+    pub motion: Vector3<f64>,
+    /// Index of the command in force into [`SampleLog::command`]; `u32::MAX`: neutral.
+    pub command: u32,
+}
+
+/// The navigated samples of one run and the commands they were taken under.
+#[derive(Debug)]
+pub struct SampleLog {
+    /// Full chunks, shared with snapshots, never written again.
+    sealed: Vec<Arc<Vec<Navigated>>>,
+    /// The chunk being written (capacity [`CHUNK`]); never shared (a snapshot copies it), so
+    /// it is written in place.
+    open: Arc<Vec<Navigated>>,
+    /// Empty chunks allocated up front, taken as the open one fills: already in their `Arc`,
+    /// so sealing a chunk allocates nothing.
+    spare: Vec<Arc<Vec<Navigated>>>,
+    /// Every distinct command (one per pulse), N values each, concatenated.
+    commands: Vec<f64>,
+    n: usize,
+    /// Samples that did not fit any more.
+    dropped: u64,
+}
+
+impl SampleLog {
+    /// An empty log for `n` thrusters with room for [`CAPACITY`] samples and `max_commands`
+    /// commands, all allocated now.
+    pub fn new(n: usize, max_commands: usize) -> Self {
+        SampleLog {
+            sealed: Vec::with_capacity(CHUNKS),
+            open: Arc::new(Vec::with_capacity(CHUNK)),
+            spare: (1..CHUNKS)
+                .map(|_| Arc::new(Vec::with_capacity(CHUNK)))
+                .collect(),
+            commands: Vec::with_capacity(n * max_commands.max(1)),
+            n,
+            dropped: 0,
+        }
+    }
+
+    /// Store command `u` (N values) and return its index, or `u32::MAX` when there is no room.
+    /// Called when a pulse starts (an allocation point anyway).
+    pub fn add_command(&mut self, u: &[f64]) -> u32 {
+        let index = self.commands.len() / self.n.max(1);
+        if u.len() != self.n || self.commands.len() + self.n > self.commands.capacity() {
+            return u32::MAX;
+        }
+        self.commands.extend_from_slice(u);
+        index as u32
+    }
+
+    /// The command stored at `index` (None: neutral).
+    pub fn command(&self, index: u32) -> Option<&[f64]> {
+        let start = (index as usize).checked_mul(self.n)?;
+        self.commands.get(start..start + self.n)
+    }
+
+    /// Append one sample; never allocates (dropped, and counted, once the log is full).
+    pub fn push(&mut self, s: Navigated) {
+        if self.open.len() == CHUNK {
+            let Some(next) = self.spare.pop() else {
+                self.dropped += 1;
+                return;
+            };
+            let full = std::mem::replace(&mut self.open, next);
+            self.sealed.push(full);
+        }
+        // The open chunk is never shared: a snapshot copies it into its own Arc.
+        if let Some(open) = Arc::get_mut(&mut self.open) {
+            open.push(s);
+        } else {
+            self.dropped += 1;
+        }
+    }
+
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.sealed.len() * CHUNK + self.open.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Samples that arrived after the log was full.
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// Every sample, in order.
+    pub fn iter(&self) -> impl Iterator<Item = &Navigated> {
+        self.sealed
+            .iter()
+            .flat_map(|c| c.iter())
+            .chain(self.open.iter())
+    }
+}
+
+impl Clone for SampleLog {
+    /// A read-only snapshot: the sealed chunks shared, the open one's samples copied, no spare
+    /// room (a snapshot is solved, never written).
+    fn clone(&self) -> Self {
+        SampleLog {
+            sealed: self.sealed.clone(),
+            open: Arc::new(self.open.as_ref().clone()),
+            spare: Vec::new(),
+            commands: self.commands.clone(),
+            n: self.n,
+            dropped: self.dropped,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(k: usize) -> Navigated {
+        Navigated {
+            t_s: k as f64,
+            gyro: Vector3::zeros(),
+            velocity: Vector3::zeros(),
+            rate: Vector3::zeros(),
+            down: Vector3::z(),
+            motion: Vector3::zeros(),
+            command: u32::MAX,
+        }
+    }
+
+    #[test]
+    fn keeps_every_sample_in_order_across_chunks_and_snapshots() {
+        let mut log = SampleLog::new(2, 4);
+        for k in 0..(CHUNK * 2 + 7) {
+            log.push(sample(k));
+        }
+        let snapshot = log.clone();
+        for k in (CHUNK * 2 + 7)..(CHUNK * 3 + 1) {
+            log.push(sample(k));
+        }
+        assert_eq!(snapshot.len(), CHUNK * 2 + 7);
+        assert_eq!(log.len(), CHUNK * 3 + 1);
+        assert!(log.iter().enumerate().all(|(k, s)| s.t_s == k as f64));
+        assert!(snapshot.iter().enumerate().all(|(k, s)| s.t_s == k as f64));
+    }
+
+    #[test]
+    fn stops_growing_when_full_and_counts_what_it_dropped() {
+        let mut log = SampleLog::new(1, 1);
+        for k in 0..CAPACITY + 10 {
+            log.push(sample(k));
+        }
+        assert_eq!(log.len(), CAPACITY);
+        assert_eq!(log.dropped(), 10);
+    }
+
+    #[test]
+    fn commands_are_stored_up_to_their_room() {
+        let mut log = SampleLog::new(2, 2);
+        assert_eq!(log.add_command(&[0.5, -0.5]), 0);
+        assert_eq!(log.add_command(&[1.0, 0.0]), 1);
+        assert_eq!(log.add_command(&[1.0, 1.0]), u32::MAX);
+        assert_eq!(log.add_command(&[1.0]), u32::MAX);
+        assert_eq!(log.command(1), Some(&[1.0, 0.0][..]));
+        assert_eq!(log.command(u32::MAX), None);
+    }
+}
