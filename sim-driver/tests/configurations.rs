@@ -31,6 +31,9 @@ fn every_vehicle_file_loads_with_the_expected_rank() {
         ("aligned", 5, 3),
         ("six_dof", 6, 6),
         ("eight_vectored", 8, 6),
+        ("amour5_lag30ms", 5, 5),
+        ("amour5_lag200ms", 5, 5),
+        ("eight_vectored_lag80ms_curve", 8, 6),
     ];
     let mut seen = 0;
     for entry in std::fs::read_dir(vehicles_dir()).expect("config/vehicles") {

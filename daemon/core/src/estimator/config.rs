@@ -317,7 +317,9 @@ impl EstimatorConfig {
         if lo * 1.1 > hi {
             return Err(ConfigError {
                 key: "spin_up_range_s",
-                why: format!("the first value must be below the second by 10 % or more, got [{lo}, {hi}]"),
+                why: format!(
+                    "the first value must be below the second by 10 % or more, got [{lo}, {hi}]"
+                ),
             });
         }
         self.check_dof_priority()

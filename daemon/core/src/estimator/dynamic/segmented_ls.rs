@@ -247,7 +247,11 @@ impl SegmentedLs {
     /// output the model explains exactly came out 0 or 1e-300 at random).
     pub fn residual_variance(&self) -> Option<[f64; 3]> {
         let Normal {
-            g, xy, yy, segments, ..
+            g,
+            xy,
+            yy,
+            segments,
+            ..
         } = self.normal_equations();
         let k = self.k;
         let d = DVector::from_fn(k, |i, _| {
