@@ -42,12 +42,17 @@ fn dynamic_sample(t: f64) -> (Vector3<f64>, Vector3<f64>) {
 /// A dynamic-method estimator (the default config) that has seen `pulses` back-to-back pulses
 /// of 0.1 s at 200 Hz, for the `estimate()` cost.
 fn warmed_dynamic(n: usize, pulses: usize) -> Estimator {
+    warmed_dynamic_at(n, pulses, NoiseLevels::isotropic(0.25, 0.5))
+}
+
+/// The same at rest noise `noise`: at a quiet gyro (below `spin_up_max_gyro_sigma`) the run
+/// logs its samples and every estimate learns the thrusters' lag.
+fn warmed_dynamic_at(n: usize, pulses: usize, noise: NoiseLevels) -> Estimator {
     let cfg = EstimatorConfig {
         max_pulses: 1000,
         ..EstimatorConfig::default()
     };
-    let mut est = Estimator::new(cfg, n, NoiseLevels::isotropic(0.25, 0.5))
-        .with_rest_specific_force(REST_FORCE);
+    let mut est = Estimator::new(cfg, n, noise).with_rest_specific_force(REST_FORCE);
     let mut t = 0.0;
     for _ in 0..pulses {
         est.begin_pulse_at(t);
@@ -111,11 +116,48 @@ fn bench(c: &mut Criterion) {
                 est.push_dynamic_sample(black_box(k as f64 * 0.005), w, f, black_box(Some(5.0)))
             })
         });
+        // The same at a quiet gyro, where the run also logs each navigated sample for the lag
+        // search (`estimator::dynamic::sample_log`).
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_sample_update_learning_lag", n),
+            &n,
+            |b, _| {
+                let mut est = Estimator::new(
+                    EstimatorConfig::default(),
+                    n,
+                    NoiseLevels::isotropic(0.002, 0.03),
+                )
+                .with_rest_specific_force(REST_FORCE);
+                est.begin_pulse_at(0.0);
+                let samples: Vec<_> = (0..200).map(|k| dynamic_sample(k as f64 * 0.005)).collect();
+                let mut k = 0u64;
+                b.iter(|| {
+                    k += 1;
+                    let (w, f) = &samples[(k % 200) as usize];
+                    est.push_dynamic_sample(black_box(k as f64 * 0.005), w, f, black_box(Some(5.0)))
+                })
+            },
+        );
         // A full dynamic estimate after 64 pulses (the default stops at a bound or 80 pulses).
         let dynamic = warmed_dynamic(n, 64);
         c.bench_with_input(BenchmarkId::new("dynamic_estimate", n), &n, |b, _| {
             b.iter(|| black_box(dynamic.estimate()))
         });
+        // The same at a realistic IMU's noise, where the estimate also learns the lag
+        // (`estimator::dynamic::lag_search`: ~22 refits of the logged samples), and the job
+        // copy, which then also copies the log's open chunk.
+        let learning = warmed_dynamic_at(n, 64, NoiseLevels::isotropic(0.002, 0.03));
+        assert!(learning.learns_lag());
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_estimate_learning_lag", n),
+            &n,
+            |b, _| b.iter(|| black_box(learning.estimate())),
+        );
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_job_copy_learning_lag", n),
+            &n,
+            |b, _| b.iter(|| black_box(Box::new(learning.clone()))),
+        );
         c.bench_with_input(BenchmarkId::new("dynamic_stop_decision", n), &n, |b, _| {
             b.iter(|| black_box(dynamic.stop_decision()))
         });
