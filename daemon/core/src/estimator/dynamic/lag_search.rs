@@ -229,7 +229,7 @@ mod tests {
             let t = k as f64 * 0.005;
             let step = (t / 0.3) as usize;
             let u = [
-                if step % 2 == 0 { 0.6 } else { -0.6 },
+                if step.is_multiple_of(2) { 0.6 } else { -0.6 },
                 if step % 4 < 2 { 0.4 } else { -0.4 },
             ];
             let gyro = Vector3::new(
