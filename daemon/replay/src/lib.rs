@@ -67,6 +67,21 @@ pub struct Replayed {
 pub fn replay(rec: &Recording, cfg: &DaemonConfig) -> Result<Replayed, ReplayError> {
     let inputs = journal::check(&rec.inputs)?;
     rerun::check_complete(&rec.imu, &rec.thrust)?;
+    // When each solve's result reached the daemon's machine holds for the daemon's own
+    // settings only: with other settings the jobs are other jobs, run inline and applied at
+    // their due samples.
+    let own_settings = recorded_config(rec).is_ok_and(|recorded| &recorded == cfg);
+    let without_deliveries: Vec<thruster_protocol::InputMsg>;
+    let inputs = if own_settings {
+        inputs
+    } else {
+        without_deliveries = inputs
+            .iter()
+            .filter(|m| m.kind() != Ok(thruster_protocol::InputKind::SolveDelivered))
+            .copied()
+            .collect();
+        &without_deliveries
+    };
     let outcome = rerun::rerun(cfg, &rec.imu, inputs, &rec.thrust)?;
     let difference = compare::first_difference(&outcome.models, &rec.models);
     Ok(Replayed {

@@ -5,7 +5,7 @@
 use thruster_protocol::validate::ImuSampleValidator;
 use thruster_protocol::{ImuSample, InputKind, InputMsg, ModelMsg, RequestKind, ThrustCommand};
 use thrusterd_core::config::DaemonConfig;
-use thrusterd_core::machine::{Event, Machine, Request, State};
+use thrusterd_core::machine::{Event, Machine, Request, SolveResult, SolverMode, State};
 use thrusterd_core::wire;
 
 /// Why the recording does not hold the session the journal describes.
@@ -132,12 +132,32 @@ pub fn rerun(
         diverged_at: None,
         models_valid: Vec::new(),
     };
+    // A journal that says when each solve's result reached the daemon's machine (the daemon
+    // journals every one): the replay computes each job at once and hands its result over at
+    // the same place, so a result the daemon applied late is applied late here too. Without
+    // (an older recording) the jobs run inline and are applied at their due sample, which is
+    // the daemon's outcome whenever no solve was late.
+    let journaled = inputs
+        .iter()
+        .any(|m| m.kind() == Ok(InputKind::SolveDelivered));
+    let mut solved = Solved::default();
+    if journaled {
+        machine.set_solver_mode(SolverMode::External);
+    }
     let t0 = imu.first().map_or(0, |s| s.t_ns);
     let mut validator = ImuSampleValidator::default();
     let mut next = 0;
     let mut model_seq = 0;
     // Entries before the first sample (the start, "no IMU yet").
-    apply_due(&mut machine, inputs, &mut next, 0, None, &mut out)?;
+    apply_due(
+        &mut machine,
+        inputs,
+        &mut next,
+        0,
+        None,
+        &mut solved,
+        &mut out,
+    )?;
     collect(&mut machine, &mut model_seq, &mut out);
     for sample in imu {
         // The daemon answers every sample it receives (a command, or neutral for a rejected
@@ -154,6 +174,7 @@ pub fn rerun(
         }
         out.imu_accepted += 1;
         let cmd = machine.on_imu(&wire::imu_input(sample));
+        solved.run(&mut machine);
         if out.diverged_at.is_none() {
             out.commands_compared += 1;
             if !same_command(&cmd, recorded) {
@@ -170,6 +191,7 @@ pub fn rerun(
             &mut next,
             out.imu_accepted,
             Some(sample.seq),
+            &mut solved,
             &mut out,
         )?;
         // The daemon publishes swaps after the round's inputs; the order of swaps is the same.
@@ -205,6 +227,7 @@ fn apply_due(
     next: &mut usize,
     count: u64,
     seq: Option<u64>,
+    solved: &mut Solved,
     out: &mut Outcome,
 ) -> Result<(), RerunError> {
     while let Some(m) = inputs.get(*next).filter(|m| m.imu_count == count) {
@@ -218,7 +241,8 @@ fn apply_due(
                 });
             }
         }
-        let refused = apply(machine, m);
+        let refused = apply(machine, m, solved);
+        solved.run(machine);
         if refused != (m.refused != 0) {
             let verb = |r: bool| if r { "refused" } else { "took" };
             out.divergences.push(format!(
@@ -237,7 +261,7 @@ fn apply_due(
 }
 
 /// Hands one journal entry to the machine as the daemon did; true when the machine refused.
-fn apply(machine: &mut Machine, m: &InputMsg) -> bool {
+fn apply(machine: &mut Machine, m: &InputMsg, solved: &mut Solved) -> bool {
     let text = m.text.as_str();
     match m.kind() {
         Ok(InputKind::Request) => {
@@ -283,9 +307,35 @@ fn apply(machine: &mut Machine, m: &InputMsg) -> bool {
             machine.on_dvl(m.dvl);
             false
         }
+        // A result the replay does not have (a job it never made) is "refused": the entry
+        // is then reported as a divergence.
+        Ok(InputKind::SolveDelivered) => match solved.results.remove(&u64::from(m.code)) {
+            Some(r) => {
+                machine.deliver(r);
+                false
+            }
+            None => true,
+        },
         // Start carries nothing for the machine; Load and unknown kinds were refused by
         // `journal::check`.
         Ok(InputKind::Start) | Ok(InputKind::Load) | Err(_) => false,
+    }
+}
+
+/// The results of the solve jobs the replayed machine handed out (external mode), by job
+/// id, until the journal says the daemon's machine got them.
+#[derive(Default)]
+struct Solved {
+    results: std::collections::HashMap<u64, SolveResult>,
+}
+
+impl Solved {
+    /// Runs every job the machine has handed out since the last call (none inline).
+    fn run(&mut self, machine: &mut Machine) {
+        while let Some(job) = machine.take_job() {
+            let id = job.id();
+            self.results.insert(id, job.run());
+        }
     }
 }
 
@@ -362,6 +412,29 @@ mod tests {
         assert_eq!(o.diverged_at, None);
         assert!(o.divergences.is_empty(), "{:?}", o.divergences);
         assert!(o.models.is_empty());
+    }
+
+    /// A journal that hands over a result the replay's machine never asked for (a damaged
+    /// or foreign journal): reported, not silently skipped.
+    #[test]
+    fn a_delivered_result_the_replay_never_made_is_reported() {
+        let imu = rest(20);
+        let mut delivered = entry(1, InputKind::SolveDelivered, 10, 10);
+        delivered.code = 7;
+        let inputs = [entry(0, InputKind::Start, 0, 0), delivered];
+        let o = rerun(
+            &DaemonConfig::default(),
+            &imu,
+            &inputs,
+            &neutral_answers(&imu, 5),
+        )
+        .unwrap();
+        assert_eq!(o.divergences.len(), 1, "{:?}", o.divergences);
+        assert!(
+            o.divergences[0].contains("SolveDelivered"),
+            "{:?}",
+            o.divergences
+        );
     }
 
     #[test]

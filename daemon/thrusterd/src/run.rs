@@ -32,7 +32,7 @@ use thruster_protocol::{
 };
 use thrusterd_core::config::DaemonConfig;
 use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
-use thrusterd_core::machine::{Command, Event, Machine, Request, SolverMode};
+use thrusterd_core::machine::{Command, Event, Machine, Request, SolveResult, SolverMode};
 
 use crate::loader::{LoadError, Loader, Progress};
 use crate::solver::SolverThread;
@@ -625,6 +625,13 @@ impl Daemon {
         match self.validator.check(sample) {
             Ok(accepted) => {
                 self.last_imu = Some((sample.seq, sample.t_ns));
+                let input = wire::imu_input(sample);
+                // Results first, then the sample is counted: a result handed over now is
+                // journaled as before this sample, which is where a replay hands it over.
+                self.collect_solves();
+                if self.cfg.runtime.lockstep {
+                    self.wait_for_due_solves(input.t_ns);
+                }
                 if let Some(j) = self.journal.as_mut() {
                     j.imu(sample.seq, sample.t_ns);
                 }
@@ -644,11 +651,6 @@ impl Daemon {
                         "IMU stream restarted (seq {}): time discontinuity",
                         sample.seq
                     );
-                }
-                let input = wire::imu_input(sample);
-                self.collect_solves();
-                if self.cfg.runtime.lockstep {
-                    self.wait_for_due_solves(input.t_ns);
                 }
                 let cmd = self.machine.on_imu(&input);
                 let sent = self.send_thrust(&out.thrust, &cmd);
@@ -682,7 +684,7 @@ impl Daemon {
     fn collect_solves(&mut self) {
         loop {
             match self.solver.try_result() {
-                Ok(Some(r)) => self.machine.deliver(r),
+                Ok(Some(r)) => self.deliver(r),
                 Ok(None) => return,
                 Err(lost) => return self.solver_lost(&lost.0),
             }
@@ -695,7 +697,7 @@ impl Daemon {
         let wait = Duration::from_millis(self.cfg.runtime.lockstep_wait_ms.clamp(1, 1_500));
         while let Some(id) = self.machine.awaiting_result(t_ns) {
             match self.solver.wait_result(wait) {
-                Ok(Some(r)) => self.machine.deliver(r),
+                Ok(Some(r)) => self.deliver(r),
                 Ok(None) => {
                     let why = format!(
                         "solve {id} not back after {} ms in lockstep (runtime.lockstep_wait_ms)",
@@ -706,6 +708,19 @@ impl Daemon {
                 Err(lost) => return self.solver_lost(&lost.0),
             }
         }
+    }
+
+    /// Hands a solve's result to the machine and journals when it did: a result back after
+    /// its due sample is applied at the next one, which a replay can only reproduce from the
+    /// journal.
+    fn deliver(&mut self, r: SolveResult) {
+        let id = r.id();
+        self.machine.deliver(r);
+        self.journal(|j| {
+            j.record(InputKind::SolveDelivered, false, |m| {
+                m.code = u32::try_from(id).unwrap_or(u32::MAX)
+            })
+        });
     }
 
     /// Gives the solver thread the jobs the last sample made; logs late results.
