@@ -82,6 +82,9 @@ pub struct SolveJob {
     /// The estimator at the moment of submission (its normal equations, noise, prior).
     est: Box<Estimator>,
     work: Work,
+    /// Progress only: the estimate does not search the thrusters' lag
+    /// (`Estimator::estimate_progress`).
+    progress: bool,
     /// The candidate model's geometry key and the vehicle time it is made at.
     geometry_key: Option<u64>,
     made_t_ns: u64,
@@ -101,7 +104,11 @@ impl SolveJob {
     /// Compute the result. Pure and deterministic: the same job gives the same result on any
     /// thread.
     pub fn run(self) -> SolveResult {
-        let estimate = self.est.estimate();
+        let estimate = if self.progress {
+            self.est.estimate_progress()
+        } else {
+            self.est.estimate()
+        };
         let (decision, elapsed_s) = match self.work {
             Work::Pulse => (self.est.stop_decision_with(&estimate), 0.0),
             Work::Interval {
@@ -280,6 +287,7 @@ impl Solver {
             due_ns,
             est: Box::new(est.clone()),
             work,
+            progress: purpose == Purpose::Progress,
             geometry_key,
             made_t_ns: t_ns,
         };

@@ -303,6 +303,7 @@ mod tests {
             max_heading_change_rad: 0.2,
             spin_up_s: 0.07,
             spin_up_learned: true,
+            spin_up_sd_ln: 0.01,
         });
         let d = dynamics_msg(0, &m).unwrap();
         assert!(d.validate().is_ok(), "{:?}", d.validate());

@@ -187,6 +187,13 @@ impl EstimationRun {
     }
 
     /// A result applied: its estimate is the run's latest.
+    /// The lag an applied estimate learned, for the run's next progress estimates.
+    pub(super) fn hint_lag(&mut self, estimate: &Estimate) {
+        if let Some(est) = self.est.as_mut() {
+            est.set_lag_hint(estimate);
+        }
+    }
+
     pub(super) fn keep_estimate(&mut self, estimate: Estimate) {
         self.last_estimate = Some(estimate);
     }

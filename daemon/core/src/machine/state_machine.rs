@@ -843,6 +843,7 @@ impl Machine {
     /// a run stops, so every result applied belongs to the run under way.
     fn apply_solve(&mut self, purpose: Purpose, result: SolveResult) {
         let decision = result.decision;
+        self.run.hint_lag(&result.estimate);
         match purpose {
             Purpose::Progress => self.run.keep_estimate(result.estimate),
             Purpose::Decide | Purpose::Conclude if decision.is_stop() => {

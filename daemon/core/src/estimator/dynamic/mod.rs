@@ -54,6 +54,8 @@ pub struct DynamicTerms {
     pub spin_up_s: f64,
     /// Whether `spin_up_s` was learned from this run's data.
     pub spin_up_learned: bool,
+    /// One standard deviation of ln(`spin_up_s`) when learned (0 when configured).
+    pub spin_up_sd_ln: f64,
 }
 
 impl DynamicTerms {
@@ -519,6 +521,7 @@ impl DynamicRun {
                 max_heading_change_rad: self.nav.max_heading_change(),
                 spin_up_s: self.lags.iter().sum::<f64>() / n.max(1) as f64,
                 spin_up_learned: self.lags_learned,
+                spin_up_sd_ln: 0.0,
             },
             split: self.split.then_some((split_b, split_se)),
         }
