@@ -138,6 +138,9 @@ fn estimate_on(
     assert_eq!(setup.estimator.method, Method::Dynamic);
     // No driver in between: the daemon compensates the T200 deadband itself.
     setup.machine.deadband = 0.05;
+    if let Ok(v) = std::env::var("LAG_NOISE_S") {
+        setup.machine.noise_s = v.parse().unwrap();
+    }
     let mut machine = Machine::new(setup);
     while sim.time_s() < 1.0 {
         tick(&mut machine, &mut sim);
@@ -1116,6 +1119,10 @@ fn lag_sweep() {
                 cfg.learn_spin_up = learn;
                 if let Ok(p) = std::env::var("LAG_MIN_POWER") {
                     cfg.min_power = p.parse().unwrap();
+                }
+                if std::env::var("LAG_FORCE").is_ok() {
+                    // Learn whatever the gyro noise (the decisive runs at the paper's noise).
+                    cfg.spin_up_max_gyro_sigma = f64::INFINITY;
                 }
                 if let Ok(b) = std::env::var("LAG_BIAS_STD") {
                     cfg.accel_bias_std = b.parse().unwrap();
