@@ -31,6 +31,8 @@ fn every_vehicle_file_loads_with_the_expected_rank() {
         ("aligned", 5, 3),
         ("six_dof", 6, 6),
         ("eight_vectored", 8, 6),
+        ("amour5_t200", 5, 5),
+        ("eight_vectored_t200", 8, 6),
     ];
     let mut seen = 0;
     for entry in std::fs::read_dir(vehicles_dir()).expect("config/vehicles") {

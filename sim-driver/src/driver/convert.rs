@@ -203,6 +203,7 @@ mod tests {
                 ThrusterSpec::new("a", [0.2, 0.0, -0.15], [0.0, 0.0, -1.0]),
                 ThrusterSpec::new("b", [0.0, 0.2, 0.0], [1.0, 0.0, 0.0]),
             ],
+            battery: None,
         };
         v.thrusters[1].reversed = true;
         let change = Change {
