@@ -30,6 +30,10 @@ wire_enum! {
         /// A model loaded from a file (`text` the path) by an operator request: its content
         /// is not in the journal, so replay refuses a recording that has one.
         Load = 8,
+        /// The driver's supply voltage as the machine took it: `code` 1 with the volts in
+        /// `value`, or `code` 0 when the reading was lost (`value` 0; never NaN, so the
+        /// journal's JSON stays numbers).
+        Supply = 9,
     }
 }
 
