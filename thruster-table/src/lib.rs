@@ -264,24 +264,42 @@ impl ThrusterTable {
         let (i, wv) = bracket(&self.voltages, voltage_v);
         let env = |k: usize| lerp(self.envelope_n[i][k], self.envelope_n[i + 1][k], wv);
         let last = self.pwm_us.len() - 1;
-        // Outward from neutral the envelope is monotone: the first point reaching the thrust.
-        let (found, from) = if thrust_n > 0.0 {
-            let side: Vec<usize> = (self.neutral..=last).collect();
-            let j = side.partition_point(|&k| env(k) < thrust_n);
-            (side.get(j).copied(), side)
-        } else {
-            let side: Vec<usize> = (0..=self.neutral).rev().collect();
-            let j = side.partition_point(|&k| env(k) > thrust_n);
-            (side.get(j).copied(), side)
+        // Outward from neutral the envelope is monotone: binary search for the first point
+        // that reaches the thrust (`p` steps out from neutral; no allocation, the daemon calls
+        // this in its control loop).
+        let forward = thrust_n > 0.0;
+        let steps = if forward { last - self.neutral } else { self.neutral };
+        let index = |p: usize| {
+            if forward {
+                self.neutral + p
+            } else {
+                self.neutral - p
+            }
         };
-        let Some(k) = found else {
-            return if thrust_n > 0.0 { 1.0 } else { -1.0 };
+        let reached = |p: usize| {
+            let f = env(index(p));
+            if forward {
+                f >= thrust_n
+            } else {
+                f <= thrust_n
+            }
         };
-        let pos = from.iter().position(|&x| x == k).expect("k is on its side");
-        if pos == 0 {
+        let (mut lo, mut hi) = (0, steps + 1);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if reached(mid) {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        if lo > steps {
+            return if forward { 1.0 } else { -1.0 };
+        }
+        if lo == 0 {
             return 0.0;
         }
-        let inner = from[pos - 1];
+        let (inner, k) = (index(lo - 1), index(lo));
         let (f0, f1) = (env(inner), env(k));
         let w = if f1 != f0 {
             (thrust_n - f0) / (f1 - f0)

@@ -15,6 +15,7 @@ use crate::machine::{Geometry, MachineConfig, MachineSetup};
 use crate::model::RigidBody;
 use crate::monitor::MonitorConfig;
 use crate::refinement::RefinementConfig;
+use crate::supply::SupplyConfig;
 use thruster_protocol::MAX_THRUSTERS;
 
 /// The whole file.
@@ -33,6 +34,7 @@ pub struct DaemonConfig {
     pub monitor: MonitorConfig,
     pub identification: IdentificationConfig,
     pub refinement: RefinementConfig,
+    pub supply: SupplyConfig,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -254,6 +256,11 @@ impl DaemonConfig {
         let mut floats: Vec<(String, f64, Range)> = vec![
             ("machine.noise_s".into(), m.noise_s, Range::above(0.0)),
             (
+                "supply.reference_voltage_v".into(),
+                self.supply.reference_voltage_v,
+                SupplyConfig::REFERENCE_RANGE,
+            ),
+            (
                 "machine.level_max_s".into(),
                 m.level_max_s,
                 Range::at_least(0.0),
@@ -421,6 +428,7 @@ impl DaemonConfig {
             body: self.body.clone(),
             thrusters: self.thruster_count(),
             geometry,
+            supply: self.supply.clone(),
         }
     }
 }

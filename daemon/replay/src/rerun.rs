@@ -283,6 +283,10 @@ fn apply(machine: &mut Machine, m: &InputMsg) -> bool {
             machine.on_dvl(m.dvl);
             false
         }
+        Ok(InputKind::Supply) => {
+            machine.on_supply((m.code != 0).then_some(m.value));
+            false
+        }
         // Start carries nothing for the machine; Load and unknown kinds were refused by
         // `journal::check`.
         Ok(InputKind::Start) | Ok(InputKind::Load) | Err(_) => false,
