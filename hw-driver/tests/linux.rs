@@ -267,7 +267,11 @@ fn the_supply_voltage_comes_from_an_optional_iio_channel_through_the_divider() {
     let mut b = LinuxBackend::new(cfg.clone(), outputs());
     let t0 = monotonic_ns();
     b.start(Waker::noop(), t0).unwrap();
-    assert_eq!(b.supply(t0).voltage_v, None, "not read before the first poll");
+    assert_eq!(
+        b.supply(t0).voltage_v,
+        None,
+        "not read before the first poll"
+    );
     b.read_sensors(t0).unwrap();
     let v = b.supply(t0).voltage_v.expect("read at the first poll");
     assert!((v - 15.125).abs() < 1e-9, "{v}");

@@ -98,14 +98,22 @@ impl BatterySpec {
                 ))
             }
         };
-        check("capacity_ah", self.capacity_ah, Range::above_to(0.0, 1000.0))?;
+        check(
+            "capacity_ah",
+            self.capacity_ah,
+            Range::above_to(0.0, 1000.0),
+        )?;
         check("cells", self.cells as f64, Range::closed(1.0, 14.0))?;
         check(
             "internal_resistance_ohm",
             self.internal_resistance_ohm,
             Range::closed(0.0, 1.0),
         )?;
-        check("initial_charge", self.initial_charge, Range::closed(0.0, 1.0))?;
+        check(
+            "initial_charge",
+            self.initial_charge,
+            Range::closed(0.0, 1.0),
+        )?;
         check(
             "hotel_current_a",
             self.hotel_current_a,

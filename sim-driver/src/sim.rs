@@ -229,7 +229,9 @@ impl Simulator {
 
     /// Supply voltage the thrusters see now, V ([`FIXED_SUPPLY_V`] without a battery).
     pub fn supply_voltage_v(&self) -> f64 {
-        self.battery.as_ref().map_or(FIXED_SUPPLY_V, Battery::voltage_v)
+        self.battery
+            .as_ref()
+            .map_or(FIXED_SUPPLY_V, Battery::voltage_v)
     }
 
     /// Solves the battery's voltage for the held commands, drains `dt` seconds of their

@@ -287,7 +287,9 @@ mod tests {
         }
         // weaken scales it; reversed flips it.
         s.forward_max_n *= 0.5;
-        assert!((steady_thrust_at(&s, 1.0, 16.0) - 0.5 * t.thrust_at_command(16.0, 1.0)).abs() < 1e-9);
+        assert!(
+            (steady_thrust_at(&s, 1.0, 16.0) - 0.5 * t.thrust_at_command(16.0, 1.0)).abs() < 1e-9
+        );
         s.reversed = true;
         assert!(steady_thrust_at(&s, 1.0, 16.0) < 0.0);
         // The supply moves the target of a held command.

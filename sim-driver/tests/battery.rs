@@ -94,7 +94,11 @@ fn a_dive_drains_the_charge_and_the_voltage_falls() {
         "drawn {drawn} Ah, current {i_start} -> {} A",
         b.current_a()
     );
-    assert!(sim.supply_voltage_v() < v_start - 0.2, "{v_start} -> {}", sim.supply_voltage_v());
+    assert!(
+        sim.supply_voltage_v() < v_start - 0.2,
+        "{v_start} -> {}",
+        sim.supply_voltage_v()
+    );
 }
 
 #[test]
@@ -105,5 +109,8 @@ fn vehicles_without_a_battery_keep_the_fixed_supply() {
     // The power law's truth: full forward is forward_max_n on each column.
     let (fwd, _) = sim.truth();
     let (fwd16, _) = sim.truth_at(12.0);
-    assert_eq!(fwd, fwd16, "a power-law thruster does not depend on the voltage");
+    assert_eq!(
+        fwd, fwd16,
+        "a power-law thruster does not depend on the voltage"
+    );
 }

@@ -17,8 +17,7 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::{
     DriverStatusMsg, ImuSample, ReconfigEvent, ReconfigKind, ThrustCommand, ThrustMode, TruthMsg,
-    Validate,
-    VehicleStateMsg,
+    Validate, VehicleStateMsg,
 };
 use thruster_sim::driver::shutdown::Shutdown;
 use thruster_sim::driver::wait::{recv_until, Received};

@@ -25,7 +25,11 @@ pub const T200_CSV: &str = include_str!("../data/t200.csv");
 
 /// PWM pulse (us) for a normalised command; non-finite is neutral, beyond +-1 is clamped.
 pub fn command_to_pwm(u: f64) -> f64 {
-    let u = if u.is_finite() { u.clamp(-1.0, 1.0) } else { 0.0 };
+    let u = if u.is_finite() {
+        u.clamp(-1.0, 1.0)
+    } else {
+        0.0
+    };
     PWM_NEUTRAL_US + PWM_HALF_RANGE_US * u
 }
 
@@ -268,7 +272,11 @@ impl ThrusterTable {
         // that reaches the thrust (`p` steps out from neutral; no allocation, the daemon calls
         // this in its control loop).
         let forward = thrust_n > 0.0;
-        let steps = if forward { last - self.neutral } else { self.neutral };
+        let steps = if forward {
+            last - self.neutral
+        } else {
+            self.neutral
+        };
         let index = |p: usize| {
             if forward {
                 self.neutral + p
@@ -347,7 +355,11 @@ mod tests {
         ];
         let t = ThrusterTable::t200();
         for (v, pwm, f, a) in points {
-            assert!((kgf(v, pwm) - f).abs() < 1e-4, "{v} V {pwm} us: {}", kgf(v, pwm));
+            assert!(
+                (kgf(v, pwm) - f).abs() < 1e-4,
+                "{v} V {pwm} us: {}",
+                kgf(v, pwm)
+            );
             assert!((t.current_a(v, pwm) - a).abs() < 1e-3, "{v} V {pwm} us");
         }
         // Dead zone as published: nothing at 1500 us nor at 1528 us at 16 V, thrust at 1532.
@@ -404,13 +416,19 @@ mod tests {
 
     #[test]
     fn bad_text_names_the_line() {
-        let err = ThrusterTable::parse_csv("voltage_v,pwm_us,force_kgf,current_a\n10,1500,x,0\n", "t.csv")
-            .unwrap_err()
-            .to_string();
+        let err = ThrusterTable::parse_csv(
+            "voltage_v,pwm_us,force_kgf,current_a\n10,1500,x,0\n",
+            "t.csv",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.starts_with("t.csv:2:"), "{err}");
-        let err = ThrusterTable::parse_csv("10,1400,-1,1\n10,1500,0,0\n10,1600,1,1\n12,1400,-1,1\n12,1500,0,0\n", "t.csv")
-            .unwrap_err()
-            .to_string();
+        let err = ThrusterTable::parse_csv(
+            "10,1400,-1,1\n10,1500,0,0\n10,1600,1,1\n12,1400,-1,1\n12,1500,0,0\n",
+            "t.csv",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.contains("12 V has 2 PWM points"), "{err}");
     }
 }

@@ -113,7 +113,11 @@ impl Supply {
         };
         let reference = self.config.reference_voltage_v;
         for u in commands {
-            let c = if u.is_finite() { u.clamp(-1.0, 1.0) } else { 0.0 };
+            let c = if u.is_finite() {
+                u.clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
             let out = match present {
                 Some(v) if c != 0.0 => self.table.refer_command(c, reference, v),
                 _ => c,
@@ -197,7 +201,10 @@ mod tests {
             let at_ref = t200().thrust_at_command(16.0, r);
             let now = t200().thrust_at_command(13.0, *out);
             // Within the table's 4 us steps and its few non-monotone points.
-            assert!((now - at_ref).abs() < 0.02 * at_ref.abs() + 0.05, "{r}: {out}");
+            assert!(
+                (now - at_ref).abs() < 0.02 * at_ref.abs() + 0.05,
+                "{r}: {out}"
+            );
             assert!(out.abs() > r.abs(), "more command at the lower voltage");
             assert!((s.referred(*out) - r).abs() < 0.01, "{r}");
         }
@@ -215,6 +222,9 @@ mod tests {
         s.on_voltage(Some(16.0));
         let mut u = [0.5, -0.3];
         s.to_present(&mut u);
-        assert!((u[0] - 0.5).abs() < 1e-9 && (u[1] + 0.3).abs() < 1e-9, "{u:?}");
+        assert!(
+            (u[0] - 0.5).abs() < 1e-9 && (u[1] + 0.3).abs() < 1e-9,
+            "{u:?}"
+        );
     }
 }

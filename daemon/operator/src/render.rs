@@ -389,8 +389,9 @@ thrusterd on namespace veh1
         s.supply_voltage_v = f64::NAN;
         s.supply_compensation = thruster_protocol::SupplyCompensation::NoReading.as_u32();
         assert!(
-            status_report("veh1", &s)
-                .contains("  supply       no voltage reading, not compensated (no voltage reading)\n"),
+            status_report("veh1", &s).contains(
+                "  supply       no voltage reading, not compensated (no voltage reading)\n"
+            ),
             "{text}"
         );
         assert!(

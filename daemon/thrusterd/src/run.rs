@@ -623,7 +623,10 @@ impl Daemon {
         if voltage_v.is_none() {
             warn!("the driver no longer reports a supply voltage: commands go out unreferred");
         } else if self.supply_v.is_none() {
-            info!(volts = voltage_v, "supply voltage reported: commands referred to the reference voltage");
+            info!(
+                volts = voltage_v,
+                "supply voltage reported: commands referred to the reference voltage"
+            );
         }
         self.supply_v = voltage_v;
         self.machine.on_supply(voltage_v);

@@ -341,9 +341,9 @@ impl Loop {
         let core = self.controller.state(now);
         let (link, armed) = (backend.link(), backend.armed());
         let supply = backend.supply(now);
-        if let Some(msg) = self
-            .reporter
-            .report(now, core, self.controller.counters(), &link, armed, supply)
+        if let Some(msg) =
+            self.reporter
+                .report(now, core, self.controller.counters(), &link, armed, supply)
         {
             self.driver_status.send(&msg)?;
         }

@@ -182,7 +182,9 @@ mod tests {
         let mut r = StatusReporter::new("mavlink", 5, 0);
         let c = Counters::default();
         let up = LinkState::Up;
-        let first = r.report(0, CoreState::Arming, &c, &up, false, Supply::default()).unwrap();
+        let first = r
+            .report(0, CoreState::Arming, &c, &up, false, Supply::default())
+            .unwrap();
         assert_eq!(first.driver(), "thruster-hw mavlink");
         assert_eq!(
             (first.thruster_count, first.armed, first.link_up),
@@ -190,30 +192,79 @@ mod tests {
         );
         assert_eq!(first.output_state(), Ok(OutputState::Disarmed));
         assert!(r
-            .report(50 * MS, CoreState::Arming, &c, &up, false, Supply::default())
+            .report(
+                50 * MS,
+                CoreState::Arming,
+                &c,
+                &up,
+                false,
+                Supply::default()
+            )
             .is_none());
         // Armed: at once.
         let armed = r
-            .report(60 * MS, CoreState::Waiting, &c, &up, true, Supply::default())
+            .report(
+                60 * MS,
+                CoreState::Waiting,
+                &c,
+                &up,
+                true,
+                Supply::default(),
+            )
             .unwrap();
         assert_eq!(armed.output_state(), Ok(OutputState::Neutral));
         // Nothing new: the next after 100 ms.
         assert!(r
-            .report(159 * MS, CoreState::Waiting, &c, &up, true, Supply::default())
+            .report(
+                159 * MS,
+                CoreState::Waiting,
+                &c,
+                &up,
+                true,
+                Supply::default()
+            )
             .is_none());
         assert!(r
-            .report(160 * MS, CoreState::Waiting, &c, &up, true, Supply::default())
+            .report(
+                160 * MS,
+                CoreState::Waiting,
+                &c,
+                &up,
+                true,
+                Supply::default()
+            )
             .is_some());
         // Active, then the watchdog: counted once.
-        r.report(170 * MS, CoreState::Active, &c, &up, true, Supply::default())
-            .unwrap();
+        r.report(
+            170 * MS,
+            CoreState::Active,
+            &c,
+            &up,
+            true,
+            Supply::default(),
+        )
+        .unwrap();
         let w = r
-            .report(400 * MS, CoreState::Watchdog, &c, &up, true, Supply::default())
+            .report(
+                400 * MS,
+                CoreState::Watchdog,
+                &c,
+                &up,
+                true,
+                Supply::default(),
+            )
             .unwrap();
         assert_eq!(w.watchdog_expiries, 1);
         r.rejected("count 4, configured 5");
         let t = r
-            .report(600 * MS, CoreState::Rejected, &c, &up, true, Supply::default())
+            .report(
+                600 * MS,
+                CoreState::Rejected,
+                &c,
+                &up,
+                true,
+                Supply::default(),
+            )
             .unwrap();
         assert!(t.text().contains("count 4"), "{}", t.text());
     }
