@@ -467,6 +467,15 @@ mod tests {
             e.to_string(),
             "d.toml:2:11: estimator.k_sigma: must be in (0, inf), got -1"
         );
+        let e = DaemonConfig::from_toml_str("[supply]\nreference_voltage_v = 24\n", "d.toml")
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "d.toml:2:23: supply.reference_voltage_v: must be in [10, 20], got 24"
+        );
+        let e = DaemonConfig::from_toml_str("[supply]\ncompensation = \"linear\"\n", "d.toml")
+            .unwrap_err();
+        assert!(e.to_string().starts_with("d.toml:2:"), "{e}");
         let e =
             DaemonConfig::from_toml_str("[machine]\npulse_s = \"long\"\n", "d.toml").unwrap_err();
         assert!(e.to_string().starts_with("d.toml:2:"), "{e}");
