@@ -102,6 +102,10 @@ pub struct ExperimentArgs {
     /// a `[battery]` (its capacity and hotel load are set so 30 minutes drain it).
     #[arg(long, default_value = "amour5_t200")]
     pub vehicle: String,
+    /// dive: the battery's capacity, Ah (default 4.6: full to ~13.7 V in 30 minutes with the
+    /// dive's 8 A hotel load); a large one gives the same dive on a battery that stays full.
+    #[arg(long, default_value_t = dive::CAPACITY_AH)]
+    pub capacity_ah: f64,
 }
 
 /// How a run gets its model.
@@ -1118,6 +1122,18 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
     // A command line's vehicle lives as long as the process: leaked once, like a literal.
     let vehicle: &'static str = Box::leak(args.vehicle.clone().into_boxed_str());
     let mut specs = runs(args.name, args.t_change, vehicle);
+    if !(args.capacity_ah.is_finite() && args.capacity_ah > 0.0 && args.capacity_ah <= 1000.0) {
+        return Err(thrusterctl_operator::exit::Failure::usage(format!(
+            "--capacity-ah must be in (0, 1000], got {}",
+            args.capacity_ah
+        ))
+        .into());
+    }
+    for s in &mut specs {
+        if let Some((_, hotel)) = s.battery {
+            s.battery = Some((args.capacity_ah, hotel));
+        }
+    }
     if let Some(noise) = &args.noise {
         let noise: &'static str = match noise.as_str() {
             "paper" => "paper",
