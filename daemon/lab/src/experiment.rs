@@ -1705,7 +1705,10 @@ mod tests {
                 assert_eq!(specs.len(), 2);
                 for s in &specs {
                     let d = s.plan.duration_s();
-                    assert!((dive::DIVE_S - 1.0..=dive::DIVE_S + 80.0).contains(&d), "{d}");
+                    assert!(
+                        (dive::DIVE_S - 1.0..=dive::DIVE_S + 80.0).contains(&d),
+                        "{d}"
+                    );
                     assert!(s.battery.is_some());
                 }
                 continue;

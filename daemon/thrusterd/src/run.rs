@@ -621,11 +621,11 @@ impl Daemon {
             return;
         }
         if voltage_v.is_none() {
-            warn!("the driver no longer reports a supply voltage: commands go out unreferred");
+            warn!("the driver no longer reports a supply voltage: commands are not compensated");
         } else if self.supply_v.is_none() {
             info!(
                 volts = voltage_v,
-                "supply voltage reported: commands referred to the reference voltage"
+                "the driver reports the supply voltage ([supply] compensation decides its use)"
             );
         }
         self.supply_v = voltage_v;

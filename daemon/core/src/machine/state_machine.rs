@@ -278,11 +278,6 @@ impl Machine {
         self.supply.on_voltage(voltage_v);
     }
 
-    /// The referred command (at the reference voltage) that `u`, as sent now, amounts to.
-    pub fn referred_command(&self, u: f64) -> f64 {
-        self.supply.referred(u)
-    }
-
     fn respond(&mut self, s: &ImuInput) -> Command {
         self.samples += 1;
         let dt = match self.last_t_ns {
