@@ -248,6 +248,52 @@ fn iio_values_are_scaled_rotated_to_frd_and_converted_to_si() {
 }
 
 #[test]
+fn the_supply_voltage_comes_from_an_optional_iio_channel_through_the_divider() {
+    let fake = FakeSysfs::new(true);
+    fake.set_imu([0.0; 3], [0.0, 0.0, -9.81], [0.0; 3], 0.0);
+    // An ADS1115 at 0.125 mV per count behind an 11:1 divider: 11,000 counts = 1375 mV at
+    // the ADC = 15.125 V of supply.
+    let adc = fake.root().join("bus/iio/devices/iio:device5");
+    std::fs::create_dir_all(&adc).unwrap();
+    std::fs::write(adc.join("name"), "ads1115\n").unwrap();
+    std::fs::write(adc.join("in_voltage1_raw"), "11000\n").unwrap();
+    std::fs::write(adc.join("in_voltage_scale"), "0.125\n").unwrap();
+    let cfg = LinuxConfig {
+        supply_device: Some("ads1115".into()),
+        supply_channel: 1,
+        supply_gain: 11.0,
+        ..config(&fake)
+    };
+    let mut b = LinuxBackend::new(cfg.clone(), outputs());
+    let t0 = monotonic_ns();
+    b.start(Waker::noop(), t0).unwrap();
+    assert_eq!(
+        b.supply(t0).voltage_v,
+        None,
+        "not read before the first poll"
+    );
+    b.read_sensors(t0).unwrap();
+    let v = b.supply(t0).voltage_v.expect("read at the first poll");
+    assert!((v - 15.125).abs() < 1e-9, "{v}");
+    assert_eq!(b.supply(t0).current_a, None, "no current channel");
+    // The ADC gone: the last reading goes stale after a second, the driver goes on.
+    std::fs::remove_file(adc.join("in_voltage1_raw")).unwrap();
+    b.read_sensors(t0 + 200_000_000).unwrap();
+    assert!(b.supply(t0 + 500_000_000).voltage_v.is_some());
+    assert_eq!(b.supply(t0 + 1_100_000_000).voltage_v, None);
+    drop(b);
+    // Configured but absent: refused at start, naming the file.
+    let mut b = LinuxBackend::new(cfg, outputs());
+    let err = b.start(Waker::noop(), t0).unwrap_err().to_string();
+    assert!(err.contains("in_voltage1_raw"), "{err}");
+    // Not configured: unknown, as before.
+    let mut b = LinuxBackend::new(config(&fake), outputs());
+    b.start(Waker::noop(), t0).unwrap();
+    b.read_sensors(t0).unwrap();
+    assert_eq!(b.supply(t0).voltage_v, None);
+}
+
+#[test]
 fn configured_axes_and_no_optional_sensors() {
     let fake = FakeSysfs::new(true);
     fake.set_imu([0.1, -0.2, 0.3], [0.0, 0.0, -9.81], [0.0; 3], 0.0);

@@ -411,6 +411,56 @@ fn truth_validation() {
 }
 
 #[test]
+fn supply_fields_validation() {
+    // A driver that cannot measure its supply says NaN (the default), and that passes.
+    let mut d = DriverStatusMsg::default();
+    assert!(d.supply_voltage().is_none() && d.supply_current().is_none());
+    d.validate().unwrap();
+    d.supply_voltage_v = 15.2;
+    d.supply_current_a = -3.0;
+    d.validate().unwrap();
+    assert_eq!(d.supply_voltage(), Some(15.2));
+    d.supply_voltage_v = f64::INFINITY;
+    assert_rejects(&d, RejectCategory::NonFinite, "supply_voltage_v is inf");
+    d.supply_voltage_v = 150.0;
+    assert_rejects(
+        &d,
+        RejectCategory::Range,
+        "supply_voltage_v = 150 V is outside [0, 100]",
+    );
+    d.supply_voltage_v = f64::NAN;
+    d.supply_current_a = 2000.0;
+    assert_rejects(
+        &d,
+        RejectCategory::Range,
+        "supply_current_a = 2000 A is outside [-1000, 1000]",
+    );
+    // The truth's voltage is always known; its battery flag is 0 or 1.
+    let mut t = TruthMsg {
+        count: 1,
+        supply_voltage_v: 16.0,
+        battery: 1,
+        ..Default::default()
+    };
+    t.validate().unwrap();
+    t.supply_voltage_v = f64::NAN;
+    assert_rejects(&t, RejectCategory::NonFinite, "supply_voltage_v is NaN");
+    t.supply_voltage_v = 16.0;
+    t.battery = 2;
+    assert!(t.validate().is_err());
+    // The status's voltage may be unknown; its compensation state must be known.
+    let mut s = status();
+    s.supply_voltage_v = f64::NAN;
+    s.validate().unwrap();
+    s.supply_compensation = 3;
+    assert_rejects(
+        &s,
+        RejectCategory::Other,
+        "supply_compensation has unknown value 3",
+    );
+}
+
+#[test]
 fn status_validation() {
     status().validate().unwrap();
     let mut s = status();

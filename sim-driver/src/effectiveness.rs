@@ -14,16 +14,31 @@
 //! `s` is -1 for a `reversed` (left-handed) thruster and +1 otherwise; dead thrusters have zero
 //! columns. Beyond the deadband and with `exponent = 1`, the response to a command vector is
 //! `sum_i (u_i > 0 ? B_fwd : B_rev)[:, i] * e(u_i)` with `e` the deadband-rescaled command.
+//!
+//! For a `t200` thruster the thrust at `u = +-1` is the table's at the supply voltage
+//! ([`effectiveness_at`]), so the truth follows the battery.
 
 use nalgebra::{DMatrix, Matrix6, Vector6};
 
 use crate::dynamics::fossen_to_dof_order;
+use crate::thruster::{steady_thrust_at, FIXED_SUPPLY_V};
 use crate::vehicle::ThrusterSpec;
 
-/// `(B_fwd, B_rev)` of `thrusters` for a vehicle whose `M^-1` is `mass_inv` (Fossen order).
+/// `(B_fwd, B_rev)` of `thrusters` for a vehicle whose `M^-1` is `mass_inv` (Fossen order),
+/// at the fixed supply.
 pub fn effectiveness(
     mass_inv: &Matrix6<f64>,
     thrusters: &[ThrusterSpec],
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    effectiveness_at(mass_inv, thrusters, FIXED_SUPPLY_V)
+}
+
+/// `(B_fwd, B_rev)` at supply voltage `supply_v`: each column the thrust at `u = +1` and the
+/// magnitude at `u = -1` that voltage gives (only `t200` thrusters depend on it).
+pub fn effectiveness_at(
+    mass_inv: &Matrix6<f64>,
+    thrusters: &[ThrusterSpec],
+    supply_v: f64,
 ) -> (DMatrix<f64>, DMatrix<f64>) {
     let n = thrusters.len();
     let mut fwd = DMatrix::zeros(6, n);
@@ -32,10 +47,13 @@ pub fn effectiveness(
         if t.dead {
             continue;
         }
-        let sign = if t.reversed { -1.0 } else { 1.0 };
-        let unit: Vector6<f64> = fossen_to_dof_order(&(mass_inv * t.wrench_per_newton())) * sign;
-        fwd.set_column(i, &(unit * t.forward_max_n));
-        rev.set_column(i, &(unit * t.reverse_max_n));
+        // The signed thrust of +-1 already carries `reversed`; for the power law it is
+        // +-forward/reverse_max_n exactly, as before.
+        let unit: Vector6<f64> = fossen_to_dof_order(&(mass_inv * t.wrench_per_newton()));
+        let full_fwd = steady_thrust_at(t, 1.0, supply_v);
+        let full_rev = -steady_thrust_at(t, -1.0, supply_v);
+        fwd.set_column(i, &(unit * full_fwd));
+        rev.set_column(i, &(unit * full_rev));
     }
     (fwd, rev)
 }

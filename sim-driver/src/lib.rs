@@ -26,6 +26,7 @@
 //! assert_eq!(b_fwd.shape(), (6, 4));
 //! ```
 
+pub mod battery;
 pub mod cli;
 pub mod disturbance;
 pub mod driver;
@@ -43,6 +44,7 @@ pub mod sim;
 pub mod thruster;
 pub mod vehicle;
 
+pub use battery::{Battery, BatterySpec};
 pub use disturbance::{DisturbanceConfig, WaveComponent};
 pub use dvl::{Dvl, DvlConfig};
 pub use dynamics::{RigidBody, State};
@@ -53,4 +55,4 @@ pub use scenario::{Action, Event, Scenario};
 pub use sensors::{ImuNoise, ImuReading, NoisePreset, SensorBiases, SensorConfig};
 pub use sim::{Change, ChangeKind, InitialState, SimError, SimOptions, Simulator};
 pub use thruster::{sanitize_command, steady_thrust, Thruster};
-pub use vehicle::{Body, Dof6, ThrusterSpec, Vehicle};
+pub use vehicle::{Body, Dof6, ThrusterModel, ThrusterSpec, Vehicle};

@@ -41,6 +41,7 @@ pub fn random_vehicle(n: usize, seed: u64) -> Result<Vehicle, LoadError> {
         description: format!("{n} thrusters at random positions and directions, seed {seed}"),
         body: Body::default(),
         thrusters,
+        battery: None,
     };
     vehicle.validate(origin)?;
     Ok(vehicle)

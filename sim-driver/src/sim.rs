@@ -7,13 +7,14 @@
 use nalgebra::{DMatrix, Quaternion, UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
+use crate::battery::Battery;
 use crate::disturbance::DisturbanceConfig;
 use crate::dynamics::{RigidBody, State};
-use crate::effectiveness::effectiveness;
+use crate::effectiveness::effectiveness_at;
 use crate::load::{check_finite, LoadError};
 use crate::scenario::Action;
 use crate::sensors::{Imu, ImuReading, SensorBiases, SensorConfig, SensorTruth};
-use crate::thruster::Thruster;
+use crate::thruster::{Thruster, FIXED_SUPPLY_V};
 use crate::vehicle::{ThrusterSpec, Vehicle};
 use thruster_protocol::MAX_THRUSTERS;
 
@@ -170,6 +171,8 @@ pub struct Simulator {
     imu: Imu,
     dvl: Option<crate::dvl::Dvl>,
     disturbance: DisturbanceConfig,
+    /// None: a fixed supply at [`FIXED_SUPPLY_V`].
+    battery: Option<Battery>,
 }
 
 impl Simulator {
@@ -195,13 +198,14 @@ impl Simulator {
         sensors.validate("sensors")?;
         options.validate("sim options")?;
         let body = RigidBody::new(&vehicle.body)?;
+        let battery = vehicle.battery.clone().map(Battery::new);
         let thrusters = vehicle
             .thrusters
             .iter()
             .cloned()
             .map(Thruster::new)
             .collect();
-        Ok(Simulator {
+        let mut sim = Simulator {
             body,
             thrusters,
             state: options.initial.to_state(),
@@ -211,7 +215,37 @@ impl Simulator {
             imu: Imu::new(sensors, seed),
             disturbance: options.disturbance,
             vehicle,
-        })
+            battery,
+        };
+        // The voltage at rest before the first step, so the first sample already sees it.
+        sim.update_supply(0.0);
+        Ok(sim)
+    }
+
+    /// The battery, when the vehicle has one.
+    pub fn battery(&self) -> Option<&Battery> {
+        self.battery.as_ref()
+    }
+
+    /// Supply voltage the thrusters see now, V ([`FIXED_SUPPLY_V`] without a battery).
+    pub fn supply_voltage_v(&self) -> f64 {
+        self.battery
+            .as_ref()
+            .map_or(FIXED_SUPPLY_V, Battery::voltage_v)
+    }
+
+    /// Solves the battery's voltage for the held commands, drains `dt` seconds of their
+    /// current and hands the voltage to the thrusters. Nothing without a battery.
+    fn update_supply(&mut self, dt: f64) {
+        let Some(battery) = self.battery.as_mut() else {
+            return;
+        };
+        let thrusters = &self.thrusters;
+        battery.step(dt, |v| thrusters.iter().map(|t| t.current_a(v)).sum());
+        let v = battery.voltage_v();
+        for t in &mut self.thrusters {
+            t.set_supply(v);
+        }
     }
 
     /// Sets the commands, one per thruster in order, normalised to [-1, 1]; non-finite values
@@ -227,6 +261,8 @@ impl Simulator {
         for (t, &ui) in self.thrusters.iter_mut().zip(u) {
             t.set_command(ui);
         }
+        // The new load sags the voltage at once (no charge drawn yet).
+        self.update_supply(0.0);
         Ok(())
     }
 
@@ -284,11 +320,17 @@ impl Simulator {
         self.imu.ideal(self.t_ns, &self.sensor_truth())
     }
 
-    /// True effectiveness `(B_fwd, B_rev)` of the current geometry, 6 x N, rows
-    /// `[roll, pitch, yaw, surge, sway, heave]`; see [`crate::effectiveness`].
+    /// True effectiveness `(B_fwd, B_rev)` of the current geometry at the present supply
+    /// voltage, 6 x N, rows `[roll, pitch, yaw, surge, sway, heave]`; see
+    /// [`crate::effectiveness`].
     pub fn truth(&self) -> (DMatrix<f64>, DMatrix<f64>) {
+        self.truth_at(self.supply_voltage_v())
+    }
+
+    /// True effectiveness at supply voltage `supply_v` (e.g. the daemon's reference voltage).
+    pub fn truth_at(&self, supply_v: f64) -> (DMatrix<f64>, DMatrix<f64>) {
         let specs: Vec<ThrusterSpec> = self.thrusters.iter().map(|t| t.spec().clone()).collect();
-        effectiveness(self.body.mass_matrix_inverse(), &specs)
+        effectiveness_at(self.body.mass_matrix_inverse(), &specs, supply_v)
     }
 
     /// Applies a scenario action now.
@@ -556,6 +598,7 @@ impl Simulator {
         for t in &mut self.thrusters {
             t.advance(h);
         }
+        self.update_supply(h);
         self.t_ns += h_ns;
     }
 

@@ -13,10 +13,20 @@
 //! ```
 //!
 //! and the delivered thrust follows `tau dT/dt = T_ss - T` (exact exponential update).
+//!
+//! A `model = "t200"` thruster takes `T_ss` from the T200's measured table at the present
+//! supply voltage instead (`thruster_table`; u is the PWM pulse 1500 + 400 u us, the dead zone
+//! and asymmetry are the data's), scaled by `forward_max_n` / `reverse_max_n` relative to the
+//! defaults, so `weaken` works the same on both models.
 
 use nalgebra::Vector6;
+use thruster_table::ThrusterTable;
 
-use crate::vehicle::ThrusterSpec;
+use crate::vehicle::{ThrusterModel, ThrusterSpec, T200_FORWARD_MAX_N, T200_REVERSE_MAX_N};
+
+/// The supply a simulator without a `[battery]` has, V: the voltage of the T200 data the
+/// power-law defaults (5.25 / 4.1 kgf) come from.
+pub const FIXED_SUPPLY_V: f64 = 16.0;
 
 /// Replaces a non-finite command by 0 and clamps to [-1, 1]: nothing non-finite ever reaches
 /// a thruster, and a saturated command is just full thrust.
@@ -28,11 +38,38 @@ pub fn sanitize_command(u: f64) -> f64 {
     }
 }
 
-/// Steady-state thrust (N, signed along `spec.direction`) for command `u`.
+/// Current the thruster draws at command `u` and supply `supply_v`, A: the T200 table's
+/// (a power-law thruster is a T200-class one too); none when dead. The held command's steady
+/// current, not the spin-up's.
+pub fn current_at(spec: &ThrusterSpec, u: f64, supply_v: f64) -> f64 {
+    if spec.dead {
+        return 0.0;
+    }
+    ThrusterTable::t200().current_at_command(supply_v, sanitize_command(u))
+}
+
+/// Steady-state thrust (N, signed along `spec.direction`) for command `u` at the fixed
+/// supply ([`FIXED_SUPPLY_V`]).
 pub fn steady_thrust(spec: &ThrusterSpec, u: f64) -> f64 {
+    steady_thrust_at(spec, u, FIXED_SUPPLY_V)
+}
+
+/// Steady-state thrust (N, signed along `spec.direction`) for command `u` at supply voltage
+/// `supply_v` (only `t200` thrusters depend on it).
+pub fn steady_thrust_at(spec: &ThrusterSpec, u: f64, supply_v: f64) -> f64 {
     let u = sanitize_command(u);
     if spec.dead {
         return 0.0;
+    }
+    if spec.model == ThrusterModel::T200 {
+        let table = ThrusterTable::t200().thrust_at_command(supply_v, u);
+        let scale = if table >= 0.0 {
+            spec.forward_max_n / T200_FORWARD_MAX_N
+        } else {
+            spec.reverse_max_n / T200_REVERSE_MAX_N
+        };
+        let thrust = table * scale;
+        return if spec.reversed { -thrust } else { thrust };
     }
     let mag = u.abs();
     if mag <= spec.deadband {
@@ -62,6 +99,7 @@ pub struct Thruster {
     // The same as an array, for the integration hot path.
     wrench_a: [f64; 6],
     command: f64,
+    supply_v: f64,
     target_n: f64,
     thrust_n: f64,
 }
@@ -75,6 +113,7 @@ impl Thruster {
             wrench,
             wrench_a: wrench.into(),
             command: 0.0,
+            supply_v: FIXED_SUPPLY_V,
             target_n: 0.0,
             thrust_n: 0.0,
         }
@@ -91,7 +130,7 @@ impl Thruster {
         self.wrench = spec.wrench_per_newton();
         self.wrench_a = self.wrench.into();
         self.spec = spec;
-        self.target_n = steady_thrust(&self.spec, self.command);
+        self.target_n = steady_thrust_at(&self.spec, self.command, self.supply_v);
     }
 
     /// Generalised force per newton of thrust, Fossen order `[f; r x f]`.
@@ -106,7 +145,22 @@ impl Thruster {
     /// Sets the held command (sanitised, see [`sanitize_command`]).
     pub fn set_command(&mut self, u: f64) {
         self.command = sanitize_command(u);
-        self.target_n = steady_thrust(&self.spec, self.command);
+        self.target_n = steady_thrust_at(&self.spec, self.command, self.supply_v);
+    }
+
+    /// Sets the supply voltage the thruster sees (V); the target thrust follows it.
+    pub fn set_supply(&mut self, supply_v: f64) {
+        if supply_v != self.supply_v && supply_v.is_finite() {
+            self.supply_v = supply_v;
+            if self.spec.model == ThrusterModel::T200 {
+                self.target_n = steady_thrust_at(&self.spec, self.command, supply_v);
+            }
+        }
+    }
+
+    /// Current drawn at the held command and supply `supply_v`, A.
+    pub fn current_a(&self, supply_v: f64) -> f64 {
+        current_at(&self.spec, self.command, supply_v)
     }
 
     /// The held (sanitised) command, normalised.
@@ -212,6 +266,54 @@ mod tests {
         fn forward_max(&self) -> f64 {
             self.spec.forward_max_n
         }
+    }
+
+    #[test]
+    fn t200_model_follows_the_table_and_the_voltage() {
+        let mut s = spec();
+        s.model = ThrusterModel::T200;
+        let t = ThrusterTable::t200();
+        // At 16 V full forward is the data's 5.245 kgf, full reverse its -4.069 kgf.
+        assert!((steady_thrust_at(&s, 1.0, 16.0) - 5.24504 * thruster_table::KGF_N).abs() < 1e-3);
+        assert!((steady_thrust_at(&s, -1.0, 16.0) + 4.06948 * thruster_table::KGF_N).abs() < 1e-3);
+        // The ESC's dead zone: 0.06 is 1524 us, no thrust at 16 V.
+        assert_eq!(steady_thrust_at(&s, 0.06, 16.0), 0.0);
+        // 12 V against 16 V: the data's ratio at full and at half command.
+        for u in [1.0, 0.5, -0.5] {
+            let ratio = steady_thrust_at(&s, u, 16.0) / steady_thrust_at(&s, u, 12.0);
+            let data = t.thrust_at_command(16.0, u) / t.thrust_at_command(12.0, u);
+            assert!((ratio - data).abs() < 1e-12, "u {u}");
+            assert!((1.3..1.6).contains(&ratio), "u {u}: {ratio}");
+        }
+        // weaken scales it; reversed flips it.
+        s.forward_max_n *= 0.5;
+        assert!(
+            (steady_thrust_at(&s, 1.0, 16.0) - 0.5 * t.thrust_at_command(16.0, 1.0)).abs() < 1e-9
+        );
+        s.reversed = true;
+        assert!(steady_thrust_at(&s, 1.0, 16.0) < 0.0);
+        // The supply moves the target of a held command.
+        let mut th = Thruster::new(spec_t200());
+        th.set_command(1.0);
+        let at16 = th.target_n();
+        th.set_supply(12.0);
+        assert!((at16 / th.target_n() - 5.24504 / 3.71416).abs() < 1e-4);
+        assert!((th.current_a(12.0) - 16.9117).abs() < 1e-3);
+    }
+
+    fn spec_t200() -> ThrusterSpec {
+        let mut s = spec();
+        s.model = ThrusterModel::T200;
+        s
+    }
+
+    #[test]
+    fn power_law_ignores_the_supply() {
+        let mut t = Thruster::new(spec());
+        t.set_command(0.7);
+        let before = t.target_n();
+        t.set_supply(12.0);
+        assert_eq!(t.target_n(), before);
     }
 
     #[test]

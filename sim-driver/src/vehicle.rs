@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 // messages), so every simulated vehicle can be driven by the daemon.
 use thruster_protocol::MAX_THRUSTERS;
 
+use crate::battery::BatterySpec;
 use crate::load::{check_finite, parse_toml, read_text, LoadError};
 
 /// Standard gravity, m/s^2 per kgf (thrust data sheets are in kgf).
@@ -231,6 +232,22 @@ fn default_exponent() -> f64 {
     1.0
 }
 
+/// Where a thruster's steady thrust comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ThrusterModel {
+    /// `forward_max_n` / `reverse_max_n` times the deadband-rescaled command to `exponent`,
+    /// whatever the supply voltage (the simulator's original thrusters).
+    #[default]
+    PowerLaw,
+    /// The Blue Robotics T200's published thrust-vs-PWM table at the present supply voltage
+    /// (`thruster_table::ThrusterTable::t200`; command u is 1500 + 400 u us, the ESC's dead
+    /// zone and asymmetry are the data's), scaled by `forward_max_n / 51.5 N` forward and
+    /// `reverse_max_n / 40.2 N` in reverse (1 with the defaults; `weaken` scales them).
+    /// `deadband` and `exponent` are not used.
+    T200,
+}
+
 /// One thruster: where it sits, which way it pushes, how hard.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -266,6 +283,10 @@ pub struct ThrusterSpec {
     /// Produces no thrust at all. Default false.
     #[serde(default)]
     pub dead: bool,
+    /// The thrust curve: `"power_law"` (default: the keys above, no voltage dependence) or
+    /// `"t200"` (the T200's measured table at the battery's voltage).
+    #[serde(default)]
+    pub model: ThrusterModel,
 }
 
 impl ThrusterSpec {
@@ -282,6 +303,7 @@ impl ThrusterSpec {
             exponent: default_exponent(),
             reversed: false,
             dead: false,
+            model: ThrusterModel::PowerLaw,
         }
     }
 
@@ -388,6 +410,10 @@ pub struct Vehicle {
     /// The thrusters, in command order (`[[thruster]]` tables in the file).
     #[serde(rename = "thruster", default)]
     pub thrusters: Vec<ThrusterSpec>,
+    /// The battery (`[battery]`). Default none: a fixed supply that never sags, as before
+    /// (no voltage is reported then, and `t200` thrusters see the table's 16 V).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub battery: Option<BatterySpec>,
 }
 
 impl Vehicle {
@@ -401,6 +427,10 @@ impl Vehicle {
     /// Parses and validates TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Vehicle, LoadError> {
         let mut vehicle: Vehicle = parse_toml(text, origin)?;
+        // With the text at hand, a bad battery value is located (file:line:col).
+        if let Some(b) = &vehicle.battery {
+            b.validate(origin, text)?;
+        }
         vehicle.validate(origin)?;
         Ok(vehicle)
     }
@@ -409,6 +439,9 @@ impl Vehicle {
     /// thruster directions.
     pub fn validate(&mut self, origin: &str) -> Result<(), LoadError> {
         self.body.validate(origin)?;
+        if let Some(b) = &self.battery {
+            b.validate(origin, "")?;
+        }
         if self.thrusters.len() > MAX_THRUSTERS {
             return Err(LoadError::invalid(
                 origin,

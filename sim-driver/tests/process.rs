@@ -16,8 +16,8 @@ use thruster_protocol::services::{
     NamespaceGuard, Port, SHM_DIR,
 };
 use thruster_protocol::{
-    ImuSample, ReconfigEvent, ReconfigKind, ThrustCommand, ThrustMode, TruthMsg, Validate,
-    VehicleStateMsg,
+    DriverStatusMsg, ImuSample, ReconfigEvent, ReconfigKind, ThrustCommand, ThrustMode, TruthMsg,
+    Validate, VehicleStateMsg,
 };
 use thruster_sim::driver::shutdown::Shutdown;
 use thruster_sim::driver::wait::{recv_until, Received};
@@ -929,4 +929,60 @@ fn a_configured_dvl_publishes_the_true_velocity_at_its_rate() {
         sim.terminate();
     }
     assert_namespace_clean(&ns);
+}
+
+/// A vehicle with T200 thrusters on a battery: the driver reports the battery's voltage and
+/// current on driver_status (a fixed supply reports none), the truth carries the voltage and is
+/// republished as full thrust sags it, and it matches a replica driven the same way.
+#[test]
+fn a_battery_vehicle_reports_its_supply_and_the_truth_follows_it() {
+    for (vehicle, battery) in [("amour5_t200", true), ("amour5", false)] {
+        let ns = NamespaceGuard::unique_for_test("bat").unwrap();
+        {
+            let node = ns.create_node("test-supply").unwrap();
+            let status: Inbox<DriverStatusMsg> = Inbox::create(&node, &ns).unwrap();
+            let mut peer = Peer::new(&ns);
+            let mut sim = Proc::run(&ns, vehicle, &["--lockstep", "--noise", "none"]);
+            let first = peer.truth();
+            assert_eq!(first.battery, u32::from(battery), "{vehicle}");
+            let mut twin = replica(vehicle, NoisePreset::None, 1);
+            assert!((first.supply_voltage_v - twin.supply_voltage_v()).abs() < 1e-9);
+            let mut last = peer.sample();
+            // 0.5 s at full thrust.
+            for _ in 0..100 {
+                peer.answer(&last, &[1.0; 5]);
+                twin.set_commands(&[1.0; 5]).unwrap();
+                twin.step(PERIOD_NS);
+                last = peer.sample();
+            }
+            let mut report = None;
+            while let Some(r) = peer.try_next(&status, Duration::from_millis(200)) {
+                assert!(r.validate().is_ok(), "{r:?}");
+                report = Some(r);
+            }
+            let report = report.expect("driver status");
+            if battery {
+                let v = report.supply_voltage().expect("a battery is measured");
+                // Full thrust sags 16.8 V by about 2 V (sim-driver/tests/battery.rs).
+                assert!((14.3..14.9).contains(&v), "{v}");
+                assert!(report.supply_current().unwrap() > 80.0);
+                assert!((v - twin.supply_voltage_v()).abs() < 0.05, "{v}");
+                let mut truth = first;
+                while let Some(t) = peer.try_next(&peer.truth, Duration::from_millis(200)) {
+                    truth = t;
+                }
+                assert!(truth.seq > first.seq, "republished as the voltage sagged");
+                assert!((truth.supply_voltage_v - v).abs() < 0.05);
+                let (fwd, _) = twin.truth_at(truth.supply_voltage_v);
+                assert!((truth.effectiveness[0][0] - fwd[(0, 0)]).abs() < 1e-9);
+                // Weaker than at rest, as the table says for the lower voltage.
+                assert!(truth.effectiveness[1][0].abs() < first.effectiveness[1][0].abs());
+            } else {
+                assert!(report.supply_voltage().is_none() && report.supply_current().is_none());
+                assert_eq!(first.supply_voltage_v, 16.0);
+            }
+            sim.terminate();
+        }
+        assert_namespace_clean(&ns);
+    }
 }

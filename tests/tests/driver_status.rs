@@ -277,3 +277,79 @@ fn a_disarmed_autopilot_holds_the_estimation_until_it_is_armed() {
     }
     assert_nothing_left(world);
 }
+
+/// A simulated battery's voltage reaches the daemon through the driver's report: its status
+/// carries it with commands referred to the reference voltage, and the operator sees both the
+/// daemon's and the driver's figures. A vehicle without a battery reports no voltage, and the
+/// daemon says it does not compensate.
+#[test]
+fn the_supply_voltage_reaches_the_daemon_and_the_operator() {
+    for (vehicle, battery) in [("amour5_t200", true), ("amour5", false)] {
+        let world = World::new("drvbat");
+        {
+            let op = Operator::new(&world);
+            let mut daemon = world.daemon(&["--lockstep"]);
+            let mut sim = world.sim(
+                vehicle,
+                &["--noise", "none", "--lockstep", "--duration", "100000"],
+            );
+            let s = op
+                .wait_status(LONG, |s| s.samples > 200)
+                .unwrap_or_else(|| panic!("no status\n{}", daemon.log_text()));
+            let out = Command::new(bin("thrusterctl"))
+                .args(["--namespace", &world.namespace(), "status", "--json"])
+                .output()
+                .unwrap();
+            assert!(out.status.success(), "{out:?}");
+            let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+            let text = Command::new(bin("thrusterctl"))
+                .args(["--namespace", &world.namespace(), "status"])
+                .output()
+                .unwrap();
+            let text = String::from_utf8_lossy(&text.stdout).to_string();
+            if battery {
+                // Idle at neutral: the open-circuit 16.8 V less the 1 A hotel load's 0.02 V.
+                let volts = s.supply_voltage_v;
+                assert!((volts - 16.78).abs() < 0.01, "{volts}");
+                assert_eq!(
+                    s.supply_compensation(),
+                    Ok(thruster_protocol::SupplyCompensation::Active)
+                );
+                assert!(
+                    (v["supply_voltage_v"].as_f64().unwrap() - 16.78).abs() < 0.01,
+                    "{v}"
+                );
+                assert_eq!(v["supply_compensation"], "Active", "{v}");
+                assert!(
+                    (v["driver"]["supply_voltage_v"].as_f64().unwrap() - 16.78).abs() < 0.01,
+                    "{v}"
+                );
+                assert!(
+                    v["driver"]["supply_current_a"].as_f64().unwrap() > 0.9,
+                    "{v}"
+                );
+                assert!(
+                    text.contains(
+                        "supply       16.78 V, commands referred to the reference voltage"
+                    ),
+                    "{text}"
+                );
+            } else {
+                assert!(s.supply_voltage_v.is_nan(), "{}", s.supply_voltage_v);
+                assert_eq!(
+                    s.supply_compensation(),
+                    Ok(thruster_protocol::SupplyCompensation::NoReading)
+                );
+                assert!(v["supply_voltage_v"].is_null(), "{v}");
+                assert!(v["driver"]["supply_voltage_v"].is_null(), "{v}");
+                assert!(
+                    text.contains("no voltage reading, not compensated (no voltage reading)"),
+                    "{text}"
+                );
+            }
+            assert!(daemon.stop().success(), "{}", daemon.log_text());
+            assert!(sim.stop().success(), "{}", sim.log_text());
+        }
+        assert_nothing_left(world);
+    }
+}

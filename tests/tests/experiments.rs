@@ -254,3 +254,29 @@ fn degrade_the_refined_model_follows_a_weakening_thruster() {
     assert!(f(o, &["err_rot_vs_truth_end"]) < 0.02, "{o}");
     assert_eq!(v["runs"]["refined"]["degrade"]["mismatch_reports"], 0);
 }
+
+/// The dive drains the battery over 30 vehicle minutes in both runs, and the daemon refers
+/// its commands to the reference voltage in one of them. The target (compensated
+/// last/first hold error <= 1.15) is not asserted: measured over seeds it scatters from 0.8 to
+/// 1.4 in both runs, and a battery that stays full gives 1.12-1.16 as well (docs/experiments.md).
+#[test]
+fn dive_drains_the_battery_from_full_to_nearly_empty_in_both_runs() {
+    let v = experiment("dive");
+    let h = &v["headline"];
+    let start = f(h, &["voltage_start_v"]);
+    assert!((16.3..16.8).contains(&start), "{h}");
+    for run in ["compensated", "uncompensated"] {
+        let end = f(h, &[run, "voltage_end_v"]);
+        assert!((13.2..14.2).contains(&end), "{run}: {h}");
+        let d = &v["runs"][run]["dive"];
+        assert!(f(d, &["hold_s"]) > 1700.0, "{run}: {d}");
+        assert_eq!(
+            d["new_models"], 0,
+            "{run}: one estimation at the start: {d}"
+        );
+        for k in ["hold_err_first_5min_deg", "hold_err_last_5min_deg"] {
+            let e = f(d, &[k]);
+            assert!(e > 0.0 && e < 15.0, "{run} {k}: {d}");
+        }
+    }
+}

@@ -15,6 +15,7 @@ use crate::machine::{Geometry, MachineConfig, MachineSetup};
 use crate::model::RigidBody;
 use crate::monitor::MonitorConfig;
 use crate::refinement::RefinementConfig;
+use crate::supply::SupplyConfig;
 use thruster_protocol::MAX_THRUSTERS;
 
 /// The whole file.
@@ -33,6 +34,7 @@ pub struct DaemonConfig {
     pub monitor: MonitorConfig,
     pub identification: IdentificationConfig,
     pub refinement: RefinementConfig,
+    pub supply: SupplyConfig,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -254,6 +256,11 @@ impl DaemonConfig {
         let mut floats: Vec<(String, f64, Range)> = vec![
             ("machine.noise_s".into(), m.noise_s, Range::above(0.0)),
             (
+                "supply.reference_voltage_v".into(),
+                self.supply.reference_voltage_v,
+                SupplyConfig::REFERENCE_RANGE,
+            ),
+            (
                 "machine.level_max_s".into(),
                 m.level_max_s,
                 Range::at_least(0.0),
@@ -421,6 +428,7 @@ impl DaemonConfig {
             body: self.body.clone(),
             thrusters: self.thruster_count(),
             geometry,
+            supply: self.supply.clone(),
         }
     }
 }
@@ -459,6 +467,15 @@ mod tests {
             e.to_string(),
             "d.toml:2:11: estimator.k_sigma: must be in (0, inf), got -1"
         );
+        let e = DaemonConfig::from_toml_str("[supply]\nreference_voltage_v = 24\n", "d.toml")
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "d.toml:2:23: supply.reference_voltage_v: must be in [10, 20], got 24"
+        );
+        let e = DaemonConfig::from_toml_str("[supply]\ncompensation = \"linear\"\n", "d.toml")
+            .unwrap_err();
+        assert!(e.to_string().starts_with("d.toml:2:"), "{e}");
         let e =
             DaemonConfig::from_toml_str("[machine]\npulse_s = \"long\"\n", "d.toml").unwrap_err();
         assert!(e.to_string().starts_with("d.toml:2:"), "{e}");

@@ -17,4 +17,5 @@ pub mod navigation;
 pub mod refinement;
 pub mod solve;
 pub mod study;
+pub mod supply;
 pub mod wire;

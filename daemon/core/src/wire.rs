@@ -73,6 +73,8 @@ pub fn status_msg(seq: u64, s: &StatusSnapshot) -> StatusMsg {
     };
     m.set_state(daemon_state(s.state));
     m.set_text(&s.text);
+    m.supply_voltage_v = s.supply_voltage_v.unwrap_or(f64::NAN);
+    m.supply_compensation = s.supply.as_u32();
     m
 }
 

@@ -108,6 +108,13 @@ fn answering_a_sample_does_not_allocate() {
     count(&mut m, &mut k, 2); // first control tick captures the target
     assert_eq!(m.state(), State::Active);
     assert_eq!(count(&mut m, &mut k, 500), 0, "controlling");
+    // Commands carried to a reported supply voltage through the T200 table on the way out.
+    m.on_supply(Some(13.7));
+    assert_eq!(
+        count(&mut m, &mut k, 500),
+        0,
+        "controlling, supply compensated"
+    );
 
     m.on_request(Request::Estimate).unwrap();
     // Through the noise phase into the first pulse; pulse starts and ends allocate (once per

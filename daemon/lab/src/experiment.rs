@@ -27,6 +27,7 @@ use crate::scoring::{
 use crate::session::{config_file, Binaries, DaemonConfig, Session, SessionSpec, Shutdown};
 
 mod degrade;
+mod dive;
 
 const DOFS: [&str; 6] = ["roll", "pitch", "yaw", "surge", "sway", "heave"];
 /// Samples this long after a setpoint step are its transient; "settled" errors leave them out.
@@ -47,6 +48,9 @@ pub enum Name {
     /// Thruster L loses 30 % of its thrust over a minute, unannounced: the continuously
     /// refined model against the one learned at the start.
     Degrade,
+    /// A T200 vehicle holding through 30 vehicle minutes on a draining battery: commands
+    /// referred to the reference voltage against commands as computed.
+    Dive,
 }
 
 impl Name {
@@ -57,6 +61,7 @@ impl Name {
             Name::Aligned => "aligned",
             Name::HotSwap => "hot-swap",
             Name::Degrade => "degrade",
+            Name::Dive => "dive",
         }
     }
 }
@@ -93,6 +98,14 @@ pub struct ExperimentArgs {
     /// to at most 5x real time so the recorder loses nothing.
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// dive: the vehicle file (config/vehicles/NAME.toml) with `model = "t200"` thrusters and
+    /// a `[battery]` (its capacity and hotel load are set so 30 minutes drain it).
+    #[arg(long, default_value = "amour5_t200")]
+    pub vehicle: String,
+    /// dive: the battery's capacity, Ah (default 4.6: full to ~13.7 V in 30 minutes with the
+    /// dive's 8 A hotel load); a large one gives the same dive on a battery that stays full.
+    #[arg(long, default_value_t = dive::CAPACITY_AH)]
+    pub capacity_ah: f64,
 }
 
 /// How a run gets its model.
@@ -134,6 +147,10 @@ struct RunSpec {
     /// Sensor noise preset of the simulator ("paper" unless said otherwise).
     noise: &'static str,
     plan: Plan,
+    /// `[supply] compensation`: "t200" (the daemon's default) or "none".
+    compensation: &'static str,
+    /// The vehicle's `[battery]` capacity (Ah) and hotel load (A) replaced by these.
+    battery: Option<(f64, f64)>,
 }
 
 fn steps(list: &[(&'static str, [f64; 3], f64)]) -> Vec<Step> {
@@ -142,7 +159,7 @@ fn steps(list: &[(&'static str, [f64; 3], f64)]) -> Vec<Step> {
         .collect()
 }
 
-fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
+fn runs(name: Name, t_change: f64, vehicle: &'static str) -> Vec<RunSpec> {
     let base = RunSpec {
         label: "",
         title: "",
@@ -161,6 +178,8 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
             steps: Vec::new(),
             repeat_until_s: None,
         },
+        compensation: "t200",
+        battery: None,
     };
     match name {
         Name::ManualVsLearned => {
@@ -354,6 +373,7 @@ fn runs(name: Name, t_change: f64) -> Vec<RunSpec> {
             ]
         }
         Name::Degrade => degrade::runs(base, t_change),
+        Name::Dive => dive::runs(base, vehicle),
     }
 }
 
@@ -435,6 +455,7 @@ fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> Result<Stri
         "[refinement]\nupdate = {}\nchange_test = {}",
         spec.refine, spec.change_test
     );
+    let _ = writeln!(t, "[supply]\ncompensation = \"{}\"", spec.compensation);
     Ok(t)
 }
 
@@ -525,8 +546,49 @@ fn source_name(m: &ModelMsg) -> String {
         .unwrap_or_else(|_| "?".into())
 }
 
+/// A file removed when dropped.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// The vehicle file with its `[battery]` capacity and hotel load replaced, written beside the
+/// other temporary files of this process for the run (`label`), removed when dropped.
+fn with_battery(vehicle: &Path, label: &str, capacity_ah: f64, hotel_a: f64) -> Result<Scratch> {
+    let text = std::fs::read_to_string(vehicle)
+        .with_context(|| format!("reading {}", vehicle.display()))?;
+    let mut doc: toml::Table =
+        toml::from_str(&text).with_context(|| format!("parsing {}", vehicle.display()))?;
+    let Some(toml::Value::Table(battery)) = doc.get_mut("battery") else {
+        bail!("{} has no [battery]", vehicle.display());
+    };
+    battery.insert("capacity_ah".into(), toml::Value::Float(capacity_ah));
+    battery.insert("hotel_current_a".into(), toml::Value::Float(hotel_a));
+    let path = std::env::temp_dir().join(format!(
+        "thrusterctl-{}-{label}-{}",
+        std::process::id(),
+        vehicle
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("vehicle.toml")
+    ));
+    std::fs::write(&path, toml::to_string(&doc)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(Scratch(path))
+}
+
 fn run_one(bins: &Binaries, args: &ExperimentArgs, spec: &RunSpec) -> Result<RunOutput> {
-    let vehicle = config_file(&format!("vehicles/{}.toml", spec.vehicle));
+    let shipped = config_file(&format!("vehicles/{}.toml", spec.vehicle));
+    let drained = spec
+        .battery
+        .map(|(capacity, hotel)| with_battery(&shipped, spec.label, capacity, hotel))
+        .transpose()?;
+    let vehicle = drained
+        .as_ref()
+        .map_or_else(|| shipped.clone(), |s| s.0.clone());
     let session_spec = SessionSpec {
         tag: "exp",
         vehicle: vehicle.clone(),
@@ -1057,7 +1119,21 @@ fn hot_swap(out: &RunOutput) -> Value {
 
 pub fn run(args: ExperimentArgs) -> Result<()> {
     let bins = Binaries::locate()?;
-    let mut specs = runs(args.name, args.t_change);
+    // A command line's vehicle lives as long as the process: leaked once, like a literal.
+    let vehicle: &'static str = Box::leak(args.vehicle.clone().into_boxed_str());
+    let mut specs = runs(args.name, args.t_change, vehicle);
+    if !(args.capacity_ah.is_finite() && args.capacity_ah > 0.0 && args.capacity_ah <= 1000.0) {
+        return Err(thrusterctl_operator::exit::Failure::usage(format!(
+            "--capacity-ah must be in (0, 1000], got {}",
+            args.capacity_ah
+        ))
+        .into());
+    }
+    for s in &mut specs {
+        if let Some((_, hotel)) = s.battery {
+            s.battery = Some((args.capacity_ah, hotel));
+        }
+    }
     if let Some(noise) = &args.noise {
         let noise: &'static str = match noise.as_str() {
             "paper" => "paper",
@@ -1089,6 +1165,9 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         }
         if args.name == Name::Degrade {
             v["degrade"] = degrade::summary(o);
+        }
+        if args.name == Name::Dive {
+            v["dive"] = dive::summary(o);
         }
         v["noise"] = json!(o.spec.noise);
         runs_json.insert(o.spec.label.into(), v);
@@ -1214,6 +1293,7 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
             })
         }
         Name::Degrade => degrade::headline(&r("refined"), &r("fixed"), &r("oracle")),
+        Name::Dive => dive::headline(&r("compensated"), &r("uncompensated")),
     }
 }
 
@@ -1482,6 +1562,7 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
         Name::Aligned => "All thrusters aligned, yaw and pitch steps: the paper's estimator (top) and ours (bottom)",
         Name::HotSwap => "Top thruster rotated 45 deg mid-run (red line): announced, announced holding level, silent (realistic IMU), silent (paper noise), true model (rows, top to bottom)",
         Name::Degrade => "Thruster L loses 30 % over a minute from the red line, realistic IMU: refined model, fixed model, true model (rows, top to bottom)",
+        Name::Dive => "A 30-minute dive from a full to a nearly empty battery, T200 thrusters, realistic IMU: commands referred to 16 V (top) and as computed (bottom)",
     };
     render(
         &Grid {
@@ -1618,7 +1699,20 @@ mod tests {
     #[test]
     fn every_experiment_has_its_runs_an_oracle_and_a_plan_that_ends() {
         for name in Name::value_variants() {
-            let specs = runs(*name, 40.0);
+            let specs = runs(*name, 40.0, "amour5_t200");
+            if *name == Name::Dive {
+                // Compensated against not; the truth moves with the battery, so no oracle.
+                assert_eq!(specs.len(), 2);
+                for s in &specs {
+                    let d = s.plan.duration_s();
+                    assert!(
+                        (dive::DIVE_S - 1.0..=dive::DIVE_S + 80.0).contains(&d),
+                        "{d}"
+                    );
+                    assert!(s.battery.is_some());
+                }
+                continue;
+            }
             // Two runs compared, and the true model as their reference; hot-swap: announced
             // (manoeuvring and holding level), silent at two noise levels, and the true model
             // loaded again at the change.

@@ -33,6 +33,10 @@ pub struct StatusJson {
     pub imu_rate_hz: Option<f64>,
     pub vehicle_time_ns: u64,
     pub text: String,
+    /// The supply voltage the daemon last heard, V; null when none.
+    pub supply_voltage_v: Option<f64>,
+    /// "Off", "NoReading" or "Active": whether commands are referred to the reference voltage.
+    pub supply_compensation: String,
 }
 
 impl From<&StatusMsg> for StatusJson {
@@ -58,6 +62,11 @@ impl From<&StatusMsg> for StatusJson {
             imu_rate_hz: finite(s.imu_rate_hz),
             vehicle_time_ns: s.vehicle_time_ns,
             text: s.text().to_string(),
+            supply_voltage_v: finite(s.supply_voltage_v),
+            supply_compensation: s
+                .supply_compensation()
+                .map(|c| format!("{c:?}"))
+                .unwrap_or_else(|e| format!("Unknown({})", e.value)),
         }
     }
 }
@@ -85,6 +94,10 @@ pub struct DriverJson {
     pub armed: bool,
     pub time_ns: u64,
     pub text: String,
+    /// Supply voltage, V; null when the driver does not measure it.
+    pub supply_voltage_v: Option<f64>,
+    /// Supply current, A; null when not measured.
+    pub supply_current_a: Option<f64>,
 }
 
 impl From<&DriverStatusMsg> for DriverJson {
@@ -103,6 +116,8 @@ impl From<&DriverStatusMsg> for DriverJson {
             armed: d.armed == 1,
             time_ns: d.time_ns,
             text: d.text().to_string(),
+            supply_voltage_v: d.supply_voltage(),
+            supply_current_a: d.supply_current(),
         }
     }
 }
@@ -319,6 +334,8 @@ mod tests {
             model_version: 4,
             imu_rate_hz: 400.0,
             vehicle_time_ns: 1_500_000_000,
+            supply_voltage_v: 15.5,
+            supply_compensation: thruster_protocol::SupplyCompensation::Active.as_u32(),
             ..StatusMsg::default()
         };
         s.set_state(DaemonState::Pulse);
@@ -333,12 +350,15 @@ mod tests {
                 "rejected_time": 0, "rejected_count": 0, "rejected_other": 0,
                 "requests_refused": 0,
                 "model_version": 4, "imu_rate_hz": 400.0, "vehicle_time_ns": 1_500_000_000u64,
-                "text": "pulsing"
+                "text": "pulsing", "supply_voltage_v": 15.5, "supply_compensation": "Active"
             })
         );
         // Every wire field except padding is exported.
         let wire = serde_json::to_value(s).unwrap();
         for key in wire.as_object().unwrap().keys() {
+            if key.starts_with("reserved") {
+                continue;
+            }
             assert!(v.get(key).is_some(), "missing {key}");
         }
         s.state = 77;

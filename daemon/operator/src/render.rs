@@ -89,7 +89,7 @@ pub fn driver_line(d: Option<&thruster_protocol::DriverStatusMsg>) -> String {
         .map(|s| format!("{s:?}"))
         .unwrap_or_else(|e| format!("Unknown({})", e.value));
     let mut line = format!(
-        "  {:<13}{}: {} thrusters, outputs {state}, link {}, {}, commands {} accepted / {} rejected, watchdog {}",
+        "  {:<13}{}: {} thrusters, outputs {state}, link {}, {}, commands {} accepted / {} rejected, watchdog {}{}",
         "driver",
         d.driver(),
         d.thruster_count,
@@ -98,12 +98,34 @@ pub fn driver_line(d: Option<&thruster_protocol::DriverStatusMsg>) -> String {
         d.commands_accepted,
         d.commands_rejected,
         d.watchdog_expiries,
+        match (d.supply_voltage(), d.supply_current()) {
+            (Some(v), Some(a)) => format!(", supply {v:.2} V {a:.1} A"),
+            (Some(v), None) => format!(", supply {v:.2} V"),
+            _ => String::new(),
+        },
     );
     if !d.text().is_empty() {
         line.push_str(&format!(" ({})", d.text()));
     }
     line.push('\n');
     line
+}
+
+/// The supply: the voltage the daemon last heard and what it does with it.
+pub fn supply(s: &StatusMsg) -> String {
+    use thruster_protocol::SupplyCompensation;
+    let volts = if s.supply_voltage_v.is_finite() {
+        format!("{:.2} V", s.supply_voltage_v)
+    } else {
+        "no voltage reading".to_string()
+    };
+    let what = match s.supply_compensation() {
+        Ok(SupplyCompensation::Active) => "commands referred to the reference voltage",
+        Ok(SupplyCompensation::NoReading) => "not compensated (no voltage reading)",
+        Ok(SupplyCompensation::Off) => "not compensated (supply.compensation = \"none\")",
+        Err(_) => "unknown compensation state",
+    };
+    format!("{volts}, {what}")
 }
 
 pub fn status_report(namespace: &str, s: &StatusMsg) -> String {
@@ -138,6 +160,7 @@ pub fn status_report(namespace: &str, s: &StatusMsg) -> String {
         ("model", model),
         ("IMU rate", format!("{} Hz", known(s.imu_rate_hz, 1))),
         ("vehicle time", seconds(s.vehicle_time_ns)),
+        ("supply", supply(s)),
     ];
     let _ = writeln!(out, "thrusterd on namespace {namespace}");
     for (k, v) in rows {
@@ -331,6 +354,8 @@ mod tests {
         s.rejected_nonfinite = 2;
         s.rejected_time = 1;
         s.requests_refused = 4;
+        s.supply_voltage_v = 15.87;
+        s.supply_compensation = thruster_protocol::SupplyCompensation::Active.as_u32();
         s.set_text("pulsing thruster 2");
         let text = status_report("veh1", &s);
         let expected = "\
@@ -345,6 +370,7 @@ thrusterd on namespace veh1
   model        version 3
   IMU rate     400.0 Hz
   vehicle time 12.345 s
+  supply       15.87 V, commands referred to the reference voltage
   message      pulsing thruster 2
 ";
         assert_eq!(text, expected);
@@ -360,6 +386,14 @@ thrusterd on namespace veh1
         let text = status_report("veh1", &s);
         assert!(text.contains("  noise        not measured yet\n"), "{text}");
         assert!(text.contains("  IMU rate     unknown Hz\n"), "{text}");
+        s.supply_voltage_v = f64::NAN;
+        s.supply_compensation = thruster_protocol::SupplyCompensation::NoReading.as_u32();
+        assert!(
+            status_report("veh1", &s).contains(
+                "  supply       no voltage reading, not compensated (no voltage reading)\n"
+            ),
+            "{text}"
+        );
         assert!(
             text.contains("  progress     idle, zero thrust\n"),
             "{text}"

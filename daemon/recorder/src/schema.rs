@@ -22,7 +22,10 @@ pub fn json_schema(title: &str, value: &Value) -> Value {
 
 fn shape(value: &Value) -> Value {
     match value {
-        Value::Null => json!({"type": "null"}),
+        // Every field of a protocol message is a number, string or array: a null is a NaN
+        // float ("not known", e.g. a supply voltage no driver measures yet), and a later
+        // message of the same type may carry a number there.
+        Value::Null => json!({"type": ["number", "null"]}),
         Value::Bool(_) => json!({"type": "boolean"}),
         Value::Number(n) if n.is_f64() => json!({"type": "number"}),
         Value::Number(_) => json!({"type": "integer"}),

@@ -125,6 +125,16 @@ fn payload(m: &InputMsg, kind: InputKind) -> Result<(), String> {
         }
         .validate()
         .map_err(|r| format!("DVL velocity {r}")),
+        // As the daemon took it from a validated driver report.
+        InputKind::Supply if m.code > 1 => Err(format!("supply code {} not 0 or 1", m.code)),
+        InputKind::Supply
+            if m.code == 1
+                && !(m.value.is_finite()
+                    && (0.0..=thruster_protocol::validate::limits::MAX_SUPPLY_VOLTAGE_V)
+                        .contains(&m.value)) =>
+        {
+            Err(format!("supply voltage {} V out of range", m.value))
+        }
         _ => Ok(()),
     }
 }

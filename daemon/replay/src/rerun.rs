@@ -307,6 +307,10 @@ fn apply(machine: &mut Machine, m: &InputMsg, solved: &mut Solved) -> bool {
             machine.on_dvl(m.dvl);
             false
         }
+        Ok(InputKind::Supply) => {
+            machine.on_supply((m.code != 0).then_some(m.value));
+            false
+        }
         // A result the replay does not have (a job it never made) is "refused": the entry
         // is then reported as a divergence.
         Ok(InputKind::SolveDelivered) => match solved.results.remove(&u64::from(m.code)) {

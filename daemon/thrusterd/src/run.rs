@@ -38,6 +38,11 @@ use crate::loader::{LoadError, Loader, Progress};
 use crate::solver::SolverThread;
 use thrusterd_core::wire;
 
+/// A change of the driver's supply voltage that is handed to the machine (and journaled), V:
+/// finer than the T200 table resolves (~0.4 % thrust per 50 mV), coarse enough that a
+/// driver's ADC noise does not fill the journal.
+const SUPPLY_STEP_V: f64 = 0.01;
+
 #[derive(Args)]
 pub struct RunArgs {
     /// Configuration file (see config/thrusterd.toml); defaults apply without one.
@@ -181,6 +186,8 @@ struct Daemon {
     driver: DriverWatch,
     /// The verdict the machine was last given on the driver's outputs.
     driver_verdict: OutputVerdict,
+    /// The supply voltage last handed to the machine, V.
+    supply_v: Option<f64>,
     /// The thruster count the latest report was judged for; `None` when a new report came.
     /// Judging again only then keeps the per-round work (and its text) off the hot path.
     driver_judged_for: Option<usize>,
@@ -260,6 +267,7 @@ impl Daemon {
             stale_reported: false,
             driver: DriverWatch::new(),
             driver_verdict: OutputVerdict::Usable,
+            supply_v: None,
             driver_judged_for: None,
             journal: None,
         })
@@ -469,6 +477,7 @@ impl Daemon {
                     Ok(()) => {
                         self.driver.observe(&report, self.machine.thrusters());
                         self.driver_judged_for = None;
+                        self.take_supply(report.supply_voltage());
                     }
                     Err(reason) => {
                         self.rejected.record(&reason);
@@ -597,6 +606,36 @@ impl Daemon {
         status.set_text("thrusterd stopped");
         let _ = status_out.send(&status);
         Ok(())
+    }
+
+    /// Hands the machine the driver's supply voltage when it moved by [`SUPPLY_STEP_V`] or
+    /// came or went, and journals it (replay hands the machine the same values at the same
+    /// samples).
+    fn take_supply(&mut self, voltage_v: Option<f64>) {
+        let moved = match (self.supply_v, voltage_v) {
+            (Some(a), Some(b)) => (a - b).abs() >= SUPPLY_STEP_V,
+            (None, None) => false,
+            _ => true,
+        };
+        if !moved {
+            return;
+        }
+        if voltage_v.is_none() {
+            warn!("the driver no longer reports a supply voltage: commands are not compensated");
+        } else if self.supply_v.is_none() {
+            info!(
+                volts = voltage_v,
+                "the driver reports the supply voltage ([supply] compensation decides its use)"
+            );
+        }
+        self.supply_v = voltage_v;
+        self.machine.on_supply(voltage_v);
+        self.journal(|j| {
+            j.record(InputKind::Supply, false, |m| {
+                m.code = u32::from(voltage_v.is_some());
+                m.value = voltage_v.unwrap_or(0.0);
+            })
+        });
     }
 
     /// Hands the machine the driver's verdict on its outputs when it changed.

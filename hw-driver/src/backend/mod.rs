@@ -34,6 +34,15 @@ pub struct SensorReading {
     pub depth: Option<f64>,
 }
 
+/// The supply (battery) as the hardware measures it; `None` where it does not.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Supply {
+    /// Voltage at the ESCs, V.
+    pub voltage_v: Option<f64>,
+    /// Current drawn, A (positive: discharging).
+    pub current_a: Option<f64>,
+}
+
 /// One output as the backend sees it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct OutputSpec {
@@ -182,6 +191,12 @@ pub trait Backend {
     /// Hardware without arming is always armed.
     fn armed(&self) -> bool {
         true
+    }
+
+    /// The supply's voltage and current as last measured, if the hardware measures them and
+    /// the measurement is fresh at `now_ns` (the driver reports it on `driver_status`).
+    fn supply(&self, _now_ns: u64) -> Supply {
+        Supply::default()
     }
 
     /// Backend counters for the status line and the final summary (`name=value`).

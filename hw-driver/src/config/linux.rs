@@ -24,6 +24,8 @@ ranged!(
     " ms"
 );
 ranged!(de_rate_hz, "rate_hz", f64, 1.0, 1000.0, " Hz");
+ranged!(de_supply_channel, "supply_channel", u32, 0, 255, "");
+ranged!(de_supply_gain, "supply_gain", f64, 0.001, 1000.0, "");
 ranged!(
     de_density,
     "fluid_density_kg_m3",
@@ -74,6 +76,17 @@ pub struct LinuxConfig {
     /// IIO device with `in_pressure_input` or `in_pressure_raw` (kPa after scale), for
     /// depth. Default: none (no depth in the samples).
     pub pressure_device: Option<String>,
+    /// IIO device whose `in_voltage<supply_channel>` measures the thrusters' supply (an ADC
+    /// behind a voltage divider, e.g. a Navigator's ADS1115): "iio:deviceN" or its name.
+    /// Default: none (the supply voltage is reported unknown).
+    pub supply_device: Option<String>,
+    /// The ADC channel N of `in_voltageN_raw` (0..=255). Default 0.
+    #[serde(deserialize_with = "de_supply_channel")]
+    pub supply_channel: u32,
+    /// Supply volts per volt at the ADC (the divider's ratio), in [0.001, 1000]: supply V =
+    /// (in_voltageN_raw + offset) x scale / 1000 (IIO gives mV) x supply_gain. Default 1.
+    #[serde(deserialize_with = "de_supply_gain")]
+    pub supply_gain: f64,
     /// Body axes from sensor axes for gyro and accelerometer: body x, y, z (forward,
     /// starboard, down) are these signed sensor axes. Default ["x", "-y", "-z"]: a chip
     /// mounted face up with its x axis forward (its y points to port, z up).
@@ -102,6 +115,9 @@ impl Default for LinuxConfig {
             accel_device: None,
             mag_device: None,
             pressure_device: None,
+            supply_device: None,
+            supply_channel: 0,
+            supply_gain: 1.0,
             imu_axes: AxisMap::FLU_TO_FRD,
             mag_axes: None,
             fluid_density_kg_m3: 997.0,

@@ -340,9 +340,10 @@ impl Loop {
     fn publish_status(&mut self, backend: &dyn Backend, now: u64) -> Result<(), DriverError> {
         let core = self.controller.state(now);
         let (link, armed) = (backend.link(), backend.armed());
-        if let Some(msg) = self
-            .reporter
-            .report(now, core, self.controller.counters(), &link, armed)
+        let supply = backend.supply(now);
+        if let Some(msg) =
+            self.reporter
+                .report(now, core, self.controller.counters(), &link, armed, supply)
         {
             self.driver_status.send(&msg)?;
         }

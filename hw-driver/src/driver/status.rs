@@ -9,7 +9,7 @@
 
 use thruster_protocol::{DriverStatusMsg, OutputState, Text};
 
-use crate::backend::LinkState;
+use crate::backend::{LinkState, Supply};
 use crate::core::controller::{Counters, OutputState as CoreState};
 
 const MS: u64 = 1_000_000;
@@ -91,6 +91,7 @@ impl StatusReporter {
         counters: &Counters,
         link: &LinkState,
         armed: bool,
+        supply: Supply,
     ) -> Option<DriverStatusMsg> {
         // An expiry is the core going from following commands to the watchdog's neutral.
         if core == CoreState::Watchdog && self.last_core == CoreState::Active {
@@ -130,6 +131,13 @@ impl StatusReporter {
             ..DriverStatusMsg::default()
         };
         msg.set_output_state(state);
+        // Unknown stays NaN (the message's default); a non-finite measurement is unknown too.
+        if let Some(v) = supply.voltage_v.filter(|v| v.is_finite()) {
+            msg.supply_voltage_v = v;
+        }
+        if let Some(a) = supply.current_a.filter(|a| a.is_finite()) {
+            msg.supply_current_a = a;
+        }
         Some(msg)
     }
 }
@@ -174,7 +182,9 @@ mod tests {
         let mut r = StatusReporter::new("mavlink", 5, 0);
         let c = Counters::default();
         let up = LinkState::Up;
-        let first = r.report(0, CoreState::Arming, &c, &up, false).unwrap();
+        let first = r
+            .report(0, CoreState::Arming, &c, &up, false, Supply::default())
+            .unwrap();
         assert_eq!(first.driver(), "thruster-hw mavlink");
         assert_eq!(
             (first.thruster_count, first.armed, first.link_up),
@@ -182,30 +192,79 @@ mod tests {
         );
         assert_eq!(first.output_state(), Ok(OutputState::Disarmed));
         assert!(r
-            .report(50 * MS, CoreState::Arming, &c, &up, false)
+            .report(
+                50 * MS,
+                CoreState::Arming,
+                &c,
+                &up,
+                false,
+                Supply::default()
+            )
             .is_none());
         // Armed: at once.
         let armed = r
-            .report(60 * MS, CoreState::Waiting, &c, &up, true)
+            .report(
+                60 * MS,
+                CoreState::Waiting,
+                &c,
+                &up,
+                true,
+                Supply::default(),
+            )
             .unwrap();
         assert_eq!(armed.output_state(), Ok(OutputState::Neutral));
         // Nothing new: the next after 100 ms.
         assert!(r
-            .report(159 * MS, CoreState::Waiting, &c, &up, true)
+            .report(
+                159 * MS,
+                CoreState::Waiting,
+                &c,
+                &up,
+                true,
+                Supply::default()
+            )
             .is_none());
         assert!(r
-            .report(160 * MS, CoreState::Waiting, &c, &up, true)
+            .report(
+                160 * MS,
+                CoreState::Waiting,
+                &c,
+                &up,
+                true,
+                Supply::default()
+            )
             .is_some());
         // Active, then the watchdog: counted once.
-        r.report(170 * MS, CoreState::Active, &c, &up, true)
-            .unwrap();
+        r.report(
+            170 * MS,
+            CoreState::Active,
+            &c,
+            &up,
+            true,
+            Supply::default(),
+        )
+        .unwrap();
         let w = r
-            .report(400 * MS, CoreState::Watchdog, &c, &up, true)
+            .report(
+                400 * MS,
+                CoreState::Watchdog,
+                &c,
+                &up,
+                true,
+                Supply::default(),
+            )
             .unwrap();
         assert_eq!(w.watchdog_expiries, 1);
         r.rejected("count 4, configured 5");
         let t = r
-            .report(600 * MS, CoreState::Rejected, &c, &up, true)
+            .report(
+                600 * MS,
+                CoreState::Rejected,
+                &c,
+                &up,
+                true,
+                Supply::default(),
+            )
             .unwrap();
         assert!(t.text().contains("count 4"), "{}", t.text());
     }

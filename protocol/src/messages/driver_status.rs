@@ -40,8 +40,8 @@ impl OutputState {
 /// another thruster count (it rejects every command), a driver rejecting commands, an
 /// autopilot that is disarmed or unreachable.
 #[repr(C)]
-#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.DriverStatusMsg.v1")]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[type_name("thrusterd.DriverStatusMsg.v2")]
 pub struct DriverStatusMsg {
     /// Sequence number, +1 per message from this driver.
     pub seq: u64,
@@ -68,6 +68,33 @@ pub struct DriverStatusMsg {
     pub driver: Text,
     /// Short human-readable detail: the last rejection reason, why the link is down.
     pub text: Text,
+    /// Supply (battery) voltage at the thrusters' ESCs, V, in [0, 100]; NaN when the driver
+    /// cannot measure it (the default). (v2 of this message.)
+    pub supply_voltage_v: f64,
+    /// Current drawn from the supply, A, in [-1000, 1000] (positive: discharging); NaN when
+    /// not known (the default). (v2.)
+    pub supply_current_a: f64,
+}
+
+impl Default for DriverStatusMsg {
+    /// Every counter zero, state unknown, supply not known (NaN).
+    fn default() -> Self {
+        DriverStatusMsg {
+            seq: 0,
+            time_ns: 0,
+            thruster_count: 0,
+            output_state: 0,
+            commands_accepted: 0,
+            commands_rejected: 0,
+            watchdog_expiries: 0,
+            link_up: 0,
+            armed: 0,
+            driver: Text::default(),
+            text: Text::default(),
+            supply_voltage_v: f64::NAN,
+            supply_current_a: f64::NAN,
+        }
+    }
 }
 
 impl DriverStatusMsg {
@@ -92,5 +119,19 @@ impl DriverStatusMsg {
     /// The detail text.
     pub fn text(&self) -> &str {
         self.text.as_str()
+    }
+
+    /// The supply voltage, V, when the driver measures it.
+    pub fn supply_voltage(&self) -> Option<f64> {
+        self.supply_voltage_v
+            .is_finite()
+            .then_some(self.supply_voltage_v)
+    }
+
+    /// The supply current, A, when the driver measures it.
+    pub fn supply_current(&self) -> Option<f64> {
+        self.supply_current_a
+            .is_finite()
+            .then_some(self.supply_current_a)
     }
 }

@@ -30,10 +30,14 @@ wire_enum! {
         /// A model loaded from a file (`text` the path) by an operator request: its content
         /// is not in the journal, so replay refuses a recording that has one.
         Load = 8,
+        /// The driver's supply voltage as the machine took it: `code` 1 with the volts in
+        /// `value`, or `code` 0 when the reading was lost (`value` 0; never NaN, so the
+        /// journal's JSON stays numbers).
+        Supply = 9,
         /// A solve job's result reached the state machine (`code`: the job's id). Journaled
         /// for every result, so a replay hands each result over between the same two samples
         /// as the daemon did: one that came back after its due sample (a long solve, a
-        /// loaded machine) is applied late in both (`crate::...` solve jobs, issue 29).
+        /// loaded machine) is applied late in both (thrusterd_core::solve; issue 29).
         SolveDelivered = 10,
     }
 }

@@ -38,7 +38,7 @@ pub use input::{InputKind, InputMsg};
 pub use model::{ModelMethod, ModelMsg, ModelSource};
 pub use reconfig::{ReconfigEvent, ReconfigKind};
 pub use setpoint::Setpoint;
-pub use status::{DaemonState, StatusMsg};
+pub use status::{DaemonState, StatusMsg, SupplyCompensation};
 pub use telemetry::TelemetryMsg;
 pub use thrust::{ThrustCommand, ThrustMode};
 pub use truth::{TruthMsg, VehicleStateMsg};

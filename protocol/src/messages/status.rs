@@ -28,10 +28,24 @@ wire_enum! {
     }
 }
 
+wire_enum! {
+    /// Whether the daemon scales its commands for the measured supply voltage.
+    pub enum SupplyCompensation {
+        /// Not configured (`[supply] compensation = "none"`): commands go out as computed.
+        #[default]
+        Off = 0,
+        /// Configured, but no driver reports a voltage: commands go out as computed, as if
+        /// the supply were at the reference voltage.
+        NoReading = 1,
+        /// Commands are referred to the reference voltage through the thruster table.
+        Active = 2,
+    }
+}
+
 /// Daemon progress and health (daemon -> all, service `status`, history 1).
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.StatusMsg.v2")]
+#[type_name("thrusterd.StatusMsg.v3")]
 pub struct StatusMsg {
     /// Sequence number, +1 per status message.
     pub seq: u64,
@@ -83,6 +97,14 @@ pub struct StatusMsg {
     pub vehicle_time_ns: u64,
     /// Short human-readable reason or message (why a fault, why a model was refused).
     pub text: Text,
+    /// The supply voltage the daemon last heard from the driver, V; NaN when it has none.
+    /// (v3 of this message.)
+    pub supply_voltage_v: f64,
+    /// [`SupplyCompensation`] as `u32`: whether commands are referred to the reference
+    /// voltage. (v3.)
+    pub supply_compensation: u32,
+    /// Written as zero, ignored.
+    pub reserved: u32,
 }
 
 impl StatusMsg {
@@ -104,5 +126,10 @@ impl StatusMsg {
     /// The human-readable text.
     pub fn text(&self) -> &str {
         self.text.as_str()
+    }
+
+    /// Decoded `supply_compensation`.
+    pub fn supply_compensation(&self) -> Result<SupplyCompensation, UnknownEnumValue> {
+        SupplyCompensation::try_from(self.supply_compensation)
     }
 }

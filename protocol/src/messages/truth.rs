@@ -7,7 +7,7 @@ use super::{clamp_count, DOF_COUNT, MAX_THRUSTERS};
 /// so tests and the study can score estimates. Never used for control.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.TruthMsg.v1")]
+#[type_name("thrusterd.TruthMsg.v2")]
 pub struct TruthMsg {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -23,6 +23,15 @@ pub struct TruthMsg {
     /// True effectiveness for negative commands (thrusters are weaker in reverse), same
     /// shape and units: response = reverse_effectiveness * u for u < 0.
     pub reverse_effectiveness: [[f64; MAX_THRUSTERS]; DOF_COUNT],
+    /// Supply voltage the effectiveness holds at, V, in [0, 100]: a simulator with a battery
+    /// republishes the truth as the voltage moves (thrusters with a measured table follow it);
+    /// without one the fixed supply's. (v2 of this message.)
+    pub supply_voltage_v: f64,
+    /// 1 when the simulator models a battery (the voltage sags and falls), 0 for a fixed
+    /// supply. (v2.)
+    pub battery: u32,
+    /// Written as zero, ignored.
+    pub reserved2: u32,
 }
 
 impl TruthMsg {

@@ -333,7 +333,16 @@ impl Validate for TruthMsg {
             MAX_EFFECTIVENESS,
             false,
             "per unit command",
-        )
+        )?;
+        in_range(
+            Field::new("supply_voltage_v"),
+            self.supply_voltage_v,
+            0.0,
+            MAX_SUPPLY_VOLTAGE_V,
+            "V",
+        )?;
+        zero_or_one("battery", self.battery)?;
+        Ok(())
     }
 }
 
@@ -371,6 +380,14 @@ impl Validate for StatusMsg {
             f64::MAX,
             "Hz",
         )?;
+        in_range_or_unknown(
+            Field::new("supply_voltage_v"),
+            self.supply_voltage_v,
+            0.0,
+            MAX_SUPPLY_VOLTAGE_V,
+            "V",
+        )?;
+        known_enum("supply_compensation", self.supply_compensation())?;
         utf8_text("text", &self.text)
     }
 }
@@ -532,7 +549,22 @@ impl Validate for DriverStatusMsg {
         zero_or_one("link_up", self.link_up)?;
         zero_or_one("armed", self.armed)?;
         utf8_text("driver", &self.driver)?;
-        utf8_text("text", &self.text)
+        utf8_text("text", &self.text)?;
+        // NaN is "not measured"; infinity never passes.
+        in_range_or_unknown(
+            Field::new("supply_voltage_v"),
+            self.supply_voltage_v,
+            0.0,
+            MAX_SUPPLY_VOLTAGE_V,
+            "V",
+        )?;
+        in_range_or_unknown(
+            Field::new("supply_current_a"),
+            self.supply_current_a,
+            -MAX_SUPPLY_CURRENT_A,
+            MAX_SUPPLY_CURRENT_A,
+            "A",
+        )
     }
 }
 

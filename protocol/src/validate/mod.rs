@@ -62,4 +62,8 @@ pub mod limits {
     pub const MAX_EFFECTIVENESS: f64 = 1e3;
     /// Largest accepted allocation entry, command per rad/s^2 or per m/s^2.
     pub const MAX_ALLOCATION: f64 = 1e6;
+    /// Largest plausible supply voltage, V (a 12S pack is ~50 V).
+    pub const MAX_SUPPLY_VOLTAGE_V: f64 = 100.0;
+    /// Largest plausible supply current magnitude, A (16 T200s at full are ~500 A).
+    pub const MAX_SUPPLY_CURRENT_A: f64 = 1000.0;
 }

@@ -66,13 +66,23 @@ pub fn reading_is_finite(r: &ImuReading) -> bool {
         .all(|v| v.is_finite())
 }
 
-/// The truth message for `(B_fwd, B_rev)` (6 x N, DOF order) valid from `t_ns`.
-pub fn truth_msg(seq: u64, t_ns: u64, fwd: &DMatrix<f64>, rev: &DMatrix<f64>) -> TruthMsg {
+/// The truth message for `(B_fwd, B_rev)` (6 x N, DOF order) valid from `t_ns`, at supply
+/// voltage `supply_v` (`battery`: whether a battery model gives it).
+pub fn truth_msg(
+    seq: u64,
+    t_ns: u64,
+    fwd: &DMatrix<f64>,
+    rev: &DMatrix<f64>,
+    supply_v: f64,
+    battery: bool,
+) -> TruthMsg {
     let n = fwd.ncols().min(MAX_THRUSTERS);
     let mut msg = TruthMsg {
         seq,
         t_ns,
         count: n as u32,
+        supply_voltage_v: supply_v,
+        battery: u32::from(battery),
         ..TruthMsg::default()
     };
     for dof in 0..6 {
@@ -185,7 +195,7 @@ mod tests {
     fn truth_copies_both_matrices() {
         let fwd = DMatrix::from_fn(6, 3, |i, j| (i * 10 + j) as f64);
         let rev = &fwd * 0.5;
-        let t = truth_msg(2, 99, &fwd, &rev);
+        let t = truth_msg(2, 99, &fwd, &rev, 16.0, false);
         assert_eq!((t.seq, t.t_ns, t.count), (2, 99, 3));
         assert_eq!(t.effectiveness[4][2], 42.0);
         assert_eq!(t.reverse_effectiveness[4][2], 21.0);
@@ -203,6 +213,7 @@ mod tests {
                 ThrusterSpec::new("a", [0.2, 0.0, -0.15], [0.0, 0.0, -1.0]),
                 ThrusterSpec::new("b", [0.0, 0.2, 0.0], [1.0, 0.0, 0.0]),
             ],
+            battery: None,
         };
         v.thrusters[1].reversed = true;
         let change = Change {

@@ -47,6 +47,10 @@ const EXIT_LINGER: std::time::Duration = std::time::Duration::from_millis(100);
 /// Node name of the driver in iceoryx2 listings.
 pub const NODE_NAME: &str = "thruster-sim";
 
+/// A battery's voltage change that republishes the truth, V (the T200's thrust moves ~0.4 %
+/// per 50 mV at 16 V).
+const TRUTH_VOLTAGE_STEP_V: f64 = 0.05;
+
 /// How often the truth port hands its history to late subscribers, wall time.
 const HOUSEKEEPING_PERIOD: Duration = Duration::from_millis(50);
 /// How often progress is logged, wall time.
@@ -226,6 +230,8 @@ pub struct Driver {
     /// Vehicle time at which the next driver status is due, and what the last one said
     /// (rejections, output state, count) so a change goes out at once.
     next_driver_status_ns: u64,
+    /// Supply voltage of the last truth published, V.
+    truth_voltage_v: f64,
     driver_status_seq: u64,
     last_driver_status: Option<(u64, u32, u32)>,
     /// Why the last thrust command was rejected, for the driver status.
@@ -307,6 +313,7 @@ impl Driver {
             next_housekeeping: now,
             next_report: now + REPORT_PERIOD,
             next_driver_status_ns: 0,
+            truth_voltage_v: f64::NAN,
             driver_status_seq: 0,
             last_driver_status: None,
             last_rejection: None,
@@ -464,6 +471,12 @@ impl Driver {
             ..Default::default()
         };
         msg.set_output_state(output);
+        // The supply as a real driver measures it, at its report rate; none without a battery
+        // (a fixed supply is not measured, so a daemon works as it did before batteries).
+        if let Some(b) = self.sim.battery() {
+            msg.supply_voltage_v = b.voltage_v();
+            msg.supply_current_a = b.current_a();
+        }
         msg.driver.set(NODE_NAME);
         if let Some(reason) = &self.last_rejection {
             msg.text.set(reason);
@@ -471,6 +484,14 @@ impl Driver {
         self.ports.driver_status.send(&msg)?;
         self.last_driver_status = Some((rejected, output.as_u32(), count));
         self.next_driver_status_ns = now_ns + DriverStatusMsg::PERIOD_MS * 1_000_000;
+        // The truth at the present voltage, republished (IPC only) when the supply moved by
+        // more than TRUTH_VOLTAGE_STEP_V since the last one: with table thrusters the
+        // effectiveness follows the battery.
+        if self.sim.battery().is_some()
+            && (self.sim.supply_voltage_v() - self.truth_voltage_v).abs() > TRUTH_VOLTAGE_STEP_V
+        {
+            self.publish_truth_ipc()?;
+        }
         Ok(())
     }
 
@@ -491,18 +512,32 @@ impl Driver {
 
     /// Publishes the current truth (and appends it to the truth file).
     fn publish_truth(&mut self, cause: &str) -> Result<(), DriverError> {
+        self.publish_truth_ipc()?;
+        if let Some(file) = &mut self.truth_file {
+            file.push(TruthEntry::of(&self.sim, cause))?;
+        }
+        Ok(())
+    }
+
+    /// Publishes the current truth on the truth topic only.
+    fn publish_truth_ipc(&mut self) -> Result<(), DriverError> {
         let (fwd, rev) = self.sim.truth();
         self.truth_seq += 1;
-        let msg = convert::truth_msg(self.truth_seq, self.sim.time_ns(), &fwd, &rev);
+        let msg = convert::truth_msg(
+            self.truth_seq,
+            self.sim.time_ns(),
+            &fwd,
+            &rev,
+            self.sim.supply_voltage_v(),
+            self.sim.battery().is_some(),
+        );
+        self.truth_voltage_v = self.sim.supply_voltage_v();
         if let Err(reason) = msg.validate() {
             // Only an absurd vehicle file gets here (effectiveness beyond the protocol's
             // bound); readers would drop the message, so say why.
             error!(%reason, "truth message fails protocol validation");
         }
         self.ports.truth.send(&msg)?;
-        if let Some(file) = &mut self.truth_file {
-            file.push(TruthEntry::of(&self.sim, cause))?;
-        }
         Ok(())
     }
 

@@ -115,4 +115,6 @@ pub struct MachineSetup {
     pub thrusters: usize,
     /// Declared geometry at start (positions m, directions), if known.
     pub geometry: Option<Geometry>,
+    /// Commands referred to a reference supply voltage (`[supply]`).
+    pub supply: crate::supply::SupplyConfig,
 }

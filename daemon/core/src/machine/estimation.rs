@@ -228,7 +228,9 @@ impl EstimationRun {
 
     /// One sample at rest, `elapsed_s` into the noise measurement. Once it is long enough, the
     /// levels are kept and the estimator is built, its first power sized to the noise with the
-    /// model in force: then true (pulse now).
+    /// model in force: then true (pulse now). `power_cap` (in (0, 1]) bounds every pulse's
+    /// power: the largest the thrusters can give at the present supply voltage, so a pulse
+    /// the estimator believes it applied is the one applied (`crate::supply`).
     pub(super) fn measure_noise(
         &mut self,
         m: &Motion,
@@ -236,6 +238,7 @@ impl EstimationRun {
         setup: &MachineSetup,
         model: Option<&Model>,
         n: usize,
+        power_cap: f64,
     ) -> bool {
         self.noise.push(&m.gyro.into(), &m.accel.into());
         self.rest.push(m, elapsed_s);
@@ -245,6 +248,14 @@ impl EstimationRun {
         let levels = self.noise.levels();
         self.levels = Some(levels);
         let mut cfg = setup.estimator.clone();
+        let cap = if power_cap.is_finite() {
+            power_cap.clamp(0.05, 1.0)
+        } else {
+            1.0
+        };
+        cfg.max_power = cfg.max_power.min(cap);
+        cfg.initial_power = cfg.initial_power.min(cap);
+        cfg.min_power = cfg.min_power.min(cap);
         // The dynamic method pulses back to back at a fixed strength: its information grows
         // with the motion it fits, not with one pulse's SNR (pulse_power's model).
         let sized = cfg.pulse_snr > 0.0 && cfg.method != Method::Dynamic;

@@ -23,6 +23,7 @@ use crate::model::{nominal_effectiveness, Model, ModelSource, PreparedModel};
 use crate::monitor::{MismatchAction, ModelMonitor};
 use crate::refinement::{Refiner, Tick, WindowVerdict};
 use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
+use crate::supply::Supply;
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
 struct Levelling {
@@ -63,6 +64,10 @@ pub struct Machine {
     /// Why the driver's outputs cannot be used (see `driver_watch`), while they cannot: the
     /// machine stays in Fault, neutral, and does not recover on good IMU samples alone.
     output_block: Option<String>,
+    /// The supply voltage and the referral of commands to the reference voltage: every
+    /// command inside the machine is referred, only the outgoing one is carried to the
+    /// present voltage (`crate::supply`).
+    supply: Supply,
 }
 
 impl Machine {
@@ -90,6 +95,7 @@ impl Machine {
             text: "idle: waiting for an estimate request".into(),
             last_desired: [0.0; 6],
             output_block: None,
+            supply: Supply::new(setup.supply.clone()),
             setup,
         };
         m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);
@@ -256,7 +262,23 @@ impl Machine {
     }
 
     /// The answer to one IMU sample. Always a command: neutral unless estimating or controlling.
+    /// Everything the machine computes is referred to the reference supply voltage (what the
+    /// estimator learns, what the refinement compares); the command is carried to the present
+    /// voltage on its way out, finite and in [-1, 1] whatever happened.
     pub fn on_imu(&mut self, s: &ImuInput) -> Command {
+        let mut cmd = self.respond(s);
+        let n = cmd.count.min(cmd.thrust.len());
+        self.supply.to_present(&mut cmd.thrust[..n]);
+        cmd
+    }
+
+    /// The supply voltage the driver reports (V, validated), or `None` when it stopped
+    /// reporting one: from the next sample on, commands are referred to it (`[supply]`).
+    pub fn on_supply(&mut self, voltage_v: Option<f64>) {
+        self.supply.on_voltage(voltage_v);
+    }
+
+    fn respond(&mut self, s: &ImuInput) -> Command {
         self.samples += 1;
         let dt = match self.last_t_ns {
             Some(last) if s.t_ns > last => (s.t_ns - last) as f64 * 1e-9,
@@ -308,9 +330,19 @@ impl Machine {
                     depth: s.depth,
                 };
                 let elapsed = self.elapsed_s(s.t_ns);
-                let ready =
-                    self.run
-                        .measure_noise(&m, elapsed, &self.setup, self.models.current(), self.n);
+                // The power whose output (after the deadband jump) the thrusters can still
+                // give, referred, at the present voltage: a saturated pulse would teach the
+                // estimator a weaker thruster than it has.
+                let db = self.setup.machine.deadband.clamp(0.0, 0.5);
+                let cap = ((self.supply.attainable() - db) / (1.0 - db)).clamp(0.0, 1.0);
+                let ready = self.run.measure_noise(
+                    &m,
+                    elapsed,
+                    &self.setup,
+                    self.models.current(),
+                    self.n,
+                    cap,
+                );
                 if ready {
                     return self.start_pulse(s.t_ns);
                 }
@@ -573,6 +605,8 @@ impl Machine {
             vehicle_time_ns: self.last_t_ns.unwrap_or(0),
             thrusters: self.n,
             text: self.text.clone(),
+            supply_voltage_v: self.supply.voltage_v(),
+            supply: self.supply.state(),
         }
     }
 

@@ -172,6 +172,10 @@ pub struct StatusSnapshot {
     pub vehicle_time_ns: u64,
     pub thrusters: usize,
     pub text: String,
+    /// The supply voltage last reported, V.
+    pub supply_voltage_v: Option<f64>,
+    /// What is done with the commands for it.
+    pub supply: thruster_protocol::SupplyCompensation,
 }
 
 /// Last line of defence: nothing non-finite or out of range leaves the machine; then the

@@ -62,6 +62,18 @@ impl Channel {
         } else {
             format!("in_{kind}_{axis}")
         };
+        Channel::open_named(device, &name, kind)
+    }
+
+    /// Channel `in_voltage<index>` of `device` (millivolts after scale, per the IIO ABI;
+    /// indexed channels have no underscore: `in_voltage0_raw`, shared `in_voltage_scale`).
+    pub fn open_voltage(device: &Path, index: u32) -> Result<Channel, BackendError> {
+        Channel::open_named(device, &format!("in_voltage{index}"), "voltage")
+    }
+
+    /// Channel `name` (`<name>_raw`) of `device`, with its own scale and offset or the
+    /// shared `in_<kind>_scale` / `_offset`.
+    fn open_named(device: &Path, name: &str, kind: &str) -> Result<Channel, BackendError> {
         let raw = device.join(format!("{name}_raw"));
         if !raw.exists() {
             return Err(BackendError::Content {
@@ -180,6 +192,22 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("in_anglvel_y_raw"));
+    }
+
+    #[test]
+    fn voltage_channels_are_indexed_without_underscore() {
+        let root = tempfile::tempdir().unwrap();
+        let d = dev(root.path(), 1, "ads1115");
+        fs::write(d.join("in_voltage2_raw"), "1500\n").unwrap();
+        fs::write(d.join("in_voltage_scale"), "0.125\n").unwrap();
+        let c = Channel::open_voltage(&d, 2).unwrap();
+        assert!((c.read().unwrap() - 187.5).abs() < 1e-12);
+        fs::write(d.join("in_voltage2_scale"), "0.25\n").unwrap();
+        assert!((Channel::open_voltage(&d, 2).unwrap().read().unwrap() - 375.0).abs() < 1e-12);
+        assert!(Channel::open_voltage(&d, 0)
+            .unwrap_err()
+            .to_string()
+            .contains("in_voltage0_raw"));
     }
 
     #[test]

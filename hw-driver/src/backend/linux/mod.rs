@@ -10,9 +10,9 @@ pub mod sysfs;
 
 use std::time::Duration;
 
-use self::iio::{find_device, Pressure, Vector3};
+use self::iio::{find_device, Channel, Pressure, Vector3};
 use self::pwm::PwmChannel;
-use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Waker};
+use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Supply, Waker};
 use crate::clock::monotonic_ns;
 use crate::config::LinuxConfig;
 use crate::core::axes::AxisMap;
@@ -29,6 +29,12 @@ const UT_PER_GAUSS: f64 = 100.0;
 /// I2C sensors return an occasional EIO; a sensor that is gone fails within this many
 /// periods (0.1 s at 200 Hz), and the daemon's stale-IMU fault sees the gap meanwhile.
 pub const MAX_READ_FAILURES: u32 = 20;
+
+/// How often the supply voltage channel is read, ns: a battery moves slowly, and the
+/// driver reports it every 100 ms.
+const SUPPLY_PERIOD_NS: u64 = 100_000_000;
+/// A supply reading older than this is reported unknown, ns (reads have been failing).
+const SUPPLY_STALE_NS: u64 = 1_000_000_000;
 
 /// The IIO channels of the samples.
 #[derive(Debug)]
@@ -52,6 +58,12 @@ pub struct LinuxBackend {
     next_due_ns: u64,
     read_failures: u32,
     read_log: LogLimiter,
+    /// The supply's ADC channel, when configured.
+    supply_channel: Option<Channel>,
+    /// The last good supply reading (V) and when; the next read is due at `next_supply_ns`.
+    supply: Option<(u64, f64)>,
+    next_supply_ns: u64,
+    supply_log: LogLimiter,
     stopped: bool,
 }
 
@@ -68,7 +80,37 @@ impl LinuxBackend {
             next_due_ns: 0,
             read_failures: 0,
             read_log: LogLimiter::default(),
+            supply_channel: None,
+            supply: None,
+            next_supply_ns: 0,
+            supply_log: LogLimiter::default(),
             stopped: false,
+        }
+    }
+
+    /// Reads the supply voltage when due. A failed read is logged and leaves the last good
+    /// value to go stale: a flaky ADC must not end the driver.
+    fn poll_supply(&mut self, now_ns: u64) {
+        let Some(ch) = &self.supply_channel else {
+            return;
+        };
+        if now_ns < self.next_supply_ns {
+            return;
+        }
+        self.next_supply_ns = now_ns + SUPPLY_PERIOD_NS;
+        // IIO voltages are millivolts after scale; the gain undoes the divider.
+        match ch.read().map(|mv| mv / 1000.0 * self.cfg.supply_gain) {
+            Ok(v) if v.is_finite() && v >= 0.0 => self.supply = Some((now_ns, v)),
+            Ok(v) => {
+                if let Some(suppressed) = self.supply_log.allow() {
+                    tracing::warn!(suppressed, "supply voltage {v} V is not plausible, ignored");
+                }
+            }
+            Err(e) => {
+                if let Some(suppressed) = self.supply_log.allow() {
+                    tracing::warn!(suppressed, "supply voltage read failed: {e}");
+                }
+            }
         }
     }
 
@@ -140,6 +182,13 @@ impl Backend for LinuxBackend {
     fn start(&mut self, _waker: Waker, now_ns: u64) -> Result<(), BackendError> {
         // Sensors first: a wrong device name fails before any output is touched.
         self.sensors = Some(self.open_sensors()?);
+        // A configured supply channel that is not there is a configuration error, like a
+        // missing IMU: said at start, not hidden behind an unknown voltage forever.
+        if let Some(spec) = &self.cfg.supply_device {
+            let dev = find_device(&self.cfg.sysfs_root, spec)?;
+            self.supply_channel = Some(Channel::open_voltage(&dev, self.cfg.supply_channel)?);
+        }
+        self.next_supply_ns = now_ns;
         let chip = self.chip_dir();
         let timeout = Duration::from_millis(self.cfg.export_timeout_ms);
         for o in &self.outputs {
@@ -159,6 +208,7 @@ impl Backend for LinuxBackend {
     }
 
     fn read_sensors(&mut self, now_ns: u64) -> Result<Option<SensorReading>, BackendError> {
+        self.poll_supply(now_ns);
         let Some(sensors) = &self.sensors else {
             return Ok(None);
         };
@@ -222,6 +272,16 @@ impl Backend for LinuxBackend {
 
     fn link(&self) -> LinkState {
         LinkState::Local
+    }
+
+    fn supply(&self, now_ns: u64) -> Supply {
+        match self.supply {
+            Some((t, v)) if now_ns.saturating_sub(t) <= SUPPLY_STALE_NS => Supply {
+                voltage_v: Some(v),
+                current_a: None,
+            },
+            _ => Supply::default(),
+        }
     }
 
     fn stop(&mut self) -> Result<(), BackendError> {

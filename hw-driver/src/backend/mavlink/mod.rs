@@ -10,6 +10,7 @@
 //! [`RECONNECT_PERIOD`]. Only a connection that cannot be opened at start is an error (a
 //! wrong address in the configuration).
 
+pub mod battery;
 pub mod convert;
 pub mod io;
 pub mod session;
@@ -22,7 +23,7 @@ use std::time::{Duration, Instant};
 
 use self::io::{Incoming, SharedLink};
 use self::session::{Session, SessionCounters};
-use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Waker};
+use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Supply, Waker};
 use crate::clock::monotonic_ns;
 use crate::config::MavlinkConfig;
 use crate::core::pwm::Pwm;
@@ -284,6 +285,12 @@ impl Backend for MavlinkBackend {
     fn next_deadline_ns(&self) -> Option<u64> {
         let session = self.session.as_ref().map(Session::next_deadline_ns);
         [session, self.reconnect_at_ns].into_iter().flatten().min()
+    }
+
+    fn supply(&self, now_ns: u64) -> Supply {
+        self.session
+            .as_ref()
+            .map_or_else(Supply::default, |s| s.supply(now_ns))
     }
 
     fn armed(&self) -> bool {

@@ -24,6 +24,9 @@
 //! - DO_MOTOR_TEST param1 is ArduSub's 0-based motor index: `channel - 1` (see
 //!   [`ardusub_motor_index`]).
 //! - Our HEARTBEAT every `heartbeat_ms`, from the start.
+//! - Supply: the newest voltage (and current) of SYS_STATUS or BATTERY_STATUS monitor 0
+//!   ([`super::battery`]), reported while younger than [`SUPPLY_STALE_NS`]; ArduSub streams
+//!   both at its default rates (SR0_EXT_STAT), so no interval is requested.
 
 use std::collections::VecDeque;
 
@@ -36,8 +39,12 @@ use mavlink::dialects::ardupilotmega::{
 use mavlink::{MavHeader, MessageData};
 use tracing::{debug, info, warn};
 
+use super::battery::{self, SupplyReading};
 use super::convert::{depth_from_hpa, implausible, plausible_mag, scaled_imu, ImuSi};
-use crate::backend::{LinkState, OutputSpec, SensorReading};
+use crate::backend::{LinkState, OutputSpec, SensorReading, Supply};
+
+/// A supply reading older than this is not reported, ns (ArduSub sends SYS_STATUS at 1-2 Hz).
+pub const SUPPLY_STALE_NS: u64 = 5_000_000_000;
 use crate::config::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
 use crate::core::pwm::Pwm;
 use crate::log_limit::LogLimiter;
@@ -100,6 +107,8 @@ pub struct Session {
     commands: VecDeque<Pending>,
     attitude: Option<(u64, [f64; 3])>,
     depth: Option<(u64, f64)>,
+    /// The newest supply reading and when it came.
+    supply: Option<(u64, SupplyReading)>,
     readings: VecDeque<SensorReading>,
     pwm: Vec<Pwm>,
     thrust_dirty: bool,
@@ -132,6 +141,7 @@ impl Session {
             commands: VecDeque::new(),
             attitude: None,
             depth: None,
+            supply: None,
             readings: VecDeque::new(),
             pwm,
             thrust_dirty: true,
@@ -283,6 +293,16 @@ impl Session {
         match msg {
             MavMessage::ATTITUDE(a) => self.attitude = Some((t_ns, attitude_rates(a))),
             MavMessage::SCALED_PRESSURE2(p) => self.on_pressure(t_ns, p),
+            MavMessage::SYS_STATUS(st) => {
+                if let Some(r) = battery::from_sys_status(st) {
+                    self.supply = Some((t_ns, r));
+                }
+            }
+            MavMessage::BATTERY_STATUS(b) => {
+                if let Some(r) = battery::from_battery_status(b) {
+                    self.supply = Some((t_ns, r));
+                }
+            }
             MavMessage::COMMAND_ACK(ack) => self.on_ack(t_ns, ack),
             MavMessage::STATUSTEXT(s) => {
                 if let Some(suppressed) = self.text_log.allow() {
@@ -441,6 +461,17 @@ impl Session {
             depth,
         });
         self.counters.readings += 1;
+    }
+
+    /// The supply as last reported, if younger than [`SUPPLY_STALE_NS`] at `now_ns`.
+    pub fn supply(&self, now_ns: u64) -> Supply {
+        match self.supply {
+            Some((t, r)) if now_ns.saturating_sub(t) <= SUPPLY_STALE_NS => Supply {
+                voltage_v: Some(r.voltage_v),
+                current_a: r.current_a,
+            },
+            _ => Supply::default(),
+        }
     }
 
     fn on_pressure(&mut self, t_ns: u64, p: &SCALED_PRESSURE2_DATA) {
@@ -898,6 +929,53 @@ mod tests {
         }
         assert_eq!(confirmations, [0, 1, 2]);
         assert_eq!(s.counters().commands_unacked, 1);
+    }
+
+    #[test]
+    fn the_supply_comes_from_the_autopilots_battery_reports_and_goes_stale() {
+        use mavlink::dialects::ardupilotmega::{BATTERY_STATUS_DATA, SYS_STATUS_DATA};
+        let mut s = up(true);
+        assert_eq!(s.supply(10), Supply::default(), "nothing reported yet");
+        let sys = |mv: u16, ca: i16| {
+            MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+                voltage_battery: mv,
+                current_battery: ca,
+                ..SYS_STATUS_DATA::default()
+            })
+        };
+        s.on_message(100, &hdr(AP.0, AP.1), &sys(15_600, 850));
+        assert_eq!(
+            s.supply(200),
+            Supply {
+                voltage_v: Some(15.6),
+                current_a: Some(8.5)
+            }
+        );
+        // Another system's battery is not ours; an unknown voltage keeps the last one.
+        s.on_message(300, &hdr(7, 1), &sys(12_000, -1));
+        s.on_message(300, &hdr(AP.0, AP.1), &sys(u16::MAX, -1));
+        assert_eq!(s.supply(400).voltage_v, Some(15.6));
+        // BATTERY_STATUS of monitor 0 counts too.
+        let mut cells = [u16::MAX; 10];
+        cells[0] = 14_900;
+        s.on_message(
+            500,
+            &hdr(AP.0, AP.1),
+            &MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
+                voltages: cells,
+                current_battery: -1,
+                ..BATTERY_STATUS_DATA::default()
+            }),
+        );
+        assert_eq!(
+            s.supply(600),
+            Supply {
+                voltage_v: Some(14.9),
+                current_a: None
+            }
+        );
+        // Older than SUPPLY_STALE_NS: unknown.
+        assert_eq!(s.supply(500 + SUPPLY_STALE_NS + 1), Supply::default());
     }
 
     #[test]
