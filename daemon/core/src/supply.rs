@@ -45,6 +45,16 @@ pub struct SupplyConfig {
     /// The voltage models are learned at and commands referred to, V, in [10, 20] (the
     /// table's range). Default 16 (the T200 figures the simulator's default thrusters use).
     pub reference_voltage_v: f64,
+    /// Command through the thruster's curve (with `compensation = "t200"`): a referred command
+    /// c asks for thrust c times the thruster's full thrust that way at the reference
+    /// voltage, so thrust is linear in the command on each side and the ESC's dead zone
+    /// (+-25 us around 1500 us, where the T200 gives nothing) is stepped over instead of
+    /// swallowing small corrections. Applies without a voltage reading too (at the reference
+    /// voltage). Default false: the outgoing command is the one whose thrust at the present
+    /// voltage equals the referred command's at the reference (the curve and dead zone kept).
+    /// A driver that jumps the dead zone itself (thruster-hw's `deadband_us`) must not have
+    /// it jumped twice. Issue 29 item 5; measured in docs/experiments.md ("The dead zone").
+    pub linearize: bool,
 }
 
 impl Default for SupplyConfig {
@@ -52,6 +62,7 @@ impl Default for SupplyConfig {
         SupplyConfig {
             compensation: CompensationModel::T200,
             reference_voltage_v: 16.0,
+            linearize: false,
         }
     }
 }
@@ -72,16 +83,51 @@ pub struct Supply {
     config: SupplyConfig,
     table: &'static ThrusterTable,
     voltage_v: Option<f64>,
+    /// Full forward and reverse thrust at the reference voltage, N (reverse negative): the
+    /// scale of a linearized command.
+    full_n: (f64, f64),
 }
 
 impl Supply {
     /// No reading yet.
     pub fn new(config: SupplyConfig) -> Supply {
+        // Parsed here, once, not in the first control tick.
+        let table = ThrusterTable::t200();
+        let v = config.reference_voltage_v;
         Supply {
+            full_n: (
+                table.thrust_at_command(v, 1.0),
+                table.thrust_at_command(v, -1.0),
+            ),
             config,
-            // Parsed here, once, not in the first control tick.
-            table: ThrusterTable::t200(),
+            table,
             voltage_v: None,
+        }
+    }
+
+    /// The voltage commands go out at: the reading when compensating, the reference when
+    /// only linearizing; None: commands pass unchanged.
+    fn out_voltage(&self) -> Option<f64> {
+        match (self.config.compensation, self.voltage_v) {
+            (CompensationModel::T200, Some(v)) => Some(v),
+            (CompensationModel::T200, None) if self.config.linearize => {
+                Some(self.config.reference_voltage_v)
+            }
+            _ => None,
+        }
+    }
+
+    /// The thrust a referred command `c` asks for, N.
+    fn wanted_n(&self, c: f64) -> f64 {
+        if self.config.linearize {
+            if c >= 0.0 {
+                c * self.full_n.0
+            } else {
+                -c * self.full_n.1
+            }
+        } else {
+            self.table
+                .thrust_at_command(self.config.reference_voltage_v, c)
         }
     }
 
@@ -107,11 +153,7 @@ impl Supply {
     /// Carries commands referred to the reference voltage to the present one, in place.
     /// Whatever happens every command ends finite and in [-1, 1].
     pub fn to_present(&self, commands: &mut [f64]) {
-        let present = match (self.config.compensation, self.voltage_v) {
-            (CompensationModel::T200, Some(v)) => Some(v),
-            _ => None,
-        };
-        let reference = self.config.reference_voltage_v;
+        let present = self.out_voltage();
         for u in commands {
             let c = if u.is_finite() {
                 u.clamp(-1.0, 1.0)
@@ -119,7 +161,7 @@ impl Supply {
                 0.0
             };
             let out = match present {
-                Some(v) if c != 0.0 => self.table.refer_command(c, reference, v),
+                Some(v) if c != 0.0 => self.table.command_for_thrust(v, self.wanted_n(c)),
                 _ => c,
             };
             *u = if out.is_finite() {
@@ -149,12 +191,24 @@ impl Supply {
     /// The command referred to the reference voltage that `u` (sent at the present voltage)
     /// amounts to: the inverse of [`Supply::to_present`] where the output did not saturate.
     pub fn referred(&self, u: f64) -> f64 {
-        match (self.config.compensation, self.voltage_v) {
-            (CompensationModel::T200, Some(v)) => {
-                self.table
-                    .refer_command(u, v, self.config.reference_voltage_v)
+        let Some(v) = self.out_voltage() else {
+            return u;
+        };
+        let thrust = self.table.thrust_at_command(v, u);
+        if self.config.linearize {
+            let full = if thrust >= 0.0 {
+                self.full_n.0
+            } else {
+                -self.full_n.1
+            };
+            if full > 0.0 {
+                thrust / full
+            } else {
+                0.0
             }
-            _ => u,
+        } else {
+            self.table
+                .command_for_thrust(self.config.reference_voltage_v, thrust)
         }
     }
 }
@@ -226,5 +280,44 @@ mod tests {
             (u[0] - 0.5).abs() < 1e-9 && (u[1] + 0.3).abs() < 1e-9,
             "{u:?}"
         );
+    }
+
+    fn linearized() -> Supply {
+        Supply::new(SupplyConfig {
+            linearize: true,
+            ..SupplyConfig::default()
+        })
+    }
+
+    /// Linearized, thrust is the command times the full thrust that way, from the smallest
+    /// command up, with or without a reading; the T200's dead zone swallows 0.02 otherwise.
+    #[test]
+    fn linearized_commands_step_over_the_dead_zone_and_are_linear_in_thrust() {
+        let (fwd, rev) = (
+            t200().thrust_at_command(16.0, 1.0),
+            t200().thrust_at_command(16.0, -1.0),
+        );
+        for voltage in [None, Some(16.0), Some(13.5)] {
+            let mut s = linearized();
+            s.on_voltage(voltage);
+            let v = voltage.unwrap_or(16.0);
+            for c in [0.02, 0.05, 0.3, 0.8, -0.02, -0.3, -0.8] {
+                let mut u = [c];
+                s.to_present(&mut u);
+                let thrust = t200().thrust_at_command(v, u[0]);
+                let want = if c > 0.0 { c * fwd } else { -c * rev };
+                assert!(
+                    (thrust - want).abs() <= 0.01 * want.abs() + 0.02,
+                    "{voltage:?} V, c {c}: {thrust} N for {want} N (out {})",
+                    u[0]
+                );
+                assert!((s.referred(u[0]) - c).abs() < 0.01, "{voltage:?} {c}");
+            }
+        }
+        let mut plain = Supply::new(SupplyConfig::default());
+        plain.on_voltage(Some(16.0));
+        let mut u = [0.02];
+        plain.to_present(&mut u);
+        assert_eq!(t200().thrust_at_command(16.0, u[0]), 0.0, "{u:?}");
     }
 }
