@@ -106,6 +106,10 @@ pub struct ExperimentArgs {
     /// dive's 8 A hotel load); a large one gives the same dive on a battery that stays full.
     #[arg(long, default_value_t = dive::CAPACITY_AH)]
     pub capacity_ah: f64,
+    /// Every run's daemon commands through the thruster's curve (`[supply] linearize`: thrust
+    /// linear in the command, the T200's dead zone stepped over).
+    #[arg(long)]
+    pub linearize: bool,
 }
 
 /// How a run gets its model.
@@ -149,6 +153,8 @@ struct RunSpec {
     plan: Plan,
     /// `[supply] compensation`: "t200" (the daemon's default) or "none".
     compensation: &'static str,
+    /// `[supply] linearize` (default false).
+    linearize: bool,
     /// The vehicle's `[battery]` capacity (Ah) and hotel load (A) replaced by these.
     battery: Option<(f64, f64)>,
 }
@@ -179,6 +185,7 @@ fn runs(name: Name, t_change: f64, vehicle: &'static str) -> Vec<RunSpec> {
             repeat_until_s: None,
         },
         compensation: "t200",
+        linearize: false,
         battery: None,
     };
     match name {
@@ -455,7 +462,11 @@ fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> Result<Stri
         "[refinement]\nupdate = {}\nchange_test = {}",
         spec.refine, spec.change_test
     );
-    let _ = writeln!(t, "[supply]\ncompensation = \"{}\"", spec.compensation);
+    let _ = writeln!(
+        t,
+        "[supply]\ncompensation = \"{}\"\nlinearize = {}",
+        spec.compensation, spec.linearize
+    );
     Ok(t)
 }
 
@@ -1133,6 +1144,7 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         if let Some((_, hotel)) = s.battery {
             s.battery = Some((args.capacity_ah, hotel));
         }
+        s.linearize = args.linearize;
     }
     if let Some(noise) = &args.noise {
         let noise: &'static str = match noise.as_str() {
