@@ -403,6 +403,12 @@ impl Estimator {
             && self.noise.sigma_rot() <= self.cfg.spin_up_max_gyro_sigma
     }
 
+    /// The at-rest noise per DOF row (gyro, then accelerometer).
+    fn rest_sigma(&self) -> [f64; 6] {
+        let (g, a) = (self.noise.gyro_sigma, self.noise.accel_sigma);
+        [g[0], g[1], g[2], a[0], a[1], a[2]]
+    }
+
     /// Where the dynamic method searches the thrusters' lag.
     fn lag_range(&self) -> LagRange {
         let [min_s, max_s] = self.cfg.spin_up_range_s;
@@ -814,14 +820,7 @@ impl Estimator {
 
     fn dynamic_estimate(&self) -> Estimate {
         let n = self.thrusters();
-        let rest = [
-            self.noise.gyro_sigma[0],
-            self.noise.gyro_sigma[1],
-            self.noise.gyro_sigma[2],
-            self.noise.accel_sigma[0],
-            self.noise.accel_sigma[1],
-            self.noise.accel_sigma[2],
-        ];
+        let rest = self.rest_sigma();
         let Some(run) = self.dynamic.as_ref() else {
             let zeros = DMatrix::zeros(6, n);
             let inf = DMatrix::from_element(6, n, f64::INFINITY);
@@ -854,14 +853,7 @@ impl Estimator {
     /// The dynamic estimate from `run`, or from the fit at a learned lag when there is one.
     fn dynamic_estimate_with(&self, run: &DynamicRun, learned: Option<LagFit>) -> Estimate {
         let n = self.thrusters();
-        let rest = [
-            self.noise.gyro_sigma[0],
-            self.noise.gyro_sigma[1],
-            self.noise.gyro_sigma[2],
-            self.noise.accel_sigma[0],
-            self.noise.accel_sigma[1],
-            self.noise.accel_sigma[2],
-        ];
+        let rest = self.rest_sigma();
         let run = learned.as_ref().map_or(run, |l| &l.run);
         let solve = |run: &DynamicRun| {
             run.solve(
