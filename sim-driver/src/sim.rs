@@ -569,7 +569,7 @@ impl Simulator {
     }
 
     /// Generalised force (body, Fossen order) `s` seconds after the current time for attitude
-    /// `q` (`[w x y z]`, unit): thrusters with their lag, plus wave forcing.
+    /// `q` (`[w x y z]`, unit): thrusters with their lag, plus waves and a tether.
     fn generalized_force(&self, s: f64, q: &[f64; 4]) -> [f64; 6] {
         let mut tau = [0.0; 6];
         for t in &self.thrusters {
@@ -578,9 +578,9 @@ impl Simulator {
                 *acc += w * f;
             }
         }
-        if !self.disturbance.waves.is_empty() {
+        if self.disturbance.has_forcing() {
             let att = UnitQuaternion::new_unchecked(Quaternion::new(q[0], q[1], q[2], q[3]));
-            let wave = self.disturbance.wave_force(self.time_s() + s, &att);
+            let wave = self.disturbance.forcing(self.time_s() + s, &att);
             for (acc, w) in tau.iter_mut().zip(wave.iter()) {
                 *acc += w;
             }

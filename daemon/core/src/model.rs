@@ -123,6 +123,16 @@ impl Model {
             .map(|d| d.spin_up_s)
     }
 
+    /// The IMU's position from the centre this model's acceleration rows are referred with, m
+    /// (learned or configured); None when the model did not come from the dynamic method.
+    /// Fits under control against this model use it rather than learning it again.
+    pub fn imu_position_m(&self) -> Option<nalgebra::Vector3<f64>> {
+        self.dynamics
+            .as_ref()
+            .and_then(|d| d.imu_position)
+            .map(|p| p.position_m)
+    }
+
     /// A model from an estimate solved at vehicle time `t_ns` (version assigned at swap time).
     pub fn from_estimate(e: &Estimate, geometry_key: Option<u64>, t_ns: u64) -> Model {
         Model {

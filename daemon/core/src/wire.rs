@@ -148,6 +148,18 @@ pub fn dynamics_msg(seq: u64, model: &Model) -> Option<DynamicsMsg> {
         max_heading_change_rad: d.max_heading_change_rad,
         spin_up_s: d.spin_up_s,
         spin_up_learned: u32::from(d.spin_up_learned),
+        imu_position_contradicted: u32::from(d.imu_position.is_some_and(|p| p.contradicted)),
+        imu_position_m: d
+            .imu_position
+            .map_or([f64::NAN; 3], |p| p.position_m.into()),
+        imu_learned_m: d
+            .imu_position
+            .and_then(|p| p.learned)
+            .map_or([f64::NAN; 3], |l| l.position_m.into()),
+        imu_learned_sd_m: d
+            .imu_position
+            .and_then(|p| p.learned)
+            .map_or([f64::NAN; 3], |l| l.sd_m().into()),
     })
 }
 
@@ -286,6 +298,7 @@ mod tests {
 
     #[test]
     fn dynamics_the_wire_cannot_carry_are_published_as_unknown_and_the_message_stays_valid() {
+        use crate::estimator::dynamic::imu_position::{ImuPosition, Learned};
         use crate::estimator::dynamic::regressors::TERMS;
         use crate::estimator::dynamic::DynamicTerms;
         let mut m = Model::nominal(nalgebra::DMatrix::from_element(6, 3, 1.0), None);
@@ -306,9 +319,22 @@ mod tests {
             spin_up_s: 0.07,
             spin_up_learned: true,
             spin_up_sd_ln: 0.01,
+            imu_position: Some(ImuPosition::decide(
+                nalgebra::Vector3::zeros(),
+                Learned {
+                    position_m: nalgebra::Vector3::new(0.15, 0.05, -0.1),
+                    cov: nalgebra::Matrix3::identity() * 1e-6,
+                },
+                0.03,
+            )),
         });
         let d = dynamics_msg(0, &m).unwrap();
         assert!(d.validate().is_ok(), "{:?}", d.validate());
+        // The IMU's position: the data contradicted the configured centre, so it is used.
+        assert_eq!(d.imu_position_contradicted, 1);
+        assert_eq!(d.imu_position_m, [0.15, 0.05, -0.1]);
+        assert_eq!(d.imu_learned_m, [0.15, 0.05, -0.1]);
+        assert!((d.imu_learned_sd_m[0] - 1e-3).abs() < 1e-12);
         for (r, j) in [(2, 10), (3, 10), (4, 20)] {
             assert!(d.coefficients[r].to_terms()[j].is_nan(), "({r}, {j})");
             assert!(d.std_err[r].to_terms()[j].is_nan(), "({r}, {j})");

@@ -48,6 +48,9 @@ pub struct DemoArgs {
     /// paced to 5x real time (1 kHz of samples) so the recorder loses nothing.
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// The simulated vehicle's IMU position and water (the daemon is told neither).
+    #[command(flatten)]
+    pub water: crate::water::WaterArgs,
 }
 
 fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
@@ -77,6 +80,8 @@ struct Summary {
     /// The simulated thrusters' mean spin-up time constant, s, from the vehicle file (the
     /// daemon is not told it).
     spin_up_true_s: Option<f64>,
+    /// The IMU position and water the simulator had ([`crate::water::WaterArgs::json`]).
+    as_is: serde_json::Value,
     clean_exit: bool,
     leftovers: usize,
 }
@@ -103,6 +108,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             .clone()
             .map_or(DaemonConfig::Defaults, DaemonConfig::File),
         scenario: None,
+        sim_config: args.water.sim_config()?,
         record: args
             .record
             .clone()
@@ -116,6 +122,24 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let result = drive(&args, &mut session, &vehicle);
     let recorded = session.stop_recording();
     let shutdown = session.finish();
+    if let Some(refused) = result
+        .as_ref()
+        .err()
+        .and_then(|e| e.downcast_ref::<crate::session::ModelRefused>())
+    {
+        // A refusal is the daemon's answer, not the demo's failure: said as the report is.
+        if args.json {
+            let obj = serde_json::json!({
+                "vehicle": vehicle.display().to_string(),
+                "refused": refused.0,
+                "vehicle_as_is": args.water.json()?,
+                "clean_exit": shutdown.clean,
+                "files_left": shutdown.leftovers,
+            });
+            println!("{obj}");
+        }
+        bail!("{refused}");
+    }
     let mut summary = result?;
     summary.clean_exit = shutdown.clean;
     summary.leftovers = shutdown.leftovers;
@@ -265,6 +289,7 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
         estimation_heading_deg: excursion.map(|e| e.max_heading_deg),
         dynamics,
         spin_up_true_s: true_spin_up_s(vehicle),
+        as_is: args.water.json()?,
         clean_exit: false,
         leftovers: 0,
     })
@@ -342,6 +367,10 @@ fn report(args: &DemoArgs, s: &Summary) {
             "spin_up_s": s.dynamics.as_ref().map(|d| d.spin_up_s).filter(|v| v.is_finite()),
             "spin_up_learned": s.dynamics.as_ref().map(|d| d.spin_up_learned == 1),
             "spin_up_true_s": s.spin_up_true_s,
+            "imu_position_m": s.dynamics.as_ref().map(|d| d.imu_position_m),
+            "imu_learned_m": s.dynamics.as_ref().map(|d| d.imu_learned_m),
+            "imu_position_contradicted": s.dynamics.as_ref().map(|d| d.imu_position_contradicted == 1),
+            "vehicle_as_is": s.as_is,
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,
         });

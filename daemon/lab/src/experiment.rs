@@ -110,6 +110,9 @@ pub struct ExperimentArgs {
     /// linear in the command, the T200's dead zone stepped over).
     #[arg(long)]
     pub linearize: bool,
+    /// Every run's simulated IMU position and water (the daemon is told neither).
+    #[command(flatten)]
+    pub water: crate::water::WaterArgs,
 }
 
 /// How a run gets its model.
@@ -614,6 +617,7 @@ fn run_one(bins: &Binaries, args: &ExperimentArgs, spec: &RunSpec) -> Result<Run
         },
         daemon_config: DaemonConfig::Text(daemon_config(spec, bins, &vehicle)?),
         scenario: spec.change.map(|(t, a)| scenario(t, a, spec.action)),
+        sim_config: args.water.sim_config()?,
         record: args
             .record
             .as_deref()
@@ -1188,6 +1192,7 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
     let summary = json!({
         "experiment": args.name.id(),
         "seed": args.seed,
+        "vehicle_as_is": args.water.json()?,
         "noise": args.noise.clone().unwrap_or_else(|| "paper (per run: runs.*.noise)".into()),
         "pace_requested": args.pace,
         "sim_has_pace": bins.sim_pace,

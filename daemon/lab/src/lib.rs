@@ -10,3 +10,4 @@ pub mod recording;
 pub mod scoring;
 pub mod session;
 pub mod study;
+pub mod water;

@@ -258,6 +258,18 @@ pub enum DaemonConfig {
     Text(String),
 }
 
+/// The daemon refused the model an estimation made (its status text says why).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelRefused(pub String);
+
+impl std::fmt::Display for ModelRefused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the daemon refused the estimated model: {}", self.0)
+    }
+}
+
+impl std::error::Error for ModelRefused {}
+
 /// What to start.
 #[derive(Debug, Clone)]
 pub struct SessionSpec {
@@ -275,6 +287,9 @@ pub struct SessionSpec {
     pub scenario: Option<String>,
     /// Record the session's namespace to MCAP (`--record`), from before the processes start.
     pub record: Option<thruster_recorder::RecordOptions>,
+    /// The simulator's config file (its IMU position and water, [`crate::water`]), written
+    /// into the session's temp folder; None: its defaults.
+    pub sim_config: Option<String>,
 }
 
 impl SessionSpec {
@@ -422,6 +437,11 @@ impl Session {
                 sim_args.extend(["--pace".into(), x.to_string()]);
                 pace = Some(x);
             }
+        }
+        if let Some(text) = &spec.sim_config {
+            let p = tmp.path.join("thruster-sim.toml");
+            std::fs::write(&p, text)?;
+            sim_args.extend(["--config".into(), path_arg(&p)]);
         }
         if let Some(text) = &spec.scenario {
             let p = tmp.path.join("scenario.toml");
@@ -592,12 +612,22 @@ impl Session {
         while self.vehicle_inbox().recv()?.is_some() {}
         self.excursion = Some(Excursion::default());
         self.command(RequestKind::Estimate)?;
+        // A refused model (the daemon back in Idle, or holding the old model, with "model
+        // rejected" in its status) ends the wait at once, with the daemon's reason.
+        let refused = |s: &StatusMsg| {
+            matches!(s.state(), Ok(DaemonState::Idle) | Ok(DaemonState::Active))
+                && s.text().contains("model rejected")
+        };
         let done = self.wait_status("the estimated model", timeout, &mut |s| {
             progress(s);
-            s.state() == Ok(DaemonState::Active) && s.model_version > before
+            (s.state() == Ok(DaemonState::Active) && s.model_version > before) || refused(s)
         });
         self.last_excursion = self.excursion.take();
-        done
+        let done = done?;
+        if refused(&done) && done.model_version <= before {
+            return Err(ModelRefused(done.text().to_string()).into());
+        }
+        Ok(done)
     }
 
     /// How far the vehicle moved during the last `estimate` (the vehicle states the session

@@ -43,6 +43,10 @@ pub fn json(d: &DynamicsMsg) -> Value {
         "navigation_max_heading_change_deg": num(d.max_heading_change_rad.to_degrees()),
         "spin_up_s": num(d.spin_up_s),
         "spin_up_learned": d.spin_up_learned == 1,
+        "imu_position_m": d.imu_position_m.map(num),
+        "imu_position_contradicted": d.imu_position_contradicted == 1,
+        "imu_learned_m": d.imu_learned_m.map(num),
+        "imu_learned_sd_m": d.imu_learned_sd_m.map(num),
     })
 }
 
@@ -78,6 +82,27 @@ pub fn report(d: &DynamicsMsg) -> String {
         d.max_tilt_rad.to_degrees(),
         d.max_heading_change_rad.to_degrees()
     );
+    if d.imu_position_m.iter().all(|v| v.is_finite()) {
+        let [x, y, z] = d.imu_position_m;
+        let how = if d.imu_position_contradicted == 1 {
+            "learned: the data contradicted the configured estimator.imu_position_m"
+        } else {
+            "configured"
+        };
+        let _ = write!(
+            s,
+            "  translation rows referred from the IMU at ({x:.3}, {y:.3}, {z:.3}) m ({how})"
+        );
+        if d.imu_learned_m.iter().all(|v| v.is_finite()) {
+            let [lx, ly, lz] = d.imu_learned_m;
+            let [sx, sy, sz] = d.imu_learned_sd_m;
+            let _ = write!(
+                s,
+                "; the data puts it at ({lx:.3}, {ly:.3}, {lz:.3}) +- ({sx:.3}, {sy:.3}, {sz:.3}) m from the centre of mass"
+            );
+        }
+        s.push('\n');
+    }
     if d.spin_up_s.is_finite() {
         let how = if d.spin_up_learned == 1 {
             "learned from the pulses"
@@ -111,6 +136,10 @@ mod tests {
             max_tilt_rad: 0.4,
             spin_up_s: 0.052,
             spin_up_learned: 1,
+            imu_position_contradicted: 1,
+            imu_position_m: [0.149, 0.05, -0.113],
+            imu_learned_m: [0.149, 0.05, -0.113],
+            imu_learned_sd_m: [0.001, 0.0005, 0.0005],
             ..DynamicsMsg::default()
         };
         let mut terms = [0.0; thruster_protocol::DYNAMIC_TERMS];
@@ -133,5 +162,11 @@ mod tests {
         assert_eq!(v["model_version"], 3);
         assert_eq!(v["spin_up_s"], 0.052);
         assert_eq!(v["spin_up_learned"], true);
+        assert!(
+            text.contains("IMU at (0.149, 0.050, -0.113) m (learned: the data contradicted"),
+            "{text}"
+        );
+        assert_eq!(v["imu_position_m"][2], -0.113);
+        assert_eq!(v["imu_position_contradicted"], true);
     }
 }

@@ -112,7 +112,7 @@ impl DynamicsRow {
 /// moved while it was being excited.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.DynamicsMsg.v2")]
+#[type_name("thrusterd.DynamicsMsg.v3")]
 pub struct DynamicsMsg {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -135,6 +135,17 @@ pub struct DynamicsMsg {
     pub spin_up_s: f64,
     /// 1 when `spin_up_s` was learned from the excitation's data, 0 when configured (v2).
     pub spin_up_learned: u32,
+    /// 1 when the data contradicted the configured IMU position, so `imu_position_m` is the
+    /// learned one (v3).
+    pub imu_position_contradicted: u32,
+    /// The IMU's position from the centre the translation rows are referred to, body frame
+    /// (x forward, y starboard, z down), m; NaN when unknown (v3).
+    pub imu_position_m: [f64; 3],
+    /// The IMU's position from the centre of mass as the excitation's data found it, m; NaN
+    /// when not learned (v3).
+    pub imu_learned_m: [f64; 3],
+    /// Its one-sigma standard error per axis, m (>= 0; NaN when not learned) (v3).
+    pub imu_learned_sd_m: [f64; 3],
 }
 
 #[cfg(test)]

@@ -536,7 +536,31 @@ impl Validate for DynamicsMsg {
         if !self.spin_up_s.is_nan() {
             in_range(Field::new("spin_up_s"), self.spin_up_s, 0.0, 2.0, "s")?;
         }
-        zero_or_one("spin_up_learned", self.spin_up_learned).map(|_| ())
+        zero_or_one("spin_up_learned", self.spin_up_learned)?;
+        zero_or_one("imu_position_contradicted", self.imu_position_contradicted)?;
+        // An IMU is on the vehicle: as far from its centre as a thruster may be.
+        for (name, v) in [
+            ("imu_position_m", &self.imu_position_m),
+            ("imu_learned_m", &self.imu_learned_m),
+        ] {
+            for (i, x) in v.iter().enumerate() {
+                if !x.is_nan() {
+                    in_range(Field::at(name, i), *x, -MAX_POSITION_M, MAX_POSITION_M, "m")?;
+                }
+            }
+        }
+        for (i, x) in self.imu_learned_sd_m.iter().enumerate() {
+            if !x.is_nan() {
+                in_range(
+                    Field::at("imu_learned_sd_m", i),
+                    *x,
+                    0.0,
+                    MAX_POSITION_M,
+                    "m",
+                )?;
+            }
+        }
+        Ok(())
     }
 }
 

@@ -1047,6 +1047,19 @@ impl Machine {
             StopDecision::MaxPulses => format!("pulse limit {pulses} reached"),
             StopDecision::Continue => "stopped".into(),
         };
+        // The status text holds 128 bytes: the IMU's position leads, the bound is in the
+        // rejection event and the model's dynamics.
+        let imu_note = match candidate.dynamics.as_ref().and_then(|d| d.imu_position) {
+            Some(p) if p.contradicted => Some(format!(
+                "IMU found at {} m, not as configured (estimator.imu_position_m)",
+                fmt_xyz(&p.position_m)
+            )),
+            _ => None,
+        };
+        let why = match &imu_note {
+            Some(note) => format!("{why}; {note}"),
+            None => why,
+        };
         match self.try_swap(candidate, ModelSource::Estimated) {
             Ok(()) => {
                 if let Some(k) = key {
@@ -1079,10 +1092,11 @@ impl Machine {
                 } else {
                     State::Idle
                 };
-                self.transition(
-                    next,
-                    &format!("{why}: model rejected ({e}); old model kept"),
-                );
+                let text = match &imu_note {
+                    Some(note) => format!("{note}: model rejected; old model kept"),
+                    None => format!("{why}: model rejected ({e}); old model kept"),
+                };
+                self.transition(next, &text);
             }
         }
     }
@@ -1225,4 +1239,9 @@ impl Machine {
             }
         }
     }
+}
+
+/// A body-frame position as "(x, y, z)" in metres to the centimetre's tenth.
+fn fmt_xyz(p: &nalgebra::Vector3<f64>) -> String {
+    format!("({:.3}, {:.3}, {:.3})", p.x, p.y, p.z)
 }

@@ -783,6 +783,9 @@ fn open_window(
     if let Some(lag_s) = model.learned_spin_up_s() {
         est = est.with_learned_lag(lag_s);
     }
+    if let Some(p) = model.imu_position_m() {
+        est = est.with_known_imu_position(p);
+    }
     est.begin_closed_loop();
     Window {
         est,

@@ -14,6 +14,8 @@
 //! grid cell. Each evaluation refits the logged samples ([`super::sample_log`]); the search
 //! runs in the solve job, off the control thread.
 
+use nalgebra::Vector3;
+
 use super::DynamicRun;
 
 /// Where and how finely the lag is searched.
@@ -133,12 +135,24 @@ pub fn profile_score(run: &DynamicRun) -> Option<f64> {
 /// without searching: three refits instead of ~22. For progress estimates between the
 /// decisions, which search (see `Estimator::estimate_progress`).
 pub fn fit_at(run: &DynamicRun, lag_s: f64, sd_ln: f64) -> Option<LagFit> {
+    fit_at_centred(run, lag_s, sd_ln, &Vector3::zeros())
+}
+
+/// [`fit_at`] with the terms at the velocity of the centre, the IMU at `imu_m` from it (see
+/// [`DynamicRun::refit_with`]).
+pub fn fit_at_centred(
+    run: &DynamicRun,
+    lag_s: f64,
+    sd_ln: f64,
+    imu_m: &Vector3<f64>,
+) -> Option<LagFit> {
     let x = lag_s.max(1e-4).ln();
+    let refit = |lag: f64| run.refit_with(&[lag], true, imu_m);
     Some(LagFit {
         lag_s,
-        run: run.refit(&[lag_s])?,
-        above: run.refit(&[(x + STEP).exp()])?,
-        below: run.refit(&[(x - STEP).exp()])?,
+        run: refit(lag_s)?,
+        above: refit((x + STEP).exp())?,
+        below: refit((x - STEP).exp())?,
         sd_ln,
         profile: Vec::new(),
     })
@@ -147,7 +161,18 @@ pub fn fit_at(run: &DynamicRun, lag_s: f64, sd_ln: f64) -> Option<LagFit> {
 /// The common lag of all thrusters that best explains `run`'s logged samples, searched over
 /// `range`. None without a log or before the fit has residual degrees of freedom.
 pub fn learn_common_lag(run: &DynamicRun, range: &LagRange) -> Option<LagFit> {
+    learn_common_lag_centred(run, range, &Vector3::zeros())
+}
+
+/// [`learn_common_lag`] with the terms at the velocity of the centre, the IMU at `imu_m` from
+/// it (see [`DynamicRun::refit_with`]).
+pub fn learn_common_lag_centred(
+    run: &DynamicRun,
+    range: &LagRange,
+    imu_m: &Vector3<f64>,
+) -> Option<LagFit> {
     run.log()?;
+    let refit = |lag: f64| run.refit_with(&[lag], true, imu_m);
     let (lo, hi) = (
         range.min_s.max(1e-4).ln(),
         range.max_s.max(range.min_s * 1.01).ln(),
@@ -158,7 +183,7 @@ pub fn learn_common_lag(run: &DynamicRun, range: &LagRange) -> Option<LagFit> {
     let eval =
         |x: f64, profile: &mut Vec<(f64, f64)>, best: &mut Option<(f64, f64, DynamicRun)>| {
             let lag = x.exp();
-            let fit = run.refit(&[lag])?;
+            let fit = refit(lag)?;
             let score = profile_score(&fit)?;
             profile.push((lag, score));
             if best.as_ref().is_none_or(|(_, s, _)| score < *s) {
@@ -202,8 +227,8 @@ pub fn learn_common_lag(run: &DynamicRun, range: &LagRange) -> Option<LagFit> {
         }
     }
     let (x, s0, fit) = best?;
-    let above = run.refit(&[(x + STEP).exp()])?;
-    let below = run.refit(&[(x - STEP).exp()])?;
+    let above = refit((x + STEP).exp())?;
+    let below = refit((x - STEP).exp())?;
     let (sa, sb) = (profile_score(&above)?, profile_score(&below)?);
     let rows = fit.samples() as f64;
     // ln L = -(rows / 2) * score, so var(ln lag) = 2 / (rows * score'').

@@ -194,6 +194,13 @@ impl SegmentedLs {
         self.seg_y = Vector3::zeros();
     }
 
+    /// The centred normal equations over every row so far: the symmetric Gram matrix X'X
+    /// (K x K) and the cross products X'y (K x 3), the segments' intercepts projected out.
+    pub fn centred_sums(&self) -> (DMatrix<f64>, DMatrix<f64>) {
+        let n = self.normal_equations();
+        (n.g, n.xy)
+    }
+
     /// The normal equations over every row so far (the open segment counted as if closed
     /// now), the Gram matrix made symmetric.
     fn normal_equations(&self) -> Normal {
@@ -402,7 +409,7 @@ struct Normal {
 /// Pseudo-inverse of a Gram matrix, scaled to a unit diagonal first (Jacobi): the regressors
 /// (commands, rates, squared velocities, products) span many orders of magnitude. Unexcited
 /// columns stay zero.
-fn scaled_pinv(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+pub(crate) fn scaled_pinv(g: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
     let k = g.nrows();
     let d = DVector::from_fn(k, |i, _| {
         let v = g[(i, i)];

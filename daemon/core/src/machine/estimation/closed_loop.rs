@@ -116,6 +116,10 @@ impl EstimationRun {
             if let Some(lag_s) = model.and_then(|m| m.learned_spin_up_s()) {
                 est = est.with_learned_lag(lag_s);
             }
+            // The IMU did not move with the thrusters: where the model in force put it.
+            if let Some(p) = model.and_then(|m| m.imu_position_m()) {
+                est = est.with_known_imu_position(p);
+            }
             est.begin_closed_loop();
             self.est = Some(est);
             return ClosedStep::Holding;
