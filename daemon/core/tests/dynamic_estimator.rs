@@ -52,6 +52,8 @@ struct Outcome {
     b_se: DMatrix<f64>,
     rank: usize,
     actuated: usize,
+    /// The machine refused the model (only with `Ideal::allow_refusal`).
+    refused: bool,
 }
 
 fn tick(machine: &mut Machine, sim: &mut Simulator) {
@@ -94,6 +96,8 @@ struct Ideal {
     allow_refusal: bool,
     /// Current, waves, a tether (default: still water).
     water: WaterPreset,
+    /// Without the preset's current (its waves alone).
+    no_current: bool,
 }
 
 fn estimate_with(
@@ -135,8 +139,12 @@ fn estimate_on(
         v.body.buoyancy_n = v.body.mass_kg * v.body.gravity_mps2;
     }
     let n = v.thrusters.len();
+    let mut disturbance = ideal.water.disturbance();
+    if ideal.no_current {
+        disturbance.current_ned_mps = [0.0; 3];
+    }
     let options = SimOptions {
-        disturbance: ideal.water.disturbance(),
+        disturbance,
         ..SimOptions::default()
     };
     let mut sim = Simulator::with_options(v, sensors, seed, options).unwrap();
@@ -193,6 +201,7 @@ fn estimate_on(
         b_se: est.std_err.clone(),
         rank: est.rank.rank,
         actuated: est.rank.actuated.count(),
+        refused: machine.model().is_none(),
     }
 }
 
@@ -1178,10 +1187,102 @@ fn lag_sweep() {
     }
 }
 
-/// PROBE (temporary): the IMU's position.
+/// The simulator's IMU 18 cm off the centre (issue 32), the daemon told nothing: the
+/// translation rows referred to the IMU were 84-144 % off against a bound of 2 % (eight_vectored,
+/// AMOUR-5; measured before the fix). Noise-free, the data finds the IMU's position (measured
+/// (0.150, 0.048, -0.101) m on eight_vectored; on AMOUR-5 (0.149, 0.050, -0.114): from its
+/// centre of mass, 2 cm below the CO), the estimate says it contradicts the configured one and
+/// the machine refuses the model. Told the position, the model is 1.3 / 1.6 % off
+/// (eight_vectored) and 1.2 / 1.9 % (AMOUR-5).
+#[test]
+fn an_imu_off_the_centre_is_found_refused_and_then_used_when_configured() {
+    let arm = [0.15, 0.05, -0.10];
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::None,
+        lever_arm_m: arm,
+        ..SensorConfig::default()
+    };
+    let refusable = Ideal {
+        allow_refusal: true,
+        ..Ideal::default()
+    };
+    for (name, z_tol) in [("eight_vectored", 0.005), ("amour5", 0.02)] {
+        let o = estimate_ideal(
+            name,
+            sensors.clone(),
+            1,
+            EstimatorConfig::dynamic(),
+            refusable,
+        );
+        let p = o.terms.imu_position.expect("position decided");
+        let learned = p.learned.expect("learned").position_m;
+        assert!(p.contradicted && o.refused, "{name}: {p:?}");
+        for (axis, tol) in [(0, 0.005), (1, 0.005), (2, z_tol)] {
+            assert!(
+                (learned[axis] - arm[axis]).abs() <= tol,
+                "{name}: axis {axis} learned {:.4}",
+                learned[axis]
+            );
+        }
+        // The bound counts the tolerance: it no longer claims 2 %.
+        assert!(
+            o.bound[1] >= 2.0 * o.err_acc,
+            "{name}: bound {:?} err {}",
+            o.bound,
+            o.err_acc
+        );
+
+        let mut told = EstimatorConfig::dynamic();
+        told.imu_position_m = arm;
+        let o = estimate_ideal(name, sensors.clone(), 1, told, refusable);
+        let p = o.terms.imu_position.expect("position decided");
+        assert!(!p.contradicted && !o.refused, "{name}: {p:?}");
+        assert!(
+            o.err_rot <= 0.02 && o.err_acc <= 0.025,
+            "{name}: told, err_rot {:.4} err_acc {:.4}",
+            o.err_rot,
+            o.err_acc
+        );
+        assert!(o.seconds <= 6.0, "{name}: {:.1} s", o.seconds);
+    }
+}
+
+/// The same with the realistic IMU, told the position: 1.6-2.5 % off on eight_vectored over
+/// seeds 1-5, the bound 5.6-6.0 % (the rotation rows' error carried over 18 cm counts).
+#[test]
+fn with_a_realistic_imu_a_configured_offset_imu_gives_the_centres_model() {
+    let arm = [0.15, 0.05, -0.10];
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Realistic,
+        lever_arm_m: arm,
+        ..SensorConfig::default()
+    };
+    let mut told = EstimatorConfig::dynamic();
+    told.imu_position_m = arm;
+    let o = estimate_with("eight_vectored", sensors, 1, told);
+    assert!(
+        o.err_rot <= 0.02 && o.err_acc <= 0.025,
+        "err_rot {:.4} err_acc {:.4}",
+        o.err_rot,
+        o.err_acc
+    );
+    assert!(
+        o.err_acc <= 1.5 * o.bound[1],
+        "err {} bound {:?}",
+        o.err_acc,
+        o.bound
+    );
+}
+
+/// The IMU off the centre and the water, over seeds (docs/study.md, "The IMU off the centre"):
+/// LA_VEHICLES, LA_SEEDS, LA_NOISE (none|realistic|paper), LA_ARM (x,y,z m), LA_TOLD (the
+/// daemon is told LA_ARM), LA_TOL (tolerance, m), LA_WATER (current|moderate|rough),
+/// LA_NO_CURRENT (the preset's waves alone), LA_DVL (a perfect DVL), LA_SEG (segment_s).
 #[test]
 #[ignore]
-fn lever_arm_probe() {
+fn imu_and_water_sweep() {
     let noise = match std::env::var("LA_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
         Ok("paper") => NoisePreset::Paper,
@@ -1206,6 +1307,9 @@ fn lever_arm_probe() {
             if let Ok(v) = std::env::var("LA_LEARN") {
                 cfg.learn_imu_position = v != "0";
             }
+            if let Ok(v) = std::env::var("LA_SEG") {
+                cfg.segment_s = v.parse().unwrap();
+            }
             if let Ok(v) = std::env::var("LA_TOL") {
                 cfg.imu_position_tolerance_m = v.parse().unwrap();
             }
@@ -1221,6 +1325,8 @@ fn lever_arm_probe() {
             let ideal = Ideal {
                 allow_refusal: true,
                 water,
+                true_velocity: std::env::var("LA_DVL").is_ok(),
+                no_current: std::env::var("LA_NO_CURRENT").is_ok(),
                 ..Ideal::default()
             };
             let o = estimate_ideal(name, sensors, seed, cfg, ideal);
@@ -1228,8 +1334,8 @@ fn lever_arm_probe() {
             let l = p.learned.unwrap();
             let sd = l.sd_m();
             println!(
-                "{name} seed {seed}: lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} (share {:.4}) in {:.2} s; used [{:.4} {:.4} {:.4}] learned [{:.4} {:.4} {:.4}] sd [{:.4} {:.4} {:.4}] contradicted {}",
-                o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], p.rel_err_share, o.seconds, p.position_m[0], p.position_m[1], p.position_m[2], l.position_m[0], l.position_m[1], l.position_m[2], sd[0], sd[1], sd[2], p.contradicted
+                "{name} seed {seed}: refused {} lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} (share {:.4}) in {:.2} s; used [{:.4} {:.4} {:.4}] learned [{:.4} {:.4} {:.4}] sd [{:.4} {:.4} {:.4}] contradicted {}",
+                o.refused, o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], p.rel_err_share, o.seconds, p.position_m[0], p.position_m[1], p.position_m[2], l.position_m[0], l.position_m[1], l.position_m[2], sd[0], sd[1], sd[2], p.contradicted
             );
         }
     }
