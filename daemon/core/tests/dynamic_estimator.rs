@@ -143,6 +143,19 @@ fn estimate_on(
     if ideal.no_current {
         disturbance.current_ned_mps = [0.0; 3];
     }
+    match std::env::var("LA_WAVE_PART").as_deref() {
+        Ok("force") => disturbance.waves.iter_mut().for_each(|w| w.torque_body_nm = [0.0; 3]),
+        Ok("torque") => disturbance.waves.iter_mut().for_each(|w| w.force_ned_n = [0.0; 3]),
+        Ok("heave") => disturbance.waves.iter_mut().for_each(|w| {
+            w.torque_body_nm = [0.0; 3];
+            w.force_ned_n[0] = 0.0;
+        }),
+        Ok("surge") => disturbance.waves.iter_mut().for_each(|w| {
+            w.torque_body_nm = [0.0; 3];
+            w.force_ned_n[2] = 0.0;
+        }),
+        _ => {}
+    }
     let options = SimOptions {
         disturbance,
         ..SimOptions::default()
@@ -1279,7 +1292,8 @@ fn with_a_realistic_imu_a_configured_offset_imu_gives_the_centres_model() {
 /// The IMU off the centre and the water, over seeds (docs/study.md, "The IMU off the centre"):
 /// LA_VEHICLES, LA_SEEDS, LA_NOISE (none|realistic|paper), LA_ARM (x,y,z m), LA_TOLD (the
 /// daemon is told LA_ARM), LA_TOL (tolerance, m), LA_WATER (current|moderate|rough),
-/// LA_NO_CURRENT (the preset's waves alone), LA_DVL (a perfect DVL), LA_SEG (segment_s).
+/// LA_NO_CURRENT (the preset's waves alone), LA_WAVE_PART (force|torque|heave|surge: that
+/// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s).
 #[test]
 #[ignore]
 fn imu_and_water_sweep() {
