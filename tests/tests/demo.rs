@@ -109,7 +109,10 @@ fn an_imu_off_the_centre_is_found_refused_and_then_used_from_the_drawings() {
         v["err_rot"].as_f64().unwrap(),
         v["err_acc"].as_f64().unwrap(),
     );
-    assert!(rot <= 0.03 && acc <= 0.03, "errors {rot:.4} / {acc:.4}: {v}");
+    assert!(
+        rot <= 0.03 && acc <= 0.03,
+        "errors {rot:.4} / {acc:.4}: {v}"
+    );
     assert_eq!(v["imu_position_m"][0], 0.15, "{v}");
     assert_eq!(v["imu_position_contradicted"], false, "{v}");
     let learned = v["imu_learned_m"][0].as_f64().unwrap();

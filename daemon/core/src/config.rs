@@ -297,6 +297,11 @@ impl DaemonConfig {
                 Range::above(0.0),
             ),
             (
+                "machine.max_unexplained_rate_radps".into(),
+                m.max_unexplained_rate_radps,
+                Range::above(0.0),
+            ),
+            (
                 "machine.deadband".into(),
                 m.deadband,
                 Range::from_below(0.0, 0.5),

@@ -14,6 +14,10 @@ pub struct NoiseLevels {
     pub gyro_sigma: [f64; 3],
     /// Per-axis accelerometer standard deviation, m/s^2.
     pub accel_sigma: [f64; 3],
+    /// Per-axis gyro noise from successive differences (their standard deviation / sqrt 2),
+    /// rad/s: white noise alone, whatever slow motion the rest had (a swell rocking the
+    /// vehicle goes into `gyro_sigma`, not here).
+    pub gyro_white_sigma: [f64; 3],
     /// Samples the levels were measured from.
     pub samples: u64,
 }
@@ -26,6 +30,7 @@ impl NoiseLevels {
             accel_baseline: [0.0; 3],
             gyro_sigma: [sigma_rot; 3],
             accel_sigma: [sigma_acc; 3],
+            gyro_white_sigma: [sigma_rot; 3],
             samples: 0,
         }
     }
@@ -61,6 +66,9 @@ pub struct NoiseMeter {
     n: u64,
     gyro: [Welford; 3],
     accel: [Welford; 3],
+    /// Successive differences of the gyro, and its last sample.
+    gyro_diff: [Welford; 3],
+    last_gyro: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -96,6 +104,12 @@ impl NoiseMeter {
             self.gyro[a].push(self.n, gyro[a]);
             self.accel[a].push(self.n, accel[a]);
         }
+        if let Some(last) = self.last_gyro {
+            for a in 0..3 {
+                self.gyro_diff[a].push(self.n - 1, gyro[a] - last[a]);
+            }
+        }
+        self.last_gyro = Some(*gyro);
     }
 
     pub fn samples(&self) -> u64 {
@@ -109,6 +123,9 @@ impl NoiseMeter {
             accel_baseline: std::array::from_fn(|a| self.accel[a].mean),
             gyro_sigma: std::array::from_fn(|a| self.gyro[a].sigma(self.n)),
             accel_sigma: std::array::from_fn(|a| self.accel[a].sigma(self.n)),
+            gyro_white_sigma: std::array::from_fn(|a| {
+                self.gyro_diff[a].sigma(self.n.saturating_sub(1)) / std::f64::consts::SQRT_2
+            }),
             samples: self.n,
         }
     }
@@ -134,5 +151,28 @@ mod tests {
         assert!((l.accel_sigma[2] - 0.5 * expect).abs() < 1e-9);
         assert_eq!(l.gyro_sigma[1], 0.0);
         assert!((l.sigma_rot() - expect / 3f64.sqrt()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_slow_rocking_is_not_white_noise() {
+        let mut m = NoiseMeter::new();
+        let mut x: u64 = 12345;
+        for i in 0..400 {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let e = if (x >> 33) & 1 == 0 { 0.002 } else { -0.002 };
+            let swell = 0.1 * (std::f64::consts::TAU * 0.15 * i as f64 * 0.005).sin();
+            m.push(&[e + swell, e, 0.0], &[0.0, 0.0, -9.81]);
+        }
+        let l = m.levels();
+        // The rocking is in the standard deviation, not in the white part.
+        assert!(l.gyro_sigma[0] > 0.02, "{:?}", l.gyro_sigma);
+        assert!(
+            (l.gyro_white_sigma[0] - 0.002).abs() < 0.0005,
+            "{:?}",
+            l.gyro_white_sigma
+        );
+        assert!((l.gyro_white_sigma[1] - l.gyro_sigma[1]).abs() < 0.0003);
     }
 }

@@ -53,6 +53,13 @@ pub struct MachineConfig {
     /// A new estimated model is swapped in only if both relative error bounds are below this
     /// (default 0.25).
     pub max_swap_rel_err: f64,
+    /// An estimated model is refused when more of the vehicle's rotation than this is
+    /// explained by neither thrust nor its own dynamics, rad/s (the rotation rows' residual
+    /// beyond the noise measured at rest; `DynamicTerms::unexplained_rate_radps`; default
+    /// 0.01). Why: a swell's torque made models 5-38 % off whose bounds said 4-20 %; it left
+    /// 0.013-0.12 rad/s unexplained where still water leaves 0-0.0001 (docs/study.md, "Moving
+    /// water").
+    pub max_unexplained_rate_radps: f64,
     /// "estimate" (default) or "on_request".
     pub on_reconfig: ReconfigPolicy,
     /// Hold attitude with the new model after an estimation (default true); otherwise Idle.
@@ -90,6 +97,7 @@ impl Default for MachineConfig {
             settle_max_s: 1.0,
             settle_quiet_s: 0.1,
             max_swap_rel_err: 0.25,
+            max_unexplained_rate_radps: 0.01,
             on_reconfig: ReconfigPolicy::Estimate,
             control_after_estimate: true,
             max_sample_gap_s: 0.1,

@@ -1060,6 +1060,20 @@ impl Machine {
             Some(note) => format!("{why}; {note}"),
             None => why,
         };
+        // Rotation that neither thrust nor the vehicle's own dynamics explain (a swell, a
+        // tether): the fit absorbed it somewhere, and its bound does not know it.
+        let (unexplained, tilt_deg) = candidate.dynamics.as_ref().map_or((0.0, 0.0), |d| {
+            (d.unexplained_rate_radps, d.max_tilt_rad.to_degrees())
+        });
+        let limit = self.setup.machine.max_unexplained_rate_radps;
+        if unexplained > limit {
+            let text = format!(
+                "{unexplained:.3} rad/s of rotation unexplained (limit {limit:.3}; water?), tilted {tilt_deg:.0} deg: model rejected; old model kept"
+            );
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(self.after_refusal(), &text);
+            return;
+        }
         match self.try_swap(candidate, ModelSource::Estimated) {
             Ok(()) => {
                 if let Some(k) = key {
@@ -1085,19 +1099,23 @@ impl Machine {
                 }
             }
             Err(e) => {
-                let next = if self.models.current().is_some()
-                    && self.setup.machine.control_after_estimate
-                {
-                    State::Active
-                } else {
-                    State::Idle
-                };
+                let next = self.after_refusal();
                 let text = match &imu_note {
                     Some(note) => format!("{note}: model rejected; old model kept"),
                     None => format!("{why}: model rejected ({e}); old model kept"),
                 };
                 self.transition(next, &text);
             }
+        }
+    }
+
+    /// Where a refused estimate leaves the vehicle: holding with the old model, if there is
+    /// one and control follows estimation, else Idle (thrusters neutral).
+    fn after_refusal(&self) -> State {
+        if self.models.current().is_some() && self.setup.machine.control_after_estimate {
+            State::Active
+        } else {
+            State::Idle
         }
     }
 

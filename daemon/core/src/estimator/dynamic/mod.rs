@@ -61,6 +61,11 @@ pub struct DynamicTerms {
     /// The IMU's position from the centre the acceleration rows are referred to
     /// ([`imu_position`]), learned or configured; None before [`DynamicRun::refer_to_centre`].
     pub imu_position: Option<ImuPosition>,
+    /// The rotation rows' noise level beyond the gyro's white noise at rest (RMS over the axes
+    /// of sqrt(max(0, sigma^2 - 2 white^2))), rad/s: rotation neither thrust nor the
+    /// vehicle's dynamics explain, such as a swell's torque (set by the session, which knows
+    /// the rest's noise; 0 until then).
+    pub unexplained_rate_radps: f64,
 }
 
 impl DynamicTerms {
@@ -547,6 +552,7 @@ impl DynamicRun {
                 spin_up_learned: self.lags_learned,
                 spin_up_sd_ln: 0.0,
                 imu_position: None,
+                unexplained_rate_radps: 0.0,
             },
             split: self.split.then_some((split_b, split_se)),
         }
