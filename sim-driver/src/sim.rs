@@ -251,6 +251,14 @@ impl Simulator {
     /// Sets the commands, one per thruster in order, normalised to [-1, 1]; non-finite values
     /// become 0 and others are clamped. They are held until the next call. A wrong count is an
     /// error and leaves the held commands unchanged.
+    /// The water from now on (the weather changes: a swell comes up). Checked first; an
+    /// invalid one changes nothing.
+    pub fn set_disturbance(&mut self, d: DisturbanceConfig) -> Result<(), SimError> {
+        d.validate("set_disturbance")?;
+        self.disturbance = d;
+        Ok(())
+    }
+
     pub fn set_commands(&mut self, u: &[f64]) -> Result<(), SimError> {
         if u.len() != self.thrusters.len() {
             return Err(SimError::CommandCount {

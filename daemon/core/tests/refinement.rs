@@ -16,6 +16,7 @@
 mod common;
 use common::Run;
 use nalgebra::UnitQuaternion;
+use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::NoisePreset;
 use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
 use thrusterd_core::monitor::MismatchAction;
@@ -409,7 +410,8 @@ fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds()
 /// The false-alarm soak for the change test: `CT_MINUTES` (default 10) through pitch steps
 /// (+-20 deg every 4 s), then as long again holding level, on an unchanged vehicle at the
 /// paper's noise with the shipped settings and the change test on, seeds `CT_SEEDS` (default
-/// 1-5; CT_NOISE realistic or none for another IMU); no mismatch may be reported. Then the
+/// 1-5; CT_NOISE realistic or none for another IMU; CT_WATER a water preset that comes up
+/// after the estimation); no mismatch may be reported. Then the
 /// top thruster rotated while holding level: prints the detection time. A measuring tool (minutes of vehicle
 /// time per seed): `cargo test --release -p thrusterd-core --test refinement -- --ignored
 /// change_test_soak --nocapture`.
@@ -430,6 +432,17 @@ fn change_test_soak() {
             _ => NoisePreset::Paper,
         };
         let mut run = holding_with(noise, seed, with_change_test());
+        // CT_WATER (current|moderate|rough): the model learned in still water, then the water
+        // comes up (issue 32 item 5: a swell is not a moved thruster).
+        let water = match std::env::var("CT_WATER").as_deref() {
+            Ok("current") => Some(WaterPreset::Current),
+            Ok("moderate") => Some(WaterPreset::Moderate),
+            Ok("rough") => Some(WaterPreset::Rough),
+            _ => None,
+        };
+        if let Some(w) = water {
+            run.sim.set_disturbance(w.disturbance()).unwrap();
+        }
         let (pitch, level) = quiet_flight(&mut run, minutes * 60.0);
         println!("seed {seed}: pitch steps {pitch:?}, level {level:?}");
         if level.is_some() || pitch.is_some() {
