@@ -833,6 +833,11 @@ impl ConnectedClient {
         self.send_control_msg(&FetchAssetResponse::asset_data(request_id, response));
     }
 
+    /// thrusterd patch: the subprotocol negotiated with this client.
+    pub(crate) fn subprotocol(&self) -> Subprotocol {
+        self.subprotocol
+    }
+
     /// Advertises a channel to the client.
     fn advertise_channels(&self, channels: &[&Arc<RawChannel>]) {
         let message = advertise::advertise_channels(channels.iter().copied());
@@ -840,14 +845,14 @@ impl ConnectedClient {
             return;
         }
 
-        let sent = match self.subprotocol {
-            Subprotocol::V1 => self.send_control_msg(&message),
-            Subprotocol::V1_1 => {
-                // Hold the schema table lock until the message is enqueued, so that concurrent
-                // advertisements cannot reference a schema ID before its definition is sent.
-                let mut schema_table = self.schema_table.lock();
-                self.send_control_msg(&schema_table.deduplicate(&message))
-            }
+        // thrusterd patch: `foxglove.websocket.v1` is served as `foxglove.sdk.v1` (inline schemas).
+        let sent = if self.subprotocol.uses_schema_table() {
+            // Hold the schema table lock until the message is enqueued, so that concurrent
+            // advertisements cannot reference a schema ID before its definition is sent.
+            let mut schema_table = self.schema_table.lock();
+            self.send_control_msg(&schema_table.deduplicate(&message))
+        } else {
+            self.send_control_msg(&message)
         };
         if !sent {
             return;

@@ -5,6 +5,11 @@ use tokio_tungstenite::{WebSocketStream, tungstenite};
 
 pub(crate) const SUBPROTOCOL_V1: &str = "foxglove.sdk.v1";
 pub(crate) const SUBPROTOCOL_V1_1: &str = "foxglove.sdk.v1.1";
+/// thrusterd patch: the ws-protocol's name before the SDK renamed it. The SDK's maintainers say
+/// `foxglove.sdk.v1` is the same protocol under a new name, and clients that offer only the old
+/// name are still in use (Foxglove Studio 1.87, Lichtblick before its switch): a client offering
+/// it is served `foxglove.sdk.v1` (inline schemas) and told the name it offered.
+pub(crate) const SUBPROTOCOL_WEBSOCKET_V1: &str = "foxglove.websocket.v1";
 
 /// The WebSocket subprotocol negotiated with a client.
 ///
@@ -19,6 +24,9 @@ pub(crate) enum Subprotocol {
     V1,
     /// `foxglove.sdk.v1.1`: channel advertisements reference a connection-scoped schema table.
     V1_1,
+    /// thrusterd patch: `foxglove.websocket.v1`, the same protocol as [`Subprotocol::V1`]
+    /// under its old name.
+    WebsocketV1,
 }
 
 impl Subprotocol {
@@ -27,7 +35,14 @@ impl Subprotocol {
         match self {
             Subprotocol::V1 => SUBPROTOCOL_V1,
             Subprotocol::V1_1 => SUBPROTOCOL_V1_1,
+            Subprotocol::WebsocketV1 => SUBPROTOCOL_WEBSOCKET_V1,
         }
+    }
+
+    /// thrusterd patch: whether channel advertisements carry a schema table (v1.1) rather than
+    /// inline schemas (v1 under either name).
+    pub(crate) const fn uses_schema_table(self) -> bool {
+        matches!(self, Subprotocol::V1_1)
     }
 
     /// Returns the subprotocol identified by `name`, if it is one the server supports.
@@ -37,6 +52,7 @@ impl Subprotocol {
         match name {
             SUBPROTOCOL_V1 => Some(Subprotocol::V1),
             SUBPROTOCOL_V1_1 => Some(Subprotocol::V1_1),
+            SUBPROTOCOL_WEBSOCKET_V1 => Some(Subprotocol::WebsocketV1),
             _ => None,
         }
     }
@@ -51,6 +67,9 @@ fn select_subprotocol<'a>(offered: impl IntoIterator<Item = &'a str>) -> Option<
         .into_iter()
         .filter_map(|name| Subprotocol::from_name(name.trim()))
         .max_by_key(|subprotocol| match subprotocol {
+            // thrusterd patch: the old name last, so a client offering both names is told the
+            // SDK's.
+            Subprotocol::WebsocketV1 => 0,
             Subprotocol::V1 => 1,
             Subprotocol::V1_1 => 2,
         })
@@ -126,6 +145,16 @@ mod tests {
         assert_eq!(select_subprotocol(["foxglove.sdk.v11"]), None);
         // Reserved for the remote-access v2 protocol; not negotiated on this WebSocket server.
         assert_eq!(select_subprotocol(["foxglove.sdk.v2"]), None);
+        // thrusterd patch: the old name is accepted, the SDK's preferred when both are offered.
+        assert_eq!(
+            select_subprotocol(["foxglove.websocket.v1"]),
+            Some(Subprotocol::WebsocketV1)
+        );
+        assert_eq!(
+            select_subprotocol(["foxglove.websocket.v1", "foxglove.sdk.v1"]),
+            Some(Subprotocol::V1)
+        );
+        assert_eq!(select_subprotocol(["foxglove.websocket.v10"]), None);
         assert_eq!(
             select_subprotocol(["foxglove.sdk.v2", "foxglove.sdk.v1"]),
             Some(Subprotocol::V1)
