@@ -64,6 +64,9 @@ pub enum Command {
     Hold,
     /// Stop controlling: zero thrust.
     Idle,
+    /// Emergency stop: thrusters neutral now in any state, and nothing starts them again (no
+    /// automatic re-estimation, no resumed hold) until `estimate` or `hold`.
+    Stop,
     /// Save the current model (to the daemon's default location if PATH is omitted).
     Save {
         /// File to write, on the daemon's machine; relative paths are made absolute here.

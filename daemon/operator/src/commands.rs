@@ -52,6 +52,7 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
         Command::Abort => simple(&target, timeout, ControlRequest::new(RequestKind::Abort)),
         Command::Hold => simple(&target, timeout, ControlRequest::new(RequestKind::Hold)),
         Command::Idle => simple(&target, timeout, ControlRequest::new(RequestKind::Idle)),
+        Command::Stop => simple(&target, timeout, ControlRequest::new(RequestKind::Stop)),
         Command::Revert => simple(&target, timeout, ControlRequest::new(RequestKind::Revert)),
         Command::Shutdown => simple(&target, timeout, ControlRequest::new(RequestKind::Shutdown)),
         Command::Save { path } => {

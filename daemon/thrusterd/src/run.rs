@@ -916,6 +916,7 @@ impl Daemon {
             RequestKind::Abort => Request::Abort,
             RequestKind::Hold => Request::Hold,
             RequestKind::Idle => Request::Idle,
+            RequestKind::Stop => Request::Stop,
             RequestKind::Revert => Request::Revert,
             RequestKind::Save => {
                 let Some(model) = self.machine.model().cloned() else {
