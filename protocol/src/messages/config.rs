@@ -13,6 +13,7 @@ pub const CONFIG_TEXT_CAPACITY: usize = 16 * 1024;
 /// daemon had.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ConfigMsg.v1")]
 pub struct ConfigMsg {
     /// Sequence number, +1 per message.

@@ -41,6 +41,7 @@ impl OutputState {
 /// autopilot that is disarmed or unreachable.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.DriverStatusMsg.v2")]
 pub struct DriverStatusMsg {
     /// Sequence number, +1 per message from this driver.

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 /// uses it when one arrives; without it the body velocity is dead-reckoned.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.DvlSample.v1")]
 pub struct DvlSample {
     /// Sequence number, +1 per sample from this driver.

@@ -55,6 +55,7 @@ pub const DYNAMIC_TERM_NAMES: [&str; DYNAMIC_TERMS] = [
 /// acceleration (rad/s^2 for rotation rows, m/s^2 for translation rows, per unit of the term).
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct DynamicsRow {
     /// p, q, r (linear rate damping and the coupling M^-1 brings between axes).
     pub rate: [f64; 3],
@@ -112,6 +113,7 @@ impl DynamicsRow {
 /// moved while it was being excited.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.DynamicsMsg.v2")]
 pub struct DynamicsMsg {
     /// Sequence number, +1 per message.

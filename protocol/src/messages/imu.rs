@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 /// faster than real time against the simulator.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ImuSample.v1")]
 pub struct ImuSample {
     /// Sequence number, +1 per sample from this driver.

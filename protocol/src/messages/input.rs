@@ -52,6 +52,7 @@ wire_enum! {
 /// same machine offline and reach the same models (docs/recording.md).
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.InputMsg.v1")]
 pub struct InputMsg {
     /// Sequence number, +1 per input; the daemon's first (a [`InputKind::Start`]) is 0.

@@ -40,6 +40,7 @@ wire_enum! {
 /// Columns at and beyond `count` are ignored and should be zero.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ModelMsg.v2")]
 pub struct ModelMsg {
     /// Sequence number, +1 per published model message.

@@ -24,6 +24,7 @@ wire_enum! {
 /// swaps in the nominal model for it at once.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ReconfigEvent.v1")]
 pub struct ReconfigEvent {
     /// Sequence number, +1 per event from this sender.

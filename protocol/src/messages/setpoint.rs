@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 /// Desired attitude and depth (operator -> daemon, service `setpoint`, history 1).
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.Setpoint.v1")]
 pub struct Setpoint {
     /// Sequence number, +1 per setpoint from this sender.

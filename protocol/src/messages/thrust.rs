@@ -22,6 +22,7 @@ wire_enum! {
 /// `thrust`).
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ThrustCommand.v1")]
 pub struct ThrustCommand {
     /// Sequence number, +1 per command.

@@ -7,6 +7,7 @@ use super::{clamp_count, DOF_COUNT, MAX_THRUSTERS};
 /// so tests and the study can score estimates. Never used for control.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.TruthMsg.v2")]
 pub struct TruthMsg {
     /// Sequence number, +1 per message.
@@ -67,6 +68,7 @@ impl TruthMsg {
 /// daemon's own estimate. Never used for control.
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.VehicleStateMsg.v1")]
 pub struct VehicleStateMsg {
     /// Sequence number: the IMU sample's.
