@@ -122,6 +122,7 @@ fn plan(args: &Args, c: BridgeConfig) -> Result<Plan> {
         max_bytes: r.max_mb.map(|mb| (mb * 1024.0 * 1024.0) as u64),
         duration,
         queue: r.queue,
+        compression: r.compression,
     });
     Ok(Plan {
         target: Target {

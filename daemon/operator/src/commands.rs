@@ -80,8 +80,12 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
             out,
             max_mb,
             duration_s,
+            compression,
         } => {
-            let options = record::options(out, max_mb, duration_s)?;
+            let mut options = record::options(out, max_mb, duration_s)?;
+            // The parser admits only the two names.
+            options.compression =
+                thruster_recorder::Compression::from_name(&compression).unwrap_or_default();
             record::run(&target, &options, interrupt_flag()?)
         }
         Command::Reconfigure {
