@@ -13,8 +13,8 @@
 // out-of-range pitch (refused with the reason) and report once it is answered; no estimate.
 //
 // Every advertised schema (each channel's, each service's request and response) goes through
-// Foxglove Studio's own JSON Schema parser (foxglove_parser.js); `schema_errors` lists what it
-// refused, as the app would show it.
+// Foxglove Studio's and Lichtblick's own JSON Schema parsers (foxglove_parser.js,
+// lichtblick_parser.js); `schema_errors` lists what they refused, as the apps would show it.
 //
 // Otherwise lists the advertised channels and services, subscribes to every channel, counts
 // and parses the messages, calls `thrusterd/estimate` once the daemon has published its status,
@@ -25,7 +25,10 @@
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const WebSocket = require("ws");
-const { parseJsonSchema } = require("./foxglove_parser.js");
+const parsers = {
+  foxglove: require("./foxglove_parser.js").parseJsonSchema,
+  lichtblick: require("./lichtblick_parser.js").parseJsonSchema,
+};
 
 const url = process.argv[2];
 const seconds = Number(process.argv[3] || "20");
@@ -120,17 +123,19 @@ client.on("error", (e) => out.errors.push(String(e && e.message ? e.message : e)
 client.on("serverInfo", (info) => {
   out.server_name = info.name;
 });
-/// Runs Foxglove's parser on one advertised schema; a refusal is kept under `what`.
+/// Runs both apps' parsers on one advertised schema; a refusal is kept under "PARSER what".
 function checkSchema(what, name, encoding, text) {
   out.schemas_checked += 1;
   if (encoding !== "jsonschema") {
     out.schema_errors[what] = `schema encoding ${encoding}, not jsonschema`;
     return;
   }
-  try {
-    parseJsonSchema(JSON.parse(text), name);
-  } catch (e) {
-    out.schema_errors[what] = String(e && e.message ? e.message : e);
+  for (const [p, parse] of Object.entries(parsers)) {
+    try {
+      parse(JSON.parse(text), name);
+    } catch (e) {
+      out.schema_errors[`${p} ${what}`] = String(e && e.message ? e.message : e);
+    }
   }
 }
 

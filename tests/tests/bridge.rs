@@ -271,8 +271,9 @@ fn the_bridge_refuses_to_run_without_a_job_or_with_a_bad_config() {
 /// Every schema the bridge declares, including the channels a short session never advertises
 /// (model, dynamics, input, config, reconfig, dvl, ...), and each service's request and
 /// response, passes Foxglove Studio's own JSON Schema parser (`parseJsonSchema` from the npm
-/// package @foxglove/studio-base, tests/node/check_schemas.js): the same schemas as in the
-/// recordings, declared from the message types.
+/// package @foxglove/studio-base) and Lichtblick's (its source file, tests/node/lichtblick),
+/// tests/node/check_schemas.js: the same schemas as in the recordings, declared from the
+/// message types.
 #[test]
 fn every_declared_schema_passes_the_foxglove_apps_parser() {
     let o = std::process::Command::new(bin("thruster-bridge"))
@@ -296,20 +297,19 @@ fn every_declared_schema_passes_the_foxglove_apps_parser() {
     assert!(out.status.success(), "{out:?}");
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(report["errors"], serde_json::json!({}), "{report}");
+    // Both apps' parsers on every schema.
     assert_eq!(
         report["checked"].as_array().unwrap().len(),
-        14 + 2 * 6,
+        2 * (14 + 2 * 6),
         "{report}"
     );
-    assert!(
-        report["parser"]
-            .as_str()
-            .unwrap()
-            .contains("@foxglove/studio-base"),
-        "{report}"
-    );
-    // The parser saw the fields: a model has its matrices (as row objects) and every scalar.
+    let parser = |p: &str| report["parsers"][p].as_str().unwrap_or_default().to_string();
+    assert!(parser("foxglove").contains("@foxglove/studio-base"), "{report}");
+    assert!(parser("lichtblick").ends_with("parseJsonSchema.ts"), "{report}");
+    // The parsers saw the fields: a model has its matrices (as row objects) and every scalar.
     let fields = |what: &str| report["fields"][what].as_u64().unwrap_or(0);
-    assert!(fields("channel model") >= 15, "{report}");
-    assert!(fields("channel status") >= 20, "{report}");
+    for p in ["foxglove", "lichtblick"] {
+        assert!(fields(&format!("{p} channel model")) >= 15, "{report}");
+        assert!(fields(&format!("{p} channel status")) >= 20, "{report}");
+    }
 }

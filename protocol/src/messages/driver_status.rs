@@ -39,9 +39,9 @@ impl OutputState {
 /// The daemon uses it to see what it cannot see in the IMU alone: a driver configured for
 /// another thruster count (it rejects every command), a driver rejecting commands, an
 /// autopilot that is disarmed or unreachable.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.DriverStatusMsg.v2")]
 pub struct DriverStatusMsg {
     /// Sequence number, +1 per message from this driver.

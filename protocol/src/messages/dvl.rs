@@ -4,9 +4,9 @@ use serde::{Deserialize, Serialize};
 /// A velocity measurement from a Doppler velocity log (driver -> daemon, service `dvl`),
 /// optional: most small vehicles have none. The daemon's navigation during an estimation
 /// uses it when one arrives; without it the body velocity is dead-reckoned.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.DvlSample.v1")]
 pub struct DvlSample {
     /// Sequence number, +1 per sample from this driver.

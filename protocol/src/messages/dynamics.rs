@@ -53,9 +53,9 @@ pub const DYNAMIC_TERM_NAMES: [&str; DYNAMIC_TERMS] = [
 
 /// One DOF row of dynamic-model coefficients: how much each term adds to that DOF's
 /// acceleration (rad/s^2 for rotation rows, m/s^2 for translation rows, per unit of the term).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct DynamicsRow {
     /// p, q, r (linear rate damping and the coupling M^-1 brings between axes).
     pub rate: [f64; 3],
@@ -111,9 +111,9 @@ impl DynamicsRow {
 /// history 1): published with every model the dynamic method made, so operators and the lab
 /// can see the vehicle's damping, restoring and Coriolis coefficients and how far the vehicle
 /// moved while it was being excited.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.DynamicsMsg.v2")]
 pub struct DynamicsMsg {
     /// Sequence number, +1 per message.

@@ -6,9 +6,9 @@ use serde::{Deserialize, Serialize};
 /// The daemon answers every sample with one [`crate::ThrustCommand`]. Time comes from the
 /// sensor's monotonic clock, never the wall clock, so the same code runs in real time and
 /// faster than real time against the simulator.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ImuSample.v1")]
 pub struct ImuSample {
     /// Sequence number, +1 per sample from this driver.

@@ -38,9 +38,9 @@ wire_enum! {
 ///
 /// DOF order of every 6-row matrix is [`Dof`]: roll, pitch, yaw, surge, sway, heave.
 /// Columns at and beyond `count` are ignored and should be zero.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ModelMsg.v2")]
 pub struct ModelMsg {
     /// Sequence number, +1 per published model message.

@@ -22,9 +22,9 @@ wire_enum! {
 /// A change of the thruster configuration (driver or operator -> daemon, service
 /// `reconfig`). It starts re-estimation; when it declares the new geometry the daemon
 /// swaps in the nominal model for it at once.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ReconfigEvent.v1")]
 pub struct ReconfigEvent {
     /// Sequence number, +1 per event from this sender.

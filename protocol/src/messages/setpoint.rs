@@ -2,9 +2,9 @@ use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
 /// Desired attitude and depth (operator -> daemon, service `setpoint`, history 1).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.Setpoint.v1")]
 pub struct Setpoint {
     /// Sequence number, +1 per setpoint from this sender.

@@ -43,9 +43,9 @@ wire_enum! {
 }
 
 /// Daemon progress and health (daemon -> all, service `status`, history 1).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.StatusMsg.v3")]
 pub struct StatusMsg {
     /// Sequence number, +1 per status message.

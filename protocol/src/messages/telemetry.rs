@@ -15,9 +15,9 @@ use crate::wire::UnknownEnumValue;
 /// its flag is clear, so a plot never meets NaN.
 ///
 /// Angles are radians, like every other message; `thrusterctl watch` shows degrees.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.TelemetryMsg.v1")]
 pub struct TelemetryMsg {
     /// Sequence number, +1 per telemetry message (gaps: decimation never makes them, a lost

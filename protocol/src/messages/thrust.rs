@@ -20,9 +20,9 @@ wire_enum! {
 
 /// Thruster commands answering one [`crate::ImuSample`] (daemon -> driver, service
 /// `thrust`).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.ThrustCommand.v1")]
 pub struct ThrustCommand {
     /// Sequence number, +1 per command.

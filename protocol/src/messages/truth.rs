@@ -5,9 +5,9 @@ use super::{clamp_count, DOF_COUNT, MAX_THRUSTERS};
 
 /// The simulator's true thruster model (simulator -> anyone, service `truth`, history 1),
 /// so tests and the study can score estimates. Never used for control.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.TruthMsg.v2")]
 pub struct TruthMsg {
     /// Sequence number, +1 per message.
@@ -66,9 +66,9 @@ impl TruthMsg {
 /// The simulated vehicle's true state (simulator -> anyone, service `vehicle`), one per IMU
 /// sample, so experiments can score attitude control against the truth rather than against the
 /// daemon's own estimate. Never used for control.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[type_name("thrusterd.VehicleStateMsg.v1")]
 pub struct VehicleStateMsg {
     /// Sequence number: the IMU sample's.
