@@ -303,9 +303,20 @@ fn every_declared_schema_passes_the_foxglove_apps_parser() {
         2 * (14 + 2 * 6),
         "{report}"
     );
-    let parser = |p: &str| report["parsers"][p].as_str().unwrap_or_default().to_string();
-    assert!(parser("foxglove").contains("@foxglove/studio-base"), "{report}");
-    assert!(parser("lichtblick").ends_with("parseJsonSchema.ts"), "{report}");
+    let parser = |p: &str| {
+        report["parsers"][p]
+            .as_str()
+            .unwrap_or_default()
+            .to_string()
+    };
+    assert!(
+        parser("foxglove").contains("@foxglove/studio-base"),
+        "{report}"
+    );
+    assert!(
+        parser("lichtblick").ends_with("parseJsonSchema.ts"),
+        "{report}"
+    );
     // The parsers saw the fields: a model has its matrices (as row objects) and every scalar.
     let fields = |what: &str| report["fields"][what].as_u64().unwrap_or(0);
     for p in ["foxglove", "lichtblick"] {
