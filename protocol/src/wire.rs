@@ -191,6 +191,25 @@ impl<'de, const N: usize> Deserialize<'de> for FixedText<N> {
     }
 }
 
+/// On the wire a JSON string of at most `N` bytes of UTF-8 (what `Serialize` writes).
+#[cfg(feature = "schema")]
+impl<const N: usize> schemars::JsonSchema for FixedText<N> {
+    fn inline_schema() -> bool {
+        true
+    }
+
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        format!("FixedText{N}").into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "type": "string",
+            "description": format!("UTF-8 text of at most {N} bytes"),
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

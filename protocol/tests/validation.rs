@@ -770,7 +770,7 @@ fn enums_round_trip_and_reject_unknown_values() {
     check(ModelSource::ALL, 4);
     check(ModelMethod::ALL, 3);
     check(DaemonState::ALL, 8);
-    check(RequestKind::ALL, 9);
+    check(RequestKind::ALL, 10);
     check(ResponseCode::ALL, 6);
     check(Dof::ALL, 6);
     let err = DaemonState::try_from(9).unwrap_err();

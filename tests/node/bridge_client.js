@@ -1,32 +1,67 @@
 // The system test's Foxglove WebSocket client (tests/tests/bridge.rs): Foxglove's own
 // `FoxgloveClient` from @foxglove/ws-protocol, not code of this project, over the `ws` package.
 //
-//   node bridge_client.js ws://127.0.0.1:PORT SECONDS [--watch]
+//   node bridge_client.js ws://127.0.0.1:PORT SECONDS [--watch] [--quick] [--offer A,B]
 //
+// --offer: the WebSocket subprotocol names to offer (default: foxglove.sdk.v1 and
+// FoxgloveClient.SUPPORTED_SUBPROTOCOL, foxglove.websocket.v1). With foxglove.sdk.v1.1 the
+// server advertises channels against a schema table; this script reads that table from the raw
+// frames (this client package predates it) so the channels' schemas are checked the same way.
 // --watch (the latency bench's topside): only subscribe to every channel and count messages
 // for SECONDS (or until SIGTERM), then print the counts; no service calls.
+// --quick: list channels and services, check their schemas, call `thrusterd/setpoint` with an
+// out-of-range pitch (refused with the reason) and report once it is answered; no estimate.
 //
-// Lists the advertised channels and services, subscribes to every channel, counts and parses
-// the messages, calls `thrusterd/estimate` once the daemon has published its status, calls
-// `thrusterd/setpoint` with an out-of-range pitch (it must fail with the reason), keeps
+// Every advertised schema (each channel's, each service's request and response) goes through
+// Foxglove Studio's and Lichtblick's own JSON Schema parsers (foxglove_parser.js,
+// lichtblick_parser.js); `schema_errors` lists what they refused, as the apps would show it.
+//
+// Otherwise lists the advertised channels and services, subscribes to every channel, counts
+// and parses the messages, calls `thrusterd/estimate` once the daemon has published its status,
+// calls `thrusterd/setpoint` with an out-of-range pitch (it must fail with the reason), keeps
 // receiving for a while after the estimate and prints one JSON summary on stdout. It exits 0
 // whenever it could report (the Rust test judges), 2 on a connection failure or timeout.
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const WebSocket = require("ws");
+const parsers = {
+  foxglove: require("./foxglove_parser.js").parseJsonSchema,
+  lichtblick: require("./lichtblick_parser.js").parseJsonSchema,
+};
 
 const url = process.argv[2];
 const seconds = Number(process.argv[3] || "20");
 const watchOnly = process.argv.includes("--watch");
+const quick = process.argv.includes("--quick");
+const offerAt = process.argv.indexOf("--offer");
 // The Foxglove SDK's server negotiates "foxglove.sdk.v1" (the ws-protocol spec's current
 // name); this client package predates the rename and speaks the same messages.
-const ws = new WebSocket(url, ["foxglove.sdk.v1", FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+const offered =
+  offerAt > 0
+    ? process.argv[offerAt + 1].split(",")
+    : ["foxglove.sdk.v1", FoxgloveClient.SUPPORTED_SUBPROTOCOL];
+const ws = new WebSocket(url, offered);
+// foxglove.sdk.v1.1's schema table (id -> {name, encoding, data}), read from the raw frames
+// before the client handles them (listeners run in the order they were added).
+const schemaTable = new Map();
+ws.on("message", (data, isBinary) => {
+  if (isBinary) return;
+  try {
+    const m = JSON.parse(String(data));
+    if (m.op === "advertise" && Array.isArray(m.schemas)) {
+      for (const s of m.schemas) schemaTable.set(s.id, s);
+    }
+  } catch (_) {}
+});
 const client = new FoxgloveClient({ ws });
 const decoder = new TextDecoder();
 
 const out = {
+  offered,
   subprotocol: null,
+  schemas_checked: 0,
+  schema_errors: {},
   server_name: null,
   channels: {},
   services: {},
@@ -88,21 +123,44 @@ client.on("error", (e) => out.errors.push(String(e && e.message ? e.message : e)
 client.on("serverInfo", (info) => {
   out.server_name = info.name;
 });
+/// Runs both apps' parsers on one advertised schema; a refusal is kept under "PARSER what".
+function checkSchema(what, name, encoding, text) {
+  out.schemas_checked += 1;
+  if (encoding !== "jsonschema") {
+    out.schema_errors[what] = `schema encoding ${encoding}, not jsonschema`;
+    return;
+  }
+  for (const [p, parse] of Object.entries(parsers)) {
+    try {
+      parse(JSON.parse(text), name);
+    } catch (e) {
+      out.schema_errors[`${p} ${what}`] = String(e && e.message ? e.message : e);
+    }
+  }
+}
+
 client.on("advertise", (channels) => {
   for (const c of channels) {
+    // foxglove.sdk.v1.1: the schema by reference to the table.
+    const t = c.schemaId != undefined ? schemaTable.get(c.schemaId) : undefined;
+    const schemaName = t ? t.name : c.schemaName;
+    const schemaEncoding = t ? t.encoding : c.schemaEncoding;
+    const schema = t ? t.data : c.schema;
     byId.set(c.id, c);
     out.channels[c.topic] = {
       encoding: c.encoding,
-      schemaName: c.schemaName,
-      schemaEncoding: c.schemaEncoding,
+      schemaName,
+      schemaEncoding,
       schemaIsJson: (() => {
         try {
-          return typeof JSON.parse(c.schema) === "object";
+          return typeof JSON.parse(schema) === "object";
         } catch (_) {
           return false;
         }
       })(),
     };
+    checkSchema(`channel ${c.topic}`, schemaName, schemaEncoding, schema);
+    if (quick) continue;
     const sub = client.subscribe(c.id);
     bySub.set(sub, c);
   }
@@ -110,6 +168,15 @@ client.on("advertise", (channels) => {
 client.on("advertiseServices", (services) => {
   for (const s of services) {
     out.services[s.name] = { id: s.id, type: s.type };
+    for (const part of ["request", "response"]) {
+      const m = s[part];
+      if (m) checkSchema(`service ${s.name} ${part}`, m.schemaName, m.schemaEncoding, m.schema);
+    }
+  }
+  if (quick && !estimateSent && out.services["thrusterd/setpoint"]) {
+    estimateSent = true;
+    call("thrusterd/setpoint", { pitch_deg: 100 });
+    return;
   }
   maybeCall();
 });
@@ -154,6 +221,15 @@ client.on("serviceCallFailure", (f) => {
 const started = Date.now();
 process.on("SIGTERM", () => finish(0));
 const timer = setInterval(() => {
+  if (quick && out.bad_setpoint) {
+    // A moment for late advertisements (channels appear with their first message).
+    if (!out.quick_done) out.quick_done = Date.now();
+    if (Date.now() - out.quick_done > 1000) {
+      clearInterval(timer);
+      finish(0);
+    }
+    return;
+  }
   if (watchOnly) {
     if (Date.now() - started > seconds * 1000) {
       clearInterval(timer);

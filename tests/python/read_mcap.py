@@ -4,6 +4,7 @@
 Usage: read_mcap.py FILE.mcap [FILE-0001.mcap ...]
        read_mcap.py --messages TOPIC FILE.mcap [...]   (every message of TOPIC, decoded, as a JSON list)
        read_mcap.py --recover FILE.mcap [...]   (what a linear read recovers from each file)
+       read_mcap.py --rewrite OUT.mcap FILE.mcap [...]   (every record rewritten by Python's writer)
 
 Per channel (topic): schema name and encoding, message encoding, whether the schema parses as
 JSON, message count, first and last log/publish times, whether log and publish times never go
@@ -14,12 +15,18 @@ contiguous. Also every metadata record. Used by tests/tests/recording.rs.
 or the first error (a file cut short by a full disk has no summary and ends in a partial
 chunk): per file the messages per topic, whether it read to its end, and the error that
 stopped it; the IMU's `seq` over all files and whether it is contiguous.
+
+--rewrite: the files' schemas, channels, messages (in file order, with their times and
+sequence numbers) and metadata written into one file by the `mcap` package's own Writer
+with its defaults (zstd chunks of 1 MiB, its own indexes and summary): a recording as another
+MCAP writer makes it. Prints {"messages": N, "compression": ..., "bytes": size}.
 """
 
 import json
 import sys
 
 from mcap.reader import NonSeekingReader, make_reader
+from mcap.writer import CompressionType, Writer
 
 
 def summarise(paths):
@@ -121,7 +128,56 @@ def recover(paths):
     return {"files": files, "messages": sum(f["messages"] for f in files), "imu": imu}
 
 
+def rewrite(out_path, paths):
+    count = 0
+    with open(out_path, "wb") as out:
+        writer = Writer(out, compression=CompressionType.ZSTD)
+        writer.start(profile="", library="python mcap (tests/python/read_mcap.py --rewrite)")
+        schemas = {}
+        channels = {}
+        metadata = []
+        for path in paths:
+            with open(path, "rb") as f:
+                reader = make_reader(f)
+                for schema, channel, message in reader.iter_messages(log_time_order=False):
+                    key = (path, channel.id)
+                    if key not in channels:
+                        skey = (schema.name, schema.encoding, schema.data)
+                        if skey not in schemas:
+                            schemas[skey] = writer.register_schema(
+                                name=schema.name, encoding=schema.encoding, data=schema.data
+                            )
+                        channels[key] = writer.register_channel(
+                            topic=channel.topic,
+                            message_encoding=channel.message_encoding,
+                            schema_id=schemas[skey],
+                            metadata=dict(channel.metadata),
+                        )
+                    writer.add_message(
+                        channel_id=channels[key],
+                        log_time=message.log_time,
+                        data=message.data,
+                        publish_time=message.publish_time,
+                        sequence=message.sequence,
+                    )
+                    count += 1
+                for record in reader.iter_metadata():
+                    metadata.append((record.name, dict(record.metadata)))
+        for name, data in metadata:
+            writer.add_metadata(name, data)
+        writer.finish()
+    import os
+
+    return {"messages": count, "compression": "zstd", "bytes": os.path.getsize(out_path)}
+
+
 if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--rewrite":
+        if len(sys.argv) < 4:
+            sys.exit(__doc__)
+        json.dump(rewrite(sys.argv[2], sys.argv[3:]), sys.stdout)
+        print()
+        sys.exit(0)
     if len(sys.argv) < 2:
         sys.exit(__doc__)
     if sys.argv[1] == "--messages":

@@ -116,6 +116,14 @@ pub fn mcap_messages(files: &[PathBuf], topic: &str) -> Vec<Value> {
         .expect("read_mcap.py --messages prints a JSON list")
 }
 
+/// `files` rewritten into `out` by Python's `mcap` Writer (zstd chunks, its own indexes and
+/// summary; read_mcap.py --rewrite): a recording as another MCAP writer makes it. Returns its
+/// `{"messages", "compression", "bytes"}`.
+pub fn rewrite_mcap(out: &Path, files: &[PathBuf]) -> Value {
+    let out = out.to_str().expect("a UTF-8 path");
+    reader(&["--rewrite", out], files)
+}
+
 /// What Python's `mcap` recovers from `files` read from their start up to the first error
 /// (read_mcap.py --recover): the messages of files cut short (no summary), CRC-checked.
 pub fn recover_mcap(files: &[PathBuf]) -> Value {

@@ -18,9 +18,14 @@ use thruster_protocol::DaemonState;
 const CLIENT_S: u64 = 60;
 
 fn client(port: u16) -> (Value, Output) {
+    client_with(port, &[])
+}
+
+fn client_with(port: u16, args: &[&str]) -> (Value, Output) {
     let out = system_tests::node::script("bridge_client.js")
         .arg(format!("ws://127.0.0.1:{port}"))
         .arg(CLIENT_S.to_string())
+        .args(args)
         .output()
         .expect("node runs tests/node/bridge_client.js");
     let summary = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
@@ -56,6 +61,13 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
     );
     assert_eq!(summary["subprotocol"], "foxglove.sdk.v1", "{summary}");
     assert_eq!(summary["errors"], Value::Array(vec![]), "{summary}");
+    // Every advertised schema (channels, service requests and responses) parses in Foxglove
+    // Studio's own parser (tests/node/foxglove_parser.js).
+    assert_eq!(summary["schema_errors"], serde_json::json!({}), "{summary}");
+    assert!(
+        summary["schemas_checked"].as_u64().unwrap() >= 6 + 2 * 6,
+        "{summary}"
+    );
     // Channels: the recorder's, named by topic leaf, JSON with a JSON Schema.
     for topic in [
         "imu",
@@ -86,7 +98,7 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
         summary["first"]
     );
     // Services: the operator's requests.
-    for name in ["estimate", "abort", "hold", "idle", "setpoint"] {
+    for name in ["estimate", "abort", "hold", "idle", "stop", "setpoint"] {
         let s = &summary["services"][format!("thrusterd/{name}")];
         assert!(s.is_object(), "no service {name}: {}", summary["services"]);
     }
@@ -131,6 +143,61 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
             .contains("pitch_deg must be in"),
         "{summary}"
     );
+
+    // Clients offering each subprotocol name connect and see the same channels and services;
+    // a refused call answers each with the reason. `foxglove.websocket.v1` (the name older apps
+    // offer, Lichtblick 1.10 among them) gets the failure as a response `{"error": ...}`: their
+    // ws-protocol client has no `serviceCallFailure` and would wait forever.
+    let topics = |v: &Value| -> std::collections::BTreeSet<String> {
+        v.as_object().unwrap().keys().cloned().collect()
+    };
+    for offer in [
+        "foxglove.sdk.v1.1",
+        "foxglove.websocket.v1",
+        "foxglove.sdk.v1",
+    ] {
+        let (other, output) = client_with(port, &["--quick", "--offer", offer]);
+        assert!(output.status.success(), "{offer}: {other}");
+        assert_eq!(other["subprotocol"], offer, "{other}");
+        assert_eq!(other["errors"], Value::Array(vec![]), "{offer}: {other}");
+        assert_eq!(
+            other["schema_errors"],
+            serde_json::json!({}),
+            "{offer}: {other}"
+        );
+        assert_eq!(
+            topics(&other["services"]),
+            topics(&summary["services"]),
+            "{offer}"
+        );
+        // Channels appear with their first message: this later client sees at least as many.
+        assert!(
+            topics(&other["channels"]).is_superset(&topics(&summary["channels"])),
+            "{offer}: {} vs {}",
+            other["channels"],
+            summary["channels"]
+        );
+        for (topic, c) in summary["channels"].as_object().unwrap() {
+            assert_eq!(
+                other["channels"][topic]["schemaName"], c["schemaName"],
+                "{offer}: {topic}"
+            );
+        }
+        let refused = &other["bad_setpoint"];
+        let reason = if offer == "foxglove.websocket.v1" {
+            assert_eq!(refused["ok"], true, "{offer}: {refused}");
+            let body: Value = serde_json::from_str(refused["response"].as_str().unwrap())
+                .expect("the failure as a JSON response");
+            body["error"].as_str().unwrap_or_default().to_string()
+        } else {
+            assert_eq!(refused["ok"], false, "{offer}: {refused}");
+            refused["message"].as_str().unwrap_or_default().to_string()
+        };
+        assert!(
+            reason.contains("pitch_deg must be in [-90, 90] degrees, got 100"),
+            "{offer}: {refused}"
+        );
+    }
 
     // SIGINT: the bridge finishes the file and reports no loss, no drop.
     bridge.signal("INT");
@@ -199,4 +266,61 @@ fn the_bridge_refuses_to_run_without_a_job_or_with_a_bad_config() {
         err.contains("b.toml:3") && err.contains("websocket.listen"),
         "{err}"
     );
+}
+
+/// Every schema the bridge declares, including the channels a short session never advertises
+/// (model, dynamics, input, config, reconfig, dvl, ...), and each service's request and
+/// response, passes Foxglove Studio's own JSON Schema parser (`parseJsonSchema` from the npm
+/// package @foxglove/studio-base) and Lichtblick's (its source file, tests/node/lichtblick),
+/// tests/node/check_schemas.js: the same schemas as in the recordings, declared from the
+/// message types.
+#[test]
+fn every_declared_schema_passes_the_foxglove_apps_parser() {
+    let o = std::process::Command::new(bin("thruster-bridge"))
+        .arg("--print-schemas")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let declared: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(declared["channels"].as_array().unwrap().len(), 14);
+    let mut node = system_tests::node::script("check_schemas.js")
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("node runs tests/node/check_schemas.js");
+    {
+        use std::io::Write;
+        let mut stdin = node.stdin.take().unwrap();
+        stdin.write_all(&o.stdout).unwrap();
+    }
+    let out = node.wait_with_output().unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["errors"], serde_json::json!({}), "{report}");
+    // Both apps' parsers on every schema.
+    assert_eq!(
+        report["checked"].as_array().unwrap().len(),
+        2 * (14 + 2 * 6),
+        "{report}"
+    );
+    let parser = |p: &str| {
+        report["parsers"][p]
+            .as_str()
+            .unwrap_or_default()
+            .to_string()
+    };
+    assert!(
+        parser("foxglove").contains("@foxglove/studio-base"),
+        "{report}"
+    );
+    assert!(
+        parser("lichtblick").ends_with("parseJsonSchema.ts"),
+        "{report}"
+    );
+    // The parsers saw the fields: a model has its matrices (as row objects) and every scalar.
+    let fields = |what: &str| report["fields"][what].as_u64().unwrap_or(0);
+    for p in ["foxglove", "lichtblick"] {
+        assert!(fields(&format!("{p} channel model")) >= 15, "{report}");
+        assert!(fields(&format!("{p} channel status")) >= 20, "{report}");
+    }
 }

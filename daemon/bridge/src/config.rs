@@ -45,6 +45,7 @@ struct RecordFile {
     out: Option<PathBuf>,
     max_mb: Option<f64>,
     queue: Option<usize>,
+    compression: Option<String>,
 }
 
 /// The bridge's settings, checked.
@@ -75,6 +76,7 @@ pub struct Record {
     pub out: PathBuf,
     pub max_mb: Option<f64>,
     pub queue: usize,
+    pub compression: thruster_recorder::Compression,
 }
 
 impl Default for BridgeConfig {
@@ -108,6 +110,7 @@ impl Record {
             out,
             max_mb: None,
             queue: thruster_recorder::DEFAULT_QUEUE,
+            compression: thruster_recorder::Compression::default(),
         }
     }
 }
@@ -190,7 +193,7 @@ pub fn parse(text: &str, origin: &str) -> Result<BridgeConfig, LoadError> {
     let r = file.record;
     let record = match r.out {
         None => {
-            if r.max_mb.is_some() || r.queue.is_some() {
+            if r.max_mb.is_some() || r.queue.is_some() || r.compression.is_some() {
                 return Err(LoadError::invalid(
                     origin,
                     "record.out",
@@ -220,6 +223,16 @@ pub fn parse(text: &str, origin: &str) -> Result<BridgeConfig, LoadError> {
                 thruster_recorder::DEFAULT_QUEUE,
                 1e7,
             )?,
+            compression: match r.compression.as_deref() {
+                None => thruster_recorder::Compression::default(),
+                Some(name) => thruster_recorder::Compression::from_name(name).ok_or_else(|| {
+                    LoadError::invalid(
+                        origin,
+                        "record.compression",
+                        format!("must be \"zstd\" or \"none\", got {name:?}"),
+                    )
+                })?,
+            },
         }),
     };
     Ok(BridgeConfig {
@@ -267,6 +280,26 @@ mod tests {
         assert!(e.to_string().contains("listen"), "{e}");
         let e = parse("[record]\nout = \"a.mcap\"\nmax_mb = -1\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("record.max_mb"), "{e}");
+        let e = parse(
+            "[record]\nout = \"a.mcap\"\ncompression = \"lz4\"\n",
+            "f.toml",
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("record.compression"), "{e}");
+        let c = parse(
+            "[record]\nout = \"a.mcap\"\ncompression = \"none\"\n",
+            "f.toml",
+        )
+        .unwrap();
+        assert_eq!(
+            c.record.unwrap().compression,
+            thruster_recorder::Compression::None
+        );
+        let c = parse("[record]\nout = \"a.mcap\"\n", "f.toml").unwrap();
+        assert_eq!(
+            c.record.unwrap().compression,
+            thruster_recorder::Compression::Zstd
+        );
         let e = parse("ipc_root = \"rel\"\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("absolute"), "{e}");
     }

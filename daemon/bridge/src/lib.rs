@@ -6,12 +6,13 @@
 //! queue, so neither a slow client nor a slow disk can slow the draining (or the daemon, which
 //! never waits for a subscriber).
 //!
-//! Modules, one job each: [`config`] (the TOML file), [`live`] (messages onto Foxglove
-//! channels), [`services`] (the operator's requests as services), [`bridge`] (starting and
+//! Modules, one job each: [`config`] (the TOML file), [`layout`] (the Foxglove layout for a
+//! vehicle), [`live`] (messages onto Foxglove channels), [`services`] (the operator's requests as services), [`bridge`] (starting and
 //! stopping the parts around the recorder's session).
 
 pub mod bridge;
 pub mod config;
+pub mod layout;
 pub mod live;
 pub mod services;
 

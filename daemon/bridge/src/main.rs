@@ -51,6 +51,16 @@ struct Args {
     /// Stop after this many seconds (wall clock).
     #[arg(long)]
     duration_s: Option<f64>,
+    /// Print every channel's and service's JSON Schema (what the live view and the recordings
+    /// declare) as one JSON object, and exit. The CI check feeds them to the Foxglove app's
+    /// parser (tests/node/check_schemas.js).
+    #[arg(long)]
+    print_schemas: bool,
+    /// Print the Foxglove layout for this vehicle file (config/vehicles/*.toml): the shipped
+    /// config/foxglove/thrusterd-live.json with the thrust plot showing exactly the vehicle's
+    /// thrusters, named as in the file; then exit.
+    #[arg(long, value_name = "VEHICLE.toml")]
+    layout_for: Option<PathBuf>,
 }
 
 /// The settings: the file's, then the flags over them.
@@ -112,6 +122,7 @@ fn plan(args: &Args, c: BridgeConfig) -> Result<Plan> {
         max_bytes: r.max_mb.map(|mb| (mb * 1024.0 * 1024.0) as u64),
         duration,
         queue: r.queue,
+        compression: r.compression,
     });
     Ok(Plan {
         target: Target {
@@ -125,6 +136,19 @@ fn plan(args: &Args, c: BridgeConfig) -> Result<Plan> {
 
 fn run() -> Result<()> {
     let args = Args::parse();
+    if args.print_schemas {
+        println!("{}", thruster_bridge::services::every_schema()?);
+        return Ok(());
+    }
+    if let Some(vehicle) = &args.layout_for {
+        let names = thrusterctl_operator::geometry::load_names(vehicle)?;
+        let stem = vehicle
+            .file_stem()
+            .map_or_else(|| "vehicle".into(), |s| s.to_string_lossy().into_owned());
+        let layout = thruster_bridge::layout::for_vehicle(&stem, &names)?;
+        println!("{}", serde_json::to_string_pretty(&layout)?);
+        return Ok(());
+    }
     let c = settings(&args)?;
     let plan = plan(&args, c)?;
     // A live view without a recording still honours --duration-s: the session needs a

@@ -1,5 +1,5 @@
 //! The operator's requests as Foxglove WebSocket services: `estimate`, `abort`, `hold`,
-//! `idle` and `setpoint`, each answered by the daemon through the operator's own client
+//! `idle`, `stop` (the emergency stop) and `setpoint`, each answered by the daemon through the operator's own client
 //! (`thrusterctl_operator::client::Daemon`), so a topside operator needs no shell on the
 //! vehicle and every request passes the checks `thrusterctl` applies.
 //!
@@ -38,6 +38,8 @@ pub enum Call {
     Abort,
     Hold,
     Idle,
+    /// The emergency stop (`RequestKind::Stop`).
+    Stop,
     Setpoint(cli::SetpointArgs),
 }
 
@@ -82,6 +84,7 @@ pub fn parse(name: &str, payload: &[u8]) -> Result<Call, String> {
         "abort" => body::<Empty>(payload).map(|_| Call::Abort),
         "hold" => body::<Empty>(payload).map(|_| Call::Hold),
         "idle" => body::<Empty>(payload).map(|_| Call::Idle),
+        "stop" => body::<Empty>(payload).map(|_| Call::Stop),
         "setpoint" => {
             let r: SetpointRequest = body(payload)?;
             cli::setpoint_args(r.roll_deg, r.pitch_deg, r.yaw_deg, r.depth_m)
@@ -128,13 +131,53 @@ fn response_schema() -> serde_json::Value {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "thrusterd.Response",
         "type": "object",
-        "properties": {"text": {"type": "string", "description": "the daemon's answer"}},
-        "required": ["text"],
+        "properties": {
+            "text": {"type": "string", "description": "the daemon's answer"},
+            "error": {
+                "type": "string",
+                "description": "why the call was refused; only to clients of the old protocol \
+                    name foxglove.websocket.v1 (the others get a service call failure)"
+            },
+        },
     })
 }
 
+/// Every schema the bridge declares: each topic's channel (as in the recordings) and each
+/// service's request and response, as `{"channels": [{"topic", "schemaName", "schema"}],
+/// "services": [{"name", "request": {"schemaName", "schema"}, "response": ...}]}` with each
+/// schema as its JSON text (as the WebSocket protocol carries it).
+pub fn every_schema() -> Result<serde_json::Value> {
+    let channels: Vec<_> = thruster_recorder::source::all_channels()?
+        .into_iter()
+        .map(|c| {
+            json!({
+                "topic": c.topic,
+                "schemaName": c.schema_name,
+                "schema": String::from_utf8_lossy(&c.schema),
+            })
+        })
+        .collect();
+    let services: Vec<_> = NAMES
+        .iter()
+        .map(|name| {
+            json!({
+                "name": format!("{PREFIX}{name}"),
+                "request": {
+                    "schemaName": format!("thrusterd.{name}.Request"),
+                    "schema": request_schema(name).to_string(),
+                },
+                "response": {
+                    "schemaName": "thrusterd.Response",
+                    "schema": response_schema().to_string(),
+                },
+            })
+        })
+        .collect();
+    Ok(json!({"channels": channels, "services": services}))
+}
+
 /// The names of the services, without [`PREFIX`].
-pub const NAMES: [&str; 5] = ["estimate", "abort", "hold", "idle", "setpoint"];
+pub const NAMES: [&str; 6] = ["estimate", "abort", "hold", "idle", "stop", "setpoint"];
 
 /// The services, each handing its calls to `queue`.
 pub fn services(queue: &SyncSender<Pending>) -> Vec<Service> {
@@ -227,6 +270,7 @@ fn execute(daemon: &Daemon, call: &Call) -> Result<String> {
         Call::Abort => request(RequestKind::Abort),
         Call::Hold => request(RequestKind::Hold),
         Call::Idle => request(RequestKind::Idle),
+        Call::Stop => request(RequestKind::Stop),
         Call::Setpoint(args) => {
             let sp = attitude::setpoint(args, publish::sender_seq());
             sp.validate()
@@ -255,6 +299,7 @@ mod tests {
             .unwrap_err()
             .contains("(0, 1]"));
         assert_eq!(parse("hold", b"{}").unwrap(), Call::Hold);
+        assert_eq!(parse("stop", b"").unwrap(), Call::Stop);
         assert!(parse("hold", br#"{"x": 1}"#).unwrap_err().contains("JSON"));
         let Call::Setpoint(a) = parse("setpoint", br#"{"pitch_deg": 10}"#).unwrap() else {
             panic!("not a setpoint")

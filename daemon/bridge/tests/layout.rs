@@ -1,10 +1,11 @@
 //! The shipped Foxglove layout (config/foxglove/thrusterd-live.json) names only what exists:
 //! every plotted or shown path is a field of the message its topic carries (checked on the
-//! messages' own JSON form, as the bridge sends them), every service button one of the
-//! bridge's services. A renamed field then fails here, not silently in the app.
+//! messages' recorded JSON form, as the bridge sends them), every service button one of the
+//! bridge's services. A renamed field then fails here, not silently in the app. Every panel
+//! has its own title (`foxglovePanelTitle`, what Foxglove and Lichtblick show), and every
+//! service has its button.
 
 use serde_json::Value;
-use thruster_protocol::{ImuSample, ModelMsg, StatusMsg, TelemetryMsg, ThrustCommand};
 
 fn layout() -> Value {
     let path = concat!(
@@ -14,17 +15,13 @@ fn layout() -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
-/// The JSON form of a message of `topic`, as the bridge sends it.
+/// The JSON form of a message of `topic`, as the bridge sends it (matrices as row objects).
 fn message(topic: &str) -> Value {
-    match topic {
-        "imu" => serde_json::to_value(ImuSample::default()),
-        "thrust" => serde_json::to_value(ThrustCommand::default()),
-        "telemetry" => serde_json::to_value(TelemetryMsg::default()),
-        "status" => serde_json::to_value(StatusMsg::default()),
-        "model" => serde_json::to_value(ModelMsg::default()),
-        other => panic!("the layout names topic {other}, which the test does not know"),
-    }
-    .unwrap()
+    thruster_recorder::source::every_default_message()
+        .into_iter()
+        .find(|(t, _, _)| *t == topic)
+        .unwrap_or_else(|| panic!("the layout names topic {topic}, which the bridge has not"))
+        .1
 }
 
 /// Resolves `field[i].sub` in `value`.
@@ -48,7 +45,10 @@ fn every_path_and_service_of_the_layout_exists() {
     let layout = layout();
     let panels = layout["configById"].as_object().unwrap();
     let mut checked = 0;
+    let mut buttons = Vec::new();
     for (id, config) in panels {
+        let title = config["foxglovePanelTitle"].as_str().unwrap_or_default();
+        assert!(!title.is_empty(), "{id}: no foxglovePanelTitle");
         let mut paths: Vec<String> = Vec::new();
         if id.starts_with("Plot!") {
             for p in config["paths"].as_array().unwrap() {
@@ -70,6 +70,10 @@ fn every_path_and_service_of_the_layout_exists() {
             let payload = config["requestPayload"].as_str().unwrap();
             thruster_bridge::services::parse(leaf, payload.as_bytes())
                 .unwrap_or_else(|e| panic!("{id}: the button's request is refused: {e}"));
+            // The tooltip says what the button does, starting with the service it calls.
+            let tooltip = config["buttonTooltip"].as_str().unwrap_or_default();
+            assert!(tooltip.starts_with(&format!("{name}: ")), "{id}: {tooltip}");
+            buttons.push(leaf.to_string());
             checked += 1;
         } else {
             panic!("panel {id}: not checked by this test");
@@ -84,6 +88,14 @@ fn every_path_and_service_of_the_layout_exists() {
         }
     }
     assert!(checked >= 20, "{checked} items checked");
+    buttons.sort();
+    let mut services = thruster_bridge::services::NAMES.map(String::from).to_vec();
+    services.sort();
+    assert_eq!(buttons, services, "one button per service");
+    // The emergency stop is red and says so.
+    let stop = &panels["CallService!stop"];
+    assert_eq!(stop["buttonText"], "EMERGENCY STOP");
+    assert_eq!(stop["buttonColor"], "#d1242f");
     // Every panel of the tree is configured.
     let tree = layout["layout"].to_string();
     for id in panels.keys() {

@@ -64,6 +64,9 @@ pub enum Command {
     Hold,
     /// Stop controlling: zero thrust.
     Idle,
+    /// Emergency stop: thrusters neutral now in any state, and nothing starts them again (no
+    /// automatic re-estimation, no resumed hold) until `estimate` or `hold`.
+    Stop,
     /// Save the current model (to the daemon's default location if PATH is omitted).
     Save {
         /// File to write, on the daemon's machine; relative paths are made absolute here.
@@ -108,6 +111,10 @@ pub enum Command {
         /// Stop after this many seconds (wall clock; default: until Ctrl-C or SIGTERM).
         #[arg(long)]
         duration_s: Option<f64>,
+        /// Chunk compression: zstd (about 0.36 of the size, what Foxglove's writers use) or
+        /// none.
+        #[arg(long, default_value = "zstd", value_parser = ["zstd", "none"])]
+        compression: String,
     },
     /// Announce a change of the thruster configuration (starts re-estimation).
     Reconfigure {

@@ -52,6 +52,7 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
         Command::Abort => simple(&target, timeout, ControlRequest::new(RequestKind::Abort)),
         Command::Hold => simple(&target, timeout, ControlRequest::new(RequestKind::Hold)),
         Command::Idle => simple(&target, timeout, ControlRequest::new(RequestKind::Idle)),
+        Command::Stop => simple(&target, timeout, ControlRequest::new(RequestKind::Stop)),
         Command::Revert => simple(&target, timeout, ControlRequest::new(RequestKind::Revert)),
         Command::Shutdown => simple(&target, timeout, ControlRequest::new(RequestKind::Shutdown)),
         Command::Save { path } => {
@@ -79,8 +80,12 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
             out,
             max_mb,
             duration_s,
+            compression,
         } => {
-            let options = record::options(out, max_mb, duration_s)?;
+            let mut options = record::options(out, max_mb, duration_s)?;
+            // The parser admits only the two names.
+            options.compression =
+                thruster_recorder::Compression::from_name(&compression).unwrap_or_default();
             record::run(&target, &options, interrupt_flag()?)
         }
         Command::Reconfigure {

@@ -66,6 +66,9 @@ fn default_cg() -> [f64; 3] {
 
 #[derive(Deserialize)]
 struct ThrusterKeys {
+    /// For people (a layout's labels); the protocol numbers thrusters by their order.
+    #[serde(default)]
+    name: Option<String>,
     position_m: [f64; 3],
     direction: [f64; 3],
     #[serde(default)]
@@ -77,6 +80,22 @@ pub fn load(path: &Path) -> anyhow::Result<Geometry> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
     parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
+/// The thrusters' names in `path`, in the protocol's order, after the same checks as [`load`]:
+/// the file's `name`, or `thruster i` where it has none.
+pub fn load_names(path: &Path) -> anyhow::Result<Vec<String>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let file: VehicleFile =
+        toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(file
+        .thrusters
+        .iter()
+        .enumerate()
+        .map(|(i, t)| t.name.clone().unwrap_or_else(|| format!("thruster {i}")))
+        .collect())
 }
 
 /// Parses vehicle-file TOML text.

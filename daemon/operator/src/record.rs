@@ -54,6 +54,7 @@ pub fn options(
         max_bytes,
         duration,
         queue: thruster_recorder::DEFAULT_QUEUE,
+        compression: thruster_recorder::Compression::default(),
     })
 }
 

@@ -22,7 +22,7 @@ pub use session::{
     record, record_on, stream_on, RecordOptions, RecordSummary, TapSummary, TopicSummary,
     DEFAULT_QUEUE,
 };
-pub use sink::{rotated_path, McapSink};
+pub use sink::{rotated_path, Compression, McapSink};
 pub use tap::{ChannelInfo, Message, Tap};
 
 use std::path::PathBuf;

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use serde::Serialize;
 use thruster_protocol::services::{IpcConfig, IpcNode};
 
-use crate::sink::McapSink;
+use crate::sink::{Compression, McapSink};
 use crate::source::{open_all, Source};
 use crate::tap::{self, Message, Tap};
 use crate::RecordError;
@@ -51,6 +51,8 @@ pub struct RecordOptions {
     pub duration: Option<Duration>,
     /// Capacity of the queue to the writer thread, in messages ([`DEFAULT_QUEUE`]).
     pub queue: usize,
+    /// How chunks are compressed (zstd unless asked otherwise).
+    pub compression: Compression,
 }
 
 /// One topic's counts.
@@ -264,7 +266,7 @@ struct Writer {
 
 impl Writer {
     fn start(options: &RecordOptions, failed: &Arc<AtomicBool>) -> Result<Self, RecordError> {
-        let mut sink = McapSink::create(&options.out, options.max_bytes)?;
+        let mut sink = McapSink::create(&options.out, options.max_bytes, options.compression)?;
         let (tap, rx) = tap::bounded("mcap", options.queue);
         let failed = Arc::clone(failed);
         let thread = std::thread::Builder::new()

@@ -2,11 +2,12 @@
 
 use std::sync::Arc;
 
+use schemars::JsonSchema;
 use serde::Serialize;
 use thruster_protocol::services::{IpcConfig, IpcNode, Reader, TopicMessage};
 use thruster_protocol::*;
 
-use crate::schema::json_schema;
+use crate::schema::{schema_of, to_recorded, ROW_KEY};
 use crate::tap::{ChannelInfo, Message};
 use crate::RecordError;
 
@@ -95,13 +96,30 @@ pub trait Source {
 pub struct TopicSource<T: TopicMessage> {
     reader: Reader<T>,
     namespace: String,
-    /// Known from the first message (its JSON shape gives the schema).
-    channel: Option<Arc<ChannelInfo>>,
+    /// Declared from the type ([`channel_info`]).
+    channel: Arc<ChannelInfo>,
+    /// Whether `T` has a matrix, written in the recorded form ([`to_recorded`]).
+    has_rows: bool,
     count: u64,
     seq: SeqTracker,
 }
 
-impl<T: TopicMessage + Serialize + Stamped> TopicSource<T> {
+/// The channel of `T`'s topic: its leaf, and the JSON Schema declared from the type.
+pub fn channel_info<T: TopicMessage + JsonSchema>() -> Result<ChannelInfo, RecordError> {
+    let name = schema_name::<T>();
+    let schema =
+        serde_json::to_vec(&schema_of::<T>(&name)).map_err(|source| RecordError::Json {
+            topic: T::TOPIC.leaf(),
+            source,
+        })?;
+    Ok(ChannelInfo {
+        topic: T::TOPIC.leaf(),
+        schema_name: name,
+        schema,
+    })
+}
+
+impl<T: TopicMessage + Serialize + Stamped + JsonSchema> TopicSource<T> {
     pub fn open(node: &IpcNode, ipc: &IpcConfig) -> Result<Self, RecordError> {
         let reader =
             Reader::create_with_buffer(node, ipc, T::TOPIC.qos().max_buffer).map_err(|source| {
@@ -110,10 +128,13 @@ impl<T: TopicMessage + Serialize + Stamped> TopicSource<T> {
                     source,
                 }
             })?;
+        let channel = channel_info::<T>()?;
+        let has_rows = String::from_utf8_lossy(&channel.schema).contains(&format!("\"{ROW_KEY}\""));
         Ok(Self {
             reader,
             namespace: ipc.namespace().to_string(),
-            channel: None,
+            channel: Arc::new(channel),
+            has_rows,
             count: 0,
             seq: SeqTracker::default(),
         })
@@ -126,7 +147,7 @@ fn schema_name<T>() -> String {
     format!("thrusterd.{}", full.rsplit("::").next().unwrap_or(full))
 }
 
-impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
+impl<T: TopicMessage + Serialize + Stamped + JsonSchema> Source for TopicSource<T> {
     fn topic(&self) -> &'static str {
         T::TOPIC.leaf()
     }
@@ -145,22 +166,15 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
         let mut n = 0;
         while let Some(msg) = self.reader.recv().map_err(ipc)? {
             let json = |source| RecordError::Json { topic, source };
-            let channel = match &self.channel {
-                Some(c) => Arc::clone(c),
-                None => {
-                    let value = serde_json::to_value(msg).map_err(json)?;
-                    let name = schema_name::<T>();
-                    let schema = serde_json::to_vec(&json_schema(&name, &value)).map_err(json)?;
-                    let c = Arc::new(ChannelInfo {
-                        topic,
-                        schema_name: name,
-                        schema,
-                    });
-                    self.channel = Some(Arc::clone(&c));
-                    c
-                }
+            let channel = Arc::clone(&self.channel);
+            // Straight to bytes unless the type has a matrix to rewrite as row objects.
+            let data: Arc<[u8]> = if self.has_rows {
+                let mut value = serde_json::to_value(msg).map_err(json)?;
+                to_recorded(&mut value);
+                serde_json::to_vec(&value).map_err(json)?.into()
+            } else {
+                serde_json::to_vec(&msg).map_err(json)?.into()
             };
-            let data: Arc<[u8]> = serde_json::to_vec(&msg).map_err(json)?.into();
             let log_ns = now_ns();
             // Publish time: the sender's clock where the message has one (vehicle time for
             // the simulator), else the receipt.
@@ -190,25 +204,65 @@ impl<T: TopicMessage + Serialize + Stamped> Source for TopicSource<T> {
     }
 }
 
+/// Calls `$m!` with every topic's message type: one list for the subscriptions
+/// ([`open_all`]) and the declared channels ([`all_channels`]).
+macro_rules! every_topic {
+    ($m:ident) => {
+        $m!(
+            ImuSample,
+            ThrustCommand,
+            TelemetryMsg,
+            ModelMsg,
+            StatusMsg,
+            ReconfigEvent,
+            Setpoint,
+            DriverStatusMsg,
+            DynamicsMsg,
+            DvlSample,
+            TruthMsg,
+            VehicleStateMsg,
+            // What `thrusterd replay` needs besides the IMU stream (docs/recording.md).
+            InputMsg,
+            ConfigMsg
+        )
+    };
+}
+
 /// Every topic of the protocol, subscribed on `node`.
 pub fn open_all(node: &IpcNode, ipc: &IpcConfig) -> Result<Vec<Box<dyn Source>>, RecordError> {
-    Ok(vec![
-        Box::new(TopicSource::<ImuSample>::open(node, ipc)?),
-        Box::new(TopicSource::<ThrustCommand>::open(node, ipc)?),
-        Box::new(TopicSource::<TelemetryMsg>::open(node, ipc)?),
-        Box::new(TopicSource::<ModelMsg>::open(node, ipc)?),
-        Box::new(TopicSource::<StatusMsg>::open(node, ipc)?),
-        Box::new(TopicSource::<ReconfigEvent>::open(node, ipc)?),
-        Box::new(TopicSource::<Setpoint>::open(node, ipc)?),
-        Box::new(TopicSource::<DriverStatusMsg>::open(node, ipc)?),
-        Box::new(TopicSource::<DynamicsMsg>::open(node, ipc)?),
-        Box::new(TopicSource::<DvlSample>::open(node, ipc)?),
-        Box::new(TopicSource::<TruthMsg>::open(node, ipc)?),
-        Box::new(TopicSource::<VehicleStateMsg>::open(node, ipc)?),
-        // What `thrusterd replay` needs besides the IMU stream (docs/recording.md).
-        Box::new(TopicSource::<InputMsg>::open(node, ipc)?),
-        Box::new(TopicSource::<ConfigMsg>::open(node, ipc)?),
-    ])
+    macro_rules! open {
+        ($($t:ty),*) => {
+            vec![$(Box::new(TopicSource::<$t>::open(node, ipc)?) as Box<dyn Source>),*]
+        };
+    }
+    Ok(every_topic!(open))
+}
+
+/// The channel of every topic (what a recording or the live view declares for it).
+pub fn all_channels() -> Result<Vec<ChannelInfo>, RecordError> {
+    macro_rules! channels {
+        ($($t:ty),*) => {
+            vec![$(channel_info::<$t>()?),*]
+        };
+    }
+    Ok(every_topic!(channels))
+}
+
+/// The default message of every topic in the recorded form, with its declared schema, for the
+/// tests that hold the two together.
+pub fn every_default_message() -> Vec<(&'static str, serde_json::Value, serde_json::Value)> {
+    fn one<T: TopicMessage + Serialize + JsonSchema + Default>(
+    ) -> (&'static str, serde_json::Value, serde_json::Value) {
+        let mut value = serde_json::to_value(T::default()).expect("a message serialises");
+        to_recorded(&mut value);
+        (T::TOPIC.leaf(), value, schema_of::<T>(&schema_name::<T>()))
+    }
+    macro_rules! defaults {
+        ($($t:ty),*) => {
+            vec![$(one::<$t>()),*]
+        };
+    }
+    every_topic!(defaults)
 }
 
 #[cfg(test)]
@@ -223,6 +277,23 @@ mod tests {
         }
         assert_eq!(s.lost, 2);
         assert_eq!(s.restarts, 1);
+    }
+
+    #[test]
+    fn every_field_of_every_topic_has_its_schema_entry() {
+        // The schemas are derived from the types; this holds the JSON each type serialises to
+        // (a custom Serialize, a serde attribute, the row rewrite) to its declared schema, so a
+        // field that reaches the wire without a schema entry fails here.
+        let all = every_default_message();
+        assert_eq!(all.len(), 14);
+        for (topic, value, schema) in all {
+            let mut out = Vec::new();
+            crate::schema::mismatches(&schema, &value, topic, &mut out);
+            assert!(out.is_empty(), "{topic}: {out:#?}");
+            let text = schema.to_string();
+            assert!(!text.contains("\"null\""), "{topic}: a null type in {text}");
+            assert!(!text.contains("$ref"), "{topic}: a reference in {text}");
+        }
     }
 
     #[test]

@@ -182,6 +182,12 @@ fn decode_one<T: DeserializeOwned + NonFinite>(data: &[u8]) -> Result<T, serde_j
         Ok(v) => Ok(v),
         Err(first) => {
             let mut value: serde_json::Value = serde_json::from_slice(data)?;
+            // Matrices are recorded as arrays of row objects (thruster_recorder::schema);
+            // recordings made before that hold arrays of arrays, which pass unchanged.
+            thruster_recorder::schema::from_recorded(&mut value);
+            if let Ok(v) = serde_json::from_value::<T>(value.clone()) {
+                return Ok(v);
+            }
             if !nulls_to_sentinel(&mut value) {
                 return Err(first);
             }

@@ -277,6 +277,7 @@ fn apply(machine: &mut Machine, m: &InputMsg, solved: &mut Solved) -> bool {
                 Ok(RequestKind::Abort) => Request::Abort,
                 Ok(RequestKind::Hold) => Request::Hold,
                 Ok(RequestKind::Idle) => Request::Idle,
+                Ok(RequestKind::Stop) => Request::Stop,
                 Ok(RequestKind::Revert) => Request::Revert,
                 // Status, save, load and shutdown never go to the machine as requests.
                 _ => return true,

@@ -574,6 +574,9 @@ impl Daemon {
                 let _ = model_out.model.update_connections();
                 let _ = model_out.dynamics.update_connections();
                 let _ = status_out.update_connections();
+                // The configuration is sent once: a recorder that joins later gets it only
+                // from here (issue 26: a late `thrusterctl record` had no `config` channel).
+                let _ = config_out.update_connections();
                 last_status = Instant::now();
             }
         }
@@ -916,6 +919,7 @@ impl Daemon {
             RequestKind::Abort => Request::Abort,
             RequestKind::Hold => Request::Hold,
             RequestKind::Idle => Request::Idle,
+            RequestKind::Stop => Request::Stop,
             RequestKind::Revert => Request::Revert,
             RequestKind::Save => {
                 let Some(model) = self.machine.model().cloned() else {

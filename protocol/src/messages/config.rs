@@ -11,6 +11,7 @@ pub const CONFIG_TEXT_CAPACITY: usize = 16 * 1024;
 /// the configuration file with the command line's overrides applied, as TOML, published
 /// once at start. A recording keeps it, so a replay runs the machine with the settings the
 /// daemon had.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.ConfigMsg.v1")]

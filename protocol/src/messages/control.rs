@@ -26,6 +26,12 @@ wire_enum! {
         Load = 7,
         /// Stop the daemon cleanly.
         Shutdown = 8,
+        /// Emergency stop: thrusters neutral from the next command on, in any state (unlike
+        /// `Abort`, which stops only an estimation, and `Idle`, after which a reconfiguration
+        /// or a cleared fault may start thrusters again), and held off: nothing drives them
+        /// again (no automatic re-estimation, no resumed hold) until an operator asks for
+        /// `Estimate` or `Hold`.
+        Stop = 9,
     }
 }
 

@@ -39,6 +39,7 @@ impl OutputState {
 /// The daemon uses it to see what it cannot see in the IMU alone: a driver configured for
 /// another thruster count (it rejects every command), a driver rejecting commands, an
 /// autopilot that is disarmed or unreachable.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[type_name("thrusterd.DriverStatusMsg.v2")]

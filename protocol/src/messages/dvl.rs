@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 /// A velocity measurement from a Doppler velocity log (driver -> daemon, service `dvl`),
 /// optional: most small vehicles have none. The daemon's navigation during an estimation
 /// uses it when one arrives; without it the body velocity is dead-reckoned.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.DvlSample.v1")]

@@ -53,6 +53,7 @@ pub const DYNAMIC_TERM_NAMES: [&str; DYNAMIC_TERMS] = [
 
 /// One DOF row of dynamic-model coefficients: how much each term adds to that DOF's
 /// acceleration (rad/s^2 for rotation rows, m/s^2 for translation rows, per unit of the term).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct DynamicsRow {
@@ -110,6 +111,7 @@ impl DynamicsRow {
 /// history 1): published with every model the dynamic method made, so operators and the lab
 /// can see the vehicle's damping, restoring and Coriolis coefficients and how far the vehicle
 /// moved while it was being excited.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.DynamicsMsg.v3")]

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 /// The daemon answers every sample with one [`crate::ThrustCommand`]. Time comes from the
 /// sensor's monotonic clock, never the wall clock, so the same code runs in real time and
 /// faster than real time against the simulator.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.ImuSample.v1")]

@@ -50,6 +50,7 @@ wire_enum! {
 /// same two samples. With the recorded IMU stream and the daemon's configuration
 /// ([`crate::ConfigMsg`]) it is everything the machine saw, so `thrusterd replay` can run the
 /// same machine offline and reach the same models (docs/recording.md).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.InputMsg.v1")]

@@ -38,6 +38,7 @@ wire_enum! {
 ///
 /// DOF order of every 6-row matrix is [`Dof`]: roll, pitch, yaw, surge, sway, heave.
 /// Columns at and beyond `count` are ignored and should be zero.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.ModelMsg.v2")]

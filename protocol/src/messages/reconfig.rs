@@ -22,6 +22,7 @@ wire_enum! {
 /// A change of the thruster configuration (driver or operator -> daemon, service
 /// `reconfig`). It starts re-estimation; when it declares the new geometry the daemon
 /// swaps in the nominal model for it at once.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.ReconfigEvent.v1")]

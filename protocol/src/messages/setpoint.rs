@@ -2,6 +2,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
 /// Desired attitude and depth (operator -> daemon, service `setpoint`, history 1).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[type_name("thrusterd.Setpoint.v1")]

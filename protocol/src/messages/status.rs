@@ -43,6 +43,7 @@ wire_enum! {
 }
 
 /// Daemon progress and health (daemon -> all, service `status`, history 1).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.StatusMsg.v3")]

@@ -15,6 +15,7 @@ use crate::wire::UnknownEnumValue;
 /// its flag is clear, so a plot never meets NaN.
 ///
 /// Angles are radians, like every other message; `thrusterctl watch` shows degrees.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[type_name("thrusterd.TelemetryMsg.v1")]

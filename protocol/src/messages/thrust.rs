@@ -20,6 +20,7 @@ wire_enum! {
 
 /// Thruster commands answering one [`crate::ImuSample`] (daemon -> driver, service
 /// `thrust`).
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.ThrustCommand.v1")]

@@ -5,6 +5,7 @@ use super::{clamp_count, DOF_COUNT, MAX_THRUSTERS};
 
 /// The simulator's true thruster model (simulator -> anyone, service `truth`, history 1),
 /// so tests and the study can score estimates. Never used for control.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.TruthMsg.v2")]
@@ -65,6 +66,7 @@ impl TruthMsg {
 /// The simulated vehicle's true state (simulator -> anyone, service `vehicle`), one per IMU
 /// sample, so experiments can score attitude control against the truth rather than against the
 /// daemon's own estimate. Never used for control.
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
 #[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.VehicleStateMsg.v1")]

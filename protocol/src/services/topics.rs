@@ -133,22 +133,36 @@ impl Topic {
                 max_buffer: 16,
                 default_buffer: 8,
             },
-            // Discrete events: keep a few, but do not replay old ones to a new reader. The
-            // input journal is one of them: a journal joined late cannot be replayed anyway
-            // (the machine's state at the join is unknown).
-            Topic::Reconfig | Topic::Input => TopicQos {
+            // Discrete events: keep a few, but do not replay old ones to a new reader.
+            Topic::Reconfig => TopicQos {
                 history: 0,
                 max_buffer: 16,
                 default_buffer: 8,
             },
-            // State: a late joiner gets the latest value; readers want the newest.
+            // The input journal: a replay needs every entry, and a solve result is journaled
+            // for every job, several per sample in a burst; room for the recorder (which asks
+            // for the maximum) to be descheduled for a while. No history: a journal joined
+            // late cannot be replayed anyway (the machine's state at the join is unknown).
+            Topic::Input => TopicQos {
+                history: 0,
+                max_buffer: 64,
+                default_buffer: 8,
+            },
+            // State: a late joiner gets the latest value; readers want the newest. The
+            // recorder asks for the maximum: 16 hold 1.6 s of driver status at 10 Hz (4 lost
+            // one in a paced demo recording on a loaded 2-core machine).
             Topic::Model
             | Topic::Status
             | Topic::Truth
             | Topic::Setpoint
             | Topic::DriverStatus
-            | Topic::Dynamics
-            | Topic::Config => TopicQos {
+            | Topic::Dynamics => TopicQos {
+                history: 1,
+                max_buffer: 16,
+                default_buffer: 2,
+            },
+            // The configuration: once per daemon start, 16 KiB a message.
+            Topic::Config => TopicQos {
                 history: 1,
                 max_buffer: 4,
                 default_buffer: 2,

@@ -55,6 +55,10 @@ pub struct Machine {
     run: EstimationRun,
     levelling: Option<Levelling>,
     resume: Resume,
+    /// An emergency stop holds the thrusters off: set by `Request::Stop`, cleared only by an
+    /// operator's estimate or hold. While set nothing starts them on its own (a
+    /// reconfiguration does not re-estimate, a cleared fault does not resume).
+    stopped: bool,
     good_samples: u32,
     events: Vec<Event>,
     imu_rate_hz: f64,
@@ -88,6 +92,7 @@ impl Machine {
             run: EstimationRun::new(setup.machine.solve_budget_s),
             levelling: None,
             resume: Resume::Idle,
+            stopped: false,
             good_samples: 0,
             events: Vec::new(),
             imu_rate_hz: 0.0,
@@ -424,6 +429,7 @@ impl Machine {
                     )));
                 }
                 let t = self.last_t_ns.unwrap_or(0);
+                self.stopped = false;
                 self.start_estimation(t, "estimate requested");
                 Ok(format!("estimating {} thrusters", self.n))
             }
@@ -455,6 +461,7 @@ impl Machine {
                     return Err(Refused(NO_IMU_YET.into()));
                 }
                 self.run.stop();
+                self.stopped = false;
                 self.target = None;
                 self.controller.reset();
                 self.transition(State::Active, "holding attitude");
@@ -470,6 +477,30 @@ impl Machine {
                 self.phase_start_ns = t;
                 self.transition(State::Idle, "idle on request: thrusters neutral");
                 Ok("idle".into())
+            }
+            Request::Stop => {
+                // Whatever runs (an estimation, its solve, levelling, control) ends here; the
+                // next command is neutral. The model in force stays, so `hold` can resume.
+                self.run.stop();
+                self.levelling = None;
+                self.controller.reset();
+                self.stopped = true;
+                self.resume = Resume::Idle;
+                let t = self.last_t_ns.unwrap_or(0);
+                if self.state == State::Fault {
+                    // Already neutral; after the fault clears it stays idle.
+                    return Ok(
+                        "emergency stop: in fault, thrusters neutral; idle after it \
+                               clears, until estimate or hold"
+                            .into(),
+                    );
+                }
+                self.phase_start_ns = t;
+                self.transition(
+                    State::Idle,
+                    "emergency stop: thrusters neutral until estimate or hold",
+                );
+                Ok("emergency stop: thrusters neutral until estimate or hold".into())
             }
             Request::Revert => {
                 let Some(prev) = self.models.take_previous() else {
@@ -521,7 +552,9 @@ impl Machine {
         self.n = count;
         self.geometry = r.geometry.clone().filter(|g| g.positions.len() == count);
         let t = self.last_t_ns.unwrap_or(0);
-        let mut estimate = self.setup.machine.on_reconfig == ReconfigPolicy::Estimate;
+        // After an emergency stop a reconfiguration swaps models but drives no thruster.
+        let mut estimate =
+            self.setup.machine.on_reconfig == ReconfigPolicy::Estimate && !self.stopped;
         // Before any swap: what the learned model in force says about the unchanged rest.
         let prior = self.carry_over(r.change, count);
         if self.state.is_estimating() {

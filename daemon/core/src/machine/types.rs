@@ -127,6 +127,9 @@ pub enum Request {
     Hold,
     Idle,
     Revert,
+    /// Emergency stop: neutral now, and nothing starts the thrusters again until an
+    /// estimate or hold request (see `RequestKind::Stop`).
+    Stop,
 }
 
 /// A request that cannot be carried out now.
