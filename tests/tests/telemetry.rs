@@ -242,10 +242,21 @@ fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_erro
         last["pulses_planned"].as_u64().unwrap() >= pulses[pulses.len() - 1],
         "{last}"
     );
-    let bound = last["error_bound"]
-        .as_f64()
-        .expect("an error bound by the end");
-    assert!(bound > 0.0 && bound < 0.5, "{last}");
+    // The bound comes from a progress solve off the control thread, due a solve budget after
+    // each pulse: the run's last lines can precede the latest one (on a loaded machine the
+    // last line had none in 3 of 5 runs). The last line that has one must be a sane bound
+    // late in the run.
+    let bounded = est
+        .iter()
+        .rev()
+        .find(|v| v["estimation"]["error_bound"].as_f64().is_some())
+        .unwrap_or_else(|| panic!("no estimation line with an error bound: {last}"));
+    let bound = bounded["estimation"]["error_bound"].as_f64().unwrap();
+    assert!(bound > 0.0 && bound < 0.5, "{bounded}");
+    assert!(
+        bounded["estimation"]["pulse"].as_u64().unwrap() >= 4,
+        "the bound appeared only at {bounded}"
+    );
     assert!(f(&last, "sigma_rot") > 0.0, "{last}");
     assert!(
         est.iter()
