@@ -119,20 +119,21 @@ fn an_imu_off_the_centre_is_found_refused_and_then_used_from_the_drawings() {
     assert!((learned - 0.15).abs() <= 0.01, "learned x {learned}");
 }
 
-/// Issue 32, moving water through the processes: in the `moderate` preset (a 0.3 m/s current
-/// and a 0.15 Hz swell of 10 N / 1 N m) the swell swings AMOUR-5 41-90 deg while it is excited
-/// and its models were 10-13 % off against bounds of 4-6 %; the daemon refuses them, saying how
-/// much rotation was unexplained (measured 0.031-0.061 rad/s over seeds 1-5).
+/// Issue 32, moving water through the processes: in the `rough` preset (a 0.5 m/s current
+/// and a 0.15 Hz swell of 20 N / 2 N m) the swell swings AMOUR-5 118-151 deg while it is excited
+/// and its models were 14-41 % off against bounds of 6-15 %; the daemon refuses them, saying how
+/// much rotation was unexplained (measured 0.038-0.220 rad/s over seeds 1-5; seed 1, this
+/// test's, 0.097-0.158 over two runs against the limit of 0.05).
 #[test]
 fn a_model_the_water_made_is_refused() {
-    let (ok, v, log) = demo_outcome(&["--noise", "realistic", "--water", "moderate"]);
+    let (ok, v, log) = demo_outcome(&["--noise", "realistic", "--water", "rough"]);
     assert!(!ok, "a refused model fails the demo\n{log}");
     let refused = v["refused"].as_str().unwrap_or_else(|| panic!("{log}"));
     assert!(
         refused.contains("rad/s of rotation unexplained") && refused.contains("model rejected"),
         "{refused}"
     );
-    assert_eq!(v["vehicle_as_is"]["water"], "moderate", "{v}");
+    assert_eq!(v["vehicle_as_is"]["water"], "rough", "{v}");
     assert_eq!(v["clean_exit"], true);
     assert_eq!(v["files_left"], 0);
 }

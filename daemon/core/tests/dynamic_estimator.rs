@@ -1094,10 +1094,10 @@ fn noise_free_the_thruster_lag_is_learned_on_vehicles_the_daemon_was_not_told_ab
         "lag assumed 0.1 s on a 0.05 s vehicle: {:.3}",
         o.err_rot
     );
-    // And the daemon no longer swaps it in: the wrong lag leaves 0.042 rad/s of rotation
-    // unexplained (issue 32's test for unmodelled forcing; the limit is 0.01).
+    // The wrong lag leaves 0.042 rad/s of rotation unexplained (issue 32's measure of
+    // unmodelled forcing; below the default limit of 0.05, so it is not refused).
     assert!(
-        o.refused && o.terms.unexplained_rate_radps > 0.01,
+        o.terms.unexplained_rate_radps > 0.01,
         "refused {} with {:.4} rad/s unexplained",
         o.refused,
         o.terms.unexplained_rate_radps
@@ -1329,10 +1329,12 @@ fn a_model_the_water_made_is_refused() {
         noise: NoisePreset::Realistic,
         ..SensorConfig::default()
     };
+    // Above the default limit of 0.05 rad/s (measured 0.060, 0.094, 0.072; eight_vectored in
+    // moderate water leaves 0.038 and is not refused by default).
     for (name, water) in [
         ("amour5", WaterPreset::Moderate),
-        ("eight_vectored", WaterPreset::Moderate),
         ("amour5", WaterPreset::Rough),
+        ("eight_vectored", WaterPreset::Rough),
     ] {
         let ideal = Ideal {
             allow_refusal: true,
@@ -1341,7 +1343,7 @@ fn a_model_the_water_made_is_refused() {
         };
         let o = estimate_ideal(name, sensors.clone(), 1, EstimatorConfig::dynamic(), ideal);
         assert!(
-            o.refused && o.terms.unexplained_rate_radps > 0.02,
+            o.refused && o.terms.unexplained_rate_radps > 0.05,
             "{name} in {water:?}: refused {}, {:.4} rad/s unexplained, err {:.3} / {:.3}",
             o.refused,
             o.terms.unexplained_rate_radps,

@@ -97,7 +97,7 @@ impl Default for MachineConfig {
             settle_max_s: 1.0,
             settle_quiet_s: 0.1,
             max_swap_rel_err: 0.25,
-            max_unexplained_rate_radps: 0.01,
+            max_unexplained_rate_radps: 0.05,
             on_reconfig: ReconfigPolicy::Estimate,
             control_after_estimate: true,
             max_sample_gap_s: 0.1,
