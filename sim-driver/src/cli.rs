@@ -79,6 +79,13 @@ pub struct RunArgs {
     /// daemon answers].
     #[arg(long, value_name = "X", requires = "lockstep")]
     pub pace: Option<f64>,
+    /// Lockstep, advancing only as far as standard input allows (`run N` lines; the
+    /// simulator answers `at SEQ T_NS` on standard output when it has used them up): the
+    /// process that started it acts at exact vehicle times (thrusterctl demo, experiment).
+    /// Each answer is then awaited up to 600 s of wall time (`[lockstep] timeout_ms` raised
+    /// to it): going on without it would make the run depend on the machine's speed.
+    #[arg(long, requires = "lockstep")]
+    pub stepped: bool,
     /// Stop after this much vehicle time, s [default: run until SIGINT/SIGTERM].
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,

@@ -155,6 +155,9 @@ impl SensorSettings {
     }
 }
 
+/// A stepped simulator's wait for each answer, wall ms (the most `timeout_ms` allows).
+pub const STEPPED_TIMEOUT_MS: u64 = 600_000;
+
 /// `[lockstep]`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -257,6 +260,8 @@ pub struct Settings {
     pub lockstep: LockstepSettings,
     /// Real-time tuning.
     pub realtime: RealtimeSettings,
+    /// Lockstep advanced by standard input (`--stepped`, command line only).
+    pub stepped: bool,
 }
 
 impl Settings {
@@ -351,9 +356,16 @@ impl Settings {
                     })?,
                     None => file.lockstep.pace,
                 },
+                // Stepped runs are for reproducible results: a late answer is waited for.
+                timeout_ms: if args.stepped {
+                    file.lockstep.timeout_ms.max(STEPPED_TIMEOUT_MS)
+                } else {
+                    file.lockstep.timeout_ms
+                },
                 ..file.lockstep
             },
             realtime: file.realtime,
+            stepped: args.stepped,
         })
     }
 

@@ -64,8 +64,10 @@ pub struct RuntimeSection {
     /// systemd's StateDirectory).
     pub state_dir: PathBuf,
     /// No IMU sample for this long is a sensor dropout: neutral thrust and Fault (default 100).
+    /// Not judged in lockstep, where no vehicle time passes while the driver is silent.
     pub imu_timeout_ms: u64,
-    /// Publish status at least this often, wall clock (default 100).
+    /// Publish status at least this often, wall clock (default 100); vehicle time in lockstep,
+    /// where status goes out with the samples.
     pub status_period_ms: u64,
     /// Low-latency mode: poll for the next IMU sample for up to this long before blocking on
     /// the event (default 0 = always block). An event wake-up costs ~50 us on a small VM,
@@ -87,8 +89,10 @@ pub struct RuntimeSection {
     /// applied when it comes and counted. `thrusterd run --lockstep` sets it.
     pub lockstep: bool,
     /// In lockstep, the longest wait for a due solve, ms of wall time (default 1000, at most
-    /// 1500: below the simulator's 2000 ms answer timeout, so it never steps past a waiting
-    /// daemon). Past it the machine faults (neutral), saying so.
+    /// 600000). Keep it below the simulator's answer timeout (`[lockstep] timeout_ms`, 2000
+    /// by default; a stepped simulator waits 600000), so it never steps past a waiting
+    /// daemon. Past it the machine faults (neutral), saying so. The lab's stepped runs use
+    /// 300000: a solve starved by a loaded machine must not change the result.
     pub lockstep_wait_ms: u64,
 }
 
@@ -398,7 +402,7 @@ impl DaemonConfig {
             ("runtime.imu_timeout_ms", r.imu_timeout_ms, 1, 60_000),
             ("runtime.status_period_ms", r.status_period_ms, 0, 60_000),
             ("runtime.spin_us", r.spin_us, 0, 1_000_000),
-            ("runtime.lockstep_wait_ms", r.lockstep_wait_ms, 1, 1_500),
+            ("runtime.lockstep_wait_ms", r.lockstep_wait_ms, 1, 600_000),
             ("telemetry.every_n", self.telemetry.every_n, 0, 10_000),
         ] {
             if !(lo..=hi).contains(&v) {

@@ -244,7 +244,7 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
                     {
                         bail!("no vehicle state from the simulator");
                     }
-                    std::thread::sleep(Duration::from_micros(200));
+                    session.tick()?;
                     continue;
                 };
                 let t = v.t_ns.saturating_sub(t_start) as f64 * 1e-9;

@@ -9,5 +9,6 @@ pub mod experiment;
 pub mod recording;
 pub mod scoring;
 pub mod session;
+pub mod stepper;
 pub mod study;
 pub mod water;

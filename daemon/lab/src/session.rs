@@ -28,13 +28,26 @@ pub struct ChildProc {
 }
 
 impl ChildProc {
-    fn spawn(name: &'static str, exe: &Path, args: &[String], dir: &Path) -> Result<ChildProc> {
+    /// `piped`: standard input and output are pipes to this process (a stepped simulator's
+    /// protocol, [`crate::stepper`]); the log is then standard error only.
+    fn spawn(
+        name: &'static str,
+        exe: &Path,
+        args: &[String],
+        dir: &Path,
+        piped: bool,
+    ) -> Result<ChildProc> {
         let log = dir.join(format!("{name}.log"));
         let out = std::fs::File::create(&log)?;
+        let (stdin, stdout) = if piped {
+            (Stdio::piped(), Stdio::piped())
+        } else {
+            (Stdio::null(), Stdio::from(out.try_clone()?))
+        };
         let child = Command::new(exe)
             .args(args)
-            .stdin(Stdio::null())
-            .stdout(out.try_clone()?)
+            .stdin(stdin)
+            .stdout(stdout)
             .stderr(out)
             .spawn()
             .with_context(|| format!("starting {}", exe.display()))?;
@@ -63,6 +76,12 @@ impl ChildProc {
         let _ = child.kill();
         let _ = child.wait();
         false
+    }
+
+    /// The pipes of a process spawned `piped`.
+    fn take_pipes(&mut self) -> Option<(std::process::ChildStdin, std::process::ChildStdout)> {
+        let child = self.child.as_mut()?;
+        Some((child.stdin.take()?, child.stdout.take()?))
     }
 
     fn kill(&mut self) {
@@ -113,6 +132,8 @@ pub struct Binaries {
     pub daemon_monitor: bool,
     /// `thrusterd run --lockstep` exists (waits for a due solve in lockstep).
     pub daemon_lockstep: bool,
+    /// `thruster-sim run --stepped` exists (the lab steps vehicle time itself).
+    pub sim_stepped: bool,
 }
 
 impl Binaries {
@@ -158,11 +179,13 @@ impl Binaries {
                 );
             }
         }
-        let sim_pace = Command::new(&sim)
+        let sim_help = Command::new(&sim)
             .args(["run", "--help"])
             .output()
-            .map(|o| String::from_utf8_lossy(&o.stdout).contains("--pace"))
-            .unwrap_or(false);
+            .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+            .unwrap_or_default();
+        let sim_pace = sim_help.contains("--pace");
+        let sim_stepped = sim_help.contains("--stepped");
         let daemon_monitor = probe_config(&daemon, "[monitor]\naction = \"report\"\n");
         let daemon_lockstep = Command::new(&daemon)
             .args(["run", "--help"])
@@ -175,6 +198,7 @@ impl Binaries {
             sim_pace,
             daemon_monitor,
             daemon_lockstep,
+            sim_stepped,
         })
     }
 }
@@ -344,6 +368,8 @@ pub struct Session {
     sim: ChildProc,
     /// The pace the simulator runs at, if any.
     pub pace: Option<f64>,
+    /// In lockstep: the lab steps vehicle time itself ([`crate::stepper`]).
+    stepper: Option<crate::stepper::Stepper>,
     /// While an estimation runs: how far the vehicle moves (from the true vehicle state).
     excursion: Option<Excursion>,
     last_excursion: Option<Excursion>,
@@ -407,6 +433,11 @@ impl Session {
             if bins.daemon_lockstep {
                 daemon_args.push("--lockstep".into());
             }
+            // Stepped: a solve starved by a loaded machine is waited for (as the simulator
+            // waits for every answer), never taken for a hung solver.
+            if bins.sim_stepped {
+                daemon_args.extend(["--lockstep-wait-ms".into(), "300000".into()]);
+            }
         }
         match &spec.daemon_config {
             DaemonConfig::Defaults => {}
@@ -429,10 +460,14 @@ impl Session {
             spec.seed.to_string(),
         ];
         let mut pace = None;
+        let stepped = !spec.realtime && bins.sim_stepped;
         if spec.realtime {
             sim_args.push("--realtime".into());
         } else {
             sim_args.push("--lockstep".into());
+            if stepped {
+                sim_args.push("--stepped".into());
+            }
             if let (Some(x), true) = (spec.pace, bins.sim_pace) {
                 sim_args.extend(["--pace".into(), x.to_string()]);
                 pace = Some(x);
@@ -453,8 +488,12 @@ impl Session {
             Some(options) => Some(crate::recording::Recording::start(&ipc, options.clone())?),
             None => None,
         };
-        let daemon = ChildProc::spawn("thrusterd", &bins.daemon, &daemon_args, &tmp.path)?;
-        let sim = ChildProc::spawn("thruster-sim", &bins.sim, &sim_args, &tmp.path)?;
+        let daemon = ChildProc::spawn("thrusterd", &bins.daemon, &daemon_args, &tmp.path, false)?;
+        let mut sim = ChildProc::spawn("thruster-sim", &bins.sim, &sim_args, &tmp.path, stepped)?;
+        let stepper = match sim.take_pipes() {
+            Some((to_sim, from_sim)) => Some(crate::stepper::Stepper::new(to_sim, from_sim)?),
+            None => None,
+        };
         Ok(Session {
             recording,
             ports: Some(ports),
@@ -463,6 +502,7 @@ impl Session {
             daemon,
             sim,
             pace,
+            stepper,
             excursion: None,
             last_excursion: None,
             _tmp: tmp,
@@ -550,8 +590,34 @@ impl Session {
             if start.elapsed() > timeout {
                 return Err(self.timeout_error(what));
             }
-            std::thread::sleep(Duration::from_millis(1));
+            self.tick()?;
         }
+    }
+
+    /// Lets vehicle time pass: a step of [`crate::stepper::STEP_SAMPLES`] samples when the
+    /// lab steps the simulator, a short sleep otherwise. Every wait of the lab goes through
+    /// here, so in lockstep it acts only between steps, at vehicle times that do not depend
+    /// on the machine's speed.
+    pub fn tick(&mut self) -> Result<()> {
+        match self.stepper.as_mut() {
+            Some(stepper) => {
+                if let Err(e) = stepper.advance(crate::stepper::STEP_SAMPLES) {
+                    self.check_alive("the next step of the simulator")?;
+                    return Err(e.context(self.timeout_error("the next step of the simulator")));
+                }
+                Ok(())
+            }
+            None => {
+                std::thread::sleep(Duration::from_micros(200));
+                Ok(())
+            }
+        }
+    }
+
+    /// The vehicle time the stepped simulator holds at, ns (None when not stepped, or
+    /// before its first sample was answered).
+    pub fn held_ns(&self) -> Option<u64> {
+        self.stepper.as_ref().and_then(|s| s.held()).map(|h| h.t_ns)
     }
 
     /// Both processes up, the daemon answering samples, the simulator's truth received.
@@ -618,12 +684,40 @@ impl Session {
             matches!(s.state(), Ok(DaemonState::Idle) | Ok(DaemonState::Active))
                 && s.text().contains("model rejected")
         };
+        // An estimation that faulted (a lost IMU, a solve past its time) or was aborted ends
+        // in Fault or Idle without a model: the wait ends there, with the daemon's words,
+        // not at the timeout while vehicle time runs on.
+        let mut started = false;
+        let mut ended = None;
         let done = self.wait_status("the estimated model", timeout, &mut |s| {
             progress(s);
-            (s.state() == Ok(DaemonState::Active) && s.model_version > before) || refused(s)
+            let state = s.state();
+            started |= matches!(
+                state,
+                Ok(DaemonState::MeasureNoise
+                    | DaemonState::Pulse
+                    | DaemonState::Settle
+                    | DaemonState::Solve)
+            );
+            if started
+                && matches!(state, Ok(DaemonState::Fault | DaemonState::Idle))
+                && s.model_version <= before
+                && !refused(s)
+            {
+                ended = Some(format!(
+                    "{}: {}",
+                    state.map(|x| x.name()).unwrap_or("?"),
+                    s.text()
+                ));
+                return true;
+            }
+            (state == Ok(DaemonState::Active) && s.model_version > before) || refused(s)
         });
         self.last_excursion = self.excursion.take();
         let done = done?;
+        if let Some(why) = ended {
+            bail!("the estimation ended without a model ({why})");
+        }
         if refused(&done) && done.model_version <= before {
             return Err(ModelRefused(done.text().to_string()).into());
         }
@@ -679,7 +773,7 @@ impl Session {
             if start.elapsed() > Duration::from_secs(10) {
                 return Err(self.timeout_error(what));
             }
-            std::thread::sleep(Duration::from_micros(200));
+            self.tick()?;
         }
     }
 

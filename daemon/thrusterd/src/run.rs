@@ -71,6 +71,9 @@ pub struct RunArgs {
     /// due by a sample's time before handling the sample.
     #[arg(long)]
     lockstep: bool,
+    /// Override `runtime.lockstep_wait_ms` (the longest wait for a due solve in lockstep).
+    #[arg(long, value_name = "MS")]
+    lockstep_wait_ms: Option<u64>,
 }
 
 /// Least vehicle time between two saves of a refined model, ns (a minute).
@@ -107,6 +110,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
     if args.lockstep {
         cfg.runtime.lockstep = true;
+    }
+    if let Some(ms) = args.lockstep_wait_ms {
+        cfg.runtime.lockstep_wait_ms = ms;
     }
 
     // Refused here, before anything is created, with the command line applied: a state_dir
@@ -176,6 +182,8 @@ struct Daemon {
     /// Telemetry messages that could not be published (logged sparingly).
     telemetry_failures: u64,
     last_imu: Option<(u64, u64)>,
+    /// In lockstep: vehicle time at which the next periodic status is due, ns.
+    next_status_ns: u64,
     pending_estimate: bool,
     /// The predecessor died while controlling (see `session`): hold with the loaded model
     /// as soon as the IMU is up.
@@ -261,6 +269,7 @@ impl Daemon {
             since_telemetry: 0,
             telemetry_failures: 0,
             last_imu: None,
+            next_status_ns: 0,
             pending_estimate: false,
             pending_hold: false,
             session: None,
@@ -302,24 +311,28 @@ impl Daemon {
             .context("another thrusterd already serves this namespace")?;
         self.open_session();
         let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
-        let reconfig_in = Inbox::<ReconfigEvent>::create(&node, &self.ipc)?;
-        let setpoint_in = Inbox::<Setpoint>::create(&node, &self.ipc)?;
-        let driver_in = Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?;
-        // Optional: only a vehicle with a DVL publishes here. Polled each round, before the
-        // IMU samples, which is when a driver sends it.
-        let dvl_in = Inbox::<DvlSample>::create(&node, &self.ipc)?;
+        let side = SideInputs {
+            reconfig: Inbox::<ReconfigEvent>::create(&node, &self.ipc)?,
+            setpoint: Inbox::<Setpoint>::create(&node, &self.ipc)?,
+            driver: Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?,
+            // Optional: only a vehicle with a DVL publishes here.
+            dvl: Inbox::<DvlSample>::create(&node, &self.ipc)?,
+        };
         let thrust = Port::<ThrustCommand>::create(&node, &self.ipc)?;
         // Off (every_n = 0): no service at all, so nothing in the loop pays for it.
         let telemetry = match self.cfg.telemetry.every_n {
             0 => None,
             _ => Some(Port::<TelemetryMsg>::create(&node, &self.ipc)?),
         };
-        let out = Outputs { thrust, telemetry };
-        let model_out = ModelPorts {
-            model: Port::<ModelMsg>::create(&node, &self.ipc)?,
-            dynamics: Port::<DynamicsMsg>::create(&node, &self.ipc)?,
+        let out = Outputs {
+            thrust,
+            telemetry,
+            model: ModelPorts {
+                model: Port::<ModelMsg>::create(&node, &self.ipc)?,
+                dynamics: Port::<DynamicsMsg>::create(&node, &self.ipc)?,
+            },
+            status: Port::<StatusMsg>::create(&node, &self.ipc)?,
         };
-        let status_out = Port::<StatusMsg>::create(&node, &self.ipc)?;
         // The effective configuration (history 1) and the input journal: what a replay of a
         // recording needs besides the IMU stream. Before the first sample is read.
         let config_out = Port::<ConfigMsg>::create(&node, &self.ipc)?;
@@ -339,20 +352,20 @@ impl Daemon {
         let waitset = create_waitset()?;
         let imu_timeout = Duration::from_millis(self.cfg.runtime.imu_timeout_ms);
         let imu_guard = waitset.attach_deadline(imu_in.listener(), imu_timeout)?;
-        let reconfig_guard = waitset.attach_notification(reconfig_in.listener())?;
-        let setpoint_guard = waitset.attach_notification(setpoint_in.listener())?;
-        let driver_guard = waitset.attach_notification(driver_in.listener())?;
+        let reconfig_guard = waitset.attach_notification(side.reconfig.listener())?;
+        let setpoint_guard = waitset.attach_notification(side.setpoint.listener())?;
+        let driver_guard = waitset.attach_notification(side.driver.listener())?;
         let control_guard = waitset.attach_notification(control.listener())?;
         let status_period = Duration::from_millis(self.cfg.runtime.status_period_ms.max(1));
         let spin = Duration::from_micros(self.cfg.runtime.spin_us);
 
         if let Some(model) = self.machine.model().cloned() {
-            self.publish_model(&model_out, &model);
+            self.publish_model(&out.model, &model);
         }
         info!(thrusters = self.machine.thrusters(), "thrusterd serving");
         let mut systemd = thruster_driver_kit::Systemd::new();
         systemd.ready();
-        self.publish_status(&status_out);
+        self.publish_status(&out.status);
         let mut last_status = Instant::now();
         let mut wait_errors = 0u32;
 
@@ -365,7 +378,7 @@ impl Daemon {
                 let mut idle_since = Instant::now();
                 while idle_since.elapsed() < spin && housekeeping.elapsed() < HOUSEKEEPING {
                     if let Some(sample) = imu_in.recv()? {
-                        self.on_imu(&sample, &out);
+                        self.on_sample(&sample, &side, &out)?;
                         self.stale_reported = false;
                         idle_since = Instant::now();
                     } else {
@@ -406,18 +419,15 @@ impl Daemon {
             if imu {
                 imu_in.drain_events()?;
             }
-            dvl_in.drain_events()?;
-            while let Some(d) = dvl_in.recv()? {
-                match d.validate() {
-                    Ok(()) => {
-                        self.machine.on_dvl(d.velocity);
-                        self.journal(|j| j.record(InputKind::Dvl, false, |m| m.dvl = d.velocity));
-                    }
-                    Err(reason) => {
-                        self.rejected.record(&reason);
-                        warn!("DVL sample rejected: {reason}");
-                    }
-                }
+            side.dvl.drain_events()?;
+            if reconf {
+                side.reconfig.drain_events()?;
+            }
+            if drv {
+                side.driver.drain_events()?;
+            }
+            if setp {
+                side.setpoint.drain_events()?;
             }
             // The inbox is read on every wake-up, not only on an IMU event: a sample whose
             // notification was lost (a driver that notified before this listener was
@@ -425,9 +435,11 @@ impl Daemon {
             // for its answer forever. An empty inbox costs one check.
             let mut got = false;
             while let Some(sample) = imu_in.recv()? {
-                self.on_imu(&sample, &out);
+                self.on_sample(&sample, &side, &out)?;
                 got = true;
             }
+            // What came without a sample (a setpoint while a lockstep driver waits).
+            self.take_side_inputs(&side)?;
             if got {
                 self.stale_reported = false;
             }
@@ -445,66 +457,19 @@ impl Daemon {
                 self.machine.on_no_imu_yet(&why);
                 self.journal(|j| j.text(InputKind::NoImuYet, 0, false, &why));
             }
-            if stale && !got && !self.stale_reported && self.last_imu.is_some() {
+            // In lockstep no vehicle time passes while the driver sends nothing (it waits for
+            // us, or for whoever steps it): silence there is a pause, not a lost IMU.
+            if stale
+                && !got
+                && !self.stale_reported
+                && self.last_imu.is_some()
+                && !self.cfg.runtime.lockstep
+            {
                 let why = format!("no IMU sample for {} ms", imu_timeout.as_millis());
                 let cmd = self.machine.on_imu_stale(&why);
                 self.journal(|j| j.text(InputKind::ImuStale, 0, false, &why));
                 self.send_thrust(&out.thrust, &cmd);
                 self.stale_reported = true;
-            }
-            if reconf {
-                reconfig_in.drain_events()?;
-                while let Some(e) = reconfig_in.recv()? {
-                    match e.validate().and_then(|_| check_reconfig(&e)) {
-                        Ok(()) => {
-                            self.machine.on_reconfig(wire::reconfig(&e));
-                            self.journal(|j| j.reconfig(&e));
-                        }
-                        Err(reason) => {
-                            self.rejected.record(&reason);
-                            warn!("reconfiguration event rejected: {reason}");
-                        }
-                    }
-                }
-            }
-            if drv {
-                driver_in.drain_events()?;
-            }
-            // Read on every round like the IMU: the driver's report decides whether thrust
-            // may go out at all, so a lost notification must not delay it.
-            while let Some(report) = driver_in.recv()? {
-                match report.validate() {
-                    Ok(()) => {
-                        self.driver.observe(&report, self.machine.thrusters());
-                        self.driver_judged_for = None;
-                        self.take_supply(report.supply_voltage());
-                    }
-                    Err(reason) => {
-                        self.rejected.record(&reason);
-                        warn!("driver status rejected: {reason}");
-                    }
-                }
-            }
-            // Judged on a new report, and when a reconfiguration changed the count the
-            // driver must match.
-            if self.driver_judged_for != Some(self.machine.thrusters()) {
-                self.judge_outputs();
-                self.driver_judged_for = Some(self.machine.thrusters());
-            }
-            if setp {
-                setpoint_in.drain_events()?;
-                while let Some(s) = setpoint_in.recv()? {
-                    match s.validate() {
-                        Ok(()) => {
-                            self.machine.on_setpoint_input(&wire::setpoint(&s));
-                            self.journal(|j| j.setpoint(&s));
-                        }
-                        Err(reason) => {
-                            self.rejected.record(&reason);
-                            warn!("setpoint rejected: {reason}");
-                        }
-                    }
-                }
             }
             if ctrl {
                 control.drain_events()?;
@@ -519,6 +484,10 @@ impl Daemon {
                 let mut refused = 0u32;
                 let served = control.serve_deferring(|kind, req| {
                     let reply = self.on_request(kind, req);
+                    // What the request changed goes out before its answer: a client that
+                    // reads status after the answer finds it there (and the lab, stepping a
+                    // lockstep simulator, acts on it at the same vehicle time every run).
+                    self.publish_changes(&out);
                     if let Reply::Now(response) = &reply {
                         if !response.is_ok() {
                             refused += 1;
@@ -535,45 +504,32 @@ impl Daemon {
                     .saturating_add(refused)
                     .saturating_add(served.invalid as u32);
             }
-            if self.pending_estimate
-                && self.last_imu.is_some()
-                && self.machine.state() != thrusterd_core::machine::State::Fault
-            {
-                self.pending_estimate = false;
-                let result = self.machine.on_request(Request::Estimate);
-                self.journal_request(RequestKind::Estimate, 0.0, result.is_err());
-                if let Err(e) = result {
-                    warn!("start-up estimation refused: {e}");
-                }
-            }
-            if self.pending_hold
-                && self.last_imu.is_some()
-                && self.machine.state() != thrusterd_core::machine::State::Fault
-            {
-                self.pending_hold = false;
-                let result = self.machine.on_request(Request::Hold);
-                self.journal_request(RequestKind::Hold, 0.0, result.is_err());
-                match result {
-                    Ok(_) => info!("resumed control after a crash: holding attitude"),
-                    Err(e) => warn!("could not resume control after a crash: {e}"),
-                }
-            }
-            self.poll_load(&control);
-            let changed = self.handle_events(&model_out);
+            self.start_pending();
+            self.poll_load(&control, &out);
+            let changed = self.handle_events(&out.model);
             self.poll_saves();
             systemd.tick();
-            if changed || last_status.elapsed() >= status_period {
+            let wall_due = last_status.elapsed() >= status_period;
+            if changed || wall_due {
                 let s = self.machine.status();
                 if s.text.starts_with(s.state.name()) {
                     systemd.status(&s.text);
                 } else {
                     systemd.status(&format!("{}: {}", s.state.name(), s.text));
                 }
-                self.publish_status(&status_out);
+            }
+            // In lockstep the periodic status goes out with the samples, every
+            // `status_period_ms` of vehicle time (`on_imu`): on the wall clock its count and
+            // its vehicle times would depend on the machine's speed.
+            let periodic = wall_due && !(self.cfg.runtime.lockstep && self.last_imu.is_some());
+            if changed || periodic {
+                self.publish_status(&out.status);
+            }
+            if wall_due {
                 // History-1 services only reach late joiners on a send or this call.
-                let _ = model_out.model.update_connections();
-                let _ = model_out.dynamics.update_connections();
-                let _ = status_out.update_connections();
+                let _ = out.model.model.update_connections();
+                let _ = out.model.dynamics.update_connections();
+                let _ = out.status.update_connections();
                 // The configuration is sent once: a recorder that joins later gets it only
                 // from here (issue 26: a late `thrusterctl record` had no `config` channel).
                 let _ = config_out.update_connections();
@@ -585,7 +541,7 @@ impl Daemon {
         systemd.stopping();
         let neutral = Command::neutral(self.machine.thrusters());
         self.send_thrust(&out.thrust, &neutral);
-        self.handle_events(&model_out);
+        self.handle_events(&out.model);
         if let Some(model) = self.machine.model().cloned() {
             self.save(&model);
         }
@@ -607,7 +563,7 @@ impl Daemon {
         }
         let mut status = self.status_msg();
         status.set_text("thrusterd stopped");
-        let _ = status_out.send(&status);
+        let _ = out.status.send(&status);
         Ok(())
     }
 
@@ -639,6 +595,113 @@ impl Daemon {
                 m.value = voltage_v.unwrap_or(0.0);
             })
         });
+    }
+
+    /// One IMU sample: the inputs that came before it, a start-up request waiting for the
+    /// IMU, then the sample itself.
+    fn on_sample(&mut self, sample: &ImuSample, side: &SideInputs, out: &Outputs) -> Result<()> {
+        self.take_side_inputs(side)?;
+        self.start_pending();
+        self.on_imu(sample, out);
+        Ok(())
+    }
+
+    /// `--estimate`, or a hold resumed after a crash, once the IMU is up (before the next
+    /// sample, so in lockstep at the same vehicle time every run).
+    fn start_pending(&mut self) {
+        use thrusterd_core::machine::State;
+        if self.last_imu.is_none() || self.machine.state() == State::Fault {
+            return;
+        }
+        if self.pending_estimate {
+            self.pending_estimate = false;
+            let result = self.machine.on_request(Request::Estimate);
+            self.journal_request(RequestKind::Estimate, 0.0, result.is_err());
+            if let Err(e) = result {
+                warn!("start-up estimation refused: {e}");
+            }
+        }
+        if self.pending_hold {
+            self.pending_hold = false;
+            let result = self.machine.on_request(Request::Hold);
+            self.journal_request(RequestKind::Hold, 0.0, result.is_err());
+            match result {
+                Ok(_) => info!("resumed control after a crash: holding attitude"),
+                Err(e) => warn!("could not resume control after a crash: {e}"),
+            }
+        }
+    }
+
+    /// Publishes the machine's events (a new model) and, if there were any, the status.
+    fn publish_changes(&mut self, out: &Outputs) {
+        if self.handle_events(&out.model) {
+            self.publish_status(&out.status);
+        }
+    }
+
+    /// Every input besides the IMU samples and the operator's requests: the DVL, announced
+    /// reconfigurations, the driver's reports and setpoints. Taken before each sample is
+    /// handled (and once per round without one), so whatever a driver or operator sent
+    /// before a sample is in effect for it: in lockstep that makes the sample each input
+    /// lands at a matter of vehicle time, not of how long the loop spun before it looked.
+    fn take_side_inputs(&mut self, side: &SideInputs) -> Result<()> {
+        while let Some(d) = side.dvl.recv()? {
+            match d.validate() {
+                Ok(()) => {
+                    self.machine.on_dvl(d.velocity);
+                    self.journal(|j| j.record(InputKind::Dvl, false, |m| m.dvl = d.velocity));
+                }
+                Err(reason) => {
+                    self.rejected.record(&reason);
+                    warn!("DVL sample rejected: {reason}");
+                }
+            }
+        }
+        while let Some(e) = side.reconfig.recv()? {
+            match e.validate().and_then(|_| check_reconfig(&e)) {
+                Ok(()) => {
+                    self.machine.on_reconfig(wire::reconfig(&e));
+                    self.journal(|j| j.reconfig(&e));
+                }
+                Err(reason) => {
+                    self.rejected.record(&reason);
+                    warn!("reconfiguration event rejected: {reason}");
+                }
+            }
+        }
+        // The driver's report decides whether thrust may go out at all.
+        while let Some(report) = side.driver.recv()? {
+            match report.validate() {
+                Ok(()) => {
+                    self.driver.observe(&report, self.machine.thrusters());
+                    self.driver_judged_for = None;
+                    self.take_supply(report.supply_voltage());
+                }
+                Err(reason) => {
+                    self.rejected.record(&reason);
+                    warn!("driver status rejected: {reason}");
+                }
+            }
+        }
+        // Judged on a new report, and when a reconfiguration changed the count the driver
+        // must match.
+        if self.driver_judged_for != Some(self.machine.thrusters()) {
+            self.judge_outputs();
+            self.driver_judged_for = Some(self.machine.thrusters());
+        }
+        while let Some(s) = side.setpoint.recv()? {
+            match s.validate() {
+                Ok(()) => {
+                    self.machine.on_setpoint_input(&wire::setpoint(&s));
+                    self.journal(|j| j.setpoint(&s));
+                }
+                Err(reason) => {
+                    self.rejected.record(&reason);
+                    warn!("setpoint rejected: {reason}");
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Hands the machine the driver's verdict on its outputs when it changed.
@@ -695,6 +758,19 @@ impl Daemon {
                     );
                 }
                 let cmd = self.machine.on_imu(&input);
+                if self.cfg.runtime.lockstep {
+                    // Whatever this sample changed, and the periodic status in vehicle time,
+                    // goes out before the answer: when the driver has the answer to sample
+                    // k, everything the daemon published up to k is there, whatever the
+                    // loop's timing (a lockstep observer reads one stream every run).
+                    let changed = self.handle_events(&out.model);
+                    if changed || input.t_ns >= self.next_status_ns {
+                        self.publish_status(&out.status);
+                        self.next_status_ns = input
+                            .t_ns
+                            .saturating_add(self.cfg.runtime.status_period_ms.max(1) * 1_000_000);
+                    }
+                }
                 let sent = self.send_thrust(&out.thrust, &cmd);
                 // After the answer went out: the sample's own latency does not include it.
                 self.dispatch_solves();
@@ -797,7 +873,7 @@ impl Daemon {
 
     /// A load in flight: answered when its file is read and installed, or told after
     /// `loader::ANSWER_WAIT` that it is still being read.
-    fn poll_load(&mut self, control: &ControlServer) {
+    fn poll_load(&mut self, control: &ControlServer, out: &Outputs) {
         match self.loader.poll() {
             Progress::Nothing => {}
             Progress::Slow { token, path } => {
@@ -837,6 +913,8 @@ impl Daemon {
                         ControlResponse::new(code, &e.to_string())
                     }
                 };
+                // The new model and status before the answer, as for any request.
+                self.publish_changes(out);
                 if !answered {
                     control.answer(token, response);
                 }
@@ -1171,8 +1249,19 @@ struct ModelPorts {
     dynamics: Port<DynamicsMsg>,
 }
 
-/// What answers an IMU sample: the thrust command, and telemetry when it is on.
+/// What the daemon publishes: the thrust command answering each sample, telemetry when it is
+/// on, models and status.
 struct Outputs {
     thrust: Port<ThrustCommand>,
     telemetry: Option<Port<TelemetryMsg>>,
+    model: ModelPorts,
+    status: Port<StatusMsg>,
+}
+
+/// The inputs read before each sample (see [`Daemon::take_side_inputs`]).
+struct SideInputs {
+    reconfig: Inbox<ReconfigEvent>,
+    setpoint: Inbox<Setpoint>,
+    driver: Inbox<DriverStatusMsg>,
+    dvl: Inbox<DvlSample>,
 }

@@ -11,6 +11,9 @@
 //!    `idle_period_ms` until answers come back;
 //! 4. step the physics one period with the held thrust, apply due scenario events, go to 1.
 //!
+//! With `--stepped`, before step 4 the simulator may take the next sample only when its
+//! controller allows it (`stepping.rs`).
+//!
 //! Start: sample 1 is re-sent every 20 ms until a subscriber receives it, and its answer is
 //! awaited without a time limit, so the simulator waits for the daemon without consuming
 //! vehicle time.
@@ -51,9 +54,25 @@ impl Driver {
             return Ok(StopReason::Signal);
         }
         let mut answering = true;
+        if self.settings.stepped {
+            self.stepping = Some(super::stepping::Stepping::from_stdin());
+        }
         loop {
             if self.duration_reached() {
                 return Ok(StopReason::Duration);
+            }
+            // Stepped: the newest sample is answered; the controller decides whether the
+            // next one may be taken (it acts at exactly this vehicle time meanwhile).
+            if let Some(stepping) = self.stepping.as_mut() {
+                if stepping.will_wait() {
+                    // History (the truth) reaches a new reader only on a connection update,
+                    // which housekeeping does on the wall clock: do it before waiting, so a
+                    // reader that looks while the run holds finds it without a step.
+                    self.ports.truth.update_connections()?;
+                }
+                if !stepping.permit(self.imu_seq, self.sim.time_ns(), &self.stop)? {
+                    return Ok(StopReason::Signal);
+                }
             }
             self.pace(cfg.pace);
             self.sim.step(self.period_ns);

@@ -20,6 +20,7 @@ pub mod truth_file;
 pub mod wait;
 
 mod lockstep;
+mod stepping;
 mod realtime;
 
 use std::time::{Duration, Instant};
@@ -92,6 +93,9 @@ pub enum DriverError {
     /// `--stats-file` was given in lockstep (it measures the real-time loop only).
     #[error("--stats-file needs real-time mode")]
     StatsNeedRealtime,
+    /// The stepping controller sent a bad line or closed standard output.
+    #[error(transparent)]
+    Stepping(#[from] stepping::SteppingError),
     /// The integration produced non-finite values.
     #[error("the simulation diverged at t = {t_s} s (non-finite sensor values)")]
     Diverged {
@@ -204,6 +208,8 @@ pub struct Driver {
     truth_file: Option<TruthFile>,
     /// `--stats-file` (real time only).
     stats: Option<StatsFile>,
+    /// `--stepped`: the allowance of samples from standard input.
+    stepping: Option<stepping::Stepping>,
     stop: Shutdown,
     period_ns: u64,
     /// Seq of the newest sample taken (0 before the first).
@@ -294,6 +300,7 @@ impl Driver {
             scenario,
             truth_file,
             stats,
+            stepping: None,
             stop,
             period_ns,
             imu_seq: 0,

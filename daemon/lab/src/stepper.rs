@@ -1,0 +1,124 @@
+//! The lab's hand on a stepped simulator (`thruster-sim run --lockstep --stepped`): vehicle
+//! time advances only when the lab says so, a few samples at a time, and the lab reads and
+//! acts between steps. Every request, setpoint and decision of a demo or experiment then
+//! lands at the same vehicle time in every run of a seed, however loaded the machine is
+//! (issue 27); before, the lab acted on its own wall clock while the simulator ran ahead.
+//!
+//! Protocol (see the simulator's `driver/stepping.rs`): the lab writes `run N`; the simulator
+//! takes N more samples, each answered by the daemon, and writes `at SEQ T_NS`.
+
+use std::io::{BufRead, BufReader, Write};
+use std::process::{ChildStdin, ChildStdout};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+
+/// Samples per step. The lab reads every message between steps, so a step must not outrun
+/// the smallest inbox it keeps (status: 4 messages; vehicle state and thrust: 16, one per
+/// sample); 8 samples is 40 ms of vehicle time at 200 Hz, 8 ms at 1 kHz.
+pub const STEP_SAMPLES: u64 = 8;
+
+/// Longest wall time one step may take (the daemon answers each sample within the
+/// simulator's lockstep timeout, 2 s by default, or the simulator goes on without it).
+const STEP_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Where the simulator stands: the newest sample, answered, and nothing newer taken.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Held {
+    pub seq: u64,
+    pub t_ns: u64,
+}
+
+pub struct Stepper {
+    to_sim: ChildStdin,
+    lines: Receiver<String>,
+    held: Option<Held>,
+}
+
+impl Stepper {
+    /// Takes the simulator's standard input and output (its log goes to standard error).
+    pub fn new(to_sim: ChildStdin, from_sim: ChildStdout) -> Result<Stepper> {
+        let (tx, lines) = mpsc::channel();
+        std::thread::Builder::new()
+            .name("stepper".into())
+            .spawn(move || {
+                for line in BufReader::new(from_sim).lines() {
+                    let Ok(line) = line else { return };
+                    if tx.send(line).is_err() {
+                        return;
+                    }
+                }
+            })
+            .context("starting the stepper's reader")?;
+        Ok(Stepper {
+            to_sim,
+            lines,
+            held: None,
+        })
+    }
+
+    /// Where the simulator was held last (None before its first sample was answered).
+    pub fn held(&self) -> Option<Held> {
+        self.held
+    }
+
+    /// Lets the simulator take `n` more samples and waits until it holds again; the first
+    /// call first waits for the answer to the first sample.
+    pub fn advance(&mut self, n: u64) -> Result<Held> {
+        if self.held.is_none() {
+            self.held = Some(self.next_hold()?);
+        }
+        writeln!(self.to_sim, "run {n}")
+            .and_then(|_| self.to_sim.flush())
+            .context("the simulator's standard input is closed")?;
+        let held = self.next_hold()?;
+        self.held = Some(held);
+        Ok(held)
+    }
+
+    fn next_hold(&mut self) -> Result<Held> {
+        let line = match self.lines.recv_timeout(STEP_TIMEOUT) {
+            Ok(line) => line,
+            Err(RecvTimeoutError::Timeout) => bail!(
+                "the simulator did not hold within {} s of a step",
+                STEP_TIMEOUT.as_secs()
+            ),
+            Err(RecvTimeoutError::Disconnected) => {
+                bail!("the simulator closed its standard output (it exited)")
+            }
+        };
+        parse_held(&line)
+            .with_context(|| format!("the simulator's stepping line {line:?} is not `at SEQ T_NS`"))
+    }
+}
+
+fn parse_held(line: &str) -> Option<Held> {
+    let mut w = line.split_whitespace();
+    match (w.next(), w.next(), w.next(), w.next()) {
+        (Some("at"), Some(seq), Some(t), None) => Some(Held {
+            seq: seq.parse().ok()?,
+            t_ns: t.parse().ok()?,
+        }),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_hold_line_is_at_seq_and_time() {
+        assert_eq!(
+            parse_held("at 17 80000000"),
+            Some(Held {
+                seq: 17,
+                t_ns: 80_000_000
+            })
+        );
+        for bad in ["at 17", "at x 5", "held 1 2", "at 1 2 3", ""] {
+            assert_eq!(parse_held(bad), None, "{bad:?}");
+        }
+    }
+}
