@@ -77,6 +77,30 @@ fn daemon_active_on_sim(world: &World, op: &Operator) -> (Proc, Proc) {
     (daemon, sim)
 }
 
+/// The same with the IMU watchdog on: a daemon in lockstep takes a silent driver for a pause
+/// (no vehicle time passes), so a test of the watchdog runs the daemon in real time, here
+/// against a simulator paced to 20x real time.
+fn watched_daemon_active_on_sim(world: &World, op: &Operator) -> (Proc, Proc) {
+    let daemon = world.daemon(&["--estimate"]);
+    let sim = world.sim(
+        "amour5",
+        &[
+            "--noise",
+            "paper",
+            "--lockstep",
+            "--pace",
+            "20",
+            "--duration",
+            "100000",
+        ],
+    );
+    op.wait_status(LONG, |s| {
+        state(s) == DaemonState::Active && s.model_version >= 1
+    })
+    .unwrap_or_else(|| panic!("no estimated model\n{}", daemon.log_text()));
+    (daemon, sim)
+}
+
 /// Nothing of the namespace left on disk, once every process has exited and the caller has
 /// dropped its ports.
 fn assert_nothing_left(mut world: World) {
@@ -296,7 +320,7 @@ fn driver_killed_faults_with_neutral_thrust_and_a_new_driver_recovers() {
     let world = World::new("kdrv");
     let op = Operator::new(&world);
     let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
-    let (mut daemon, mut sim) = daemon_active_on_sim(&world, &op);
+    let (mut daemon, mut sim) = watched_daemon_active_on_sim(&world, &op);
     let start = Instant::now();
     while !drain(&thrust)
         .iter()

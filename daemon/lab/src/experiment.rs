@@ -66,7 +66,7 @@ impl Name {
     }
 }
 
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 pub struct ExperimentArgs {
     /// Which experiment.
     #[arg(value_enum)]
@@ -80,10 +80,15 @@ pub struct ExperimentArgs {
     /// Seed of the simulator's sensor noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Lockstep, but no faster than this many times real time (needs `thruster-sim --pace`;
-    /// ignored by a simulator without it), so setpoints land at the planned vehicle time.
-    /// 0: as fast as possible.
-    #[arg(long, default_value_t = 50.0)]
+    /// Run every seed of `A-B` (e.g. 1-10) and report each headline figure's mean, standard
+    /// deviation and range over them (one line per figure; with --json every seed's
+    /// headline too). Each seed's run is the one `--seed` gives.
+    #[arg(long, value_name = "A-B", conflicts_with_all = ["seed", "out", "record"])]
+    pub seeds: Option<String>,
+    /// Lockstep, but no faster than this many times real time (needs `thruster-sim --pace`),
+    /// for watching a run. 0: as fast as possible. The lab steps the simulator's vehicle
+    /// time itself, so the result is the same at any pace.
+    #[arg(long, default_value_t = 0.0)]
     pub pace: f64,
     /// hot-swap: vehicle time of the thruster rotation, s (after the first estimation);
     /// degrade: when the thruster starts losing thrust.
@@ -1176,12 +1181,61 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             s.noise = noise;
         }
     }
+    if let Some(range) = &args.seeds {
+        let seeds: Vec<u64> = crate::seeds::parse_range(range)
+            .map_err(|e| thrusterctl_operator::exit::Failure::usage(e.to_string()))?
+            .collect();
+        let mut headlines = Vec::new();
+        for &seed in &seeds {
+            if !args.json {
+                eprintln!("seed {seed} ...");
+            }
+            let one = ExperimentArgs {
+                seed,
+                json: true,
+                ..args.clone()
+            };
+            let (_, summary) =
+                run_seed(&bins, &one, &specs).with_context(|| format!("seed {seed}"))?;
+            headlines.push(summary["headline"].clone());
+        }
+        if args.json {
+            println!(
+                "{}",
+                crate::seeds::summary(args.name.id(), &seeds, &headlines)
+            );
+        } else {
+            print!(
+                "{}",
+                crate::seeds::table(args.name.id(), &seeds, &headlines)
+            );
+        }
+        return Ok(());
+    }
+    let (outs, summary) = run_seed(&bins, &args, &specs)?;
+    if let Some(dir) = &args.out {
+        write_out(dir, args.name, &outs, &summary)?;
+    }
+    if args.json {
+        println!("{summary}");
+    } else {
+        print_report(args.name, &outs, &summary);
+    }
+    Ok(())
+}
+
+/// Every run of the experiment with `args.seed`; their outputs and the JSON summary.
+fn run_seed(
+    bins: &Binaries,
+    args: &ExperimentArgs,
+    specs: &[RunSpec],
+) -> Result<(Vec<RunOutput>, Value)> {
     let mut outs = Vec::new();
-    for spec in &specs {
+    for spec in specs {
         if !args.json {
             eprintln!("running {} / {} ...", args.name.id(), spec.label);
         }
-        outs.push(run_one(&bins, &args, spec)?);
+        outs.push(run_one(bins, args, spec)?);
     }
     let mut runs_json = serde_json::Map::new();
     for o in &outs {
@@ -1210,15 +1264,7 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         "runs": runs_json,
         "headline": headline,
     });
-    if let Some(dir) = &args.out {
-        write_out(dir, args.name, &outs, &summary)?;
-    }
-    if args.json {
-        println!("{summary}");
-    } else {
-        print_report(args.name, &outs, &summary);
-    }
-    Ok(())
+    Ok((outs, summary))
 }
 
 fn get(v: &Value, path: &[&str]) -> f64 {

@@ -8,6 +8,7 @@ pub mod excursion;
 pub mod experiment;
 pub mod recording;
 pub mod scoring;
+pub mod seeds;
 pub mod session;
 pub mod stepper;
 pub mod study;

@@ -20,8 +20,8 @@ pub mod truth_file;
 pub mod wait;
 
 mod lockstep;
-mod stepping;
 mod realtime;
+mod stepping;
 
 use std::time::{Duration, Instant};
 

@@ -68,10 +68,7 @@ impl Stepping {
                 let _ = tx.send(Order::Closed);
             })
             .expect("spawning the stepping reader");
-        Stepping {
-            orders,
-            allowed: 0,
-        }
+        Stepping { orders, allowed: 0 }
     }
 
     /// True when the next [`Stepping::permit`] reports where the run stands and waits.
@@ -106,7 +103,11 @@ impl Stepping {
 
 fn parse(line: &str) -> Order {
     let mut words = line.split_whitespace();
-    match (words.next(), words.next().map(str::parse::<u64>), words.next()) {
+    match (
+        words.next(),
+        words.next().map(str::parse::<u64>),
+        words.next(),
+    ) {
         (Some("run"), Some(Ok(n)), None) if (1..=MAX_RUN).contains(&n) => Order::Run(n),
         _ => Order::Bad(line.to_string()),
     }
@@ -120,7 +121,15 @@ mod tests {
     fn only_run_with_a_count_in_range_is_an_order() {
         assert!(matches!(parse("run 8"), Order::Run(8)));
         assert!(matches!(parse("  run   1 "), Order::Run(1)));
-        for bad in ["run 0", "run", "run -3", "run 8 9", "walk 8", "", "run 1000000001"] {
+        for bad in [
+            "run 0",
+            "run",
+            "run -3",
+            "run 8 9",
+            "walk 8",
+            "",
+            "run 1000000001",
+        ] {
             assert!(matches!(parse(bad), Order::Bad(_)), "{bad:?} was taken");
         }
     }

@@ -1,0 +1,134 @@
+//! One seed, one result (issue 27): `thrusterctl demo` and an experiment run twice with the
+//! same seed give the same JSON, bit for bit, once the wall-clock fields are dropped; the
+//! second run is made while the machine is loaded (two busy threads), which before the lab
+//! stepped the simulator's vehicle time moved err_rot from 0.065 to 0.045 and the experiments'
+//! yaw errors by 30 %. A different seed gives different numbers (the comparison can fail).
+
+use std::process::Command;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use serde_json::Value;
+use system_tests::{bin, workspace};
+
+/// `thrusterctl <args> --json`, which must succeed, as JSON.
+fn run(args: &[&str]) -> Value {
+    let out = Command::new(bin("thrusterctl"))
+        .args(args)
+        .arg("--json")
+        .current_dir(workspace())
+        // Under cargo, thrusterctl would build its siblings itself; the test has them already.
+        .env_remove("CARGO")
+        .env_remove("CARGO_MANIFEST_DIR")
+        .output()
+        .expect("thrusterctl runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "thrusterctl {args:?} failed\nstdout: {stdout}\nstderr: {stderr}"
+    );
+    serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("not one JSON object ({e}): {stdout}"))
+}
+
+/// The same run with two threads spinning on this machine's two cores meanwhile.
+fn run_loaded(args: &[&str]) -> Value {
+    let stop = Arc::new(AtomicBool::new(false));
+    let hogs: Vec<_> = (0..2)
+        .map(|_| {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let mut x = 0u64;
+                while !stop.load(Ordering::Relaxed) {
+                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+                }
+            })
+        })
+        .collect();
+    let v = run(args);
+    stop.store(true, Ordering::Relaxed);
+    for h in hogs {
+        h.join().expect("load thread");
+    }
+    v
+}
+
+/// `v` without the fields that measure the wall clock (`wall_s`, `wall_seconds`).
+fn vehicle_time_only(v: &Value) -> Value {
+    match v {
+        Value::Object(map) => Value::Object(
+            map.iter()
+                .filter(|(k, _)| !k.starts_with("wall_"))
+                .map(|(k, x)| (k.clone(), vehicle_time_only(x)))
+                .collect(),
+        ),
+        Value::Array(a) => Value::Array(a.iter().map(vehicle_time_only).collect()),
+        x => x.clone(),
+    }
+}
+
+/// Paths where `a` and `b` differ (for the failure message).
+fn differences(a: &Value, b: &Value, path: &str, out: &mut Vec<String>) {
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            for k in x.keys().chain(y.keys().filter(|k| !x.contains_key(*k))) {
+                differences(
+                    x.get(k).unwrap_or(&Value::Null),
+                    y.get(k).unwrap_or(&Value::Null),
+                    &format!("{path}.{k}"),
+                    out,
+                );
+            }
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
+            for (i, (p, q)) in x.iter().zip(y).enumerate() {
+                differences(p, q, &format!("{path}[{i}]"), out);
+            }
+        }
+        _ if a != b => out.push(format!("{path}: {a} vs {b}")),
+        _ => {}
+    }
+}
+
+fn assert_same(a: &Value, b: &Value, what: &str) {
+    let (a, b) = (vehicle_time_only(a), vehicle_time_only(b));
+    let mut diff = Vec::new();
+    differences(&a, &b, "", &mut diff);
+    assert!(
+        diff.is_empty(),
+        "{what}: {} fields differ between two runs of one seed:\n{}",
+        diff.len(),
+        diff.iter().take(20).cloned().collect::<Vec<_>>().join("\n")
+    );
+}
+
+/// The demo with its hold (the level and pitch setpoints are sent at vehicle times the lab
+/// decides), paper noise, seed 3: the run the issue saw give 0.065 then 0.045.
+#[test]
+fn the_demo_gives_the_same_json_for_a_seed_under_load() {
+    let args = ["demo", "--seed", "3", "--hold-s", "4", "--noise", "paper"];
+    let first = run(&args);
+    let second = run_loaded(&args);
+    assert!(first["err_rot"].as_f64().is_some(), "{first}");
+    assert!(first["attitude_err_deg"].as_f64().is_some(), "{first}");
+    assert_same(&first, &second, "demo --seed 3");
+    let other = run(&["demo", "--seed", "4", "--hold-s", "4", "--noise", "paper"]);
+    assert_ne!(
+        vehicle_time_only(&first),
+        vehicle_time_only(&other),
+        "seeds 3 and 4 gave the same JSON: the comparison sees nothing"
+    );
+}
+
+/// An experiment of three runs (manual, learned, oracle: an estimation, a model file
+/// loaded, pitch steps sent at vehicle times), seed 2: the issue saw its yaw errors move by
+/// 30 % between two passes.
+#[test]
+fn an_experiment_gives_the_same_json_for_a_seed_under_load() {
+    let args = ["experiment", "misaligned", "--seed", "2"];
+    let first = run(&args);
+    let second = run_loaded(&args);
+    assert!(first["runs"]["learned"].is_object(), "{first}");
+    assert_same(&first, &second, "experiment misaligned --seed 2");
+}
