@@ -986,3 +986,87 @@ fn a_battery_vehicle_reports_its_supply_and_the_truth_follows_it() {
         assert_namespace_clean(&ns);
     }
 }
+
+/// `--stepped` (issue 27): the simulator takes exactly the samples its controller allows,
+/// reports where it holds, takes none while it waits, refuses a bad line with a message that
+/// names it, and stops cleanly when its controller closes standard input.
+#[test]
+fn a_stepped_run_takes_exactly_the_samples_it_is_allowed() {
+    use std::io::{BufRead, BufReader, Write};
+    use std::sync::mpsc;
+
+    let ns = NamespaceGuard::unique_for_test("step").unwrap();
+    {
+        let mut responder = Proc::spawn(&["respond", "--namespace", ns.namespace(), "--neutral"]);
+        let spawn = || {
+            let dir = tempfile::tempdir().unwrap();
+            let log = dir.path().join("stderr.log");
+            let v = vehicle_path("six_dof");
+            let child = Command::new(BIN)
+                .args(["run", "--namespace", ns.namespace(), "--vehicle"])
+                .arg(&v)
+                .args(["--noise", "none", "--lockstep", "--stepped"])
+                .stdin(Stdio::piped())
+                .stdout(Stdio::piped())
+                .stderr(fs::File::create(&log).unwrap())
+                .spawn()
+                .unwrap();
+            (child, log, dir)
+        };
+        let (mut sim, log, _dir) = spawn();
+        let mut to_sim = sim.stdin.take().unwrap();
+        let (tx, lines) = mpsc::channel();
+        let out = sim.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines().map_while(Result::ok) {
+                let _ = tx.send(l);
+            }
+        });
+        let next = || lines.recv_timeout(TIMEOUT).expect("a line from the simulator");
+        assert_eq!(next(), "at 1 0", "the first hold is after sample 1");
+        for (n, want_seq) in [(8u64, 9u64), (2, 11)] {
+            writeln!(to_sim, "run {n}").unwrap();
+            assert_eq!(next(), format!("at {want_seq} {}", (want_seq - 1) * PERIOD_NS));
+        }
+        // Held: nothing is taken while the controller thinks.
+        std::thread::sleep(Duration::from_millis(300));
+        assert!(lines.try_recv().is_err(), "a line while held");
+        writeln!(to_sim, "run 1").unwrap();
+        assert_eq!(next(), format!("at 12 {}", 11 * PERIOD_NS));
+        writeln!(to_sim, "walk 3").unwrap();
+        let deadline = Instant::now() + TIMEOUT;
+        let status = loop {
+            if let Some(s) = sim.try_wait().unwrap() {
+                break s;
+            }
+            assert!(Instant::now() < deadline, "no exit on a bad line");
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let text = fs::read_to_string(&log).unwrap();
+        assert!(!status.success(), "a bad line must fail the run\n{text}");
+        assert!(text.contains("walk 3"), "the message names the line\n{text}");
+
+        // A controller that goes away (its end of stdin closed) ends the run cleanly.
+        let (mut sim, log, _dir) = spawn();
+        let mut from_sim = BufReader::new(sim.stdout.take().unwrap());
+        let mut first = String::new();
+        from_sim.read_line(&mut first).unwrap();
+        assert_eq!(first.trim(), "at 1 0");
+        drop(sim.stdin.take());
+        let deadline = Instant::now() + TIMEOUT;
+        let status = loop {
+            if let Some(s) = sim.try_wait().unwrap() {
+                break s;
+            }
+            assert!(Instant::now() < deadline, "no exit when stdin closed");
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        assert!(
+            status.success(),
+            "{}",
+            fs::read_to_string(&log).unwrap_or_default()
+        );
+        responder.terminate();
+    }
+    assert_namespace_clean(&ns);
+}
