@@ -60,22 +60,48 @@ impl Spread {
     }
 }
 
-/// The numeric fields of every seed's `headline`, in the order of the first seed's, each
-/// with its spread over the seeds (a field missing or null in a seed is left out of it).
+/// The numeric fields of every seed's `headline` (nested objects' as `outer.inner`), in the
+/// order of the first seed's, each with its spread over the seeds (a field missing or null in
+/// a seed is left out of it).
 pub fn headline_spread(headlines: &[Value]) -> Vec<(String, Spread)> {
-    let Some(Value::Object(first)) = headlines.first() else {
+    let Some(first) = headlines.first() else {
         return Vec::new();
     };
-    first
-        .keys()
-        .filter_map(|k| {
+    let mut paths = Vec::new();
+    numeric_paths(first, "", &mut paths);
+    paths
+        .into_iter()
+        .filter_map(|path| {
             let xs: Vec<f64> = headlines
                 .iter()
-                .filter_map(|h| h.get(k).and_then(Value::as_f64))
+                .filter_map(|h| lookup(h, &path).and_then(Value::as_f64))
                 .collect();
-            Spread::of(&xs).map(|s| (k.clone(), s))
+            Spread::of(&xs).map(|s| (path, s))
         })
         .collect()
+}
+
+/// Dotted paths of the fields of `v` that are numbers, or null (a figure a seed could not
+/// measure, which another seed may have).
+fn numeric_paths(v: &Value, prefix: &str, out: &mut Vec<String>) {
+    if let Value::Object(map) = v {
+        for (k, x) in map {
+            let path = if prefix.is_empty() {
+                k.clone()
+            } else {
+                format!("{prefix}.{k}")
+            };
+            match x {
+                Value::Object(_) => numeric_paths(x, &path, out),
+                Value::Number(_) | Value::Null => out.push(path),
+                _ => {}
+            }
+        }
+    }
+}
+
+fn lookup<'a>(v: &'a Value, path: &str) -> Option<&'a Value> {
+    path.split('.').try_fold(v, |x, k| x.get(k))
 }
 
 /// The JSON of a many-seed run: each seed's headline, and the spread of each figure.
@@ -140,11 +166,12 @@ mod tests {
     #[test]
     fn every_numeric_headline_field_gets_its_spread_and_text_is_left_out() {
         let h = [
-            json!({"claim": "c", "a": 1.0, "b": null}),
-            json!({"claim": "c", "a": 3.0, "b": 2.0}),
+            json!({"claim": "c", "a": 1.0, "b": null, "run": {"t": 4.0, "u": null}}),
+            json!({"claim": "c", "a": 3.0, "b": 2.0, "run": {"t": 6.0, "u": null}}),
         ];
         let spread = headline_spread(&h);
-        assert_eq!(spread.len(), 2);
+        assert_eq!(spread.len(), 3, "{spread:?}");
+        assert_eq!((spread[2].0.as_str(), spread[2].1.mean), ("run.t", 5.0));
         assert_eq!(spread[0].0, "a");
         assert_eq!(spread[0].1.mean, 2.0);
         assert_eq!((spread[1].0.as_str(), spread[1].1.n), ("b", 1));
