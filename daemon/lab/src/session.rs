@@ -725,7 +725,8 @@ impl Session {
     }
 
     /// How far the vehicle moved during the last `estimate` (the vehicle states the session
-    /// received; the inbox keeps the newest 16, so in fast lockstep some are skipped).
+    /// received: every one when the lab steps the simulator; the inbox keeps the newest 16,
+    /// so in unstepped fast lockstep some are skipped).
     pub fn last_excursion(&self) -> Option<Excursion> {
         self.last_excursion
     }

@@ -439,7 +439,8 @@ impl Daemon {
                 got = true;
             }
             // What came without a sample (a setpoint while a lockstep driver waits).
-            self.take_side_inputs(&side)?;
+            self.take_driver_inputs(&side)?;
+            self.take_operator_inputs(&side)?;
             if got {
                 self.stale_reported = false;
             }
@@ -597,13 +598,13 @@ impl Daemon {
         });
     }
 
-    /// One IMU sample: the inputs that came before it, a start-up request waiting for the
-    /// IMU, then the sample itself.
+    /// One IMU sample: the driver's inputs that came with it (DVL, its report), a start-up
+    /// request waiting for the IMU, then the sample itself (which takes the operator's
+    /// inputs, see `on_imu`).
     fn on_sample(&mut self, sample: &ImuSample, side: &SideInputs, out: &Outputs) -> Result<()> {
-        self.take_side_inputs(side)?;
+        self.take_driver_inputs(side)?;
         self.start_pending();
-        self.on_imu(sample, out);
-        Ok(())
+        self.on_imu(sample, side, out)
     }
 
     /// `--estimate`, or a hold resumed after a crash, once the IMU is up (before the next
@@ -639,12 +640,11 @@ impl Daemon {
         }
     }
 
-    /// Every input besides the IMU samples and the operator's requests: the DVL, announced
-    /// reconfigurations, the driver's reports and setpoints. Taken before each sample is
-    /// handled (and once per round without one), so whatever a driver or operator sent
-    /// before a sample is in effect for it: in lockstep that makes the sample each input
-    /// lands at a matter of vehicle time, not of how long the loop spun before it looked.
-    fn take_side_inputs(&mut self, side: &SideInputs) -> Result<()> {
+    /// What a driver sends with a sample, before it: the DVL's measurement and its report
+    /// (count, outputs, supply). Taken before each sample is handled (and once per round
+    /// without one), so a sample is handled with them: in lockstep the sample each input
+    /// lands at is a matter of vehicle time, not of how long the loop spun before it looked.
+    fn take_driver_inputs(&mut self, side: &SideInputs) -> Result<()> {
         while let Some(d) = side.dvl.recv()? {
             match d.validate() {
                 Ok(()) => {
@@ -654,18 +654,6 @@ impl Daemon {
                 Err(reason) => {
                     self.rejected.record(&reason);
                     warn!("DVL sample rejected: {reason}");
-                }
-            }
-        }
-        while let Some(e) = side.reconfig.recv()? {
-            match e.validate().and_then(|_| check_reconfig(&e)) {
-                Ok(()) => {
-                    self.machine.on_reconfig(wire::reconfig(&e));
-                    self.journal(|j| j.reconfig(&e));
-                }
-                Err(reason) => {
-                    self.rejected.record(&reason);
-                    warn!("reconfiguration event rejected: {reason}");
                 }
             }
         }
@@ -688,6 +676,26 @@ impl Daemon {
         if self.driver_judged_for != Some(self.machine.thrusters()) {
             self.judge_outputs();
             self.driver_judged_for = Some(self.machine.thrusters());
+        }
+        Ok(())
+    }
+
+    /// Announced reconfigurations and setpoints: taken once a sample's command is computed
+    /// and before it goes out (and once per round without a sample), so they act from the
+    /// next sample on, are stamped with this sample's time, and what they change is
+    /// published before this sample's answer.
+    fn take_operator_inputs(&mut self, side: &SideInputs) -> Result<()> {
+        while let Some(e) = side.reconfig.recv()? {
+            match e.validate().and_then(|_| check_reconfig(&e)) {
+                Ok(()) => {
+                    self.machine.on_reconfig(wire::reconfig(&e));
+                    self.journal(|j| j.reconfig(&e));
+                }
+                Err(reason) => {
+                    self.rejected.record(&reason);
+                    warn!("reconfiguration event rejected: {reason}");
+                }
+            }
         }
         while let Some(s) = side.setpoint.recv()? {
             match s.validate() {
@@ -726,7 +734,7 @@ impl Daemon {
         self.driver_verdict = verdict;
     }
 
-    fn on_imu(&mut self, sample: &ImuSample, out: &Outputs) {
+    fn on_imu(&mut self, sample: &ImuSample, side: &SideInputs, out: &Outputs) -> Result<()> {
         match self.validator.check(sample) {
             Ok(accepted) => {
                 self.last_imu = Some((sample.seq, sample.t_ns));
@@ -758,6 +766,7 @@ impl Daemon {
                     );
                 }
                 let cmd = self.machine.on_imu(&input);
+                self.take_operator_inputs(side)?;
                 if self.cfg.runtime.lockstep {
                     // Whatever this sample changed, and the periodic status in vehicle time,
                     // goes out before the answer: when the driver has the answer to sample
@@ -796,6 +805,7 @@ impl Daemon {
                 let _ = out.thrust.send(&msg);
             }
         }
+        Ok(())
     }
 
     /// Hands the machine the solve results that are back (never waits).
