@@ -439,8 +439,8 @@ impl Daemon {
                 got = true;
             }
             // What came without a sample (a setpoint while a lockstep driver waits).
-            self.take_driver_inputs(&side)?;
-            self.take_operator_inputs(&side)?;
+            self.take_inputs_before_sample(&side)?;
+            self.take_reconfigurations(&side)?;
             if got {
                 self.stale_reported = false;
             }
@@ -598,11 +598,11 @@ impl Daemon {
         });
     }
 
-    /// One IMU sample: the driver's inputs that came with it (DVL, its report), a start-up
-    /// request waiting for the IMU, then the sample itself (which takes the operator's
-    /// inputs, see `on_imu`).
+    /// One IMU sample: the inputs that came before it (DVL, the driver's report, setpoints), a
+    /// start-up request waiting for the IMU, then the sample itself (which takes announced
+    /// reconfigurations, see `on_imu`).
     fn on_sample(&mut self, sample: &ImuSample, side: &SideInputs, out: &Outputs) -> Result<()> {
-        self.take_driver_inputs(side)?;
+        self.take_inputs_before_sample(side)?;
         self.start_pending();
         self.on_imu(sample, side, out)
     }
@@ -640,11 +640,13 @@ impl Daemon {
         }
     }
 
-    /// What a driver sends with a sample, before it: the DVL's measurement and its report
-    /// (count, outputs, supply). Taken before each sample is handled (and once per round
-    /// without one), so a sample is handled with them: in lockstep the sample each input
-    /// lands at is a matter of vehicle time, not of how long the loop spun before it looked.
-    fn take_driver_inputs(&mut self, side: &SideInputs) -> Result<()> {
+    /// What came before a sample: the DVL's measurement and the driver's report (count,
+    /// outputs, supply), which a driver sends just before it, and setpoints. Taken before each
+    /// sample is handled (and once per round without one), so the sample is handled with
+    /// them: in lockstep the sample each input lands at is a matter of vehicle time, not of
+    /// how long the loop spun before it looked (a setpoint the lab sent while the simulator
+    /// held acts from the next sample, always).
+    fn take_inputs_before_sample(&mut self, side: &SideInputs) -> Result<()> {
         while let Some(d) = side.dvl.recv()? {
             match d.validate() {
                 Ok(()) => {
@@ -677,26 +679,6 @@ impl Daemon {
             self.judge_outputs();
             self.driver_judged_for = Some(self.machine.thrusters());
         }
-        Ok(())
-    }
-
-    /// Announced reconfigurations and setpoints: taken once a sample's command is computed
-    /// and before it goes out (and once per round without a sample), so they act from the
-    /// next sample on, are stamped with this sample's time, and what they change is
-    /// published before this sample's answer.
-    fn take_operator_inputs(&mut self, side: &SideInputs) -> Result<()> {
-        while let Some(e) = side.reconfig.recv()? {
-            match e.validate().and_then(|_| check_reconfig(&e)) {
-                Ok(()) => {
-                    self.machine.on_reconfig(wire::reconfig(&e));
-                    self.journal(|j| j.reconfig(&e));
-                }
-                Err(reason) => {
-                    self.rejected.record(&reason);
-                    warn!("reconfiguration event rejected: {reason}");
-                }
-            }
-        }
         while let Some(s) = side.setpoint.recv()? {
             match s.validate() {
                 Ok(()) => {
@@ -706,6 +688,27 @@ impl Daemon {
                 Err(reason) => {
                     self.rejected.record(&reason);
                     warn!("setpoint rejected: {reason}");
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Announced reconfigurations: taken once a sample's command is computed and before it
+    /// goes out (and once per round without a sample). A driver announces a change just
+    /// before the first sample taken after it, so the machine learns of it at that sample's
+    /// time (taken before the sample, the new model was stamped one period before the
+    /// change), and what it changes is published before that sample's answer.
+    fn take_reconfigurations(&mut self, side: &SideInputs) -> Result<()> {
+        while let Some(e) = side.reconfig.recv()? {
+            match e.validate().and_then(|_| check_reconfig(&e)) {
+                Ok(()) => {
+                    self.machine.on_reconfig(wire::reconfig(&e));
+                    self.journal(|j| j.reconfig(&e));
+                }
+                Err(reason) => {
+                    self.rejected.record(&reason);
+                    warn!("reconfiguration event rejected: {reason}");
                 }
             }
         }
@@ -766,7 +769,7 @@ impl Daemon {
                     );
                 }
                 let cmd = self.machine.on_imu(&input);
-                self.take_operator_inputs(side)?;
+                self.take_reconfigurations(side)?;
                 if self.cfg.runtime.lockstep {
                     // Whatever this sample changed, and the periodic status in vehicle time,
                     // goes out before the answer: when the driver has the answer to sample
