@@ -1022,11 +1022,18 @@ fn a_stepped_run_takes_exactly_the_samples_it_is_allowed() {
                 let _ = tx.send(l);
             }
         });
-        let next = || lines.recv_timeout(TIMEOUT).expect("a line from the simulator");
+        let next = || {
+            lines
+                .recv_timeout(TIMEOUT)
+                .expect("a line from the simulator")
+        };
         assert_eq!(next(), "at 1 0", "the first hold is after sample 1");
         for (n, want_seq) in [(8u64, 9u64), (2, 11)] {
             writeln!(to_sim, "run {n}").unwrap();
-            assert_eq!(next(), format!("at {want_seq} {}", (want_seq - 1) * PERIOD_NS));
+            assert_eq!(
+                next(),
+                format!("at {want_seq} {}", (want_seq - 1) * PERIOD_NS)
+            );
         }
         // Held: nothing is taken while the controller thinks.
         std::thread::sleep(Duration::from_millis(300));
@@ -1044,7 +1051,10 @@ fn a_stepped_run_takes_exactly_the_samples_it_is_allowed() {
         };
         let text = fs::read_to_string(&log).unwrap();
         assert!(!status.success(), "a bad line must fail the run\n{text}");
-        assert!(text.contains("walk 3"), "the message names the line\n{text}");
+        assert!(
+            text.contains("walk 3"),
+            "the message names the line\n{text}"
+        );
 
         // A controller that goes away (its end of stdin closed) ends the run cleanly.
         let (mut sim, log, _dir) = spawn();

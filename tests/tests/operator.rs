@@ -190,3 +190,66 @@ fn a_demo_refused_for_its_vehicle_or_noise_leaves_no_namespace_folder() {
         assert!(!folder.exists(), "{what}: {} left", folder.display());
     }
 }
+
+/// The processes whose command line names `needle`.
+fn processes_naming(needle: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        if let Ok(raw) = std::fs::read(entry.path().join("cmdline")) {
+            let cmd = String::from_utf8_lossy(&raw).replace('\0', " ");
+            if cmd.contains(needle) {
+                found.push(format!("{}: {cmd}", entry.file_name().to_string_lossy()));
+            }
+        }
+    }
+    found
+}
+
+/// Waits up to `within` for `pred` on the processes naming `needle`.
+fn wait_processes(needle: &str, within: Duration, pred: impl Fn(&[String]) -> bool) -> Vec<String> {
+    let end = std::time::Instant::now() + within;
+    loop {
+        let p = processes_naming(needle);
+        if pred(&p) || std::time::Instant::now() > end {
+            return p;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A demo stopped by SIGTERM (a supervisor, a CI timeout) stops its daemon and simulator and
+/// removes its namespace, saying it was interrupted; one killed by SIGKILL runs no code, but
+/// its daemon and simulator still go (they die with their parent). Before, both left a
+/// lockstep daemon running forever.
+#[test]
+fn an_interrupted_demo_leaves_no_process_and_no_namespace() {
+    let world = World::new("dint");
+    for sig in ["TERM", "KILL"] {
+        let demo = Proc::spawn(
+            "thrusterctl",
+            &["demo", "--hold-s", "100000", "--noise", "paper"],
+            world.dir.path(),
+        );
+        // The demo's namespace is `demo-<pid>-<n>` (session.rs).
+        let name = format!("demo-{}-0", demo.pid() % 1_000_000);
+        let ns = format!("--namespace {name} ");
+        let running = wait_processes(&ns, Duration::from_secs(20), |p| p.len() >= 2);
+        assert!(
+            running.len() >= 2,
+            "{sig}: daemon and simulator not up: {running:?}"
+        );
+        demo.signal(sig);
+        let (status, log) = finish(demo, sig);
+        assert!(!status.success(), "{sig}: {log}");
+        if sig == "TERM" {
+            assert!(log.contains("interrupted"), "{sig}: {log}");
+        }
+        let left = wait_processes(&ns, Duration::from_secs(5), |p| p.is_empty());
+        assert!(left.is_empty(), "{sig}: still running: {left:?}");
+        if sig == "TERM" {
+            let folder =
+                std::path::Path::new(thruster_protocol::services::DEFAULT_ROOT_BASE).join(&name);
+            assert!(!folder.exists(), "{} left", folder.display());
+        }
+    }
+}

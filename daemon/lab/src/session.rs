@@ -3,6 +3,7 @@
 //! process and no shared-memory file behind. Used by `thrusterctl demo` and by every run of
 //! `thrusterctl experiment`.
 
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -44,11 +45,20 @@ impl ChildProc {
         } else {
             (Stdio::null(), Stdio::from(out.try_clone()?))
         };
-        let child = Command::new(exe)
-            .args(args)
-            .stdin(stdin)
-            .stdout(stdout)
-            .stderr(out)
+        let mut cmd = Command::new(exe);
+        cmd.args(args).stdin(stdin).stdout(stdout).stderr(out);
+        // A lab killed by a signal runs no destructor: without this its daemon (which in
+        // lockstep never takes the silence for a lost IMU) would run on, orphaned, forever.
+        // SAFETY: prctl is async-signal-safe and the closure touches nothing of the parent.
+        unsafe {
+            cmd.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+        let child = cmd
             .spawn()
             .with_context(|| format!("starting {}", exe.display()))?;
         Ok(ChildProc {
@@ -393,6 +403,8 @@ impl Session {
             N.fetch_add(1, Ordering::Relaxed) % 1000
         );
         let ipc = IpcConfig::new(&ns)?;
+        // The interrupt handler, before anything needs cleaning up.
+        let _ = interrupted();
         // A crashed earlier run with the same id must not confuse this one.
         let _ = purge_namespace(&ipc);
         let tmp = TempDir::new(spec.tag)?;
@@ -539,8 +551,12 @@ impl Session {
         self.daemon.log_text()
     }
 
-    /// An error if either process has exited.
+    /// An error if either process has exited, or the lab was interrupted (Ctrl-C, SIGTERM:
+    /// the session is then dropped, which stops both processes and removes the namespace).
     pub fn check_alive(&mut self, what: &str) -> Result<()> {
+        if interrupted() {
+            bail!("interrupted while waiting for {what}: thrusterd and thruster-sim stopped");
+        }
         if !self.daemon.alive() {
             bail!(
                 "thrusterd exited while waiting for {what}:\n{}",
@@ -599,6 +615,9 @@ impl Session {
     /// here, so in lockstep it acts only between steps, at vehicle times that do not depend
     /// on the machine's speed.
     pub fn tick(&mut self) -> Result<()> {
+        if interrupted() {
+            bail!("interrupted: thrusterd and thruster-sim stopped");
+        }
         match self.stepper.as_mut() {
             Some(stepper) => {
                 if let Err(e) = stepper.advance(crate::stepper::STEP_SAMPLES) {
@@ -825,6 +844,17 @@ impl Drop for Session {
         self.node = None;
         let _ = purge_namespace(&self.ipc);
     }
+}
+
+/// True once Ctrl-C or SIGTERM reached the lab (the handler is installed by the first
+/// session: the wait loops then end with an error and the session's drop cleans up, where the
+/// default action would kill the lab and leave its namespace's files behind).
+fn interrupted() -> bool {
+    static FLAG: std::sync::OnceLock<Option<std::sync::Arc<std::sync::atomic::AtomicBool>>> =
+        std::sync::OnceLock::new();
+    FLAG.get_or_init(|| thrusterctl_operator::console::interrupt_flag().ok())
+        .as_ref()
+        .is_some_and(|f| f.load(Ordering::SeqCst))
 }
 
 fn path_arg(p: &Path) -> String {
