@@ -338,7 +338,7 @@ fn number_after(line: &str, key: &str) -> u64 {
 /// how many messages reached the files; Foxglove's reader recovers at least that many from
 /// them (CRC-checked), the finished files whole. The daemon meanwhile keeps answering every
 /// sample in the state it was in, status every 100 ms, and still does after the recorder died.
-/// Without root (no tmpfs) the test says it is skipped, and why.
+/// It needs root (a tmpfs is mounted): ignored with that reason, run by tests/root/run.sh.
 /// The counts of a recorder's summary line.
 struct Counts {
     written: u64,
@@ -368,25 +368,21 @@ fn failed_summary(log: &str) -> (&str, Counts) {
 }
 
 #[test]
+#[ignore = "needs root to mount a small tmpfs: tests/root/run.sh runs it (so does .ci/run)"]
 fn a_full_disk_stops_the_recorder_with_file_and_os_error_and_the_daemon_serves_on() {
     let _one = one_at_a_time();
     let world = World::new("recfull");
     let disk = world.path("disk");
     std::fs::create_dir_all(&disk).unwrap();
-    if !is_root() {
-        println!(
-            "SKIPPED: full recording disk: not root, so no small tmpfs can be mounted to fill \
-             (RLIMIT_FSIZE is no substitute: it would also stop iceoryx2's shared memory files)"
-        );
-        return;
-    }
-    let mount = match Mount::tmpfs(&disk, SMALL_DISK) {
-        Ok(m) => m,
-        Err(why) => {
-            println!("SKIPPED: full recording disk: {why}");
-            return;
-        }
-    };
+    // Run as root only (tests/root/run.sh): a check that cannot be made fails, it never
+    // passes unmade. RLIMIT_FSIZE is no substitute for the tmpfs: it would also stop
+    // iceoryx2's shared memory files.
+    assert!(
+        is_root(),
+        "needs root to mount a small tmpfs to fill: run tests/root/run.sh as root"
+    );
+    let mount = Mount::tmpfs(&disk, SMALL_DISK)
+        .unwrap_or_else(|why| panic!("cannot mount the small recording disk: {why}"));
     system_tests::python::venv_python();
     let ns = world.namespace();
     let config = world.path("thrusterd.toml");

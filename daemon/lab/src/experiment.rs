@@ -1292,6 +1292,8 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
                 "oracle_mean_err_deg": num(o),
                 "learned_over_manual": num(l / m),
                 "learned_over_oracle": num(l / o),
+                "learned_model_err_rot": r("learned")["model"]["rel_err_rot_vs_truth"],
+                "learned_model_err_acc": r("learned")["model"]["rel_err_acc_vs_truth"],
             })
         }
         Name::Misaligned => {
@@ -1311,6 +1313,7 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
                 // How much of the paper's effect this setup can show at all (the true model),
                 // and how much of it the learned model captures.
                 "manual_over_oracle": num(mm / y("oracle", "mean_abs_yaw_err_deg")),
+                "learned_model_err_rot": r("learned")["model"]["rel_err_rot_vs_truth"],
             })
         }
         Name::Aligned => {
@@ -1345,6 +1348,7 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
                 json!({
                     "detection_delay_s": h["detection_delay_s"],
                     "new_model_delay_s": h["new_model_delay_s"],
+                    "new_model_err_rot": h["new_model_rel_err_rot_vs_truth"],
                     "recovered_after_s": h["recovered_after_s"],
                     "before_mean_err_deg": h["before"]["mean_err_deg"],
                     "during_mean_err_deg": h["during"]["mean_err_deg"],
@@ -1357,6 +1361,8 @@ fn headline(name: Name, runs: &serde_json::Map<String, Value>) -> Value {
                 "claim": "after the top thruster turns 45 degrees the daemon re-estimates, swaps the new model in and control recovers, with and without a reconfiguration event",
                 "announced": per("announced"),
                 "silent": per("silent"),
+                // The change test's run: silent at the paper's noise.
+                "silent_paper": per("silent-paper"),
                 // Holding level through the announced change: the largest tilt while the
                 // daemon identifies under control (the bound: 10 deg at the paper's
                 // noise).
