@@ -825,7 +825,9 @@ impl Daemon {
     /// Lockstep: the results due by `t_ns` are waited for, each up to
     /// `runtime.lockstep_wait_ms`, so the outcome is the inline one (see `runtime.lockstep`).
     fn wait_for_due_solves(&mut self, t_ns: u64) {
-        let wait = Duration::from_millis(self.cfg.runtime.lockstep_wait_ms.clamp(1, 1_500));
+        // The configuration's own range (checked at load); clamped again so no value can
+        // make the wait unbounded or zero.
+        let wait = Duration::from_millis(self.cfg.runtime.lockstep_wait_ms.clamp(1, 600_000));
         while let Some(id) = self.machine.awaiting_result(t_ns) {
             match self.solver.wait_result(wait) {
                 Ok(Some(r)) => self.deliver(r),
