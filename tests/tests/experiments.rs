@@ -1,9 +1,11 @@
 //! `thrusterctl experiment NAME --json`: the paper's four pool experiments and `degrade` (a
 //! slowly weakening thruster), each run with the real thrusterd and thruster-sim processes
-//! (lockstep, paper noise unless the run says otherwise), asserting the headline
-//! result with a margin. The numbers in the comments are what the runs measured (seed 1,
-//! docs/experiments.md); the margins leave room for scheduling on a loaded 2-core machine,
-//! which shifts when a setpoint lands by a few samples.
+//! (stepped lockstep, paper noise unless the run says otherwise), asserting the headline
+//! result. A run is reproducible (one seed, one JSON, under any load: tests/determinism.rs),
+//! so the bounds sit near the figures measured over seeds 1-10 (`thrusterctl experiment NAME
+//! --seeds 1-10`, docs/experiments.md#over-ten-seeds-issue-27): errors and delays at 1.5x
+//! the worst seed, ratios at 1.2x (issue 31); a change that moves a figure beyond them is a
+//! regression or a new measurement for the docs.
 
 use std::process::Command;
 use std::sync::Mutex;
@@ -11,9 +13,8 @@ use std::sync::Mutex;
 use serde_json::Value;
 use system_tests::{bin, workspace};
 
-/// One experiment at a time: each runs three processes at 50x real time, and four at once on
-/// two cores starved the scorer (thrusterctl) of vehicle samples and shifted its setpoints by
-/// whole seconds, which is the test machine's doing, not the daemon's.
+/// One experiment at a time: a run's result no longer depends on the machine's load, but
+/// several at once on two cores only make each slower.
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn experiment(name: &str) -> Value {
@@ -73,14 +74,18 @@ fn manual_vs_learned_the_learned_model_holds_attitude_as_well_as_the_manual_one(
         f(&v, &["runs", "learned", "mean_err_deg"]),
         f(&v, &["runs", "manual", "mean_err_deg"]),
     );
-    // Measured: about 4 deg each (steps of 15-30 deg included), learned/manual 0.9-1.0. The
-    // paper's claim is "matches"; 1.5x allows for the noise of one run each.
-    assert!(l < 1.5 * m, "learned {l} deg vs manual {m} deg");
-    assert!(l < 8.0 && m < 8.0, "learned {l}, manual {m}");
-    // The reference: the simulator's true model, loaded. Measured 4.75 deg against the learned
-    // model's 4.72: the hold is not limited by the model. 1.3x allows for one run each.
+    // The paper's claim is "matches". Seeds 1-10: learned/manual 0.85-1.10, learned 3.96-4.98
+    // deg, manual 4.06-5.19 deg.
+    assert!(l < 1.3 * m, "learned {l} deg vs manual {m} deg");
+    assert!(l < 7.5 && m < 7.8, "learned {l}, manual {m}");
+    // The reference: the simulator's true model, loaded: learned/oracle 0.88-1.16, the hold
+    // is not limited by the model.
     let o = f(&v, &["runs", "oracle", "mean_err_deg"]);
-    assert!(l < 1.3 * o, "learned {l} deg vs the true model {o} deg");
+    assert!(l < 1.4 * o, "learned {l} deg vs the true model {o} deg");
+    // The learned model at the paper's noise: 0.040-0.077 / 0.044-0.093 off the truth.
+    let h = &v["headline"];
+    assert!(f(h, &["learned_model_err_rot"]) < 0.115, "{h}");
+    assert!(f(h, &["learned_model_err_acc"]) < 0.14, "{h}");
     assert!(f(&v, &["runs", "oracle", "model", "rel_err_rot_vs_truth"]) < 1e-6);
     assert_eq!(
         dofs(&v["runs"]["learned"]["model"]["actuated"]),
@@ -96,21 +101,18 @@ fn misaligned_the_relearned_model_does_not_yaw_more_than_the_manual_one() {
         f(h, &["manual_yaw_err_mean_deg"]),
         f(h, &["learned_yaw_err_mean_deg"]),
     );
-    // The paper: more than 2x smaller with the learned model. Measured here over seeds 1-5 at
-    // the paper's noise: manual/learned 1.44-2.06 (dynamic model), and with the simulator's
-    // true model (the "oracle" run) 1.37-2.13: this setup shows about 1.6x at this noise even
-    // with a perfect model, and the learned model gets as far (docs/experiments.md). Asserted
-    // at seed 1 (2.9 / 2.0 / 1.4 deg): the learned model clearly better than the manual one,
-    // and the true model better than the manual one by the margin the setup allows. The same
-    // seed run 5 times gave learned/manual 0.62-0.86 (the processes' scheduling moves the
-    // setpoints by a few samples); 0.85 failed one of those runs and one CI-like run, so the
-    // bound is 0.9: still "better", not more.
+    // The paper: more than 2x smaller with the learned model. Measured over seeds 1-10 at the
+    // paper's noise: manual/learned 0.84-2.22 (mean 1.47; below 1 on seeds 2 and 7), and with
+    // the simulator's true model (the "oracle" run) 0.86-1.77 (mean 1.35): this setup shows
+    // about 1.4x at this noise even with a perfect model. Seed 1, asserted here: manual/learned
+    // 1.17, manual/oracle 1.32, manual 1.58-3.71 deg over the seeds.
     assert!(l < 0.9 * m, "learned {l} deg vs manual {m} deg");
     let o = f(h, &["oracle_yaw_err_mean_deg"]);
-    assert!(o < 0.8 * m, "true model {o} deg vs manual {m} deg");
-    assert!(m < 10.0, "manual {m}");
+    assert!(o < 0.85 * m, "true model {o} deg vs manual {m} deg");
+    assert!(m < 5.6, "manual {m}");
     assert!(f(&v, &["runs", "manual", "model", "rel_err_rot_vs_truth"]) > 0.3);
-    assert!(f(&v, &["runs", "learned", "model", "rel_err_rot_vs_truth"]) < 0.3);
+    // The re-learned model: 0.026-0.062 off the truth over seeds 1-10.
+    assert!(f(h, &["learned_model_err_rot"]) < 0.095, "{h}");
 }
 
 #[test]
@@ -123,21 +125,20 @@ fn aligned_ours_reports_the_missing_dofs_holds_pitch_and_yaw_and_the_papers_thru
     for dof in ["roll", "sway", "heave"] {
         assert!(paper.iter().any(|d| d == dof), "paper {paper:?}");
     }
-    // Measured: thrust activity 467/s (paper) vs 29/s (ours), 16x: the paper's model commands
-    // the thrusters back and forth for the DOFs they cannot move. 4x is far from both.
+    // Thrust activity paper/ours 11.2-18.5x over seeds 1-10 (337-540/s against 29-32/s): the
+    // paper's model commands the thrusters back and forth for the DOFs they cannot move.
     let ratio = f(&v, &["headline", "paper_over_forward_thrust_activity"]);
-    assert!(ratio > 4.0, "thrust activity paper/ours {ratio}");
-    // Ours holds yaw (measured 3.7-5.9 deg mean over the 30 deg yaw step and back; the
-    // paper's model measured 4.8-13.6 deg, so it is not asserted).
+    assert!(ratio > 9.0, "thrust activity paper/ours {ratio}");
+    // Ours holds yaw (3.7-5.5 deg mean over the 30 deg yaw step and back, seeds 1-10; the
+    // paper's model 3.5-9.7 deg over seeds 1-10, so it is not asserted).
     let yaw = f(
         &v,
         &["runs", "forward", "per_maneuver", "yaw", "mean_err_deg"],
     );
-    assert!(yaw < 10.0, "ours: yaw maneuver {yaw} deg");
-    // And pitch, without rolling away: measured 4.4 deg mean over the 20 deg pitch step and
-    // back, roll rate 1.5 deg/s rms. Before the controller stopped holding depth by surging
-    // (this vehicle has no heave) it was 12.9-14.4 deg and 6.1-6.8 deg/s: the bounds sit
-    // between.
+    assert!(yaw < 8.3, "ours: yaw maneuver {yaw} deg");
+    // And pitch, without rolling away: 4.1-5.4 deg mean over the 20 deg pitch step and back,
+    // roll rate 1.29-1.51 deg/s rms over seeds 1-10. Before the controller stopped holding
+    // depth by surging (this vehicle has no heave) it was 12.9-14.4 deg and 6.1-6.8 deg/s.
     let pitch = f(
         &v,
         &["runs", "forward", "per_maneuver", "pitch", "mean_err_deg"],
@@ -147,22 +148,23 @@ fn aligned_ours_reports_the_missing_dofs_holds_pitch_and_yaw_and_the_papers_thru
         &v,
         &["runs", "forward", "oscillation", "roll_rate_rms_deg_s"],
     );
-    assert!(roll_rate < 4.0, "ours: roll rate {roll_rate} deg/s rms");
+    assert!(roll_rate < 2.3, "ours: roll rate {roll_rate} deg/s rms");
 }
 
 #[test]
 fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
     let v = experiment("hot-swap");
     let a = &v["runs"]["announced"]["hot_swap"];
-    // Announced: the nominal model of the declared geometry at once (measured 0.04 s), the
-    // learned one after identifying under control, keeping the other thrusters' columns
-    // (measured 8.0-14.1 s, seeds 1-5, mean 11.1; learning every column anew took the 20 s
-    // limit, 21.0 s: 18 s fails that and leaves room for CI), and the error back under 1.5x
-    // its worst 2 s window before the change within 30 s (measured 0.3-1.7 s).
+    // Announced: the nominal model of the declared geometry at once (0.0 s), the learned one
+    // after identifying under control, keeping the other thrusters' columns (10-14 s over
+    // seeds 1-10, 0.041-0.064 off the truth; learning every column anew took the 20 s limit,
+    // 21.0 s: 18 s fails that), and the error back under 1.5x its worst 2 s window before
+    // the change (0.005-1.6 s).
     assert_eq!(a["first_swap_source"], "Nominal", "{a}");
     assert!(f(a, &["first_swap_delay_s"]) < 0.5, "{a}");
     assert!(f(a, &["new_model_delay_s"]) < 18.0, "{a}");
-    assert!(f(a, &["recovered_after_s"]) < 30.0, "{a}");
+    assert!(f(a, &["new_model_rel_err_rot_vs_truth"]) < 0.1, "{a}");
+    assert!(f(a, &["recovered_after_s"]) < 2.5, "{a}");
     // After: as good as before, within 2 deg (measured 4.4 before, 4.6 after).
     let (before, after) = (
         f(a, &["before", "mean_err_deg"]),
@@ -171,11 +173,10 @@ fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
     assert!(after < before + 2.0, "before {before}, after {after}");
 
     // Holding level through the announced change (paper noise), the identification under
-    // control tilts the vehicle by 6.6-9.3 deg (seeds 1-5, mean 7.7; the issue's bound is
-    // 10 deg) and brings the new model after 10.1-13.0 s (mean 11.4); 12 deg and 18 s leave
-    // room for CI.
+    // control tilts the vehicle by 6.5-8.2 deg (seeds 1-10; the bound is its issue's 10 deg)
+    // and brings the new model after 10-15 s.
     let h = &v["headline"];
-    assert!(f(h, &["announced_level_max_tilt_deg"]) <= 12.0, "{h}");
+    assert!(f(h, &["announced_level_max_tilt_deg"]) <= 10.0, "{h}");
     assert!(f(h, &["announced_level_new_model_delay_s"]) < 18.0, "{h}");
 
     let s = &v["runs"]["silent"]["hot_swap"];
@@ -189,24 +190,25 @@ fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
             v["runs"]["silent"]
         );
         assert_eq!(v["runs"]["announced"]["monitor_mismatch_reports"], 0);
-        assert!(f(s, &["detection_delay_s"]) < 20.0, "{s}");
-        assert!(f(s, &["new_model_delay_s"]) < 40.0, "{s}");
-        assert!(f(s, &["recovered_after_s"]) < 40.0, "{s}");
+        // Seeds 1-10 (realistic IMU): detected after 0.60-1.04 s, new model after 5.6-6.0 s,
+        // 0.011-0.032 off the truth, recovered after 0.4 s.
+        assert!(f(s, &["detection_delay_s"]) < 1.6, "{s}");
+        assert!(f(s, &["new_model_delay_s"]) < 9.0, "{s}");
+        assert!(f(s, &["new_model_rel_err_rot_vs_truth"]) < 0.05, "{s}");
+        assert!(f(s, &["recovered_after_s"]) < 2.5, "{s}");
         let (before, after) = (
             f(s, &["before", "mean_err_deg"]),
             f(s, &["after", "mean_err_deg"]),
         );
         assert!(after < before + 2.0, "before {before}, after {after}");
         // At the paper's noise the refinement's change test finds it through the pitch steps
-        // (measured over seeds 1-5: detected after 3.1-5.1 s, mean 4.1, thruster 1 every
-        // time, the new model 13-19 s after the change, 0.052-0.061 off the truth, one report
-        // each; the windows alone took 42.6-50.6 s). 12 s fails the windows alone and leaves
-        // room for CI.
+        // (seeds 1-10: detected after 2.8-6.6 s, the new model 11.5-18.6 s after the change,
+        // 0.037-0.068 off the truth, one report each; the windows alone took 42.6-50.6 s).
         let p = &v["runs"]["silent-paper"];
         assert_eq!(p["monitor_mismatch_reports"], 1, "{p}");
         let ph = &p["hot_swap"];
-        assert!(f(ph, &["detection_delay_s"]) < 12.0, "{ph}");
-        assert!(f(ph, &["new_model_rel_err_rot_vs_truth"]) < 0.15, "{ph}");
+        assert!(f(ph, &["detection_delay_s"]) < 10.0, "{ph}");
+        assert!(f(ph, &["new_model_rel_err_rot_vs_truth"]) < 0.1, "{ph}");
         // The oracle (the new true model loaded at the change) holds as the learned one does
         // after re-learning (measured after 4.7-5.0 deg against before 4.6-5.0).
         let o = &v["runs"]["oracle"]["hot_swap"];
@@ -234,17 +236,16 @@ fn hot_swap_the_daemon_reestimates_swaps_and_recovers() {
 }
 
 /// Thruster L loses 30 % over a minute, unannounced, realistic IMU: the refined model follows
-/// it without a re-estimation (measured seeds 1-5: 0.014-0.018 / 0.015-0.025 off the truth at
-/// the end, 23 refinements, no new model; seed 1 run 5 times: 0.015-0.020 / 0.013-0.019; before
-/// the fusion's floor, slow drift and widening it was 0.020-0.036 / 0.028-0.039 and seed 1
-/// scattered to 0.049), the model learned at the start ends 0.12 / 0.17 off; the oracle
-/// reloads the truth as it moves. The bound is the issue's 0.05, twice the largest measured.
+/// it without a re-estimation (seeds 1-10: 0.010-0.021 / 0.014-0.025 off the truth at the end,
+/// 24 refinements, no new model), the model learned at the start ends 0.12 / 0.17 off; the
+/// oracle reloads the truth as it moves. Bounds at 1.5x the worst seed (the issue asked for
+/// 0.05).
 #[test]
 fn degrade_the_refined_model_follows_a_weakening_thruster() {
     let v = experiment("degrade");
     let h = &v["headline"];
-    assert!(f(h, &["refined_err_rot"]) <= 0.05, "{h}");
-    assert!(f(h, &["refined_err_acc"]) <= 0.05, "{h}");
+    assert!(f(h, &["refined_err_rot"]) <= 0.032, "{h}");
+    assert!(f(h, &["refined_err_acc"]) <= 0.038, "{h}");
     assert_eq!(h["refined_new_models"], 0, "{h}");
     assert!(f(h, &["refined_refinements"]) >= 10.0, "{h}");
     // The fixed model is the contrast: the loss is visible in it.

@@ -748,6 +748,7 @@ fn run(args: &Args) -> Result<ExitCode> {
     std::thread::sleep(Duration::from_millis(300));
     refresh(&mut status, &mut driver)?;
     let final_counts = DaemonCounts::of(status.as_ref().unwrap(), period_ns);
+    let mut failures_extra: Vec<String> = Vec::new();
     let daemon_exit = daemon.stop();
     let sim_summary = sim
         .log_text()
@@ -758,8 +759,21 @@ fn run(args: &Args) -> Result<ExitCode> {
         .unwrap_or_default();
     let sim_samples = system_tests::season::field_u64(&sim_summary, "samples");
     let sim_stale = system_tests::season::field_u64(&sim_summary, "stale");
-    let uncounted_total =
-        sim_samples.map(|n| n.saturating_sub(final_counts.accepted + final_counts.rejected));
+    // In lockstep the daemon publishes status with the samples, every 100 ms of vehicle time
+    // (`runtime.status_period_ms`), and not while the simulator is silent: its last status
+    // may be up to one period behind the simulator's last sample. The counters are checked at
+    // that status (exact there), and it must be that recent.
+    let uncounted_total = sim_samples.map(|_| final_counts.uncounted());
+    let status_every = 100_000_000u64.div_ceil(period_ns.max(1));
+    if let Some(behind) = sim_samples
+        .map(|n| n.saturating_sub(final_counts.last_seq))
+        .filter(|b| *b > status_every + 1)
+    {
+        failures_extra.push(format!(
+            "the daemon's last status is {behind} samples behind the simulator's last (at most \
+             {status_every} expected)"
+        ));
+    }
     drop(status_in);
     drop(driver_in);
     // What is left once every process has gone (the soak's own node too): nothing, if each
@@ -779,6 +793,7 @@ fn run(args: &Args) -> Result<ExitCode> {
         .iter()
         .map(|f| format!("{}: {}", f.what, f.detail))
         .collect();
+    failures.append(&mut failures_extra);
     if let Some(who) = died {
         failures.push(format!("{who} died during the run"));
     }
