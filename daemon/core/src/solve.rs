@@ -319,12 +319,17 @@ impl Solver {
         }
     }
 
-    /// The id of the oldest job due at `t_ns` whose result is not back.
+    /// The id of the oldest job due at `t_ns` whose result is not back. Every job due by then
+    /// counts, not only the oldest: `take_due` applies all of them at this sample, in order,
+    /// and one missing behind a delivered one would be applied at whichever later sample its
+    /// result happened to come back by (a lockstep run then varied with the machine's load).
     pub(crate) fn awaiting(&self, t_ns: u64) -> Option<u64> {
-        self.pending
-            .front()
-            .filter(|p| p.result.is_none() && p.due_ns <= t_ns)
-            .map(|p| p.id)
+        first_awaited(
+            self.pending
+                .iter()
+                .map(|p| (p.id, p.due_ns, p.result.is_some())),
+            t_ns,
+        )
     }
 
     /// The oldest result due at `t_ns`, in submission order. A due job without its result
@@ -358,6 +363,14 @@ impl Solver {
     }
 }
 
+/// Of jobs `(id, due_ns, result back)` in submission order (so in order of due time), the
+/// first due at `t_ns` whose result is not back.
+fn first_awaited(jobs: impl Iterator<Item = (u64, u64, bool)>, t_ns: u64) -> Option<u64> {
+    jobs.take_while(|(_, due_ns, _)| *due_ns <= t_ns)
+        .find(|(_, _, back)| !back)
+        .map(|(id, _, _)| id)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -379,6 +392,21 @@ mod tests {
             );
         }
         assert_ne!(Solver::new(0.0, 0).next_id, Solver::new(0.0, 1).next_id);
+    }
+
+    #[test]
+    fn every_due_job_without_its_result_is_awaited_not_only_the_oldest() {
+        let jobs = |back: [bool; 3]| [(1, 10, back[0]), (2, 20, back[1]), (3, 40, back[2])];
+        let none = [false; 3];
+        assert_eq!(first_awaited(jobs(none).into_iter(), 5), None, "nothing due");
+        assert_eq!(first_awaited(jobs(none).into_iter(), 30), Some(1));
+        // The oldest is back, the second (also due at 30) is not: it is awaited (before, only
+        // the oldest was looked at, and the second was applied whenever it came).
+        let first_back = [true, false, false];
+        assert_eq!(first_awaited(jobs(first_back).into_iter(), 30), Some(2));
+        let two_back = [true, true, false];
+        assert_eq!(first_awaited(jobs(two_back).into_iter(), 30), None, "third not due");
+        assert_eq!(first_awaited(jobs(two_back).into_iter(), 40), Some(3));
     }
 
     #[test]
