@@ -398,14 +398,22 @@ mod tests {
     fn every_due_job_without_its_result_is_awaited_not_only_the_oldest() {
         let jobs = |back: [bool; 3]| [(1, 10, back[0]), (2, 20, back[1]), (3, 40, back[2])];
         let none = [false; 3];
-        assert_eq!(first_awaited(jobs(none).into_iter(), 5), None, "nothing due");
+        assert_eq!(
+            first_awaited(jobs(none).into_iter(), 5),
+            None,
+            "nothing due"
+        );
         assert_eq!(first_awaited(jobs(none).into_iter(), 30), Some(1));
         // The oldest is back, the second (also due at 30) is not: it is awaited (before, only
         // the oldest was looked at, and the second was applied whenever it came).
         let first_back = [true, false, false];
         assert_eq!(first_awaited(jobs(first_back).into_iter(), 30), Some(2));
         let two_back = [true, true, false];
-        assert_eq!(first_awaited(jobs(two_back).into_iter(), 30), None, "third not due");
+        assert_eq!(
+            first_awaited(jobs(two_back).into_iter(), 30),
+            None,
+            "third not due"
+        );
         assert_eq!(first_awaited(jobs(two_back).into_iter(), 40), Some(3));
     }
 

@@ -50,7 +50,21 @@ struct Tracked {
 
 /// Holds through pitch steps of +-10 deg every 5 s for `seconds`, applying the scenario's
 /// events as they fall due (times from the start of this call).
-fn fly(run: &mut Run, mut scenario: Scenario, seconds: f64) -> Tracked {
+/// `fly_with` without a DVL and quiet: what every asserting test uses.
+fn fly(run: &mut Run, scenario: Scenario, seconds: f64) -> Tracked {
+    fly_with(run, scenario, seconds, false, false)
+}
+
+/// `dvl`: a perfect DVL (the decisive run for the navigation's share of the bias);
+/// `print_windows`: each refinement as it comes. The measuring sweeps set them from `RU_DVL`
+/// and `RU_WINDOWS`; no asserting test reads the environment.
+fn fly_with(
+    run: &mut Run,
+    mut scenario: Scenario,
+    seconds: f64,
+    dvl: bool,
+    print_windows: bool,
+) -> Tracked {
     let yaw = run.sim.roll_pitch_yaw()[2];
     let depth = run.sim.position_ned().z;
     let start = run.sim.time_s();
@@ -59,8 +73,6 @@ fn fly(run: &mut Run, mut scenario: Scenario, seconds: f64) -> Tracked {
     let mut step = 0;
     let mut mismatches = 0;
     let mut windows = Vec::new();
-    // RU_DVL=1: a perfect DVL (the decisive run for the navigation's share of the bias).
-    let dvl = std::env::var_os("RU_DVL").is_some();
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
         if t >= 5.0 * step as f64 {
@@ -88,7 +100,7 @@ fn fly(run: &mut Run, mut scenario: Scenario, seconds: f64) -> Tracked {
             .copied()
             .filter(|v| Some(*v) != before)
         {
-            if std::env::var_os("RU_WINDOWS").is_some() {
+            if print_windows {
                 println!("{:.2} s: {v}", run.sim.time_s());
             }
             windows.push((v.rel_err_rot, v.window_s));
@@ -118,11 +130,15 @@ fn degrade(thruster: &str) -> Scenario {
     Scenario::from_toml_str(&text, "degrade").unwrap()
 }
 
-/// The sweep behind the settings (prints; run with --ignored --nocapture; `RU_SCALE` and
-/// `RU_DRIFT` set `window_se_scale` and `drift_per_sqrt_s`).
+/// The sweep behind the settings (prints, asserts nothing; run with --ignored --nocapture;
+/// `RU_SCALE`, `RU_DRIFT`, `RU_FLOOR`, `RU_UPDATE_REL`, `RU_INFLATE` set the refinement's
+/// settings, `RU_NOISE` narrows the noise levels, `RU_DVL` adds a perfect DVL, `RU_WINDOWS`
+/// prints each refinement).
 #[test]
-#[ignore]
+#[ignore = "a measuring sweep driven by RU_* variables; asserts nothing"]
 fn update_sweep() {
+    let dvl = std::env::var_os("RU_DVL").is_some();
+    let windows = std::env::var_os("RU_WINDOWS").is_some();
     let tune = |r: &mut RefinementConfig| {
         if let Ok(v) = std::env::var("RU_SCALE") {
             r.window_se_scale = v.parse().expect("RU_SCALE is a number");
@@ -158,7 +174,7 @@ fn update_sweep() {
             for update in [false, true] {
                 for seed in [1, 2] {
                     let mut run = holding(noise, seed, update, 200.0);
-                    let r = fly(&mut run, degrade(thruster), 100.0);
+                    let r = fly_with(&mut run, degrade(thruster), 100.0, dvl, windows);
                     println!(
                         "{noise:?} {thruster} update={update} seed {seed}: {r:?} state {:?}",
                         run.machine.state()
@@ -168,7 +184,7 @@ fn update_sweep() {
         }
         for seed in [1, 2] {
             let mut run = holding(noise, seed, true, 200.0);
-            let r = fly(&mut run, Scenario::default(), 180.0);
+            let r = fly_with(&mut run, Scenario::default(), 180.0, dvl, windows);
             let w: Vec<String> = r
                 .windows
                 .iter()
@@ -244,22 +260,16 @@ fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
     );
 }
 
-/// Noise-free, every vehicle file, 60 s of pitch steps with the default updates: the model
-/// stays within 0.03 of the truth (measured 0.006-0.017 rotation, 0.005-0.017 acceleration,
-/// from 0.013-0.015 at the start). The first fusion, which weighed windows by their own
-/// standard errors and let entries drift 0.01 per sqrt(s), took eight_vectored from 0.015 to
-/// 0.066 here (docs/experiments.md). `--nocapture` prints each vehicle; `RU_*` variables
-/// override the settings for sweeps (their results are not asserted then).
-#[test]
-fn every_vehicle_noise_free_sweep() {
-    let tuned = std::env::vars().any(|(k, _)| k.starts_with("RU_"));
-    // RU_VEHICLES (comma-separated) narrows the list; RU_DITHER sets the refinement's dither.
-    let only = std::env::var("RU_VEHICLES").ok();
+/// Every vehicle file (or those `only` names), noise-free, the default settings changed by
+/// `tune`: estimated, then 60 s of pitch steps with the refinement's updates. Each vehicle's
+/// result and a line saying it.
+fn every_vehicle(
+    only: Option<&str>,
+    tune: &dyn Fn(&mut MachineSetup),
+) -> Vec<(&'static str, Tracked, String)> {
+    let mut out = Vec::new();
     for name in common::VEHICLES {
-        if only
-            .as_ref()
-            .is_some_and(|o| !o.split(',').any(|v| v == name))
-        {
+        if only.is_some_and(|o| !o.split(',').any(|v| v == name)) {
             continue;
         }
         let v = common::vehicle(name);
@@ -270,21 +280,7 @@ fn every_vehicle_noise_free_sweep() {
             ..MachineSetup::default()
         };
         setup.machine.deadband = 0.05;
-        if let Ok(v) = std::env::var("RU_DITHER") {
-            setup.refinement.dither = v.parse().expect("RU_DITHER is a number");
-        }
-        if let Ok(v) = std::env::var("RU_DRIFT") {
-            setup.refinement.drift_per_sqrt_s = v.parse().expect("RU_DRIFT is a number");
-        }
-        if let Ok(v) = std::env::var("RU_FLOOR") {
-            setup.refinement.window_floor = v.parse().expect("RU_FLOOR is a number");
-        }
-        if let Ok(v) = std::env::var("RU_INFLATE") {
-            setup.refinement.inflate_above = v.parse().expect("RU_INFLATE is a number");
-        }
-        if let Ok(v) = std::env::var("RU_SCALE") {
-            setup.refinement.window_se_scale = v.parse().expect("RU_SCALE is a number");
-        }
+        tune(&mut setup);
         run.machine = Machine::new(setup);
         run.run_for(1.0);
         run.estimate();
@@ -295,20 +291,71 @@ fn every_vehicle_noise_free_sweep() {
             r.err_rot_start, r.err_rot, r.err_acc, r.refinements, r.mismatches
         );
         println!("{what}");
+        out.push((name, r, what));
+    }
+    out
+}
+
+/// Noise-free, every vehicle file, 60 s of pitch steps with the default updates: the model
+/// stays within 0.03 of the truth (measured 0.006-0.017 rotation, 0.005-0.017 acceleration,
+/// from 0.013-0.015 at the start). The first fusion, which weighed windows by their own
+/// standard errors and let entries drift 0.01 per sqrt(s), took eight_vectored from 0.015 to
+/// 0.066 here (docs/experiments.md). `--nocapture` prints each vehicle. No environment
+/// variable changes this test: the sweeps with other settings are
+/// `every_vehicle_sweep_with_settings_from_the_environment` (issue 31: a knob used to switch
+/// every assertion here off).
+#[test]
+fn every_vehicle_noise_free_sweep() {
+    for (name, r, what) in every_vehicle(None, &|_| {}) {
+        assert!(r.err_rot <= 0.03 && r.err_acc <= 0.03, "{what}");
+        // four_up: 2 refinements since the window fits became solve jobs due 20 ms after
+        // their decision point (11 before). Its third window (19.8 s) judged a 82 % move
+        // of thruster 3 at chi2 3 and ended; from then on the attitude error grew from 11
+        // to 23 deg by 60 s, so no window opened again (a window needs the error under
+        // SETTLE_ERROR_DEG for SETTLE_S). Why the hold drifts is not found: an open defect
+        // (issue 25's closing note), held here at what it does now so it cannot get worse.
+        let least = if name == "four_up" { 2 } else { 5 };
+        assert!(r.refinements >= least, "{what}");
+        assert_eq!(r.mismatches, 0, "{what}");
+    }
+}
+
+/// The measuring tool behind the settings (prints, asserts nothing; run with `--ignored
+/// --nocapture`): `RU_VEHICLES` (comma-separated) narrows the list, `RU_DITHER`, `RU_DRIFT`,
+/// `RU_FLOOR`, `RU_INFLATE`, `RU_SCALE` set the refinement's dither, drift per sqrt(s),
+/// window floor, inflation threshold and window standard-error scale; `RU_WINDOWS` prints
+/// each window's bound.
+#[test]
+#[ignore = "a measuring sweep driven by RU_* variables; asserts nothing"]
+fn every_vehicle_sweep_with_settings_from_the_environment() {
+    let num = |k: &str| {
+        std::env::var(k).ok().map(|v| {
+            v.parse::<f64>()
+                .unwrap_or_else(|_| panic!("{k} is a number"))
+        })
+    };
+    let tune = |setup: &mut MachineSetup| {
+        let r = &mut setup.refinement;
+        if let Some(v) = num("RU_DITHER") {
+            r.dither = v;
+        }
+        if let Some(v) = num("RU_DRIFT") {
+            r.drift_per_sqrt_s = v;
+        }
+        if let Some(v) = num("RU_FLOOR") {
+            r.window_floor = v;
+        }
+        if let Some(v) = num("RU_INFLATE") {
+            r.inflate_above = v;
+        }
+        if let Some(v) = num("RU_SCALE") {
+            r.window_se_scale = v;
+        }
+    };
+    let only = std::env::var("RU_VEHICLES").ok();
+    for (name, r, _) in every_vehicle(only.as_deref(), &tune) {
         if std::env::var_os("RU_WINDOWS").is_some() {
             println!("{name} windows (bound, s): {:?}", r.windows);
-        }
-        if !tuned {
-            assert!(r.err_rot <= 0.03 && r.err_acc <= 0.03, "{what}");
-            // four_up: 2 refinements since the window fits became solve jobs due 20 ms after
-            // their decision point (11 before). Its third window (19.8 s) judged a 82 % move
-            // of thruster 3 at chi2 3 and ended; from then on the attitude error grew from 11
-            // to 23 deg by 60 s, so no window opened again (a window needs the error under
-            // SETTLE_ERROR_DEG for SETTLE_S). Why the hold drifts is not found: an open defect
-            // (issue 25's closing note), held here at what it does now so it cannot get worse.
-            let least = if name == "four_up" { 2 } else { 5 };
-            assert!(r.refinements >= least, "{what}");
-            assert_eq!(r.mismatches, 0, "{what}");
         }
     }
 }
