@@ -132,3 +132,37 @@ fn an_experiment_gives_the_same_json_for_a_seed_under_load() {
     assert!(first["runs"]["learned"].is_object(), "{first}");
     assert_same(&first, &second, "experiment misaligned --seed 2");
 }
+
+/// `--seeds A-B` runs exactly the runs `--seed S` gives, and its spread is theirs: seed 2's
+/// headline inside a two-seed sweep equals the single run's, and each figure's mean, sd and
+/// range are those of the per-seed values.
+#[test]
+fn a_seed_sweep_is_the_single_seed_runs_and_their_spread() {
+    let sweep = run(&["experiment", "misaligned", "--seeds", "1-2"]);
+    assert_eq!(sweep["seeds"], serde_json::json!([1, 2]), "{sweep}");
+    let per_seed = sweep["headline_per_seed"].as_array().expect("per seed");
+    assert_eq!(per_seed.len(), 2);
+    let single = run(&["experiment", "misaligned", "--seed", "2"]);
+    assert_eq!(
+        per_seed[1], single["headline"],
+        "seed 2 in the sweep and alone"
+    );
+    let stats = &sweep["headline_over_seeds"]["manual_over_learned"];
+    let xs: Vec<f64> = per_seed
+        .iter()
+        .map(|h| h["manual_over_learned"].as_f64().unwrap())
+        .collect();
+    let mean = (xs[0] + xs[1]) / 2.0;
+    let sd = (xs[0] - xs[1]).abs() / 2f64.sqrt();
+    assert_eq!(stats["n"], 2, "{stats}");
+    assert!(
+        (stats["mean"].as_f64().unwrap() - mean).abs() < 1e-12,
+        "{stats}"
+    );
+    assert!(
+        (stats["sd"].as_f64().unwrap() - sd).abs() < 1e-12,
+        "{stats}"
+    );
+    assert_eq!(stats["min"].as_f64().unwrap(), xs[0].min(xs[1]));
+    assert_eq!(stats["max"].as_f64().unwrap(), xs[0].max(xs[1]));
+}
