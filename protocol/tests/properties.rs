@@ -279,7 +279,9 @@ proptest! {
         let ok = attitude.iter().all(|v| v.is_finite())
             && (n - 1.0).abs() <= limits::QUATERNION_NORM_TOLERANCE
             && within(depth, limits::MIN_DEPTH_M, limits::MAX_DEPTH_M)
-            && flags & !Setpoint::KNOWN_FLAGS == 0;
+            && flags & !Setpoint::KNOWN_FLAGS == 0
+            && flags & (Setpoint::HOLD_DEPTH | Setpoint::RELEASE_DEPTH)
+                != Setpoint::HOLD_DEPTH | Setpoint::RELEASE_DEPTH;
         match s.validate() {
             Ok(()) => prop_assert!(ok, "invalid setpoint accepted: {s:?}"),
             Err(reason) => {

@@ -694,10 +694,26 @@ fn setpoint_validation() {
         "depth = 12000 m is outside [-10, 11000]",
     );
     let p = Setpoint {
-        flags: 1 << 4,
+        flags: 1 << 5,
         ..Default::default()
     };
-    assert_rejects(&p, RejectCategory::Other, "flags has unknown bits 0x10");
+    assert_rejects(&p, RejectCategory::Other, "flags has unknown bits 0x20");
+    // Hold and release at once is a contradiction, refused rather than guessed.
+    let p = Setpoint {
+        flags: Setpoint::HOLD_DEPTH | Setpoint::RELEASE_DEPTH,
+        ..Default::default()
+    };
+    assert_rejects(
+        &p,
+        RejectCategory::Other,
+        "flags: HOLD_DEPTH and RELEASE_DEPTH together",
+    );
+    let p = Setpoint {
+        flags: Setpoint::RELEASE_DEPTH,
+        ..Default::default()
+    };
+    p.validate().unwrap();
+    assert!(p.release_depth() && !p.hold_depth());
 }
 
 // ---- control ---------------------------------------------------------------------------

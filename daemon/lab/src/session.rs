@@ -689,10 +689,11 @@ impl Session {
         let sp = Setpoint {
             attitude: [q.w, q.i, q.j, q.k],
             depth: depth.unwrap_or(0.0),
+            // None releases depth; a setpoint without either flag would keep the held one.
             flags: if depth.is_some() {
                 Setpoint::HOLD_DEPTH
             } else {
-                0
+                Setpoint::RELEASE_DEPTH
             },
             ..Setpoint::default()
         };

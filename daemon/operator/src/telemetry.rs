@@ -188,6 +188,26 @@ impl HeldSetpoint {
     }
 }
 
+/// What the daemon holds, as the reply to a setpoint says it: read from telemetry published
+/// after the daemon took the setpoint, so it is what is held, not what was asked.
+pub fn held_text(t: &TelemetryMsg) -> String {
+    if !t.has(TelemetryMsg::HAS_SETPOINT) {
+        return format!(
+            "thrusterd is {} and holds nothing now (it takes this setpoint when it controls)",
+            state_name(t.state)
+        );
+    }
+    let depth = if t.has(TelemetryMsg::HOLD_DEPTH) {
+        format!("depth {:.2} m", t.setpoint_depth)
+    } else {
+        "depth free".to_string()
+    };
+    format!(
+        "thrusterd holds {} deg, {depth}",
+        angles(&t.setpoint_euler)
+    )
+}
+
 /// The line `watch` prints when the held setpoint changes.
 pub fn setpoint_line(t: &TelemetryMsg) -> String {
     let mut s = format!(
@@ -229,6 +249,24 @@ mod tests {
         t.set_mode(ThrustMode::Controlling);
         t.thrust[..5].copy_from_slice(&[0.12, -0.05, 0.0, 0.31, -1.0]);
         t
+    }
+
+    #[test]
+    fn the_held_setpoint_says_depth() {
+        assert_eq!(
+            held_text(&holding()),
+            "thrusterd holds roll +0.0 pitch +10.0 yaw +45.0 deg, depth 2.00 m"
+        );
+        let mut free = holding();
+        free.flags &= !TelemetryMsg::HOLD_DEPTH;
+        assert!(held_text(&free).ends_with(", depth free"));
+        let mut idle = holding();
+        idle.flags = 0;
+        idle.set_state(DaemonState::Idle);
+        assert_eq!(
+            held_text(&idle),
+            "thrusterd is Idle and holds nothing now (it takes this setpoint when it controls)"
+        );
     }
 
     #[test]

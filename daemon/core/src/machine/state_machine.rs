@@ -10,7 +10,8 @@ use super::estimation::ESTIMATION;
 use super::estimation::{ClosedStep, EstimationRun, Motion, PulseStep};
 use super::models::ModelSlot;
 use super::types::{
-    finish, Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput,
+    finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
+    SetpointInput,
     State, StatusSnapshot, NO_IMU_YET,
 };
 use crate::attitude::AttitudeFilter;
@@ -532,7 +533,7 @@ impl Machine {
 
     /// An operator's setpoint in which some angles may be left out: those keep the value held
     /// now (the current target's, or, before any target, what control would hold: level at
-    /// the current heading).
+    /// the current heading). Depth left out keeps the held depth, as angles do.
     pub fn on_setpoint_input(&mut self, s: &SetpointInput) {
         let held = match &self.target {
             Some(t) => t.attitude.euler_angles(),
@@ -543,7 +544,12 @@ impl Machine {
         let want = [r, p, y];
         let pick = |i: usize| if s.keep[i] { held[i] } else { want[i] };
         let attitude = UnitQuaternion::from_euler_angles(pick(0), pick(1), pick(2));
-        self.on_setpoint(attitude, s.depth);
+        let depth = match s.depth {
+            DepthInput::Keep => self.target.as_ref().and_then(|t| t.depth),
+            DepthInput::Release => None,
+            DepthInput::Hold(d) => Some(d),
+        };
+        self.on_setpoint(attitude, depth);
     }
 
     pub fn on_reconfig(&mut self, r: Reconfig) {

@@ -115,7 +115,7 @@ impl Machine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::{Geometry, MachineSetup, Request, SetpointInput};
+    use crate::machine::{DepthInput, Geometry, MachineSetup, Request, SetpointInput};
 
     /// AMOUR-like layout: two thrusters along x at the sides, two pushing up fore and aft.
     fn machine() -> Machine {
@@ -203,7 +203,7 @@ mod tests {
         m.on_setpoint_input(&SetpointInput {
             attitude: want,
             keep: [false, false, true],
-            depth: Some(2.5),
+            depth: DepthInput::Hold(2.5),
         });
         k += 1;
         let s = level(k, 3.1);
@@ -226,6 +226,45 @@ mod tests {
         let t = m.telemetry(&s);
         assert_eq!(t.setpoint, None);
         assert_eq!(t.depth_error, None);
+    }
+
+    /// Issue 27: `setpoint --pitch 10` from a depth hold let the vehicle rise 7 m. A setpoint
+    /// that does not mention depth keeps the depth held; only an explicit release frees it.
+    #[test]
+    fn a_setpoint_without_depth_keeps_the_held_depth() {
+        let mut m = machine();
+        let mut k = 0;
+        let mut step = |m: &mut Machine, depth: f64| {
+            k += 1;
+            let s = level(k, depth);
+            m.on_imu(&s);
+            m.telemetry(&s)
+        };
+        for _ in 0..50 {
+            step(&mut m, 26.56);
+        }
+        m.on_request(Request::Hold).unwrap();
+        assert_eq!(step(&mut m, 26.56).setpoint.unwrap().depth, Some(26.56));
+        let pitch = |depth| SetpointInput {
+            attitude: UnitQuaternion::from_euler_angles(0.0, 10f64.to_radians(), 0.0),
+            keep: [true, false, true],
+            depth,
+        };
+        m.on_setpoint_input(&pitch(DepthInput::Keep));
+        let t = step(&mut m, 26.6);
+        let sp = t.setpoint.unwrap();
+        assert_eq!(sp.depth, Some(26.56));
+        assert!((sp.attitude.euler_angles().1 - 10f64.to_radians()).abs() < 1e-9);
+        assert!((t.depth_error.unwrap() - (26.56 - 26.6)).abs() < 1e-12);
+        m.on_setpoint_input(&pitch(DepthInput::Hold(20.0)));
+        assert_eq!(step(&mut m, 26.6).setpoint.unwrap().depth, Some(20.0));
+        m.on_setpoint_input(&pitch(DepthInput::Release));
+        let t = step(&mut m, 26.6);
+        assert_eq!(t.setpoint.unwrap().depth, None);
+        assert_eq!(t.depth_error, None);
+        // Released stays released: keeping keeps "free".
+        m.on_setpoint_input(&pitch(DepthInput::Keep));
+        assert_eq!(step(&mut m, 26.6).setpoint.unwrap().depth, None);
     }
 
     #[test]

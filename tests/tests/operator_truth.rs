@@ -1,0 +1,162 @@
+//! Issue 27: what thrusterctl says, and what the vehicle does, checked the way a new user met
+//! them. Real thrusterd and thruster-sim processes on a private namespace (lockstep, paced so
+//! vehicle time advances evenly), the simulator's true vehicle state as the judge; every child
+//! reaped and the namespace's files checked at the end.
+
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use system_tests::{bin, World};
+use thruster_protocol::services::Inbox;
+use thruster_protocol::VehicleStateMsg;
+
+fn ctl(world: &World, args: &[&str]) -> Output {
+    Command::new(bin("thrusterctl"))
+        .args(["--namespace", &world.namespace(), "--timeout-ms", "5000"])
+        .args(args)
+        .output()
+        .expect("thrusterctl runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn expect_ok(out: &Output, what: &str) -> String {
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{what}\nstdout: {}\nstderr: {}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+    text(&out.stdout)
+}
+
+/// Polls `status --json` until `pred` holds (60 s at most); the last status.
+fn wait_status(world: &World, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let out = ctl(world, &["status", "--json"]);
+        if out.status.success() {
+            let v: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
+            if pred(&v) {
+                return v;
+            }
+        }
+        assert!(
+            Instant::now() < deadline,
+            "timed out waiting for {what}; last: {}{}",
+            text(&out.stdout),
+            text(&out.stderr)
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// The simulator's true vehicle states over the next `seconds` of vehicle time, from the first
+/// one read (every state the buffer kept; a few dropped on a loaded machine do not matter).
+fn truth_for(vehicle: &Inbox<VehicleStateMsg>, seconds: f64) -> Vec<VehicleStateMsg> {
+    while vehicle.recv().unwrap().is_some() {}
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let mut got: Vec<VehicleStateMsg> = Vec::new();
+    loop {
+        while let Some(v) = vehicle.recv().unwrap() {
+            got.push(v);
+        }
+        if let (Some(a), Some(b)) = (got.first(), got.last()) {
+            if (b.t_ns - a.t_ns) as f64 * 1e-9 >= seconds {
+                return got;
+            }
+        }
+        assert!(Instant::now() < deadline, "vehicle time stalled");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+fn depth_range(states: &[VehicleStateMsg]) -> (f64, f64) {
+    states.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| {
+        (lo.min(v.position_ned[2]), hi.max(v.position_ned[2]))
+    })
+}
+
+/// Item 1, the safety defect: `setpoint --pitch 10` from a depth hold answered "depth free"
+/// and the vehicle rose 7 m. Now the held depth is kept (within 0.3 m of the true depth for 30
+/// vehicle-s), the reply says so, and only `--depth free` lets go (then the buoyant vehicle
+/// rises, which shows the check can fail).
+#[test]
+fn a_pitch_setpoint_from_a_depth_hold_keeps_the_depth() {
+    let world = World::new("spdepth");
+    let vehicle: Inbox<VehicleStateMsg> =
+        Inbox::create_with_buffer(world.node(), world.ipc(), 128).unwrap();
+    let mut daemon = world.daemon(&["--lockstep"]);
+    let mut sim = world.sim(
+        "amour5",
+        &[
+            "--noise",
+            "realistic",
+            "--lockstep",
+            "--pace",
+            "10",
+            "--duration",
+            "100000",
+        ],
+    );
+    wait_status(&world, "an idle daemon reading the IMU", |v| {
+        v["state"] == "Idle" && v["samples"].as_u64().unwrap_or(0) > 50
+    });
+    let out = ctl(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
+    expect_ok(&out, "estimate --wait");
+    let now = truth_for(&vehicle, 0.05);
+    let d0 = now.last().unwrap().position_ned[2];
+    let held = format!("{d0:.2}");
+    let out = ctl(&world, &["setpoint", "--roll", "0", "--pitch", "0", "--depth", &held]);
+    let said = expect_ok(&out, "setpoint --depth");
+    assert!(said.contains(&format!("depth {held} m")), "{said}");
+    let d0: f64 = held.parse().unwrap();
+    // Settle on the held depth and level.
+    truth_for(&vehicle, 10.0);
+
+    let out = ctl(&world, &["setpoint", "--pitch", "10"]);
+    let said = expect_ok(&out, "setpoint --pitch 10");
+    assert!(
+        said.contains("depth kept") && said.contains(&format!("depth {held} m")),
+        "the reply must say depth is kept and which: {said}"
+    );
+    let states = truth_for(&vehicle, 30.0);
+    let (lo, hi) = depth_range(&states);
+    assert!(
+        (lo - d0).abs() <= 0.3 && (hi - d0).abs() <= 0.3,
+        "held {d0:.2} m, the vehicle went {lo:.2}-{hi:.2} m over 30 vehicle-s"
+    );
+    let pitch = {
+        let q = states.last().unwrap().attitude;
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            q[0], q[1], q[2], q[3],
+        ));
+        q.euler_angles().1.to_degrees()
+    };
+    assert!((pitch - 10.0).abs() < 3.0, "pitch {pitch:.1} deg");
+
+    // Released on request only: the buoyant vehicle then rises.
+    let out = ctl(&world, &["setpoint", "--depth", "free"]);
+    let said = expect_ok(&out, "setpoint --depth free");
+    assert!(said.contains("depth free"), "{said}");
+    let states = truth_for(&vehicle, 30.0);
+    let last = states.last().unwrap().position_ned[2];
+    assert!(
+        d0 - last > 0.3,
+        "free depth: from {d0:.2} m to {last:.2} m, the check could not fail"
+    );
+
+    let out = ctl(&world, &["shutdown"]);
+    expect_ok(&out, "shutdown");
+    assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
+    sim.stop();
+    drop(vehicle);
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+}
