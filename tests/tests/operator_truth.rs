@@ -160,3 +160,37 @@ fn a_pitch_setpoint_from_a_depth_hold_keeps_the_depth() {
     let left = world.leftovers();
     assert!(left.is_empty(), "files of the namespace left: {left:?}");
 }
+
+/// Item 3: the daemon started before the simulator, as the README does. Once samples flow,
+/// `status` must not go on saying none came.
+#[test]
+fn status_drops_no_imu_yet_once_the_simulator_runs() {
+    let world = World::new("noimu");
+    let mut daemon = world.daemon(&["--lockstep"]);
+    let first = wait_status(&world, "the daemon saying no IMU came", |v| {
+        v["text"].as_str().unwrap_or("").contains("no IMU samples")
+    });
+    assert_eq!(first["state"], "Idle", "{first}");
+    let mut sim = world.sim(
+        "amour5",
+        &["--noise", "paper", "--lockstep", "--pace", "5", "--duration", "100000"],
+    );
+    let flowing = wait_status(&world, "samples", |v| {
+        v["samples"].as_u64().unwrap_or(0) > 200
+    });
+    let text = flowing["text"].as_str().unwrap();
+    assert!(!text.contains("no IMU"), "stale text beside samples: {flowing}");
+    assert_eq!(flowing["state"], "Idle", "{flowing}");
+    // And the human form, as the user read it.
+    let out = ctl(&world, &["status"]);
+    let said = expect_ok(&out, "status");
+    assert!(!said.contains("no IMU samples"), "{said}");
+    let out = ctl(&world, &["shutdown"]);
+    expect_ok(&out, "shutdown");
+    assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
+    sim.stop();
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+}

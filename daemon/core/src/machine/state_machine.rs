@@ -65,6 +65,8 @@ pub struct Machine {
     imu_rate_hz: f64,
     samples: u64,
     text: String,
+    /// `text` says no IMU sample has come yet (set by `on_no_imu_yet`).
+    text_says_no_imu: bool,
     last_desired: [f64; 6],
     /// Why the driver's outputs cannot be used (see `driver_watch`), while they cannot: the
     /// machine stays in Fault, neutral, and does not recover on good IMU samples alone.
@@ -74,6 +76,9 @@ pub struct Machine {
     /// present voltage (`crate::supply`).
     supply: Supply,
 }
+
+/// What status says while idle with samples coming and nothing asked.
+const IDLE_TEXT: &str = "idle: waiting for an estimate request";
 
 impl Machine {
     pub fn new(setup: MachineSetup) -> Self {
@@ -98,7 +103,8 @@ impl Machine {
             events: Vec::new(),
             imu_rate_hz: 0.0,
             samples: 0,
-            text: "idle: waiting for an estimate request".into(),
+            text: IDLE_TEXT.into(),
+            text_says_no_imu: false,
             last_desired: [0.0; 6],
             output_block: None,
             supply: Supply::new(setup.supply.clone()),
@@ -285,6 +291,9 @@ impl Machine {
     }
 
     fn respond(&mut self, s: &ImuInput) -> Command {
+        if self.samples == 0 {
+            self.first_sample();
+        }
         self.samples += 1;
         let dt = match self.last_t_ns {
             Some(last) if s.t_ns > last => (s.t_ns - last) as f64 * 1e-9,
@@ -391,6 +400,15 @@ impl Machine {
     pub fn on_no_imu_yet(&mut self, why: &str) {
         if self.state == State::Idle && self.samples == 0 {
             self.text = format!("idle: {why}");
+            self.text_says_no_imu = true;
+        }
+    }
+
+    /// The first sample ends "no IMU yet": status must not go on saying it beside a rate and
+    /// a sample count (issue 27: it stayed until the next state change).
+    fn first_sample(&mut self) {
+        if std::mem::take(&mut self.text_says_no_imu) && self.state == State::Idle {
+            self.text = IDLE_TEXT.into();
         }
     }
 

@@ -267,6 +267,21 @@ mod tests {
         assert_eq!(step(&mut m, 26.6).setpoint.unwrap().depth, None);
     }
 
+    /// Issue 27: a daemon started before its driver said "no IMU samples from any driver"
+    /// beside a 200 Hz rate until an estimation. The first sample clears it.
+    #[test]
+    fn the_first_sample_clears_no_imu_yet() {
+        let mut m = machine();
+        m.on_no_imu_yet("no IMU samples from any driver for 100 ms (namespace x)");
+        assert!(m.status().text.contains("no IMU samples"), "{}", m.status().text);
+        m.on_imu(&level(1, 3.0));
+        let text = m.status().text;
+        assert_eq!(text, "idle: waiting for an estimate request");
+        // Once samples came, the call does nothing (the daemon stops making it anyway).
+        m.on_no_imu_yet("no IMU samples from any driver for 100 ms (namespace x)");
+        assert_eq!(m.status().text, text);
+    }
+
     #[test]
     fn an_estimation_reports_its_own_progress_only() {
         let mut m = machine();
