@@ -194,3 +194,123 @@ fn status_drops_no_imu_yet_once_the_simulator_runs() {
     let left = world.leftovers();
     assert!(left.is_empty(), "files of the namespace left: {left:?}");
 }
+
+/// "pulse X of Y" in a line of `estimate --wait` or `watch`: (X, Y).
+fn pulse_counts(line: &str) -> Option<(u64, u64)> {
+    let rest = line.split("pulse ").nth(1)?;
+    let mut words = rest.split_whitespace();
+    let x = words.next()?.parse().ok()?;
+    (words.next()? == "of").then_some(())?;
+    let y = words.next()?.trim_end_matches(',').parse().ok()?;
+    Some((x, y))
+}
+
+/// Every "bound N %" figure of a line, in percent.
+fn bounds(line: &str) -> Vec<f64> {
+    line.split("bound ")
+        .skip(1)
+        .filter_map(|r| r.split_whitespace().next()?.parse().ok())
+        .collect()
+}
+
+/// Items 2 and 5 as the user met them. `estimate --wait` at the paper's noise, where the
+/// estimator extends its plan: no line counts a pulse beyond the plan it shows. A second
+/// estimation under `watch`: its first pulse shows no error bound (the old model's was shown),
+/// and no bound above 100 % is printed as a number. Then the daemon is shut down and a new one
+/// started under the same `watch`: it says stopped (not the old state), then that a new
+/// instance runs, and shows that one's state.
+#[test]
+fn progress_bounds_and_watch_across_a_restart_say_what_is_so() {
+    let world = World::new("progress");
+    let mut daemon = world.daemon(&["--lockstep"]);
+    let mut sim = world.sim(
+        "amour5",
+        &["--noise", "paper", "--lockstep", "--pace", "20", "--duration", "100000"],
+    );
+    wait_status(&world, "an idle daemon reading the IMU", |v| {
+        v["state"] == "Idle" && v["samples"].as_u64().unwrap_or(0) > 50
+    });
+    let ns = world.namespace();
+    let mut watch = system_tests::Proc::spawn(
+        "thrusterctl",
+        &["--namespace", &ns, "watch", "--interval-ms", "0"],
+        world.dir.path(),
+    );
+    let mut extents = Vec::new();
+    for run in 0..2 {
+        let out = ctl(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
+        expect_ok(&out, "estimate --wait");
+        let progress = text(&out.stderr);
+        for line in progress.lines() {
+            if let Some((x, y)) = pulse_counts(line) {
+                assert!(x <= y, "run {run}: {line}\n{progress}");
+                extents.push(y);
+            }
+        }
+    }
+    let (lo, hi) = (
+        extents.iter().min().copied().unwrap_or(0),
+        extents.iter().max().copied().unwrap_or(0),
+    );
+    assert!(hi > lo, "the plan never grew ({lo}..{hi}): the count check could not fail");
+
+    let out = ctl(&world, &["shutdown"]);
+    expect_ok(&out, "shutdown");
+    assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
+    let stopped_at = Instant::now();
+    while !watch.log_text().contains("thrusterd stopped") {
+        assert!(stopped_at.elapsed() < Duration::from_secs(10), "{}", watch.log_text());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut daemon = world.daemon(&["--lockstep"]);
+    let back = Instant::now();
+    while !watch.log_text().contains("restarted") || !watch.log_text().contains("] Idle") {
+        assert!(back.elapsed() < Duration::from_secs(20), "{}", watch.log_text());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    watch.signal("INT");
+    assert!(watch.wait_timeout(Duration::from_secs(10)).is_some());
+    let log = watch.log_text();
+
+    // The second estimation's first pulse (a model in force): no bound yet.
+    for line in log.lines() {
+        if line.contains("Pulse") && pulse_counts(line).is_some_and(|(x, _)| x == 1) {
+            assert!(bounds(line).is_empty(), "a bound before any estimate: {line}");
+        }
+        for b in bounds(line) {
+            assert!(b <= 100.0, "an absurd bound: {line}");
+        }
+        if let Some((x, y)) = pulse_counts(line) {
+            assert!(x <= y, "{line}");
+        }
+    }
+    let stop_line = log
+        .lines()
+        .find(|l| l.contains("thrusterd stopped"))
+        .unwrap();
+    assert!(
+        stop_line.contains("] Stopped") && !stop_line.contains("] Active"),
+        "{stop_line}"
+    );
+    let after: Vec<&str> = log
+        .lines()
+        .skip_while(|l| !l.contains("restarted"))
+        .collect();
+    assert!(
+        after.iter().any(|l| l.contains("] Idle")),
+        "the new daemon's state: {log}"
+    );
+    assert!(
+        !after.iter().skip(1).any(|l| l.contains("Active")),
+        "the old daemon's state after the restart: {log}"
+    );
+
+    let out = ctl(&world, &["shutdown"]);
+    expect_ok(&out, "shutdown");
+    assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
+    sim.stop();
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+}

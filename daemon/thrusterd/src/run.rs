@@ -606,7 +606,7 @@ impl Daemon {
             session.finish();
         }
         let mut status = self.status_msg();
-        status.set_text("thrusterd stopped");
+        status.set_text(StatusMsg::STOPPED_TEXT);
         let _ = status_out.send(&status);
         Ok(())
     }

@@ -625,7 +625,7 @@ impl Machine {
 
     pub fn status(&self) -> StatusSnapshot {
         let (pulse, planned, power) = match self.run.estimator() {
-            Some(e) => (e.pulses(), e.planned_pulses(), e.power()),
+            Some(e) => (e.pulses(), e.plan_extent(), e.power()),
             // Not estimating: how many pulses the model in force took (0 for a nominal
             // one), not the last run's, which may have been refused or reverted.
             None => {
@@ -636,9 +636,13 @@ impl Machine {
         // Likewise the bound: the running estimate's, else the model in force's (NaN when it
         // has none: nominal, or the paper's method).
         let error_bound = match (self.run.estimator(), self.models.current()) {
-            (Some(_), _) => self
+            // Only this run's estimate: the run keeps the previous one until its first solve,
+            // and status once showed the old model's bound at the start of a new estimation
+            // (as telemetry, which filters the same way).
+            (Some(e), _) => self
                 .run
                 .last_estimate()
+                .filter(|last| e.pulses() > 0 && last.pulses == e.pulses())
                 .map(|e| e.rel_err_rot.max(e.rel_err_acc))
                 .unwrap_or(f64::NAN),
             (None, Some(m)) => m.rel_err_rot.max(m.rel_err_acc),

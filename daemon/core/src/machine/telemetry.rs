@@ -90,7 +90,7 @@ impl Machine {
                 .filter(|(r, a)| r.is_finite() && a.is_finite());
             Progress {
                 pulses,
-                pulses_planned: est.planned_pulses(),
+                pulses_planned: est.plan_extent(),
                 power: est.power(),
                 error_bound,
                 sigma,
