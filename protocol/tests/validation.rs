@@ -658,7 +658,13 @@ fn status_text_truncates_at_char_boundary() {
     // 127 ASCII bytes then a 2-byte char: the char does not fit in 128 bytes.
     let long = format!("{}é and more", "x".repeat(127));
     s.set_text(&long);
-    assert_eq!(s.text(), "x".repeat(127));
+    assert_eq!(s.text(), format!("{}...", "x".repeat(125)));
+    // Issue 27: a refusal cut mid-word ("estimate af"). Cut at a word, marked as cut.
+    let words = "in fault (the driver reports its outputs cannot be used: link down for 2.0 s, \
+                 thrusters neutral); estimate after it clears";
+    s.set_text(words);
+    let got = s.text();
+    assert!(got.len() <= 128 && got.ends_with("neutral); estimate..."), "{got}");
     s.set_text("fault: IMU stale for 120 ms");
     assert_eq!(s.text(), "fault: IMU stale for 120 ms");
 }

@@ -434,8 +434,9 @@ impl Machine {
                     return Err(Refused(NO_IMU_YET.into()));
                 }
                 if self.state == State::Fault {
+                    // What to do first: the fault's own text is long and may be cut.
                     return Err(Refused(format!(
-                        "in fault ({}); estimate after it clears",
+                        "in fault: estimate once it clears ({})",
                         self.text
                     )));
                 }
