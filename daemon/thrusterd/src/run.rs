@@ -964,6 +964,10 @@ impl Daemon {
         };
         let result = self.machine.on_request(machine_req);
         self.journal_request(kind, req.value, result.is_err());
+        if self.machine.state() == thrusterd_core::machine::State::Fault {
+            // Idle or stop in Fault change what it recovers to without a state change.
+            self.record_intent(thrusterd_core::machine::State::Fault);
+        }
         match result {
             Ok(text) => ControlResponse::ok(&text),
             Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.0),
@@ -1042,6 +1046,10 @@ impl Daemon {
                 warn!("the previous thrusterd did not stop cleanly while controlling, but there is no model to resume with: idle");
                 Intent::Idle
             }
+            Some(Intent::Idle) if session.previous_in_fault() => {
+                info!("the previous thrusterd did not stop cleanly; it was in Fault and would have recovered to idle: idle");
+                Intent::Idle
+            }
             Some(Intent::Idle) => {
                 info!("the previous thrusterd did not stop cleanly; it was idle: idle");
                 Intent::Idle
@@ -1060,6 +1068,19 @@ impl Daemon {
             State::Active => crate::session::Intent::Hold,
             s if s.is_estimating() => crate::session::Intent::Hold,
             State::Idle => crate::session::Intent::Idle,
+            State::Fault => {
+                // What clearing the fault resumes, marked as Fault (an operator's idle or stop
+                // in Fault changes it without a state change: called after every request).
+                let intent = if self.machine.fault_resumes_control() {
+                    crate::session::Intent::Hold
+                } else {
+                    crate::session::Intent::Idle
+                };
+                if let Some(session) = self.session.as_mut() {
+                    session.record_in_fault(intent);
+                }
+                return;
+            }
             _ => return,
         };
         if let Some(session) = self.session.as_mut() {

@@ -257,9 +257,16 @@ impl Machine {
     }
 
     fn install_loaded(&mut self, model: Model) -> Result<(), Refused> {
+        let saved = model.version;
         self.try_swap(model, ModelSource::Loaded)
             .map_err(|e| Refused(format!("model not used: {e}")))?;
-        self.describe_swap("model loaded");
+        // Versions only go up here: a file older than the model in force gets a new number,
+        // and status says which version it was saved as.
+        let what = match self.models.current() {
+            Some(m) if saved > 0 && m.version != saved => format!("model loaded (saved as v{saved})"),
+            _ => "model loaded".to_string(),
+        };
+        self.describe_swap(&what);
         Ok(())
     }
 
@@ -271,6 +278,12 @@ impl Machine {
         };
         self.text = format!("{what}: model v{}, {}", m.version, m.provenance());
         self.text.clone()
+    }
+
+    /// In Fault: whether clearing it resumes control (or the interrupted estimation) rather
+    /// than idle. What a restart after a crash in Fault should resume.
+    pub fn fault_resumes_control(&self) -> bool {
+        matches!(self.resume, Resume::Active | Resume::Estimate)
     }
 
     /// The answer to one IMU sample. Always a command: neutral unless estimating or controlling.

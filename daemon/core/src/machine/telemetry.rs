@@ -282,6 +282,28 @@ mod tests {
         assert_eq!(m.status().text, text);
     }
 
+    /// Issue 27: a saved model v8 reloaded as version 1. It keeps its version when the
+    /// daemon's counter is below it; an older file gets the next number (versions never go
+    /// back) and status names the version it was saved as.
+    #[test]
+    fn a_loaded_model_keeps_its_saved_version_and_versions_only_go_up() {
+        let mut m = machine();
+        let mut saved = m.model().unwrap().clone();
+        assert_eq!(saved.version, 1);
+        saved.version = 8;
+        m.load_model(saved.clone()).unwrap();
+        assert_eq!(m.model().unwrap().version, 8);
+        assert!(m.status().text.starts_with("model loaded: model v8"), "{}", m.status().text);
+        saved.version = 3;
+        m.load_model(saved).unwrap();
+        assert_eq!(m.model().unwrap().version, 9);
+        assert!(
+            m.status().text.starts_with("model loaded (saved as v3): model v9"),
+            "{}",
+            m.status().text
+        );
+    }
+
     #[test]
     fn an_estimation_reports_its_own_progress_only() {
         let mut m = machine();
