@@ -314,3 +314,31 @@ fn progress_bounds_and_watch_across_a_restart_say_what_is_so() {
     let left = world.leftovers();
     assert!(left.is_empty(), "files of the namespace left: {left:?}");
 }
+
+/// Item 8: a demo whose daemon refuses its configuration failed with `kill: (N): No such
+/// process` and named a log file the demo had already deleted. Now it says why, with the log's
+/// last lines, and names no file that is gone.
+#[test]
+fn a_failed_demo_names_no_deleted_file_and_no_kill_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "[machine]\nmax_unexplained_rate_radps = -3\n").unwrap();
+    let out = Command::new(bin("thrusterctl"))
+        .args(["demo", "--hold-s", "0", "--daemon-config", bad.to_str().unwrap()])
+        .env_remove("THRUSTERCTL_KEEP_LOGS")
+        .output()
+        .expect("thrusterctl runs");
+    let said = format!("{}{}", text(&out.stdout), text(&out.stderr));
+    assert!(!out.status.success(), "{said}");
+    assert!(said.contains("max_unexplained_rate_radps"), "the reason: {said}");
+    assert!(!said.contains("No such process"), "{said}");
+    for word in said.split(|c: char| c.is_whitespace() || c == '(' || c == ')') {
+        if word.starts_with('/') && word.ends_with(".log") {
+            assert!(
+                std::path::Path::new(word).exists(),
+                "names {word}, which does not exist: {said}"
+            );
+        }
+    }
+    assert!(said.contains("last lines of its log"), "{said}");
+}
