@@ -342,3 +342,58 @@ fn a_failed_demo_names_no_deleted_file_and_no_kill_error() {
     }
     assert!(said.contains("last lines of its log"), "{said}");
 }
+
+fn demo(args: &[&str]) -> String {
+    let out = Command::new(bin("thrusterctl"))
+        .arg("demo")
+        .args(args)
+        .output()
+        .expect("thrusterctl runs");
+    expect_ok(&out, "demo")
+}
+
+/// Items 6 and 10, on the aligned vehicle (roll, sway and heave not actuated): one tilt figure
+/// for the estimation, the simulator's true one, named; no coefficient printed for roll; and
+/// the JSON carries the matrices the text prints, rows named.
+#[test]
+fn the_demo_says_one_tilt_no_coefficient_of_an_axis_not_actuated_and_gives_its_matrices() {
+    let vehicle = system_tests::workspace().join("config/vehicles/aligned.toml");
+    let vehicle = vehicle.to_str().unwrap();
+    let text = demo(&["--hold-s", "0", "--vehicle", vehicle]);
+    assert_eq!(text.matches("tilted up to").count(), 1, "{text}");
+    assert!(text.contains("(the simulator's true attitude)"), "{text}");
+    assert!(!text.contains("navigation estimate"), "{text}");
+    assert!(
+        text.contains("   roll: axis not actuated: not identified"),
+        "{text}"
+    );
+    assert!(!text.contains("|p|p"), "{text}");
+    assert!(text.contains("pitch: damping q"), "{text}");
+
+    let json: Value = serde_json::from_str(&demo(&["--hold-s", "0", "--json", "--vehicle", vehicle]))
+        .expect("demo JSON");
+    let e = &json["effectiveness"];
+    assert_eq!(
+        e["rows"],
+        serde_json::json!(["roll", "pitch", "yaw", "surge", "sway", "heave"]),
+        "{json}"
+    );
+    for key in ["learned", "truth"] {
+        let rows = e[key].as_array().unwrap_or_else(|| panic!("{key}: {json}"));
+        assert_eq!(rows.len(), 6, "{key}: {json}");
+        assert!(rows.iter().all(|r| r.as_array().unwrap().len() == 5), "{key}: {json}");
+    }
+    // The numbers are the model's: the relative rotation error recomputed from them is the
+    // one the demo reports.
+    let m = |k: &str| -> Vec<f64> {
+        e[k].as_array().unwrap()[..3]
+            .iter()
+            .flat_map(|r| r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
+            .collect()
+    };
+    let (l, t) = (m("learned"), m("truth"));
+    let diff: f64 = l.iter().zip(&t).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+    let norm: f64 = t.iter().map(|b| b * b).sum::<f64>().sqrt();
+    let err_rot = json["err_rot"].as_f64().unwrap();
+    assert!((diff / norm - err_rot).abs() < 1e-9, "{} vs {err_rot}", diff / norm);
+}
