@@ -664,7 +664,10 @@ fn status_text_truncates_at_char_boundary() {
                  thrusters neutral); estimate after it clears";
     s.set_text(words);
     let got = s.text();
-    assert!(got.len() <= 128 && got.ends_with("neutral); estimate..."), "{got}");
+    assert!(
+        got.len() <= 128 && got.ends_with("neutral); estimate..."),
+        "{got}"
+    );
     s.set_text("fault: IMU stale for 120 ms");
     assert_eq!(s.text(), "fault: IMU stale for 120 ms");
 }

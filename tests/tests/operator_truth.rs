@@ -111,7 +111,10 @@ fn a_pitch_setpoint_from_a_depth_hold_keeps_the_depth() {
     let now = truth_for(&vehicle, 0.05);
     let d0 = now.last().unwrap().position_ned[2];
     let held = format!("{d0:.2}");
-    let out = ctl(&world, &["setpoint", "--roll", "0", "--pitch", "0", "--depth", &held]);
+    let out = ctl(
+        &world,
+        &["setpoint", "--roll", "0", "--pitch", "0", "--depth", &held],
+    );
     let said = expect_ok(&out, "setpoint --depth");
     assert!(said.contains(&format!("depth {held} m")), "{said}");
     let d0: f64 = held.parse().unwrap();
@@ -173,13 +176,24 @@ fn status_drops_no_imu_yet_once_the_simulator_runs() {
     assert_eq!(first["state"], "Idle", "{first}");
     let mut sim = world.sim(
         "amour5",
-        &["--noise", "paper", "--lockstep", "--pace", "5", "--duration", "100000"],
+        &[
+            "--noise",
+            "paper",
+            "--lockstep",
+            "--pace",
+            "5",
+            "--duration",
+            "100000",
+        ],
     );
     let flowing = wait_status(&world, "samples", |v| {
         v["samples"].as_u64().unwrap_or(0) > 200
     });
     let text = flowing["text"].as_str().unwrap();
-    assert!(!text.contains("no IMU"), "stale text beside samples: {flowing}");
+    assert!(
+        !text.contains("no IMU"),
+        "stale text beside samples: {flowing}"
+    );
     assert_eq!(flowing["state"], "Idle", "{flowing}");
     // And the human form, as the user read it.
     let out = ctl(&world, &["status"]);
@@ -225,7 +239,15 @@ fn progress_bounds_and_watch_across_a_restart_say_what_is_so() {
     let mut daemon = world.daemon(&["--lockstep"]);
     let mut sim = world.sim(
         "amour5",
-        &["--noise", "paper", "--lockstep", "--pace", "20", "--duration", "100000"],
+        &[
+            "--noise",
+            "paper",
+            "--lockstep",
+            "--pace",
+            "20",
+            "--duration",
+            "100000",
+        ],
     );
     wait_status(&world, "an idle daemon reading the IMU", |v| {
         v["state"] == "Idle" && v["samples"].as_u64().unwrap_or(0) > 50
@@ -252,20 +274,31 @@ fn progress_bounds_and_watch_across_a_restart_say_what_is_so() {
         extents.iter().min().copied().unwrap_or(0),
         extents.iter().max().copied().unwrap_or(0),
     );
-    assert!(hi > lo, "the plan never grew ({lo}..{hi}): the count check could not fail");
+    assert!(
+        hi > lo,
+        "the plan never grew ({lo}..{hi}): the count check could not fail"
+    );
 
     let out = ctl(&world, &["shutdown"]);
     expect_ok(&out, "shutdown");
     assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
     let stopped_at = Instant::now();
     while !watch.log_text().contains("thrusterd stopped") {
-        assert!(stopped_at.elapsed() < Duration::from_secs(10), "{}", watch.log_text());
+        assert!(
+            stopped_at.elapsed() < Duration::from_secs(10),
+            "{}",
+            watch.log_text()
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     let mut daemon = world.daemon(&["--lockstep"]);
     let back = Instant::now();
     while !watch.log_text().contains("restarted") || !watch.log_text().contains("] Idle") {
-        assert!(back.elapsed() < Duration::from_secs(20), "{}", watch.log_text());
+        assert!(
+            back.elapsed() < Duration::from_secs(20),
+            "{}",
+            watch.log_text()
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     watch.signal("INT");
@@ -275,7 +308,10 @@ fn progress_bounds_and_watch_across_a_restart_say_what_is_so() {
     // The second estimation's first pulse (a model in force): no bound yet.
     for line in log.lines() {
         if line.contains("Pulse") && pulse_counts(line).is_some_and(|(x, _)| x == 1) {
-            assert!(bounds(line).is_empty(), "a bound before any estimate: {line}");
+            assert!(
+                bounds(line).is_empty(),
+                "a bound before any estimate: {line}"
+            );
         }
         for b in bounds(line) {
             assert!(b <= 100.0, "an absurd bound: {line}");
@@ -324,13 +360,22 @@ fn a_failed_demo_names_no_deleted_file_and_no_kill_error() {
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, "[machine]\nmax_unexplained_rate_radps = -3\n").unwrap();
     let out = Command::new(bin("thrusterctl"))
-        .args(["demo", "--hold-s", "0", "--daemon-config", bad.to_str().unwrap()])
+        .args([
+            "demo",
+            "--hold-s",
+            "0",
+            "--daemon-config",
+            bad.to_str().unwrap(),
+        ])
         .env_remove("THRUSTERCTL_KEEP_LOGS")
         .output()
         .expect("thrusterctl runs");
     let said = format!("{}{}", text(&out.stdout), text(&out.stderr));
     assert!(!out.status.success(), "{said}");
-    assert!(said.contains("max_unexplained_rate_radps"), "the reason: {said}");
+    assert!(
+        said.contains("max_unexplained_rate_radps"),
+        "the reason: {said}"
+    );
     assert!(!said.contains("No such process"), "{said}");
     for word in said.split(|c: char| c.is_whitespace() || c == '(' || c == ')') {
         if word.starts_with('/') && word.ends_with(".log") {
@@ -370,8 +415,9 @@ fn the_demo_says_one_tilt_no_coefficient_of_an_axis_not_actuated_and_gives_its_m
     assert!(!text.contains("|p|p"), "{text}");
     assert!(text.contains("pitch: damping q"), "{text}");
 
-    let json: Value = serde_json::from_str(&demo(&["--hold-s", "0", "--json", "--vehicle", vehicle]))
-        .expect("demo JSON");
+    let json: Value =
+        serde_json::from_str(&demo(&["--hold-s", "0", "--json", "--vehicle", vehicle]))
+            .expect("demo JSON");
     let e = &json["effectiveness"];
     assert_eq!(
         e["rows"],
@@ -381,7 +427,10 @@ fn the_demo_says_one_tilt_no_coefficient_of_an_axis_not_actuated_and_gives_its_m
     for key in ["learned", "truth"] {
         let rows = e[key].as_array().unwrap_or_else(|| panic!("{key}: {json}"));
         assert_eq!(rows.len(), 6, "{key}: {json}");
-        assert!(rows.iter().all(|r| r.as_array().unwrap().len() == 5), "{key}: {json}");
+        assert!(
+            rows.iter().all(|r| r.as_array().unwrap().len() == 5),
+            "{key}: {json}"
+        );
     }
     // The numbers are the model's: the relative rotation error recomputed from them is the
     // one the demo reports.
@@ -392,8 +441,17 @@ fn the_demo_says_one_tilt_no_coefficient_of_an_axis_not_actuated_and_gives_its_m
             .collect()
     };
     let (l, t) = (m("learned"), m("truth"));
-    let diff: f64 = l.iter().zip(&t).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+    let diff: f64 = l
+        .iter()
+        .zip(&t)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
     let norm: f64 = t.iter().map(|b| b * b).sum::<f64>().sqrt();
     let err_rot = json["err_rot"].as_f64().unwrap();
-    assert!((diff / norm - err_rot).abs() < 1e-9, "{} vs {err_rot}", diff / norm);
+    assert!(
+        (diff / norm - err_rot).abs() < 1e-9,
+        "{} vs {err_rot}",
+        diff / norm
+    );
 }

@@ -510,12 +510,19 @@ fn the_plan_extent_grows_with_the_plan_and_never_trails_the_pulses() {
         if !stop.is_stop() && done == extent {
             // Going on past the extent: the pulse it begins is inside the new one.
             let _ = est.begin_pulse();
-            assert!(est.plan_extent() > done, "extent {} at {done}", est.plan_extent());
+            assert!(
+                est.plan_extent() > done,
+                "extent {} at {done}",
+                est.plan_extent()
+            );
             est.end_pulse();
             stop = est.stop_decision();
         }
     }
-    assert!(grew, "the plan never grew past {min}: the check could not fail");
+    assert!(
+        grew,
+        "the plan never grew past {min}: the check could not fail"
+    );
     assert_eq!(est.pulses(), 90, "{stop:?}");
     assert_eq!(est.plan_extent(), 90);
 }

@@ -1753,7 +1753,10 @@ mod tests {
         );
         let oracle = json!({"recovery_threshold_deg": 12.18, "recovered_after_s": null});
         let text = hot_swap_events(&oracle);
-        assert_eq!(text, "no re-estimation, not recovered (2 s windows < 12.18 deg)");
+        assert_eq!(
+            text,
+            "no re-estimation, not recovered (2 s windows < 12.18 deg)"
+        );
         assert!(!text.contains(" - ") && !text.contains("- s"), "{text}");
     }
 
@@ -1768,7 +1771,10 @@ mod tests {
         // An estimation before the hold began (negative x) is not drawn.
         assert!(!shading_drawn(&[panel(vec![(-8.0, -0.5)])], 30.0));
         assert!(!shading_drawn(&[panel(vec![])], 30.0));
-        assert!(shading_drawn(&[panel(vec![]), panel(vec![(12.0, 20.0)])], 30.0));
+        assert!(shading_drawn(
+            &[panel(vec![]), panel(vec![(12.0, 20.0)])],
+            30.0
+        ));
         assert_eq!(settled(&Value::Null), "not settled");
         assert_eq!(settled(&json!(1.234)), "settled 1.23 deg");
     }

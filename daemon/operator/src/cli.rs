@@ -528,7 +528,13 @@ mod tests {
             (z, Some(91.0), z, None, "--pitch must be in [-90, 90]"),
             (Some(181.0), z, z, None, "--roll must be in [-180, 180]"),
             (z, z, Some(f64::INFINITY), None, "--yaw must be a finite"),
-            (z, z, z, Some(Depth::Hold(f64::NAN)), "--depth must be a finite"),
+            (
+                z,
+                z,
+                z,
+                Some(Depth::Hold(f64::NAN)),
+                "--depth must be a finite",
+            ),
             (z, z, z, Some(Depth::Hold(-20.0)), "--depth must be in"),
             (None, None, None, None, "needs at least one of"),
         ];

@@ -183,7 +183,10 @@ mod tests {
                 navigation_excursion: false,
             },
         );
-        assert!(text.contains("   roll: axis not actuated: not identified\n"), "{text}");
+        assert!(
+            text.contains("   roll: axis not actuated: not identified\n"),
+            "{text}"
+        );
         assert!(!text.contains("down_y"), "{text}");
         assert!(text.contains("pitch: damping q"), "{text}");
         assert!(!text.contains("tilted"), "{text}");

@@ -213,10 +213,7 @@ pub fn held_text(t: &TelemetryMsg) -> String {
     } else {
         "depth free".to_string()
     };
-    format!(
-        "thrusterd holds {} deg, {depth}",
-        angles(&t.setpoint_euler)
-    )
+    format!("thrusterd holds {} deg, {depth}", angles(&t.setpoint_euler))
 }
 
 /// The line `watch` prints when the held setpoint changes.

@@ -411,10 +411,7 @@ mod tests {
         // A new daemon counts from 0 again.
         assert_eq!(life.observe(&at(2, "")), Life::Restarted);
         assert_eq!(life.observe(&at(3, "")), Life::Same);
-        assert_eq!(
-            life.observe(&at(4, StatusMsg::STOPPED_TEXT)),
-            Life::Stopped
-        );
+        assert_eq!(life.observe(&at(4, StatusMsg::STOPPED_TEXT)), Life::Stopped);
         // Whatever comes after a stop is another daemon, even with a higher number.
         assert_eq!(life.observe(&at(9, "")), Life::Restarted);
     }

@@ -191,7 +191,10 @@ mod tests {
                 .render_long_help()
                 .to_string();
             for hidden in ["--namespace", "--ipc-root", "--timeout-ms"] {
-                assert!(!help.contains(hidden), "{verb} --help offers {hidden}:\n{help}");
+                assert!(
+                    !help.contains(hidden),
+                    "{verb} --help offers {hidden}:\n{help}"
+                );
             }
         }
         let help = cmd
@@ -199,7 +202,10 @@ mod tests {
             .unwrap()
             .render_long_help()
             .to_string();
-        assert!(help.contains("--namespace") && help.contains("--ipc-root"), "{help}");
+        assert!(
+            help.contains("--namespace") && help.contains("--ipc-root"),
+            "{help}"
+        );
         // Still parsed (and refused by `run` with a reason) rather than an unknown option.
         let m = command()
             .try_get_matches_from(["thrusterctl", "demo", "--namespace", "veh9"])

@@ -495,7 +495,11 @@ impl Estimator {
             Method::Forward => self.plan.cycle_len(),
             Method::Dynamic => 4,
         };
-        begun.div_ceil(step).saturating_mul(step).min(self.cfg.max_pulses).max(begun)
+        begun
+            .div_ceil(step)
+            .saturating_mul(step)
+            .min(self.cfg.max_pulses)
+            .max(begun)
     }
 
     /// The thrust to apply for the next pulse: power times the plan's sign pattern, in [-1, 1].

@@ -11,8 +11,7 @@ use super::estimation::{ClosedStep, EstimationRun, Motion, PulseStep};
 use super::models::ModelSlot;
 use super::types::{
     finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
-    SetpointInput,
-    State, StatusSnapshot, NO_IMU_YET,
+    SetpointInput, State, StatusSnapshot, NO_IMU_YET,
 };
 use crate::attitude::AttitudeFilter;
 use crate::controller::{Controller, Measured, Target};
@@ -263,7 +262,9 @@ impl Machine {
         // Versions only go up here: a file older than the model in force gets a new number,
         // and status says which version it was saved as.
         let what = match self.models.current() {
-            Some(m) if saved > 0 && m.version != saved => format!("model loaded (saved as v{saved})"),
+            Some(m) if saved > 0 && m.version != saved => {
+                format!("model loaded (saved as v{saved})")
+            }
             _ => "model loaded".to_string(),
         };
         self.describe_swap(&what);

@@ -273,7 +273,11 @@ mod tests {
     fn the_first_sample_clears_no_imu_yet() {
         let mut m = machine();
         m.on_no_imu_yet("no IMU samples from any driver for 100 ms (namespace x)");
-        assert!(m.status().text.contains("no IMU samples"), "{}", m.status().text);
+        assert!(
+            m.status().text.contains("no IMU samples"),
+            "{}",
+            m.status().text
+        );
         m.on_imu(&level(1, 3.0));
         let text = m.status().text;
         assert_eq!(text, "idle: waiting for an estimate request");
@@ -293,12 +297,18 @@ mod tests {
         saved.version = 8;
         m.load_model(saved.clone()).unwrap();
         assert_eq!(m.model().unwrap().version, 8);
-        assert!(m.status().text.starts_with("model loaded: model v8"), "{}", m.status().text);
+        assert!(
+            m.status().text.starts_with("model loaded: model v8"),
+            "{}",
+            m.status().text
+        );
         saved.version = 3;
         m.load_model(saved).unwrap();
         assert_eq!(m.model().unwrap().version, 9);
         assert!(
-            m.status().text.starts_with("model loaded (saved as v3): model v9"),
+            m.status()
+                .text
+                .starts_with("model loaded (saved as v3): model v9"),
             "{}",
             m.status().text
         );
