@@ -455,3 +455,71 @@ fn the_demo_says_one_tilt_no_coefficient_of_an_axis_not_actuated_and_gives_its_m
         diff / norm
     );
 }
+
+/// SIGKILL through kill(2): the test's own child, not reaped yet.
+fn kill9(proc: &mut system_tests::Proc) {
+    // SAFETY: kill(2) on our own child, which Proc reaps only on exit.
+    let rc = unsafe { libc::kill(proc.pid() as i32, libc::SIGKILL) };
+    assert_eq!(rc, 0, "kill: {}", std::io::Error::last_os_error());
+    proc.wait_timeout(Duration::from_secs(5))
+        .expect("a SIGKILLed process is reaped at once");
+}
+
+/// Item 11 as the operator met it. A model saved as v2 comes back as v2 after a restart (it
+/// came back as v1). Then, in Fault (the simulator gone) with `idle` asked for, a kill -9: the
+/// restart says the predecessor was in Fault and stays idle (the marker still said "hold", so
+/// a restart would have resumed control the operator had stopped).
+#[test]
+fn a_saved_model_keeps_its_version_and_a_crash_in_fault_is_told_as_such() {
+    let world = World::new("version");
+    let sim_args = [
+        "--noise", "realistic", "--lockstep", "--pace", "20", "--duration", "100000",
+    ];
+    let mut daemon = world.daemon(&["--lockstep"]);
+    let mut sim = world.sim("amour5", &sim_args);
+    wait_status(&world, "samples", |v| v["samples"].as_u64().unwrap_or(0) > 50);
+    for _ in 0..2 {
+        let out = ctl(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
+        expect_ok(&out, "estimate --wait");
+    }
+    let saved = wait_status(&world, "a model", |v| v["model_version"].as_u64() >= Some(2));
+    let version = saved["model_version"].as_u64().unwrap();
+    let out = ctl(&world, &["shutdown"]);
+    expect_ok(&out, "shutdown");
+    assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
+
+    let mut daemon = world.daemon(&["--lockstep"]);
+    let back = wait_status(&world, "the restarted daemon", |v| {
+        v["samples"].as_u64().unwrap_or(0) > 10
+    });
+    assert_eq!(back["model_version"].as_u64(), Some(version), "{back}");
+
+    // Hold, lose the simulator: Fault. The operator asks for idle, then the daemon dies.
+    let out = ctl(&world, &["hold"]);
+    expect_ok(&out, "hold");
+    sim.stop();
+    wait_status(&world, "Fault", |v| v["state"] == "Fault");
+    let out = ctl(&world, &["idle"]);
+    let said = expect_ok(&out, "idle in Fault");
+    assert!(said.contains("idle after the fault clears"), "{said}");
+    kill9(&mut daemon);
+    let mut daemon = world.daemon(&["--lockstep"]);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !daemon.log_text().contains("did not stop cleanly") {
+        assert!(Instant::now() < deadline, "{}", daemon.log_text());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let log = daemon.log_text();
+    assert!(
+        log.contains("it was in Fault and would have recovered to idle"),
+        "{log}"
+    );
+    assert!(!log.contains("resuming control"), "{log}");
+    let out = ctl(&world, &["shutdown"]);
+    expect_ok(&out, "shutdown");
+    assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
+    let mut world = world;
+    world.node = None;
+    let left = world.leftovers();
+    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+}
