@@ -660,14 +660,16 @@ fn status_text_truncates_at_char_boundary() {
     s.set_text(&long);
     assert_eq!(s.text(), format!("{}...", "x".repeat(125)));
     // Issue 27: a refusal cut mid-word ("estimate af"). Cut at a word, marked as cut.
-    let words = "in fault (the driver reports its outputs cannot be used: link down for 2.0 s, \
-                 thrusters neutral); estimate after it clears";
+    let words = "in fault (the driver reports that its outputs cannot be used: the link has been \
+                 down for 2.0 s, thrusters neutral); estimate after it clears";
+    assert!(words.len() > 128);
     s.set_text(words);
     let got = s.text();
-    assert!(
-        got.len() <= 128 && got.ends_with("neutral); estimate..."),
-        "{got}"
-    );
+    let kept = got.strip_suffix("...").unwrap_or_else(|| panic!("no ellipsis: {got}"));
+    assert!(got.len() <= 128, "{got}");
+    assert!(words.starts_with(kept), "{got}");
+    assert!(words[kept.len()..].starts_with(' '), "cut mid-word: {got}");
+    assert_eq!(got, "in fault (the driver reports that its outputs cannot be used: the link has been down for 2.0 s, thrusters neutral); estimate...");
     s.set_text("fault: IMU stale for 120 ms");
     assert_eq!(s.text(), "fault: IMU stale for 120 ms");
 }
