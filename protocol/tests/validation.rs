@@ -665,7 +665,9 @@ fn status_text_truncates_at_char_boundary() {
     assert!(words.len() > 128);
     s.set_text(words);
     let got = s.text();
-    let kept = got.strip_suffix("...").unwrap_or_else(|| panic!("no ellipsis: {got}"));
+    let kept = got
+        .strip_suffix("...")
+        .unwrap_or_else(|| panic!("no ellipsis: {got}"));
     assert!(got.len() <= 128, "{got}");
     assert!(words.starts_with(kept), "{got}");
     assert!(words[kept.len()..].starts_with(' '), "cut mid-word: {got}");

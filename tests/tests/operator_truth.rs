@@ -473,16 +473,26 @@ fn kill9(proc: &mut system_tests::Proc) {
 fn a_saved_model_keeps_its_version_and_a_crash_in_fault_is_told_as_such() {
     let world = World::new("version");
     let sim_args = [
-        "--noise", "realistic", "--lockstep", "--pace", "20", "--duration", "100000",
+        "--noise",
+        "realistic",
+        "--lockstep",
+        "--pace",
+        "20",
+        "--duration",
+        "100000",
     ];
     let mut daemon = world.daemon(&["--lockstep"]);
     let mut sim = world.sim("amour5", &sim_args);
-    wait_status(&world, "samples", |v| v["samples"].as_u64().unwrap_or(0) > 50);
+    wait_status(&world, "samples", |v| {
+        v["samples"].as_u64().unwrap_or(0) > 50
+    });
     for _ in 0..2 {
         let out = ctl(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
         expect_ok(&out, "estimate --wait");
     }
-    let saved = wait_status(&world, "a model", |v| v["model_version"].as_u64() >= Some(2));
+    let saved = wait_status(&world, "a model", |v| {
+        v["model_version"].as_u64() >= Some(2)
+    });
     let version = saved["model_version"].as_u64().unwrap();
     let out = ctl(&world, &["shutdown"]);
     expect_ok(&out, "shutdown");
