@@ -112,17 +112,44 @@ impl<const N: usize> FixedText<N> {
         t
     }
 
-    /// Stores `s`, truncating at the last character boundary that fits, and returns the
-    /// number of bytes stored. Interior NUL characters end the text (they are the
+    /// Stores `s` and returns the number of bytes stored. A text that does not fit is cut
+    /// at a word boundary (or, in a word longer than half the room, at a character boundary)
+    /// and ends in `...`, so a reader sees it was cut rather than a word that reads wrong
+    /// (issue 27: "estimate af"). Interior NUL characters end the text (they are the
     /// terminator on the wire).
     pub fn set(&mut self, s: &str) -> usize {
+        const ELLIPSIS: &str = "...";
         let s = s.split('\0').next().unwrap_or("");
-        let mut len = s.len().min(N);
-        while !s.is_char_boundary(len) {
-            len -= 1;
-        }
         self.bytes = [0; N];
-        self.bytes[..len].copy_from_slice(&s.as_bytes()[..len]);
+        if s.len() <= N {
+            self.bytes[..s.len()].copy_from_slice(s.as_bytes());
+            return s.len();
+        }
+        let Some(budget) = N.checked_sub(ELLIPSIS.len()) else {
+            // Too small for an ellipsis: a plain cut at a character boundary.
+            let mut len = N;
+            while !s.is_char_boundary(len) {
+                len -= 1;
+            }
+            self.bytes[..len].copy_from_slice(&s.as_bytes()[..len]);
+            return len;
+        };
+        let mut cut = budget;
+        while !s.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        let mid_word = !s[cut..].starts_with(char::is_whitespace);
+        if mid_word {
+            if let Some(space) = s[..cut].rfind(char::is_whitespace) {
+                if space >= budget / 2 {
+                    cut = space;
+                }
+            }
+        }
+        let kept = s[..cut].trim_end();
+        let len = kept.len() + ELLIPSIS.len();
+        self.bytes[..kept.len()].copy_from_slice(kept.as_bytes());
+        self.bytes[kept.len()..len].copy_from_slice(ELLIPSIS.as_bytes());
         len
     }
 
@@ -222,9 +249,14 @@ mod tests {
         // "aaaaaaé" is 6 + 2 = 8 bytes: fits exactly.
         assert_eq!(t.set("aaaaaaé"), 8);
         assert_eq!(t.as_str(), "aaaaaaé");
-        // 7 ASCII + 2-byte char = 9 bytes: the é must be dropped whole, not split.
-        assert_eq!(t.set("aaaaaaaé"), 7);
-        assert_eq!(t.as_str(), "aaaaaaa");
+        // 7 ASCII + 2-byte char = 9 bytes: cut, marked with an ellipsis.
+        assert_eq!(t.set("aaaaaaaé"), 8);
+        assert_eq!(t.as_str(), "aaaaa...");
+        // At a word when the word is short, never splitting a character.
+        assert_eq!(t.set("ab cdefgh"), 5);
+        assert_eq!(t.as_str(), "ab...");
+        assert_eq!(t.set("abcdéfgh"), 7);
+        assert_eq!(t.as_str(), "abcd...");
         // Shorter text after longer text leaves no tail behind.
         t.set("ab");
         assert_eq!(t.as_str(), "ab");

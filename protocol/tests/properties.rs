@@ -103,9 +103,13 @@ proptest! {
         let stored = status.text();
         prop_assert!(stored.len() <= TEXT_CAPACITY);
         let expected_src = s.split('\0').next().unwrap();
-        prop_assert!(expected_src.starts_with(stored));
         if expected_src.len() <= TEXT_CAPACITY {
             prop_assert_eq!(stored, expected_src);
+        } else {
+            // Cut: a prefix of the text (trailing space dropped), then "...".
+            let kept = stored.strip_suffix("...");
+            prop_assert!(kept.is_some(), "a cut text without its ellipsis: {:?}", stored);
+            prop_assert!(expected_src.starts_with(kept.unwrap()));
         }
     }
 }
@@ -279,7 +283,9 @@ proptest! {
         let ok = attitude.iter().all(|v| v.is_finite())
             && (n - 1.0).abs() <= limits::QUATERNION_NORM_TOLERANCE
             && within(depth, limits::MIN_DEPTH_M, limits::MAX_DEPTH_M)
-            && flags & !Setpoint::KNOWN_FLAGS == 0;
+            && flags & !Setpoint::KNOWN_FLAGS == 0
+            && flags & (Setpoint::HOLD_DEPTH | Setpoint::RELEASE_DEPTH)
+                != Setpoint::HOLD_DEPTH | Setpoint::RELEASE_DEPTH;
         match s.validate() {
             Ok(()) => prop_assert!(ok, "invalid setpoint accepted: {s:?}"),
             Err(reason) => {

@@ -658,7 +658,20 @@ fn status_text_truncates_at_char_boundary() {
     // 127 ASCII bytes then a 2-byte char: the char does not fit in 128 bytes.
     let long = format!("{}é and more", "x".repeat(127));
     s.set_text(&long);
-    assert_eq!(s.text(), "x".repeat(127));
+    assert_eq!(s.text(), format!("{}...", "x".repeat(125)));
+    // Issue 27: a refusal cut mid-word ("estimate af"). Cut at a word, marked as cut.
+    let words = "in fault (the driver reports that its outputs cannot be used: the link has been \
+                 down for 2.0 s, thrusters neutral); estimate after it clears";
+    assert!(words.len() > 128);
+    s.set_text(words);
+    let got = s.text();
+    let kept = got
+        .strip_suffix("...")
+        .unwrap_or_else(|| panic!("no ellipsis: {got}"));
+    assert!(got.len() <= 128, "{got}");
+    assert!(words.starts_with(kept), "{got}");
+    assert!(words[kept.len()..].starts_with(' '), "cut mid-word: {got}");
+    assert_eq!(got, "in fault (the driver reports that its outputs cannot be used: the link has been down for 2.0 s, thrusters neutral); estimate...");
     s.set_text("fault: IMU stale for 120 ms");
     assert_eq!(s.text(), "fault: IMU stale for 120 ms");
 }
@@ -694,10 +707,26 @@ fn setpoint_validation() {
         "depth = 12000 m is outside [-10, 11000]",
     );
     let p = Setpoint {
-        flags: 1 << 4,
+        flags: 1 << 5,
         ..Default::default()
     };
-    assert_rejects(&p, RejectCategory::Other, "flags has unknown bits 0x10");
+    assert_rejects(&p, RejectCategory::Other, "flags has unknown bits 0x20");
+    // Hold and release at once is a contradiction, refused rather than guessed.
+    let p = Setpoint {
+        flags: Setpoint::HOLD_DEPTH | Setpoint::RELEASE_DEPTH,
+        ..Default::default()
+    };
+    assert_rejects(
+        &p,
+        RejectCategory::Other,
+        "flags: HOLD_DEPTH and RELEASE_DEPTH together",
+    );
+    let p = Setpoint {
+        flags: Setpoint::RELEASE_DEPTH,
+        ..Default::default()
+    };
+    p.validate().unwrap();
+    assert!(p.release_depth() && !p.hold_depth());
 }
 
 // ---- control ---------------------------------------------------------------------------

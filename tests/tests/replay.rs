@@ -199,6 +199,12 @@ fn a_replayed_demo_reproduces_the_daemons_model_and_answers_for_another_config()
         assert!(bound > 0.0 && bound < 0.1, "{key} {bound}: {o}");
     }
     assert_eq!(model["actuated"], daemon["actuated"], "{o}");
+    // Issue 27: the bit mask alone said nothing; the axes are named beside it.
+    assert_eq!(
+        model["actuated_dof"],
+        serde_json::json!(["roll", "pitch", "yaw", "surge", "heave"]),
+        "{o}"
+    );
     let n = model["count"].as_u64().unwrap() as usize;
     assert_eq!(n, 5);
     for row in model["effectiveness"].as_array().unwrap() {

@@ -56,6 +56,8 @@ struct SetpointRequest {
     pitch_deg: Option<f64>,
     yaw_deg: Option<f64>,
     depth_m: Option<f64>,
+    /// true: release the depth hold (heave free). Exclusive with `depth_m`.
+    depth_free: Option<bool>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -87,7 +89,16 @@ pub fn parse(name: &str, payload: &[u8]) -> Result<Call, String> {
         "stop" => body::<Empty>(payload).map(|_| Call::Stop),
         "setpoint" => {
             let r: SetpointRequest = body(payload)?;
-            cli::setpoint_args(r.roll_deg, r.pitch_deg, r.yaw_deg, r.depth_m)
+            // As on the command line: depth left out keeps the depth held.
+            let depth = match (r.depth_m, r.depth_free) {
+                (Some(_), Some(true)) => {
+                    return Err("depth_m and depth_free: true together".to_string())
+                }
+                (Some(d), _) => Some(cli::Depth::Hold(d)),
+                (None, Some(true)) => Some(cli::Depth::Free),
+                (None, _) => None,
+            };
+            cli::setpoint_args(r.roll_deg, r.pitch_deg, r.yaw_deg, depth)
                 .map(Call::Setpoint)
                 .map_err(|e| {
                     // The operator's words name command-line flags; here they are JSON keys.
@@ -113,7 +124,8 @@ fn request_schema(name: &str) -> serde_json::Value {
             "roll_deg": number("roll, degrees in [-180, 180]; left out: kept"),
             "pitch_deg": number("pitch, degrees in [-90, 90]; left out: kept"),
             "yaw_deg": number("yaw, degrees in [-360, 360]; left out: kept"),
-            "depth_m": number("depth to hold, m; left out: depth free"),
+            "depth_m": number("depth to hold, m; left out: the depth held now is kept"),
+            "depth_free": {"type": "boolean", "description": "true: release the depth hold (heave free)"},
         }),
         _ => json!({}),
     };
@@ -276,7 +288,11 @@ fn execute(daemon: &Daemon, call: &Call) -> Result<String> {
             sp.validate()
                 .map_err(|r| anyhow::anyhow!("internal error: setpoint fails validation: {r}"))?;
             let reached = publish::send(daemon, &sp)?;
-            Ok(format!("setpoint sent to {reached} subscriber(s)"))
+            let held = publish::held_now(daemon)?;
+            Ok(format!(
+                "setpoint sent to {reached} subscriber(s): {}; {held}",
+                publish::asked(args)
+            ))
         }
     }
 }
@@ -305,6 +321,16 @@ mod tests {
             panic!("not a setpoint")
         };
         assert_eq!((a.pitch_deg, a.roll_deg), (Some(10.0), None));
+        // Depth left out is kept, as on the command line; released only when asked.
+        assert_eq!(a.depth, thrusterctl_operator::cli::Depth::Keep);
+        let Call::Setpoint(a) =
+            parse("setpoint", br#"{"pitch_deg": 10, "depth_free": true}"#).unwrap()
+        else {
+            panic!("not a setpoint")
+        };
+        assert_eq!(a.depth, thrusterctl_operator::cli::Depth::Free);
+        let e = parse("setpoint", br#"{"depth_m": 2, "depth_free": true}"#).unwrap_err();
+        assert!(e.contains("together"), "{e}");
         let e = parse("setpoint", br#"{"pitch_deg": 100}"#).unwrap_err();
         assert!(e.contains("pitch_deg must be in"), "{e}");
         assert!(parse("setpoint", b"{}").is_err());

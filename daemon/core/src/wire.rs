@@ -186,11 +186,18 @@ pub fn reconfig(e: &ReconfigEvent) -> Reconfig {
     }
 }
 
-/// Attitude and optional depth of a validated setpoint.
+/// Attitude and depth intent of a validated setpoint (neither depth flag: keep the held depth).
 pub fn setpoint(s: &Setpoint) -> crate::machine::SetpointInput {
+    use crate::machine::DepthInput;
     let [w, x, y, z] = s.attitude;
     let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-    let depth = (s.flags & Setpoint::HOLD_DEPTH != 0).then_some(s.depth);
+    let depth = if s.hold_depth() {
+        DepthInput::Hold(s.depth)
+    } else if s.release_depth() {
+        DepthInput::Release
+    } else {
+        DepthInput::Keep
+    };
     crate::machine::SetpointInput {
         attitude: q,
         keep: s.kept_angles(),

@@ -481,3 +481,48 @@ fn study_output_is_deterministic_for_a_seed() {
     let other = to_csv(&run_study(&StudyParams { seed: 43, ..params }));
     assert_ne!(a, other, "the seed must matter");
 }
+
+/// Issue 27: `estimate --wait` read "pulse 40 of 32" and ran to "pulse 60 of 32" when the
+/// plan grew past its minimum. The extent shown never falls below the pulses begun, grows to
+/// the next point where the run may stop, and the run does stop there or grows it again.
+#[test]
+fn the_plan_extent_grows_with_the_plan_and_never_trails_the_pulses() {
+    let truth = five_thruster_truth();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let cfg = EstimatorConfig {
+        // Never met: the run extends to its pulse limit.
+        target_rel_err: 1e-9,
+        max_pulses: 90,
+        ..EstimatorConfig::forward()
+    };
+    let mut est = Estimator::new(cfg, 5, NoiseLevels::isotropic(0.25, 0.5));
+    let min = est.planned_pulses();
+    assert_eq!(est.plan_extent(), min);
+    let mut grew = false;
+    let mut stop = StopDecision::Continue;
+    while !stop.is_stop() {
+        run_live(&mut est, &truth, 1, (0.25, 0.5), &mut rng);
+        let (done, extent) = (est.pulses(), est.plan_extent());
+        assert!(done <= extent, "{done} pulses done of {extent}");
+        assert!(extent <= 90, "{extent}");
+        grew |= extent > min;
+        stop = est.stop_decision();
+        if !stop.is_stop() && done == extent {
+            // Going on past the extent: the pulse it begins is inside the new one.
+            let _ = est.begin_pulse();
+            assert!(
+                est.plan_extent() > done,
+                "extent {} at {done}",
+                est.plan_extent()
+            );
+            est.end_pulse();
+            stop = est.stop_decision();
+        }
+    }
+    assert!(
+        grew,
+        "the plan never grew past {min}: the check could not fail"
+    );
+    assert_eq!(est.pulses(), 90, "{stop:?}");
+    assert_eq!(est.plan_extent(), 90);
+}

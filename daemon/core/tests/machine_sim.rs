@@ -435,7 +435,7 @@ fn a_setpoint_with_angles_left_out_keeps_the_held_ones() {
             yaw.unwrap_or(0.0).to_radians(),
         ),
         keep: [true, pitch.is_none(), yaw.is_none()],
-        depth: None,
+        depth: thrusterd_core::machine::DepthInput::Keep,
     };
     run.machine.on_setpoint_input(&only(Some(10.0), None));
     run.run_for(10.0);

@@ -87,6 +87,27 @@ struct Summary {
     as_is: serde_json::Value,
     clean_exit: bool,
     leftovers: usize,
+    /// The model's actuated-DOF bit mask (bit = row of `DOFS`).
+    actuated_mask: u64,
+    /// The learned and true effectiveness the text prints, for `--json`.
+    matrices: serde_json::Value,
+}
+
+/// The learned and true (mean of forward and reverse) effectiveness, 6 x N, rows in `DOFS`
+/// order: what the text report prints side by side, for the JSON (issue 27).
+fn matrices(m: &ModelMsg, t: &TruthMsg) -> serde_json::Value {
+    let n = m.count as usize;
+    let learned: Vec<Vec<f64>> = (0..6).map(|j| m.effectiveness[j][..n].to_vec()).collect();
+    let truth: Vec<Vec<f64>> = (0..6)
+        .map(|j| (0..n).map(|i| t.symmetric(j, i)).collect())
+        .collect();
+    serde_json::json!({
+        "rows": DOFS,
+        "units": "rad/s^2 (roll, pitch, yaw) and m/s^2 (surge, sway, heave) per unit command",
+        "learned": learned,
+        "truth": truth,
+        "truth_is": "mean of forward and reverse gain, what a linear model learns",
+    })
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
@@ -297,6 +318,8 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
         as_is: args.water.json()?,
         clean_exit: false,
         leftovers: 0,
+        actuated_mask: u64::from(model.actuated),
+        matrices: matrices(&model, &truth),
     })
 }
 
@@ -378,6 +401,7 @@ fn report(args: &DemoArgs, s: &Summary) {
             "imu_learned_m": s.dynamics.as_ref().map(|d| d.imu_learned_m),
             "imu_position_contradicted": s.dynamics.as_ref().map(|d| d.imu_position_contradicted == 1),
             "vehicle_as_is": s.as_is,
+            "effectiveness": s.matrices,
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,
         });
@@ -399,10 +423,16 @@ fn report(args: &DemoArgs, s: &Summary) {
         }
     }
     if let (Some(t), Some(h)) = (s.estimation_tilt_deg, s.estimation_heading_deg) {
-        println!("during estimation ({} method) the vehicle tilted up to {t:.1} deg and turned up to {h:.1} deg", s.method.to_lowercase());
+        println!("during estimation ({} method) the vehicle tilted up to {t:.1} deg and turned up to {h:.1} deg (the simulator's true attitude)", s.method.to_lowercase());
     }
     if let Some(d) = &s.dynamics {
-        print!("{}", thrusterctl_operator::dynamics::report(d));
+        // The truth's excursion is printed above: the navigation's own figure would be a
+        // second, different number for the same estimation.
+        let options = thrusterctl_operator::dynamics::ReportOptions {
+            actuated: s.actuated_mask,
+            navigation_excursion: s.estimation_tilt_deg.is_none(),
+        };
+        print!("{}", thrusterctl_operator::dynamics::report(d, options));
         if let Some(t) = s.spin_up_true_s.filter(|_| d.spin_up_s.is_finite()) {
             println!("  (the simulated thrusters' true time constant: {t:.3} s)");
         }

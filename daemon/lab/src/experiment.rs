@@ -1001,7 +1001,12 @@ fn common(out: &RunOutput) -> Value {
     json!({
         "vehicle": out.spec.vehicle,
         "model": {
-            "start": if out.spec.start == Start::Manual { "manual (declared nominal geometry)" } else { "estimated" },
+            // The oracle's model is loaded, not estimated (issue 27: it read "estimated").
+            "start": match out.spec.start {
+                Start::Manual => "manual (declared nominal geometry)",
+                Start::Estimate => "estimated",
+                Start::Oracle => "the simulator's true model, loaded",
+            },
             "method": out.model.method().map(|m| format!("{m:?}")).unwrap_or_default(),
             "source": source_name(&out.model),
             "version": out.model.version,
@@ -1384,6 +1389,41 @@ fn fmt(v: &Value) -> String {
     }
 }
 
+/// What followed a change, in the order it happens; what did not happen is said in words, not
+/// as "-" (the oracle does not re-estimate; an announced change is told, not detected).
+fn hot_swap_events(h: &Value) -> String {
+    let after = |key: &str| h[key].as_f64().map(|v| format!("{v:.2} s"));
+    let mut parts = vec![match after("reestimation_start_delay_s") {
+        Some(t) => format!("re-estimation began after {t}"),
+        None => "no re-estimation".to_string(),
+    }];
+    if let Some(t) = after("detection_delay_s") {
+        parts.push(format!("mismatch in status after {t}"));
+    }
+    if let Some(t) = after("first_swap_delay_s") {
+        let source = h["first_swap_source"].as_str().unwrap_or("unknown source");
+        parts.push(format!("first swap after {t} ({source})"));
+    }
+    if let Some(t) = after("new_model_delay_s") {
+        parts.push(format!("new model after {t}"));
+    }
+    let threshold = fmt(&h["recovery_threshold_deg"]);
+    parts.push(match after("recovered_after_s") {
+        Some(t) => format!("recovered (2 s windows < {threshold} deg) after {t}"),
+        None => format!("not recovered (2 s windows < {threshold} deg)"),
+    });
+    parts.join(", ")
+}
+
+/// A settled error in words: "settled 1.23 deg", or "not settled" where no step was held long enough
+/// to count (issue 27: it read "settled - deg").
+fn settled(v: &Value) -> String {
+    match v.as_f64() {
+        Some(x) => format!("settled {x:.2} deg"),
+        None => "not settled".into(),
+    }
+}
+
 fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
     println!(
         "experiment {} (noise {}, seed {})",
@@ -1419,9 +1459,9 @@ fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
             );
         }
         println!(
-            "  mean angular error {} deg (settled {}; max {}), mean |yaw error| {} deg over {} s of hold",
+            "  mean angular error {} deg ({}; max {}), mean |yaw error| {} deg over {} s of hold",
             fmt(&v["mean_err_deg"]),
-            fmt(&v["settled_mean_err_deg"]),
+            settled(&v["settled_mean_err_deg"]),
             fmt(&v["max_err_deg"]),
             fmt(&v["mean_abs_yaw_err_deg"]),
             fmt(&v["hold_s"]),
@@ -1429,9 +1469,9 @@ fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
         if let Some(groups) = v["per_maneuver"].as_object() {
             for (g, s) in groups {
                 println!(
-                    "    {g:>5}: mean {} deg, settled {} deg, |yaw error| mean {} max {} deg",
+                    "    {g:>5}: mean {} deg, {}, |yaw error| mean {} max {} deg",
                     fmt(&s["mean_err_deg"]),
-                    fmt(&s["settled_mean_err_deg"]),
+                    settled(&s["settled_mean_err_deg"]),
                     fmt(&s["mean_abs_yaw_err_deg"]),
                     fmt(&s["max_abs_yaw_err_deg"]),
                 );
@@ -1454,16 +1494,20 @@ fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
         }
         let h = &v["hot_swap"];
         if !h.is_null() {
+            // One clock with the figure: its x axis is time since this run's hold began (the
+            // first estimation takes a different time per run, so the change, at one vehicle
+            // time for all, sits at a different x per row).
+            let since_hold = match (h["t_change_s"].as_f64(), v["hold_start_s"].as_f64()) {
+                (Some(c), Some(h0)) => format!("{:.2}", c - h0),
+                _ => "-".into(),
+            };
+            // The re-estimation's start is its first command's sample time; the mismatch is
+            // seen in a status, published up to a status period after the monitor fired and
+            // started the re-estimation: so the status can read later than the start.
             println!(
-                "  change at {} s: detected after {} s, re-estimation after {} s, first swap after {} s ({}), new model after {} s, recovered (2 s windows < {} deg) after {} s",
+                "  change {since_hold} s after the hold began (vehicle time {} s): {}",
                 fmt(&h["t_change_s"]),
-                fmt(&h["detection_delay_s"]),
-                fmt(&h["reestimation_start_delay_s"]),
-                fmt(&h["first_swap_delay_s"]),
-                h["first_swap_source"].as_str().unwrap_or("-"),
-                fmt(&h["new_model_delay_s"]),
-                fmt(&h["recovery_threshold_deg"]),
-                fmt(&h["recovered_after_s"]),
+                hot_swap_events(h)
             );
             let r = &h["reestimation"];
             if !r.is_null() {
@@ -1636,16 +1680,21 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
         });
     }
     let title = match name {
-        Name::ManualVsLearned => "AMOUR-5, yaw / pitch / roll steps: learned (top) and manual (bottom) model",
-        Name::Misaligned => "Top thruster rotated 45 deg, pitch steps: manual (top) and re-learned (bottom) model",
-        Name::Aligned => "All thrusters aligned, yaw and pitch steps: the paper's estimator (top) and ours (bottom)",
+        Name::ManualVsLearned => "AMOUR-5, yaw / pitch / roll steps: learned, manual and the simulator's true model (rows, top to bottom)",
+        Name::Misaligned => "Top thruster rotated 45 deg, pitch steps: manual, re-learned and the simulator's true model (rows, top to bottom)",
+        Name::Aligned => "All thrusters aligned, yaw and pitch steps: the paper's estimator, ours and the simulator's true model (rows, top to bottom)",
         Name::HotSwap => "Top thruster rotated 45 deg mid-run (red line): announced, announced holding level, silent (realistic IMU), silent (paper noise), true model (rows, top to bottom)",
         Name::Degrade => "Thruster L loses 30 % over a minute from the red line, realistic IMU: refined model, fixed model, true model (rows, top to bottom)",
         Name::Dive => "A 30-minute dive from a full to a nearly empty battery, T200 thrusters, realistic IMU: commands referred to 16 V (top) and as computed (bottom)",
     };
+    let title = if shading_drawn(&panels, x_max) {
+        format!("{title}; grey: estimating")
+    } else {
+        title.to_string()
+    };
     render(
         &Grid {
-            title: format!("{title}; grey: estimating"),
+            title,
             columns: 5,
             x_label: "vehicle time since the hold began, s".into(),
             y_label: "deg".into(),
@@ -1654,6 +1703,15 @@ fn figure(name: Name, outs: &[RunOutput]) -> String {
         },
         &panels,
     )
+}
+
+/// Whether any panel shades an interval inside the plotted 0..x_max: only then does the title
+/// promise grey bands (issue 27: manual-vs-learned estimates before its hold, at x < 0).
+fn shading_drawn(panels: &[Panel], x_max: f64) -> bool {
+    panels
+        .iter()
+        .flat_map(|p| &p.shade)
+        .any(|&(a, b)| b > 0.0 && a < x_max && b > a)
 }
 
 /// The vehicle-time intervals (since the hold began) in which the daemon estimated: open-loop
@@ -1734,6 +1792,53 @@ mod tests {
             u: [0.0; MAX_THRUSTERS],
             nu: 0,
         }
+    }
+
+    /// Issue 27: "detected after 0.67 s, re-estimation after 0.56 s" and "-" for what did not
+    /// happen. In order, the status's lag named, and absent events said in words.
+    #[test]
+    fn hot_swap_events_in_order_and_in_words() {
+        let silent = json!({
+            "reestimation_start_delay_s": 0.31,
+            "detection_delay_s": 0.35,
+            "first_swap_delay_s": 5.3,
+            "first_swap_source": "Estimated",
+            "new_model_delay_s": 5.3,
+            "recovery_threshold_deg": 13.18,
+            "recovered_after_s": 1.72,
+        });
+        assert_eq!(
+            hot_swap_events(&silent),
+            "re-estimation began after 0.31 s, mismatch in status after 0.35 s, first swap after \
+             5.30 s (Estimated), new model after 5.30 s, recovered (2 s windows < 13.18 deg) \
+             after 1.72 s"
+        );
+        let oracle = json!({"recovery_threshold_deg": 12.18, "recovered_after_s": null});
+        let text = hot_swap_events(&oracle);
+        assert_eq!(
+            text,
+            "no re-estimation, not recovered (2 s windows < 12.18 deg)"
+        );
+        assert!(!text.contains(" - ") && !text.contains("- s"), "{text}");
+    }
+
+    #[test]
+    fn grey_is_promised_only_where_drawn_and_settled_says_so() {
+        let panel = |shade| Panel {
+            title: String::new(),
+            series: vec![],
+            y_range: None,
+            shade,
+        };
+        // An estimation before the hold began (negative x) is not drawn.
+        assert!(!shading_drawn(&[panel(vec![(-8.0, -0.5)])], 30.0));
+        assert!(!shading_drawn(&[panel(vec![])], 30.0));
+        assert!(shading_drawn(
+            &[panel(vec![]), panel(vec![(12.0, 20.0)])],
+            30.0
+        ));
+        assert_eq!(settled(&Value::Null), "not settled");
+        assert_eq!(settled(&json!(1.234)), "settled 1.23 deg");
     }
 
     #[test]

@@ -73,8 +73,15 @@ impl ChildProc {
         let Some(mut child) = self.child.take() else {
             return true;
         };
+        // Already gone (and reaped by `alive`): its pid may be another process's by now, and
+        // kill(1) said "No such process" on the demo's output (issue 27). Signal only a child
+        // not yet reaped, whose pid is still ours; kill(1)'s own words go nowhere.
+        if let Ok(Some(status)) = child.try_wait() {
+            return status.success();
+        }
         let _ = Command::new("kill")
             .args(["-TERM", &child.id().to_string()])
+            .stderr(Stdio::null())
             .status();
         let start = Instant::now();
         while start.elapsed() < Duration::from_secs(5) {
@@ -113,13 +120,19 @@ impl ChildProc {
     }
 
     /// The end of the process's log, for error messages.
+    /// Names the log file only when it is kept: the session's folder is removed at the end
+    /// otherwise, and a failed demo named a file already deleted (issue 27).
     fn tail(&self) -> String {
         let text = self.log_text();
         let lines: Vec<&str> = text.lines().collect();
+        let source = if keep_logs() {
+            self.log.display().to_string()
+        } else {
+            "last lines of its log; THRUSTERCTL_KEEP_LOGS=1 keeps it".to_string()
+        };
         format!(
-            "--- {} ({}) ---\n{}",
+            "--- {} ({source}) ---\n{}",
             self.name,
-            self.log.display(),
             lines[lines.len().saturating_sub(15)..].join("\n")
         )
     }
@@ -250,9 +263,13 @@ impl TempDir {
     }
 }
 
+fn keep_logs() -> bool {
+    std::env::var_os("THRUSTERCTL_KEEP_LOGS").is_some()
+}
+
 impl Drop for TempDir {
     fn drop(&mut self) {
-        if std::env::var_os("THRUSTERCTL_KEEP_LOGS").is_some() {
+        if keep_logs() {
             eprintln!("kept {}", self.path.display());
             return;
         }
@@ -803,10 +820,11 @@ impl Session {
         let sp = Setpoint {
             attitude: [q.w, q.i, q.j, q.k],
             depth: depth.unwrap_or(0.0),
+            // None releases depth; a setpoint without either flag would keep the held one.
             flags: if depth.is_some() {
                 Setpoint::HOLD_DEPTH
             } else {
-                0
+                Setpoint::RELEASE_DEPTH
             },
             ..Setpoint::default()
         };

@@ -2,7 +2,7 @@
 
 use thruster_protocol::Setpoint;
 
-use crate::cli::SetpointArgs;
+use crate::cli::{Depth, SetpointArgs};
 
 /// Unit quaternion `[w, x, y, z]` of the body-to-NED rotation for ZYX (yaw, pitch, roll)
 /// Euler angles in radians: R = Rz(yaw) Ry(pitch) Rx(roll), the aerospace convention and
@@ -45,13 +45,22 @@ pub fn setpoint(args: &SetpointArgs, seq: u64) -> Setpoint {
             flags |= flag;
         }
     }
-    if args.depth_m.is_some() {
-        flags |= Setpoint::HOLD_DEPTH;
-    }
+    // Neither depth flag: the daemon keeps the depth it holds.
+    let depth = match args.depth {
+        Depth::Keep => 0.0,
+        Depth::Free => {
+            flags |= Setpoint::RELEASE_DEPTH;
+            0.0
+        }
+        Depth::Hold(d) => {
+            flags |= Setpoint::HOLD_DEPTH;
+            d
+        }
+    };
     Setpoint {
         seq,
         attitude,
-        depth: args.depth_m.unwrap_or(0.0),
+        depth,
         flags,
     }
 }
@@ -118,7 +127,7 @@ mod tests {
             roll_deg: Some(0.0),
             pitch_deg: Some(10.0),
             yaw_deg: Some(-45.0),
-            depth_m: Some(2.5),
+            depth: Depth::Hold(2.5),
         };
         let sp = setpoint(&args, 7);
         assert_eq!(sp.seq, 7);
@@ -127,26 +136,35 @@ mod tests {
         sp.validate().unwrap();
         let free = setpoint(
             &SetpointArgs {
-                depth_m: None,
+                depth: Depth::Free,
                 ..args
             },
             8,
         );
         assert!(!free.hold_depth());
-        assert_eq!(free.flags, 0);
+        assert_eq!(free.flags, Setpoint::RELEASE_DEPTH);
         free.validate().unwrap();
+        let kept = setpoint(
+            &SetpointArgs {
+                depth: Depth::Keep,
+                ..args
+            },
+            8,
+        );
+        assert_eq!(kept.flags, 0, "neither hold nor release: keep");
+        kept.validate().unwrap();
         // Angles left out are flagged to be kept, and only those.
         let pitch_only = setpoint(
             &SetpointArgs {
                 roll_deg: None,
                 pitch_deg: Some(10.0),
                 yaw_deg: None,
-                depth_m: None,
+                depth: Depth::Keep,
             },
             9,
         );
         assert_eq!(pitch_only.kept_angles(), [true, false, true]);
-        assert!(!pitch_only.hold_depth());
+        assert!(!pitch_only.hold_depth() && !pitch_only.release_depth());
         pitch_only.validate().unwrap();
     }
 }

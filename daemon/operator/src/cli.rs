@@ -143,9 +143,10 @@ pub enum Command {
         /// now is kept.
         #[arg(long, allow_negative_numbers = true)]
         yaw: Option<f64>,
-        /// Depth to hold, m, positive down; heave is left free if omitted.
-        #[arg(long, allow_negative_numbers = true)]
-        depth: Option<f64>,
+        /// Depth to hold, m, positive down, or `free` to release the depth hold (heave
+        /// free); left out: the depth held now is kept.
+        #[arg(long, allow_negative_numbers = true, value_parser = parse_depth, value_name = "M|free")]
+        depth: Option<Depth>,
     },
 }
 
@@ -280,6 +281,29 @@ pub fn reconfig_args(
     })
 }
 
+/// What a setpoint does with depth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Depth {
+    /// Keep the depth held now (free if none is held): what leaving `--depth` out means, as
+    /// for the angles. Releasing depth is never implied (issue 27: an attitude command once
+    /// let a held vehicle rise 7 m).
+    Keep,
+    /// `--depth free`: release the depth hold, heave free.
+    Free,
+    /// `--depth M`: hold M metres, positive down.
+    Hold(f64),
+}
+
+/// `--depth`'s value: `free` or a number of metres (checked later, with the other ranges).
+pub fn parse_depth(text: &str) -> Result<Depth, String> {
+    if text.eq_ignore_ascii_case("free") {
+        return Ok(Depth::Free);
+    }
+    text.parse::<f64>()
+        .map(Depth::Hold)
+        .map_err(|_| format!("expected metres (a number) or `free`, got {text:?}"))
+}
+
 /// Checked `setpoint` arguments, degrees and metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 /// Angles in degrees; `None`: keep the value the daemon holds now.
@@ -287,14 +311,14 @@ pub struct SetpointArgs {
     pub roll_deg: Option<f64>,
     pub pitch_deg: Option<f64>,
     pub yaw_deg: Option<f64>,
-    pub depth_m: Option<f64>,
+    pub depth: Depth,
 }
 
 pub fn setpoint_args(
     roll: Option<f64>,
     pitch: Option<f64>,
     yaw: Option<f64>,
-    depth: Option<f64>,
+    depth: Option<Depth>,
 ) -> Result<SetpointArgs, Failure> {
     if roll.is_none() && pitch.is_none() && yaw.is_none() && depth.is_none() {
         return Err(Failure::usage(
@@ -313,14 +337,14 @@ pub fn setpoint_args(
             check_range(name, v, -limit, limit, "degrees")?;
         }
     }
-    if let Some(d) = depth {
+    if let Some(Depth::Hold(d)) = depth {
         check_range("--depth", d, MIN_DEPTH_M, MAX_DEPTH_M, "m")?;
     }
     Ok(SetpointArgs {
         roll_deg: roll,
         pitch_deg: pitch,
         yaw_deg: yaw,
-        depth_m: depth,
+        depth: depth.unwrap_or(Depth::Keep),
     })
 }
 
@@ -384,11 +408,26 @@ mod tests {
             } => {
                 assert_eq!(
                     (roll, pitch, yaw, depth),
-                    (Some(-10.0), Some(-5.5), Some(-90.0), Some(2.0))
+                    (Some(-10.0), Some(-5.5), Some(-90.0), Some(Depth::Hold(2.0)))
                 );
             }
             other => panic!("parsed as {other:?}"),
         }
+    }
+
+    #[test]
+    fn depth_free_parses_and_a_word_is_refused() {
+        let cli = parse(&["setpoint", "--pitch", "10", "--depth", "free"]).unwrap();
+        match cli.command {
+            Command::Setpoint { depth, .. } => assert_eq!(depth, Some(Depth::Free)),
+            other => panic!("parsed as {other:?}"),
+        }
+        let cli = parse(&["setpoint", "--pitch", "10"]).unwrap();
+        match cli.command {
+            Command::Setpoint { depth, .. } => assert_eq!(depth, None),
+            other => panic!("parsed as {other:?}"),
+        }
+        assert!(parse(&["setpoint", "--depth", "deep"]).is_err());
     }
 
     #[test]
@@ -467,10 +506,14 @@ mod tests {
 
     #[test]
     fn setpoint_ranges() {
-        let ok = setpoint_args(Some(10.0), Some(-20.0), Some(350.0), Some(1.5)).unwrap();
-        assert_eq!(ok.depth_m, Some(1.5));
-        // One angle alone is enough (the README's `setpoint --pitch 10`).
+        let ok =
+            setpoint_args(Some(10.0), Some(-20.0), Some(350.0), Some(Depth::Hold(1.5))).unwrap();
+        assert_eq!(ok.depth, Depth::Hold(1.5));
+        // One angle alone is enough (the README's `setpoint --pitch 10`), and it keeps depth.
         let pitch_only = setpoint_args(None, Some(10.0), None, None).unwrap();
+        assert_eq!(pitch_only.depth, Depth::Keep);
+        let free = setpoint_args(None, None, None, Some(Depth::Free)).unwrap();
+        assert_eq!(free.depth, Depth::Free);
         assert_eq!(
             (
                 pitch_only.roll_deg,
@@ -485,8 +528,14 @@ mod tests {
             (z, Some(91.0), z, None, "--pitch must be in [-90, 90]"),
             (Some(181.0), z, z, None, "--roll must be in [-180, 180]"),
             (z, z, Some(f64::INFINITY), None, "--yaw must be a finite"),
-            (z, z, z, Some(f64::NAN), "--depth must be a finite"),
-            (z, z, z, Some(-20.0), "--depth must be in"),
+            (
+                z,
+                z,
+                z,
+                Some(Depth::Hold(f64::NAN)),
+                "--depth must be a finite",
+            ),
+            (z, z, z, Some(Depth::Hold(-20.0)), "--depth must be in"),
             (None, None, None, None, "needs at least one of"),
         ];
         for (r, p, y, d, want) in cases {

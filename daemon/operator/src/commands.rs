@@ -235,7 +235,14 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
     } else {
         say(render::model_report(&model).trim_end())?;
         match &dynamics {
-            Some(d) => say(crate::dynamics::report(d).trim_end()),
+            Some(d) => say(crate::dynamics::report(
+                d,
+                crate::dynamics::ReportOptions {
+                    actuated: u64::from(model.actuated),
+                    navigation_excursion: true,
+                },
+            )
+            .trim_end()),
             None => Ok(()),
         }
     }

@@ -50,10 +50,30 @@ pub fn json(d: &DynamicsMsg) -> Value {
     })
 }
 
+/// What the report says beside the coefficients.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReportOptions {
+    /// The model's actuated-DOF bit mask (bit = `Dof` index): a row whose axis no thruster
+    /// moves was not identified (nothing excited it), so its numbers are not printed.
+    pub actuated: u64,
+    /// Print the excursion the daemon's navigation estimated while learning. Off where the
+    /// caller prints the simulator's true one: one figure for one estimation (issue 27).
+    pub navigation_excursion: bool,
+}
+
 /// The rotation rows' own-axis damping and the roll/pitch restoring, one line each.
-pub fn report(d: &DynamicsMsg) -> String {
+pub fn report(d: &DynamicsMsg, options: ReportOptions) -> String {
     let mut s = String::from("learned dynamics (per unit of the term, 1-sigma):\n");
     for (r, rate) in ["p", "q", "r"].iter().enumerate() {
+        if options.actuated & (1 << r) == 0 {
+            // Issue 27: aligned printed `|p|p -55.881 +- 24.544` for a roll no thruster moves.
+            let _ = writeln!(
+                s,
+                "  {:>5}: axis not actuated: not identified",
+                Dof::ALL[r].name().to_lowercase()
+            );
+            continue;
+        }
         let c = d.coefficients[r].to_terms();
         let se = d.std_err[r].to_terms();
         let (k, kq) = (r, 3 + r);
@@ -76,12 +96,14 @@ pub fn report(d: &DynamicsMsg) -> String {
         }
         s.push('\n');
     }
-    let _ = writeln!(
-        s,
-        "  while it was learned the vehicle tilted up to {:.1} deg and turned up to {:.1} deg (navigation estimate)",
-        d.max_tilt_rad.to_degrees(),
-        d.max_heading_change_rad.to_degrees()
-    );
+    if options.navigation_excursion {
+        let _ = writeln!(
+            s,
+            "  while it was learned the vehicle tilted up to {:.1} deg and turned up to {:.1} deg (navigation estimate)",
+            d.max_tilt_rad.to_degrees(),
+            d.max_heading_change_rad.to_degrees()
+        );
+    }
     if d.imu_position_m.iter().all(|v| v.is_finite()) {
         let [x, y, z] = d.imu_position_m;
         let how = if d.imu_position_contradicted == 1 {
@@ -146,9 +168,29 @@ mod tests {
         terms[DOWN_Y] = -8.06;
         d.coefficients[0] = DynamicsRow::from_terms(&terms);
         d.std_err[2].rate[2] = f64::NAN;
-        let text = report(&d);
+        let all = ReportOptions {
+            actuated: 0b11_1111,
+            navigation_excursion: true,
+        };
+        let text = report(&d, all);
         assert!(text.contains("restoring down_y -8.06"), "{text}");
         assert!(text.contains("tilted up to 22.9 deg"), "{text}");
+        // Issue 27: roll not actuated (aligned), and the truth's tilt printed by the caller.
+        let text = report(
+            &d,
+            ReportOptions {
+                actuated: 0b11_1110,
+                navigation_excursion: false,
+            },
+        );
+        assert!(
+            text.contains("   roll: axis not actuated: not identified\n"),
+            "{text}"
+        );
+        assert!(!text.contains("down_y"), "{text}");
+        assert!(text.contains("pitch: damping q"), "{text}");
+        assert!(!text.contains("tilted"), "{text}");
+        let text = report(&d, all);
         assert!(
             text.contains("spin-up time constant 0.052 s (learned from the pulses)"),
             "{text}"

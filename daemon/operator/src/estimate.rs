@@ -113,7 +113,7 @@ impl Progress {
         let done = match s.state() {
             Ok(DaemonState::Pulse) => u64::from(s.pulse),
             Ok(DaemonState::Settle) | Ok(DaemonState::Identify) => u64::from(s.pulse),
-            Ok(DaemonState::Solve) => u64::from(s.pulses_planned),
+            Ok(DaemonState::Solve) => u64::from(s.pulse),
             _ => self.bar.position(),
         };
         let message = format!(

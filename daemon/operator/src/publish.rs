@@ -25,14 +25,15 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::Result;
 use thruster_protocol::services::TopicMessage;
-use thruster_protocol::{ReconfigEvent, Validate};
+use thruster_protocol::{ReconfigEvent, TelemetryMsg, Validate};
 
 use crate::attitude;
-use crate::cli::{self, KindArg, ReconfigArgs, SetpointArgs};
-use crate::client::{Daemon, Target};
+use crate::cli::{self, Depth, KindArg, ReconfigArgs, SetpointArgs};
+use crate::client::{wait_latest, Daemon, Target};
 use crate::console::say;
 use crate::exit::{self, Failure};
 use crate::geometry::{self, Geometry};
+use crate::telemetry;
 
 pub fn reconfigure(
     target: &Target,
@@ -66,21 +67,46 @@ pub fn setpoint(target: &Target, timeout: Duration, args: SetpointArgs) -> Resul
         .map_err(|r| anyhow::anyhow!("internal error: setpoint fails validation: {r}"))?;
     let daemon = Daemon::connect(target, timeout)?;
     let reached = send(&daemon, &sp)?;
-    let depth = match args.depth_m {
-        Some(d) => format!("hold depth {d:.2} m"),
-        None => "depth free".to_string(),
-    };
+    let held = held_now(&daemon)?;
+    say(&format!(
+        "setpoint sent to {reached} subscriber(s): {}; {held}",
+        asked(&args)
+    ))
+}
+
+/// What the operator asked for, in words: left-out values are kept, depth included.
+pub fn asked(args: &SetpointArgs) -> String {
     let angle = |a: Option<f64>| match a {
         Some(v) => format!("{v:.1} deg"),
         None => "kept".to_string(),
     };
-    say(&format!(
-        "setpoint sent to {reached} subscriber(s): roll {}, pitch {}, yaw {}, {depth}",
+    let depth = match args.depth {
+        Depth::Keep => "depth kept".to_string(),
+        Depth::Free => "depth released (free)".to_string(),
+        Depth::Hold(d) => format!("depth {d:.2} m"),
+    };
+    format!(
+        "roll {}, pitch {}, yaw {}, {depth}",
         angle(args.roll_deg),
         angle(args.pitch_deg),
         angle(args.yaw_deg)
-    ))
+    )
 }
+
+/// What the daemon holds once it has read our setpoint, from the first telemetry message
+/// after the delivery barrier (the topic keeps no history, so every message read here was
+/// published after the daemon took the setpoint). With telemetry off, says so.
+pub fn held_now(daemon: &Daemon) -> Result<String> {
+    let inbox = daemon.inbox::<TelemetryMsg>()?;
+    Ok(match wait_latest(&inbox, HELD_WAIT)? {
+        Some(t) => telemetry::held_text(&t),
+        None => "no telemetry within 0.5 s to say what thrusterd holds ([telemetry] every_n = 0?)"
+            .to_string(),
+    })
+}
+
+/// Telemetry comes at 20 Hz by default; a tenth of a second on a loaded machine is common.
+const HELD_WAIT: Duration = Duration::from_millis(500);
 
 /// Builds the event and runs the protocol's own check, so the daemon will not reject it.
 pub fn reconfig_event(

@@ -14,6 +14,18 @@ fn percent(v: f64) -> String {
     format!("{:.1} %", 100.0 * v)
 }
 
+/// An error bound for people: early in an estimation the bound is meaningless (thousands of
+/// percent, issue 27's "43923.9 %"), so above 100 % it reads "> 100 %"; None when unknown.
+pub fn bound(v: f64) -> Option<String> {
+    if !(v.is_finite() && v > 0.0) {
+        None
+    } else if v > 1.0 {
+        Some("> 100 %".to_string())
+    } else {
+        Some(percent(v))
+    }
+}
+
 /// `v` with `decimals`, or "unknown": thrusterd sends NaN for what it does not know yet.
 fn known(v: f64, decimals: usize) -> String {
     if v.is_finite() {
@@ -32,18 +44,16 @@ fn seconds(ns: u64) -> String {
 pub fn progress(s: &StatusMsg) -> String {
     let planned = s.pulses_planned;
     // NaN (no estimate yet) and 0 (not estimating) both mean: nothing to show.
-    let bound = if s.error_bound > 0.0 && s.error_bound.is_finite() {
-        format!(", error bound {}", percent(s.error_bound))
-    } else {
-        String::new()
-    };
+    let bound = bound(s.error_bound)
+        .map(|b| format!(", error bound {b}"))
+        .unwrap_or_default();
     match s.state() {
         Ok(DaemonState::MeasureNoise) => "measuring noise at rest".to_string(),
         Ok(DaemonState::Pulse) => format!("pulse {} of {planned}{bound}", s.pulse + 1),
         Ok(DaemonState::Settle) => {
             format!("settling after pulse {} of {planned}{bound}", s.pulse)
         }
-        Ok(DaemonState::Solve) => format!("solving after {planned} pulses{bound}"),
+        Ok(DaemonState::Solve) => format!("solving after {} pulses{bound}", s.pulse),
         Ok(DaemonState::Identify) => {
             format!("identifying under control, decision {}{bound}", s.pulse)
         }
@@ -174,6 +184,20 @@ pub fn status_report(namespace: &str, s: &StatusMsg) -> String {
 
 /// One line per status for `watch`.
 pub fn status_line(s: &StatusMsg) -> String {
+    if s.is_stopped() {
+        // The state field is the one the daemon left, not what it is now.
+        let mut line = format!(
+            "[{:>11}] {:<12} thrusterd stopped (it was {}",
+            seconds(s.vehicle_time_ns),
+            "Stopped",
+            state_name(s.state)
+        );
+        if s.model_version > 0 {
+            let _ = write!(line, ", model v{}", s.model_version);
+        }
+        line.push(')');
+        return line;
+    }
     let mut line = format!(
         "[{:>11}] {:<12} {}",
         seconds(s.vehicle_time_ns),
@@ -346,6 +370,15 @@ mod tests {
         assert_eq!(progress(&status(DaemonState::Fault)), "FAULT, zero thrust");
         s.error_bound = f64::NAN;
         assert_eq!(progress(&s), "pulse 3 of 8");
+        // Early in a run the bound is meaningless: no number in the thousands of percent.
+        s.error_bound = 439.239;
+        assert_eq!(progress(&s), "pulse 3 of 8, error bound > 100 %");
+        s.error_bound = 1.0;
+        assert_eq!(progress(&s), "pulse 3 of 8, error bound 100.0 %");
+        // Solving counts the pulses done, not the plan's (which may have grown).
+        let mut s = status(DaemonState::Solve);
+        s.pulse = 12;
+        assert_eq!(progress(&s), "solving after 12 pulses, error bound 4.2 %");
     }
 
     #[test]
@@ -414,6 +447,12 @@ thrusterd on namespace veh1
         s.rejected_range = 4;
         s.set_text("model refused: rank 4");
         assert!(status_line(&s).ends_with("| model v3 | 4 rejected | model refused: rank 4"));
+        // Issue 27: the last status read "Active ... | thrusterd stopped".
+        s.set_text(StatusMsg::STOPPED_TEXT);
+        assert_eq!(
+            status_line(&s),
+            "[   12.345 s] Stopped      thrusterd stopped (it was Active, model v3)"
+        );
     }
 
     #[test]

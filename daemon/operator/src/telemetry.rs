@@ -5,7 +5,7 @@
 
 use std::fmt::Write;
 
-use thruster_protocol::TelemetryMsg;
+use thruster_protocol::{DaemonState, TelemetryMsg};
 
 use crate::json::state_name;
 
@@ -44,12 +44,23 @@ pub fn estimation(t: &TelemetryMsg) -> Option<String> {
     if !t.has(TelemetryMsg::ESTIMATING) {
         return None;
     }
+    // `pulse` counts pulses completed: while one runs it is the next one, as status says it
+    // (one number for one moment, issue 27).
+    let current = if t.state() == Ok(DaemonState::Pulse) {
+        t.pulse + 1
+    } else {
+        t.pulse
+    };
     let mut s = format!(
-        "pulse {} of {}, power {:.2}",
-        t.pulse, t.pulses_planned, t.power
+        "pulse {current} of {}, power {:.2}",
+        t.pulses_planned, t.power
     );
-    if t.has(TelemetryMsg::HAS_ERROR_BOUND) {
-        let _ = write!(s, ", bound {:.1} %", 100.0 * t.error_bound);
+    if let Some(b) = t
+        .has(TelemetryMsg::HAS_ERROR_BOUND)
+        .then(|| crate::render::bound(t.error_bound))
+        .flatten()
+    {
+        let _ = write!(s, ", bound {b}");
     }
     if t.has(TelemetryMsg::HAS_NOISE) {
         let _ = write!(
@@ -188,6 +199,23 @@ impl HeldSetpoint {
     }
 }
 
+/// What the daemon holds, as the reply to a setpoint says it: read from telemetry published
+/// after the daemon took the setpoint, so it is what is held, not what was asked.
+pub fn held_text(t: &TelemetryMsg) -> String {
+    if !t.has(TelemetryMsg::HAS_SETPOINT) {
+        return format!(
+            "thrusterd is {} and holds nothing now (it takes this setpoint when it controls)",
+            state_name(t.state)
+        );
+    }
+    let depth = if t.has(TelemetryMsg::HOLD_DEPTH) {
+        format!("depth {:.2} m", t.setpoint_depth)
+    } else {
+        "depth free".to_string()
+    };
+    format!("thrusterd holds {} deg, {depth}", angles(&t.setpoint_euler))
+}
+
 /// The line `watch` prints when the held setpoint changes.
 pub fn setpoint_line(t: &TelemetryMsg) -> String {
     let mut s = format!(
@@ -206,7 +234,7 @@ pub fn setpoint_line(t: &TelemetryMsg) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use thruster_protocol::{DaemonState, ThrustMode};
+    use thruster_protocol::ThrustMode;
 
     fn holding() -> TelemetryMsg {
         let pitch = 10f64.to_radians();
@@ -229,6 +257,24 @@ mod tests {
         t.set_mode(ThrustMode::Controlling);
         t.thrust[..5].copy_from_slice(&[0.12, -0.05, 0.0, 0.31, -1.0]);
         t
+    }
+
+    #[test]
+    fn the_held_setpoint_says_depth() {
+        assert_eq!(
+            held_text(&holding()),
+            "thrusterd holds roll +0.0 pitch +10.0 yaw +45.0 deg, depth 2.00 m"
+        );
+        let mut free = holding();
+        free.flags &= !TelemetryMsg::HOLD_DEPTH;
+        assert!(held_text(&free).ends_with(", depth free"));
+        let mut idle = holding();
+        idle.flags = 0;
+        idle.set_state(DaemonState::Idle);
+        assert_eq!(
+            held_text(&idle),
+            "thrusterd is Idle and holds nothing now (it takes this setpoint when it controls)"
+        );
     }
 
     #[test]
@@ -258,11 +304,14 @@ mod tests {
         assert_eq!(
             line(&t),
             "[    0.000 s] telemetry Pulse | att roll +0.0 pitch +0.0 yaw +0.0 deg \
-             | thrust +0.00 +0.00 | pulse 3 of 56, power 0.80, noise 0.250 rad/s 0.490 m/s^2"
+             | thrust +0.00 +0.00 | pulse 4 of 56, power 0.80, noise 0.250 rad/s 0.490 m/s^2"
         );
         t.flags |= TelemetryMsg::HAS_ERROR_BOUND;
         t.error_bound = 0.081;
         assert!(line(&t).ends_with("power 0.80, bound 8.1 %, noise 0.250 rad/s 0.490 m/s^2"));
+        // Issue 27's "error bound 43923.9 %": meaningless early bounds read "> 100 %".
+        t.error_bound = 439.239;
+        assert!(line(&t).contains("pulse 4 of 56, power 0.80, bound > 100 %, noise"));
     }
 
     #[test]

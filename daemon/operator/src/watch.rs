@@ -107,6 +107,41 @@ impl From<&StatusMsg> for Key {
     }
 }
 
+/// Which daemon a status comes from, compared with the last one seen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Life {
+    /// The daemon seen before (or the first one seen).
+    Same,
+    /// Another daemon instance: its status sequence started again below the last one, or it
+    /// came after the last one's "stopped". What was drawn for the old one is stale.
+    Restarted,
+    /// The daemon's last status: it exited.
+    Stopped,
+}
+
+/// Follows the daemon instance through its statuses' sequence numbers (a daemon starts at 0
+/// and counts up; a restarted one starts again).
+#[derive(Debug, Default)]
+pub struct Instance {
+    last_seq: Option<u64>,
+    stopped: bool,
+}
+
+impl Instance {
+    pub fn observe(&mut self, s: &StatusMsg) -> Life {
+        let restarted = self.stopped || self.last_seq.is_some_and(|last| s.seq < last);
+        self.last_seq = Some(s.seq);
+        self.stopped = s.is_stopped();
+        if self.stopped {
+            Life::Stopped
+        } else if restarted {
+            Life::Restarted
+        } else {
+            Life::Same
+        }
+    }
+}
+
 /// Decides which statuses `watch` prints.
 #[derive(Debug, Default)]
 pub struct ChangeFilter {
@@ -210,6 +245,16 @@ impl Screen {
         write_out(&frame)
     }
 
+    /// Takes the dashboard off the screen (its daemon stopped or was replaced).
+    fn clear(&mut self) -> Result<()> {
+        self.board.clear();
+        let frame = self.erase();
+        if frame.is_empty() {
+            return Ok(());
+        }
+        write_out(&frame)
+    }
+
     /// Replaces the dashboard.
     fn show(&mut self, board: Vec<String>) -> Result<()> {
         self.board = board;
@@ -254,6 +299,7 @@ pub fn run(daemon: &Daemon, options: Options, interrupted: Arc<AtomicBool>) -> R
         daemon.inbox::<TelemetryMsg>()?
     };
     let mut filter = ChangeFilter::default();
+    let mut instance = Instance::default();
     let mut shown = TelemetryFilter::new(options.interval);
     let mut screen = Screen::new(options.dashboard);
     let mut warner = Warner::default();
@@ -271,6 +317,23 @@ pub fn run(daemon: &Daemon, options: Options, interrupted: Arc<AtomicBool>) -> R
                 gone = false;
             }
             warner.warn(status_problem(&s));
+            match instance.observe(&s) {
+                Life::Same => {}
+                // The old daemon's dashboard, setpoint and last status say nothing of the new
+                // one (issue 27: a dead daemon's "Active, model v8" stayed drawn).
+                Life::Restarted => {
+                    screen.clear()?;
+                    filter = ChangeFilter::default();
+                    shown = TelemetryFilter::new(options.interval);
+                    if !options.json {
+                        screen.line("thrusterd restarted: a new instance, showing its state")?;
+                    }
+                }
+                Life::Stopped => {
+                    screen.clear()?;
+                    shown = TelemetryFilter::new(options.interval);
+                }
+            }
             if filter.should_print(&s, now) {
                 if options.json {
                     screen.line(&serde_json::to_string(&StatusJson::from(&s))?)?;
@@ -332,6 +395,26 @@ pub fn run(daemon: &Daemon, options: Options, interrupted: Arc<AtomicBool>) -> R
 mod tests {
     use super::*;
     use thruster_protocol::DaemonState;
+
+    /// Issue 27: after a restart `watch` went on drawing the dead daemon's dashboard.
+    #[test]
+    fn a_restart_and_a_stop_are_told_from_the_sequence_and_the_last_text() {
+        let mut life = Instance::default();
+        let at = |seq: u64, text: &str| {
+            let mut s = status(DaemonState::Active, 0);
+            s.seq = seq;
+            s.set_text(text);
+            s
+        };
+        assert_eq!(life.observe(&at(40, "")), Life::Same);
+        assert_eq!(life.observe(&at(41, "")), Life::Same);
+        // A new daemon counts from 0 again.
+        assert_eq!(life.observe(&at(2, "")), Life::Restarted);
+        assert_eq!(life.observe(&at(3, "")), Life::Same);
+        assert_eq!(life.observe(&at(4, StatusMsg::STOPPED_TEXT)), Life::Stopped);
+        // Whatever comes after a stop is another daemon, even with a higher number.
+        assert_eq!(life.observe(&at(9, "")), Life::Restarted);
+    }
 
     fn status(state: DaemonState, pulse: u32) -> StatusMsg {
         let mut s = StatusMsg {

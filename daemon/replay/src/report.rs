@@ -127,6 +127,16 @@ pub fn text(ctx: &Context, r: &Replayed) -> String {
 /// carries it (the `ModelMsg` JSON), so a script compares them field for field.
 pub fn json(ctx: &Context, r: &Replayed) -> Value {
     let o = &r.outcome;
+    // `actuated` stays the channel's bit mask (compared with the recording field for field);
+    // `actuated_dof` beside it names the axes (issue 27: `"actuated": 47` said nothing).
+    let named = |m: &ModelMsg| {
+        let mut v = serde_json::to_value(m).unwrap_or(Value::Null);
+        if let Value::Object(fields) = &mut v {
+            fields.insert("actuated_dof".into(), json!(actuated(m)));
+        }
+        v
+    };
+    let models: Vec<Value> = o.models.iter().map(named).collect();
     json!({
         "files": ctx.files,
         "config": ctx.config.unwrap_or("recording"),
@@ -139,8 +149,8 @@ pub fn json(ctx: &Context, r: &Replayed) -> Value {
         "vehicle_s": o.vehicle_s,
         "final_state": o.final_state.name(),
         "final_text": o.final_text,
-        "models": o.models,
-        "model": o.models.last(),
+        "models": models,
+        "model": o.models.last().map(named),
         "models_valid": o.models_valid,
         "model_valid": o.models_valid.last(),
         "commands_compared": o.commands_compared,

@@ -9,6 +9,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+
 use thrusterctl_operator::cli::{self, Globals};
 use thrusterctl_operator::{commands, exit};
 
@@ -70,7 +71,7 @@ fn main() -> ExitCode {
     // after unwinding has stopped the demo's children and purged its namespace.
     thruster_driver_kit::pipe::main(|| {
         init_logging();
-        let cli = Cli::parse();
+        let cli = parse_cli();
         // `run` returns instead of exiting so every iceoryx2 port and node is dropped
         // normally: a process::exit would leave the namespace's files behind.
         match run(cli) {
@@ -83,6 +84,42 @@ fn main() -> ExitCode {
             }
         }
     })
+}
+
+/// The lab's verbs run their own daemon: the operator's options for reaching one are refused
+/// there (see `run`), so their help does not list them (issue 27: `demo --help` did).
+#[cfg(feature = "lab")]
+const LAB_VERBS: [&str; 3] = ["demo", "experiment", "study"];
+#[cfg(not(feature = "lab"))]
+const LAB_VERBS: [&str; 0] = [];
+
+fn command() -> clap::Command {
+    use clap::CommandFactory;
+    let mut cmd = Cli::command();
+    // Global options reach the subcommands when the command is built, so hide them after,
+    // in place: the built parser refers to arguments and subcommands by position
+    // (`mut_arg`/`mut_subcommand` move them to the end, and `demo --namespace` then parsed
+    // as `--help`).
+    cmd.build();
+    cmd.mut_subcommands(|sub| {
+        if !LAB_VERBS.contains(&sub.get_name()) {
+            return sub;
+        }
+        sub.mut_args(|a| {
+            let refused = ["namespace", "ipc_root", "timeout_ms"].contains(&a.get_id().as_str());
+            if refused {
+                a.hide(true)
+            } else {
+                a
+            }
+        })
+    })
+}
+
+fn parse_cli() -> Cli {
+    use clap::FromArgMatches;
+    let matches = command().get_matches();
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -135,10 +172,44 @@ fn init_logging() {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::CommandFactory;
+    use clap::{CommandFactory, FromArgMatches};
 
     #[test]
     fn clap_definition_is_consistent() {
         Cli::command().debug_assert();
+    }
+
+    /// Issue 27: `demo --help` listed --namespace and --ipc-root, which demo then refuses.
+    #[cfg(feature = "lab")]
+    #[test]
+    fn lab_help_does_not_offer_the_options_it_refuses() {
+        let mut cmd = command();
+        for verb in LAB_VERBS {
+            let help = cmd
+                .find_subcommand_mut(verb)
+                .unwrap()
+                .render_long_help()
+                .to_string();
+            for hidden in ["--namespace", "--ipc-root", "--timeout-ms"] {
+                assert!(
+                    !help.contains(hidden),
+                    "{verb} --help offers {hidden}:\n{help}"
+                );
+            }
+        }
+        let help = cmd
+            .find_subcommand_mut("status")
+            .unwrap()
+            .render_long_help()
+            .to_string();
+        assert!(
+            help.contains("--namespace") && help.contains("--ipc-root"),
+            "{help}"
+        );
+        // Still parsed (and refused by `run` with a reason) rather than an unknown option.
+        let m = command()
+            .try_get_matches_from(["thrusterctl", "demo", "--namespace", "veh9"])
+            .unwrap();
+        assert_eq!(Cli::from_arg_matches(&m).unwrap().globals.namespace, "veh9");
     }
 }

@@ -93,12 +93,15 @@ impl FakeDaemon {
                         }
                     })
                     .unwrap();
+                // A daemon numbers its statuses on, whatever they say: `watch` takes a
+                // sequence number going back for a restarted daemon.
+                let seq = status.seq;
                 while let Ok(s) = status_rx.try_recv() {
-                    status = s;
+                    status = StatusMsg { seq, ..s };
                 }
                 if Instant::now() >= next_step {
                     if let Some((s, m)) = plan.pop() {
-                        status = s;
+                        status = StatusMsg { seq, ..s };
                         if let Some(m) = m {
                             model_port.send(&m).unwrap();
                         }

@@ -563,7 +563,7 @@ impl Daemon {
             session.finish();
         }
         let mut status = self.status_msg();
-        status.set_text("thrusterd stopped");
+        status.set_text(StatusMsg::STOPPED_TEXT);
         let _ = out.status.send(&status);
         Ok(())
     }
@@ -1057,6 +1057,10 @@ impl Daemon {
         };
         let result = self.machine.on_request(machine_req);
         self.journal_request(kind, req.value, result.is_err());
+        if self.machine.state() == thrusterd_core::machine::State::Fault {
+            // Idle or stop in Fault change what it recovers to without a state change.
+            self.record_intent(thrusterd_core::machine::State::Fault);
+        }
         match result {
             Ok(text) => ControlResponse::ok(&text),
             Err(e) => ControlResponse::new(ResponseCode::Rejected, &e.0),
@@ -1135,6 +1139,10 @@ impl Daemon {
                 warn!("the previous thrusterd did not stop cleanly while controlling, but there is no model to resume with: idle");
                 Intent::Idle
             }
+            Some(Intent::Idle) if session.previous_in_fault() => {
+                info!("the previous thrusterd did not stop cleanly; it was in Fault and would have recovered to idle: idle");
+                Intent::Idle
+            }
             Some(Intent::Idle) => {
                 info!("the previous thrusterd did not stop cleanly; it was idle: idle");
                 Intent::Idle
@@ -1153,6 +1161,19 @@ impl Daemon {
             State::Active => crate::session::Intent::Hold,
             s if s.is_estimating() => crate::session::Intent::Hold,
             State::Idle => crate::session::Intent::Idle,
+            State::Fault => {
+                // What clearing the fault resumes, marked as Fault (an operator's idle or stop
+                // in Fault changes it without a state change: called after every request).
+                let intent = if self.machine.fault_resumes_control() {
+                    crate::session::Intent::Hold
+                } else {
+                    crate::session::Intent::Idle
+                };
+                if let Some(session) = self.session.as_mut() {
+                    session.record_in_fault(intent);
+                }
+                return;
+            }
             _ => return,
         };
         if let Some(session) = self.session.as_mut() {

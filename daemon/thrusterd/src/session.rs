@@ -40,8 +40,12 @@ impl Intent {
 
 pub struct Session {
     path: PathBuf,
-    written: Option<Intent>,
+    /// What the marker says now: the intent, and whether the daemon is in Fault.
+    written: Option<(Intent, bool)>,
     warned: bool,
+    /// The predecessor's marker said it was in Fault (its intent is what it would have
+    /// recovered to).
+    previous_in_fault: bool,
 }
 
 impl Session {
@@ -49,8 +53,12 @@ impl Session {
     /// (None after a clean stop or on the first start). Nothing is written yet.
     pub fn open(state_dir: &Path) -> (Session, Option<Intent>) {
         let path = state_dir.join(SESSION_FILE);
+        let mut previous_in_fault = false;
         let previous = match fs::read_to_string(&path) {
-            Ok(text) => Some(parse(&text)),
+            Ok(text) => {
+                previous_in_fault = text.lines().any(|l| l == "state=fault");
+                Some(parse(&text))
+            }
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
             // Unreadable: a predecessor was there, but what it did is unknown; idle is safe.
             Err(e) => {
@@ -62,19 +70,36 @@ impl Session {
             path,
             written: None,
             warned: false,
+            previous_in_fault,
         };
         (session, previous)
     }
 
     /// Records what a restart after a crash from now on should resume (written on change).
     pub fn record(&mut self, intent: Intent) {
-        if self.written == Some(intent) {
+        self.write(intent, false);
+    }
+
+    /// As `record`, in Fault: `intent` is what the daemon will recover to, and the marker
+    /// says it was in Fault, so a restart does not call it idle (issue 27).
+    pub fn record_in_fault(&mut self, intent: Intent) {
+        self.write(intent, true);
+    }
+
+    /// True when the predecessor's marker said it was in Fault.
+    pub fn previous_in_fault(&self) -> bool {
+        self.previous_in_fault
+    }
+
+    fn write(&mut self, intent: Intent, in_fault: bool) {
+        if self.written == Some((intent, in_fault)) {
             return;
         }
         // Temp file and rename: a crash mid-write never leaves half a marker. No fsync: the
         // marker guards against the process dying, whose completed writes the kernel keeps.
         let tmp = self.path.with_extension("tmp");
-        let text = format!("thrusterd session\nresume={}\n", intent.word());
+        let state = if in_fault { "state=fault\n" } else { "" };
+        let text = format!("thrusterd session\nresume={}\n{state}", intent.word());
         let result = self
             .path
             .parent()
@@ -82,7 +107,7 @@ impl Session {
             .and_then(|()| fs::write(&tmp, text))
             .and_then(|()| fs::rename(&tmp, &self.path));
         match result {
-            Ok(()) => self.written = Some(intent),
+            Ok(()) => self.written = Some((intent, in_fault)),
             Err(e) => {
                 let _ = fs::remove_file(&tmp);
                 if !self.warned {
@@ -131,6 +156,23 @@ mod tests {
         assert_eq!(previous, Some(Intent::Idle));
         s3.finish();
         assert_eq!(Session::open(dir.path()).1, None);
+    }
+
+    /// Issue 27: after kill -9 in Fault the restart said "it was idle".
+    #[test]
+    fn a_marker_written_in_fault_says_so_and_what_it_would_recover_to() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut s, _) = Session::open(dir.path());
+        s.record(Intent::Hold);
+        s.record_in_fault(Intent::Hold);
+        let (mut s2, previous) = Session::open(dir.path());
+        assert_eq!(previous, Some(Intent::Hold));
+        assert!(s2.previous_in_fault());
+        s2.record(Intent::Idle);
+        let (s3, previous) = Session::open(dir.path());
+        assert_eq!(previous, Some(Intent::Idle));
+        assert!(!s3.previous_in_fault());
+        s3.finish();
     }
 
     #[test]

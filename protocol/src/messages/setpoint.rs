@@ -12,14 +12,16 @@ pub struct Setpoint {
     /// Desired attitude as a unit quaternion `[w, x, y, z]`, rotation of the body frame
     /// relative to NED (north, east, down).
     pub attitude: [f64; 4],
-    /// Desired depth, m, positive down. Used with [`Setpoint::HOLD_DEPTH`].
+    /// Desired depth, m, positive down. Used with [`Setpoint::HOLD_DEPTH`] only.
     pub depth: f64,
     /// Bit set of `Setpoint::*` flags.
     pub flags: u64,
 }
 
 impl Setpoint {
-    /// Hold `depth`; otherwise heave is left free.
+    /// Hold `depth`. Without this flag or [`Setpoint::RELEASE_DEPTH`] the daemon keeps the
+    /// depth it holds now (none if it holds none): an attitude command never lets go of depth
+    /// unless asked to (issue 27: a pitch-only setpoint once let a held vehicle rise 7 m).
     pub const HOLD_DEPTH: u64 = 1 << 0;
     /// Keep the roll the daemon holds now; `attitude`'s roll is ignored.
     pub const KEEP_ROLL: u64 = 1 << 1;
@@ -27,14 +29,25 @@ impl Setpoint {
     pub const KEEP_PITCH: u64 = 1 << 2;
     /// Keep the heading the daemon holds now; `attitude`'s yaw is ignored.
     pub const KEEP_YAW: u64 = 1 << 3;
+    /// Release the depth hold: heave is left free. Exclusive with [`Setpoint::HOLD_DEPTH`].
+    pub const RELEASE_DEPTH: u64 = 1 << 4;
     /// Every flag this protocol version defines; other bits are rejected (a daemon that
-    /// does not know the KEEP_* flags refuses such a setpoint rather than misreading it).
-    pub const KNOWN_FLAGS: u64 =
-        Self::HOLD_DEPTH | Self::KEEP_ROLL | Self::KEEP_PITCH | Self::KEEP_YAW;
+    /// does not know the KEEP_* or RELEASE_DEPTH flags refuses such a setpoint rather than
+    /// misreading it).
+    pub const KNOWN_FLAGS: u64 = Self::HOLD_DEPTH
+        | Self::KEEP_ROLL
+        | Self::KEEP_PITCH
+        | Self::KEEP_YAW
+        | Self::RELEASE_DEPTH;
 
     /// True when depth is to be held.
     pub fn hold_depth(&self) -> bool {
         self.flags & Self::HOLD_DEPTH != 0
+    }
+
+    /// True when the depth hold is to be released (heave free).
+    pub fn release_depth(&self) -> bool {
+        self.flags & Self::RELEASE_DEPTH != 0
     }
 
     /// Which of roll, pitch, yaw keep the value the daemon holds now (the operator left
@@ -45,7 +58,7 @@ impl Setpoint {
 }
 
 impl Default for Setpoint {
-    /// Level attitude (identity quaternion), surface, no depth hold.
+    /// Level attitude (identity quaternion); the depth held now is kept.
     fn default() -> Self {
         Self {
             seq: 0,

@@ -109,6 +109,15 @@ pub struct StatusMsg {
 }
 
 impl StatusMsg {
+    /// The text of the last status a daemon publishes as it exits (state: the one it left).
+    /// Operators show it as stopped rather than as that state.
+    pub const STOPPED_TEXT: &'static str = "thrusterd stopped";
+
+    /// True for the last status of a daemon that exited.
+    pub fn is_stopped(&self) -> bool {
+        self.text() == Self::STOPPED_TEXT
+    }
+
     /// Decoded `state`.
     pub fn state(&self) -> Result<DaemonState, UnknownEnumValue> {
         DaemonState::try_from(self.state)

@@ -393,7 +393,8 @@ impl Validate for StatusMsg {
 }
 
 impl Validate for Setpoint {
-    /// Quaternion finite and unit length, depth finite and in range, flags known.
+    /// Quaternion finite and unit length, depth finite and in range, flags known and not both
+    /// HOLD_DEPTH and RELEASE_DEPTH.
     fn validate(&self) -> Result<(), RejectReason> {
         for (i, &q) in self.attitude.iter().enumerate() {
             finite(Field::at("attitude", i), q)?;
@@ -410,7 +411,14 @@ impl Validate for Setpoint {
             MAX_DEPTH_M,
             "m",
         )?;
-        known_flags("flags", self.flags, Setpoint::KNOWN_FLAGS)
+        known_flags("flags", self.flags, Setpoint::KNOWN_FLAGS)?;
+        if self.hold_depth() && self.release_depth() {
+            return Err(RejectReason::Inconsistent {
+                field: Field::new("flags"),
+                detail: "HOLD_DEPTH and RELEASE_DEPTH together",
+            });
+        }
+        Ok(())
     }
 }
 

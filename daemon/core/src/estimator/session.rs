@@ -479,6 +479,29 @@ impl Estimator {
         (cycles * self.plan.cycle_len()).min(self.cfg.max_pulses)
     }
 
+    /// The pulses the plan runs to as it stands, for progress: the minimum plan
+    /// (`planned_pulses`) until a pulse beyond it begins; then the plan has grown (the bound
+    /// was not met) to the next point where the estimator may stop, at most `max_pulses`.
+    /// Never below the pulses begun, so progress never reads "pulse 40 of 32".
+    pub fn plan_extent(&self) -> usize {
+        let min = self.planned_pulses();
+        let begun = self.pulses + usize::from(self.pulse.is_some());
+        if begun <= min {
+            return min;
+        }
+        // Where stop_gate lets the run end (see there).
+        let step = match self.cfg.method {
+            Method::Paper => 1,
+            Method::Forward => self.plan.cycle_len(),
+            Method::Dynamic => 4,
+        };
+        begun
+            .div_ceil(step)
+            .saturating_mul(step)
+            .min(self.cfg.max_pulses)
+            .max(begun)
+    }
+
     /// The thrust to apply for the next pulse: power times the plan's sign pattern, in [-1, 1].
     /// Starts the pulse; feed its samples with `push_pulse_sample`, then call `end_pulse`.
     /// The pulse starts just after the last rest sample.

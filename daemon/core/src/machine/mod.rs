@@ -26,6 +26,6 @@ pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};
 pub use types::{
-    Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput, State,
-    StatusSnapshot, ThrusterChange, NO_IMU_YET,
+    Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
+    SetpointInput, State, StatusSnapshot, ThrusterChange, NO_IMU_YET,
 };

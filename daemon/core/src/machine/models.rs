@@ -30,7 +30,14 @@ impl ModelSlot {
         max_rel_err: f64,
     ) -> Result<Model, SwapRejection> {
         model.check(n, max_rel_err)?;
-        self.versions += 1;
+        // A loaded model keeps the version it was saved with when the counter is below it
+        // (issue 27: a saved v8 came back as v1); otherwise it gets the next number, so the
+        // daemon's versions never go back.
+        self.versions = if source == ModelSource::Loaded {
+            (self.versions + 1).max(model.version)
+        } else {
+            self.versions + 1
+        };
         model.version = self.versions;
         model.source = source;
         if let Some(old) = self.current.replace(model.clone()) {

@@ -10,8 +10,8 @@ use super::estimation::ESTIMATION;
 use super::estimation::{ClosedStep, EstimationRun, Motion, PulseStep};
 use super::models::ModelSlot;
 use super::types::{
-    finish, Command, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request, SetpointInput,
-    State, StatusSnapshot, NO_IMU_YET,
+    finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
+    SetpointInput, State, StatusSnapshot, NO_IMU_YET,
 };
 use crate::attitude::AttitudeFilter;
 use crate::controller::{Controller, Measured, Target};
@@ -64,6 +64,8 @@ pub struct Machine {
     imu_rate_hz: f64,
     samples: u64,
     text: String,
+    /// `text` says no IMU sample has come yet (set by `on_no_imu_yet`).
+    text_says_no_imu: bool,
     last_desired: [f64; 6],
     /// Why the driver's outputs cannot be used (see `driver_watch`), while they cannot: the
     /// machine stays in Fault, neutral, and does not recover on good IMU samples alone.
@@ -73,6 +75,9 @@ pub struct Machine {
     /// present voltage (`crate::supply`).
     supply: Supply,
 }
+
+/// What status says while idle with samples coming and nothing asked.
+const IDLE_TEXT: &str = "idle: waiting for an estimate request";
 
 impl Machine {
     pub fn new(setup: MachineSetup) -> Self {
@@ -97,7 +102,8 @@ impl Machine {
             events: Vec::new(),
             imu_rate_hz: 0.0,
             samples: 0,
-            text: "idle: waiting for an estimate request".into(),
+            text: IDLE_TEXT.into(),
+            text_says_no_imu: false,
             last_desired: [0.0; 6],
             output_block: None,
             supply: Supply::new(setup.supply.clone()),
@@ -250,9 +256,18 @@ impl Machine {
     }
 
     fn install_loaded(&mut self, model: Model) -> Result<(), Refused> {
+        let saved = model.version;
         self.try_swap(model, ModelSource::Loaded)
             .map_err(|e| Refused(format!("model not used: {e}")))?;
-        self.describe_swap("model loaded");
+        // Versions only go up here: a file older than the model in force gets a new number,
+        // and status says which version it was saved as.
+        let what = match self.models.current() {
+            Some(m) if saved > 0 && m.version != saved => {
+                format!("model loaded (saved as v{saved})")
+            }
+            _ => "model loaded".to_string(),
+        };
+        self.describe_swap(&what);
         Ok(())
     }
 
@@ -264,6 +279,12 @@ impl Machine {
         };
         self.text = format!("{what}: model v{}, {}", m.version, m.provenance());
         self.text.clone()
+    }
+
+    /// In Fault: whether clearing it resumes control (or the interrupted estimation) rather
+    /// than idle. What a restart after a crash in Fault should resume.
+    pub fn fault_resumes_control(&self) -> bool {
+        matches!(self.resume, Resume::Active | Resume::Estimate)
     }
 
     /// The answer to one IMU sample. Always a command: neutral unless estimating or controlling.
@@ -284,6 +305,9 @@ impl Machine {
     }
 
     fn respond(&mut self, s: &ImuInput) -> Command {
+        if self.samples == 0 {
+            self.first_sample();
+        }
         self.samples += 1;
         let dt = match self.last_t_ns {
             Some(last) if s.t_ns > last => (s.t_ns - last) as f64 * 1e-9,
@@ -390,6 +414,15 @@ impl Machine {
     pub fn on_no_imu_yet(&mut self, why: &str) {
         if self.state == State::Idle && self.samples == 0 {
             self.text = format!("idle: {why}");
+            self.text_says_no_imu = true;
+        }
+    }
+
+    /// The first sample ends "no IMU yet": status must not go on saying it beside a rate and
+    /// a sample count (issue 27: it stayed until the next state change).
+    fn first_sample(&mut self) {
+        if std::mem::take(&mut self.text_says_no_imu) && self.state == State::Idle {
+            self.text = IDLE_TEXT.into();
         }
     }
 
@@ -415,8 +448,9 @@ impl Machine {
                     return Err(Refused(NO_IMU_YET.into()));
                 }
                 if self.state == State::Fault {
+                    // What to do first: the fault's own text is long and may be cut.
                     return Err(Refused(format!(
-                        "in fault ({}); estimate after it clears",
+                        "in fault: estimate once it clears ({})",
                         self.text
                     )));
                 }
@@ -532,7 +566,7 @@ impl Machine {
 
     /// An operator's setpoint in which some angles may be left out: those keep the value held
     /// now (the current target's, or, before any target, what control would hold: level at
-    /// the current heading).
+    /// the current heading). Depth left out keeps the held depth, as angles do.
     pub fn on_setpoint_input(&mut self, s: &SetpointInput) {
         let held = match &self.target {
             Some(t) => t.attitude.euler_angles(),
@@ -543,7 +577,12 @@ impl Machine {
         let want = [r, p, y];
         let pick = |i: usize| if s.keep[i] { held[i] } else { want[i] };
         let attitude = UnitQuaternion::from_euler_angles(pick(0), pick(1), pick(2));
-        self.on_setpoint(attitude, s.depth);
+        let depth = match s.depth {
+            DepthInput::Keep => self.target.as_ref().and_then(|t| t.depth),
+            DepthInput::Release => None,
+            DepthInput::Hold(d) => Some(d),
+        };
+        self.on_setpoint(attitude, depth);
     }
 
     pub fn on_reconfig(&mut self, r: Reconfig) {
@@ -601,7 +640,7 @@ impl Machine {
 
     pub fn status(&self) -> StatusSnapshot {
         let (pulse, planned, power) = match self.run.estimator() {
-            Some(e) => (e.pulses(), e.planned_pulses(), e.power()),
+            Some(e) => (e.pulses(), e.plan_extent(), e.power()),
             // Not estimating: how many pulses the model in force took (0 for a nominal
             // one), not the last run's, which may have been refused or reverted.
             None => {
@@ -612,9 +651,13 @@ impl Machine {
         // Likewise the bound: the running estimate's, else the model in force's (NaN when it
         // has none: nominal, or the paper's method).
         let error_bound = match (self.run.estimator(), self.models.current()) {
-            (Some(_), _) => self
+            // Only this run's estimate: the run keeps the previous one until its first solve,
+            // and status once showed the old model's bound at the start of a new estimation
+            // (as telemetry, which filters the same way).
+            (Some(e), _) => self
                 .run
                 .last_estimate()
+                .filter(|last| e.pulses() > 0 && last.pulses == e.pulses())
                 .map(|e| e.rel_err_rot.max(e.rel_err_acc))
                 .unwrap_or(f64::NAN),
             (None, Some(m)) => m.rel_err_rot.max(m.rel_err_acc),

@@ -90,7 +90,7 @@ impl Machine {
                 .filter(|(r, a)| r.is_finite() && a.is_finite());
             Progress {
                 pulses,
-                pulses_planned: est.planned_pulses(),
+                pulses_planned: est.plan_extent(),
                 power: est.power(),
                 error_bound,
                 sigma,
@@ -115,7 +115,7 @@ impl Machine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::{Geometry, MachineSetup, Request, SetpointInput};
+    use crate::machine::{DepthInput, Geometry, MachineSetup, Request, SetpointInput};
 
     /// AMOUR-like layout: two thrusters along x at the sides, two pushing up fore and aft.
     fn machine() -> Machine {
@@ -203,7 +203,7 @@ mod tests {
         m.on_setpoint_input(&SetpointInput {
             attitude: want,
             keep: [false, false, true],
-            depth: Some(2.5),
+            depth: DepthInput::Hold(2.5),
         });
         k += 1;
         let s = level(k, 3.1);
@@ -226,6 +226,92 @@ mod tests {
         let t = m.telemetry(&s);
         assert_eq!(t.setpoint, None);
         assert_eq!(t.depth_error, None);
+    }
+
+    /// Issue 27: `setpoint --pitch 10` from a depth hold let the vehicle rise 7 m. A setpoint
+    /// that does not mention depth keeps the depth held; only an explicit release frees it.
+    #[test]
+    fn a_setpoint_without_depth_keeps_the_held_depth() {
+        let mut m = machine();
+        let mut k = 0;
+        let mut step = |m: &mut Machine, depth: f64| {
+            k += 1;
+            let s = level(k, depth);
+            m.on_imu(&s);
+            m.telemetry(&s)
+        };
+        for _ in 0..50 {
+            step(&mut m, 26.56);
+        }
+        m.on_request(Request::Hold).unwrap();
+        assert_eq!(step(&mut m, 26.56).setpoint.unwrap().depth, Some(26.56));
+        let pitch = |depth| SetpointInput {
+            attitude: UnitQuaternion::from_euler_angles(0.0, 10f64.to_radians(), 0.0),
+            keep: [true, false, true],
+            depth,
+        };
+        m.on_setpoint_input(&pitch(DepthInput::Keep));
+        let t = step(&mut m, 26.6);
+        let sp = t.setpoint.unwrap();
+        assert_eq!(sp.depth, Some(26.56));
+        assert!((sp.attitude.euler_angles().1 - 10f64.to_radians()).abs() < 1e-9);
+        assert!((t.depth_error.unwrap() - (26.56 - 26.6)).abs() < 1e-12);
+        m.on_setpoint_input(&pitch(DepthInput::Hold(20.0)));
+        assert_eq!(step(&mut m, 26.6).setpoint.unwrap().depth, Some(20.0));
+        m.on_setpoint_input(&pitch(DepthInput::Release));
+        let t = step(&mut m, 26.6);
+        assert_eq!(t.setpoint.unwrap().depth, None);
+        assert_eq!(t.depth_error, None);
+        // Released stays released: keeping keeps "free".
+        m.on_setpoint_input(&pitch(DepthInput::Keep));
+        assert_eq!(step(&mut m, 26.6).setpoint.unwrap().depth, None);
+    }
+
+    /// Issue 27: a daemon started before its driver said "no IMU samples from any driver"
+    /// beside a 200 Hz rate until an estimation. The first sample clears it.
+    #[test]
+    fn the_first_sample_clears_no_imu_yet() {
+        let mut m = machine();
+        m.on_no_imu_yet("no IMU samples from any driver for 100 ms (namespace x)");
+        assert!(
+            m.status().text.contains("no IMU samples"),
+            "{}",
+            m.status().text
+        );
+        m.on_imu(&level(1, 3.0));
+        let text = m.status().text;
+        assert_eq!(text, "idle: waiting for an estimate request");
+        // Once samples came, the call does nothing (the daemon stops making it anyway).
+        m.on_no_imu_yet("no IMU samples from any driver for 100 ms (namespace x)");
+        assert_eq!(m.status().text, text);
+    }
+
+    /// Issue 27: a saved model v8 reloaded as version 1. It keeps its version when the
+    /// daemon's counter is below it; an older file gets the next number (versions never go
+    /// back) and status names the version it was saved as.
+    #[test]
+    fn a_loaded_model_keeps_its_saved_version_and_versions_only_go_up() {
+        let mut m = machine();
+        let mut saved = m.model().unwrap().clone();
+        assert_eq!(saved.version, 1);
+        saved.version = 8;
+        m.load_model(saved.clone()).unwrap();
+        assert_eq!(m.model().unwrap().version, 8);
+        assert!(
+            m.status().text.starts_with("model loaded: model v8"),
+            "{}",
+            m.status().text
+        );
+        saved.version = 3;
+        m.load_model(saved).unwrap();
+        assert_eq!(m.model().unwrap().version, 9);
+        assert!(
+            m.status()
+                .text
+                .starts_with("model loaded (saved as v3): model v9"),
+            "{}",
+            m.status().text
+        );
     }
 
     #[test]

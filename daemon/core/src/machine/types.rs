@@ -151,12 +151,24 @@ pub struct Reconfig {
 }
 
 /// An operator's setpoint: the attitude wanted, which of roll, pitch, yaw keep the value held
-/// now instead, and the depth to hold (None: heave free).
+/// now instead, and what to do with depth.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SetpointInput {
     pub attitude: UnitQuaternion<f64>,
     pub keep: [bool; 3],
-    pub depth: Option<f64>,
+    pub depth: DepthInput,
+}
+
+/// The depth part of an operator's setpoint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DepthInput {
+    /// Keep the depth held now, or stay free if none is held. What a setpoint that does not
+    /// mention depth means: an attitude command must never let go of a held depth.
+    Keep,
+    /// Release the depth hold: heave free.
+    Release,
+    /// Hold this depth, m, positive down.
+    Hold(f64),
 }
 
 /// Status numbers for the status message.

@@ -78,8 +78,31 @@ pub fn render(grid: &Grid, panels: &[Panel]) -> String {
     let rows = panels.len().div_ceil(cols);
     let cell_w = MARGIN_L + PANEL_W + GAP;
     let cell_h = MARGIN_T + PANEL_H + MARGIN_B;
-    let legend_h = 28.0;
     let width = cols as f64 * cell_w + GAP;
+    // Every line's label once, from every panel (issue 27: the thrust panels' lines were
+    // in no legend, which took the first panel's only), wrapped to the figure's width.
+    let mut entries: Vec<&Series> = Vec::new();
+    for ser in panels.iter().flat_map(|p| &p.series) {
+        if !entries
+            .iter()
+            .any(|e| e.label == ser.label && e.color == ser.color)
+        {
+            entries.push(ser);
+        }
+    }
+    let entry_w = |ser: &Series| 34.0 + 6.5 * ser.label.len() as f64;
+    let mut legend_rows = 1;
+    let mut x = GAP + MARGIN_L;
+    let mut placed = Vec::with_capacity(entries.len());
+    for ser in &entries {
+        if x + entry_w(ser) > width && x > GAP + MARGIN_L {
+            legend_rows += 1;
+            x = GAP + MARGIN_L;
+        }
+        placed.push((x, legend_rows - 1));
+        x += entry_w(ser);
+    }
+    let legend_h = 12.0 + 16.0 * legend_rows as f64;
     let height = 40.0 + rows as f64 * cell_h + legend_h;
     let mut s = String::new();
     let _ = write!(
@@ -97,27 +120,22 @@ pub fn render(grid: &Grid, panels: &[Panel]) -> String {
         let y0 = 40.0 + (i / cols) as f64 * cell_h + MARGIN_T;
         draw_panel(&mut s, grid, panel, x0, y0);
     }
-    // Legend from the first panel's series.
-    if let Some(first) = panels.first() {
-        let mut x = GAP + MARGIN_L;
-        let y = height - 12.0;
-        for ser in &first.series {
-            let dash = if ser.dashed {
-                r#" stroke-dasharray="5,3""#
-            } else {
-                ""
-            };
-            let _ = write!(
-                s,
-                r#"<line x1="{x}" y1="{y}" x2="{}" y2="{y}" stroke="{}" stroke-width="2"{dash}/><text x="{}" y="{}">{}</text>"#,
-                x + 22.0,
-                ser.color,
-                x + 26.0,
-                y + 4.0,
-                esc(&ser.label)
-            );
-            x += 34.0 + 6.5 * ser.label.len() as f64;
-        }
+    for (ser, (x, row)) in entries.iter().zip(placed) {
+        let y = height - legend_h + 16.0 + 16.0 * row as f64;
+        let dash = if ser.dashed {
+            r#" stroke-dasharray="5,3""#
+        } else {
+            ""
+        };
+        let _ = write!(
+            s,
+            r#"<line x1="{x}" y1="{y}" x2="{}" y2="{y}" stroke="{}" stroke-width="2"{dash}/><text x="{}" y="{}">{}</text>"#,
+            x + 22.0,
+            ser.color,
+            x + 26.0,
+            y + 4.0,
+            esc(&ser.label)
+        );
     }
     s.push_str("</svg>\n");
     s
@@ -319,6 +337,48 @@ mod tests {
             "{svg}"
         );
         assert!(!svg.contains("clipped"), "nothing is beyond the range");
+    }
+
+    /// Issue 27: the experiments' thrust panels had no legend (it came from the first panel).
+    #[test]
+    fn the_legend_names_every_panels_lines_once() {
+        let grid = Grid {
+            title: "t".into(),
+            columns: 2,
+            x_label: "s".into(),
+            y_label: "deg".into(),
+            x_max: 10.0,
+            y_max: 1.0,
+        };
+        let line = |label: &str, color: &'static str| Series {
+            label: label.into(),
+            color,
+            dashed: false,
+            points: vec![(0.0, 0.0), (1.0, 1.0)],
+            band: None,
+        };
+        let panel = |series| Panel {
+            title: "p".into(),
+            series,
+            y_range: None,
+            shade: vec![],
+        };
+        let thrusters: Vec<Series> = (0..8)
+            .map(|k| line(&format!("thruster {k}"), "red"))
+            .collect();
+        let svg = render(
+            &grid,
+            &[
+                panel(vec![line("setpoint", "black")]),
+                panel(thrusters),
+                panel(vec![line("setpoint", "black")]),
+            ],
+        );
+        let legend_text = |label: &str| svg.matches(&format!(">{label}</text>")).count();
+        assert_eq!(legend_text("setpoint"), 1, "{svg}");
+        for k in 0..8 {
+            assert_eq!(legend_text(&format!("thruster {k}")), 1, "{svg}");
+        }
     }
 
     #[test]
