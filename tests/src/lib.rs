@@ -145,6 +145,11 @@ impl Proc {
             .stdout(out)
             .stderr(err)
             .env("RUST_LOG", "info")
+            // Under `cargo test` these are set, and thrusterctl's lab would then run `cargo
+            // build` before it starts anything (seconds to minutes on a loaded machine): the
+            // tests have the binaries already.
+            .env_remove("CARGO")
+            .env_remove("CARGO_MANIFEST_DIR")
             .envs(env.iter().copied())
             .spawn()
             .unwrap_or_else(|e| panic!("spawning {name}: {e}"));
