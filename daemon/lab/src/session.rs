@@ -169,9 +169,14 @@ impl Binaries {
             .parent()
             .context("thrusterctl has no folder")?
             .to_path_buf();
-        if let (Ok(cargo), Ok(manifest)) =
-            (std::env::var("CARGO"), std::env::var("CARGO_MANIFEST_DIR"))
-        {
+        // Only `cargo run` of thrusterctl itself: a process started by another crate's
+        // `cargo test` (the system tests) inherits the variables too, and a `-p` build from
+        // there re-unifies features, rebuilds and can wait minutes for cargo's lock (a CI run
+        // sat on it in `thrusterctl demo | head`).
+        let run_by_cargo = std::env::var("CARGO_MANIFEST_DIR")
+            .ok()
+            .filter(|m| Path::new(m).file_name().is_some_and(|n| n == "thrusterctl"));
+        if let (Ok(cargo), Some(manifest)) = (std::env::var("CARGO"), run_by_cargo) {
             let mut cmd = Command::new(cargo);
             cmd.args([
                 "build",
