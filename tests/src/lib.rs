@@ -15,6 +15,7 @@ use thruster_protocol::{
     ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
 };
 
+pub mod cli;
 pub mod mount;
 pub mod node;
 pub mod python;
@@ -145,11 +146,6 @@ impl Proc {
             .stdout(out)
             .stderr(err)
             .env("RUST_LOG", "info")
-            // Under `cargo test` these are set, and thrusterctl's lab would then run `cargo
-            // build` before it starts anything (seconds to minutes on a loaded machine): the
-            // tests have the binaries already.
-            .env_remove("CARGO")
-            .env_remove("CARGO_MANIFEST_DIR")
             .envs(env.iter().copied())
             .spawn()
             .unwrap_or_else(|e| panic!("spawning {name}: {e}"));

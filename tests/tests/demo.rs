@@ -3,10 +3,7 @@
 //! estimator (the dynamic method); the thresholds are issue 11's targets with a margin for a
 //! loaded machine, the comments say what the runs measured.
 
-use std::process::Command;
-
 use serde_json::Value;
-use system_tests::{bin, workspace};
 
 fn demo(args: &[&str]) -> Value {
     let (ok, v, log) = demo_outcome(args);
@@ -17,16 +14,7 @@ fn demo(args: &[&str]) -> Value {
 /// The demo's JSON whether it succeeded or not (a refused model is a failure with a JSON
 /// that says why), and its output for messages.
 fn demo_outcome(args: &[&str]) -> (bool, Value, String) {
-    let out = Command::new(bin("thrusterctl"))
-        .arg("demo")
-        .args(args)
-        .args(["--json", "--hold-s", "0"])
-        .current_dir(workspace())
-        // Under cargo, thrusterctl would build its siblings itself; the test has them already.
-        .env_remove("CARGO")
-        .env_remove("CARGO_MANIFEST_DIR")
-        .output()
-        .expect("thrusterctl runs");
+    let out = system_tests::cli::lab(&[&["demo"], args, &["--json", "--hold-s", "0"]].concat());
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     let log = format!("stdout: {stdout}\nstderr: {stderr}");

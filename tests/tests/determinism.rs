@@ -4,24 +4,14 @@
 //! stepped the simulator's vehicle time moved err_rot from 0.065 to 0.045 and the experiments'
 //! yaw errors by 30 %. A different seed gives different numbers (the comparison can fail).
 
-use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use serde_json::Value;
-use system_tests::{bin, workspace};
 
 /// `thrusterctl <args> --json`, which must succeed, as JSON.
 fn run(args: &[&str]) -> Value {
-    let out = Command::new(bin("thrusterctl"))
-        .args(args)
-        .arg("--json")
-        .current_dir(workspace())
-        // Under cargo, thrusterctl would build its siblings itself; the test has them already.
-        .env_remove("CARGO")
-        .env_remove("CARGO_MANIFEST_DIR")
-        .output()
-        .expect("thrusterctl runs");
+    let out = system_tests::cli::lab(&[args, &["--json"]].concat());
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(

@@ -7,11 +7,9 @@
 //! the worst seed, ratios at 1.2x (issue 31); a change that moves a figure beyond them is a
 //! regression or a new measurement for the docs.
 
-use std::process::Command;
 use std::sync::Mutex;
 
 use serde_json::Value;
-use system_tests::{bin, workspace};
 
 /// One experiment at a time: a run's result no longer depends on the machine's load, but
 /// several at once on two cores only make each slower.
@@ -20,15 +18,7 @@ static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 fn experiment(name: &str) -> Value {
     // A failed experiment poisons the lock; the others still run.
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let out = Command::new(bin("thrusterctl"))
-        .args(["experiment", name, "--json"])
-        .current_dir(workspace())
-        // Under cargo, thrusterctl would build its siblings itself (`cargo run`); the test has
-        // them already, and a -p build from here could re-unify features and rebuild.
-        .env_remove("CARGO")
-        .env_remove("CARGO_MANIFEST_DIR")
-        .output()
-        .expect("thrusterctl runs");
+    let out = system_tests::cli::lab(&["experiment", name, "--json"]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(

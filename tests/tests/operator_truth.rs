@@ -7,31 +7,13 @@ use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
+use system_tests::cli::{ctl, expect_code, text};
 use system_tests::{bin, World};
 use thruster_protocol::services::Inbox;
 use thruster_protocol::VehicleStateMsg;
 
-fn ctl(world: &World, args: &[&str]) -> Output {
-    Command::new(bin("thrusterctl"))
-        .args(["--namespace", &world.namespace(), "--timeout-ms", "5000"])
-        .args(args)
-        .output()
-        .expect("thrusterctl runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
 fn expect_ok(out: &Output, what: &str) -> String {
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{what}\nstdout: {}\nstderr: {}",
-        text(&out.stdout),
-        text(&out.stderr)
-    );
-    text(&out.stdout)
+    expect_code(out, 0, what)
 }
 
 /// `estimate --wait`, asked again while the daemon refuses it because the vehicle is still
@@ -53,23 +35,7 @@ fn estimate_wait(world: &World) -> Output {
 
 /// Polls `status --json` until `pred` holds (60 s at most); the last status.
 fn wait_status(world: &World, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
-    let deadline = Instant::now() + Duration::from_secs(60);
-    loop {
-        let out = ctl(world, &["status", "--json"]);
-        if out.status.success() {
-            let v: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
-            if pred(&v) {
-                return v;
-            }
-        }
-        assert!(
-            Instant::now() < deadline,
-            "timed out waiting for {what}; last: {}{}",
-            text(&out.stdout),
-            text(&out.stderr)
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    system_tests::cli::wait_status(world, what, Duration::from_secs(60), pred)
 }
 
 /// The simulator's true vehicle states over the next `seconds` of vehicle time, from the first

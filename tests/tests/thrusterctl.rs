@@ -1,55 +1,18 @@
 //! thrusterctl as an operator uses it: the real binary against real `thrusterd run` and
 //! `thruster-sim run --lockstep` processes, checking output, exit codes and effects.
 
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
+use system_tests::cli::{ctl, expect_code, text};
 use system_tests::{bin, workspace, World};
 
 const LONG: Duration = Duration::from_secs(60);
 
-fn ctl(world: &World, args: &[&str]) -> Output {
-    Command::new(bin("thrusterctl"))
-        .args(["--namespace", &world.namespace(), "--timeout-ms", "5000"])
-        .args(args)
-        .output()
-        .expect("thrusterctl runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-fn expect_code(out: &Output, code: i32, what: &str) {
-    assert_eq!(
-        out.status.code(),
-        Some(code),
-        "{what}\nstdout: {}\nstderr: {}",
-        text(&out.stdout),
-        text(&out.stderr)
-    );
-}
-
 /// Polls `status --json` until `pred` holds; the last status.
 fn wait_status(world: &World, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
-    let deadline = Instant::now() + LONG;
-    loop {
-        let out = ctl(world, &["status", "--json"]);
-        if out.status.success() {
-            let v: Value = serde_json::from_slice(&out.stdout).expect("status JSON");
-            if pred(&v) {
-                return v;
-            }
-        }
-        assert!(
-            Instant::now() < deadline,
-            "timed out waiting for {what}; last: {}{}",
-            text(&out.stdout),
-            text(&out.stderr)
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    system_tests::cli::wait_status(world, what, LONG, pred)
 }
 
 #[test]
