@@ -41,6 +41,7 @@ pub mod scenario;
 pub mod sensors;
 pub mod settings;
 pub mod sim;
+pub mod stepper;
 pub mod thruster;
 pub mod vehicle;
 

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use crate::{bin, workspace, World};
+use crate::{bin, workspace, Proc, World};
 
 /// `thrusterctl --namespace <world's> --timeout-ms 5000 <args>`, run to its end.
 pub fn ctl(world: &World, args: &[&str]) -> Output {
@@ -15,6 +15,38 @@ pub fn ctl(world: &World, args: &[&str]) -> Output {
         .args(args)
         .output()
         .expect("thrusterctl runs")
+}
+
+/// `thrusterctl` as [`ctl`] runs it, left running: a `--wait` or `watch` beside a stepped
+/// simulator, whose vehicle time the test moves while the command waits.
+pub fn ctl_spawn(world: &World, args: &[&str]) -> Proc {
+    let ns = world.namespace();
+    let mut all = vec!["--namespace", &ns, "--timeout-ms", "5000"];
+    all.extend_from_slice(args);
+    Proc::spawn("thrusterctl", &all, world.dir.path())
+}
+
+/// Waits up to `within` (wall clock: the deadline of a hung process, not a schedule) until
+/// `p`'s output contains `needle`; that output.
+pub fn wait_output(p: &mut Proc, needle: &str, within: Duration) -> String {
+    let deadline = Instant::now() + within;
+    loop {
+        let log = p.log_text();
+        if log.contains(needle) {
+            return log;
+        }
+        assert!(
+            p.is_running() || p.log_text().contains(needle),
+            "{} exited without {needle:?}: {log}",
+            p.name
+        );
+        assert!(
+            Instant::now() < deadline,
+            "no {needle:?} from {}: {log}",
+            p.name
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 /// `thrusterctl <args>` from the workspace (the lab finds config/ there), run to its end.

@@ -3,7 +3,7 @@
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Once;
 use std::time::{Duration, Instant};
@@ -21,6 +21,7 @@ pub mod node;
 pub mod python;
 pub mod season;
 pub mod soak;
+pub mod vehicle_clock;
 
 /// Workspace root (this crate lives in tests/).
 pub fn workspace() -> PathBuf {
@@ -127,13 +128,7 @@ impl Proc {
         env: &[(&str, &str)],
         logs: &Path,
     ) -> Proc {
-        // One file per process: two of the same binary (say, two `thrusterctl watch`) in one
-        // test must not share a log, or each truncates and interleaves the other's lines.
-        static NEXT_LOG: AtomicU64 = AtomicU64::new(0);
-        let log = logs.join(format!(
-            "{name}-{}.log",
-            NEXT_LOG.fetch_add(1, Ordering::Relaxed)
-        ));
+        let log = Proc::new_log(name, logs);
         let out = File::options()
             .write(true)
             .create_new(true)
@@ -154,6 +149,43 @@ impl Proc {
             child: Some(child),
             log,
         }
+    }
+
+    /// As `spawn`, with standard input and output piped to the caller (a protocol such as the
+    /// simulator's stepping); standard error goes to the log.
+    pub fn spawn_piped(name: &str, args: &[&str], logs: &Path) -> (Proc, ChildStdin, ChildStdout) {
+        let log = Proc::new_log(name, logs);
+        let err = File::options()
+            .write(true)
+            .create_new(true)
+            .open(&log)
+            .unwrap_or_else(|e| panic!("creating {}: {e}", log.display()));
+        let mut child = Command::new(bin(name))
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(err)
+            .env("RUST_LOG", "info")
+            .spawn()
+            .unwrap_or_else(|e| panic!("spawning {name}: {e}"));
+        let (stdin, stdout) = (child.stdin.take().unwrap(), child.stdout.take().unwrap());
+        let proc = Proc {
+            name: name.to_string(),
+            child: Some(child),
+            log,
+        };
+        (proc, stdin, stdout)
+    }
+
+    /// A fresh log file name in `logs`. One file per process: two of the same binary (say, two
+    /// `thrusterctl watch`) in one test must not share a log, or each truncates and
+    /// interleaves the other's lines.
+    fn new_log(name: &str, logs: &Path) -> PathBuf {
+        static NEXT_LOG: AtomicU64 = AtomicU64::new(0);
+        logs.join(format!(
+            "{name}-{}.log",
+            NEXT_LOG.fetch_add(1, Ordering::Relaxed)
+        ))
     }
 
     pub fn pid(&self) -> u32 {

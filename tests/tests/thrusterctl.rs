@@ -5,8 +5,10 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use system_tests::cli::{ctl, expect_code, text};
-use system_tests::{bin, workspace, World};
+use system_tests::cli::{ctl, ctl_spawn, expect_code, text, wait_output};
+use system_tests::vehicle_clock::STEPPED_DAEMON;
+use system_tests::{bin, state, workspace, Operator, World};
+use thruster_protocol::{DaemonState, ModelSource};
 
 const LONG: Duration = Duration::from_secs(60);
 
@@ -15,28 +17,44 @@ fn wait_status(world: &World, what: &str, pred: impl Fn(&Value) -> bool) -> Valu
     system_tests::cli::wait_status(world, what, LONG, pred)
 }
 
+/// The operator's session, in vehicle time (the simulator stepped by the test): every command
+/// lands at the same vehicle time in every run, so what follows it is asserted exactly.
 #[test]
 fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     let world = World::new("ctl");
-    let mut daemon = world.daemon(&["--lockstep"]);
-    let mut sim = world.sim(
-        "amour5",
-        &["--noise", "paper", "--lockstep", "--duration", "100000"],
-    );
-    wait_status(&world, "an idle daemon reading the IMU", |v| {
-        v["state"] == "Idle" && v["samples"].as_u64().unwrap_or(0) > 50
-    });
+    let op = Operator::new(&world);
+    let mut daemon = world.daemon(&STEPPED_DAEMON);
+    let (mut sim, mut clock) =
+        world.stepped_sim("amour5", &["--noise", "paper", "--duration", "100000"]);
+    clock
+        .run_until(&op.status, 5.0, |s| {
+            state(s) == DaemonState::Idle && s.samples > 50
+        })
+        .unwrap_or_else(|| panic!("an idle daemon reading the IMU\n{}", daemon.log_text()));
 
     // Refused before there is a model: exit 4 with the daemon's reason.
     let out = ctl(&world, &["save"]);
     expect_code(&out, 4, "save without a model");
     assert!(text(&out.stderr).contains("no model to save"));
 
-    let out = ctl(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
-    expect_code(&out, 0, "estimate --wait");
-    let done = text(&out.stdout);
+    // `estimate --wait` sends its request while the simulator is held, so the estimation
+    // starts at the next sample whatever the machine's load; the test then moves vehicle
+    // time until the model is in and the command has seen it.
+    let mut estimate = ctl_spawn(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
+    wait_output(&mut estimate, "estimation started", LONG);
+    let done_at = clock
+        .run_until(&op.status, 30.0, |s| {
+            state(s) == DaemonState::Active && s.model_version >= 1
+        })
+        .unwrap_or_else(|| panic!("no model within 30 vehicle-s\n{}", daemon.log_text()));
+    assert_eq!(done_at.model_version, 1, "one estimation, one model");
+    let code = estimate
+        .wait_timeout(LONG)
+        .expect("estimate --wait returns");
+    let done = estimate.log_text();
+    assert!(code.success(), "{done}");
     assert!(
-        done.starts_with("estimation done: model version 1 (Estimated, "),
+        done.contains("estimation done: model version 1 (Estimated, "),
         "{done}\n{}",
         daemon.log_text()
     );
@@ -44,12 +62,9 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     let out = ctl(&world, &["model", "--json"]);
     expect_code(&out, 0, "model --json");
     let m: Value = serde_json::from_slice(&out.stdout).expect("model JSON");
-    // Version 1, or a later one the continuous refinement made from it while holding.
-    let version = m["version"].as_u64().unwrap_or(0);
-    assert!(version >= 1, "{m}");
-    if version > 1 {
-        assert!(m["provenance"].as_str().unwrap().contains("refined"), "{m}");
-    }
+    // The simulator is held at the sample that swapped the model in: no refinement yet.
+    assert_eq!(m["version"], 1, "{m}");
+    assert_eq!(m["source"], "Estimated", "{m}");
     assert_eq!(m["count"], 5);
     let eff = m["effectiveness"].as_array().unwrap();
     assert_eq!(eff.len(), 6);
@@ -89,14 +104,18 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     );
     expect_code(&out, 0, "setpoint");
     assert!(text(&out.stdout).starts_with("setpoint sent to 1 subscriber(s)"));
+    clock.run_for(2.0);
 
-    // A declared geometry swaps in its nominal model at once: proof the event arrived.
+    // A declared geometry swaps in its nominal model at the next sample: proof the event
+    // arrived. Then the moved thruster alone is identified under control (the others'
+    // columns kept): a new estimated model, one version after the nominal one.
     let before = {
         let out = ctl(&world, &["model", "--json"]);
         let m: Value = serde_json::from_slice(&out.stdout).expect("model JSON");
         m["version"].as_u64().expect("model version")
     };
     let vehicle = workspace().join("config/vehicles/amour5_top45.toml");
+    let event_s = clock.now_s();
     let out = ctl(
         &world,
         &[
@@ -112,31 +131,33 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
         ],
     );
     expect_code(&out, 0, "reconfigure");
-    // The nominal model of the declared geometry swaps in at once (a refinement may have
-    // bumped the version before, so the version alone proves nothing).
-    let start = Instant::now();
-    loop {
-        let out = ctl(&world, &["model", "--json"]);
-        let m: Value = serde_json::from_slice(&out.stdout).unwrap_or(Value::Null);
-        // Or already the model identified under control after it: the moved thruster alone
-        // is learned (the others' columns kept), which at this noise took 8 s in one CI run,
-        // so the nominal one may be gone before a poll sees it. Its version then counts the
-        // nominal swap and the new model (a refinement is not a new estimation).
-        let version = m["version"].as_u64().unwrap_or(0);
-        let provenance = m["provenance"].as_str().unwrap_or("");
-        if m["source"] == "Nominal"
-            || provenance.contains("nominal")
-            || (version >= before + 2 && !provenance.contains("refined"))
-        {
-            break;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(20),
-            "no nominal model after the reconfiguration: {m}\n{}",
-            daemon.log_text()
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    let nominal = clock
+        .run_until(&op.model, 1.0, |m| m.version > before)
+        .unwrap_or_else(|| panic!("no model after the reconfiguration\n{}", daemon.log_text()));
+    assert_eq!(nominal.version, before + 1);
+    assert_eq!(nominal.source(), Ok(ModelSource::Nominal), "{nominal:?}");
+    let out = ctl(&world, &["model", "--json"]);
+    let m: Value = serde_json::from_slice(&out.stdout).expect("model JSON");
+    assert_eq!(m["source"], "Nominal", "{m}");
+    assert_eq!(m["version"], before + 1, "{m}");
+    let relearned = clock
+        .run_until(&op.model, 40.0, |m| m.version > before + 1)
+        .unwrap_or_else(|| {
+            panic!(
+                "the moved thruster not identified within 40 vehicle-s\n{}",
+                daemon.log_text()
+            )
+        });
+    assert_eq!(relearned.version, before + 2);
+    assert_eq!(
+        relearned.source(),
+        Ok(ModelSource::Estimated),
+        "{relearned:?}"
+    );
+    println!(
+        "moved thruster identified under control {:.2} vehicle-s after the event",
+        clock.now_s() - event_s
+    );
 
     let out = ctl(&world, &["shutdown"]);
     expect_code(&out, 0, "shutdown");
@@ -147,8 +168,9 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
 
     let out = ctl(&world, &["status"]);
     expect_code(&out, 3, "status after shutdown");
-    assert!(sim.stop().success());
+    assert!(sim.stop().success(), "{}", sim.log_text());
 
+    drop(op);
     let mut world = world;
     world.node = None;
     let left = world.leftovers();

@@ -10,6 +10,5 @@ pub mod recording;
 pub mod scoring;
 pub mod seeds;
 pub mod session;
-pub mod stepper;
 pub mod study;
 pub mod water;

@@ -30,7 +30,7 @@ pub struct ChildProc {
 
 impl ChildProc {
     /// `piped`: standard input and output are pipes to this process (a stepped simulator's
-    /// protocol, [`crate::stepper`]); the log is then standard error only.
+    /// protocol, [`thruster_sim::stepper`]); the log is then standard error only.
     fn spawn(
         name: &'static str,
         exe: &Path,
@@ -400,8 +400,8 @@ pub struct Session {
     sim: ChildProc,
     /// The pace the simulator runs at, if any.
     pub pace: Option<f64>,
-    /// In lockstep: the lab steps vehicle time itself ([`crate::stepper`]).
-    stepper: Option<crate::stepper::Stepper>,
+    /// In lockstep: the lab steps vehicle time itself ([`thruster_sim::stepper`]).
+    stepper: Option<thruster_sim::stepper::Stepper>,
     /// While an estimation runs: how far the vehicle moves (from the true vehicle state).
     excursion: Option<Excursion>,
     last_excursion: Option<Excursion>,
@@ -525,7 +525,9 @@ impl Session {
         let daemon = ChildProc::spawn("thrusterd", &bins.daemon, &daemon_args, &tmp.path, false)?;
         let mut sim = ChildProc::spawn("thruster-sim", &bins.sim, &sim_args, &tmp.path, stepped)?;
         let stepper = match sim.take_pipes() {
-            Some((to_sim, from_sim)) => Some(crate::stepper::Stepper::new(to_sim, from_sim)?),
+            Some((to_sim, from_sim)) => {
+                Some(thruster_sim::stepper::Stepper::new(to_sim, from_sim)?)
+            }
             None => None,
         };
         Ok(Session {
@@ -632,7 +634,7 @@ impl Session {
         }
     }
 
-    /// Lets vehicle time pass: a step of [`crate::stepper::STEP_SAMPLES`] samples when the
+    /// Lets vehicle time pass: a step of [`thruster_sim::stepper::STEP_SAMPLES`] samples when the
     /// lab steps the simulator, a short sleep otherwise. Every wait of the lab goes through
     /// here, so in lockstep it acts only between steps, at vehicle times that do not depend
     /// on the machine's speed.
@@ -642,9 +644,10 @@ impl Session {
         }
         match self.stepper.as_mut() {
             Some(stepper) => {
-                if let Err(e) = stepper.advance(crate::stepper::STEP_SAMPLES) {
+                if let Err(e) = stepper.advance(thruster_sim::stepper::STEP_SAMPLES) {
                     self.check_alive("the next step of the simulator")?;
-                    return Err(e.context(self.timeout_error("the next step of the simulator")));
+                    return Err(anyhow::Error::new(e)
+                        .context(self.timeout_error("the next step of the simulator")));
                 }
                 Ok(())
             }

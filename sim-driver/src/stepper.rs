@@ -1,20 +1,34 @@
-//! The lab's hand on a stepped simulator (`thruster-sim run --lockstep --stepped`): vehicle
-//! time advances only when the lab says so, a few samples at a time, and the lab reads and
-//! acts between steps. Every request, setpoint and decision of a demo or experiment then
-//! lands at the same vehicle time in every run of a seed, however loaded the machine is
-//! (issue 27); before, the lab acted on its own wall clock while the simulator ran ahead.
+//! The other end of the stepping protocol (`thruster-sim run --lockstep --stepped`, served by
+//! the driver's `stepping` module): whoever drives a stepped simulator (the lab's demo and
+//! experiments, the system tests) lets vehicle time advance a few samples at a time and reads
+//! and acts between steps. Every request, setpoint and decision then lands at the same vehicle
+//! time in every run of a seed, however loaded the machine is (issue 27); before, the driver
+//! acted on its own wall clock while the simulator ran ahead.
 //!
-//! Protocol (see the simulator's `driver/stepping.rs`): the lab writes `run N`; the simulator
-//! takes N more samples, each answered by the daemon, and writes `at SEQ T_NS`.
+//! Protocol: the driver writes `run N`; the simulator takes N more samples, each answered by
+//! the daemon, and writes `at SEQ T_NS`.
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{ChildStdin, ChildStdout};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::Duration;
 
-use anyhow::{bail, Context, Result};
+/// Why a step failed: the simulator is gone, stuck or speaking another protocol.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    #[error("starting the stepper's reader: {0}")]
+    Reader(std::io::Error),
+    #[error("the simulator's standard input is closed: {0}")]
+    Closed(std::io::Error),
+    #[error("the simulator did not hold within {0} s of a step")]
+    Stuck(u64),
+    #[error("the simulator closed its standard output (it exited)")]
+    Exited,
+    #[error("the simulator's stepping line {0:?} is not `at SEQ T_NS`")]
+    Garbled(String),
+}
 
-/// Samples per step. The lab reads every message between steps, so a step must not outrun
+/// Samples per step. The driver reads every message between steps, so a step must not outrun
 /// the smallest inbox it keeps (status: 4 messages; vehicle state and thrust: 16, one per
 /// sample); 8 samples is 40 ms of vehicle time at 200 Hz, 8 ms at 1 kHz.
 pub const STEP_SAMPLES: u64 = 8;
@@ -38,7 +52,7 @@ pub struct Stepper {
 
 impl Stepper {
     /// Takes the simulator's standard input and output (its log goes to standard error).
-    pub fn new(to_sim: ChildStdin, from_sim: ChildStdout) -> Result<Stepper> {
+    pub fn new(to_sim: ChildStdin, from_sim: ChildStdout) -> Result<Stepper, StepError> {
         let (tx, lines) = mpsc::channel();
         std::thread::Builder::new()
             .name("stepper".into())
@@ -50,7 +64,7 @@ impl Stepper {
                     }
                 }
             })
-            .context("starting the stepper's reader")?;
+            .map_err(StepError::Reader)?;
         Ok(Stepper {
             to_sim,
             lines,
@@ -65,31 +79,25 @@ impl Stepper {
 
     /// Lets the simulator take `n` more samples and waits until it holds again; the first
     /// call first waits for the answer to the first sample.
-    pub fn advance(&mut self, n: u64) -> Result<Held> {
+    pub fn advance(&mut self, n: u64) -> Result<Held, StepError> {
         if self.held.is_none() {
             self.held = Some(self.next_hold()?);
         }
         writeln!(self.to_sim, "run {n}")
             .and_then(|_| self.to_sim.flush())
-            .context("the simulator's standard input is closed")?;
+            .map_err(StepError::Closed)?;
         let held = self.next_hold()?;
         self.held = Some(held);
         Ok(held)
     }
 
-    fn next_hold(&mut self) -> Result<Held> {
+    fn next_hold(&mut self) -> Result<Held, StepError> {
         let line = match self.lines.recv_timeout(STEP_TIMEOUT) {
             Ok(line) => line,
-            Err(RecvTimeoutError::Timeout) => bail!(
-                "the simulator did not hold within {} s of a step",
-                STEP_TIMEOUT.as_secs()
-            ),
-            Err(RecvTimeoutError::Disconnected) => {
-                bail!("the simulator closed its standard output (it exited)")
-            }
+            Err(RecvTimeoutError::Timeout) => return Err(StepError::Stuck(STEP_TIMEOUT.as_secs())),
+            Err(RecvTimeoutError::Disconnected) => return Err(StepError::Exited),
         };
-        parse_held(&line)
-            .with_context(|| format!("the simulator's stepping line {line:?} is not `at SEQ T_NS`"))
+        parse_held(&line).ok_or(StepError::Garbled(line))
     }
 }
 

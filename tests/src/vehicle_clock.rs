@@ -1,0 +1,102 @@
+//! Vehicle time for the system tests (issue 27): the simulator runs stepped
+//! (`thruster-sim run --lockstep --stepped`) and the test lets vehicle time pass a few samples
+//! at a time, reading the daemon's topics and acting only between steps. A request, setpoint
+//! or reconfiguration then lands at the same vehicle time in every run, however loaded the
+//! machine is, so a test can assert what happens exactly instead of accepting whichever of
+//! several outcomes the process scheduling produced. Wall-clock limits stay only as the
+//! deadline of a wait (a hung process), never as the schedule.
+
+use std::process::{ChildStdin, ChildStdout};
+
+use thruster_protocol::services::{Inbox, TopicMessage};
+use thruster_sim::stepper::{Stepper, STEP_SAMPLES};
+
+use crate::{workspace, Proc, World};
+
+/// The test's hand on a stepped simulator's clock.
+pub struct VehicleClock {
+    stepper: Stepper,
+}
+
+impl VehicleClock {
+    fn new(to_sim: ChildStdin, from_sim: ChildStdout) -> VehicleClock {
+        VehicleClock {
+            stepper: Stepper::new(to_sim, from_sim).expect("the stepper's reader starts"),
+        }
+    }
+
+    /// Vehicle seconds of the newest answered sample (0 before the first).
+    pub fn now_s(&self) -> f64 {
+        self.stepper.held().map_or(0.0, |h| h.t_ns as f64 * 1e-9)
+    }
+
+    /// One step of [`STEP_SAMPLES`] samples, each answered by the daemon.
+    pub fn step(&mut self) {
+        if let Err(e) = self.stepper.advance(STEP_SAMPLES) {
+            panic!(
+                "stepping the simulator at {:.3} vehicle-s: {e}",
+                self.now_s()
+            );
+        }
+    }
+
+    /// Lets `seconds` of vehicle time pass.
+    pub fn run_for(&mut self, seconds: f64) {
+        self.step();
+        let end = self.now_s() + seconds;
+        while self.now_s() < end {
+            self.step();
+        }
+    }
+
+    /// Steps until a message on `inbox` satisfies `pred` (the messages already waiting are
+    /// judged first); None if `within_s` vehicle seconds pass first. The daemon publishes what
+    /// a sample changed before it answers the sample, so the first step that makes `pred`
+    /// true is the same in every run.
+    pub fn run_until<T: TopicMessage>(
+        &mut self,
+        inbox: &Inbox<T>,
+        within_s: f64,
+        pred: impl Fn(&T) -> bool,
+    ) -> Option<T> {
+        let end = self.now_s() + within_s;
+        loop {
+            while let Some(m) = inbox.recv().expect("reading a topic") {
+                if pred(&m) {
+                    return Some(m);
+                }
+            }
+            if self.stepper.held().is_some() && self.now_s() >= end {
+                return None;
+            }
+            self.step();
+        }
+    }
+}
+
+impl World {
+    /// `thruster-sim run --lockstep --stepped` on this namespace and the clock that steps it.
+    /// The daemon beside it should run with [`STEPPED_DAEMON`]'s flags.
+    pub fn stepped_sim(&self, vehicle: &str, extra: &[&str]) -> (Proc, VehicleClock) {
+        let ns = self.namespace();
+        let vehicle = workspace()
+            .join("config/vehicles")
+            .join(format!("{vehicle}.toml"));
+        let mut args = vec![
+            "run",
+            "--namespace",
+            &ns,
+            "--vehicle",
+            vehicle.to_str().unwrap(),
+            "--lockstep",
+            "--stepped",
+        ];
+        args.extend_from_slice(extra);
+        let (proc, to_sim, from_sim) = Proc::spawn_piped("thruster-sim", &args, self.dir.path());
+        (proc, VehicleClock::new(to_sim, from_sim))
+    }
+}
+
+/// The daemon's flags beside a stepped simulator: lockstep, and a wait for a due solve long
+/// enough that no load makes it give up (as the lab runs it).
+pub const STEPPED_DAEMON: [&str; 3] = ["--lockstep", "--lockstep-wait-ms", "300000"];
