@@ -49,6 +49,46 @@ impl VehicleClock {
         }
     }
 
+    /// Lets vehicle time pass up to `t_s` (vehicle seconds; at once if already past).
+    pub fn run_to(&mut self, t_s: f64) {
+        while self.stepper.held().is_none() || self.now_s() < t_s {
+            self.step();
+        }
+    }
+
+    /// Every message on `inbox` from those waiting now up to vehicle time `t_s` (the inbox's
+    /// buffer must hold what comes between two calls).
+    pub fn collect_until<T: TopicMessage>(&mut self, inbox: &Inbox<T>, t_s: f64) -> Vec<T> {
+        let mut got = Vec::new();
+        loop {
+            while let Some(m) = inbox.recv().expect("reading a topic") {
+                got.push(m);
+            }
+            if self.stepper.held().is_some() && self.now_s() >= t_s {
+                return got;
+            }
+            self.step();
+        }
+    }
+
+    /// Every message on `inbox` over the next `seconds` of vehicle time (those waiting before
+    /// are dropped).
+    pub fn collect_for<T: TopicMessage>(&mut self, inbox: &Inbox<T>, seconds: f64) -> Vec<T> {
+        while inbox.recv().expect("reading a topic").is_some() {}
+        let mut got = Vec::new();
+        self.step();
+        let end = self.now_s() + seconds;
+        loop {
+            while let Some(m) = inbox.recv().expect("reading a topic") {
+                got.push(m);
+            }
+            if self.now_s() >= end {
+                return got;
+            }
+            self.step();
+        }
+    }
+
     /// Steps until a message on `inbox` satisfies `pred` (the messages already waiting are
     /// judged first); None if `within_s` vehicle seconds pass first. The daemon publishes what
     /// a sample changed before it answers the sample, so the first step that makes `pred`

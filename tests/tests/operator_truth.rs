@@ -7,8 +7,9 @@ use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use system_tests::cli::{ctl, expect_code, text};
-use system_tests::{bin, World};
+use system_tests::cli::{ctl, estimate_wait_stepped, expect_code, setpoint_stepped, text};
+use system_tests::vehicle_clock::STEPPED_DAEMON;
+use system_tests::{bin, Operator, World};
 use thruster_protocol::services::Inbox;
 use thruster_protocol::VehicleStateMsg;
 
@@ -38,26 +39,6 @@ fn wait_status(world: &World, what: &str, pred: impl Fn(&Value) -> bool) -> Valu
     system_tests::cli::wait_status(world, what, Duration::from_secs(60), pred)
 }
 
-/// The simulator's true vehicle states over the next `seconds` of vehicle time, from the first
-/// one read (every state the buffer kept; a few dropped on a loaded machine do not matter).
-fn truth_for(vehicle: &Inbox<VehicleStateMsg>, seconds: f64) -> Vec<VehicleStateMsg> {
-    while vehicle.recv().unwrap().is_some() {}
-    let deadline = Instant::now() + Duration::from_secs(120);
-    let mut got: Vec<VehicleStateMsg> = Vec::new();
-    loop {
-        while let Some(v) = vehicle.recv().unwrap() {
-            got.push(v);
-        }
-        if let (Some(a), Some(b)) = (got.first(), got.last()) {
-            if (b.t_ns - a.t_ns) as f64 * 1e-9 >= seconds {
-                return got;
-            }
-        }
-        assert!(Instant::now() < deadline, "vehicle time stalled");
-        std::thread::sleep(Duration::from_millis(2));
-    }
-}
-
 fn depth_range(states: &[VehicleStateMsg]) -> (f64, f64) {
     states.iter().fold((f64::MAX, f64::MIN), |(lo, hi), v| {
         (lo.min(v.position_ned[2]), hi.max(v.position_ned[2]))
@@ -73,45 +54,36 @@ fn a_pitch_setpoint_from_a_depth_hold_keeps_the_depth() {
     let world = World::new("spdepth");
     let vehicle: Inbox<VehicleStateMsg> =
         Inbox::create_with_buffer(world.node(), world.ipc(), 128).unwrap();
-    let mut daemon = world.daemon(&["--lockstep"]);
-    let mut sim = world.sim(
-        "amour5",
-        &[
-            "--noise",
-            "realistic",
-            "--lockstep",
-            "--pace",
-            "10",
-            "--duration",
-            "100000",
-        ],
-    );
-    wait_status(&world, "an idle daemon reading the IMU", |v| {
-        v["state"] == "Idle" && v["samples"].as_u64().unwrap_or(0) > 50
-    });
-    let out = ctl(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
-    expect_ok(&out, "estimate --wait");
-    let now = truth_for(&vehicle, 0.05);
+    let op = Operator::new(&world);
+    let mut daemon = world.daemon(&STEPPED_DAEMON);
+    let (mut sim, mut clock) =
+        world.stepped_sim("amour5", &["--noise", "realistic", "--duration", "100000"]);
+    clock
+        .run_until(&op.status, 5.0, |s| s.samples > 50)
+        .expect("an idle daemon reading the IMU");
+    estimate_wait_stepped(&world, &mut clock, &op.status, 0, 30.0);
+    let now = clock.collect_for(&vehicle, 0.05);
     let d0 = now.last().unwrap().position_ned[2];
     let held = format!("{d0:.2}");
-    let out = ctl(
+    let (said, t0) = setpoint_stepped(
         &world,
-        &["setpoint", "--roll", "0", "--pitch", "0", "--depth", &held],
+        &mut clock,
+        &["--roll", "0", "--pitch", "0", "--depth", &held],
     );
-    let said = expect_ok(&out, "setpoint --depth");
     assert!(said.contains(&format!("depth {held} m")), "{said}");
     let d0: f64 = held.parse().unwrap();
     // Settle on the held depth and level.
-    truth_for(&vehicle, 10.0);
+    clock.run_to(t0 + 10.0);
 
-    let out = ctl(&world, &["setpoint", "--pitch", "10"]);
-    let said = expect_ok(&out, "setpoint --pitch 10");
+    while vehicle.recv().unwrap().is_some() {}
+    let (said, t1) = setpoint_stepped(&world, &mut clock, &["--pitch", "10"]);
     assert!(
         said.contains("depth kept") && said.contains(&format!("depth {held} m")),
         "the reply must say depth is kept and which: {said}"
     );
-    let states = truth_for(&vehicle, 30.0);
+    let states = clock.collect_until(&vehicle, t1 + 30.0);
     let (lo, hi) = depth_range(&states);
+    println!("pitch 10 from a hold at {d0:.2} m: depth {lo:.3}-{hi:.3} m over 30 vehicle-s");
     assert!(
         (lo - d0).abs() <= 0.3 && (hi - d0).abs() <= 0.3,
         "held {d0:.2} m, the vehicle went {lo:.2}-{hi:.2} m over 30 vehicle-s"
@@ -126,11 +98,15 @@ fn a_pitch_setpoint_from_a_depth_hold_keeps_the_depth() {
     assert!((pitch - 10.0).abs() < 3.0, "pitch {pitch:.1} deg");
 
     // Released on request only: the buoyant vehicle then rises.
-    let out = ctl(&world, &["setpoint", "--depth", "free"]);
-    let said = expect_ok(&out, "setpoint --depth free");
+    let (said, t2) = setpoint_stepped(&world, &mut clock, &["--depth", "free"]);
     assert!(said.contains("depth free"), "{said}");
-    let states = truth_for(&vehicle, 30.0);
-    let last = states.last().unwrap().position_ned[2];
+    clock.run_to(t2 + 30.0);
+    let last = clock
+        .collect_for(&vehicle, 0.05)
+        .last()
+        .unwrap()
+        .position_ned[2];
+    println!("depth free: from {d0:.2} m to {last:.2} m in 30 vehicle-s");
     assert!(
         d0 - last > 0.3,
         "free depth: from {d0:.2} m to {last:.2} m, the check could not fail"
@@ -140,7 +116,7 @@ fn a_pitch_setpoint_from_a_depth_hold_keeps_the_depth() {
     expect_ok(&out, "shutdown");
     assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
     sim.stop();
-    drop(vehicle);
+    drop((vehicle, op));
     let mut world = world;
     world.node = None;
     let left = world.leftovers();
@@ -455,31 +431,28 @@ fn kill9(proc: &mut system_tests::Proc) {
 #[test]
 fn a_saved_model_keeps_its_version_and_a_crash_in_fault_is_told_as_such() {
     let world = World::new("version");
-    let sim_args = [
-        "--noise",
-        "realistic",
-        "--lockstep",
-        "--pace",
-        "20",
-        "--duration",
-        "100000",
-    ];
-    let mut daemon = world.daemon(&["--lockstep"]);
-    let mut sim = world.sim("amour5", &sim_args);
-    wait_status(&world, "samples", |v| {
-        v["samples"].as_u64().unwrap_or(0) > 50
-    });
-    for _ in 0..2 {
-        let out = estimate_wait(&world);
-        expect_ok(&out, "estimate --wait");
-    }
-    let saved = wait_status(&world, "a model", |v| {
-        v["model_version"].as_u64() >= Some(2)
-    });
-    let version = saved["model_version"].as_u64().unwrap();
+    let op = Operator::new(&world);
+    let mut daemon = world.daemon(&STEPPED_DAEMON);
+    let (mut sim, mut clock) =
+        world.stepped_sim("amour5", &["--noise", "realistic", "--duration", "100000"]);
+    clock
+        .run_until(&op.status, 5.0, |s| s.samples > 50)
+        .expect("samples");
+    // Two estimations, in vehicle time; the second after the vehicle has settled from the
+    // first's pulses (asked at once it is refused: beyond the identification's budget).
+    let (_, first) = estimate_wait_stepped(&world, &mut clock, &op.status, 0, 30.0);
+    assert_eq!(first.model_version, 1);
+    clock.run_for(5.0);
+    let (said, saved) = estimate_wait_stepped(&world, &mut clock, &op.status, 1, 30.0);
+    assert!(said.contains("model version 2"), "{said}");
+    let version = saved.model_version;
+    assert_eq!(version, 2);
     let out = ctl(&world, &["shutdown"]);
     expect_ok(&out, "shutdown");
     assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
+    sim.stop();
+    drop((clock, op));
+    let mut sim = world.sim("amour5", &["--noise", "realistic", "--duration", "100000"]);
 
     // From here on in real time: a daemon in lockstep takes a silent simulator for a pause,
     // not a lost IMU, and this part needs the IMU watchdog's Fault.

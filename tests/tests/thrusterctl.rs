@@ -5,7 +5,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use system_tests::cli::{ctl, ctl_spawn, expect_code, text, wait_output};
+use system_tests::cli::{ctl, estimate_wait_stepped, expect_code, text};
 use system_tests::vehicle_clock::STEPPED_DAEMON;
 use system_tests::{bin, state, workspace, Operator, World};
 use thruster_protocol::{DaemonState, ModelSource};
@@ -37,22 +37,9 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     expect_code(&out, 4, "save without a model");
     assert!(text(&out.stderr).contains("no model to save"));
 
-    // `estimate --wait` sends its request while the simulator is held, so the estimation
-    // starts at the next sample whatever the machine's load; the test then moves vehicle
-    // time until the model is in and the command has seen it.
-    let mut estimate = ctl_spawn(&world, &["estimate", "--wait", "--max-wait-s", "120"]);
-    wait_output(&mut estimate, "estimation started", LONG);
-    let done_at = clock
-        .run_until(&op.status, 30.0, |s| {
-            state(s) == DaemonState::Active && s.model_version >= 1
-        })
-        .unwrap_or_else(|| panic!("no model within 30 vehicle-s\n{}", daemon.log_text()));
+    // In vehicle time: the estimation starts at the sample after the request in every run.
+    let (done, done_at) = estimate_wait_stepped(&world, &mut clock, &op.status, 0, 30.0);
     assert_eq!(done_at.model_version, 1, "one estimation, one model");
-    let code = estimate
-        .wait_timeout(LONG)
-        .expect("estimate --wait returns");
-    let done = estimate.log_text();
-    assert!(code.success(), "{done}");
     assert!(
         done.contains("estimation done: model version 1 (Estimated, "),
         "{done}\n{}",
