@@ -22,7 +22,16 @@ fn estimate(vehicle: &str, seed: u64) -> (ModelMsg, f64, f64) {
     let world = World::new("veh");
     let op = Operator::new(&world);
     let n = thruster_count(vehicle).to_string();
-    let mut daemon = world.daemon(&["--estimate", "--thrusters", &n, "--lockstep"]);
+    // `--estimate` starts at the first sample, and a solve late on a loaded machine is waited
+    // for: the run is the same on any machine.
+    let mut daemon = world.daemon(&[
+        "--estimate",
+        "--thrusters",
+        &n,
+        "--lockstep",
+        "--lockstep-wait-ms",
+        "300000",
+    ]);
     let seed = seed.to_string();
     let mut sim = world.sim(
         vehicle,
@@ -69,19 +78,25 @@ fn actuated(m: &ModelMsg) -> Vec<String> {
         .collect()
 }
 
-/// Threshold 0.15 (paper noise, seed 7): the dynamic method stops at a 5 % (1 sigma) bound,
-/// which at this noise is optimistic (the demo over seeds 1-5: true 0.052 / 0.061, docs/study.md);
-/// measured here 0.038-0.061 rotation and 0.055-0.097 acceleration over the five vehicles. The
-/// margin is for the vehicle time at which the request lands, which moves with process
-/// scheduling. (With the static forward model this test needed 0.3, and 0.35 for four_up.)
+/// Paper noise, seed 7, in vehicle time (the same figures every run). Measured rotation /
+/// acceleration errors against the simulator's truth; each must stay under 1.5x its own
+/// figure, so a 2x regression on any vehicle fails. (The dynamic method stops at a 5 %
+/// (1 sigma) bound, optimistic at this noise, docs/study.md; the static forward model
+/// needed 0.3 here, 0.35 for four_up.)
+const MEASURED: [(&str, f64, f64); 4] = [
+    ("four_up", 0.062, 0.073),
+    ("amour5", 0.065, 0.074),
+    ("six_dof", 0.054, 0.074),
+    ("eight_vectored", 0.051, 0.084),
+];
+
 #[test]
 fn every_manual_configuration_is_learned_within_the_threshold() {
-    for vehicle in ["four_up", "amour5", "six_dof", "eight_vectored"] {
+    for (vehicle, rot, acc) in MEASURED {
         let (model, e_rot, e_acc) = estimate(vehicle, 7);
-        let limit = 0.15;
         assert!(
-            e_rot < limit && e_acc < limit,
-            "{vehicle}: errors rot {e_rot:.3} acc {e_acc:.3}"
+            e_rot < 1.5 * rot && e_acc < 1.5 * acc,
+            "{vehicle}: errors rot {e_rot:.3} acc {e_acc:.3} (measured {rot} / {acc})"
         );
         let dofs = actuated(&model);
         match vehicle {
@@ -98,7 +113,12 @@ fn every_manual_configuration_is_learned_within_the_threshold() {
 
 #[test]
 fn all_aligned_thrusters_report_heave_sway_and_roll_unactuated() {
-    let (model, _, _) = estimate("aligned", 3);
+    let (model, e_rot, e_acc) = estimate("aligned", 3);
+    // Measured 0.043 / 0.054 (seed 3); 1.5x.
+    assert!(
+        e_rot < 0.065 && e_acc < 0.081,
+        "errors rot {e_rot:.3} acc {e_acc:.3}"
+    );
     assert_eq!(actuated(&model), ["pitch", "yaw", "surge"]);
     for i in 0..model.count as usize {
         for dof in [Dof::Roll, Dof::Sway, Dof::Heave] {
