@@ -7,6 +7,7 @@
 //! deadline of a wait (a hung process), never as the schedule.
 
 use std::process::{ChildStdin, ChildStdout};
+use std::time::{Duration, Instant};
 
 use thruster_protocol::services::{Inbox, TopicMessage};
 use thruster_sim::stepper::{Stepper, STEP_SAMPLES};
@@ -16,13 +17,24 @@ use crate::{workspace, Proc, World};
 /// The test's hand on a stepped simulator's clock.
 pub struct VehicleClock {
     stepper: Stepper,
+    /// At most this many vehicle seconds per wall second, counted from the wall instant and
+    /// vehicle time it was set at (None: as fast as the processes go).
+    pace: Option<(f64, Instant, f64)>,
 }
 
 impl VehicleClock {
     fn new(to_sim: ChildStdin, from_sim: ChildStdout) -> VehicleClock {
         VehicleClock {
             stepper: Stepper::new(to_sim, from_sim).expect("the stepper's reader starts"),
+            pace: None,
         }
+    }
+
+    /// From now on, at most `factor` vehicle seconds per wall second: for a reader that must
+    /// keep up (`thrusterctl watch` of every telemetry message). Pacing changes when things
+    /// happen in wall time only; vehicle time, and every figure, is the same paced or not.
+    pub fn pace(&mut self, factor: f64) {
+        self.pace = Some((factor, Instant::now(), self.now_s()));
     }
 
     /// Vehicle seconds of the newest answered sample (0 before the first).
@@ -37,6 +49,12 @@ impl VehicleClock {
                 "stepping the simulator at {:.3} vehicle-s: {e}",
                 self.now_s()
             );
+        }
+        if let Some((factor, wall0, vehicle0)) = self.pace {
+            let due = Duration::from_secs_f64(((self.now_s() - vehicle0) / factor).max(0.0));
+            if let Some(wait) = due.checked_sub(wall0.elapsed()) {
+                std::thread::sleep(wait);
+            }
         }
     }
 
