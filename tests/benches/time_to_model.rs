@@ -94,20 +94,22 @@ fn main() {
             ]);
             let seed_s = seed.to_string();
             let wall = Instant::now();
-            let mut sim = world.sim(
+            // Stepped: the simulator waits for every answer however long a loaded machine
+            // takes (a free-running lockstep simulator gives up after its 2 s timeout and
+            // goes on without the answer).
+            let (mut sim, mut clock) = world.stepped_sim(
                 "amour5",
                 &[
                     "--noise",
                     "paper",
-                    "--lockstep",
                     "--seed",
                     &seed_s,
                     "--duration",
                     "100000",
                 ],
             );
-            let done = op
-                .wait_status(Duration::from_secs(120), |s| {
+            let done = clock
+                .run_until(&op.status, 400.0, |s| {
                     state(s) == DaemonState::Active && s.model_version >= 1
                 })
                 .unwrap_or_else(|| panic!("no model\n{}\n{}", daemon.log_text(), sim.log_text()));

@@ -22,8 +22,8 @@ fn estimate(vehicle: &str, seed: u64) -> (ModelMsg, f64, f64) {
     let world = World::new("veh");
     let op = Operator::new(&world);
     let n = thruster_count(vehicle).to_string();
-    // `--estimate` starts at the first sample, and a solve late on a loaded machine is waited
-    // for: the run is the same on any machine.
+    // `--estimate` starts at the first sample; stepped, the simulator waits for every
+    // answer and the daemon for every late solve: the run is the same on any machine.
     let mut daemon = world.daemon(&[
         "--estimate",
         "--thrusters",
@@ -33,29 +33,22 @@ fn estimate(vehicle: &str, seed: u64) -> (ModelMsg, f64, f64) {
         "300000",
     ]);
     let seed = seed.to_string();
-    let mut sim = world.sim(
+    let (mut sim, mut clock) = world.stepped_sim(
         vehicle,
-        &[
-            "--noise",
-            "paper",
-            "--lockstep",
-            "--seed",
-            &seed,
-            "--duration",
-            "100000",
-        ],
+        &["--noise", "paper", "--seed", &seed, "--duration", "100000"],
     );
-    op.wait_status(LONG, |s| {
-        state(s) == DaemonState::Active && s.model_version >= 1
-    })
-    .unwrap_or_else(|| {
-        panic!(
-            "{vehicle}: no model\n--- thrusterd ---\n{}\n--- thruster-sim (running: {}) ---\n{}",
-            daemon.log_text(),
-            sim.is_running(),
-            sim.log_text()
-        )
-    });
+    clock
+        .run_until(&op.status, 60.0, |s| {
+            state(s) == DaemonState::Active && s.model_version >= 1
+        })
+        .unwrap_or_else(|| {
+            panic!(
+                "{vehicle}: no model\n--- thrusterd ---\n{}\n--- thruster-sim (running: {}) ---\n{}",
+                daemon.log_text(),
+                sim.is_running(),
+                sim.log_text()
+            )
+        });
     let model = op
         .wait_model(LONG, |m| m.source() == Ok(ModelSource::Estimated))
         .expect("model published");

@@ -438,9 +438,16 @@ impl Daemon {
                 self.on_sample(&sample, &side, &out)?;
                 got = true;
             }
-            // What came without a sample (a setpoint while a lockstep driver waits).
-            self.take_inputs_before_sample(&side)?;
-            self.take_reconfigurations(&side)?;
+            // What came without a sample (a setpoint while a real-time driver is quiet). In
+            // lockstep inputs are taken with the samples only (`on_sample`): the simulator
+            // publishes its events just before a sample, and taking one here or there would
+            // depend on which of the two this loop saw first (an announced reconfiguration
+            // applied one sample apart moved an identification's end by 3 vehicle-s between
+            // two runs of one seed).
+            if !self.cfg.runtime.lockstep {
+                self.take_inputs_before_sample(&side)?;
+                self.take_reconfigurations(&side)?;
+            }
             if got {
                 self.stale_reported = false;
             }
