@@ -100,6 +100,8 @@ struct Ideal {
     water: WaterPreset,
     /// Without the preset's current (its waves alone).
     no_current: bool,
+    /// The dead band the machine compensates (default 0.05, the simulator's default).
+    deadband: Option<f64>,
 }
 
 fn estimate_with(
@@ -176,7 +178,7 @@ fn estimate_on(
     setup.estimator = estimator;
     assert_eq!(setup.estimator.method, Method::Dynamic);
     // No driver in between: the daemon compensates the T200 deadband itself.
-    setup.machine.deadband = 0.05;
+    setup.machine.deadband = ideal.deadband.unwrap_or(0.05);
     if let Ok(v) = std::env::var("LAG_NOISE_S") {
         setup.machine.noise_s = v.parse().unwrap();
     }
@@ -1421,5 +1423,414 @@ fn imu_and_water_sweep() {
                 o.max_tilt_deg, o.refused, o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], p.rel_err_share, o.seconds, p.position_m[0], p.position_m[1], p.position_m[2], l.position_m[0], l.position_m[1], l.position_m[2], sd[0], sd[1], sd[2], p.contradicted
             );
         }
+    }
+}
+
+/// Issue 31: how a vehicle's thrusters differ from what the daemon assumes. The daemon (and
+/// these tests' machine) assumes a reverse/forward thrust ratio of 0.78 (`reverse_ratio`, the
+/// simulator's T200 40.2 / 51.5 N), compensates a dead band of 0.05 (`machine.deadband` here:
+/// the simulator's default) and starts from a 0.1 s lag (`spin_up_s`, learned since issue
+/// 29). `None` keeps the vehicle file's value; the daemon is told none of them.
+#[derive(Debug, Clone, Copy, Default)]
+struct Mismatch {
+    /// Every thruster's reverse thrust at full command over its forward thrust.
+    reverse_ratio: Option<f64>,
+    /// Every thruster's dead band (fraction of full command); the machine still compensates 0.05.
+    deadband: Option<f64>,
+    /// Every thruster's spin-up time constant, s.
+    lag_s: Option<f64>,
+}
+
+/// The thrusters as the daemon assumes them (each vehicle file's own).
+const MATCHED: Mismatch = Mismatch {
+    reverse_ratio: None,
+    deadband: None,
+    lag_s: None,
+};
+
+/// The cases of issue 31 item 1, with the matched vehicle first.
+const MISMATCHES: [(&str, Mismatch); 7] = [
+    ("matched", MATCHED),
+    (
+        "reverse 0.6",
+        Mismatch {
+            reverse_ratio: Some(0.6),
+            ..MATCHED
+        },
+    ),
+    (
+        "reverse 0.95",
+        Mismatch {
+            reverse_ratio: Some(0.95),
+            ..MATCHED
+        },
+    ),
+    (
+        "dead band 0",
+        Mismatch {
+            deadband: Some(0.0),
+            ..MATCHED
+        },
+    ),
+    (
+        "dead band 0.1",
+        Mismatch {
+            deadband: Some(0.1),
+            ..MATCHED
+        },
+    ),
+    (
+        "lag 0.05 s",
+        Mismatch {
+            lag_s: Some(0.05),
+            ..MATCHED
+        },
+    ),
+    (
+        "lag 0.15 s",
+        Mismatch {
+            lag_s: Some(0.15),
+            ..MATCHED
+        },
+    ),
+];
+
+/// The vehicle file `name` with every thruster changed as `m` says (the daemon not told).
+fn mismatched(name: &str, m: Mismatch) -> Vehicle {
+    let mut v = vehicle(name);
+    for t in &mut v.thrusters {
+        if let Some(r) = m.reverse_ratio {
+            t.reverse_max_n = r * t.forward_max_n;
+        }
+        if let Some(db) = m.deadband {
+            t.deadband = db;
+        }
+        if let Some(tau) = m.lag_s {
+            t.time_constant_s = tau;
+        }
+    }
+    v
+}
+
+/// One mismatched run, the machine allowed to refuse the model (the outcome is then the
+/// refused estimate's, `refused` true).
+fn estimate_mismatched(name: &str, m: Mismatch, noise: NoisePreset, seed: u64) -> Outcome {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise,
+        ..SensorConfig::default()
+    };
+    estimate_on(
+        mismatched(name, m),
+        sensors,
+        seed,
+        EstimatorConfig::dynamic(),
+        Ideal {
+            allow_refusal: true,
+            ..Ideal::default()
+        },
+    )
+}
+
+/// The fraction of B's entries whose error against the symmetric truth is within 2 of the
+/// model's own standard errors.
+fn b_within_2se(o: &Outcome) -> f64 {
+    let hits = o
+        .b_err
+        .iter()
+        .zip(o.b_se.iter())
+        .filter(|(e, s)| e.abs() < 2.0 * **s)
+        .count();
+    hits as f64 / o.b_err.len().max(1) as f64
+}
+
+/// Issue 31: thrusters whose reverse ratio or dead band is not what the daemon assumes
+/// (0.78, 0.05 compensated), the daemon not told; noise-free, seed 1, AMOUR-5 and
+/// eight_vectored. Limits are 1.5x the measured figure (`mismatch_sweep`; docs/study.md,
+/// "Vehicles the estimator was not told about"). Measured err_rot / err_acc and the larger of
+/// error / bound (the daemon's own rel_err_rot / rel_err_acc), AMOUR-5 | eight_vectored:
+/// - reverse 0.6: 0.030 / 0.022, 1.50x | 0.029 / 0.030, 1.47x. The bound (0.020) does NOT
+///   cover the error: the one symmetric column per thruster takes a 0.6 asymmetry the floor
+///   (`model_error_floor`, set for 0.78) does not count. The model is not refused. AMOUR-5
+///   tilts 63 deg (the excitation is balanced for 0.78), eight_vectored 21.
+/// - reverse 0.95: 0.0026 / 0.0044, 0.22x | 0.0012 / 0.0019, 0.09x (better than matched).
+/// - dead band 0: 0.0089 / 0.0064, 0.45x | 0.0063 / 0.0069, 0.34x.
+/// - dead band 0.1: 0.023 / 0.020, 1.17x | 0.021 / 0.022, 1.07x: just beyond the bound.
+///
+/// The lag is learned within 0.3 ms of 0.1 s on every case, 4.2 vehicle-s each.
+#[test]
+fn noise_free_reverse_ratio_and_dead_band_the_daemon_was_not_told() {
+    // (case index in MISMATCHES, vehicle, measured err_rot, err_acc, error / bound)
+    let measured = [
+        (1, "amour5", 0.0301, 0.0217, 1.50),
+        (1, "eight_vectored", 0.0290, 0.0295, 1.47),
+        (2, "amour5", 0.0026, 0.0044, 0.22),
+        (2, "eight_vectored", 0.0012, 0.0019, 0.09),
+        (3, "amour5", 0.0089, 0.0064, 0.45),
+        (3, "eight_vectored", 0.0063, 0.0069, 0.34),
+        (4, "amour5", 0.0234, 0.0199, 1.17),
+        (4, "eight_vectored", 0.0210, 0.0215, 1.07),
+    ];
+    for (case, name, rot, acc, ratio) in measured {
+        let (what, m) = MISMATCHES[case];
+        let o = estimate_mismatched(name, m, NoisePreset::None, 1);
+        let o_ratio = (o.err_rot / o.bound[0]).max(o.err_acc / o.bound[1]);
+        let msg = format!(
+            "{name}, {what}: err {:.4} / {:.4} (measured {rot} / {acc}), bound {:.4} / {:.4}, \
+             error / bound {o_ratio:.2} (measured {ratio}), tilt {:.0} deg, lag {:.4} s in {:.2} s",
+            o.err_rot, o.err_acc, o.bound[0], o.bound[1], o.max_tilt_deg, o.spin_up_s, o.seconds
+        );
+        assert!(!o.refused, "{msg}");
+        assert!(o.err_rot <= 1.5 * rot && o.err_acc <= 1.5 * acc, "{msg}");
+        // Where the bound covered the error it must still; where it did not, the model may
+        // not get more confidently wrong than 1.5x what was measured.
+        assert!(
+            o_ratio <= if ratio < 1.0 { 1.0 } else { 1.5 * ratio },
+            "{msg}"
+        );
+        assert!(
+            o.spin_up_learned && (o.spin_up_s - 0.1).abs() <= 0.002,
+            "{msg}"
+        );
+        assert!(o.seconds <= 6.0, "{msg}");
+        let tilt = if case == 1 && name == "amour5" {
+            70.0
+        } else {
+            30.0
+        };
+        assert!(o.max_tilt_deg <= tilt, "{msg}");
+    }
+}
+
+/// The same and the lag cases at a realistic IMU, seeds 1-5. Limits are 1.5x the worst of
+/// those seeds (`MM_NOISE=realistic MM_SEEDS=5 ... mismatch_sweep`), err_rot / err_acc and
+/// error / bound, AMOUR-5 | eight_vectored: matched 0.025 / 0.022, 1.20x | 0.024 / 0.034,
+/// 1.19x; reverse 0.6 0.040 / 0.031, 1.91x | 0.040 / 0.049, 1.77x (the bound never covers
+/// it: 0 of 5 seeds on either vehicle); reverse 0.95 0.008 / 0.015, 0.66x | 0.017 / 0.027,
+/// 0.97x; dead band 0 0.018 / 0.016, 0.87x | 0.017 / 0.029, 1.00x; dead band 0.1 0.028 /
+/// 0.026, 1.35x | 0.032 / 0.041, 1.44x; lag 0.05 s 0.018 / 0.019, 0.92x | 0.018 / 0.026,
+/// 1.15x; lag 0.15 s 0.021 / 0.021, 0.92x | 0.031 / 0.044, 1.21x. Every run 4.2 vehicle-s.
+#[test]
+fn with_a_realistic_imu_thrusters_the_daemon_was_not_told_about() {
+    // (case index in MISMATCHES, vehicle, worst err_rot, err_acc, error / bound of seeds 1-5)
+    let measured = [
+        (1, "amour5", 0.0400, 0.0307, 1.91),
+        (1, "eight_vectored", 0.0400, 0.0490, 1.77),
+        (2, "amour5", 0.0081, 0.0152, 0.66),
+        (2, "eight_vectored", 0.0165, 0.0269, 0.97),
+        (3, "amour5", 0.0180, 0.0164, 0.87),
+        (3, "eight_vectored", 0.0171, 0.0285, 1.00),
+        (4, "amour5", 0.0279, 0.0259, 1.35),
+        (4, "eight_vectored", 0.0317, 0.0414, 1.44),
+        (5, "amour5", 0.0181, 0.0190, 0.92),
+        (5, "eight_vectored", 0.0175, 0.0258, 1.15),
+        (6, "amour5", 0.0211, 0.0206, 0.92),
+        (6, "eight_vectored", 0.0313, 0.0438, 1.21),
+    ];
+    for (case, name, rot, acc, ratio) in measured {
+        let (what, m) = MISMATCHES[case];
+        for seed in 1..=5 {
+            let o = estimate_mismatched(name, m, NoisePreset::Realistic, seed);
+            let o_ratio = (o.err_rot / o.bound[0]).max(o.err_acc / o.bound[1]);
+            let msg = format!(
+                "{name}, {what}, seed {seed}: err {:.4} / {:.4} (worst measured {rot} / {acc}), \
+                 error / bound {o_ratio:.2} (worst measured {ratio}), lag {:.4} s in {:.2} s",
+                o.err_rot, o.err_acc, o.spin_up_s, o.seconds
+            );
+            assert!(!o.refused && o.spin_up_learned, "{msg}");
+            assert!(o.err_rot <= 1.5 * rot && o.err_acc <= 1.5 * acc, "{msg}");
+            assert!(o_ratio <= 1.5 * ratio, "{msg}");
+            assert!(o.seconds <= 6.0, "{msg}");
+        }
+    }
+}
+
+/// The reverse-ratio and dead-band cases at the paper's noise, seeds 1-3: within the matched
+/// vehicle's spread (the noise decides). Limits are 1.5x the worst of those seeds
+/// (`MM_NOISE=paper MM_SEEDS=3 ... mismatch_sweep`), err_rot / err_acc and error / bound,
+/// AMOUR-5 | eight_vectored: matched 0.054 / 0.082, 1.39x | 0.058 / 0.087, 1.46x (the bound
+/// is optimistic at this noise for every vehicle: 0 of 6 matched runs within it); reverse 0.6
+/// 0.059 / 0.088, 1.48x | 0.066 / 0.096, 1.63x; reverse 0.95 0.067 / 0.075, 1.28x | 0.060 /
+/// 0.086, 1.43x; dead band 0 0.050 / 0.085, 1.47x | 0.056 / 0.086, 1.44x; dead band 0.1 0.059
+/// / 0.081, 1.36x | 0.062 / 0.089, 1.49x. The lag is configured (0.1 s) at this noise, and
+/// right for these vehicles.
+#[test]
+fn at_the_papers_noise_reverse_ratio_and_dead_band_the_daemon_was_not_told() {
+    // (case index in MISMATCHES, vehicle, worst err_rot, err_acc, error / bound of seeds 1-3)
+    let measured = [
+        (1, "amour5", 0.0592, 0.0877, 1.48),
+        (1, "eight_vectored", 0.0663, 0.0964, 1.63),
+        (2, "amour5", 0.0673, 0.0750, 1.28),
+        (2, "eight_vectored", 0.0599, 0.0858, 1.43),
+        (3, "amour5", 0.0502, 0.0847, 1.47),
+        (3, "eight_vectored", 0.0558, 0.0861, 1.44),
+        (4, "amour5", 0.0585, 0.0814, 1.36),
+        (4, "eight_vectored", 0.0615, 0.0894, 1.49),
+    ];
+    for (case, name, rot, acc, ratio) in measured {
+        let (what, m) = MISMATCHES[case];
+        for seed in 1..=3 {
+            let o = estimate_mismatched(name, m, NoisePreset::Paper, seed);
+            let o_ratio = (o.err_rot / o.bound[0]).max(o.err_acc / o.bound[1]);
+            let msg = format!(
+                "{name}, {what}, seed {seed}: err {:.4} / {:.4} (worst measured {rot} / {acc}), \
+                 error / bound {o_ratio:.2} (worst measured {ratio}) in {:.2} s",
+                o.err_rot, o.err_acc, o.seconds
+            );
+            assert!(!o.refused && !o.spin_up_learned, "{msg}");
+            assert!(o.err_rot <= 1.5 * rot && o.err_acc <= 1.5 * acc, "{msg}");
+            assert!(o_ratio <= 1.5 * ratio, "{msg}");
+            assert!(o.seconds <= 9.1, "{msg}");
+        }
+    }
+}
+
+/// The failure issue 31 made visible: at the paper's noise the lag is not learned (issue 29's
+/// gate), so a vehicle whose thrusters spin up in 0.05 or 0.15 s instead of the assumed 0.1 s
+/// gets a model 30-110 % off whose bound says 3-6 % on the rotation rows (seeds 1-3: AMOUR-5
+/// err_rot 0.95-1.09 at 0.05 s, 0.31-0.34 at 0.15 s; eight_vectored 0.83-0.84, 0.30-0.32;
+/// error / bound up to 30x), and the machine accepts it: the swell check
+/// (`unexplained_rate_radps` 0.0000) does not see it under that gyro noise. The only signs are
+/// `spin_up_learned` false and a run that goes to the pulse limit (9.0 vehicle-s against
+/// 7.4-8.6 when matched). This test asserts that state as it is (seed 1), so that whoever
+/// fixes it (a lag learned or the model refused at this noise) must update docs/study.md
+/// ("Vehicles the estimator was not told about") with it.
+#[test]
+fn at_the_papers_noise_a_lag_the_daemon_was_not_told_is_confidently_wrong() {
+    for name in ["amour5", "eight_vectored"] {
+        for case in [5, 6] {
+            let (what, m) = MISMATCHES[case];
+            let o = estimate_mismatched(name, m, NoisePreset::Paper, 1);
+            let msg = format!(
+                "{name}, {what}: err {:.4} / {:.4}, bound {:.4} / {:.4}, lag {:.4} s learned {}, \
+                 refused {}, {:.2} s",
+                o.err_rot,
+                o.err_acc,
+                o.bound[0],
+                o.bound[1],
+                o.spin_up_s,
+                o.spin_up_learned,
+                o.refused,
+                o.seconds
+            );
+            assert!(
+                !o.spin_up_learned && (o.spin_up_s - 0.1).abs() < 1e-9,
+                "{msg}"
+            );
+            assert!(
+                !o.refused && o.err_rot > 0.2 && o.bound[0] < 0.1,
+                "known failure changed: {msg}; update docs/study.md"
+            );
+        }
+    }
+}
+
+/// The measurement behind docs/study.md's "Vehicles the estimator was not told about (issue
+/// 31)": AMOUR-5 and eight_vectored with thrusters that differ from the daemon's assumptions
+/// (`MISMATCHES`), per case and noise the mean and range of err_rot / err_acc against the
+/// simulator's symmetric truth, the largest error / bound (the daemon's own rel_err_rot /
+/// rel_err_acc), the fraction of B's entries within 2 standard errors, the vehicle seconds to
+/// the model and how many were refused. Knobs: MM_NOISE = none | realistic | paper (default
+/// none), MM_SEEDS = the last seed (default 1), MM_VEHICLES (default amour5,eight_vectored),
+/// MM_CASES = indices into MISMATCHES (default all), MM_TOLD (set: the daemon told the true
+/// reverse ratio, dead band and lag, learning the lag off: the decisive comparison). For example
+/// `MM_NOISE=realistic MM_SEEDS=5 cargo test --release -p thrusterd-core --test
+/// dynamic_estimator mismatch_sweep -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn mismatch_sweep() {
+    let noise = match std::env::var("MM_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::None,
+    };
+    let n_seeds: u64 = std::env::var("MM_SEEDS").map_or(1, |s| s.parse().unwrap());
+    let names = std::env::var("MM_VEHICLES").unwrap_or("amour5,eight_vectored".into());
+    let cases: Vec<usize> = std::env::var("MM_CASES")
+        .map_or((0..MISMATCHES.len()).collect(), |s| {
+            s.split(',').map(|c| c.parse().unwrap()).collect()
+        });
+    let mut summary = Vec::new();
+    for name in names.split(',') {
+        for &c in &cases {
+            let (what, m) = MISMATCHES[c];
+            let mut rot = Vec::new();
+            let mut acc = Vec::new();
+            let mut ratio = 0.0f64;
+            let mut covered = 0;
+            let mut within = 0.0;
+            let mut secs = Vec::new();
+            let mut refused = 0;
+            let mut lags = Vec::new();
+            for seed in 1..=n_seeds {
+                let t0 = std::time::Instant::now();
+                let mut cfg = EstimatorConfig::dynamic();
+                let mut ideal = Ideal {
+                    allow_refusal: true,
+                    ..Ideal::default()
+                };
+                if std::env::var("MM_TOLD").is_ok() {
+                    // The decisive comparison: the daemon told the thrusters' true constants.
+                    if let Some(r) = m.reverse_ratio {
+                        cfg.reverse_ratio = r;
+                    }
+                    ideal.deadband = m.deadband;
+                    if let Some(tau) = m.lag_s {
+                        cfg.spin_up_s = tau;
+                        cfg.learn_spin_up = false;
+                    }
+                }
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let o = estimate_on(mismatched(name, m), sensors, seed, cfg, ideal);
+                println!(
+                    "{name} {what} {noise:?} seed {seed}: err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} B within 2 se {:.2} lag {:.4} ({}) refused {} tilt {:.0} deg unexplained {:.4} in {:.2} s (wall {:.1} s)",
+                    o.err_rot,
+                    o.err_acc,
+                    o.bound[0],
+                    o.bound[1],
+                    b_within_2se(&o),
+                    o.spin_up_s,
+                    if o.spin_up_learned { "learned" } else { "configured" },
+                    o.refused,
+                    o.max_tilt_deg,
+                    o.terms.unexplained_rate_radps,
+                    o.seconds,
+                    t0.elapsed().as_secs_f64()
+                );
+                rot.push(o.err_rot);
+                acc.push(o.err_acc);
+                ratio = ratio
+                    .max(o.err_rot / o.bound[0])
+                    .max(o.err_acc / o.bound[1]);
+                if o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1] {
+                    covered += 1;
+                }
+                within += b_within_2se(&o) / n_seeds as f64;
+                secs.push(o.seconds);
+                refused += o.refused as usize;
+                lags.push(o.spin_up_s);
+            }
+            let stats = |v: &[f64]| {
+                let mean = v.iter().sum::<f64>() / v.len() as f64;
+                let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                format!("{mean:.3} ({lo:.3}-{hi:.3})")
+            };
+            summary.push(format!(
+                "| {name} | {what} | {noise:?} | {} | {} | {covered}/{n_seeds}, <= {ratio:.2} x | {within:.2} | {} | lag {} | refused {refused} |",
+                stats(&rot),
+                stats(&acc),
+                stats(&secs),
+                stats(&lags),
+            ));
+        }
+    }
+    println!("| vehicle | differs | noise | err_rot mean (min-max) | err_acc mean (min-max) | within bound, largest err/bound | B within 2 se | vehicle-s | lag | refused |");
+    for line in summary {
+        println!("{line}");
     }
 }
