@@ -9,6 +9,7 @@ mod replay;
 mod run;
 mod saver;
 mod session;
+mod side_inputs;
 mod solver;
 mod store;
 mod study;

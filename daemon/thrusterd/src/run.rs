@@ -35,6 +35,7 @@ use thrusterd_core::driver_watch::{DriverWatch, OutputVerdict};
 use thrusterd_core::machine::{Command, Event, Machine, Request, SolveResult, SolverMode};
 
 use crate::loader::{LoadError, Loader, Progress};
+use crate::side_inputs::SideInputs;
 use crate::solver::SolverThread;
 use thrusterd_core::wire;
 
@@ -311,13 +312,13 @@ impl Daemon {
             .context("another thrusterd already serves this namespace")?;
         self.open_session();
         let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
-        let side = SideInputs {
-            reconfig: Inbox::<ReconfigEvent>::create(&node, &self.ipc)?,
-            setpoint: Inbox::<Setpoint>::create(&node, &self.ipc)?,
-            driver: Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?,
+        let side = SideInputs::new(
+            Inbox::<ReconfigEvent>::create(&node, &self.ipc)?,
+            Inbox::<Setpoint>::create(&node, &self.ipc)?,
+            Inbox::<DriverStatusMsg>::create(&node, &self.ipc)?,
             // Optional: only a vehicle with a DVL publishes here.
-            dvl: Inbox::<DvlSample>::create(&node, &self.ipc)?,
-        };
+            Inbox::<DvlSample>::create(&node, &self.ipc)?,
+        );
         let thrust = Port::<ThrustCommand>::create(&node, &self.ipc)?;
         // Off (every_n = 0): no service at all, so nothing in the loop pays for it.
         let telemetry = match self.cfg.telemetry.every_n {
@@ -439,12 +440,21 @@ impl Daemon {
                 got = true;
             }
             // What came without a sample (a setpoint while a real-time driver is quiet). In
-            // lockstep inputs are taken with the samples only (`on_sample`): the simulator
-            // publishes its events just before a sample, and taking one here or there would
-            // depend on which of the two this loop saw first (an announced reconfiguration
-            // applied one sample apart moved an identification's end by 3 vehicle-s between
-            // two runs of one seed).
-            if !self.cfg.runtime.lockstep {
+            // lockstep it is read now but applied with the next sample (`on_sample`): the
+            // simulator publishes its events just before a sample, and applying one here or
+            // there would depend on which of the two this loop saw first (an announced
+            // reconfiguration applied one sample apart moved an identification's end by 3
+            // vehicle-s between two runs of one seed). Read now all the same: an operator's
+            // publisher may be gone by the next sample, and an unread message with it.
+            if self.cfg.runtime.lockstep {
+                let dropped = side.hold_all()?;
+                if dropped > 0 {
+                    warn!(
+                        dropped,
+                        "inputs held for the next sample overflowed: oldest dropped"
+                    );
+                }
+            } else {
                 self.take_inputs_before_sample(&side)?;
                 self.take_reconfigurations(&side)?;
             }
@@ -649,12 +659,13 @@ impl Daemon {
 
     /// What came before a sample: the DVL's measurement and the driver's report (count,
     /// outputs, supply), which a driver sends just before it, and setpoints. Taken before each
-    /// sample is handled (and once per round without one), so the sample is handled with
+    /// sample is handled (in real time also once per round without one; in lockstep what came
+    /// between samples is held for the next one, `side_inputs.rs`), so the sample is handled with
     /// them: in lockstep the sample each input lands at is a matter of vehicle time, not of
     /// how long the loop spun before it looked (a setpoint the lab sent while the simulator
     /// held acts from the next sample, always).
     fn take_inputs_before_sample(&mut self, side: &SideInputs) -> Result<()> {
-        while let Some(d) = side.dvl.recv()? {
+        while let Some(d) = side.next_dvl()? {
             match d.validate() {
                 Ok(()) => {
                     self.machine.on_dvl(d.velocity);
@@ -667,7 +678,7 @@ impl Daemon {
             }
         }
         // The driver's report decides whether thrust may go out at all.
-        while let Some(report) = side.driver.recv()? {
+        while let Some(report) = side.next_driver_report()? {
             match report.validate() {
                 Ok(()) => {
                     self.driver.observe(&report, self.machine.thrusters());
@@ -686,7 +697,7 @@ impl Daemon {
             self.judge_outputs();
             self.driver_judged_for = Some(self.machine.thrusters());
         }
-        while let Some(s) = side.setpoint.recv()? {
+        while let Some(s) = side.next_setpoint()? {
             match s.validate() {
                 Ok(()) => {
                     self.machine.on_setpoint_input(&wire::setpoint(&s));
@@ -702,12 +713,12 @@ impl Daemon {
     }
 
     /// Announced reconfigurations: taken once a sample's command is computed and before it
-    /// goes out (and once per round without a sample). A driver announces a change just
+    /// goes out (in real time also once per round without a sample). A driver announces a change just
     /// before the first sample taken after it, so the machine learns of it at that sample's
     /// time (taken before the sample, the new model was stamped one period before the
     /// change), and what it changes is published before that sample's answer.
     fn take_reconfigurations(&mut self, side: &SideInputs) -> Result<()> {
-        while let Some(e) = side.reconfig.recv()? {
+        while let Some(e) = side.next_reconfig()? {
             match e.validate().and_then(|_| check_reconfig(&e)) {
                 Ok(()) => {
                     self.machine.on_reconfig(wire::reconfig(&e));
@@ -1299,12 +1310,4 @@ struct Outputs {
     telemetry: Option<Port<TelemetryMsg>>,
     model: ModelPorts,
     status: Port<StatusMsg>,
-}
-
-/// The inputs read before each sample (see [`Daemon::take_side_inputs`]).
-struct SideInputs {
-    reconfig: Inbox<ReconfigEvent>,
-    setpoint: Inbox<Setpoint>,
-    driver: Inbox<DriverStatusMsg>,
-    dvl: Inbox<DvlSample>,
 }
