@@ -329,7 +329,7 @@ fn command_to_output_latency<F: Fixture>() {
     // A defect check, not a speed target: wall-clock figures on a shared machine. Measured
     // (this command, debug build, 2 cores): all outputs p50 0.13-0.22 ms, max 0.25-8.8 ms;
     // with three busy loops beside it (`for i in 1 2 3; do (while :; do :; done) & done`)
-    // p50 0.12-0.40 ms, max 3.0-29.6 ms. A driver that applied commands on its own 100 Hz
+    // p50 0.09-0.40 ms, max 2.1-29.6 ms. A driver that applied commands on its own 100 Hz
     // tick instead of on arrival would show a median near 5 ms, so the median is held below
     // 2.5 ms (6x the loaded figure); the worst case below 100 ms (3x the loaded worst). The
     // figures docs/hardware.md quotes are this test's output.
