@@ -346,9 +346,10 @@ fn pitch_steps(run: &mut Run, seconds: f64, every_s: f64, pitches: [f64; 2]) -> 
 /// worst seed: 8.8 s, 7.5 s, 0.045.
 ///
 /// The monitor alone (refinement off) on the dynamic model is weaker: over the same seeds it
-/// fired after 3.9, 10.8, 29.1, 6.4 and 7.1 s and not within 30 s on seed 4 (the static forward
-/// model: 1.3-6.0 s). With an accurate model in control the monitor's test loses power; why is
-/// not measured yet (docs/experiments.md). That is why the refinement is on by default.
+/// fired after 6.1, 10.8, 29.1, 6.4 and 7.1 s and not within 30 s on seed 4 (on a model the
+/// static forward method learned, as this test ran before: 1.3-6.0 s over seeds 1-6). With an
+/// accurate model in control the monitor's test loses power; why is not measured yet
+/// (docs/experiments.md).
 #[test]
 fn silent_rotation_of_the_top_thruster_is_detected_and_re_estimated() {
     for seed in 1..=6 {
