@@ -94,9 +94,10 @@ fn amour5_estimation_at_the_papers_noise_matches_truth() {
 /// realistic IMU 0.004-0.036, paper's noise 0.054-0.080 (seeds 1-5). Bounds at 1.5x the worst:
 /// 0.018, 0.054, 0.12.
 ///
-/// Asymmetric forward/reverse gains on the default path: the first estimation pulses with
-/// one sign per pulse pair and fits no split model (no ratio); a re-estimation under control
-/// does, `closed_loop.rs`'s `under_control_a_thruster_weak_in_reverse_is_diagnosed`.
+/// Asymmetric forward/reverse gains on the default path: the first estimation (open-loop
+/// pulses) reports no forward/reverse split (`reverse_gain_ratio` None on every thruster, also
+/// with a thruster weak in reverse: measured); a re-estimation under control does, tested in
+/// `closed_loop.rs`'s `under_control_a_thruster_weak_in_reverse_is_diagnosed`.
 #[test]
 fn dead_and_reversed_thrusters_are_diagnosed_by_the_default_method() {
     use thruster_sim::Action;
