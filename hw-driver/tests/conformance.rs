@@ -326,8 +326,14 @@ fn command_to_output_latency<F: Fixture>() {
         percentile(&all, 0.99),
         percentile(&all, 1.0),
     );
-    // Generous bounds (debug build, shared 2-core machine); the figures are in the output.
-    assert!(percentile(&all, 0.5) < 5_000.0, "median above 5 ms");
+    // A defect check, not a speed target: wall-clock figures on a shared machine. Measured
+    // (this command, debug build, 2 cores): all outputs p50 0.13-0.22 ms, max 0.25-8.8 ms;
+    // with three busy loops beside it (`for i in 1 2 3; do (while :; do :; done) & done`)
+    // p50 0.09-0.40 ms, max 2.1-29.6 ms. A driver that applied commands on its own 100 Hz
+    // tick instead of on arrival would show a median near 5 ms, so the median is held below
+    // 2.5 ms (6x the loaded figure); the worst case below 100 ms (3x the loaded worst). The
+    // figures docs/hardware.md quotes are this test's output.
+    assert!(percentile(&all, 0.5) < 2_500.0, "median above 2.5 ms");
     assert!(percentile(&all, 1.0) < 100_000.0, "worst case above 100 ms");
     h.finish();
 }

@@ -661,14 +661,19 @@ fn lockstep_waits_for_a_subscriber_then_survives_a_silent_daemon() {
             per_sample >= Duration::from_millis(15) && per_sample < Duration::from_millis(200),
             "{per_sample:?}"
         );
-        // Answers resume lockstep at full speed.
+        // Answers resume lockstep at full speed: 50 round trips take less than the 50 idle
+        // periods (1 s) a simulator still pacing idle would need at the least. Measured 3.1
+        // ms in all, 4.2 ms with three busy loops beside it (`cargo test -p thruster-sim --test
+        // process -- --nocapture lockstep_waits`); the speed of a round trip itself is a
+        // bench's figure (tests/benches/latency.rs), not this test's.
         let t2 = Instant::now();
         for _ in 0..50 {
             peer.answer(&last, &[0.0; 5]);
             last = peer.sample();
         }
+        eprintln!("50 lockstep round trips in {:?}", t2.elapsed());
         assert!(
-            t2.elapsed() < Duration::from_millis(500),
+            t2.elapsed() < Duration::from_millis(50 * 20),
             "{:?}",
             t2.elapsed()
         );
@@ -741,13 +746,18 @@ fn realtime_paces_by_the_wall_clock_and_the_watchdog_goes_neutral() {
             samples.push(peer.sample());
         }
         let wall = t0.elapsed();
+        eprintln!("1 s of vehicle time in real time took {wall:?} of wall time");
         let status = sim.wait_exit(TIMEOUT).expect("no exit at --duration");
         assert_eq!(status.code(), Some(0));
-        // 201 samples (t = 0 .. 1 s) over about one wall second, none lost.
+        // 201 samples (t = 0 .. 1 s) over about one wall second, none lost. Never faster
+        // than the wall clock (0.9 s: our receipt of the first sample may be late, the
+        // simulator is not early); the upper bound leaves a loaded machine room (was 1.3 s)
+        // and still fails a simulator at half speed. Measured 1.001 s, and 1.005 s with three
+        // busy loops beside it.
         assert_eq!(samples.len(), 201);
         assert!(samples.windows(2).all(|w| w[1].seq == w[0].seq + 1));
         assert!(
-            wall > Duration::from_millis(900) && wall < Duration::from_millis(1300),
+            wall > Duration::from_millis(900) && wall < Duration::from_millis(2000),
             "{wall:?}"
         );
         // Pitch rate rises while the command is held, then decays once the watchdog cut it.

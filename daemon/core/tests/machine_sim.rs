@@ -13,49 +13,162 @@ use thrusterd_core::model::ModelSource;
 mod common;
 use common::{rel_err, vehicle, Run};
 
-/// AMOUR-5 at the paper's noise (0.25 rad/s, 0.05 g): the learned model (the default dynamic
-/// method) is within 10 % of the truth, in 8 vehicle-s. Measured 0.046 / 0.031 in 7.8 s (seed
-/// 1); over seeds 1-5 in-process 0.056 / 0.063 in 8.1 s (docs/study.md). In-process the run is
-/// deterministic; the margin is for seeds and the bound's optimism at this noise. (The static
-/// model needed 25 %: it carried a 12-23 % bias from drag and restoring moment.)
+/// AMOUR-5 at the paper's noise (0.25 rad/s, 0.05 g), seeds 1-10 (in-process runs are
+/// deterministic): the learned model (the default dynamic method) against the truth, the
+/// vehicle time to it, and 5 s of attitude hold with it after.
+///
+/// Measured (`cargo test -p thrusterd-core --test machine_sim -- --nocapture amour5_`):
+/// rotation error 0.043-0.082 (mean 0.057), acceleration 0.045-0.082 (mean 0.064), 6.6-8.2
+/// vehicle s (mean 7.4), tilt after 5 s of hold at most 1.9 deg. Bounds at 1.5x: worst seed
+/// 0.12 / 0.12, mean 0.085 / 0.095 (a 2x regression of the typical seed fails the mean even
+/// where one seed's noise would hide it), tilt 3 deg. The time is issue 11's target of 8
+/// vehicle s on the mean, 9 s for the worst seed (pulses come in 0.4 s steps; 1.5x would
+/// accept 12 s, far beyond the target). (The static model needed 25 %: it carried a 12-23 %
+/// bias from drag and restoring moment.)
 #[test]
 fn amour5_estimation_at_the_papers_noise_matches_truth() {
-    let mut run = Run::new("amour5", NoisePreset::Paper, 1);
-    run.run_for(1.0);
-    let t = run.estimate();
-    let model = run.machine.model().expect("a model").clone();
-    let truth = run.truth();
-    let (e_rot, e_acc) = (
-        rel_err(&model.effectiveness, &truth, 0),
-        rel_err(&model.effectiveness, &truth, 3),
-    );
-    let est = run.machine.last_estimate().unwrap();
-    println!(
-        "amour5/paper: {t:.1} vehicle s, {} pulses, err rot {e_rot:.3} acc {e_acc:.3}",
-        est.pulses
-    );
-    assert_eq!(run.machine.state(), State::Active);
-    assert_eq!(model.source, ModelSource::Estimated);
-    assert!(e_rot < 0.10, "rotation error {e_rot}");
-    assert!(e_acc < 0.10, "acceleration error {e_acc}");
-    assert!(t < 9.0, "{t:.1} vehicle s");
-    assert_eq!(
-        model.actuated.names(),
-        vec!["roll", "pitch", "yaw", "surge", "heave"]
-    );
-    // Then it holds attitude: 5 s of control keep roll and pitch within a few degrees.
-    run.run_for(5.0);
-    assert_eq!(run.last_mode, Mode::Controlling);
-    let desired = run.machine.last_desired();
-    assert!(
-        desired.iter().all(|v| v.is_finite()) && desired.iter().any(|v| *v != 0.0),
-        "the last control tick's desired motion is reported: {desired:?}"
-    );
-    let [roll, pitch, _] = run.sim.roll_pitch_yaw();
-    assert!(
-        roll.abs().to_degrees() < 5.0 && pitch.abs().to_degrees() < 5.0,
-        "roll {roll} pitch {pitch}"
-    );
+    let (mut sum_rot, mut sum_acc, mut sum_t) = (0.0, 0.0, 0.0);
+    let seeds = 1..=10u64;
+    for seed in seeds.clone() {
+        let mut run = Run::new("amour5", NoisePreset::Paper, seed);
+        run.run_for(1.0);
+        let t = run.estimate();
+        let model = run.machine.model().expect("a model").clone();
+        let truth = run.truth();
+        let (e_rot, e_acc) = (
+            rel_err(&model.effectiveness, &truth, 0),
+            rel_err(&model.effectiveness, &truth, 3),
+        );
+        let est = run.machine.last_estimate().unwrap();
+        println!(
+            "amour5/paper seed {seed}: {t:.1} vehicle s, {} pulses, err rot {e_rot:.3} acc {e_acc:.3}",
+            est.pulses
+        );
+        assert_eq!(run.machine.state(), State::Active, "seed {seed}");
+        assert_eq!(model.source, ModelSource::Estimated, "seed {seed}");
+        assert!(e_rot < 0.12, "seed {seed}: rotation error {e_rot}");
+        assert!(e_acc < 0.12, "seed {seed}: acceleration error {e_acc}");
+        assert!(t < 9.0, "seed {seed}: {t:.1} vehicle s");
+        assert_eq!(
+            model.actuated.names(),
+            vec!["roll", "pitch", "yaw", "surge", "heave"],
+            "seed {seed}"
+        );
+        (sum_rot, sum_acc, sum_t) = (sum_rot + e_rot, sum_acc + e_acc, sum_t + t);
+        // Then it holds attitude: 5 s of control keep roll and pitch within a few degrees.
+        run.run_for(5.0);
+        assert_eq!(run.last_mode, Mode::Controlling);
+        let desired = run.machine.last_desired();
+        assert!(
+            desired.iter().all(|v| v.is_finite()) && desired.iter().any(|v| *v != 0.0),
+            "the last control tick's desired motion is reported: {desired:?}"
+        );
+        let [roll, pitch, _] = run.sim.roll_pitch_yaw();
+        println!(
+            "  after 5 s of hold: roll {:.2} pitch {:.2} deg",
+            roll.to_degrees(),
+            pitch.to_degrees()
+        );
+        assert!(
+            roll.abs().to_degrees() < 3.0 && pitch.abs().to_degrees() < 3.0,
+            "seed {seed}: roll {roll} pitch {pitch}"
+        );
+    }
+    let n = seeds.count() as f64;
+    let (rot, acc, t) = (sum_rot / n, sum_acc / n, sum_t / n);
+    println!("mean over seeds: err rot {rot:.3} acc {acc:.3}, {t:.2} vehicle s");
+    assert!(rot < 0.085, "mean rotation error {rot:.3}");
+    assert!(acc < 0.095, "mean acceleration error {acc:.3}");
+    assert!(t < 8.0, "mean time to the model {t:.2} vehicle s");
+}
+
+/// Dead and reversed thrusters on the default path: the dynamic method through the machine,
+/// against the simulator's physics, with the declared geometry as the model in force (what
+/// "reversed" is judged against). AMOUR-5 with thruster 4 (R) dead and thruster 1 (LB) spinning
+/// the wrong way (its thrust along +z where the vehicle file declares -z): the estimate names
+/// exactly those two, and the learned model matches the changed truth.
+///
+/// Measured (`cargo test -p thrusterd-core --test machine_sim -- --nocapture dead_`): every
+/// seed names dead [4] and reversed [1]; the reversed thruster's gain along its declared
+/// direction -0.81 to -0.89 (the others +0.81 to +0.90); rotation error noise-free 0.012,
+/// realistic IMU 0.004-0.036, paper's noise 0.054-0.080 (seeds 1-5). Bounds at 1.5x the worst:
+/// 0.018, 0.054, 0.12.
+///
+/// Asymmetric forward/reverse gains on the default path: the first estimation (open-loop
+/// pulses) reports no forward/reverse split (`reverse_gain_ratio` None on every thruster, also
+/// with a thruster weak in reverse: measured); a re-estimation under control does, tested in
+/// `closed_loop.rs`'s `under_control_a_thruster_weak_in_reverse_is_diagnosed`.
+#[test]
+fn dead_and_reversed_thrusters_are_diagnosed_by_the_default_method() {
+    use thruster_sim::Action;
+    let cases = [
+        (NoisePreset::None, 1..=1u64, 0.018),
+        (NoisePreset::Realistic, 1..=5, 0.054),
+        (NoisePreset::Paper, 1..=5, 0.12),
+    ];
+    for (noise, seeds, bound) in cases {
+        for seed in seeds {
+            let v = vehicle("amour5");
+            let mut run = Run::with_vehicle(v.clone(), noise, seed, 200.0);
+            let mut setup = MachineSetup {
+                thrusters: 5,
+                geometry: Some(common::geometry(&v)),
+                ..MachineSetup::default()
+            };
+            setup.machine.deadband = 0.05;
+            run.machine = Machine::new(setup);
+            run.sim
+                .apply(&Action::Kill {
+                    thruster: "R".into(),
+                })
+                .unwrap();
+            run.sim
+                .apply(&Action::SetDirection {
+                    thruster: "LB".into(),
+                    direction: [0.0, 0.0, 1.0],
+                })
+                .unwrap();
+            run.run_for(1.0);
+            run.estimate();
+            assert_eq!(run.machine.state(), State::Active, "{noise:?} seed {seed}");
+            let e = run.machine.last_estimate().expect("an estimate");
+            let dead: Vec<usize> = e
+                .thruster
+                .iter()
+                .filter(|d| d.dead)
+                .map(|d| d.index)
+                .collect();
+            let reversed: Vec<usize> = e
+                .thruster
+                .iter()
+                .filter(|d| d.reversed == Some(true))
+                .map(|d| d.index)
+                .collect();
+            let gains: Vec<f64> = e
+                .thruster
+                .iter()
+                .map(|d| {
+                    d.nominal_gain
+                        .expect("judged against the declared geometry")
+                })
+                .collect();
+            let err = rel_err(&run.machine.model().unwrap().effectiveness, &run.truth(), 0);
+            println!(
+                "{noise:?} seed {seed}: dead {dead:?} reversed {reversed:?} gains {gains:.2?} rotation error {err:.3}"
+            );
+            assert_eq!(dead, vec![4], "{noise:?} seed {seed}");
+            assert_eq!(reversed, vec![1], "{noise:?} seed {seed}");
+            assert!(gains[1] < -0.5, "{noise:?} seed {seed}: {gains:?}");
+            assert!(
+                [0, 2, 3].iter().all(|&i| gains[i] > 0.5),
+                "{noise:?} seed {seed}: {gains:?}"
+            );
+            assert!(
+                err < bound,
+                "{noise:?} seed {seed}: rotation error {err:.3}"
+            );
+        }
+    }
 }
 
 #[test]
@@ -221,22 +334,27 @@ fn pitch_steps(run: &mut Run, seconds: f64, every_s: f64, pitches: [f64; 2]) -> 
     seen
 }
 
-/// The model-mismatch monitor on the real physics with a realistic IMU: with the learned model
-/// it stays quiet through 24 s of pitch manoeuvres (righting moment, drag, the model's own
-/// after the top thruster is silently rotated 45 degrees it fires within
-/// seconds (measured 1.3-6.0 s over seeds 1-6), the daemon re-estimates, and the new model
-/// matches the new truth. The 10 s limit leaves room for a slower seed.
+/// A silent change on the default path (the dynamic method, the mismatch monitor, the
+/// refinement's windows and its change test, as shipped) on the real physics with a realistic
+/// IMU, seeds 1-6: with the learned model it stays quiet through 24 s of pitch manoeuvres
+/// (righting moment, drag, the model's own imperfection); after the top thruster is silently
+/// rotated 45 degrees a mismatch is reported, the daemon re-estimates under control, and the
+/// new model matches the new truth.
 ///
-/// Run on a model learned by the static forward method: with an accurate model in control the
-/// monitor is slower. Measured over seeds 1-6 (a run forcing each model in after the first
-/// estimation): dynamic-learned 6.2 / 10.6 / 9.7 s and seed 4 not within 30 s; the simulator's
-/// true model 6.2-6.9 s on four seeds, 21.0 and 25.5 s on two. So the slowdown comes with an
-/// accurate model, not from the dynamic estimator as such; why the monitor's test loses power
-/// then is not measured yet (docs/experiments.md).
+/// Measured (`cargo test -p thrusterd-core --test machine_sim -- --nocapture silent_`):
+/// detected after 1.3-5.8 s (seed 2 by the monitor, 1, 3 and 6 by a refinement window, 4 and
+/// 5 by the change test), re-learned in 5.0 s, rotation error 0.010-0.030. Bounds at 1.5x the
+/// worst seed: 8.8 s, 7.5 s, 0.045.
+///
+/// The monitor alone (refinement off) on the dynamic model is weaker: over the same seeds it
+/// fired after 6.1, 10.8, 29.1, 6.4 and 7.1 s and not within 30 s on seed 4 (on a model the
+/// static forward method learned, as this test ran before: 1.3-6.0 s over seeds 1-6). With an
+/// accurate model in control the monitor's test loses power; why is not measured yet
+/// (docs/experiments.md).
 #[test]
 fn silent_rotation_of_the_top_thruster_is_detected_and_re_estimated() {
-    for seed in [1, 2] {
-        let mut run = Run::forward("amour5", NoisePreset::Realistic, seed);
+    for seed in 1..=6 {
+        let mut run = Run::new("amour5", NoisePreset::Realistic, seed);
         run.run_for(1.0);
         run.estimate();
         run.machine.take_events();
@@ -249,15 +367,18 @@ fn silent_rotation_of_the_top_thruster_is_detected_and_re_estimated() {
         let seen = pitch_manoeuvres(&mut run, 30.0);
         let (t, why) = seen.first().expect("the rotation was not detected");
         let delay = t - changed_at;
-        println!("seed {seed}: detected after {delay:.1} s: {why}");
-        assert!(delay < 10.0, "seed {seed}: detection took {delay:.1} s");
         assert!(run.machine.state().is_estimating());
-        run.run_until(120.0, |m| m.state() == State::Active);
+        let took = run.run_until(120.0, |m| m.state() == State::Active);
         let model = run.machine.model().unwrap().clone();
         assert_eq!(model.source, ModelSource::Estimated);
         let e_rot = rel_err(&model.effectiveness, &run.truth(), 0);
+        println!(
+            "seed {seed}: detected after {delay:.1} s ({why}), re-learned in {took:.1} s, rotation error {e_rot:.3}"
+        );
+        assert!(delay < 8.8, "seed {seed}: detection took {delay:.1} s");
+        assert!(took < 7.5, "seed {seed}: re-estimation took {took:.1} s");
         assert!(
-            e_rot < 0.3,
+            e_rot < 0.045,
             "seed {seed}: re-learned rotation error {e_rot:.3}"
         );
     }

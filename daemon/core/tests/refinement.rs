@@ -12,7 +12,9 @@
 //! 9 x 180 s; a rotation found after 2.9 s and 7.9 s with a realistic IMU (seeds 1, 4; a window
 //! that straddles the change moves the column less, so the next one decides) and after 49.5 s
 //! at the paper's noise (seed 4). With the estimator's honest (larger) standard errors since:
-//! 8.9 s and 7.9 s, and 79.9 s at the paper's noise.
+//! 8.9 s and 7.9 s, and 79.9 s at the paper's noise (the windows; with the per-sample change
+//! test, on by default since, 5.0 s on both seeds and 2.5-5.4 s at the paper's noise, seeds
+//! 1-10: the tests below).
 mod common;
 use common::Run;
 use nalgebra::UnitQuaternion;
@@ -33,6 +35,18 @@ fn holding_with(noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> 
 
 /// [`holding_with`] on another vehicle file.
 fn holding_on(vehicle: &str, noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> Run {
+    holding_on_prior(vehicle, noise, seed, refinement, None)
+}
+
+/// [`holding_on`] with the estimator's terms prior (`term_prior_sd`, default off) replaced:
+/// for `detection_bound`'s decisive runs (`DB_TERM_PRIOR`); no asserting test sets it.
+fn holding_on_prior(
+    vehicle: &str,
+    noise: NoisePreset,
+    seed: u64,
+    refinement: RefinementConfig,
+    term_prior_sd: Option<f64>,
+) -> Run {
     let mut run = Run::new(vehicle, noise, seed);
     let mut setup = MachineSetup {
         thrusters: run.sim.thruster_count(),
@@ -40,9 +54,8 @@ fn holding_on(vehicle: &str, noise: NoisePreset, seed: u64, refinement: Refineme
         ..MachineSetup::default()
     };
     setup.machine.deadband = 0.05;
-    // The estimator's terms prior, for `detection_bound`'s decisive runs (default off).
-    if let Ok(v) = std::env::var("DB_TERM_PRIOR") {
-        setup.estimator.term_prior_sd = v.parse().expect("DB_TERM_PRIOR");
+    if let Some(v) = term_prior_sd {
+        setup.estimator.term_prior_sd = v;
     }
     // The monitor's own test never fires (infinite threshold); its action still decides what
     // a mismatch does: re-estimate.
@@ -105,6 +118,10 @@ fn pitch_with(
     None
 }
 
+/// A realistic IMU, seeds 1 and 4: a minute of pitch steps on the unchanged vehicle raises
+/// nothing, then the rotated top thruster is found and named. Measured (`cargo test -p
+/// thrusterd-core --test refinement -- --nocapture with_a_realistic`): 5.0 s on both seeds,
+/// by the change test (on by default); bound 7.5 s (1.5x).
 #[test]
 fn with_a_realistic_imu_a_rotated_thruster_is_found_within_seconds_and_nothing_else() {
     for seed in [1, 4] {
@@ -115,8 +132,7 @@ fn with_a_realistic_imu_a_rotated_thruster_is_found_within_seconds_and_nothing_e
         run.rotate_top();
         let (t, why) = pitch_until_mismatch(&mut run, 30.0).expect("rotation not found");
         println!("seed {seed}: found after {t:.1} s: {why}");
-        // One 5 s window after the one that straddles the change: 10 s.
-        assert!(t < 10.0, "seed {seed}: {t:.1} s");
+        assert!(t < 7.5, "seed {seed}: {t:.1} s");
         assert!(why.contains("thruster 1"), "{why}");
         // The mismatch starts a re-estimation, under control.
         assert_eq!(run.machine.state(), State::Identify);
@@ -209,7 +225,7 @@ fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_m
 /// (comma list), RF_DITHER (comma list). Run with
 /// `cargo test --release -p thrusterd-core --test refinement -- --ignored dither_sweep --nocapture`.
 #[test]
-#[ignore]
+#[ignore = "measuring tool driven by RF_* variables"]
 fn dither_sweep() {
     let noise = match std::env::var("RF_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -230,7 +246,10 @@ fn dither_sweep() {
                 dither,
                 ..RefinementConfig::default()
             };
-            let mut run = holding_with(noise, seed as u64, cfg);
+            let term_prior = std::env::var("DB_TERM_PRIOR")
+                .ok()
+                .map(|v| v.parse().expect("DB_TERM_PRIOR"));
+            let mut run = holding_on_prior("amour5", noise, seed as u64, cfg, term_prior);
             let (quiet, err) = pitch_scored(&mut run, 120.0);
             err_sum += err;
             let found = if quiet.is_none() {
@@ -306,12 +325,18 @@ fn quiet_flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
 }
 
 /// The shipped refinement settings (the per-sample change test on, as by default: see
-/// `RefinementConfig::change_test`), with the measuring runs' overrides.
+/// `RefinementConfig::change_test`). What the asserting tests use: no environment variable
+/// changes it.
+fn shipped_change_test() -> RefinementConfig {
+    let c = RefinementConfig::default();
+    assert!(c.change_test, "the change test is on by default");
+    c
+}
+
+/// [`shipped_change_test`] with the measuring runs' overrides from the environment (the
+/// ignored measuring tools only).
 fn with_change_test() -> RefinementConfig {
-    let mut c = RefinementConfig {
-        change_test: true,
-        ..RefinementConfig::default()
-    };
+    let mut c = shipped_change_test();
     if let Ok(v) = std::env::var("CT_UPDATE") {
         c.update = v == "1";
     }
@@ -338,7 +363,7 @@ fn with_change_test() -> RefinementConfig {
 /// updates installed meanwhile), and the rotated top thruster found within seconds.
 #[test]
 fn noise_free_the_change_test_is_quiet_then_finds_a_rotated_thruster_within_seconds() {
-    let mut run = holding_with(NoisePreset::None, 1, with_change_test());
+    let mut run = holding_with(NoisePreset::None, 1, shipped_change_test());
     let quiet = level_until_mismatch(&mut run, 60.0);
     assert!(quiet.is_none(), "false alarm {quiet:?}");
     run.rotate_top();
@@ -362,7 +387,7 @@ fn noise_free_the_change_test_is_quiet_then_finds_a_rotated_thruster_within_seco
 #[test]
 fn thrusters_commanded_together_and_weak_terms_are_not_a_change() {
     for (vehicle, seed, seconds) in [("four_up", 4, 50.0), ("aligned", 1, 145.0)] {
-        let mut run = holding_on(vehicle, NoisePreset::Realistic, seed, with_change_test());
+        let mut run = holding_on(vehicle, NoisePreset::Realistic, seed, shipped_change_test());
         let alarm = pitch_until_mismatch(&mut run, seconds);
         assert!(
             alarm.is_none(),
@@ -373,17 +398,18 @@ fn thrusters_commanded_together_and_weak_terms_are_not_a_change() {
 
 /// Issue 12's target is a silent hot swap detected at the paper's noise within 5 s. Holding
 /// level with the learned model and the shipped settings (0.1 dither), the change test on,
-/// after two quiet minutes: measured 3.9, 5.0, 2.6, 3.2, 3.9 s for seeds 1-5 (mean 3.7 s), all
-/// naming thruster 1 (before the rows, the significant terms and the joint fit: 6.4, 6.4, 2.6,
-/// 3.7, 6.1 s, mean 5.0 s). The windows alone took 74 s here.
+/// after two quiet minutes, seeds 1-10. Measured (`cargo test -p thrusterd-core --test
+/// refinement -- --nocapture at_the_papers_noise_the_change_test`): 3.7, 5.4, 4.0, 2.5, 3.9,
+/// 4.1, 3.0, 2.7, 5.3, 5.2 s (mean 4.0 s; 3 of 10 seeds miss the 5 s target), all naming
+/// thruster 1. Bounds at 1.5x: 8.0 s on every seed, 6.0 s on the mean. (Before the rows, the
+/// significant terms and the joint fit, seeds 1-5: 6.4, 6.4, 2.6, 3.7, 6.1 s, mean 5.0 s. The
+/// windows alone took 74 s here.)
 #[test]
 fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds() {
-    let seeds: Vec<u64> = std::env::var("CT_SEEDS").map_or(vec![1, 2, 3, 4, 5], |v| {
-        v.split(',').map(|x| x.trim().parse().unwrap()).collect()
-    });
+    let seeds: Vec<u64> = (1..=10).collect();
     let mut results = Vec::new();
     for &seed in &seeds {
-        let mut run = holding_with(NoisePreset::Paper, seed, with_change_test());
+        let mut run = holding_with(NoisePreset::Paper, seed, shipped_change_test());
         let quiet = level_until_mismatch(&mut run, 120.0);
         assert!(quiet.is_none(), "seed {seed}: false alarm {quiet:?}");
         run.rotate_top();
@@ -396,7 +422,7 @@ fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds()
         let (t, why) = found
             .as_ref()
             .unwrap_or_else(|| panic!("seed {seed}: rotation not found"));
-        assert!(*t < 10.0, "seed {seed}: {t:.2} s: {why}");
+        assert!(*t < 8.0, "seed {seed}: {t:.2} s: {why}");
         assert!(why.contains("change test"), "seed {seed}: {why}");
         // The joint fit names the turned thruster (one thruster at a time, the controller's
         // answer to it made thruster 5 look moved in 4 of 5 seeds of `detection_bound`).
@@ -405,6 +431,58 @@ fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds()
     }
     let mean = sum / results.len() as f64;
     assert!(mean < 6.0, "mean {mean:.2} s: {results:?}");
+}
+
+/// The false-alarm check CI runs, a short version of [`change_test_soak`] and
+/// [`change_test_on_every_vehicle`] (config/thrusterd.toml's "no false alarm" rests on the long
+/// ones; docs/experiments.md quotes their figures and commands): with the shipped settings
+/// (no environment variable read), an unchanged vehicle flown through pitch steps (+-20 deg
+/// every 4 s) and then as long holding level raises no mismatch, and the refinement judged
+/// meanwhile (a window ended). AMOUR-5 at the paper's noise, seeds 1-5, 2 + 2 minutes each.
+/// Measured: quiet; 13 s of a debug build (`time cargo test -p thrusterd-core --test
+/// refinement short_soak`).
+#[test]
+fn change_test_short_soak_raises_no_false_alarm() {
+    for seed in 1..=5 {
+        let mut run = holding_with(NoisePreset::Paper, seed, shipped_change_test());
+        let (pitch, level) = quiet_flight(&mut run, 120.0);
+        assert!(
+            pitch.is_none() && level.is_none(),
+            "seed {seed}: false alarm: pitch steps {pitch:?}, level {level:?}"
+        );
+        assert!(
+            run.machine.refinement().is_some(),
+            "seed {seed}: no window ended"
+        );
+    }
+}
+
+/// The same on every vehicle file at every noise preset (none, realistic, paper), seed 1, 1 +
+/// 1 minutes each: the short version of [`change_test_on_every_vehicle`]. Measured: quiet;
+/// about 20 s of a debug build (`time cargo test -p thrusterd-core --test refinement
+/// every_vehicle_short`).
+#[test]
+fn change_test_on_every_vehicle_short_raises_no_false_alarm() {
+    let mut alarms = Vec::new();
+    for vehicle in common::VEHICLES {
+        for noise in [
+            NoisePreset::None,
+            NoisePreset::Realistic,
+            NoisePreset::Paper,
+        ] {
+            let mut run = holding_on(vehicle, noise, 1, shipped_change_test());
+            let (pitch, level) = quiet_flight(&mut run, 60.0);
+            println!("{vehicle} {noise:?}: pitch steps {pitch:?}, level {level:?}");
+            if pitch.is_some() || level.is_some() {
+                alarms.push((vehicle, noise, pitch, level));
+            }
+            assert!(
+                run.machine.refinement().is_some(),
+                "{vehicle} {noise:?}: no window ended"
+            );
+        }
+    }
+    assert!(alarms.is_empty(), "false alarms: {alarms:#?}");
 }
 
 /// The false-alarm soak for the change test: `CT_MINUTES` (default 10) through pitch steps
@@ -416,7 +494,7 @@ fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds()
 /// time per seed): `cargo test --release -p thrusterd-core --test refinement -- --ignored
 /// change_test_soak --nocapture`.
 #[test]
-#[ignore]
+#[ignore = "measuring tool: 20 vehicle-minutes per seed; CI runs change_test_short_soak_raises_no_false_alarm"]
 fn change_test_soak() {
     let minutes: f64 = std::env::var("CT_MINUTES").map_or(10.0, |v| v.parse().unwrap());
     let seeds: Vec<u64> = std::env::var("CT_SEEDS")
@@ -477,7 +555,7 @@ fn change_test_soak() {
 /// mismatch reported (a false alarm) and fails on any. A measuring tool: `cargo test --release
 /// -p thrusterd-core --test refinement -- --ignored change_test_on_every_vehicle --nocapture`.
 #[test]
-#[ignore = "measuring tool: minutes of vehicle time per vehicle and noise"]
+#[ignore = "measuring tool: 10 vehicle-minutes per vehicle and noise; CI runs change_test_on_every_vehicle_short_raises_no_false_alarm"]
 fn change_test_on_every_vehicle() {
     let minutes: f64 = std::env::var("CT_MINUTES").map_or(5.0, |v| v.parse().unwrap());
     let list = |key: &str, default: &str| -> Vec<String> {
@@ -552,7 +630,7 @@ fn change_test_on_every_vehicle() {
 /// the commands; a short tau removes it. Through pitch steps the learned statistic reaches
 /// 800-2100 unchanged.
 #[test]
-#[ignore]
+#[ignore = "measuring tool driven by DB_* variables"]
 fn detection_bound() {
     use bound::*;
     let env = |key: &str, default: &str| std::env::var(key).unwrap_or_else(|_| default.into());
@@ -592,7 +670,10 @@ fn detection_bound() {
                 change_test: false,
                 ..RefinementConfig::default()
             };
-            let mut run = holding_with(noise, seed as u64, cfg);
+            let term_prior = std::env::var("DB_TERM_PRIOR")
+                .ok()
+                .map(|v| v.parse().expect("DB_TERM_PRIOR"));
+            let mut run = holding_on_prior("amour5", noise, seed as u64, cfg, term_prior);
             let mut flight = Flight::new(&run, pitch, tau, horizon, spacing);
             if std::env::var("DB_DEBUG").is_ok() {
                 let m = run.machine.model().unwrap();

@@ -200,10 +200,12 @@ fn update_sweep() {
 
 /// Noise-free first, then a realistic IMU (seeds 1, 2), thrusters L and T: the model follows
 /// a 30 % loss over a minute by refinements alone (no mismatch, no re-estimation) and ends,
-/// 30 s after the loss is complete, within 0.05 of the truth (the bound). Measured:
-/// noise-free 0.013 / 0.019 (L) and 0.018 / 0.017 (T); realistic 0.012-0.020 / 0.017-0.022.
-/// Without updates the same runs end 0.12-0.15 off at the paper's noise, and with a realistic
-/// IMU the monitor re-estimates instead.
+/// 30 s after the loss is complete, near the truth (the requirement was 0.05).
+/// Measured (`cargo test -p thrusterd-core --test refinement_update -- --nocapture
+/// a_thruster_losing`), rotation / acceleration rows: noise-free 0.017 / 0.021 (L) and
+/// 0.016 / 0.016 (T); realistic 0.008-0.019 / 0.013-0.023. Bounds at 1.5x the worst case:
+/// 0.028 rotation, 0.035 acceleration. Without updates the same runs end 0.12-0.15 off at the
+/// paper's noise, and with a realistic IMU the monitor re-estimates instead.
 #[test]
 fn a_thruster_losing_30_percent_in_a_minute_is_followed_without_a_re_estimation() {
     let cases = [
@@ -223,13 +225,15 @@ fn a_thruster_losing_30_percent_in_a_minute_is_followed_without_a_re_estimation(
         assert_eq!(run.machine.state(), State::Active, "{what}");
         // A window every 5 s, each folded in.
         assert!(r.refinements >= 10, "{what}");
-        assert!(r.err_rot <= 0.05 && r.err_acc <= 0.05, "{what}");
+        assert!(r.err_rot <= 0.028 && r.err_acc <= 0.035, "{what}");
     }
 }
 
-/// On an unchanged vehicle the updates may not make the model worse: with a realistic IMU it
-/// stays within 0.05 (measured 0.016 -> 0.011 and 0.013 -> 0.005 after 180 s, 35 updates,
-/// acceleration rows 0.021-0.022); at the paper's noise no
+/// On an unchanged vehicle the updates may not make the model worse: with a realistic IMU the
+/// rotation rows end no worse than they started. Measured (`cargo test -p thrusterd-core
+/// --test refinement_update -- --nocapture an_unchanged`): rotation 0.016 -> 0.008 and
+/// 0.010 -> 0.007 after 180 s, 35 updates, acceleration rows 0.016-0.017; bounds at 1.5x the
+/// worst seed: 0.012 rotation, 0.025 acceleration. At the paper's noise no
 /// window is confident enough to update it (windows end at their 0.15 bound, above
 /// `update_rel_err`), so the model stays as learned.
 #[test]
@@ -237,9 +241,14 @@ fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
     for seed in [1, 2] {
         let mut run = holding(NoisePreset::Realistic, seed, true, 200.0);
         let r = fly(&mut run, Scenario::default(), 180.0);
+        println!("realistic seed {seed}: {r:?}");
         assert_eq!(r.mismatches, 0, "seed {seed}: {r:?}");
         assert!(r.refinements >= 20, "seed {seed}: {r:?}");
-        assert!(r.err_rot <= 0.05 && r.err_acc <= 0.05, "seed {seed}: {r:?}");
+        assert!(
+            r.err_rot <= 0.012 && r.err_acc <= 0.025,
+            "seed {seed}: {r:?}"
+        );
+        assert!(r.err_rot <= r.err_rot_start, "seed {seed}: worse: {r:?}");
         // The published bound shrank with the evidence, and the model passes every check.
         let m = run.machine.model().unwrap();
         assert!(
@@ -297,8 +306,9 @@ fn every_vehicle(
 }
 
 /// Noise-free, every vehicle file, 60 s of pitch steps with the default updates: the model
-/// stays within 0.03 of the truth (measured 0.006-0.017 rotation, 0.005-0.017 acceleration,
-/// from 0.013-0.015 at the start). The first fusion, which weighed windows by their own
+/// stays near the truth. Measured (`cargo test -p thrusterd-core --test refinement_update --
+/// --nocapture every_vehicle_noise_free`): 0.006-0.016 rotation, 0.003-0.016 acceleration,
+/// from 0.013-0.016 at the start; bound 0.025 (1.5x the worst, 0.016). The first fusion, which weighed windows by their own
 /// standard errors and let entries drift 0.01 per sqrt(s), took eight_vectored from 0.015 to
 /// 0.066 here (docs/experiments.md). `--nocapture` prints each vehicle. No environment
 /// variable changes this test: the sweeps with other settings are
@@ -307,7 +317,7 @@ fn every_vehicle(
 #[test]
 fn every_vehicle_noise_free_sweep() {
     for (name, r, what) in every_vehicle(None, &|_| {}) {
-        assert!(r.err_rot <= 0.03 && r.err_acc <= 0.03, "{what}");
+        assert!(r.err_rot <= 0.025 && r.err_acc <= 0.025, "{what}");
         // four_up: 2 refinements since the window fits became solve jobs due 20 ms after
         // their decision point (11 before). Its third window (19.8 s) judged a 82 % move
         // of thruster 3 at chi2 3 and ended; from then on the attitude error grew from 11

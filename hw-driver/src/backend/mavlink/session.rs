@@ -848,6 +848,31 @@ mod tests {
         s
     }
 
+    /// Our HEARTBEAT every `heartbeat_ms` on the session's own clock: one at the start, none
+    /// before the period is up, the next at the deadline (the process test, on the wall clock
+    /// of a shared machine, checks only that they keep coming at about 1 Hz).
+    #[test]
+    fn heartbeats_every_heartbeat_ms() {
+        let heartbeats = |s: &mut Session| {
+            s.drain_outgoing()
+                .iter()
+                .filter(|m| matches!(m, MavMessage::HEARTBEAT(_)))
+                .count()
+        };
+        let mut s = up(false);
+        let period = MavlinkConfig::default().heartbeat_ms * MS;
+        assert_eq!(period, 1_000 * MS, "the shipped period");
+        // `up` sent the first at its first service, 1 ns.
+        let t0 = 1;
+        for k in 1..=3u64 {
+            s.service(t0 + k * period - 1);
+            assert_eq!(heartbeats(&mut s), 0, "early before heartbeat {k}");
+            s.service(t0 + k * period);
+            assert_eq!(heartbeats(&mut s), 1, "heartbeat {k}");
+            assert!(s.next_deadline_ns() <= t0 + (k + 1) * period);
+        }
+    }
+
     #[test]
     fn finds_the_autopilot_and_requests_rates_one_at_a_time() {
         let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
