@@ -102,6 +102,11 @@ struct Ideal {
     no_current: bool,
     /// The dead band the machine compensates (default 0.05, the simulator's default).
     deadband: Option<f64>,
+    /// Only this part of the waves: "force", "torque", "heave" or "surge" (a sweep's
+    /// LA_WAVE_PART; default all of them).
+    wave_part: Option<&'static str>,
+    /// The noise measurement's length, s (a sweep's LAG_NOISE_S; default the shipped one).
+    noise_s: Option<f64>,
 }
 
 fn estimate_with(
@@ -147,20 +152,20 @@ fn estimate_on(
     if ideal.no_current {
         disturbance.current_ned_mps = [0.0; 3];
     }
-    match std::env::var("LA_WAVE_PART").as_deref() {
-        Ok("force") => disturbance
+    match ideal.wave_part {
+        Some("force") => disturbance
             .waves
             .iter_mut()
             .for_each(|w| w.torque_body_nm = [0.0; 3]),
-        Ok("torque") => disturbance
+        Some("torque") => disturbance
             .waves
             .iter_mut()
             .for_each(|w| w.force_ned_n = [0.0; 3]),
-        Ok("heave") => disturbance.waves.iter_mut().for_each(|w| {
+        Some("heave") => disturbance.waves.iter_mut().for_each(|w| {
             w.torque_body_nm = [0.0; 3];
             w.force_ned_n[0] = 0.0;
         }),
-        Ok("surge") => disturbance.waves.iter_mut().for_each(|w| {
+        Some("surge") => disturbance.waves.iter_mut().for_each(|w| {
             w.torque_body_nm = [0.0; 3];
             w.force_ned_n[2] = 0.0;
         }),
@@ -179,8 +184,8 @@ fn estimate_on(
     assert_eq!(setup.estimator.method, Method::Dynamic);
     // No driver in between: the daemon compensates the T200 deadband itself.
     setup.machine.deadband = ideal.deadband.unwrap_or(0.05);
-    if let Ok(v) = std::env::var("LAG_NOISE_S") {
-        setup.machine.noise_s = v.parse().unwrap();
+    if let Some(v) = ideal.noise_s {
+        setup.machine.noise_s = v;
     }
     let mut machine = Machine::new(setup);
     while sim.time_s() < 1.0 {
@@ -687,7 +692,8 @@ fn coverage(
     sensors: &SensorConfig,
     seeds: std::ops::RangeInclusive<u64>,
 ) -> ([f64; 3], [f64; 3], [f64; 3]) {
-    coverage_and_worst(sensors, seeds).0
+    // COV_DVL: the true body velocity (a perfect DVL), for the navigation's share.
+    coverage_and_worst(sensors, seeds, std::env::var_os("COV_DVL").is_some()).0
 }
 
 /// [`coverage`] and the largest |error| / honest standard error per group.
@@ -695,6 +701,7 @@ fn coverage(
 fn coverage_and_worst(
     sensors: &SensorConfig,
     seeds: std::ops::RangeInclusive<u64>,
+    true_velocity: bool,
 ) -> (([f64; 3], [f64; 3], [f64; 3]), [f64; 3]) {
     let name = "amour5";
     let (lin, restoring) = true_terms(name);
@@ -704,9 +711,8 @@ fn coverage_and_worst(
     let mut means = [0.0; 3];
     let runs = seeds.clone().count() as f64;
     for seed in seeds {
-        // COV_DVL: the true body velocity (a perfect DVL), for the navigation's share.
         let ideal = Ideal {
-            true_velocity: std::env::var_os("COV_DVL").is_some(),
+            true_velocity,
             ..Ideal::default()
         };
         let o = estimate_ideal(
@@ -796,7 +802,7 @@ fn standard_errors_cover_the_error_against_the_truth() {
         noise: NoisePreset::Realistic,
         ..SensorConfig::default()
     };
-    let ((honest, ols, _), worst) = coverage_and_worst(&realistic, 1..=10);
+    let ((honest, ols, _), worst) = coverage_and_worst(&realistic, 1..=10, false);
     println!("realistic: coverage {honest:.2?} (i.i.d. {ols:.2?}), largest |err|/se {worst:.2?}");
     assert!(
         honest[0] >= 0.9,
@@ -814,7 +820,7 @@ fn standard_errors_cover_the_error_against_the_truth() {
         noise: NoisePreset::Paper,
         ..realistic
     };
-    let ((honest, ols, _), worst) = coverage_and_worst(&paper, 1..=5);
+    let ((honest, ols, _), worst) = coverage_and_worst(&paper, 1..=5, false);
     println!("paper: coverage {honest:.2?} (i.i.d. {ols:.2?}), largest |err|/se {worst:.2?}");
     assert!(
         honest[0] >= 0.8,
@@ -1220,6 +1226,9 @@ fn lag_sweep() {
                 let ideal = Ideal {
                     true_velocity: std::env::var("LAG_DVL").is_ok(),
                     symmetric_thrusters: std::env::var("LAG_SYM").is_ok(),
+                    noise_s: std::env::var("LAG_NOISE_S")
+                        .ok()
+                        .map(|v| v.parse().unwrap()),
                     ..Ideal::default()
                 };
                 let v = with_lag(name, tau);
@@ -1417,6 +1426,9 @@ fn imu_and_water_sweep() {
                 water,
                 true_velocity: std::env::var("LA_DVL").is_ok(),
                 no_current: std::env::var("LA_NO_CURRENT").is_ok(),
+                wave_part: std::env::var("LA_WAVE_PART")
+                    .ok()
+                    .map(|v| &*Box::leak(v.into_boxed_str())),
                 ..Ideal::default()
             };
             let o = estimate_ideal(name, sensors, seed, cfg, ideal);

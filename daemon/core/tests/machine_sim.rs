@@ -499,6 +499,7 @@ fn with_a_declared_geometry_the_pulses_are_as_strong_as_the_noise_needs() {
             sim: Simulator::new(v, sensors, 2).unwrap(),
             last_mode: Mode::Neutral,
             max_abs_cmd: 0.0,
+            latency_us: None,
         };
         run.run_for(1.0);
         run.machine.on_request(Request::Estimate).unwrap();

@@ -31,6 +31,12 @@ pub struct Run {
     pub sim: Simulator,
     pub last_mode: Mode,
     pub max_abs_cmd: f64,
+    /// The command takes effect this long after its sample, us, drawn uniformly from the
+    /// range for every sample (a deterministic hash of its time): as through the driver in
+    /// real time (thruster-sim steps the physics to the command's arrival). None: at once.
+    /// Set by measuring sweeps (`RUN_LATENCY_US` there), never by an environment variable in
+    /// a test CI runs.
+    pub latency_us: Option<(u64, u64)>,
 }
 
 impl Run {
@@ -77,6 +83,7 @@ impl Run {
             sim,
             last_mode: Mode::Neutral,
             max_abs_cmd: 0.0,
+            latency_us: None,
         }
     }
 
@@ -100,14 +107,7 @@ impl Run {
         }
         assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
         self.last_mode = cmd.mode;
-        // RUN_LATENCY_US: the command takes effect this long after the sample, as through the
-        // driver in real time (thruster-sim steps the physics to the command's arrival); `A-B`
-        // draws it uniformly from A to B us for every sample (a deterministic hash of its time).
-        if let Ok(v) = std::env::var("RUN_LATENCY_US") {
-            let (lo, hi) = match v.split_once('-') {
-                Some((a, b)) => (a.parse::<u64>().unwrap(), b.parse::<u64>().unwrap()),
-                None => (v.parse::<u64>().unwrap(), v.parse::<u64>().unwrap()),
-            };
+        if let Some((lo, hi)) = self.latency_us {
             let h = r.t_ns.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
             let us = lo + h % (hi - lo + 1);
             self.sim.step_to(r.t_ns + us * 1000);
