@@ -38,6 +38,11 @@ const MAX_PENDING: usize = 8;
 /// Owners of solvers (the estimation run, the refinement): job ids are unique across them.
 pub(crate) const OWNERS: u64 = 2;
 
+/// Jobs outstanding at most across every owner: what a worker's queue must hold so that a
+/// machine within its own limits never finds it full (on a starved worker every owner may
+/// have its [`MAX_PENDING`] outstanding at once).
+pub const MAX_OUTSTANDING: usize = OWNERS as usize * MAX_PENDING;
+
 /// Which owner a job id belongs to (the `owner` its solver was made with).
 pub(crate) fn owner_of(id: u64) -> u64 {
     (id.max(1) - 1) % OWNERS

@@ -15,11 +15,16 @@ use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TryRecvError
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thrusterd_core::machine::{SolveJob, SolveResult};
+use thrusterd_core::machine::{SolveJob, SolveResult, MAX_OUTSTANDING};
 
-/// Jobs and results in flight at most: the machine keeps at most 8 outstanding (one is the
-/// rule), so a full queue means the thread stopped taking work.
-const QUEUE: usize = 8;
+/// Jobs and results in flight at most. The machine keeps at most [`MAX_OUTSTANDING`] jobs
+/// outstanding (every owner, estimation and refinement, at its limit), but a job it cancelled
+/// (a run that ended, a refinement reset by a model swap) stays queued here until the thread
+/// reaches it; four times that is room for a starved thread, and a full queue still means
+/// one that stopped taking work. (It was 8, one owner's limit: with three busy loops on the
+/// 2-core VM the daemon faulted with "the solver thread has 8 jobs queued" while the thread
+/// was only slow.) Allocated once, at start.
+const QUEUE: usize = 4 * MAX_OUTSTANDING;
 
 /// Niceness of the solver and loading threads (0 is the control thread's): their work, when
 /// it shares a core with the control thread, runs in the control thread's idle time.

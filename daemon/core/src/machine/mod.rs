@@ -21,7 +21,7 @@ mod state_machine;
 mod telemetry;
 mod types;
 
-pub use crate::solve::{SolveJob, SolveResult, SolverMode};
+pub use crate::solve::{SolveJob, SolveResult, SolverMode, MAX_OUTSTANDING};
 pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};
