@@ -58,7 +58,8 @@ pub enum Command {
         #[arg(long, default_value_t = 600.0)]
         max_wait_s: f64,
     },
-    /// Abort whatever runs: zero thrust, back to Idle.
+    /// Abort the estimation that runs: back to Idle, thrusters neutral (an identification
+    /// under control goes back to holding with the model in force). Refused when none runs.
     Abort,
     /// Control the vehicle with the current model (hold the setpoint).
     Hold,

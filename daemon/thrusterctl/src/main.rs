@@ -34,7 +34,8 @@ enum Command {
     #[cfg(feature = "lab")]
     Demo(thruster_lab::demo::DemoArgs),
     /// The paper's pool experiments in simulation (manual-vs-learned, misaligned, aligned,
-    /// hot-swap): daemon and simulator on a private namespace, scored against the truth.
+    /// hot-swap) and ours (degrade, dive): daemon and simulator on a private namespace,
+    /// scored against the truth.
     #[cfg(feature = "lab")]
     Experiment(thruster_lab::experiment::ExperimentArgs),
     /// The estimation methods against the simulator's truth in one process (no daemon): every
