@@ -108,6 +108,43 @@ fn an_imu_off_the_centre_is_found_refused_and_then_used_from_the_drawings() {
     assert!((learned - 0.15).abs() <= 0.01, "learned x {learned}");
 }
 
+/// Issue 31 item 1 through the processes: AMOUR-5 whose thrusters give 0.6 of forward thrust
+/// in reverse where the daemon assumes 0.78 (`config/vehicles/amour5_reverse60.toml`; the
+/// daemon is not told). Realistic IMU, seed 1: measured err 0.0267 / 0.0200 under bounds of
+/// 0.0208 / 0.0258, the excitation tilting the vehicle 63.6 deg (the budget is 30); over seeds
+/// 1-10 the rotation rows are outside their bound on every seed (docs/study.md, "Vehicles the
+/// estimator was not told about"). Errors and tilt bounded at 1.5x the figures; the rotation
+/// rows' miss asserted as what it is, so that a fix shows here (then update the docs).
+#[test]
+fn thrusters_weak_in_reverse_the_daemon_was_not_told_about() {
+    let v = demo(&[
+        "--noise",
+        "realistic",
+        "--seed",
+        "1",
+        "--vehicle",
+        "config/vehicles/amour5_reverse60.toml",
+    ]);
+    let f = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k}: {v}"));
+    let (rot, acc, tilt) = (f("err_rot"), f("err_acc"), f("estimation_max_tilt_deg"));
+    println!(
+        "reverse 0.6: err {rot:.4} / {acc:.4}, bounds {:.4} / {:.4}, tilt {tilt:.1} deg",
+        f("bound_rot"),
+        f("bound_acc")
+    );
+    assert!(
+        rot < 0.040 && acc < 0.030,
+        "errors {rot:.4} / {acc:.4}: {v}"
+    );
+    assert!(tilt < 95.0, "tilted {tilt:.1} deg while excited");
+    assert!(
+        rot > f("bound_rot"),
+        "the rotation rows are now within their bound ({rot:.4} <= {:.4}): the asymmetry is \
+         handled; update docs/study.md and this test",
+        f("bound_rot")
+    );
+}
+
 /// Issue 32, moving water through the processes: in the `rough` preset (a 0.5 m/s current
 /// and a 0.15 Hz swell of 20 N / 2 N m) the swell swings AMOUR-5 118-151 deg while it is excited
 /// and its models were 14-41 % off against bounds of 6-15 %; the daemon refuses them, saying how
