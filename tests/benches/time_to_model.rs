@@ -10,6 +10,7 @@
 
 use std::time::{Duration, Instant};
 
+use system_tests::vehicle_clock::STEPPED_DAEMON;
 use system_tests::{model_error, state, Operator, World};
 use thruster_protocol::{DaemonState, ModelMsg, ModelSource, TruthMsg};
 
@@ -81,18 +82,21 @@ fn main() {
             std::fs::write(&cfg, setting.toml).unwrap();
             let op = Operator::new(&world);
             // Low-latency mode: in lockstep every sample waits for its answer.
-            let mut daemon = world.daemon(&[
-                "--config",
-                cfg.to_str().unwrap(),
-                "--estimate",
-                "--spin-us",
-                "500",
-                "--lockstep",
-                // However long a solve takes on a loaded machine, the sample it is due at
-                // waits for it: the vehicle-time figures are the same on any machine.
-                "--lockstep-wait-ms",
-                "300000",
-            ]);
+            let mut daemon = world.daemon(
+                &[
+                    &[
+                        "--config",
+                        cfg.to_str().unwrap(),
+                        "--estimate",
+                        "--spin-us",
+                        "500",
+                    ],
+                    // However long a solve takes on a loaded machine, the sample it is due
+                    // at waits for it: the vehicle-time figures are the same on any machine.
+                    &STEPPED_DAEMON[..],
+                ]
+                .concat(),
+            );
             let seed_s = seed.to_string();
             let wall = Instant::now();
             // Stepped: the simulator waits for every answer however long a loaded machine

@@ -323,19 +323,22 @@ impl World {
 
     /// `thruster-sim run` on this namespace.
     pub fn sim(&self, vehicle: &str, extra: &[&str]) -> Proc {
-        let ns = self.namespace();
+        let args = self.sim_args(vehicle, extra);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        Proc::spawn("thruster-sim", &args, self.dir.path())
+    }
+
+    /// `run --namespace <this> --vehicle config/vehicles/<vehicle>.toml <extra>`.
+    fn sim_args(&self, vehicle: &str, extra: &[&str]) -> Vec<String> {
         let vehicle = workspace()
             .join("config/vehicles")
             .join(format!("{vehicle}.toml"));
-        let mut args = vec![
-            "run",
-            "--namespace",
-            &ns,
-            "--vehicle",
-            vehicle.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        Proc::spawn("thruster-sim", &args, self.dir.path())
+        let mut args: Vec<String> = ["run", "--namespace", &self.namespace(), "--vehicle"]
+            .map(String::from)
+            .into();
+        args.push(vehicle.display().to_string());
+        args.extend(extra.iter().map(|a| a.to_string()));
+        args
     }
 
     /// `thruster-bridge` on this namespace serving the live view on a free local port and
@@ -362,6 +365,14 @@ impl World {
             assert!(Instant::now() < deadline, "no start line after 60 s: {log}");
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// The end of a test: the test's own node dropped (so it leaves nothing either), no file
+    /// of the namespace may be left on disk. Call after every process has exited.
+    pub fn assert_nothing_left(mut self) {
+        self.node = None;
+        let left = self.leftovers();
+        assert!(left.is_empty(), "files of the namespace left: {left:?}");
     }
 
     /// Files of this namespace still on disk (after every process has exited).

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use thruster_protocol::services::{Inbox, TopicMessage};
 use thruster_sim::stepper::{Stepper, STEP_SAMPLES};
 
-use crate::{workspace, Proc, World};
+use crate::{Proc, World};
 
 /// The test's hand on a stepped simulator's clock.
 pub struct VehicleClock {
@@ -136,20 +136,8 @@ impl World {
     /// `thruster-sim run --lockstep --stepped` on this namespace and the clock that steps it.
     /// The daemon beside it should run with [`STEPPED_DAEMON`]'s flags.
     pub fn stepped_sim(&self, vehicle: &str, extra: &[&str]) -> (Proc, VehicleClock) {
-        let ns = self.namespace();
-        let vehicle = workspace()
-            .join("config/vehicles")
-            .join(format!("{vehicle}.toml"));
-        let mut args = vec![
-            "run",
-            "--namespace",
-            &ns,
-            "--vehicle",
-            vehicle.to_str().unwrap(),
-            "--lockstep",
-            "--stepped",
-        ];
-        args.extend_from_slice(extra);
+        let args = self.sim_args(vehicle, &[&["--lockstep", "--stepped"], extra].concat());
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let (proc, to_sim, from_sim) = Proc::spawn_piped("thruster-sim", &args, self.dir.path());
         (proc, VehicleClock::new(to_sim, from_sim))
     }

@@ -193,14 +193,6 @@ impl Driver {
     }
 }
 
-/// Everything stopped and dropped: no process, no file of the namespace left.
-fn assert_clean(world: World) {
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
-}
-
 #[test]
 fn bad_imu_samples_each_raise_their_counter_and_the_daemon_keeps_serving() {
     let world = World::new("badimu");
@@ -329,7 +321,7 @@ fn bad_imu_samples_each_raise_their_counter_and_the_daemon_keeps_serving() {
             assert!(log.contains(reason), "no {reason:?} in the log\n{log}");
         }
     }
-    assert_clean(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -589,7 +581,7 @@ fn bad_reconfig_events_setpoints_and_requests_are_counted_and_refused() {
             assert!(log.contains(reason), "no {reason:?} in the log\n{log}");
         }
     }
-    assert_clean(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -678,7 +670,7 @@ fn bad_saved_models_are_refused_at_start_counted_and_the_daemon_serves() {
             );
         }
     }
-    assert_clean(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -767,7 +759,7 @@ fn bad_config_files_are_refused_with_file_line_and_key() {
             }
         }
     }
-    assert_clean(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -828,5 +820,5 @@ fn thrust_commands_with_wrong_counts_are_rejected_by_the_driver() {
             assert!(log.contains(reason), "no {reason:?}\n{log}");
         }
     }
-    assert_clean(world);
+    world.assert_nothing_left();
 }

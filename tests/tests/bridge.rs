@@ -232,10 +232,7 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
     drop(bridge);
     drop(daemon);
     drop(sim);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }
 
 /// Neither a WebSocket address nor a recording: the bridge refuses to start, saying what to

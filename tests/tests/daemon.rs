@@ -123,7 +123,7 @@ fn reconfiguration_mid_control_leads_to_a_new_model() {
     // `--estimate` starts at the first sample and the event comes at a vehicle time; stepped,
     // the simulator waits for every answer and the daemon for every late solve: the run is
     // the same on any machine.
-    let mut daemon = world.daemon(&["--estimate", "--lockstep", "--lockstep-wait-ms", "300000"]);
+    let mut daemon = world.daemon(&[&["--estimate"], &STEPPED_DAEMON[..]].concat());
     let (mut sim, mut clock) = world.stepped_sim(
         "amour5",
         &[
@@ -371,8 +371,5 @@ fn nothing_is_left_behind() {
         let _ = sim.wait_timeout(Duration::from_secs(30));
         assert!(daemon.stop().success());
     }
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    world.assert_nothing_left();
 }

@@ -41,12 +41,6 @@ fn until_active(op: &Operator, daemon: &Proc) {
     .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
 }
 
-fn assert_nothing_left(mut world: World) {
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
-}
-
 #[test]
 fn a_daemon_for_six_thrusters_on_a_five_thruster_driver_faults_and_never_pulses() {
     let world = World::new("drvcount");
@@ -104,7 +98,7 @@ fn a_daemon_for_six_thrusters_on_a_five_thruster_driver_faults_and_never_pulses(
             daemon.log_text()
         );
     }
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -154,7 +148,7 @@ fn reconfigured_to_a_count_the_driver_lacks_while_controlling_faults_neutral() {
         assert!(daemon.stop().success(), "{}", daemon.log_text());
         assert!(sim.stop().success(), "{}", sim.log_text());
     }
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -183,7 +177,7 @@ fn with_no_driver_an_estimate_is_refused_and_status_says_why() {
         assert_eq!(s.samples, 0);
         assert!(daemon.stop().success(), "{}", daemon.log_text());
     }
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -206,7 +200,7 @@ fn the_simulators_report_counts_what_it_accepted() {
         assert!(daemon.stop().success(), "{}", daemon.log_text());
         assert!(sim.stop().success(), "{}", sim.log_text());
     }
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 /// thruster-hw on an ArduSub that is disarmed: the driver says so, and the daemon does not
@@ -275,7 +269,7 @@ fn a_disarmed_autopilot_holds_the_estimation_until_it_is_armed() {
         assert!(daemon.stop().success(), "{}", daemon.log_text());
         assert!(hw.stop().success(), "{}", hw.log_text());
     }
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 /// A simulated battery's voltage reaches the daemon through the driver's report: its status
@@ -350,6 +344,6 @@ fn the_supply_voltage_reaches_the_daemon_and_the_operator() {
             assert!(daemon.stop().success(), "{}", daemon.log_text());
             assert!(sim.stop().success(), "{}", sim.log_text());
         }
-        assert_nothing_left(world);
+        world.assert_nothing_left();
     }
 }

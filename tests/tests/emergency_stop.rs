@@ -161,8 +161,5 @@ fn the_emergency_stop_is_neutral_from_the_next_sample_in_pulse_active_and_identi
     drop(op);
     drop(sim);
     drop(daemon);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }

@@ -116,14 +116,6 @@ fn watched_daemon_active_on_sim(world: &World, op: &Operator) -> (Proc, Proc) {
     (daemon, sim)
 }
 
-/// Nothing of the namespace left on disk, once every process has exited and the caller has
-/// dropped its ports.
-fn assert_nothing_left(mut world: World) {
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
-}
-
 /// A model estimated by a real run (daemon + simulator in lockstep), saved by the daemon in
 /// the world's state directory as it does on every estimated model and on SIGTERM.
 fn estimate_and_save_a_model(world: &World, op: &Operator) {
@@ -338,7 +330,7 @@ fn daemon_killed_mid_pulse_hw_goes_neutral_and_a_restart_resumes_control() {
     assert!(hw.stop().success(), "{}", hw.log_text());
     drop(thrust);
     drop(op);
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -426,7 +418,7 @@ fn driver_killed_faults_with_neutral_thrust_and_a_new_driver_recovers() {
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     drop(thrust);
     drop(op);
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 /// Runs thrusterctl with the shipped default timeout (2 s), killing it if it runs past
@@ -561,7 +553,7 @@ fn thrusterctl_while_the_daemon_restarts_fails_clearly_and_never_hangs() {
     assert!(daemon2.stop().success(), "{}", daemon2.log_text());
     assert!(sim.stop().success());
     drop(op);
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 /// A child that is killed and reaped however the test ends.
@@ -710,7 +702,7 @@ fn save_fails_reported_daemon_keeps_serving(full: bool) {
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     drop(broken);
     drop(op);
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 #[test]
@@ -794,7 +786,7 @@ fn with_resume_after_crash_off_a_restarted_daemon_stays_idle() {
     assert!(sim.stop().success());
     drop(thrust);
     drop(op);
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 /// A disk that never answers never stalls control. The model save's temp file is a FIFO
@@ -839,7 +831,7 @@ fn a_stalled_disk_never_stalls_control() {
         println!("stalled disk: stop took {took:?}");
         assert!(sim.stop().success());
     }
-    assert_nothing_left(world);
+    world.assert_nothing_left();
 }
 
 /// An operator's `load` never stops control. The test is the driver: it sends an IMU sample

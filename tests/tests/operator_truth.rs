@@ -117,10 +117,7 @@ fn a_pitch_setpoint_from_a_depth_hold_keeps_the_depth() {
     assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
     sim.stop();
     drop((vehicle, op));
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }
 
 /// Item 3: the daemon started before the simulator, as the README does. Once samples flow,
@@ -162,10 +159,7 @@ fn status_drops_no_imu_yet_once_the_simulator_runs() {
     expect_ok(&out, "shutdown");
     assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
     sim.stop();
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }
 
 /// "pulse X of Y" in a line of `estimate --wait` or `watch`: (X, Y).
@@ -304,10 +298,7 @@ fn progress_bounds_and_watch_across_a_restart_say_what_is_so() {
     expect_ok(&out, "shutdown");
     assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
     sim.stop();
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }
 
 /// Item 8: a demo whose daemon refuses its configuration failed with `kill: (N): No such
@@ -486,8 +477,5 @@ fn a_saved_model_keeps_its_version_and_a_crash_in_fault_is_told_as_such() {
     let out = ctl(&world, &["shutdown"]);
     expect_ok(&out, "shutdown");
     assert!(daemon.wait_timeout(Duration::from_secs(20)).is_some());
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }

@@ -211,10 +211,7 @@ fn a_session_at_1_khz_is_recorded_without_loss_and_read_back_by_foxglove_mcap() 
 
     drop(recorder);
     drop(sim);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }
 
 /// `thrusterctl demo --record`: the demo's whole session (estimation, model swap, hold) in one
@@ -616,8 +613,5 @@ fn a_full_disk_stops_the_recorder_with_file_and_os_error_and_the_daemon_serves_o
         !mounts.contains(disk.to_str().unwrap()),
         "the tmpfs is still mounted"
     );
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "files of the namespace left: {left:?}");
+    world.assert_nothing_left();
 }

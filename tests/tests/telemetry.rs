@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use system_tests::cli::{estimate_wait_stepped, setpoint_stepped, wait_output};
+use system_tests::vehicle_clock::STEPPED_DAEMON;
 use system_tests::{bin, Operator, Proc, World};
 
 /// After the step the controller has this long (vehicle time) to turn the vehicle ...
@@ -134,13 +135,8 @@ fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_erro
     // step (a false alarm on pitch at the realistic IMU), which is not what this test is about.
     let config = world.path("thrusterd.toml");
     std::fs::write(&config, "[monitor]\naction = \"report\"\n").unwrap();
-    let mut daemon = world.daemon(&[
-        "--config",
-        config.to_str().unwrap(),
-        "--lockstep",
-        "--lockstep-wait-ms",
-        "300000",
-    ]);
+    let mut daemon =
+        world.daemon(&[&["--config", config.to_str().unwrap()], &STEPPED_DAEMON[..]].concat());
     // In vehicle time: every command lands at the same sample in every run; paced at 10x real
     // time so that watch, reading every message, keeps up.
     let op = Operator::new(&world);
@@ -376,10 +372,7 @@ fn watch_shows_estimation_progress_then_the_setpoint_and_a_falling_attitude_erro
         .expect("daemon exits on shutdown");
     assert!(status.success(), "{}", daemon.log_text());
     assert!(sim.stop().success());
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    world.assert_nothing_left();
 }
 
 /// `every_n = 0` turns telemetry off: no service exists and watch shows status alone.
@@ -421,8 +414,5 @@ fn telemetry_off_publishes_nothing() {
     assert!(telemetry(&log).is_empty(), "{log}");
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     assert!(sim.stop().success());
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    world.assert_nothing_left();
 }

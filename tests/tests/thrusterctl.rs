@@ -158,10 +158,7 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     assert!(sim.stop().success(), "{}", sim.log_text());
 
     drop(op);
-    let mut world = world;
-    world.node = None;
-    let left = world.leftovers();
-    assert!(left.is_empty(), "left behind: {left:?}");
+    world.assert_nothing_left();
 }
 
 /// An absurd model (a units mistake, a hand edit) is refused with the entry named, the model

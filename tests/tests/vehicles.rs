@@ -4,6 +4,7 @@
 
 use std::time::Duration;
 
+use system_tests::vehicle_clock::STEPPED_DAEMON;
 use system_tests::{model_error, state, Operator, World};
 use thruster_protocol::{DaemonState, Dof, ModelMsg, ModelSource};
 
@@ -24,14 +25,8 @@ fn estimate(vehicle: &str, seed: u64) -> (ModelMsg, f64, f64) {
     let n = thruster_count(vehicle).to_string();
     // `--estimate` starts at the first sample; stepped, the simulator waits for every
     // answer and the daemon for every late solve: the run is the same on any machine.
-    let mut daemon = world.daemon(&[
-        "--estimate",
-        "--thrusters",
-        &n,
-        "--lockstep",
-        "--lockstep-wait-ms",
-        "300000",
-    ]);
+    let mut daemon =
+        world.daemon(&[&["--estimate", "--thrusters", &n], &STEPPED_DAEMON[..]].concat());
     let seed = seed.to_string();
     let (mut sim, mut clock) = world.stepped_sim(
         vehicle,
