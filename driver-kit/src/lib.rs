@@ -2,7 +2,7 @@
 //! with errors that name the file, line and key, and the stop flag set by signals. The
 //! logging setup (journald under systemd, else stderr), systemd's notify protocol (READY,
 //! WATCHDOG) and the quiet exit on a closed stdout pipe ([`pipe`]) are shared by thrusterd and
-//! thrusterctl as well.
+//! thrusterctl as well, and so is raising the control thread to real-time priority ([`realtime`]).
 
 pub mod load;
 #[cfg(feature = "process")]
@@ -11,6 +11,8 @@ pub mod logging;
 pub mod pipe;
 #[cfg(feature = "process")]
 pub mod shutdown;
+#[cfg(feature = "process")]
+pub mod realtime;
 #[cfg(feature = "process")]
 pub mod systemd;
 

@@ -12,8 +12,12 @@
 //! Then the control thread under the daemon's long computations: IMU -> thrust at 200 Hz and
 //! 1 kHz, 8 and 16 declared thrusters, while holding attitude (idle control), during an
 //! open-loop estimation (a solve after every pulse) and during a closed-loop identification
-//! (a solve every second of dither), low-latency mode; p50 / p99 / p99.9 / max. Alone:
-//! `BENCH_SOLVES_ONLY=1`; beside another build's daemon: `BENCH_BASELINE_THRUSTERD=PATH`.
+//! (a solve every second of dither); p50 / p99 / p99.9 / max. Two schedulings: normal
+//! (low-latency mode, the control thread spinning) and real-time (event mode, the control
+//! thread at SCHED_FIFO 50 by `--realtime-priority`, the bench's driver thread at FIFO 60, as a
+//! real driver's would be; needs root or CAP_SYS_NICE, else the rows say refused). Alone:
+//! `BENCH_SOLVES_ONLY=1`; beside another build's daemon: `BENCH_BASELINE_THRUSTERD=PATH`
+//! (normal scheduling only: an older daemon has no `--realtime-priority`).
 //!
 //! Run: cargo bench -p system-tests --bench latency [-- ROUND_TRIPS]
 
@@ -48,6 +52,9 @@ fn stats(mut us: Vec<f64>) -> Stats {
 
 /// Vehicle time between samples, ns (the sample's `t_ns` follows its `seq`): 1 kHz unless the
 /// solve section sets another rate.
+/// The latest the bench's thread woke after a paced sample's due time, since the last reset.
+static WAKE_LATE_MAX_NS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
 static SAMPLE_PERIOD_NS: std::sync::atomic::AtomicU64 =
     std::sync::atomic::AtomicU64::new(1_000_000);
 
@@ -95,6 +102,10 @@ fn round_trips(
             let now = Instant::now();
             if due > now {
                 std::thread::sleep(due - now);
+                // How late the bench's own thread woke: the machine's floor for any thread's
+                // answer (what cyclictest measures), in the same run as the daemon's figures.
+                let late = Instant::now().saturating_duration_since(due).as_nanos() as u64;
+                WAKE_LATE_MAX_NS.fetch_max(late, std::sync::atomic::Ordering::Relaxed);
             }
         }
         *seq += 1;
@@ -406,15 +417,45 @@ fn bridge_section(n: usize) {
     );
 }
 
+/// The statistics of `phase`'s round trips, with the latest wake-up of the bench's own thread
+/// in it (microseconds).
+fn measured(phase: impl FnOnce() -> Vec<f64>) -> (Stats, f64) {
+    WAKE_LATE_MAX_NS.store(0, std::sync::atomic::Ordering::Relaxed);
+    let s = stats(phase());
+    let late = WAKE_LATE_MAX_NS.load(std::sync::atomic::Ordering::Relaxed) as f64 / 1e3;
+    (s, late)
+}
+
+/// How the control thread is scheduled in the solve section.
+#[derive(Clone, Copy, PartialEq)]
+enum Scheduling {
+    /// SCHED_OTHER, low-latency mode spinning for two periods so it never blocks between
+    /// samples (the figures before real-time scheduling).
+    NormalSpinning,
+    /// Event mode (blocks between samples), the control thread at SCHED_FIFO 50 and the
+    /// bench's own driver thread at FIFO 60.
+    Fifo,
+}
+
+impl Scheduling {
+    fn label(self) -> &'static str {
+        match self {
+            Scheduling::NormalSpinning => "normal, spinning",
+            Scheduling::Fifo => "FIFO 50, event",
+        }
+    }
+}
+
 /// IMU -> thrust while the daemon holds, estimates and identifies, at `rate_hz` with
-/// `thrusters` declared thrusters. One daemon (low-latency mode, spinning for two periods so
-/// it never blocks between samples), paced samples, each phase measured for `seconds`.
+/// `thrusters` declared thrusters, under `scheduling`; paced samples, each phase measured for
+/// `seconds`.
 fn solve_phases(
     daemon_bin: Option<&std::path::Path>,
+    scheduling: Scheduling,
     rate_hz: u64,
     thrusters: usize,
     seconds: f64,
-) -> Vec<(&'static str, Stats)> {
+) -> Vec<(&'static str, (Stats, f64))> {
     let period_ns = 1_000_000_000 / rate_hz;
     SAMPLE_PERIOD_NS.store(period_ns, std::sync::atomic::Ordering::Relaxed);
     let period = Duration::from_nanos(period_ns);
@@ -423,30 +464,46 @@ fn solve_phases(
     // The IMU watchdog off the bench's way: between phases the bench sends nothing while it
     // talks to the daemon.
     let cfg = daemon_config_with(&world, 10, thrusters, "[runtime]\nimu_timeout_ms = 10000\n");
-    let spin = (2 * period_ns / 1000).to_string();
+    let spin = match scheduling {
+        Scheduling::NormalSpinning => (2 * period_ns / 1000).to_string(),
+        Scheduling::Fifo => "0".to_string(),
+    };
     let state_dir = world.path("state");
-    let args = [
+    let namespace = world.namespace();
+    let mut args = vec![
         "run",
         "--config",
         cfg.to_str().unwrap(),
         "--namespace",
-        &world.namespace(),
+        &namespace,
         "--state-dir",
         state_dir.to_str().unwrap(),
         "--spin-us",
         &spin,
     ];
+    if scheduling == Scheduling::Fifo {
+        args.extend(["--realtime-priority", "50"]);
+    }
     let mut daemon = match daemon_bin {
         Some(path) => Proc::spawn_path(path, "thrusterd", &args, &[], world.dir.path()),
         None => Proc::spawn("thrusterd", &args, world.dir.path()),
     };
     let op = Operator::new(&world);
     let (imu, thrust, mut seq) = handshake(&world);
+    if scheduling == Scheduling::Fifo {
+        let control = control_thread_scheduling(daemon.pid());
+        assert_eq!(
+            control,
+            Some((libc::SCHED_FIFO, 50)),
+            "the daemon's control thread is not at FIFO 50 (its threads: {:?})",
+            thread_schedulings(daemon.pid())
+        );
+    }
     hold(&op);
     round_trips(&imu, &thrust, &mut seq, rate_hz as usize, Some(period));
     let mut out = Vec::new();
-    let idle = round_trips(&imu, &thrust, &mut seq, count, Some(period));
-    out.push(("holding (idle control)", stats(idle)));
+    let idle = measured(|| round_trips(&imu, &thrust, &mut seq, count, Some(period)));
+    out.push(("holding (idle control)", idle));
 
     // Open loop: from Idle, the noise at rest (1 s, skipped), then pulses with a solve after
     // each (the synthetic vehicle never answers the thrust, so the run goes to its limit).
@@ -461,8 +518,8 @@ fn solve_phases(
         (1.2 * rate_hz as f64) as usize,
         Some(period),
     );
-    let est = round_trips(&imu, &thrust, &mut seq, count, Some(period));
-    out.push(("estimating (open loop)", stats(est)));
+    let est = measured(|| round_trips(&imu, &thrust, &mut seq, count, Some(period)));
+    out.push(("estimating (open loop)", est));
     // What the daemon was doing at the end of the phase (it must still be estimating).
     let after_estimation = op.request(RequestKind::Status).text().to_string();
 
@@ -474,8 +531,8 @@ fn solve_phases(
     let r = op.request(RequestKind::Estimate);
     assert!(r.is_ok(), "{}", r.text());
     round_trips(&imu, &thrust, &mut seq, rate_hz as usize / 2, Some(period));
-    let ident = round_trips(&imu, &thrust, &mut seq, count, Some(period));
-    out.push(("identifying (closed loop)", stats(ident)));
+    let ident = measured(|| round_trips(&imu, &thrust, &mut seq, count, Some(period)));
+    out.push(("identifying (closed loop)", ident));
     let after_identification = op.request(RequestKind::Status).text().to_string();
     println!(
         "    ({rate_hz} Hz, N = {thrusters}: after estimating \"{after_estimation}\"; after identifying \"{after_identification}\")"
@@ -494,21 +551,49 @@ fn solve_section(seconds: f64) {
         "IMU -> thrust while holding, estimating and identifying (low-latency mode, paced, \
          {seconds} s per phase), microseconds"
     );
-    println!("| daemon | rate | N | phase | p50 | p99 | p99.9 | max | p99.9 / holding's |");
-    println!("|---|---|---|---|---|---|---|---|---|");
-    for rate in [200u64, 1000] {
-        for n in [8usize, 16] {
+    // The bench is the driver: at FIFO 60 (above the daemon's 50) its sleep to the next
+    // sample and its wait for the answer are not stretched by the machine's other work. Reset
+    // on fork: the processes it starts run normally until they raise themselves.
+    let fifo = match thruster_driver_kit::realtime::make_this_thread_fifo(60) {
+        Ok(()) => true,
+        Err(e) => {
+            println!("(real-time rows not measured: the bench's thread: {e})");
+            false
+        }
+    };
+    println!(
+        "| daemon | scheduling | rate | N | phase | p50 | p99 | p99.9 | max | p99.9 / holding's | bench's latest wake-up |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    // A subset for a closer look: BENCH_RATES=1000, BENCH_NS=16, BENCH_FIFO_ONLY=1.
+    let list = |var: &str, all: &[u64]| -> Vec<u64> {
+        std::env::var(var)
+            .ok()
+            .map(|v| v.split(',').filter_map(|x| x.trim().parse().ok()).collect())
+            .unwrap_or_else(|| all.to_vec())
+    };
+    let fifo_only = std::env::var_os("BENCH_FIFO_ONLY").is_some();
+    for rate in list("BENCH_RATES", &[200, 1000]) {
+        for n in list("BENCH_NS", &[8, 16]).into_iter().map(|n| n as usize) {
             let mut runs = Vec::new();
-            if let Some(b) = &baseline {
-                runs.push(("baseline", Some(b.as_path())));
+            if fifo_only {
+                // (the normal rows are left out on request)
+            } else if let Some(b) = &baseline {
+                runs.push(("baseline", Some(b.as_path()), Scheduling::NormalSpinning));
             }
-            runs.push(("this build", None));
-            for (label, bin) in runs {
-                let phases = solve_phases(bin, rate, n, seconds);
-                let idle = phases[0].1.p999;
-                for (phase, s) in &phases {
+            if !fifo_only {
+                runs.push(("this build", None, Scheduling::NormalSpinning));
+            }
+            if fifo {
+                runs.push(("this build", None, Scheduling::Fifo));
+            }
+            for (label, bin, scheduling) in runs {
+                let phases = solve_phases(bin, scheduling, rate, n, seconds);
+                let idle = phases[0].1 .0.p999;
+                for (phase, (s, late)) in &phases {
                     println!(
-                        "| {label} | {rate} Hz | {n} | {phase} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
+                        "| {label} | {} | {rate} Hz | {n} | {phase} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {late:.1} |",
+                        scheduling.label(),
                         s.p50,
                         s.p99,
                         s.p999,
@@ -520,6 +605,43 @@ fn solve_section(seconds: f64) {
         }
     }
     SAMPLE_PERIOD_NS.store(1_000_000, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Every thread of `pid`: (tid, policy, priority), from /proc/PID/task/TID/stat (fields 40
+/// and 41: rt_priority, policy).
+fn thread_schedulings(pid: u32) -> Vec<(u32, i32, i32)> {
+    let mut out = Vec::new();
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return out;
+    };
+    for t in tasks.flatten() {
+        let Ok(stat) = std::fs::read_to_string(t.path().join("stat")) else {
+            continue;
+        };
+        // The command name (field 2) may hold spaces: count fields after its ')'.
+        let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r) else {
+            continue;
+        };
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        // rest starts at field 3, so field k is f[k - 3].
+        if let (Some(prio), Some(policy)) = (f.get(37), f.get(38)) {
+            let tid = t.file_name().to_string_lossy().parse().unwrap_or(0);
+            out.push((tid, policy.parse().unwrap_or(-1), prio.parse().unwrap_or(-1)));
+        }
+    }
+    out
+}
+
+/// The one FIFO thread of `pid` (policy, priority), or None when it has none or several.
+fn control_thread_scheduling(pid: u32) -> Option<(i32, i32)> {
+    let fifo: Vec<_> = thread_schedulings(pid)
+        .into_iter()
+        .filter(|&(_, policy, _)| policy == libc::SCHED_FIFO)
+        .collect();
+    match fifo.as_slice() {
+        [(_, policy, prio)] => Some((*policy, *prio)),
+        _ => None,
+    }
 }
 
 fn main() {

@@ -242,6 +242,18 @@ check_active thrusterd
     || fail "ipc root: $IPC is '$(inside "stat -c '%U:%G %a' $IPC")', want thrusterd:thrusterd 2770"
 say "notify start: both units active after READY"
 
+# Real-time scheduling (issue 25): the unit's --realtime-priority 50 with LimitRTPRIO=50 puts
+# the control thread, and only it, at SCHED_FIFO 50 for the unprivileged user thrusterd; the
+# solver, saver, loader and reaper threads stay normal (policy field 41 of /proc/TID/stat:
+# 1 = FIFO; rt_priority field 40).
+SCHED=$(inside "pid=\$(systemctl show -p MainPID --value thrusterd)
+    for t in /proc/\$pid/task/*; do sed 's/.*) //' \$t/stat | awk '{print \$39 \":\" \$38}'; done | sort | uniq -c | tr -s ' ' | tr '\n' ','")
+FIFO=$(echo "$SCHED" | tr ',' '\n' | awk '$2 == "1:50" {print $1}')
+OTHER=$(echo "$SCHED" | tr ',' '\n' | awk '$2 == "0:0" {n += $1} END {print n + 0}')
+[ "$FIFO" = 1 ] && [ "$OTHER" -ge 3 ] && [ "$(echo "$SCHED" | tr ',' '\n' | grep -c .)" = 2 ] \
+    || fail "real-time: thrusterd's threads (count policy:priority) are '$SCHED', want one at 1:50 (SCHED_FIFO 50) and the rest 0:0"
+say "real-time: the control thread at SCHED_FIFO 50, $OTHER other threads normal ($SCHED)"
+
 # IMU must flow the whole run (a real-time sim that hangs starves the daemon): a watcher
 # inside the container samples the daemon's status every 0.5 s into a file, until
 # /tmp/imu-watch.stop exists (the minimal rootfs has no pkill).

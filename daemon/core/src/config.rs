@@ -94,6 +94,15 @@ pub struct RuntimeSection {
     /// daemon. Past it the machine faults (neutral), saying so. The lab's stepped runs use
     /// 300000: a solve starved by a loaded machine must not change the result.
     pub lockstep_wait_ms: u64,
+    /// Run the control thread (the one that answers IMU samples) at this SCHED_FIFO priority
+    /// (default 0 = normal scheduling; 1-99). Under normal scheduling anything else on the
+    /// computer (a build, the bridge, a logger) can hold the control thread off its core for
+    /// milliseconds; a FIFO thread runs as soon as its sample comes. Only the control thread
+    /// is raised: solves, saves and loads stay on normal threads. Needs root, CAP_SYS_NICE or
+    /// an RLIMIT_RTPRIO of at least this (the shipped unit: `LimitRTPRIO=50`); refused, the
+    /// daemon logs why and runs on at normal priority. Use it with `spin_us = 0`: a FIFO thread
+    /// that spins holds its core, and the kernel leaves normal threads only 5 % of it.
+    pub realtime_priority: u8,
 }
 
 impl Default for RuntimeSection {
@@ -107,6 +116,7 @@ impl Default for RuntimeSection {
             resume_after_crash: true,
             lockstep: false,
             lockstep_wait_ms: 1000,
+            realtime_priority: 0,
         }
     }
 }
@@ -403,6 +413,7 @@ impl DaemonConfig {
             ("runtime.status_period_ms", r.status_period_ms, 0, 60_000),
             ("runtime.spin_us", r.spin_us, 0, 1_000_000),
             ("runtime.lockstep_wait_ms", r.lockstep_wait_ms, 1, 600_000),
+            ("runtime.realtime_priority", u64::from(r.realtime_priority), 0, 99),
             ("telemetry.every_n", self.telemetry.every_n, 0, 10_000),
         ] {
             if !(lo..=hi).contains(&v) {

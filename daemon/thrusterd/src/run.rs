@@ -75,6 +75,10 @@ pub struct RunArgs {
     /// Override `runtime.lockstep_wait_ms` (the longest wait for a due solve in lockstep).
     #[arg(long, value_name = "MS")]
     lockstep_wait_ms: Option<u64>,
+    /// Override `runtime.realtime_priority` (SCHED_FIFO priority of the control thread, 1-99;
+    /// 0 = normal scheduling).
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(0..=99))]
+    realtime_priority: Option<u8>,
 }
 
 /// Least vehicle time between two saves of a refined model, ns (a minute).
@@ -114,6 +118,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
     if let Some(ms) = args.lockstep_wait_ms {
         cfg.runtime.lockstep_wait_ms = ms;
+    }
+    if let Some(p) = args.realtime_priority {
+        cfg.runtime.realtime_priority = p;
     }
 
     // Refused here, before anything is created, with the command line applied: a state_dir
@@ -363,6 +370,7 @@ impl Daemon {
         if let Some(model) = self.machine.model().cloned() {
             self.publish_model(&out.model, &model);
         }
+        self.raise_control_thread();
         info!(thrusters = self.machine.thrusters(), "thrusterd serving");
         let mut systemd = thruster_driver_kit::Systemd::new();
         systemd.ready();
@@ -827,6 +835,21 @@ impl Daemon {
             }
         }
         Ok(())
+    }
+
+    /// `runtime.realtime_priority`: this thread, the one that answers samples, to SCHED_FIFO
+    /// (the solver, saver, loader and reaper threads stay normal). Refused, the daemon runs on
+    /// at normal priority and says why: a vehicle that will not start over a scheduling
+    /// permission is worse off than one with a slower answer.
+    fn raise_control_thread(&self) {
+        let priority = self.cfg.runtime.realtime_priority;
+        if priority == 0 {
+            return;
+        }
+        match thruster_driver_kit::realtime::make_this_thread_fifo(priority) {
+            Ok(()) => info!(priority, "control thread at SCHED_FIFO"),
+            Err(e) => warn!("runtime.realtime_priority: {e}; the control thread runs at normal priority"),
+        }
     }
 
     /// Hands the machine the solve results that are back (never waits).
