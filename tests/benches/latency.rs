@@ -548,7 +548,7 @@ fn solve_section(seconds: f64) {
     let baseline = std::env::var_os("BENCH_BASELINE_THRUSTERD").map(std::path::PathBuf::from);
     println!();
     println!(
-        "IMU -> thrust while holding, estimating and identifying (low-latency mode, paced, \
+        "IMU -> thrust while holding, estimating and identifying (paced, \
          {seconds} s per phase), microseconds"
     );
     // The bench is the driver: at FIFO 60 (above the daemon's 50) its sleep to the next
