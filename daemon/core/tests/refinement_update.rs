@@ -319,11 +319,15 @@ fn every_vehicle_noise_free_sweep() {
     for (name, r, what) in every_vehicle(None, &|_| {}) {
         assert!(r.err_rot <= 0.025 && r.err_acc <= 0.025, "{what}");
         // four_up: 2 refinements since the window fits became solve jobs due 20 ms after
-        // their decision point (11 before). Its third window (19.8 s) judged a 82 % move
-        // of thruster 3 at chi2 3 and ended; from then on the attitude error grew from 11
-        // to 23 deg by 60 s, so no window opened again (a window needs the error under
-        // SETTLE_ERROR_DEG for SETTLE_S). Why the hold drifts is not found: an open defect
-        // (issue 25's closing note), held here at what it does now so it cannot get worse.
+        // their decision point (11 before). The cause, found since: no thruster of four_up
+        // turns it in yaw, the yaw drifts (22 deg in 60 s at the 20 ms budget, 11 deg at 0),
+        // and the refinement's settle error (the whole attitude error) counts it, so no
+        // window opens once it passes SETTLE_ERROR_DEG. Taking the error about the actuated
+        // rotations only gives 11 refinements at every budget, but then four_up's dithered
+        // windows at the paper's noise make the change test raise a false alarm (thruster 4,
+        // 53 %, chi2 7, in `change_test_on_every_vehicle_short_raises_no_false_alarm`), so
+        // that fix is not in: an open defect (docs/architecture.md), held here at what it
+        // does now so it cannot get worse.
         let least = if name == "four_up" { 2 } else { 5 };
         assert!(r.refinements >= least, "{what}");
         assert_eq!(r.mismatches, 0, "{what}");
