@@ -3,9 +3,17 @@
 //! each labelled with its name from the vehicle file (`thruster-bridge --layout-for FILE`).
 //! A static layout cannot know the thruster count; the daemon's messages carry 16 entries
 //! whatever the vehicle has, so without this the plot shows unused thrusters at zero.
+//!
+//! Two more things are written here rather than by hand, because the apps read them from
+//! different places (seen in Lichtblick 1.18, docs/recording.md "Screenshots"): every panel's
+//! title goes under both apps' keys (`foxglovePanelTitle` for Foxglove, `lichtblickPanelTitle`
+//! for Lichtblick, which ignores the other and showed "Plot" on every plot), and the state
+//! indicator gets one rule per [`DaemonState`], so it names the state in words and colours
+//! a fault red instead of showing a number.
 
 use anyhow::{anyhow, Result};
-use serde_json::{json, Value};
+use serde_json::{json, Map, Value};
+use thruster_protocol::DaemonState;
 
 /// The shipped layout's text.
 pub const SHIPPED: &str = include_str!("../../../config/foxglove/thrusterd-live.json");
@@ -13,8 +21,29 @@ pub const SHIPPED: &str = include_str!("../../../config/foxglove/thrusterd-live.
 /// The panel the thrust plot is in.
 pub const THRUST_PANEL: &str = "Plot!thrust";
 
+/// The panel showing the daemon's state in words (`status.state`).
+pub const STATE_PANEL: &str = "Indicator!state";
+
+/// The key of a panel's title in the Foxglove app's layouts, and in Lichtblick's.
+pub const TITLE_KEYS: [&str; 2] = ["foxglovePanelTitle", "lichtblickPanelTitle"];
+
+/// What the state indicator shows for `state`: its colour and its words.
+pub fn state_label(state: DaemonState) -> (&'static str, &'static str) {
+    match state {
+        DaemonState::Idle => ("#6e7781", "IDLE: thrusters neutral, no control"),
+        DaemonState::MeasureNoise => ("#1f6feb", "ESTIMATING: measuring the noise at rest"),
+        DaemonState::Pulse => ("#1f6feb", "ESTIMATING: pulsing the thrusters"),
+        DaemonState::Settle => ("#1f6feb", "ESTIMATING: settling after a pulse"),
+        DaemonState::Solve => ("#1f6feb", "ESTIMATING: solving the model"),
+        DaemonState::Active => ("#2da44e", "HOLDING with the model in force"),
+        DaemonState::Fault => ("#d1242f", "FAULT: thrusters neutral (reason below)"),
+        DaemonState::Identify => ("#1a7f37", "HOLDING and identifying (dither)"),
+    }
+}
+
 /// The shipped layout with the thrust plot showing `names` (one per thruster, in the
-/// protocol's order) of the vehicle `vehicle`.
+/// protocol's order) of the vehicle `vehicle`, the state indicator's rules, and every panel's
+/// title under both apps' keys.
 pub fn for_vehicle(vehicle: &str, names: &[String]) -> Result<Value> {
     let mut layout: Value = serde_json::from_str(SHIPPED)
         .map_err(|e| anyhow!("config/foxglove/thrusterd-live.json: {e}"))?;
@@ -34,6 +63,34 @@ pub fn for_vehicle(vehicle: &str, names: &[String]) -> Result<Value> {
         })
         .collect();
     plot["title"] = json!(format!("thrust per thruster (-1..1), vehicle {vehicle}"));
+    let indicator = layout["configById"]
+        .get_mut(STATE_PANEL)
+        .ok_or_else(|| anyhow!("the shipped layout has no {STATE_PANEL}"))?;
+    indicator["rules"] = DaemonState::ALL
+        .iter()
+        .map(|&state| {
+            let (color, label) = state_label(state);
+            json!({
+                "operator": "=",
+                "rawValue": state.as_u32().to_string(),
+                "color": color,
+                "label": label,
+            })
+        })
+        .collect();
+    let panels = layout["configById"]
+        .as_object_mut()
+        .ok_or_else(|| anyhow!("the shipped layout has no configById"))?;
+    for (id, config) in panels.iter_mut() {
+        let config: &mut Map<String, Value> = config
+            .as_object_mut()
+            .ok_or_else(|| anyhow!("{id}: not an object"))?;
+        let title = config
+            .get(TITLE_KEYS[0])
+            .cloned()
+            .ok_or_else(|| anyhow!("{id}: no {}", TITLE_KEYS[0]))?;
+        config.insert(TITLE_KEYS[1].to_string(), title);
+    }
     Ok(layout)
 }
 
@@ -61,5 +118,25 @@ mod tests {
         assert_eq!(paths.len(), 8);
         assert_eq!(paths[7]["value"], "thrust.thrust[7]");
         assert_eq!(paths[7]["label"], "M7 (thruster 7)");
+    }
+
+    #[test]
+    fn every_state_has_words_and_every_panel_a_title_for_both_apps() {
+        let l = for_vehicle("eight", &["A".to_string()]).unwrap();
+        let rules = l["configById"][STATE_PANEL]["rules"].as_array().unwrap();
+        assert_eq!(rules.len(), DaemonState::ALL.len());
+        for (rule, state) in rules.iter().zip(DaemonState::ALL) {
+            assert_eq!(rule["rawValue"], state.as_u32().to_string());
+            assert_eq!(rule["operator"], "=");
+        }
+        assert_eq!(
+            rules[DaemonState::Fault.as_u32() as usize]["color"],
+            "#d1242f"
+        );
+        for (id, config) in l["configById"].as_object().unwrap() {
+            let title = &config[TITLE_KEYS[0]];
+            assert!(title.as_str().is_some_and(|t| !t.is_empty()), "{id}");
+            assert_eq!(&config[TITLE_KEYS[1]], title, "{id}");
+        }
     }
 }

@@ -24,20 +24,40 @@ fn message(topic: &str) -> Value {
         .1
 }
 
-/// Resolves `field[i].sub` in `value`.
+/// Resolves `field[i].sub` in `value`; a slice `field[a:b]` (inclusive, as in the apps'
+/// message paths) resolves to its last element after checking that every one exists.
 fn resolve<'a>(value: &'a Value, path: &str) -> Option<&'a Value> {
     let mut v = value;
     for part in path.split('.') {
         let (name, index) = match part.split_once('[') {
-            Some((n, i)) => (n, Some(i.trim_end_matches(']').parse::<usize>().ok()?)),
+            Some((n, i)) => (n, Some(i.trim_end_matches(']'))),
             None => (part, None),
         };
         v = v.get(name)?;
         if let Some(i) = index {
-            v = v.get(i)?;
+            match i.split_once(':') {
+                Some((a, b)) => {
+                    let (a, b) = (a.parse::<usize>().ok()?, b.parse::<usize>().ok()?);
+                    if a > b || (a..=b).any(|k| v.get(k).is_none()) {
+                        return None;
+                    }
+                    v = v.get(b)?;
+                }
+                None => v = v.get(i.parse::<usize>().ok()?)?,
+            }
         }
     }
     Some(v)
+}
+
+/// `topic` or `topic.field...`, resolved in the topic's message.
+fn check_path(id: &str, p: &str) -> Value {
+    match p.split_once('.') {
+        None => message(p),
+        Some((topic, field)) => resolve(&message(topic), field)
+            .unwrap_or_else(|| panic!("{id}: {p} is not a field of {topic}"))
+            .clone(),
+    }
 }
 
 #[test]
@@ -47,16 +67,34 @@ fn every_path_and_service_of_the_layout_exists() {
     let mut checked = 0;
     let mut buttons = Vec::new();
     for (id, config) in panels {
+        // Titled for both apps: Lichtblick reads only its own key.
         let title = config["foxglovePanelTitle"].as_str().unwrap_or_default();
         assert!(!title.is_empty(), "{id}: no foxglovePanelTitle");
+        assert_eq!(config["lichtblickPanelTitle"], title, "{id}");
         let mut paths: Vec<String> = Vec::new();
         if id.starts_with("Plot!") {
             for p in config["paths"].as_array().unwrap() {
                 paths.push(p["value"].as_str().unwrap().to_string());
             }
         } else if id.starts_with("RawMessages!") {
-            let topic = config["topicPath"].as_str().unwrap();
-            message(topic);
+            check_path(id, config["topicPath"].as_str().unwrap());
+            checked += 1;
+        } else if id.starts_with("Indicator!") {
+            // A number, and a rule for every value the daemon sends.
+            let path = config["path"].as_str().unwrap();
+            assert!(check_path(id, path).is_number(), "{id}: {path}");
+            let values: Vec<String> = config["rules"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|r| r["rawValue"].as_str().unwrap().to_string())
+                .collect();
+            for state in thruster_protocol::DaemonState::ALL {
+                assert!(
+                    values.contains(&state.as_u32().to_string()),
+                    "{id}: {state:?}"
+                );
+            }
             checked += 1;
         } else if id.starts_with("CallService!") {
             let name = config["serviceName"].as_str().unwrap();
@@ -79,10 +117,8 @@ fn every_path_and_service_of_the_layout_exists() {
             panic!("panel {id}: not checked by this test");
         }
         for p in paths {
-            let (topic, field) = p.split_once('.').unwrap_or_else(|| panic!("{id}: {p}"));
-            let msg = message(topic);
-            let v = resolve(&msg, field)
-                .unwrap_or_else(|| panic!("{id}: {p} is not a field of {topic}"));
+            assert!(p.contains('.'), "{id}: {p}");
+            let v = check_path(id, &p);
             assert!(v.is_number(), "{id}: {p} is not a number: {v}");
             checked += 1;
         }
