@@ -15,6 +15,7 @@ pub mod model_file;
 pub mod monitor;
 pub mod navigation;
 pub mod refinement;
+mod serde_arrays;
 pub mod solve;
 pub mod study;
 pub mod supply;

@@ -49,6 +49,7 @@ const ACC: usize = 1;
 
 /// What happened during one pulse.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct PulseSummary {
     /// 0-based index of the pulse just ended.
     pub index: usize,
@@ -65,6 +66,7 @@ pub struct PulseSummary {
 
 /// Whether to pulse again.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub enum StopDecision {
     Continue,
     /// The error bound reached the target (forward method).
@@ -86,6 +88,7 @@ impl StopDecision {
 
 /// A model and everything known about its quality.
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Estimate {
     pub method: Method,
     pub thrusters: usize,
@@ -117,6 +120,7 @@ pub struct Estimate {
 /// shape value is 0): enough to add the pulse with its own intercept and, optionally, its own
 /// linear drift removed (Frisch-Waugh: regress [1, t] out of both shape and response).
 #[derive(Debug, Clone, Copy, Default)]
+#[derive(serde::Serialize, serde::Deserialize)]
 struct Moments {
     n: u64,
     t: f64,
@@ -182,6 +186,7 @@ impl Moments {
 
 /// Per-pulse bookkeeping, allocated once per pulse (never per sample).
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 struct ActivePulse {
     u: Vec<f64>,
     split: Vec<f64>,
@@ -193,6 +198,7 @@ struct ActivePulse {
 /// The last few quiet samples before a pulse, kept in a fixed ring: they pin each pulse's
 /// intercept without costing the pulse's own samples.
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 struct PreWindow {
     ring: Vec<(f64, Vector3<f64>, Vector3<f64>)>,
     next: usize,
@@ -236,6 +242,7 @@ impl PreWindow {
 
 /// An estimation run for a fixed set of thrusters.
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Estimator {
     cfg: EstimatorConfig,
     plan: ExcitationPlan,

@@ -20,6 +20,7 @@ use crate::model::Model;
 
 /// What changed in the thruster configuration, as far as the sender could say.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub enum ThrusterChange {
     /// Something changed, nobody says what: nothing is carried over.
     #[default]

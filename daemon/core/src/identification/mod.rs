@@ -182,6 +182,7 @@ impl IdentificationConfig {
 /// the rate, which the fit uses, still does. The generator is deterministic: the same seed
 /// gives the same sequence, and runs are reproducible.
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Dither {
     n: usize,
     hold_s: f64,

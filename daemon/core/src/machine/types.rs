@@ -14,6 +14,7 @@ pub const NO_IMU_YET: &str =
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
+#[derive(serde::Deserialize)]
 pub enum State {
     Idle,
     MeasureNoise,
@@ -51,6 +52,7 @@ impl State {
 
 /// Declared thruster layout.
 #[derive(Debug, Clone, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Geometry {
     pub positions: Vec<[f64; 3]>,
     pub directions: Vec<[f64; 3]>,
@@ -64,6 +66,7 @@ impl Geometry {
 
 /// One validated IMU sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct ImuInput {
     pub seq: u64,
     pub t_ns: u64,
@@ -75,6 +78,7 @@ pub struct ImuInput {
 
 /// Why the thrusters are doing what they do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub enum Mode {
     Neutral,
     Estimating,
@@ -83,6 +87,7 @@ pub enum Mode {
 
 /// The answer to one IMU sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Command {
     pub count: usize,
     pub thrust: [f64; MAX_THRUSTERS],
@@ -102,6 +107,7 @@ impl Command {
 
 /// Something the IO layer must publish or persist.
 #[derive(Debug, Clone, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub enum Event {
     /// A new current model (publish it; save it when estimated).
     ModelSwapped(Box<Model>),
@@ -121,6 +127,7 @@ pub enum Event {
 
 /// An operator request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub enum Request {
     Estimate,
     Abort,
@@ -141,6 +148,7 @@ pub use crate::identification::carry_over::ThrusterChange;
 
 /// A reconfiguration event, validated.
 #[derive(Debug, Clone, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Reconfig {
     pub count: usize,
     pub geometry: Option<Geometry>,
@@ -153,6 +161,7 @@ pub struct Reconfig {
 /// An operator's setpoint: the attitude wanted, which of roll, pitch, yaw keep the value held
 /// now instead, and what to do with depth.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct SetpointInput {
     pub attitude: UnitQuaternion<f64>,
     pub keep: [bool; 3],
@@ -161,6 +170,7 @@ pub struct SetpointInput {
 
 /// The depth part of an operator's setpoint.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub enum DepthInput {
     /// Keep the depth held now, or stay free if none is held. What a setpoint that does not
     /// mention depth means: an attitude command must never let go of a held depth.
@@ -173,6 +183,7 @@ pub enum DepthInput {
 
 /// Status numbers for the status message.
 #[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(serde::Deserialize)]
 pub struct StatusSnapshot {
     pub state: State,
     pub pulse: usize,

@@ -21,6 +21,7 @@ type Vec7 = SVector<f64, 7>;
 
 /// A correction to apply to the navigation state.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Correction {
     pub depth: f64,
     pub velocity_ned: Vector3<f64>,
@@ -31,6 +32,7 @@ pub struct Correction {
 
 /// Settings of the bias filter (1-sigma values).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct FilterNoise {
     /// Depth sensor noise per sample, m.
     pub depth_std_m: f64,
@@ -48,6 +50,7 @@ pub struct FilterNoise {
 }
 
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct BiasFilter {
     noise: FilterNoise,
     p: Mat7,

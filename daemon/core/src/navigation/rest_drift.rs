@@ -25,6 +25,7 @@ pub const MAX_DRIFT_MPS: f64 = 1.0;
 
 /// Running sums for depth = a + b t + c t^2 over the rest.
 #[derive(Debug, Clone, Default)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct RestDrift {
     t0: Option<f64>,
     last_t: f64,

@@ -361,6 +361,7 @@ impl RefinementConfig {
 
 /// The verdict of one window.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct WindowVerdict {
     /// The window's rotation-rows error bound.
     pub rel_err_rot: f64,
@@ -424,6 +425,7 @@ const CHANGE_SIGMA_FLOOR: f64 = 0.01;
 
 /// One window under way.
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 struct Window {
     est: Estimator,
     start_ns: u64,
@@ -434,6 +436,7 @@ struct Window {
 
 /// The background fit.
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Refiner {
     cfg: RefinementConfig,
     /// Since when the vehicle has been settled (attitude error small): a window opens only
@@ -519,6 +522,11 @@ impl Refiner {
     }
 
     /// Window fits not back by their due tick, since start.
+    /// Jobs out with the caller, result not back (a checkpoint waits until there are none).
+    pub fn jobs_out(&self) -> usize {
+        self.solver.out_with_caller()
+    }
+
     pub fn late_solves(&self) -> u64 {
         self.solver.late()
     }

@@ -20,6 +20,7 @@ use super::DynamicRun;
 
 /// Where and how finely the lag is searched.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct LagRange {
     /// Smallest and largest lag considered, s.
     pub min_s: f64,
@@ -45,6 +46,7 @@ impl Default for LagRange {
 
 /// The learned lag and the fit made with it.
 #[derive(Debug, Clone)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct LagFit {
     /// The maximum-likelihood lag, s.
     pub lag_s: f64,
