@@ -4,6 +4,7 @@
 //! the daemon binary reads and writes them.
 
 pub mod attitude;
+pub mod checkpoint_parts;
 pub mod config;
 pub mod controller;
 pub mod driver_watch;

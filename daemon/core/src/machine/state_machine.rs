@@ -212,6 +212,14 @@ impl Machine {
         ]
     }
 
+    /// Whether the state is small now (about 0.2 MB): no estimation under way and no
+    /// refinement window open. Their estimators hold every sample of the run or window (1-3 MB
+    /// at 200 Hz, up to 4 MB more at 1 kHz), too much to serialise on the control thread; the
+    /// daemon takes its checkpoints only when this holds (`[checkpoint]`).
+    pub fn checkpoint_small(&self) -> bool {
+        !self.state.is_estimating() && !self.refiner.window_open()
+    }
+
     /// A restored machine (`checkpoint::restore`) is given the configuration it ran with:
     /// the settings are published on their own (`config`), not in every checkpoint.
     pub(super) fn with_setup(mut self, setup: MachineSetup) -> Self {

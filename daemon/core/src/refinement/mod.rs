@@ -522,6 +522,11 @@ impl Refiner {
     }
 
     /// Window fits not back by their due tick, since start.
+    /// A window is open: its estimator holds the window's samples (a megabyte or more).
+    pub fn window_open(&self) -> bool {
+        self.window.is_some()
+    }
+
     /// Jobs out with the caller, result not back (a checkpoint waits until there are none).
     pub fn jobs_out(&self) -> usize {
         self.solver.out_with_caller()
