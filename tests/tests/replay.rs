@@ -302,7 +302,10 @@ fn start_recorder(world: &system_tests::World, out: &Path) -> system_tests::Proc
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
     while !out.exists() {
         assert!(recorder.is_running(), "{}", recorder.log_text());
-        assert!(std::time::Instant::now() < deadline, "no {out_arg} after 60 s");
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no {out_arg} after 60 s"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     recorder
@@ -316,7 +319,10 @@ fn stop_recorder(mut recorder: system_tests::Proc) -> String {
         .expect("the recorder exits on SIGINT");
     let log = recorder.log_text();
     assert!(status.success(), "recorder: {log}");
-    assert!(log.contains("; lost 0"), "the recorder lost messages: {log}");
+    assert!(
+        log.contains("; lost 0"),
+        "the recorder lost messages: {log}"
+    );
     log
 }
 
@@ -372,6 +378,12 @@ fn a_late_recording_replays_from_its_first_checkpoint_and_reproduces_the_swapped
     sim.signal("INT");
     let _ = sim.wait_timeout(Duration::from_secs(30));
     assert!(daemon.stop().success(), "{}", daemon.log_text());
+    let log = daemon.log_text();
+    let first = log
+        .lines()
+        .find(|l| l.contains("first checkpoint published"))
+        .unwrap_or_else(|| panic!("no checkpoint published: {log}"));
+    println!("daemon: {first}");
 
     // The late file: the configuration (history 1), checkpoints taken after it joined.
     let files = std::slice::from_ref(&late);
@@ -403,11 +415,22 @@ fn a_late_recording_replays_from_its_first_checkpoint_and_reproduces_the_swapped
     assert!(out.contains("started from checkpoint "), "{out}");
     let j = replay_json(&[], &late);
     let c = &j["checkpoint"];
-    assert_eq!(c["model_version"], 0, "the first checkpoint is before any model: {c}");
+    assert_eq!(
+        c["model_version"], 0,
+        "the first checkpoint is before any model: {c}"
+    );
     assert!(c["imu_count"].as_u64().unwrap() >= 2000, "{c}");
     assert_eq!(j["reproduces_recording"], true, "{}", j["first_difference"]);
-    assert!(j["commands_diverged_at"].is_null(), "{}", j["commands_diverged_at"]);
-    assert!(j["divergences"].as_array().unwrap().is_empty(), "{}", j["divergences"]);
+    assert!(
+        j["commands_diverged_at"].is_null(),
+        "{}",
+        j["commands_diverged_at"]
+    );
+    assert!(
+        j["divergences"].as_array().unwrap().is_empty(),
+        "{}",
+        j["divergences"]
+    );
     let compared = j["commands_compared"].as_u64().unwrap();
     // Every sample from the checkpoint (at most 21 vehicle-s) to the end (at least 29 s), at 200 Hz.
     assert!(compared >= 1600, "{compared} commands compared");
@@ -435,7 +458,10 @@ fn a_late_recording_replays_from_its_first_checkpoint_and_reproduces_the_swapped
     // The recording made during the estimation only: no checkpoint, refused saying so.
     let o = replay(&[], &during);
     let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "a recording without a checkpoint replayed: {stderr}");
+    assert!(
+        !o.status.success(),
+        "a recording without a checkpoint replayed: {stderr}"
+    );
     assert!(
         stderr.contains("no checkpoint of the daemon's state to start from"),
         "{stderr}"

@@ -149,7 +149,11 @@ mod tests {
     fn parts_join_back_to_the_bytes_in_any_order() {
         let bytes: Vec<u8> = (0..100_000u32).map(|i| (i * 7919 % 251) as u8).collect();
         let parts = split(4, &place(), &bytes, 10).unwrap();
-        assert_eq!(parts.len(), 9, "100 kB is 133 kB of base64: 9 parts of 16 KiB");
+        assert_eq!(
+            parts.len(),
+            9,
+            "100 kB is 133 kB of base64: 9 parts of 16 KiB"
+        );
         assert_eq!(parts[0].seq, 10);
         assert!(parts.iter().all(|m| m.parts == 9 && m.id == 4));
         let mut refs: Vec<&CheckpointMsg> = parts.iter().collect();
@@ -173,7 +177,10 @@ mod tests {
         let mut bad = parts.clone();
         bad[2].data.set("!!!!");
         let refs: Vec<&CheckpointMsg> = bad.iter().collect();
-        assert!(matches!(join(&refs), Err(PartsError::NotBase64 { id: 1, .. })));
+        assert!(matches!(
+            join(&refs),
+            Err(PartsError::NotBase64 { id: 1, .. })
+        ));
         let mut moved = parts.clone();
         moved[3].imu_count += 1;
         let refs: Vec<&CheckpointMsg> = moved.iter().collect();

@@ -164,8 +164,7 @@ impl MonitorConfig {
 }
 
 /// A verdict: the model mispredicts this axis.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Mismatch {
     /// 0 roll, 1 pitch, 2 yaw.
     pub axis: usize,
@@ -188,8 +187,7 @@ impl std::fmt::Display for Mismatch {
 }
 
 /// Running integrals whose block means are regressed.
-#[derive(Debug, Clone, Copy, Default)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 struct Integrals {
     /// Body rate (the measured quantity itself, not integrated).
     rate: [f64; 3],
@@ -225,8 +223,7 @@ impl Integrals {
 }
 
 /// Normal equations of one axis over one stretch of data.
-#[derive(Debug, Clone, Copy)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 struct Normal {
     #[serde(with = "crate::serde_arrays::matrix")]
     a: [[f64; P_MAX]; P_MAX],
@@ -268,8 +265,7 @@ impl Normal {
 }
 
 /// One stretch of data: the three axes and its (forgetting-weighted) block count.
-#[derive(Debug, Clone, Copy, Default)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 struct Stretch {
     axes: [Normal; 3],
     blocks: f64,

@@ -78,8 +78,7 @@ impl SupplyConfig {
 }
 
 /// The supply as the machine knows it, and the referral of commands.
-#[derive(Debug, Clone)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Supply {
     config: SupplyConfig,
     /// Not in a checkpoint: the compiled-in table, the same in every process.

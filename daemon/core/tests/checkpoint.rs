@@ -28,8 +28,7 @@ fn setup(n: usize) -> MachineSetup {
 /// One sample from the simulator, as `Run::tick` makes it.
 fn next_input(run: &mut Run) -> ImuInput {
     let period = run.sim.sample_period_ns();
-    run.sim
-        .step_to((run.sim.time_ns() / period + 1) * period);
+    run.sim.step_to((run.sim.time_ns() / period + 1) * period);
     let r = run.sim.sample();
     ImuInput {
         seq: 0,
@@ -44,7 +43,10 @@ fn next_input(run: &mut Run) -> ImuInput {
 fn same_command(a: &Command, b: &Command) -> bool {
     a.count == b.count
         && a.mode == b.mode
-        && a.thrust.iter().zip(&b.thrust).all(|(x, y)| x.to_bits() == y.to_bits())
+        && a.thrust
+            .iter()
+            .zip(&b.thrust)
+            .all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 /// What one comparison saw.
@@ -62,7 +64,11 @@ fn continue_both(run: &mut Run, samples: usize, requests: &[(usize, Request)]) -
     let started = Instant::now();
     let bytes = run.machine.checkpoint().unwrap();
     let encode_us = started.elapsed().as_secs_f64() * 1e6;
-    println!("  state {:?}: {:?}", run.machine.state(), run.machine.checkpoint_breakdown());
+    println!(
+        "  state {:?}: {:?}",
+        run.machine.state(),
+        run.machine.checkpoint_breakdown()
+    );
     // Events taken before the checkpoint are outputs already handed out; the copy has none.
     run.machine.take_events();
     let mut copy = Machine::restore(setup(run.sim.thruster_count()), &bytes).unwrap();
@@ -111,7 +117,10 @@ fn a_restored_machine_goes_on_exactly_as_the_original_noise_free() {
     // Idle: the estimation is asked for after the checkpoint and completes in both.
     let c = continue_both(&mut run, 4000, &[(10, Request::Estimate)]);
     report("idle", &c);
-    assert!(c.swaps >= 1, "the estimation after the checkpoint swapped a model in");
+    assert!(
+        c.swaps >= 1,
+        "the estimation after the checkpoint swapped a model in"
+    );
     assert_eq!(run.machine.state(), State::Active);
 }
 

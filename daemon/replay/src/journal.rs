@@ -212,7 +212,10 @@ mod tests {
         assert!(check_after(&j[1..], 4).unwrap().is_empty());
         // Entry 2 lost: the replay would miss it.
         let lost = [j[1], j[3]];
-        assert_eq!(check_after(&lost, 2), Err(JournalError::Gap { from: 2, to: 2 }));
+        assert_eq!(
+            check_after(&lost, 2),
+            Err(JournalError::Gap { from: 2, to: 2 })
+        );
         // A start after the checkpoint is a second session.
         let mut again = j.clone();
         again.push(entry(4, InputKind::Start, 0));

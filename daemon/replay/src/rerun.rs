@@ -489,8 +489,7 @@ mod tests {
             ..Place::default()
         };
         let resume = Resume {
-            machine: Machine::restore(cfg.machine_setup(), &daemon.checkpoint().unwrap())
-                .unwrap(),
+            machine: Machine::restore(cfg.machine_setup(), &daemon.checkpoint().unwrap()).unwrap(),
             place,
         };
         // Entry 2 right after the checkpoint's sample, entry 3 later: both refused (no model).
@@ -504,8 +503,7 @@ mod tests {
         assert_eq!(o.diverged_at, None);
         // An entry placed at another sample than the checkpoint's count says is found.
         let resume = Resume {
-            machine: Machine::restore(cfg.machine_setup(), &daemon.checkpoint().unwrap())
-                .unwrap(),
+            machine: Machine::restore(cfg.machine_setup(), &daemon.checkpoint().unwrap()).unwrap(),
             place,
         };
         let inputs = [hold(2, 30, true), entry(3, InputKind::Request, 40, 41)];

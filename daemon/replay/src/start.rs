@@ -95,7 +95,10 @@ pub fn choose<'a>(
         passed: if passed.is_empty() {
             "the recording holds no checkpoint of the daemon's state to start from instead (a daemon with [checkpoint] enabled = false, one before checkpoints existed, or a recording shorter than checkpoint.period_s)".into()
         } else {
-            format!("no checkpoint in the recording to start from instead: {}", passed.join("; "))
+            format!(
+                "no checkpoint in the recording to start from instead: {}",
+                passed.join("; ")
+            )
         },
     })
 }
@@ -143,7 +146,10 @@ mod tests {
 
     #[test]
     fn a_whole_journal_starts_at_the_daemons_start() {
-        let j = [entry(0, InputKind::Start, 0), entry(1, InputKind::Request, 5)];
+        let j = [
+            entry(0, InputKind::Start, 0),
+            entry(1, InputKind::Request, 5),
+        ];
         let s = choose(&j, &checkpoint(0, 1, 3), &DaemonConfig::default()).unwrap();
         assert!(s.checkpoint.is_none() && s.resume.is_none());
         assert_eq!(s.inputs.len(), 2);
@@ -152,10 +158,17 @@ mod tests {
     #[test]
     fn a_late_journal_starts_at_the_first_checkpoint_it_covers() {
         let cfg = DaemonConfig::default();
-        let j = [entry(5, InputKind::Request, 100), entry(6, InputKind::Request, 300)];
+        let j = [
+            entry(5, InputKind::Request, 100),
+            entry(6, InputKind::Request, 300),
+        ];
         // Checkpoint 0 was taken before the recording's first entry; 1 covers it; 2 later.
-        let parts: Vec<CheckpointMsg> = [checkpoint(0, 4, 50), checkpoint(1, 6, 200), checkpoint(2, 7, 400)]
-            .concat();
+        let parts: Vec<CheckpointMsg> = [
+            checkpoint(0, 4, 50),
+            checkpoint(1, 6, 200),
+            checkpoint(2, 7, 400),
+        ]
+        .concat();
         let s = choose(&j, &parts, &cfg).unwrap();
         let c = s.checkpoint.unwrap();
         assert_eq!((c.id, c.place.journal_next, c.place.imu_count), (1, 6, 200));
@@ -168,7 +181,10 @@ mod tests {
         let cfg = DaemonConfig::default();
         let j = [entry(5, InputKind::Request, 100)];
         let e = choose(&j, &[], &cfg).err().unwrap().to_string();
-        assert!(e.contains("starts at entry 5") && e.contains("no checkpoint"), "{e}");
+        assert!(
+            e.contains("starts at entry 5") && e.contains("no checkpoint"),
+            "{e}"
+        );
         let parts = checkpoint(0, 2, 50);
         let mut later = checkpoint(1, 9, 500);
         later.remove(0);

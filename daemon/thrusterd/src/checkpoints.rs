@@ -102,7 +102,13 @@ impl Checkpoints {
                 place.imu_count
             );
         } else {
-            debug!(id = self.id, bytes, parts = parts.len(), us, "checkpoint published");
+            debug!(
+                id = self.id,
+                bytes,
+                parts = parts.len(),
+                us,
+                "checkpoint published"
+            );
         }
         self.id += 1;
     }
@@ -111,10 +117,7 @@ impl Checkpoints {
         // A lost checkpoint costs a late recording its start there, never the daemon anything.
         self.failures += 1;
         if self.failures < 5 || self.failures.is_power_of_two() {
-            warn!(
-                failures = self.failures,
-                "checkpoint not published: {why}"
-            );
+            warn!(failures = self.failures, "checkpoint not published: {why}");
         }
     }
 }

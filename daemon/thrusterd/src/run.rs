@@ -26,8 +26,8 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
-    CheckpointMsg, ConfigMsg, ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample, InputKind,
-    InputMsg, ModelMsg, ReconfigEvent, RequestKind, ResponseCode, Setpoint, StatusMsg,
+    CheckpointMsg, ConfigMsg, ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample,
+    InputKind, InputMsg, ModelMsg, ReconfigEvent, RequestKind, ResponseCode, Setpoint, StatusMsg,
     TelemetryMsg, ThrustCommand, MAX_THRUSTERS,
 };
 use thrusterd_core::config::DaemonConfig;

@@ -47,7 +47,9 @@ impl Machine {
         let body = bytes
             .strip_prefix(MAGIC.as_slice())
             .ok_or(CheckpointError::NotACheckpoint)?;
-        let (format, body) = body.split_at_checked(4).ok_or(CheckpointError::NotACheckpoint)?;
+        let (format, body) = body
+            .split_at_checked(4)
+            .ok_or(CheckpointError::NotACheckpoint)?;
         let found = u32::from_le_bytes(format.try_into().expect("4 bytes"));
         if found != FORMAT {
             return Err(CheckpointError::Format { found });

@@ -384,8 +384,7 @@ impl EstimationRun {
 
 /// What the rest before an estimation measured, for its navigation: the mean raw specific
 /// force (the starting attitude) and the depth's trend (the vertical velocity at its end).
-#[derive(Debug, Default)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Default, serde::Serialize, serde::Deserialize)]
 pub(super) struct Rest {
     force_sum: Vector3<f64>,
     force_samples: u64,

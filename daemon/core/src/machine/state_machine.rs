@@ -33,8 +33,7 @@ struct Levelling {
 }
 
 /// What to go back to after a fault.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 enum Resume {
     Idle,
     Active,

@@ -51,8 +51,7 @@ impl State {
 }
 
 /// Declared thruster layout.
-#[derive(Debug, Clone, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Geometry {
     pub positions: Vec<[f64; 3]>,
     pub directions: Vec<[f64; 3]>,
@@ -65,8 +64,7 @@ impl Geometry {
 }
 
 /// One validated IMU sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImuInput {
     pub seq: u64,
     pub t_ns: u64,
@@ -77,8 +75,7 @@ pub struct ImuInput {
 }
 
 /// Why the thrusters are doing what they do.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Mode {
     Neutral,
     Estimating,
@@ -86,8 +83,7 @@ pub enum Mode {
 }
 
 /// The answer to one IMU sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Command {
     pub count: usize,
     pub thrust: [f64; MAX_THRUSTERS],
@@ -106,8 +102,7 @@ impl Command {
 }
 
 /// Something the IO layer must publish or persist.
-#[derive(Debug, Clone, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Event {
     /// A new current model (publish it; save it when estimated).
     ModelSwapped(Box<Model>),
@@ -126,8 +121,7 @@ pub enum Event {
 }
 
 /// An operator request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Request {
     Estimate,
     Abort,
@@ -147,8 +141,7 @@ pub struct Refused(pub String);
 pub use crate::identification::carry_over::ThrusterChange;
 
 /// A reconfiguration event, validated.
-#[derive(Debug, Clone, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Reconfig {
     pub count: usize,
     pub geometry: Option<Geometry>,
@@ -160,8 +153,7 @@ pub struct Reconfig {
 
 /// An operator's setpoint: the attitude wanted, which of roll, pitch, yaw keep the value held
 /// now instead, and what to do with depth.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SetpointInput {
     pub attitude: UnitQuaternion<f64>,
     pub keep: [bool; 3],
@@ -169,8 +161,7 @@ pub struct SetpointInput {
 }
 
 /// The depth part of an operator's setpoint.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum DepthInput {
     /// Keep the depth held now, or stay free if none is held. What a setpoint that does not
     /// mention depth means: an attitude command must never let go of a held depth.
@@ -182,8 +173,7 @@ pub enum DepthInput {
 }
 
 /// Status numbers for the status message.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[derive(serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct StatusSnapshot {
     pub state: State,
     pub pulse: usize,

@@ -46,8 +46,7 @@ use crate::estimator::dynamic::regressors::{terms, TERMS};
 use crate::model::Model;
 
 /// The change test's settings (documented on `RefinementConfig`'s `change_*` keys).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ChangeSettings {
     pub tau_s: f64,
     pub horizon_s: f64,
@@ -69,8 +68,7 @@ pub struct ChangeSettings {
 }
 
 /// The test's largest statistic at one sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ChangeStat {
     /// Thruster, 0-based.
     pub thruster: usize,
@@ -83,8 +81,7 @@ pub struct ChangeStat {
 }
 
 /// One candidate change time and the regression since then, per thruster.
-#[derive(Debug, Clone, Copy)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 struct Candidate {
     live: bool,
     /// The rows still judged: an axis that left its hold since `start_ns` is not (its
@@ -116,8 +113,7 @@ impl Candidate {
 }
 
 /// The test's state: observer, noise statistics and candidates.
-#[derive(Debug, Clone)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ChangeTest {
     s: ChangeSettings,
     candidates: Vec<Candidate>,

@@ -360,8 +360,7 @@ impl RefinementConfig {
 }
 
 /// The verdict of one window.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WindowVerdict {
     /// The window's rotation-rows error bound.
     pub rel_err_rot: f64,
@@ -424,8 +423,7 @@ const SETTLE_S: f64 = 1.0;
 const CHANGE_SIGMA_FLOOR: f64 = 0.01;
 
 /// One window under way.
-#[derive(Debug, Clone)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct Window {
     est: Estimator,
     start_ns: u64,
@@ -435,8 +433,7 @@ struct Window {
 }
 
 /// The background fit.
-#[derive(Debug, Clone)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Refiner {
     cfg: RefinementConfig,
     /// Since when the vehicle has been settled (attitude error small): a window opens only

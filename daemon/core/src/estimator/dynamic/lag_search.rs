@@ -19,8 +19,7 @@ use nalgebra::Vector3;
 use super::DynamicRun;
 
 /// Where and how finely the lag is searched.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LagRange {
     /// Smallest and largest lag considered, s.
     pub min_s: f64,
@@ -45,8 +44,7 @@ impl Default for LagRange {
 }
 
 /// The learned lag and the fit made with it.
-#[derive(Debug, Clone)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct LagFit {
     /// The maximum-likelihood lag, s.
     pub lag_s: f64,

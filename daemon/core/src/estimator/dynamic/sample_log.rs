@@ -23,8 +23,7 @@ const CHUNKS: usize = 64;
 pub const CAPACITY: usize = CHUNK * CHUNKS;
 
 /// One sample as the fit sees it, after the navigation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Navigated {
     /// Vehicle time, s.
     pub t_s: f64,

@@ -32,8 +32,7 @@ use crate::estimator::linalg::sym_pinv;
 pub const CLUSTERS: usize = 32;
 
 /// The fit: coefficients, the scaled pseudo-inverse of the Gram matrix, residuals.
-#[derive(Debug, Clone)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SegmentedSolution {
     /// K x 3 coefficients.
     pub theta: DMatrix<f64>,
@@ -60,8 +59,7 @@ impl SegmentedSolution {
     }
 }
 
-#[derive(Debug, Clone)]
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SegmentedLs {
     k: usize,
     gram: DMatrix<f64>,
