@@ -20,7 +20,7 @@ pub const CHECKPOINT_MAX_PARTS: u32 = 64;
 /// joins the parts of one `id`, in order, and decodes them.
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
-#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[type_name("thrusterd.CheckpointMsg.v1")]
 pub struct CheckpointMsg {
     /// Sequence number, +1 per message (per part).
@@ -54,26 +54,6 @@ pub struct CheckpointMsg {
     /// The part's share of the state, base64 (standard alphabet, padded only in the last
     /// part).
     pub data: FixedText<CHECKPOINT_PART_CAPACITY>,
-}
-
-impl Default for CheckpointMsg {
-    fn default() -> Self {
-        Self {
-            seq: 0,
-            id: 0,
-            imu_count: 0,
-            imu_seq: 0,
-            t_ns: 0,
-            journal_next: 0,
-            model_version: 0,
-            bytes: 0,
-            part: 0,
-            parts: 0,
-            reason: 0,
-            reserved: 0,
-            data: FixedText::new(),
-        }
-    }
 }
 
 impl CheckpointMsg {
