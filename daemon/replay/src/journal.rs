@@ -218,7 +218,7 @@ mod tests {
         );
         // A start after the checkpoint is a second session.
         let mut again = j.clone();
-        again.push(entry(4, InputKind::Start, 0));
+        again.push(entry(4, InputKind::Start, 900));
         assert!(matches!(
             check_after(&again, 2),
             Err(JournalError::SecondStart { seq: 4, .. })
