@@ -297,7 +297,7 @@ fn every_declared_schema_passes_the_foxglove_apps_parser() {
     // Both apps' parsers on every schema.
     assert_eq!(
         report["checked"].as_array().unwrap().len(),
-        2 * (14 + 2 * 6),
+        2 * (15 + 2 * 6),
         "{report}"
     );
     let parser = |p: &str| {
