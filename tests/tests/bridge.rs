@@ -279,7 +279,7 @@ fn every_declared_schema_passes_the_foxglove_apps_parser() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let declared: Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(declared["channels"].as_array().unwrap().len(), 14);
+    assert_eq!(declared["channels"].as_array().unwrap().len(), 15);
     let mut node = system_tests::node::script("check_schemas.js")
         .stdin(std::process::Stdio::piped())
         .stdout(std::process::Stdio::piped())
@@ -297,7 +297,7 @@ fn every_declared_schema_passes_the_foxglove_apps_parser() {
     // Both apps' parsers on every schema.
     assert_eq!(
         report["checked"].as_array().unwrap().len(),
-        2 * (14 + 2 * 6),
+        2 * (15 + 2 * 6),
         "{report}"
     );
     let parser = |p: &str| {

@@ -31,7 +31,7 @@ impl Default for AttitudeConfig {
 
 const G: f64 = crate::estimator::response::GRAVITY;
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct AttitudeFilter {
     cfg: AttitudeConfig,
     q: UnitQuaternion<f64>,

@@ -35,6 +35,7 @@ pub struct DaemonConfig {
     pub identification: IdentificationConfig,
     pub refinement: RefinementConfig,
     pub supply: SupplyConfig,
+    pub checkpoint: CheckpointSection,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -139,6 +140,30 @@ impl Default for TelemetrySection {
 }
 
 /// The thrusters the vehicle starts with.
+/// Checkpoints of the state machine on the `checkpoint` topic, where the replay of a
+/// recording started late begins (docs/recording.md, "Checkpoints").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CheckpointSection {
+    /// Publish checkpoints at all (default true). false: a recording that did not start with
+    /// the daemon cannot be replayed.
+    pub enabled: bool,
+    /// One every `period_s` vehicle seconds (default 10; 0: only after model swaps), taken at
+    /// the first sample after that where the state is small: no estimation under way and no
+    /// refinement window open (their sample logs are megabytes). Also one after each model
+    /// swap, with the same rule. 0-3600.
+    pub period_s: f64,
+}
+
+impl Default for CheckpointSection {
+    fn default() -> Self {
+        CheckpointSection {
+            enabled: true,
+            period_s: 10.0,
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VehicleSection {
@@ -269,6 +294,11 @@ impl DaemonConfig {
         let a = &self.attitude;
         let mut floats: Vec<(String, f64, Range)> = vec![
             ("machine.noise_s".into(), m.noise_s, Range::above(0.0)),
+            (
+                "checkpoint.period_s".into(),
+                self.checkpoint.period_s,
+                Range::closed(0.0, 3600.0),
+            ),
             (
                 "supply.reference_voltage_v".into(),
                 self.supply.reference_voltage_v,

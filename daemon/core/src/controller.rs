@@ -51,7 +51,7 @@ impl Default for ControllerConfig {
 }
 
 /// What the vehicle should hold.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Target {
     pub attitude: UnitQuaternion<f64>,
     /// Depth to hold, m (positive down); None = do not control depth.
@@ -59,7 +59,7 @@ pub struct Target {
 }
 
 /// One control tick's measurements.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct Measured {
     pub attitude: UnitQuaternion<f64>,
     /// Body rates with the gyro bias removed, rad/s.
@@ -67,7 +67,7 @@ pub struct Measured {
     pub depth: Option<f64>,
 }
 
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Controller {
     cfg: ControllerConfig,
     att_integral: Vector3<f64>,

@@ -10,7 +10,7 @@
 use thruster_protocol::{DriverStatusMsg, OutputState};
 
 /// Whether the daemon's commands can reach the water.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum OutputVerdict {
     /// Usable (or not known: a driver that publishes no status is trusted as before).
     Usable,
@@ -19,7 +19,7 @@ pub enum OutputVerdict {
 }
 
 /// The latest driver report and the verdict it led to.
-#[derive(Debug, Default, Clone)]
+#[derive(Debug, Default, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DriverWatch {
     last: Option<DriverStatusMsg>,
     /// Rejections the latest report counted since the one before it.

@@ -4,6 +4,7 @@
 //! the daemon binary reads and writes them.
 
 pub mod attitude;
+pub mod checkpoint_parts;
 pub mod config;
 pub mod controller;
 pub mod driver_watch;
@@ -15,6 +16,7 @@ pub mod model_file;
 pub mod monitor;
 pub mod navigation;
 pub mod refinement;
+mod serde_arrays;
 pub mod solve;
 pub mod study;
 pub mod supply;

@@ -25,7 +25,7 @@ pub enum ModelSource {
 }
 
 /// A thruster model ready for control.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Model {
     /// Increases by one with every swap; 0 = no model yet.
     pub version: u64,

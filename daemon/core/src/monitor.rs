@@ -164,7 +164,7 @@ impl MonitorConfig {
 }
 
 /// A verdict: the model mispredicts this axis.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Mismatch {
     /// 0 roll, 1 pitch, 2 yaw.
     pub axis: usize,
@@ -187,7 +187,7 @@ impl std::fmt::Display for Mismatch {
 }
 
 /// Running integrals whose block means are regressed.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 struct Integrals {
     /// Body rate (the measured quantity itself, not integrated).
     rate: [f64; 3],
@@ -223,14 +223,17 @@ impl Integrals {
 }
 
 /// Normal equations of one axis over one stretch of data.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 struct Normal {
+    #[serde(with = "crate::serde_arrays::matrix")]
     a: [[f64; P_MAX]; P_MAX],
     /// Against the unexplained rate change, and its sum of squares.
+    #[serde(with = "crate::serde_arrays::array")]
     b: [f64; P_MAX],
     yy: f64,
     /// Against the predicted rate change, and its sum of squares: how much thrust-driven motion
     /// the model predicts beyond what the nuisance terms could also explain.
+    #[serde(with = "crate::serde_arrays::array")]
     b_pred: [f64; P_MAX],
     pp: f64,
 }
@@ -262,13 +265,14 @@ impl Normal {
 }
 
 /// One stretch of data: the three axes and its (forgetting-weighted) block count.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 struct Stretch {
     axes: [Normal; 3],
     blocks: f64,
     seconds: f64,
 }
 
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct ModelMonitor {
     cfg: MonitorConfig,
     n: usize,

@@ -20,7 +20,7 @@ use crate::estimator::{Estimate, Estimator, StopDecision};
 use crate::model::Model;
 
 /// Who runs the machine's solve jobs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum SolverMode {
     /// The machine runs each job itself, on the sample that submits it (in-process users:
     /// tests, replay, the lab). Results are still applied at their due sample.
@@ -49,7 +49,7 @@ pub(crate) fn owner_of(id: u64) -> u64 {
 }
 
 /// What a job computes.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 enum Work {
     /// After a pulse: the estimate and the stop decision.
     Pulse,
@@ -65,7 +65,7 @@ enum Work {
 }
 
 /// What the machine does with a result when it is applied.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub(crate) enum Purpose {
     /// Progress only (the run went on pulsing): the estimate is kept for status.
     Progress,
@@ -80,7 +80,7 @@ pub(crate) enum Purpose {
 }
 
 /// One solve, as a self-contained value: everything needed to compute its result.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SolveJob {
     id: u64,
     due_ns: u64,
@@ -145,7 +145,7 @@ impl SolveJob {
 }
 
 /// A job's result.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SolveResult {
     id: u64,
     pub(crate) estimate: Estimate,
@@ -178,7 +178,7 @@ impl SolveResult {
 }
 
 /// A job submitted and not yet applied.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct Pending {
     id: u64,
     due_ns: u64,
@@ -189,7 +189,7 @@ struct Pending {
 }
 
 /// The machine's side of the solves: jobs out, results held until due.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub(crate) struct Solver {
     mode: SolverMode,
     budget_ns: u64,
@@ -335,6 +335,13 @@ impl Solver {
                 .map(|p| (p.id, p.due_ns, p.result.is_some())),
             t_ns,
         )
+    }
+
+    /// Jobs the caller took (External) whose result has not come back: their work is on the
+    /// caller's worker, not in this state, so a checkpoint taken now would lack it.
+    pub(crate) fn out_with_caller(&self) -> usize {
+        let waiting = self.pending.iter().filter(|p| p.result.is_none()).count();
+        waiting.saturating_sub(self.outbox.len())
     }
 
     /// The oldest result due at `t_ns`, in submission order. A due job without its result

@@ -78,9 +78,11 @@ impl SupplyConfig {
 }
 
 /// The supply as the machine knows it, and the referral of commands.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Supply {
     config: SupplyConfig,
+    /// Not in a checkpoint: the compiled-in table, the same in every process.
+    #[serde(skip, default = "ThrusterTable::t200")]
     table: &'static ThrusterTable,
     voltage_v: Option<f64>,
     /// Full forward and reverse thrust at the reference voltage, N (reverse negative): the

@@ -52,6 +52,7 @@ stamped! {
     DriverStatusMsg: |_: &DriverStatusMsg| None,
     InputMsg: |m: &InputMsg| Some(m.t_ns),
     ConfigMsg: |_: &ConfigMsg| None,
+    CheckpointMsg: |m: &CheckpointMsg| Some(m.t_ns),
 }
 
 /// Sequence-gap accounting of one topic.
@@ -223,7 +224,9 @@ macro_rules! every_topic {
             VehicleStateMsg,
             // What `thrusterd replay` needs besides the IMU stream (docs/recording.md).
             InputMsg,
-            ConfigMsg
+            ConfigMsg,
+            // Where the replay of a recording started late begins.
+            CheckpointMsg
         )
     };
 }
@@ -285,7 +288,7 @@ mod tests {
         // (a custom Serialize, a serde attribute, the row rewrite) to its declared schema, so a
         // field that reaches the wire without a schema entry fails here.
         let all = every_default_message();
-        assert_eq!(all.len(), 14);
+        assert_eq!(all.len(), 15);
         for (topic, value, schema) in all {
             let mut out = Vec::new();
             crate::schema::mismatches(&schema, &value, topic, &mut out);

@@ -44,9 +44,32 @@ pub fn check(inputs: &[InputMsg]) -> Result<&[InputMsg], JournalError> {
     if first.code != 0 {
         return Err(JournalError::StartedWithModel);
     }
-    let mut last_count = 0;
+    check_entries(inputs, 0)
+}
+
+/// The entries from a checkpoint on: those with `seq >= journal_next` (the checkpoint holds
+/// everything before), checked as `check` checks a whole journal. Every entry from
+/// `journal_next` must be in the recording: none may be missing before the first one kept.
+pub fn check_after(inputs: &[InputMsg], journal_next: u64) -> Result<&[InputMsg], JournalError> {
+    let from = inputs.partition_point(|m| m.seq < journal_next);
+    let after = &inputs[from..];
+    if let Some(first) = after.first() {
+        if first.seq != journal_next {
+            return Err(JournalError::Gap {
+                from: journal_next,
+                to: first.seq - 1,
+            });
+        }
+    }
+    check_entries(after, journal_next)
+}
+
+/// Every entry numbered from `first_seq` without a gap, in sample order, of a known kind, with
+/// a payload the daemon would have taken, and no second start or loaded model.
+fn check_entries(inputs: &[InputMsg], first_seq: u64) -> Result<&[InputMsg], JournalError> {
+    let mut last_count = inputs.first().map_or(0, |m| m.imu_count);
     for (i, m) in inputs.iter().enumerate() {
-        let expected = i as u64;
+        let expected = first_seq + i as u64;
         if m.seq != expected {
             if m.seq == 0 {
                 return Err(JournalError::SecondStart {
@@ -75,7 +98,7 @@ pub fn check(inputs: &[InputMsg]) -> Result<&[InputMsg], JournalError> {
         }
         last_count = m.imu_count;
         match m.kind() {
-            Ok(InputKind::Start) if i > 0 => {
+            Ok(InputKind::Start) if i > 0 || first_seq > 0 => {
                 return Err(JournalError::SecondStart {
                     seq: m.seq,
                     imu_count: m.imu_count,
@@ -178,6 +201,28 @@ mod tests {
     fn a_late_start_is_refused() {
         assert_eq!(check(&journal()[1..]), Err(JournalError::StartedLate(1)));
         assert_eq!(check(&[]), Err(JournalError::Empty));
+    }
+
+    #[test]
+    fn after_a_checkpoint_every_entry_from_its_place_must_be_there() {
+        let j = journal();
+        // The recording began at entry 1; the checkpoint came before entry 2.
+        assert_eq!(check_after(&j[1..], 2).unwrap(), &j[2..]);
+        // Nothing after it: nothing to apply.
+        assert!(check_after(&j[1..], 4).unwrap().is_empty());
+        // Entry 2 lost: the replay would miss it.
+        let lost = [j[1], j[3]];
+        assert_eq!(
+            check_after(&lost, 2),
+            Err(JournalError::Gap { from: 2, to: 2 })
+        );
+        // A start after the checkpoint is a second session.
+        let mut again = j.clone();
+        again.push(entry(4, InputKind::Start, 900));
+        assert!(matches!(
+            check_after(&again, 2),
+            Err(JournalError::SecondStart { seq: 4, .. })
+        ));
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! - `mcap_read`: the file, every problem named with its byte offset;
 //! - `recording`: the channels a replay needs (imu, input, thrust; config, model);
 //! - `journal`: the daemon's input journal checked (one whole session, nothing lost);
+//! - `start`: from the daemon's start, or from a checkpoint of its state (a late recording);
 //! - `rerun`: the machine fed the samples and the journal in the daemon's order;
 //! - `compare`: replayed models against the recorded ones, entry for entry;
 //! - `report`: text and JSON.
@@ -16,6 +17,7 @@ pub mod mcap_read;
 pub mod recording;
 pub mod report;
 pub mod rerun;
+pub mod start;
 
 use thrusterd_core::config::DaemonConfig;
 
@@ -36,6 +38,18 @@ pub enum ReplayError {
     ConfigTruncated,
     #[error(transparent)]
     Config(#[from] thrusterd_core::config::ConfigError),
+    #[error("{why}; {passed}")]
+    NoCheckpoint {
+        why: journal::JournalError,
+        passed: String,
+    },
+    #[error("checkpoint {id}: {why}")]
+    Checkpoint {
+        id: u64,
+        why: thrusterd_core::machine::CheckpointError,
+    },
+    #[error("the recording began after the daemon (or the daemon had a model from a file), so the replay starts from a checkpoint of the daemon's state, which its own settings made: it replays only with the recording's configuration (no --config, --thrusters)")]
+    CheckpointWithOtherConfig,
 }
 
 /// Where the recorded configuration came from, in errors.
@@ -61,16 +75,22 @@ pub struct Replayed {
     pub recorded_models: Vec<thruster_protocol::ModelMsg>,
     /// The first difference from the recorded models, `None` when identical.
     pub difference: Option<String>,
+    /// The checkpoint the replay started from (None: the daemon's start).
+    pub checkpoint: Option<start::Started>,
 }
 
 /// Replays `rec` with `cfg`.
 pub fn replay(rec: &Recording, cfg: &DaemonConfig) -> Result<Replayed, ReplayError> {
-    let inputs = journal::check(&rec.inputs)?;
     rerun::check_complete(&rec.imu, &rec.thrust)?;
     // When each solve's result reached the daemon's machine holds for the daemon's own
     // settings only: with other settings the jobs are other jobs, run inline and applied at
     // their due samples.
     let own_settings = recorded_config(rec).is_ok_and(|recorded| &recorded == cfg);
+    let start = start::choose(&rec.inputs, &rec.checkpoints, cfg)?;
+    if start.checkpoint.is_some() && !own_settings {
+        return Err(ReplayError::CheckpointWithOtherConfig);
+    }
+    let inputs = start.inputs;
     let without_deliveries: Vec<thruster_protocol::InputMsg>;
     let inputs = if own_settings {
         inputs
@@ -82,12 +102,22 @@ pub fn replay(rec: &Recording, cfg: &DaemonConfig) -> Result<Replayed, ReplayErr
             .collect();
         &without_deliveries
     };
-    let outcome = rerun::rerun(cfg, &rec.imu, inputs, &rec.thrust)?;
-    let difference = compare::first_difference(&outcome.models, &rec.models);
+    let outcome = rerun::rerun(cfg, start.resume, &rec.imu, inputs, &rec.thrust)?;
+    // From a checkpoint: the swaps after it (the model in force then is in the checkpoint;
+    // a recorder that joined late also got it, as the model topic's history).
+    let after = start.checkpoint.map_or(0, |c| c.place.model_version);
+    let recorded_models: Vec<_> = rec
+        .models
+        .iter()
+        .filter(|m| start.checkpoint.is_none() || m.version > after)
+        .copied()
+        .collect();
+    let difference = compare::first_difference(&outcome.models, &recorded_models);
     Ok(Replayed {
         outcome,
-        recorded_models: rec.models.clone(),
+        recorded_models,
         difference,
+        checkpoint: start.checkpoint,
     })
 }
 

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
-use thruster_protocol::{ConfigMsg, ImuSample, InputMsg, ModelMsg, ThrustCommand};
+use thruster_protocol::{CheckpointMsg, ConfigMsg, ImuSample, InputMsg, ModelMsg, ThrustCommand};
 
 use crate::mcap_read::{self, McapError, RawMessage};
 
@@ -48,6 +48,9 @@ pub struct Recording {
     pub models: Vec<ModelMsg>,
     /// The daemon's thrust commands (which IMU sample each answered, and the count).
     pub thrust: Vec<ThrustCommand>,
+    /// Every part of every checkpoint of the daemon's state (where a late recording's
+    /// replay starts).
+    pub checkpoints: Vec<CheckpointMsg>,
 }
 
 /// The channels without which nothing can be replayed, and what each one is.
@@ -83,6 +86,7 @@ pub fn read(paths: &[PathBuf]) -> Result<Recording, RecordingError> {
                 "input" => decode(path, "input", messages, &mut rec.inputs)?,
                 "model" => decode(path, "model", messages, &mut rec.models)?,
                 "thrust" => decode(path, "thrust", messages, &mut rec.thrust)?,
+                "checkpoint" => decode(path, "checkpoint", messages, &mut rec.checkpoints)?,
                 "config" => {
                     let mut configs = Vec::new();
                     decode(path, "config", messages, &mut configs)?;
@@ -158,6 +162,7 @@ impl NonFinite for ModelMsg {
 impl NonFinite for InputMsg {}
 impl NonFinite for ThrustCommand {}
 impl NonFinite for ConfigMsg {}
+impl NonFinite for CheckpointMsg {}
 
 /// Every `null` in `v` (at any depth) replaced by the sentinel.
 fn nulls_to_sentinel(v: &mut serde_json::Value) -> bool {

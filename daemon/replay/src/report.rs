@@ -57,6 +57,20 @@ pub fn text(ctx: &Context, r: &Replayed) -> String {
         o.final_state.name(),
         o.final_text
     );
+    if let Some(c) = &r.checkpoint {
+        let _ = writeln!(
+            s,
+            "started from checkpoint {} ({} bytes; taken after accepted IMU sample {} (seq {}, t {:.3} s), before input journal entry {}, model v{} in force): the recording began after the daemon's start; {} recorded samples before it only validated",
+            c.id,
+            c.bytes,
+            c.place.imu_count,
+            c.place.imu_seq,
+            c.place.t_ns as f64 * 1e-9,
+            c.place.journal_next,
+            c.place.model_version,
+            o.imu_before_checkpoint
+        );
+    }
     for (m, valid) in o.models.iter().zip(&o.models_valid) {
         let note = if *valid {
             ""
@@ -99,15 +113,20 @@ pub fn text(ctx: &Context, r: &Replayed) -> String {
         ),
     };
     let recorded = r.recorded_models.len();
+    let after = if r.checkpoint.is_some() {
+        " after the checkpoint"
+    } else {
+        ""
+    };
     let _ = match &r.difference {
         None => writeln!(
             s,
-            "the recording's {recorded} model swap(s): reproduced, identical entry for entry ({} entries)",
+            "the recording's {recorded} model swap(s){after}: reproduced, identical entry for entry ({} entries)",
             crate::compare::entries(&o.models)
         ),
         Some(d) => writeln!(
             s,
-            "the recording's {recorded} model swap(s): the replay differs ({d})"
+            "the recording's {recorded} model swap(s){after}: the replay differs ({d})"
         ),
     };
     if o.inputs_after_end > 0 {
@@ -165,5 +184,15 @@ pub fn json(ctx: &Context, r: &Replayed) -> Value {
         "first_difference": r.difference,
         "entries_compared": crate::compare::entries(&o.models),
         "divergences": o.divergences,
+        "checkpoint": r.checkpoint.map(|c| json!({
+            "id": c.id,
+            "bytes": c.bytes,
+            "imu_count": c.place.imu_count,
+            "imu_seq": c.place.imu_seq,
+            "t_ns": c.place.t_ns,
+            "journal_next": c.place.journal_next,
+            "model_version": c.place.model_version,
+            "imu_before": o.imu_before_checkpoint,
+        })),
     })
 }

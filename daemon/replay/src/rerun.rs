@@ -4,6 +4,7 @@
 
 use thruster_protocol::validate::ImuSampleValidator;
 use thruster_protocol::{ImuSample, InputKind, InputMsg, ModelMsg, RequestKind, ThrustCommand};
+use thrusterd_core::checkpoint_parts::Place;
 use thrusterd_core::config::DaemonConfig;
 use thrusterd_core::machine::{Event, Machine, Request, SolveResult, SolverMode, State};
 use thrusterd_core::wire;
@@ -61,6 +62,8 @@ pub struct Outcome {
     /// Per model in `models`: made before the commands diverged (what these settings would
     /// have learned), or after (not an answer).
     pub models_valid: Vec<bool>,
+    /// From a checkpoint: recorded samples before it (not fed to the machine).
+    pub imu_before_checkpoint: u64,
 }
 
 /// Where the replayed commands first left the recorded ones.
@@ -92,22 +95,37 @@ pub fn check_complete(imu: &[ImuSample], thrust: &[ThrustCommand]) -> Result<(),
     }
 }
 
-/// Runs `imu` and `inputs` (a checked journal) through a machine set up from `cfg`.
-/// `recorded_thrusters`: the count the daemon drove at its first answer, when known.
+/// A replay that starts from a checkpoint: the machine it holds, and where it was taken.
+pub struct Resume {
+    pub machine: Machine,
+    pub place: Place,
+}
+
+/// Runs `imu` and `inputs` (a checked journal) through a machine set up from `cfg`, or from
+/// `from` (a checkpoint: then `inputs` are the entries after it, and only the samples after
+/// its sample are fed; those before it go through the validator only, as in the daemon).
 pub fn rerun(
     cfg: &DaemonConfig,
+    from: Option<Resume>,
     imu: &[ImuSample],
     inputs: &[InputMsg],
     thrust: &[ThrustCommand],
 ) -> Result<Outcome, RerunError> {
-    let recorded_thrusters = thrust.first().map(|t| t.count as usize);
+    // The count the daemon drove at its first answer (after the checkpoint, when from one).
+    let recorded_thrusters = thrust
+        .iter()
+        .find(|t| from.as_ref().is_none_or(|r| t.imu_seq > r.place.imu_seq))
+        .map(|t| t.count as usize);
     // The daemon's answer to each sample: the first command naming it (a later one with the
     // same seq is the neutral of a stale deadline).
     let mut answers = std::collections::HashMap::with_capacity(thrust.len());
     for t in thrust {
         answers.entry(t.imu_seq).or_insert(*t);
     }
-    let mut machine = Machine::new(cfg.machine_setup());
+    let (mut machine, place) = match from {
+        Some(r) => (r.machine, Some(r.place)),
+        None => (Machine::new(cfg.machine_setup()), None),
+    };
     if let Some(recorded) = recorded_thrusters {
         if recorded != machine.thrusters() {
             return Err(RerunError::ThrusterCount {
@@ -131,6 +149,7 @@ pub fn rerun(
         commands_compared: 0,
         diverged_at: None,
         models_valid: Vec::new(),
+        imu_before_checkpoint: 0,
     };
     // A journal that says when each solve's result reached the daemon's machine (the daemon
     // journals every one): the replay computes each job at once and hands its result over at
@@ -141,25 +160,56 @@ pub fn rerun(
         .iter()
         .any(|m| m.kind() == Ok(InputKind::SolveDelivered));
     let mut solved = Solved::default();
-    if journaled {
-        machine.set_solver_mode(SolverMode::External);
-    }
+    // A restored machine has the daemon's mode (external); without journaled deliveries
+    // after the checkpoint it makes no job that needs one, so either mode is the same there.
+    machine.set_solver_mode(if journaled {
+        SolverMode::External
+    } else {
+        SolverMode::Inline
+    });
     let t0 = imu.first().map_or(0, |s| s.t_ns);
     let mut validator = ImuSampleValidator::default();
     let mut next = 0;
     let mut model_seq = 0;
-    // Entries before the first sample (the start, "no IMU yet").
-    apply_due(
-        &mut machine,
-        inputs,
-        &mut next,
-        0,
-        None,
-        &mut solved,
-        &mut out,
-    )?;
-    collect(&mut machine, &mut model_seq, &mut out);
+    // Entries before the first sample (the start, "no IMU yet"); from a checkpoint, those
+    // after it, before the next sample.
+    let mut started = place.is_none();
+    if started {
+        apply_due(
+            &mut machine,
+            inputs,
+            &mut next,
+            0,
+            None,
+            &mut solved,
+            &mut out,
+        )?;
+        collect(&mut machine, &mut model_seq, &mut out);
+    }
     for sample in imu {
+        if let Some(p) = place.filter(|_| !started) {
+            if sample.seq <= p.imu_seq {
+                // Before the checkpoint: its effect on the machine is in the checkpoint; the
+                // validator still sees it, as the daemon's did.
+                if answers.contains_key(&sample.seq) {
+                    let _ = validator.check(sample);
+                }
+                out.imu_before_checkpoint += 1;
+                continue;
+            }
+            started = true;
+            out.imu_accepted = p.imu_count;
+            apply_due(
+                &mut machine,
+                inputs,
+                &mut next,
+                p.imu_count,
+                Some(p.imu_seq),
+                &mut solved,
+                &mut out,
+            )?;
+            collect(&mut machine, &mut model_seq, &mut out);
+        }
         // The daemon answers every sample it receives (a command, or neutral for a rejected
         // one): an unanswered one never reached it (a driver publishing before the daemon
         // subscribed, or the end of the recording).
@@ -410,13 +460,57 @@ mod tests {
         let thrust = neutral_answers(&imu, 5);
         // Hold without a model: the daemon refused it, so must the replay.
         let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
-        let o = rerun(&cfg, &imu, &inputs, &thrust).unwrap();
+        let o = rerun(&cfg, None, &imu, &inputs, &thrust).unwrap();
         assert_eq!(o.imu_accepted, 50);
         assert_eq!(o.inputs_applied, 2);
         assert_eq!(o.commands_compared, 50);
         assert_eq!(o.diverged_at, None);
         assert!(o.divergences.is_empty(), "{:?}", o.divergences);
         assert!(o.models.is_empty());
+    }
+
+    /// From a checkpoint taken after sample 30 (the daemon's machine as it was then): only
+    /// the samples after it are fed, counted on from the checkpoint's count, and the entries
+    /// after it are placed by that count; a sample before it is only validated.
+    #[test]
+    fn a_replay_from_a_checkpoint_feeds_what_came_after_it() {
+        let cfg = DaemonConfig::default();
+        let imu = rest(80);
+        let thrust = neutral_answers(&imu, 5);
+        let mut daemon = Machine::new(cfg.machine_setup());
+        for s in &imu[..30] {
+            daemon.on_imu(&wire::imu_input(s));
+        }
+        let place = Place {
+            imu_count: 30,
+            imu_seq: 30,
+            t_ns: imu[29].t_ns,
+            journal_next: 2,
+            ..Place::default()
+        };
+        let resume = Resume {
+            machine: Machine::restore(cfg.machine_setup(), &daemon.checkpoint().unwrap()).unwrap(),
+            place,
+        };
+        // Entry 2 right after the checkpoint's sample, entry 3 later: both refused (no model).
+        let inputs = [hold(2, 30, true), hold(3, 60, true)];
+        let o = rerun(&cfg, Some(resume), &imu, &inputs, &thrust).unwrap();
+        assert_eq!(o.imu_before_checkpoint, 30);
+        assert_eq!(o.imu_accepted, 80);
+        assert_eq!(o.commands_compared, 50);
+        assert_eq!(o.inputs_applied, 2);
+        assert!(o.divergences.is_empty(), "{:?}", o.divergences);
+        assert_eq!(o.diverged_at, None);
+        // An entry placed at another sample than the checkpoint's count says is found.
+        let resume = Resume {
+            machine: Machine::restore(cfg.machine_setup(), &daemon.checkpoint().unwrap()).unwrap(),
+            place,
+        };
+        let inputs = [hold(2, 30, true), entry(3, InputKind::Request, 40, 41)];
+        assert!(matches!(
+            rerun(&cfg, Some(resume), &imu, &inputs, &thrust),
+            Err(RerunError::Misplaced { seq: 3, .. })
+        ));
     }
 
     /// A journal that hands over a result the replay's machine never asked for (a damaged
@@ -429,6 +523,7 @@ mod tests {
         let inputs = [entry(0, InputKind::Start, 0, 0), delivered];
         let o = rerun(
             &DaemonConfig::default(),
+            None,
             &imu,
             &inputs,
             &neutral_answers(&imu, 5),
@@ -448,6 +543,7 @@ mod tests {
         let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, false)];
         let o = rerun(
             &DaemonConfig::default(),
+            None,
             &imu,
             &inputs,
             &neutral_answers(&imu, 5),
@@ -464,6 +560,7 @@ mod tests {
         thrust[11].thrust[2] = 0.25;
         let o = rerun(
             &DaemonConfig::default(),
+            None,
             &imu,
             &[entry(0, InputKind::Start, 0, 0)],
             &thrust,
@@ -483,6 +580,7 @@ mod tests {
         shifted[1].imu_seq = 11;
         let err = rerun(
             &DaemonConfig::default(),
+            None,
             &imu,
             &shifted,
             &neutral_answers(&imu, 5),
@@ -506,7 +604,7 @@ mod tests {
     fn the_wrong_thruster_count_is_refused() {
         let imu = rest(5);
         let thrust = neutral_answers(&imu, 6);
-        let err = rerun(&DaemonConfig::default(), &imu, &[], &thrust).unwrap_err();
+        let err = rerun(&DaemonConfig::default(), None, &imu, &[], &thrust).unwrap_err();
         assert_eq!(
             err,
             RerunError::ThrusterCount {
@@ -540,7 +638,7 @@ mod tests {
         let inputs = [entry(0, InputKind::Start, 0, 0), hold(1, 10, true)];
         let mut daemon = inputs;
         daemon[1].imu_seq = 17;
-        let o = rerun(&DaemonConfig::default(), &imu, &daemon, &thrust).unwrap();
+        let o = rerun(&DaemonConfig::default(), None, &imu, &daemon, &thrust).unwrap();
         assert_eq!(o.imu_not_received, 7);
         assert_eq!(o.imu_accepted, 23);
         assert_eq!(o.inputs_applied, 2);

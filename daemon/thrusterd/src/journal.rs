@@ -41,6 +41,18 @@ impl Journal {
         self.t_ns = t_ns;
     }
 
+    /// Where the journal stands: accepted samples so far, the last one's seq and time, and the
+    /// seq the next entry will get (a checkpoint's place, `checkpoints`).
+    pub fn place(&self) -> thrusterd_core::checkpoint_parts::Place {
+        thrusterd_core::checkpoint_parts::Place {
+            imu_count: self.imu_count,
+            imu_seq: self.imu_seq,
+            t_ns: self.t_ns,
+            journal_next: self.seq,
+            ..Default::default()
+        }
+    }
+
     /// Publishes one input; `fill` sets its kind-specific fields.
     pub fn record(&mut self, kind: InputKind, refused: bool, fill: impl FnOnce(&mut InputMsg)) {
         let mut msg = InputMsg {

@@ -1,6 +1,7 @@
 //! thrusterd: the thruster-configuration daemon (`run`), its offline studies (`study`) and the
 //! replay of a recorded session (`replay`).
 
+mod checkpoints;
 mod config_file;
 mod journal;
 mod loader;

@@ -26,8 +26,8 @@ use thruster_protocol::services::{
 };
 use thruster_protocol::validate::{ImuSampleValidator, RejectCounters, RejectReason, Validate};
 use thruster_protocol::{
-    ConfigMsg, ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample, InputKind,
-    InputMsg, ModelMsg, ReconfigEvent, RequestKind, ResponseCode, Setpoint, StatusMsg,
+    CheckpointMsg, ConfigMsg, ControlResponse, DriverStatusMsg, DvlSample, DynamicsMsg, ImuSample,
+    InputKind, InputMsg, ModelMsg, ReconfigEvent, RequestKind, ResponseCode, Setpoint, StatusMsg,
     TelemetryMsg, ThrustCommand, MAX_THRUSTERS,
 };
 use thrusterd_core::config::DaemonConfig;
@@ -210,6 +210,9 @@ struct Daemon {
     /// Every input the machine takes besides the IMU samples, published for recordings
     /// (`journal`); created with the other ports in `serve`.
     journal: Option<crate::journal::Journal>,
+    /// Checkpoints of the machine (`checkpoints`), beside the journal they are placed in;
+    /// None when `[checkpoint] enabled = false`.
+    checkpoints: Option<crate::checkpoints::Checkpoints>,
     /// Runs the machine's solves off this thread.
     solver: SolverThread,
     /// Late solves already logged (the machine counts them).
@@ -287,6 +290,7 @@ impl Daemon {
             supply_v: None,
             driver_judged_for: None,
             journal: None,
+            checkpoints: None,
         })
     }
 
@@ -307,6 +311,7 @@ impl Daemon {
         // The journal's port lives in `self`, beyond the node: it must go before the tidy,
         // or its service is still open then and the namespace's global segment stays.
         self.journal = None;
+        self.checkpoints = None;
         result
     }
 
@@ -356,6 +361,12 @@ impl Daemon {
             &format!("thrusterd {}", env!("CARGO_PKG_VERSION")),
         );
         self.journal = Some(journal);
+        if self.cfg.checkpoint.enabled {
+            self.checkpoints = Some(crate::checkpoints::Checkpoints::new(
+                Port::<CheckpointMsg>::create(&node, &self.ipc)?,
+                &self.cfg.checkpoint,
+            ));
+        }
 
         let waitset = create_waitset()?;
         let imu_timeout = Duration::from_millis(self.cfg.runtime.imu_timeout_ms);
@@ -815,6 +826,9 @@ impl Daemon {
                 if let Some(port) = &out.telemetry {
                     self.publish_telemetry(port, &input, &sent);
                 }
+                if let (Some(c), Some(j)) = (self.checkpoints.as_mut(), self.journal.as_ref()) {
+                    c.after_sample(&self.machine, input.t_ns, j.place());
+                }
             }
             Err(reason) => {
                 self.rejected.record(&reason);
@@ -1143,6 +1157,9 @@ impl Daemon {
                         );
                     }
                     self.publish_model(model_out, &model);
+                    if let Some(c) = self.checkpoints.as_mut() {
+                        c.model_swapped();
+                    }
                     if model.source == thrusterd_core::model::ModelSource::Estimated
                         && self.refined_save_due(&model)
                     {

@@ -13,6 +13,7 @@
 //! - The iceoryx2 type name carries a version (`thrusterd.<Type>.v1`): a process built
 //!   with an incompatible layout fails to open the service instead of misreading it.
 
+mod checkpoint;
 mod config;
 mod control;
 mod driver_status;
@@ -28,6 +29,7 @@ mod telemetry;
 mod thrust;
 mod truth;
 
+pub use checkpoint::{CheckpointMsg, CHECKPOINT_MAX_PARTS, CHECKPOINT_PART_CAPACITY};
 pub use config::{ConfigMsg, CONFIG_TEXT_CAPACITY};
 pub use control::{ControlRequest, ControlResponse, RequestKind, ResponseCode};
 pub use driver_status::{DriverStatusMsg, OutputState};

@@ -50,6 +50,9 @@ pub enum Topic {
     Input,
     /// [`ConfigMsg`], daemon -> anyone, history 1: the daemon's effective configuration.
     Config,
+    /// [`CheckpointMsg`], daemon -> anyone: the state machine's state in parts, at each
+    /// model swap and periodically, where a late recording's replay starts.
+    Checkpoint,
 }
 
 /// Quality-of-service settings of a topic. Every process opens services with the same
@@ -69,7 +72,7 @@ pub struct TopicQos {
 
 impl Topic {
     /// Every topic.
-    pub const ALL: [Topic; 14] = [
+    pub const ALL: [Topic; 15] = [
         Topic::Imu,
         Topic::Thrust,
         Topic::Reconfig,
@@ -84,6 +87,7 @@ impl Topic {
         Topic::Telemetry,
         Topic::Input,
         Topic::Config,
+        Topic::Checkpoint,
     ];
 
     /// Service name below the namespace, e.g. `imu`.
@@ -103,6 +107,7 @@ impl Topic {
             Topic::Telemetry => "telemetry",
             Topic::Input => "input",
             Topic::Config => "config",
+            Topic::Checkpoint => "checkpoint",
         }
     }
 
@@ -161,6 +166,15 @@ impl Topic {
                 max_buffer: 16,
                 default_buffer: 2,
             },
+            // Checkpoints: a burst of parts (16 KiB each) every few vehicle seconds; room for a
+            // whole one of the largest size (`CHECKPOINT_MAX_PARTS`) while the recorder is
+            // descheduled. No history: the next comes within the period, and a reader that
+            // joined late needs one taken after it joined (its journal starts there).
+            Topic::Checkpoint => TopicQos {
+                history: 0,
+                max_buffer: 64,
+                default_buffer: 8,
+            },
             // The configuration: once per daemon start, 16 KiB a message.
             Topic::Config => TopicQos {
                 history: 1,
@@ -218,4 +232,7 @@ impl TopicMessage for InputMsg {
 }
 impl TopicMessage for ConfigMsg {
     const TOPIC: Topic = Topic::Config;
+}
+impl TopicMessage for CheckpointMsg {
+    const TOPIC: Topic = Topic::Checkpoint;
 }

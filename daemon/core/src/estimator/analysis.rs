@@ -17,7 +17,7 @@ use super::linalg::{pinv_keep, singular_left};
 const NUMERICAL_REL_TOL: f64 = 1e-9;
 
 /// Rank and DOF report.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RankReport {
     /// Singular values of the effectiveness matrix scaled to standard-error units, descending.
     pub singular_values: Vec<f64>,
@@ -33,7 +33,7 @@ pub struct RankReport {
 }
 
 /// Health of one thruster as the data shows it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct ThrusterDiagnosis {
     pub index: usize,
     /// Chi-square of the column against zero (6 dof); large = a clear response.

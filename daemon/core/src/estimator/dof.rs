@@ -45,7 +45,7 @@ impl Dof {
 }
 
 /// Which of the six DOFs a thruster configuration can drive.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
 pub struct DofMask(pub [bool; 6]);
 
 impl DofMask {

@@ -43,7 +43,7 @@ impl Excitation {
 }
 
 /// A concrete plan for N thrusters: the sign pattern (entries -1, 0, +1) of every pulse.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ExcitationPlan {
     kind: Excitation,
     n: usize,

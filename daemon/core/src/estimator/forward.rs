@@ -11,7 +11,7 @@ use nalgebra::{DMatrix, Vector3};
 use super::linalg::sym_pinv;
 
 /// Normal equations for one 3-axis sensor group (rotation or acceleration).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ForwardLs {
     gram: DMatrix<f64>,
     cross: DMatrix<f64>,
@@ -20,7 +20,7 @@ pub struct ForwardLs {
 }
 
 /// A solved forward regression for one sensor group.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ForwardSolution {
     /// Estimated effectiveness, 3 x N (row per sensor axis, column per regressor).
     pub b: DMatrix<f64>,

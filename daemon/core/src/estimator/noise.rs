@@ -4,7 +4,7 @@ use nalgebra::Vector3;
 use serde::Serialize;
 
 /// Per-axis mean and standard deviation of the gyro and the accelerometer at rest.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct NoiseLevels {
     /// Gyro reading at rest (its bias), rad/s.
     pub gyro_baseline: [f64; 3],
@@ -61,7 +61,7 @@ fn rms(v: &[f64; 3]) -> f64 {
 }
 
 /// Running mean and variance per axis (Welford), so the rest phase needs no sample buffer.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct NoiseMeter {
     n: u64,
     gyro: [Welford; 3],
@@ -71,7 +71,7 @@ pub struct NoiseMeter {
     last_gyro: Option<[f64; 3]>,
 }
 
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 struct Welford {
     mean: f64,
     m2: f64,

@@ -40,7 +40,7 @@ fn mul3(m: &Matrix3<f64>, x: &DMatrix<f64>) -> DMatrix<f64> {
     out
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct PaperLs {
     sts: Matrix3<f64>,
     stt: DMatrix<f64>,

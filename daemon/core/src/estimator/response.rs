@@ -13,7 +13,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 pub const GRAVITY: f64 = 9.80665;
 
 /// Shape of the response to a unit step command.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PulseShape {
     /// Thruster spin-up time constant, s (0 = instantaneous).
     pub lag_s: f64,

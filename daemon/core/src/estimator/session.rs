@@ -48,7 +48,7 @@ const ROT: usize = 0;
 const ACC: usize = 1;
 
 /// What happened during one pulse.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PulseSummary {
     /// 0-based index of the pulse just ended.
     pub index: usize,
@@ -64,7 +64,7 @@ pub struct PulseSummary {
 }
 
 /// Whether to pulse again.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum StopDecision {
     Continue,
     /// The error bound reached the target (forward method).
@@ -85,7 +85,7 @@ impl StopDecision {
 }
 
 /// A model and everything known about its quality.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Estimate {
     pub method: Method,
     pub thrusters: usize,
@@ -116,7 +116,7 @@ pub struct Estimate {
 /// Running sums of one sensor group over a pulse (and the quiet samples just before it, whose
 /// shape value is 0): enough to add the pulse with its own intercept and, optionally, its own
 /// linear drift removed (Frisch-Waugh: regress [1, t] out of both shape and response).
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 struct Moments {
     n: u64,
     t: f64,
@@ -181,7 +181,7 @@ impl Moments {
 }
 
 /// Per-pulse bookkeeping, allocated once per pulse (never per sample).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct ActivePulse {
     u: Vec<f64>,
     split: Vec<f64>,
@@ -192,7 +192,7 @@ struct ActivePulse {
 
 /// The last few quiet samples before a pulse, kept in a fixed ring: they pin each pulse's
 /// intercept without costing the pulse's own samples.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct PreWindow {
     ring: Vec<(f64, Vector3<f64>, Vector3<f64>)>,
     next: usize,
@@ -235,7 +235,7 @@ impl PreWindow {
 }
 
 /// An estimation run for a fixed set of thrusters.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Estimator {
     cfg: EstimatorConfig,
     plan: ExcitationPlan,

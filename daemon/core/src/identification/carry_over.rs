@@ -19,7 +19,7 @@ use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::model::Model;
 
 /// What changed in the thruster configuration, as far as the sender could say.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum ThrusterChange {
     /// Something changed, nobody says what: nothing is carried over.
     #[default]

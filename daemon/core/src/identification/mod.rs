@@ -181,7 +181,7 @@ impl IdentificationConfig {
 /// free); each coded pair cancels its own impulse, so the vehicle's angle barely moves while
 /// the rate, which the fit uses, still does. The generator is deterministic: the same seed
 /// gives the same sequence, and runs are reproducible.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Dither {
     n: usize,
     hold_s: f64,

@@ -24,6 +24,7 @@ use crate::solve::{Purpose, SolveResult, Solver};
 pub(super) const ESTIMATION: u64 = 0;
 
 /// One IMU sample as the run uses it: the body rate and the gravity-compensated acceleration.
+#[derive(serde::Serialize, serde::Deserialize)]
 pub(super) struct Motion {
     pub(super) gyro: Vector3<f64>,
     pub(super) accel: Vector3<f64>,
@@ -33,6 +34,7 @@ pub(super) struct Motion {
 }
 
 /// What one sample during a pulse led to.
+#[derive(serde::Serialize, serde::Deserialize)]
 pub(super) enum PulseStep {
     /// No estimator or no noise levels: there is no run to pulse.
     NoRun,
@@ -47,6 +49,7 @@ pub(super) enum PulseStep {
     },
 }
 
+#[derive(serde::Serialize, serde::Deserialize)]
 pub(super) struct EstimationRun {
     noise: NoiseMeter,
     levels: Option<NoiseLevels>,
@@ -144,6 +147,11 @@ impl EstimationRun {
     /// The job a sample at `t_ns` needs and whose result is not back.
     pub(super) fn awaiting(&self, t_ns: u64) -> Option<u64> {
         self.solver.awaiting(t_ns)
+    }
+
+    /// Jobs out with the caller, result not back (see `Solver::out_with_caller`).
+    pub(super) fn jobs_out(&self) -> usize {
+        self.solver.out_with_caller()
     }
 
     pub(super) fn late_solves(&self) -> u64 {
@@ -376,7 +384,7 @@ impl EstimationRun {
 
 /// What the rest before an estimation measured, for its navigation: the mean raw specific
 /// force (the starting attitude) and the depth's trend (the vertical velocity at its end).
-#[derive(Debug, Default)]
+#[derive(Debug, Default, serde::Serialize, serde::Deserialize)]
 pub(super) struct Rest {
     force_sum: Vector3<f64>,
     force_samples: u64,

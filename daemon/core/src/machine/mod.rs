@@ -12,8 +12,10 @@
 //! - `estimation`: one estimation run (noise at rest, pulses and pauses, the candidate), its
 //!   solves handed out as jobs with a due time (`crate::solve`);
 //! - `state_machine`: the machine itself (routing, state changes, faults, levelling, control);
-//! - `telemetry`: what the machine is doing, one snapshot per sample, for the `telemetry` topic.
+//! - `telemetry`: what the machine is doing, one snapshot per sample, for the `telemetry` topic;
+//! - `checkpoint`: the whole state as bytes and back (a late recording's replay starts there).
 
+mod checkpoint;
 mod config;
 mod estimation;
 mod models;
@@ -22,6 +24,7 @@ mod telemetry;
 mod types;
 
 pub use crate::solve::{SolveJob, SolveResult, SolverMode, MAX_OUTSTANDING};
+pub use checkpoint::{CheckpointError, FORMAT as CHECKPOINT_FORMAT};
 pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};

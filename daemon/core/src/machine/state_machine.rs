@@ -26,20 +26,25 @@ use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 use crate::supply::Supply;
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
+#[derive(serde::Serialize, serde::Deserialize)]
 struct Levelling {
     target: Target,
     level_since_ns: Option<u64>,
 }
 
 /// What to go back to after a fault.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 enum Resume {
     Idle,
     Active,
     Estimate,
 }
 
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Machine {
+    /// Not in a checkpoint: the configuration is published on its own (`config`), and a
+    /// restored machine is given it (`Machine::restore`).
+    #[serde(skip)]
     setup: MachineSetup,
     n: usize,
     state: State,
@@ -60,6 +65,8 @@ pub struct Machine {
     /// reconfiguration does not re-estimate, a cleared fault does not resume).
     stopped: bool,
     good_samples: u32,
+    /// Outputs waiting for the caller (`take_events`), not state: not in a checkpoint.
+    #[serde(skip)]
     events: Vec<Event>,
     imu_rate_hz: f64,
     samples: u64,
@@ -178,6 +185,45 @@ impl Machine {
     pub fn set_solver_mode(&mut self, mode: SolverMode) {
         self.run.solver().set_mode(mode);
         self.refiner.set_solver_mode(mode);
+    }
+
+    /// Whether a checkpoint (`checkpoint`) taken now holds everything the machine needs to go
+    /// on: no solve job is out with the caller (its work would be on the caller's worker,
+    /// not in the state). Jobs not yet taken, and results back but not yet due, are state.
+    pub fn checkpointable(&self) -> bool {
+        self.run.jobs_out() == 0 && self.refiner.jobs_out() == 0
+    }
+
+    /// Bytes each part of the state takes in a checkpoint (for docs/recording.md's table).
+    #[doc(hidden)]
+    pub fn checkpoint_breakdown(&self) -> Vec<(&'static str, usize)> {
+        fn size<T: serde::Serialize>(v: &T) -> usize {
+            postcard::to_allocvec(v).map_or(0, |b| b.len())
+        }
+        vec![
+            ("attitude filter", size(&self.attitude)),
+            ("controller", size(&self.controller)),
+            ("monitor", size(&self.monitor)),
+            ("refinement", size(&self.refiner)),
+            ("model slot", size(&self.models)),
+            ("estimation run", size(&self.run)),
+            ("supply", size(&self.supply)),
+        ]
+    }
+
+    /// Whether the state is small now (about 0.2 MB): no estimation under way and no
+    /// refinement window open. Their estimators hold every sample of the run or window (1-3 MB
+    /// at 200 Hz, up to 4 MB more at 1 kHz), too much to serialise on the control thread; the
+    /// daemon takes its checkpoints only when this holds (`[checkpoint]`).
+    pub fn checkpoint_small(&self) -> bool {
+        !self.state.is_estimating() && !self.refiner.window_open()
+    }
+
+    /// A restored machine (`checkpoint::restore`) is given the configuration it ran with:
+    /// the settings are published on their own (`config`), not in every checkpoint.
+    pub(super) fn with_setup(mut self, setup: MachineSetup) -> Self {
+        self.setup = setup;
+        self
     }
 
     /// The next solve job to run (`External` mode; None inline or when there is none).

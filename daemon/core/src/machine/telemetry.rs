@@ -11,7 +11,7 @@ use super::types::{ImuInput, State};
 use crate::controller::{attitude_error, Target};
 
 /// The estimation under way, as far as it got.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Progress {
     /// Pulses completed.
     pub pulses: usize,
@@ -28,7 +28,7 @@ pub struct Progress {
 }
 
 /// The machine after one IMU sample, in SI units.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TelemetrySnapshot {
     /// The sample's time, ns, IMU clock, and its sequence number.
     pub t_ns: u64,

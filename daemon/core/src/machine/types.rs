@@ -14,6 +14,7 @@ pub const NO_IMU_YET: &str =
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
+#[derive(serde::Deserialize)]
 pub enum State {
     Idle,
     MeasureNoise,
@@ -50,7 +51,7 @@ impl State {
 }
 
 /// Declared thruster layout.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Geometry {
     pub positions: Vec<[f64; 3]>,
     pub directions: Vec<[f64; 3]>,
@@ -63,7 +64,7 @@ impl Geometry {
 }
 
 /// One validated IMU sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImuInput {
     pub seq: u64,
     pub t_ns: u64,
@@ -74,7 +75,7 @@ pub struct ImuInput {
 }
 
 /// Why the thrusters are doing what they do.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Mode {
     Neutral,
     Estimating,
@@ -82,7 +83,7 @@ pub enum Mode {
 }
 
 /// The answer to one IMU sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Command {
     pub count: usize,
     pub thrust: [f64; MAX_THRUSTERS],
@@ -101,7 +102,7 @@ impl Command {
 }
 
 /// Something the IO layer must publish or persist.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Event {
     /// A new current model (publish it; save it when estimated).
     ModelSwapped(Box<Model>),
@@ -120,7 +121,7 @@ pub enum Event {
 }
 
 /// An operator request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Request {
     Estimate,
     Abort,
@@ -140,7 +141,7 @@ pub struct Refused(pub String);
 pub use crate::identification::carry_over::ThrusterChange;
 
 /// A reconfiguration event, validated.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Reconfig {
     pub count: usize,
     pub geometry: Option<Geometry>,
@@ -152,7 +153,7 @@ pub struct Reconfig {
 
 /// An operator's setpoint: the attitude wanted, which of roll, pitch, yaw keep the value held
 /// now instead, and what to do with depth.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SetpointInput {
     pub attitude: UnitQuaternion<f64>,
     pub keep: [bool; 3],
@@ -160,7 +161,7 @@ pub struct SetpointInput {
 }
 
 /// The depth part of an operator's setpoint.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum DepthInput {
     /// Keep the depth held now, or stay free if none is held. What a setpoint that does not
     /// mention depth means: an attitude command must never let go of a held depth.
@@ -172,7 +173,7 @@ pub enum DepthInput {
 }
 
 /// Status numbers for the status message.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct StatusSnapshot {
     pub state: State,
     pub pulse: usize,

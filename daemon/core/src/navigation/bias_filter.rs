@@ -20,7 +20,7 @@ type Mat7 = SMatrix<f64, 7, 7>;
 type Vec7 = SVector<f64, 7>;
 
 /// A correction to apply to the navigation state.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Correction {
     pub depth: f64,
     pub velocity_ned: Vector3<f64>,
@@ -30,7 +30,7 @@ pub struct Correction {
 }
 
 /// Settings of the bias filter (1-sigma values).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FilterNoise {
     /// Depth sensor noise per sample, m.
     pub depth_std_m: f64,
@@ -47,7 +47,7 @@ pub struct FilterNoise {
     pub velocity_std_mps: f64,
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct BiasFilter {
     noise: FilterNoise,
     p: Mat7,

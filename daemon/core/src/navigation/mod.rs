@@ -33,7 +33,7 @@ use crate::estimator::response::GRAVITY;
 pub const DVL_GAIN: f64 = 0.8;
 
 /// Settings of the depth-aided navigation (1-sigma values).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DepthAid {
     /// Depth sensor noise per sample, m. Default 0.005 (a Bar30 is 0.003; a little more for
     /// waves and the lever arm).
@@ -100,7 +100,7 @@ impl DepthAid {
 }
 
 /// The navigation state at one sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NavState {
     /// Body to NED.
     pub attitude: UnitQuaternion<f64>,
@@ -116,7 +116,7 @@ pub struct NavState {
 }
 
 /// Dead reckoning from a rest, aided by depth.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Navigator {
     aid: DepthAid,
     /// Gravity, m/s^2.

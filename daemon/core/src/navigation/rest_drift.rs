@@ -24,7 +24,7 @@ const MIN_SPAN_S: f64 = 0.2;
 pub const MAX_DRIFT_MPS: f64 = 1.0;
 
 /// Running sums for depth = a + b t + c t^2 over the rest.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct RestDrift {
     t0: Option<f64>,
     last_t: f64,

@@ -46,7 +46,7 @@ use crate::estimator::dynamic::regressors::{terms, TERMS};
 use crate::model::Model;
 
 /// The change test's settings (documented on `RefinementConfig`'s `change_*` keys).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ChangeSettings {
     pub tau_s: f64,
     pub horizon_s: f64,
@@ -68,7 +68,7 @@ pub struct ChangeSettings {
 }
 
 /// The test's largest statistic at one sample.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ChangeStat {
     /// Thruster, 0-based.
     pub thruster: usize,
@@ -81,7 +81,7 @@ pub struct ChangeStat {
 }
 
 /// One candidate change time and the regression since then, per thruster.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 struct Candidate {
     live: bool,
     /// The rows still judged: an axis that left its hold since `start_ns` is not (its
@@ -113,7 +113,7 @@ impl Candidate {
 }
 
 /// The test's state: observer, noise statistics and candidates.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ChangeTest {
     s: ChangeSettings,
     candidates: Vec<Candidate>,
@@ -127,6 +127,7 @@ pub struct ChangeTest {
     rate: Vector3<f64>,
     lag: [f64; MAX_THRUSTERS],
     lag_abs: f64,
+    #[serde(with = "crate::serde_arrays::array")]
     terms: [f64; TERMS],
     mean: [f64; 3],
     var: [f64; 3],

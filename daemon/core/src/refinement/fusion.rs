@@ -29,7 +29,7 @@ use crate::estimator::{Estimate, EstimatorConfig};
 use crate::model::Model;
 
 /// How a window is weighed against the model.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FusionSettings {
     /// Random-walk rate of each entry, share of its column's norm per sqrt(s).
     pub drift_per_sqrt_s: f64,
@@ -48,7 +48,7 @@ pub struct FusionSettings {
 }
 
 /// What a fusion made.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Fused {
     /// The refined model (not yet checked or installed).
     pub model: Model,

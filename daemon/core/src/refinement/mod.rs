@@ -360,7 +360,7 @@ impl RefinementConfig {
 }
 
 /// The verdict of one window.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct WindowVerdict {
     /// The window's rotation-rows error bound.
     pub rel_err_rot: f64,
@@ -423,7 +423,7 @@ const SETTLE_S: f64 = 1.0;
 const CHANGE_SIGMA_FLOOR: f64 = 0.01;
 
 /// One window under way.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct Window {
     est: Estimator,
     start_ns: u64,
@@ -433,7 +433,7 @@ struct Window {
 }
 
 /// The background fit.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Refiner {
     cfg: RefinementConfig,
     /// Since when the vehicle has been settled (attitude error small): a window opens only
@@ -519,6 +519,16 @@ impl Refiner {
     }
 
     /// Window fits not back by their due tick, since start.
+    /// A window is open: its estimator holds the window's samples (a megabyte or more).
+    pub fn window_open(&self) -> bool {
+        self.window.is_some()
+    }
+
+    /// Jobs out with the caller, result not back (a checkpoint waits until there are none).
+    pub fn jobs_out(&self) -> usize {
+        self.solver.out_with_caller()
+    }
+
     pub fn late_solves(&self) -> u64 {
         self.solver.late()
     }

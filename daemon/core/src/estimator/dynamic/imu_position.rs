@@ -41,7 +41,7 @@ fn rate_product(i: usize, j: usize) -> usize {
 }
 
 /// The IMU's position from the centre, body frame, m, and how well it is known.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImuPosition {
     /// The position the acceleration rows were referred with.
     pub position_m: Vector3<f64>,
@@ -59,7 +59,7 @@ pub struct ImuPosition {
 }
 
 /// The position the data found and its covariance.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Learned {
     pub position_m: Vector3<f64>,
     pub cov: Matrix3<f64>,

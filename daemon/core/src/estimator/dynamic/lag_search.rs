@@ -19,7 +19,7 @@ use nalgebra::Vector3;
 use super::DynamicRun;
 
 /// Where and how finely the lag is searched.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LagRange {
     /// Smallest and largest lag considered, s.
     pub min_s: f64,
@@ -44,7 +44,7 @@ impl Default for LagRange {
 }
 
 /// The learned lag and the fit made with it.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct LagFit {
     /// The maximum-likelihood lag, s.
     pub lag_s: f64,

@@ -34,7 +34,7 @@ const MIN_RESIDUAL_DOF: u64 = 10;
 const MIN_CLUSTERS: usize = 3;
 
 /// What the dynamic fit learned besides B: the coefficients of every term, per DOF row.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DynamicTerms {
     /// 6 x TERMS coefficients, rows in DOF order (rotation rows per rad/s^2, translation rows
     /// per m/s^2), columns as [`regressors::TERM_NAMES`].
@@ -77,7 +77,7 @@ impl DynamicTerms {
 }
 
 /// The fit of both groups.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DynamicSolution {
     /// 6 x N effectiveness.
     pub b: DMatrix<f64>,
@@ -98,7 +98,7 @@ pub struct DynamicSolution {
 
 /// One dynamic-model fit in progress: navigation, thrust lag, integrals and both regressions.
 /// Allocated once; each sample costs two rank-1 updates of a (N + 38)-wide Gram matrix.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DynamicRun {
     n: usize,
     /// Forward and reverse command in separate columns (thrust = k_f u+ + k_r u-): needed when
@@ -116,11 +116,14 @@ pub struct DynamicRun {
     lag: Vec<f64>,
     lag_prev: Vec<f64>,
     lag_abs: f64,
+    #[serde(with = "crate::serde_arrays::array")]
     terms: [f64; TERMS],
+    #[serde(with = "crate::serde_arrays::array")]
     terms_prev: [f64; TERMS],
     integral: Vec<f64>,
     /// Each term's slope over the open segment's previous step and that step's length (None
     /// at a segment's start): for the integrals' curvature correction.
+    #[serde(with = "crate::serde_arrays::option_array_f64")]
     slope_prev: Option<([f64; TERMS], f64)>,
     direct: Vec<f64>,
     last_t_s: Option<f64>,
@@ -561,7 +564,7 @@ impl DynamicRun {
 
 /// What is known of the IMU's position before the run (`EstimatorConfig::imu_position_m` and
 /// friends).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImuSetting {
     /// From the vehicle's drawings, body frame, m.
     pub position_m: Vector3<f64>,

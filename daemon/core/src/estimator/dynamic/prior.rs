@@ -12,7 +12,7 @@ use nalgebra::DMatrix;
 
 /// Known coefficients of a dynamic fit for N thrusters. Entries with an infinite or NaN
 /// standard error (or a NaN value) are unknown and left to the data.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DynamicPrior {
     /// 6 x N effectiveness, DOF rows (the symmetric gain: the mean of forward and reverse).
     pub b: DMatrix<f64>,
@@ -29,7 +29,7 @@ pub const CONTRADICTION_SHARE: f64 = 0.25;
 pub const CONTRADICTION_CHI2: f64 = 30.0;
 
 /// One prior on a linear combination `sum w_i theta_i` of one output's coefficients.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PriorEntry {
     /// (coefficient index, weight); a second weight of 0 is unused.
     pub weights: [(usize, f64); 2],

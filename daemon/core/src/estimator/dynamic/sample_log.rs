@@ -23,7 +23,7 @@ const CHUNKS: usize = 64;
 pub const CAPACITY: usize = CHUNK * CHUNKS;
 
 /// One sample as the fit sees it, after the navigation.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Navigated {
     /// Vehicle time, s.
     pub t_s: f64,
@@ -128,6 +128,75 @@ impl SampleLog {
             .iter()
             .flat_map(|c| c.iter())
             .chain(self.open.iter())
+    }
+}
+
+/// The log in a checkpoint (`machine::checkpoint`): its samples and commands, and the room
+/// it had. The room is behaviour, not only memory: a command that does not fit the commands'
+/// capacity is not stored, and a sample past the last spare chunk is dropped, so a restored
+/// log must have exactly the room the original had left.
+#[derive(serde::Serialize)]
+struct LogOut<'a> {
+    sealed: &'a [Arc<Vec<Navigated>>],
+    open: &'a [Navigated],
+    spare: usize,
+    commands: &'a [f64],
+    commands_capacity: usize,
+    n: usize,
+    dropped: u64,
+}
+
+#[derive(serde::Deserialize)]
+struct LogIn {
+    sealed: Vec<Vec<Navigated>>,
+    open: Vec<Navigated>,
+    spare: usize,
+    commands: Vec<f64>,
+    commands_capacity: usize,
+    n: usize,
+    dropped: u64,
+}
+
+impl serde::Serialize for SampleLog {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        LogOut {
+            sealed: &self.sealed,
+            open: &self.open,
+            spare: self.spare.len(),
+            commands: &self.commands,
+            commands_capacity: self.commands.capacity(),
+            n: self.n,
+            dropped: self.dropped,
+        }
+        .serialize(s)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for SampleLog {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let log = LogIn::deserialize(d)?;
+        if log.spare > CHUNKS
+            || log.open.len() > CHUNK
+            || log.commands.len() > log.commands_capacity
+            || log.sealed.iter().any(|c| c.len() != CHUNK)
+        {
+            return Err(D::Error::custom("a sample log larger than its room"));
+        }
+        let mut open = Vec::with_capacity(CHUNK);
+        open.extend_from_slice(&log.open);
+        let mut commands = Vec::with_capacity(log.commands_capacity);
+        commands.extend_from_slice(&log.commands);
+        Ok(SampleLog {
+            sealed: log.sealed.into_iter().map(Arc::new).collect(),
+            open: Arc::new(open),
+            spare: (0..log.spare)
+                .map(|_| Arc::new(Vec::with_capacity(CHUNK)))
+                .collect(),
+            commands,
+            n: log.n,
+            dropped: log.dropped,
+        })
     }
 }
 

@@ -32,7 +32,7 @@ use crate::estimator::linalg::sym_pinv;
 pub const CLUSTERS: usize = 32;
 
 /// The fit: coefficients, the scaled pseudo-inverse of the Gram matrix, residuals.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SegmentedSolution {
     /// K x 3 coefficients.
     pub theta: DMatrix<f64>,
@@ -59,7 +59,7 @@ impl SegmentedSolution {
     }
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SegmentedLs {
     k: usize,
     gram: DMatrix<f64>,
@@ -398,6 +398,7 @@ impl SegmentedLs {
 }
 
 /// The normal equations of a [`SegmentedLs`] and its open segment's centred sums.
+#[derive(serde::Serialize, serde::Deserialize)]
 struct Normal {
     g: DMatrix<f64>,
     xy: DMatrix<f64>,

@@ -14,7 +14,7 @@ use crate::model::Model;
 use crate::solve::Purpose;
 
 /// Where a closed-loop run stands.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub(in crate::machine) struct ClosedLoop {
     pub(super) dither: Dither,
     start_ns: u64,
