@@ -10,9 +10,9 @@ pub mod logging;
 #[cfg(feature = "process")]
 pub mod pipe;
 #[cfg(feature = "process")]
-pub mod shutdown;
-#[cfg(feature = "process")]
 pub mod realtime;
+#[cfg(feature = "process")]
+pub mod shutdown;
 #[cfg(feature = "process")]
 pub mod systemd;
 

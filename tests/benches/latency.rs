@@ -626,7 +626,11 @@ fn thread_schedulings(pid: u32) -> Vec<(u32, i32, i32)> {
         // rest starts at field 3, so field k is f[k - 3].
         if let (Some(prio), Some(policy)) = (f.get(37), f.get(38)) {
             let tid = t.file_name().to_string_lossy().parse().unwrap_or(0);
-            out.push((tid, policy.parse().unwrap_or(-1), prio.parse().unwrap_or(-1)));
+            out.push((
+                tid,
+                policy.parse().unwrap_or(-1),
+                prio.parse().unwrap_or(-1),
+            ));
         }
     }
     out

@@ -443,7 +443,12 @@ impl DaemonConfig {
             ("runtime.status_period_ms", r.status_period_ms, 0, 60_000),
             ("runtime.spin_us", r.spin_us, 0, 1_000_000),
             ("runtime.lockstep_wait_ms", r.lockstep_wait_ms, 1, 600_000),
-            ("runtime.realtime_priority", u64::from(r.realtime_priority), 0, 99),
+            (
+                "runtime.realtime_priority",
+                u64::from(r.realtime_priority),
+                0,
+                99,
+            ),
             ("telemetry.every_n", self.telemetry.every_n, 0, 10_000),
         ] {
             if !(lo..=hi).contains(&v) {

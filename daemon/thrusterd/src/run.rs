@@ -862,7 +862,9 @@ impl Daemon {
         }
         match thruster_driver_kit::realtime::make_this_thread_fifo(priority) {
             Ok(()) => info!(priority, "control thread at SCHED_FIFO"),
-            Err(e) => warn!("runtime.realtime_priority: {e}; the control thread runs at normal priority"),
+            Err(e) => {
+                warn!("runtime.realtime_priority: {e}; the control thread runs at normal priority")
+            }
         }
     }
 
