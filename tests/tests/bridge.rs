@@ -22,9 +22,14 @@ fn client(port: u16) -> (Value, Output) {
 }
 
 fn client_with(port: u16, args: &[&str]) -> (Value, Output) {
+    client_for(port, CLIENT_S, args)
+}
+
+/// The client with its time limit (`--watch`: how long it counts).
+fn client_for(port: u16, seconds: u64, args: &[&str]) -> (Value, Output) {
     let out = system_tests::node::script("bridge_client.js")
         .arg(format!("ws://127.0.0.1:{port}"))
-        .arg(CLIENT_S.to_string())
+        .arg(seconds.to_string())
         .args(args)
         .output()
         .expect("node runs tests/node/bridge_client.js");
@@ -196,6 +201,20 @@ fn a_foxglove_client_sees_every_topic_live_and_starts_an_estimation_through_a_se
         assert!(
             reason.contains("pitch_deg must be in [-90, 90] degrees, got 100"),
             "{offer}: {refused}"
+        );
+    }
+
+    // An app opened late (topside, after the vehicle was set up) gets the daemon's state at
+    // once: the configuration was published once, at the daemon's start, and the model at the
+    // estimation, both long before this client; without the bridge's latch it saw neither
+    // within its 2 s. Status comes every 100 ms anyway, telemetry is a stream (not latched).
+    let (late, output) = client_for(port, 2, &["--watch"]);
+    assert!(output.status.success(), "{late}");
+    for topic in ["config", "model", "dynamics", "status"] {
+        assert!(
+            late["counts"][topic].as_u64().unwrap_or(0) >= 1,
+            "a late client got no {topic}: {}",
+            late["counts"]
         );
     }
 

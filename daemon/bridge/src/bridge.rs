@@ -113,12 +113,14 @@ fn start_live(
     // A context of its own: its one sink is this server (nothing logs to the SDK's global
     // default context).
     let context = Context::new();
+    let latest = live::Latest::default();
     let mut server = WebSocketServer::new()
         .name(format!("thrusterd {}", target.namespace))
         .bind(ws.listen.ip().to_string(), ws.listen.port())
         .context(&context)
         .message_backlog_size(ws.backlog)
-        .supported_encodings(["json"]);
+        .supported_encodings(["json"])
+        .listener(Arc::new(latest.clone()));
     let mut operator = None;
     if ws.services {
         let (queue, calls) = services::queue();
@@ -134,7 +136,7 @@ fn start_live(
         let context = Arc::clone(&context);
         std::thread::Builder::new()
             .name("live-view".into())
-            .spawn(move || live::forward(&context, &rx))
+            .spawn(move || live::forward(&context, &rx, &latest))
             .context("starting the live-view thread")?
     };
     let server = server
