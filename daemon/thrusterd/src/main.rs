@@ -19,15 +19,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Result;
-
-/// mimalloc, not glibc's malloc: glibc frees a block into the arena it came from under that
-/// arena's lock, so the control thread (SCHED_FIFO) dropping a solve's result, or taking memory
-/// while the solver thread frees a job, waited for the solver whenever the scheduler had
-/// preempted it inside malloc: 44.6 ms in `__lll_lock_wait_private` measured at 200 Hz under
-/// load (perf sched, docs/performance.md). mimalloc's heaps are per thread and a free from
-/// another thread is an atomic push: no lock is shared between the two threads.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
