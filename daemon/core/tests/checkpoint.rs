@@ -8,9 +8,7 @@
 use std::time::Instant;
 
 use thruster_sim::NoisePreset;
-use thrusterd_core::machine::{
-    Command, ImuInput, Machine, MachineSetup, Request, SolverMode, State,
-};
+use thrusterd_core::machine::{Command, Machine, MachineSetup, Request, SolverMode, State};
 
 mod common;
 use common::Run;
@@ -23,21 +21,6 @@ fn setup(n: usize) -> MachineSetup {
     };
     setup.machine.deadband = 0.05;
     setup
-}
-
-/// One sample from the simulator, as `Run::tick` makes it.
-fn next_input(run: &mut Run) -> ImuInput {
-    let period = run.sim.sample_period_ns();
-    run.sim.step_to((run.sim.time_ns() / period + 1) * period);
-    let r = run.sim.sample();
-    ImuInput {
-        seq: 0,
-        t_ns: r.t_ns,
-        gyro: r.gyro,
-        accel: r.accel,
-        mag: Some(r.mag),
-        depth: Some(r.depth),
-    }
 }
 
 fn same_command(a: &Command, b: &Command) -> bool {
@@ -79,7 +62,7 @@ fn continue_both(run: &mut Run, samples: usize, requests: &[(usize, Request)]) -
             let b = copy.on_request(*r);
             assert_eq!(a, b, "request {r:?} at sample {k}");
         }
-        let input = next_input(run);
+        let input = run.next_input();
         let a = run.machine.on_imu(&input);
         let b = copy.on_imu(&input);
         assert!(

@@ -54,21 +54,6 @@ impl Drop for Worker {
     }
 }
 
-/// The next sample of `run`'s simulator.
-fn next_sample(run: &mut Run) -> ImuInput {
-    let period = run.sim.sample_period_ns();
-    run.sim.step_to((run.sim.time_ns() / period + 1) * period);
-    let r = run.sim.sample();
-    ImuInput {
-        seq: 0,
-        t_ns: r.t_ns,
-        gyro: r.gyro,
-        accel: r.accel,
-        mag: Some(r.mag),
-        depth: Some(r.depth),
-    }
-}
-
 fn apply(run: &mut Run, cmd: &Command) {
     for v in &cmd.thrust[..cmd.count] {
         assert!(v.is_finite() && v.abs() <= 1.0, "command {v}");
@@ -111,8 +96,8 @@ fn lockstep_pair(
     let (mut swaps, mut jobs) = (0, 0);
     let start = inline.sim.time_s();
     while inline.sim.time_s() - start < seconds {
-        let a = next_sample(inline);
-        let b = next_sample(external);
+        let a = inline.next_input();
+        let b = external.next_input();
         assert_eq!(format!("{a:?}"), format!("{b:?}"), "the same vehicle");
         let ca = inline.machine.on_imu(&a);
         let (cb, j) = tick_external(external, worker, &b);

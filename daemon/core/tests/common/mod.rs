@@ -87,19 +87,25 @@ impl Run {
         }
     }
 
-    pub fn tick(&mut self) {
-        // The next sample on the sensor's grid (a command may have arrived mid-period).
+    /// The simulator stepped to the next sample on the sensor's grid (a command may have
+    /// arrived mid-period), and that sample as the machine takes it.
+    pub fn next_input(&mut self) -> ImuInput {
         let period = self.sim.sample_period_ns();
         self.sim.step_to((self.sim.time_ns() / period + 1) * period);
         let r = self.sim.sample();
-        let cmd = self.machine.on_imu(&ImuInput {
+        ImuInput {
             seq: 0,
             t_ns: r.t_ns,
             gyro: r.gyro,
             accel: r.accel,
             mag: Some(r.mag),
             depth: Some(r.depth),
-        });
+        }
+    }
+
+    pub fn tick(&mut self) {
+        let input = self.next_input();
+        let cmd = self.machine.on_imu(&input);
         assert_eq!(cmd.count, self.sim.thruster_count());
         for v in &cmd.thrust[..cmd.count] {
             assert!(v.is_finite() && v.abs() <= 1.0, "command {v}");
@@ -108,9 +114,9 @@ impl Run {
         assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
         self.last_mode = cmd.mode;
         if let Some((lo, hi)) = self.latency_us {
-            let h = r.t_ns.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
+            let h = input.t_ns.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
             let us = lo + h % (hi - lo + 1);
-            self.sim.step_to(r.t_ns + us * 1000);
+            self.sim.step_to(input.t_ns + us * 1000);
         }
         self.sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
     }
