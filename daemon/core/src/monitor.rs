@@ -272,7 +272,7 @@ struct Stretch {
     seconds: f64,
 }
 
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
 pub struct ModelMonitor {
     cfg: MonitorConfig,
     n: usize,

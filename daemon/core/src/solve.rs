@@ -109,6 +109,12 @@ impl SolveJob {
     /// Compute the result. Pure and deterministic: the same job gives the same result on any
     /// thread.
     pub fn run(self) -> SolveResult {
+        self.compute()
+    }
+
+    /// [`SolveJob::run`] without giving the job up: a worker hands the spent job back to the
+    /// thread that made it, to be freed there (see the daemon's `solver.rs`).
+    pub fn compute(&self) -> SolveResult {
         let estimate = if self.progress {
             self.est.estimate_progress()
         } else {

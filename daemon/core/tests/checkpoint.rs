@@ -47,6 +47,25 @@ fn continue_both(run: &mut Run, samples: usize, requests: &[(usize, Request)]) -
     let started = Instant::now();
     let bytes = run.machine.checkpoint().unwrap();
     let encode_us = started.elapsed().as_secs_f64() * 1e6;
+    // The daemon serialises a copy on its writer thread (thrusterd `checkpoints.rs`), and
+    // only in the small state: there the copy must hold every bit of the state. (Mid-run a
+    // copy is not a checkpoint: the sample log's copy is a read-only snapshot without the
+    // spare room that is part of its behaviour.)
+    let started = Instant::now();
+    let copied = run.machine.clone();
+    let copy_us = started.elapsed().as_secs_f64() * 1e6;
+    let same = copied.checkpoint().unwrap() == bytes;
+    if run.machine.checkpoint_small() {
+        assert!(
+            same,
+            "in the small state a copy of the machine checkpoints to other bytes than the machine"
+        );
+    }
+    drop(copied);
+    println!(
+        "  copied in {copy_us:.0} us (small state: {}, same bytes: {same})",
+        run.machine.checkpoint_small()
+    );
     println!(
         "  state {:?}: {:?}",
         run.machine.state(),
@@ -121,6 +140,13 @@ fn a_restored_machine_goes_on_exactly_mid_pulse_and_holding_with_realistic_noise
     assert!(c.swaps >= 1, "the run finished after the checkpoint");
     // Holding: the controller, the monitor and the background refinement.
     run.run_for(3.0);
+    // Between two refinement windows: the small state the daemon takes its checkpoints in
+    // (continue_both then also requires a copy to checkpoint to the same bytes).
+    run.run_until(30.0, |m| m.checkpoint_small());
+    assert!(
+        run.machine.checkpoint_small(),
+        "no small state while holding"
+    );
     assert_eq!(run.machine.state(), State::Active);
     let c = continue_both(&mut run, 3000, &[(1000, Request::Estimate)]);
     report("holding, then identifying under control", &c);

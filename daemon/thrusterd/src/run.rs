@@ -365,6 +365,7 @@ impl Daemon {
             self.checkpoints = Some(crate::checkpoints::Checkpoints::new(
                 Port::<CheckpointMsg>::create(&node, &self.ipc)?,
                 &self.cfg.checkpoint,
+                self.cfg.runtime.lockstep,
             ));
         }
 

@@ -4,7 +4,9 @@
 //! stalled disk it takes from milliseconds to forever (0.7-1.1 s was seen under systemd right
 //! after an estimation, enough to lose 90 IMU samples and fault on the gap). The control loop
 //! must never wait for it, so saves run on a thread of their own: the loop hands over a copy
-//! of the model and reads the outcomes when they come, without blocking.
+//! of the model and reads the outcomes when they come, without blocking. The copy comes back
+//! with its outcome and is freed on the control thread, where it was made (a free into
+//! another thread's malloc arena can wait on that arena's lock: `solver.rs`).
 
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
@@ -28,6 +30,8 @@ pub struct Outcome {
     pub version: u64,
     /// The reason, when it failed.
     pub result: Result<(), String>,
+    /// The copy that was saved, back to be freed on the thread that made it.
+    _spent: Option<Model>,
 }
 
 /// The saving thread and the two channels to it.
@@ -54,6 +58,7 @@ impl Saver {
                         path: job.path,
                         version: job.model.version,
                         result,
+                        _spent: Some(job.model),
                     };
                     if outcome_tx.send(outcome).is_err() {
                         break;
@@ -88,6 +93,7 @@ impl Saver {
                 path: path.to_path_buf(),
                 version: model.version,
                 result: Err("the saving thread is not running".into()),
+                _spent: None,
             });
         }
         self.next_id

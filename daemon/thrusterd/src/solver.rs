@@ -7,6 +7,14 @@
 //! timeout). The thread runs at a lower scheduling priority than the control thread: on a
 //! small computer they share a core, and the control thread's sample must win.
 //!
+//! Every allocation is freed on the thread that made it. glibc frees a block into the arena it
+//! came from, under that arena's lock, and a normal-priority thread preempted inside malloc
+//! holds its lock for as long as it is preempted: `perf sched` caught the FIFO control thread
+//! asleep 44.6 ms on the solver's arena lock, freeing a result (docs/performance.md). So the
+//! spent job comes back with its result and is dropped on the control thread, and the result
+//! is copied there (a few tens of kB) and the worker's own copy sent back to be dropped on the
+//! worker. Neither thread ever touches the other's arena.
+//!
 //! A panic in a job ends the thread; the loop learns it from the closed result queue, faults
 //! the machine (neutral) with the panic's message, and starts a fresh thread for what comes
 //! next.
@@ -40,40 +48,66 @@ impl std::fmt::Display for SolverLost {
     }
 }
 
-/// What runs a job (the real one is `SolveJob::run`; tests put in one that panics).
-pub type Runner = fn(SolveJob) -> SolveResult;
+/// What runs a job (the real one is `SolveJob::compute`; tests put in one that panics).
+pub type Runner = fn(&SolveJob) -> SolveResult;
+
+/// What the control thread sends the worker.
+enum ToWorker {
+    Job(SolveJob),
+    /// The worker's own copy of a result, applied on the control thread from a copy made
+    /// there: dropped on the worker, where it was allocated.
+    Free(SolveResult),
+}
+
+/// What the worker sends back: the result and the spent job (made on the control thread,
+/// dropped there).
+struct Done {
+    result: SolveResult,
+    job: SolveJob,
+}
 
 pub struct SolverThread {
-    jobs: Option<SyncSender<SolveJob>>,
-    results: Receiver<SolveResult>,
+    to_worker: Option<SyncSender<ToWorker>>,
+    results: Receiver<Done>,
+    /// Jobs handed over whose result has not been taken: what the "queued" limit counts
+    /// (the channel also carries results going back to be freed).
+    queued: usize,
     handle: Option<JoinHandle<()>>,
     runner: Runner,
 }
 
 impl SolverThread {
-    /// The solver thread, running each job with `SolveJob::run`.
+    /// The solver thread, running each job with `SolveJob::compute`.
     pub fn spawn() -> std::io::Result<Self> {
-        Self::spawn_with(SolveJob::run)
+        Self::spawn_with(SolveJob::compute)
     }
 
     /// The solver thread, running each job with `runner`.
     pub fn spawn_with(runner: Runner) -> std::io::Result<Self> {
-        let (jobs, job_rx) = mpsc::sync_channel::<SolveJob>(QUEUE);
-        let (result_tx, results) = mpsc::sync_channel::<SolveResult>(QUEUE);
+        // Room for QUEUE jobs and as many results on their way back to be freed.
+        let (to_worker, rx) = mpsc::sync_channel::<ToWorker>(2 * QUEUE);
+        let (result_tx, results) = mpsc::sync_channel::<Done>(QUEUE);
         let handle = std::thread::Builder::new()
             .name("thrusterd-solve".into())
             .spawn(move || {
                 lower_priority();
                 // Ends when the loop drops its sender (shutdown) or stops reading results.
-                for job in job_rx {
-                    if result_tx.send(runner(job)).is_err() {
-                        break;
+                for msg in rx {
+                    match msg {
+                        ToWorker::Job(job) => {
+                            let result = runner(&job);
+                            if result_tx.send(Done { result, job }).is_err() {
+                                break;
+                            }
+                        }
+                        ToWorker::Free(result) => drop(result),
                     }
                 }
             })?;
         Ok(SolverThread {
-            jobs: Some(jobs),
+            to_worker: Some(to_worker),
             results,
+            queued: 0,
             handle: Some(handle),
             runner,
         })
@@ -81,13 +115,21 @@ impl SolverThread {
 
     /// Hands `job` over without waiting.
     pub fn submit(&mut self, job: SolveJob) -> Result<(), SolverLost> {
-        let Some(jobs) = self.jobs.as_ref() else {
+        let Some(to_worker) = self.to_worker.as_ref() else {
             return Err(SolverLost("the solver thread is stopped".into()));
         };
-        match jobs.try_send(job) {
-            Ok(()) => Ok(()),
-            Err(TrySendError::Full(_)) => Err(SolverLost(format!(
+        if self.queued >= QUEUE {
+            return Err(SolverLost(format!(
                 "the solver thread has {QUEUE} jobs queued and takes no more"
+            )));
+        }
+        match to_worker.try_send(ToWorker::Job(job)) {
+            Ok(()) => {
+                self.queued += 1;
+                Ok(())
+            }
+            Err(TrySendError::Full(_)) => Err(SolverLost(format!(
+                "the solver thread has {QUEUE} jobs and results queued and takes no more"
             ))),
             Err(TrySendError::Disconnected(_)) => Err(self.lost()),
         }
@@ -96,7 +138,7 @@ impl SolverThread {
     /// A result, if one is back (never waits).
     pub fn try_result(&mut self) -> Result<Option<SolveResult>, SolverLost> {
         match self.results.try_recv() {
-            Ok(r) => Ok(Some(r)),
+            Ok(done) => Ok(Some(self.take(done))),
             Err(TryRecvError::Empty) => Ok(None),
             Err(TryRecvError::Disconnected) => Err(self.lost()),
         }
@@ -105,10 +147,25 @@ impl SolverThread {
     /// A result, waiting up to `timeout` for one (None: none came).
     pub fn wait_result(&mut self, timeout: Duration) -> Result<Option<SolveResult>, SolverLost> {
         match self.results.recv_timeout(timeout) {
-            Ok(r) => Ok(Some(r)),
+            Ok(done) => Ok(Some(self.take(done))),
             Err(RecvTimeoutError::Timeout) => Ok(None),
             Err(RecvTimeoutError::Disconnected) => Err(self.lost()),
         }
+    }
+
+    /// The control thread's copy of a result; the worker's copy goes back to be freed there,
+    /// the spent job is freed here, where it was made.
+    fn take(&mut self, done: Done) -> SolveResult {
+        self.queued = self.queued.saturating_sub(1);
+        let Done { result, job } = done;
+        drop(job);
+        let mine = result.clone();
+        // Never waits: with the queue full (it holds as many frees as jobs, so only when the
+        // worker is stuck) or the worker gone, the copy is freed here.
+        if let Some(tx) = self.to_worker.as_ref() {
+            let _ = tx.try_send(ToWorker::Free(result));
+        }
+        mine
     }
 
     /// A fresh thread in place of a dead one (jobs of the old one are gone with it).
@@ -139,7 +196,7 @@ impl SolverThread {
     /// Never waits for it: a job that does not return (the reason a lockstep wait gave up)
     /// must not hold the control thread too; such a thread is left to itself.
     fn stop(&mut self) {
-        self.jobs = None;
+        self.to_worker = None;
         if let Some(h) = self.handle.take() {
             if h.is_finished() {
                 let _ = h.join();
@@ -211,7 +268,7 @@ mod tests {
         panic!("no job after 10 s of estimation");
     }
 
-    fn panicking(_: SolveJob) -> SolveResult {
+    fn panicking(_: &SolveJob) -> SolveResult {
         panic!("singular matrix in a test job");
     }
 
@@ -228,7 +285,7 @@ mod tests {
             "{lost}"
         );
         assert!(solver.submit(job.clone()).is_err(), "no thread takes work");
-        solver.runner = SolveJob::run;
+        solver.runner = SolveJob::compute;
         solver.restart().unwrap();
         solver.submit(job.clone()).unwrap();
         let r = solver

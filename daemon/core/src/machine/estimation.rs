@@ -49,7 +49,7 @@ pub(super) enum PulseStep {
     },
 }
 
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
 pub(super) struct EstimationRun {
     noise: NoiseMeter,
     levels: Option<NoiseLevels>,
@@ -384,7 +384,7 @@ impl EstimationRun {
 
 /// What the rest before an estimation measured, for its navigation: the mean raw specific
 /// force (the starting attitude) and the depth's trend (the vertical velocity at its end).
-#[derive(Debug, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub(super) struct Rest {
     force_sum: Vector3<f64>,
     force_samples: u64,

@@ -6,7 +6,7 @@ use std::collections::HashMap;
 
 use crate::model::{Model, ModelSource, SwapRejection};
 
-#[derive(Default, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Default, serde::Serialize, serde::Deserialize)]
 pub(super) struct ModelSlot {
     current: Option<Model>,
     previous: Option<Model>,

@@ -26,7 +26,7 @@ use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 use crate::supply::Supply;
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
 struct Levelling {
     target: Target,
     level_since_ns: Option<u64>,
@@ -40,7 +40,7 @@ enum Resume {
     Estimate,
 }
 
-#[derive(serde::Serialize, serde::Deserialize)]
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
 pub struct Machine {
     /// Not in a checkpoint: the configuration is published on its own (`config`), and a
     /// restored machine is given it (`Machine::restore`).
