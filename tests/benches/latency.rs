@@ -17,7 +17,8 @@
 //! thread at SCHED_FIFO 50 by `--realtime-priority`, the bench's driver thread at FIFO 60, as a
 //! real driver's would be; needs root or CAP_SYS_NICE, else the rows say refused). Alone:
 //! `BENCH_SOLVES_ONLY=1`; beside another build's daemon: `BENCH_BASELINE_THRUSTERD=PATH`
-//! (normal scheduling only: an older daemon has no `--realtime-priority`).
+//! (each setting on it first, then on this build; with `BENCH_FIFO_ONLY=1` too the baseline
+//! must know `--realtime-priority`, issue 25 on).
 //!
 //! Run: cargo bench -p system-tests --bench latency [-- ROUND_TRIPS]
 
@@ -575,17 +576,20 @@ fn solve_section(seconds: f64) {
     let fifo_only = std::env::var_os("BENCH_FIFO_ONLY").is_some();
     for rate in list("BENCH_RATES", &[200, 1000]) {
         for n in list("BENCH_NS", &[8, 16]).into_iter().map(|n| n as usize) {
-            let mut runs = Vec::new();
-            if fifo_only {
-                // (the normal rows are left out on request)
-            } else if let Some(b) = &baseline {
-                runs.push(("baseline", Some(b.as_path()), Scheduling::NormalSpinning));
-            }
+            let mut schedulings = Vec::new();
             if !fifo_only {
-                runs.push(("this build", None, Scheduling::NormalSpinning));
+                schedulings.push(Scheduling::NormalSpinning);
             }
             if fifo {
-                runs.push(("this build", None, Scheduling::Fifo));
+                schedulings.push(Scheduling::Fifo);
+            }
+            // Each scheduling on the baseline first, then on this build, back to back.
+            let mut runs = Vec::new();
+            for scheduling in schedulings {
+                if let Some(b) = &baseline {
+                    runs.push(("baseline", Some(b.as_path()), scheduling));
+                }
+                runs.push(("this build", None, scheduling));
             }
             for (label, bin, scheduling) in runs {
                 let phases = solve_phases(bin, scheduling, rate, n, seconds);

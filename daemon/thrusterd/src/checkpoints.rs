@@ -234,7 +234,9 @@ impl Checkpoints {
             serialise_us,
             copy,
         } = written;
+        let freed = std::time::Instant::now();
         drop(copy);
+        let free_us = freed.elapsed().as_micros();
         let (bytes, parts) = match parts {
             Ok(p) => p,
             Err(e) => return self.failed(&e),
@@ -264,6 +266,7 @@ impl Checkpoints {
                 parts = count,
                 copy_us,
                 serialise_us,
+                free_us,
                 publish_us,
                 "first checkpoint published (after IMU sample {imu_count})"
             );
@@ -274,6 +277,7 @@ impl Checkpoints {
                 parts = count,
                 copy_us,
                 serialise_us,
+                free_us,
                 publish_us,
                 "checkpoint published"
             );

@@ -597,7 +597,7 @@ impl Daemon {
         }
         // A clean stop: the next start begins idle.
         if let Some(session) = self.session.take() {
-            session.finish();
+            session.finish(SHUTDOWN_SAVE_WAIT);
         }
         let mut status = self.status_msg();
         status.set_text(StatusMsg::STOPPED_TEXT);

@@ -14,6 +14,8 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Duration;
 
 use tracing::warn;
 
@@ -40,17 +42,75 @@ impl Intent {
 
 pub struct Session {
     path: PathBuf,
-    /// What the marker says now: the intent, and whether the daemon is in Fault.
-    written: Option<(Intent, bool)>,
-    warned: bool,
-    /// The predecessor's marker said it was in Fault (its intent is what it would have
-    /// recovered to).
+    /// What was last handed to the writer (a repeat is not written again).
+    queued: Option<(Intent, bool)>,
     previous_in_fault: bool,
+    /// The thread that writes the marker; None when it could not be started (then the
+    /// marker is written on the caller's thread, said once).
+    writer: Option<MarkerWriter>,
+    warned: bool,
+}
+
+/// What the marker's thread is asked to do. Only the newest matters: a write superseded by a
+/// queued one is skipped.
+enum Msg {
+    Write(Intent, bool),
+    /// Answered once everything queued before it is on the disk (tests, shutdown).
+    Sync(mpsc::Sender<()>),
+    /// Remove the marker (a clean stop), then end.
+    Finish(mpsc::Sender<()>),
+}
+
+/// The marker's writes leave the control thread: the marker changes with the state (a fault,
+/// a hold), and a write and rename on a stalled disk would hold the loop for as long as the
+/// disk (perf sched saw the control thread in `blkdev_issue_discard` at a state change).
+struct MarkerWriter {
+    tx: mpsc::Sender<Msg>,
+}
+
+impl MarkerWriter {
+    fn spawn(path: PathBuf) -> std::io::Result<MarkerWriter> {
+        let (tx, rx) = mpsc::channel::<Msg>();
+        std::thread::Builder::new()
+            .name("session-marker".into())
+            .spawn(move || {
+                crate::solver::lower_priority();
+                let mut warned = false;
+                let mut next = None;
+                while let Some(mut msg) = next.take().or_else(|| rx.recv().ok()) {
+                    // A write followed by another write is skipped: only the newest matters.
+                    while let Msg::Write(..) = msg {
+                        match rx.try_recv() {
+                            Ok(newer @ Msg::Write(..)) => msg = newer,
+                            Ok(other) => {
+                                next = Some(other);
+                                break;
+                            }
+                            Err(_) => break,
+                        }
+                    }
+                    match msg {
+                        Msg::Write(intent, in_fault) => {
+                            write_marker(&path, intent, in_fault, &mut warned)
+                        }
+                        Msg::Sync(done) => {
+                            let _ = done.send(());
+                        }
+                        Msg::Finish(done) => {
+                            remove_marker(&path);
+                            let _ = done.send(());
+                            break;
+                        }
+                    }
+                }
+            })?;
+        Ok(MarkerWriter { tx })
+    }
 }
 
 impl Session {
-    /// The marker in `state_dir`, and the intent of a predecessor that did not stop cleanly
-    /// (None after a clean stop or on the first start). Nothing is written yet.
+    /// Reads the marker a predecessor left (None: it stopped cleanly, or this is the first
+    /// start) and starts this daemon's own. Called once, before the loop: it reads a file.
     pub fn open(state_dir: &Path) -> (Session, Option<Intent>) {
         let path = state_dir.join(SESSION_FILE);
         let mut previous_in_fault = false;
@@ -60,73 +120,113 @@ impl Session {
                 Some(parse(&text))
             }
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-            // Unreadable: a predecessor was there, but what it did is unknown; idle is safe.
             Err(e) => {
                 warn!("{}: {e}; resuming idle", path.display());
                 Some(Intent::Idle)
             }
         };
+        let writer = MarkerWriter::spawn(path.clone())
+            .map_err(|e| {
+                warn!("the session marker's thread did not start ({e}): written on the control thread")
+            })
+            .ok();
         let session = Session {
             path,
-            written: None,
-            warned: false,
+            queued: None,
             previous_in_fault,
+            writer,
+            warned: false,
         };
         (session, previous)
     }
 
-    /// Records what a restart after a crash from now on should resume (written on change).
+    /// Marks what a restart would resume (never waits: the write is the marker thread's).
     pub fn record(&mut self, intent: Intent) {
         self.write(intent, false);
     }
 
-    /// As `record`, in Fault: `intent` is what the daemon will recover to, and the marker
-    /// says it was in Fault, so a restart does not call it idle (issue 27).
+    /// As [`Session::record`], marked as in Fault: a restart says so, and resumes what
+    /// clearing the fault would have resumed.
     pub fn record_in_fault(&mut self, intent: Intent) {
         self.write(intent, true);
     }
 
-    /// True when the predecessor's marker said it was in Fault.
+    /// The predecessor's marker said it was in Fault.
     pub fn previous_in_fault(&self) -> bool {
         self.previous_in_fault
     }
 
     fn write(&mut self, intent: Intent, in_fault: bool) {
-        if self.written == Some((intent, in_fault)) {
+        if self.queued == Some((intent, in_fault)) {
             return;
         }
-        // Temp file and rename: a crash mid-write never leaves half a marker. No fsync: the
-        // marker guards against the process dying, whose completed writes the kernel keeps.
-        let tmp = self.path.with_extension("tmp");
-        let state = if in_fault { "state=fault\n" } else { "" };
-        let text = format!("thrusterd session\nresume={}\n{state}", intent.word());
-        let result = self
-            .path
-            .parent()
-            .map_or(Ok(()), fs::create_dir_all)
-            .and_then(|()| fs::write(&tmp, text))
-            .and_then(|()| fs::rename(&tmp, &self.path));
-        match result {
-            Ok(()) => self.written = Some((intent, in_fault)),
-            Err(e) => {
-                let _ = fs::remove_file(&tmp);
-                if !self.warned {
-                    warn!(
-                        "{}: {e}; a restart after a crash will not resume control",
-                        self.path.display()
-                    );
-                    self.warned = true;
-                }
-            }
+        self.queued = Some((intent, in_fault));
+        let sent = self
+            .writer
+            .as_ref()
+            .is_some_and(|w| w.tx.send(Msg::Write(intent, in_fault)).is_ok());
+        if !sent {
+            self.writer = None;
+            write_marker(&self.path, intent, in_fault, &mut self.warned);
         }
     }
 
-    /// A clean stop: the next start is a fresh one.
-    pub fn finish(self) {
-        if let Err(e) = fs::remove_file(&self.path) {
-            if e.kind() != std::io::ErrorKind::NotFound {
-                warn!("{}: {e}", self.path.display());
-            }
+    /// Waits up to `within` until every marker handed over is written; false if not by then.
+    pub fn sync(&self, within: Duration) -> bool {
+        let Some(w) = self.writer.as_ref() else {
+            return true;
+        };
+        let (done, rx) = mpsc::channel();
+        w.tx.send(Msg::Sync(done)).is_ok() && rx.recv_timeout(within).is_ok()
+    }
+
+    /// A clean stop: the marker is removed (after any write still queued), waiting at most
+    /// `within` for the disk (the thrusters are already neutral; a stalled disk must not keep
+    /// the process from exiting, and then the next start reads the last marker written).
+    pub fn finish(self, within: Duration) {
+        let Some(w) = self.writer.as_ref() else {
+            return remove_marker(&self.path);
+        };
+        let (done, rx) = mpsc::channel();
+        if w.tx.send(Msg::Finish(done)).is_err() {
+            return remove_marker(&self.path);
+        }
+        if rx.recv_timeout(within).is_err() {
+            warn!(
+                "{}: not removed within {} s (a stalled disk?): the next start will read it as a crash",
+                self.path.display(),
+                within.as_secs_f64()
+            );
+        }
+    }
+}
+
+/// Writes the marker (a temporary file renamed over it). Failures are logged once.
+fn write_marker(path: &Path, intent: Intent, in_fault: bool, warned: &mut bool) {
+    let tmp = path.with_extension("tmp");
+    let state = if in_fault { "state=fault\n" } else { "" };
+    let text = format!("thrusterd session\nresume={}\n{state}", intent.word());
+    let result = path
+        .parent()
+        .map_or(Ok(()), fs::create_dir_all)
+        .and_then(|()| fs::write(&tmp, text))
+        .and_then(|()| fs::rename(&tmp, path));
+    if let Err(e) = result {
+        let _ = fs::remove_file(&tmp);
+        if !*warned {
+            warn!(
+                "{}: {e}; a restart after a crash will not resume control",
+                path.display()
+            );
+            *warned = true;
+        }
+    }
+}
+
+fn remove_marker(path: &Path) {
+    if let Err(e) = fs::remove_file(path) {
+        if e.kind() != std::io::ErrorKind::NotFound {
+            warn!("{}: {e}", path.display());
         }
     }
 }
@@ -142,19 +242,49 @@ fn parse(text: &str) -> Intent {
 mod tests {
     use super::*;
 
+    const WAIT: Duration = Duration::from_secs(10);
+
+    /// The newest of a burst of changes is what ends on the disk, and a finish queued behind
+    /// writes removes the marker after them.
+    #[test]
+    fn the_newest_marker_wins_and_finish_removes_it_after_queued_writes() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut s, _) = Session::open(dir.path());
+        for k in 0..200 {
+            if k % 2 == 0 {
+                s.record(Intent::Hold);
+            } else {
+                s.record_in_fault(Intent::Idle);
+            }
+        }
+        s.record(Intent::Hold);
+        assert!(s.sync(WAIT));
+        let text = fs::read_to_string(dir.path().join(SESSION_FILE)).unwrap();
+        assert_eq!(text, "thrusterd session\nresume=hold\n");
+        s.record(Intent::Idle);
+        s.finish(WAIT);
+        assert!(
+            !dir.path().join(SESSION_FILE).exists(),
+            "removed after the queued write"
+        );
+        assert!(!dir.path().join("session.tmp").exists());
+    }
+
     #[test]
     fn a_marker_left_behind_gives_the_predecessors_intent_and_a_clean_stop_removes_it() {
         let dir = tempfile::tempdir().unwrap();
         let (mut s, previous) = Session::open(dir.path());
         assert_eq!(previous, None);
         s.record(Intent::Hold);
+        assert!(s.sync(WAIT), "the marker's thread wrote it");
         // The process dies here: the next start sees the marker.
         let (mut s2, previous) = Session::open(dir.path());
         assert_eq!(previous, Some(Intent::Hold));
         s2.record(Intent::Idle);
+        assert!(s2.sync(WAIT));
         let (s3, previous) = Session::open(dir.path());
         assert_eq!(previous, Some(Intent::Idle));
-        s3.finish();
+        s3.finish(WAIT);
         assert_eq!(Session::open(dir.path()).1, None);
     }
 
@@ -165,14 +295,16 @@ mod tests {
         let (mut s, _) = Session::open(dir.path());
         s.record(Intent::Hold);
         s.record_in_fault(Intent::Hold);
+        assert!(s.sync(WAIT));
         let (mut s2, previous) = Session::open(dir.path());
         assert_eq!(previous, Some(Intent::Hold));
         assert!(s2.previous_in_fault());
         s2.record(Intent::Idle);
+        assert!(s2.sync(WAIT));
         let (s3, previous) = Session::open(dir.path());
         assert_eq!(previous, Some(Intent::Idle));
         assert!(!s3.previous_in_fault());
-        s3.finish();
+        s3.finish(WAIT);
     }
 
     #[test]
