@@ -55,7 +55,8 @@ pub struct Session {
 /// queued one is skipped.
 enum Msg {
     Write(Intent, bool),
-    /// Answered once everything queued before it is on the disk (tests, shutdown).
+    /// Answered once everything queued before it is on the disk (tests).
+    #[cfg(test)]
     Sync(mpsc::Sender<()>),
     /// Remove the marker (a clean stop), then end.
     Finish(mpsc::Sender<()>),
@@ -93,6 +94,7 @@ impl MarkerWriter {
                         Msg::Write(intent, in_fault) => {
                             write_marker(&path, intent, in_fault, &mut warned)
                         }
+                        #[cfg(test)]
                         Msg::Sync(done) => {
                             let _ = done.send(());
                         }
@@ -172,6 +174,7 @@ impl Session {
     }
 
     /// Waits up to `within` until every marker handed over is written; false if not by then.
+    #[cfg(test)]
     pub fn sync(&self, within: Duration) -> bool {
         let Some(w) = self.writer.as_ref() else {
             return true;

@@ -55,14 +55,15 @@ pub type Runner = fn(&SolveJob) -> SolveResult;
 enum ToWorker {
     Job(SolveJob),
     /// The worker's own copy of a result, applied on the control thread from a copy made
-    /// there: dropped on the worker, where it was allocated.
-    Free(SolveResult),
+    /// there: dropped on the worker, where it was allocated (box and all).
+    Free(Box<SolveResult>),
 }
 
 /// What the worker sends back: the result and the spent job (made on the control thread,
 /// dropped there).
 struct Done {
-    result: SolveResult,
+    /// Boxed on the worker, so that what goes back to it is the worker's own allocation.
+    result: Box<SolveResult>,
     job: SolveJob,
 }
 
@@ -95,7 +96,7 @@ impl SolverThread {
                 for msg in rx {
                     match msg {
                         ToWorker::Job(job) => {
-                            let result = runner(&job);
+                            let result = Box::new(runner(&job));
                             if result_tx.send(Done { result, job }).is_err() {
                                 break;
                             }
@@ -159,7 +160,7 @@ impl SolverThread {
         self.queued = self.queued.saturating_sub(1);
         let Done { result, job } = done;
         drop(job);
-        let mine = result.clone();
+        let mine = SolveResult::clone(&result);
         // Never waits: with the queue full (it holds as many frees as jobs, so only when the
         // worker is stuck) or the worker gone, the copy is freed here.
         if let Some(tx) = self.to_worker.as_ref() {
