@@ -48,8 +48,8 @@ fn heartbeats_at_1_hz_and_rate_requests_acknowledged_once_each() {
         assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_INVALID);
     }
     let times: Vec<u64> = hbs.iter().map(|(t, _, _)| *t).collect();
-    // The period itself is checked on the session's own clock
-    // (`session::tests::heartbeats_every_heartbeat_ms`); here, on the wall clock of a shared
+    // The period itself is checked on the conversation's own clock
+    // (`conversation::tests::heartbeats_every_heartbeat_ms`); here, on the wall clock of a shared
     // machine, that they come at about 1 Hz: a gap is 1 s plus the scheduling delays of the
     // driver's send and of our receipt (tens of ms on a loaded 2-core machine), so [700, 1500)
     // ms, which a 2 Hz or a 0.5 Hz heartbeat fails.
@@ -104,8 +104,8 @@ fn unacknowledged_rate_requests_are_retried_then_the_next_goes_out() {
     );
     let times: Vec<u64> = first[..4].iter().map(|r| r.0).collect();
     // Never before the timeout (exact); the upper bound leaves room for a loaded machine's
-    // scheduling (the retry timing itself: `session::tests::unacknowledged_requests_are_
-    // retried_then_given_up`, on the session's own clock).
+    // scheduling (the retry timing itself: `conversation::tests::unacknowledged_requests_are_
+    // retried_then_given_up`, on the conversation's own clock).
     for g in gaps_ms(&times) {
         assert!(
             (280.0..1000.0).contains(&g),
@@ -171,8 +171,8 @@ fn motor_tests_carry_board_order_pwm_and_are_resent_well_inside_500_ms() {
         let times: Vec<u64> = mine.iter().map(|(t, _)| *t).collect();
         let worst = gaps_ms(&times).into_iter().fold(0.0, f64::max);
         // What matters is ArduSub's 0.5 s motor-test timeout (param4): a gap near it stops
-        // the motor. The 100 ms resend period itself is checked on the session's own clock
-        // (`session::tests::motor_tests_only_while_armed_at_once_on_change_and_resent`); on
+        // the motor. The 100 ms resend period itself is checked on the conversation's own clock
+        // (`conversation::tests::motor_tests_only_while_armed_at_once_on_change_and_resent`); on
         // the wall clock of a loaded machine the gap is 100 ms plus scheduling delays, held
         // under 400 ms (was 150: a busy 2-core machine can delay a send by tens of ms).
         assert!(

@@ -104,8 +104,8 @@ fn a_second_daemon_on_a_live_namespace_refuses_without_a_crash_message() {
     let mut first = world.daemon(&[]);
     let op = Operator::new(&world);
     assert!(op.request(RequestKind::Status).is_ok());
-    let marker = world.path("state").join("session");
-    let before = std::fs::read_to_string(&marker).expect("the live daemon's session marker");
+    let marker = world.path("state").join("resume");
+    let before = std::fs::read_to_string(&marker).expect("the live daemon's resume marker");
     // Same namespace, same state directory: what a second `systemctl start` by hand does.
     let second = world.daemon(&[]);
     let (status, log) = finish(second, "the second daemon");

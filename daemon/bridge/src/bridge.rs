@@ -1,6 +1,6 @@
-//! Starting and stopping the bridge's parts around the recorder's session: the Foxglove
+//! Starting and stopping the bridge's parts around the recorder's drain: the Foxglove
 //! context and WebSocket server, the live-view thread, the operator thread behind the
-//! services, and the MCAP writer (inside the session).
+//! services, and the MCAP writer (inside the drain).
 
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -79,24 +79,24 @@ pub fn run(
     let node = ipc
         .create_node("bridge")
         .with_context(|| format!("joining namespace {ns}"))?;
-    let session =
+    let drained =
         thruster_recorder::stream_on(&node, &ipc, plan.record.as_ref(), taps, stop, &mut || {
             ready(addr)
         });
-    // The session is over (a signal, or the recording's duration): stop the operator thread
-    // too. The session has dropped its taps, so the live thread ends once its queue is empty.
+    // The drain is over (a signal, or the recording's duration): stop the operator thread
+    // too. The drain has dropped its taps, so the live thread ends once its queue is empty.
     stop.store(true, Ordering::SeqCst);
     let live_logged = match live {
         Some(l) => l.stop()?,
         None => 0,
     };
     drop(node);
-    if let Some(partial) = session.as_ref().err().and_then(|e| e.summary()) {
-        // What reached the files before the error, on stdout as a finished session's summary
+    if let Some(partial) = drained.as_ref().err().and_then(|e| e.summary()) {
+        // What reached the files before the error, on stdout as a finished recording's summary
         // is: the error (a full disk) follows on stderr.
         println!("{}", partial.line());
     }
-    let summary = session.with_context(|| format!("streaming namespace {ns}"))?;
+    let summary = drained.with_context(|| format!("streaming namespace {ns}"))?;
     Ok(Outcome {
         summary,
         live_logged,

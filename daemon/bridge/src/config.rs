@@ -12,7 +12,7 @@ use thruster_protocol::services::DEFAULT_ROOT_BASE;
 /// Per-client backlog of the Foxglove server (the SDK's default), messages.
 pub const DEFAULT_BACKLOG: usize = 1024;
 /// Queue between the draining loop and the WebSocket server, messages: a second of a 1 kHz
-/// session with telemetry at every sample.
+/// run with telemetry at every sample.
 pub const DEFAULT_LIVE_QUEUE: usize = 4096;
 /// How long an operator request waits for the daemon's answer, ms (thrusterctl's default).
 pub const DEFAULT_CONTROL_TIMEOUT_MS: u64 = 2000;

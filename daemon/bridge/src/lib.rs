@@ -8,7 +8,7 @@
 //!
 //! Modules, one job each: [`config`] (the TOML file), [`layout`] (the Foxglove layout for a
 //! vehicle), [`live`] (messages onto Foxglove channels), [`services`] (the operator's requests as services), [`bridge`] (starting and
-//! stopping the parts around the recorder's session).
+//! stopping the parts around the recorder's drain).
 
 pub mod bridge;
 pub mod config;

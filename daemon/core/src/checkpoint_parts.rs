@@ -6,7 +6,7 @@ use base64::engine::general_purpose::STANDARD;
 use base64::Engine;
 use thruster_protocol::{CheckpointMsg, CHECKPOINT_MAX_PARTS, CHECKPOINT_PART_CAPACITY};
 
-/// Where in the daemon's session a checkpoint was taken (see [`CheckpointMsg`]'s fields).
+/// Where in the daemon's run a checkpoint was taken (see [`CheckpointMsg`]'s fields).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Place {
     pub imu_count: u64,

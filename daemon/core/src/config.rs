@@ -76,7 +76,7 @@ pub struct RuntimeSection {
     pub spin_us: u64,
     /// Load the saved model at start (default true).
     pub load_model: bool,
-    /// After a crash while controlling or estimating (the session marker in `state_dir` was
+    /// After a crash while controlling or estimating (the resume marker in `state_dir` was
     /// left behind), hold attitude with the saved model as soon as the IMU is up (default
     /// true: a vehicle in the water must not drift). false: start idle whatever happened,
     /// e.g. on a bench or where an operator must confirm.

@@ -10,15 +10,15 @@
 //!
 //! Modules, one job each: [`schema`] (JSON Schema of a message), [`sink`] (the MCAP files and
 //! their rotation), [`source`] (a topic's subscription and its loss count), [`tap`] (a
-//! consumer's bounded queue, drops counted), [`session`] (the loop that ties them together).
+//! consumer's bounded queue, drops counted), [`recording`] (the loop that ties them together).
 
+pub mod recording;
 pub mod schema;
-pub mod session;
 pub mod sink;
 pub mod source;
 pub mod tap;
 
-pub use session::{
+pub use recording::{
     record, record_on, stream_on, RecordOptions, RecordSummary, TapSummary, TopicSummary,
     DEFAULT_QUEUE,
 };
@@ -61,7 +61,7 @@ pub enum RecordError {
     },
     #[error("{0}")]
     Options(String),
-    /// The session had started and stopped on `source`; `summary` accounts for what it received
+    /// The recording had started and stopped on `source`; `summary` accounts for what it received
     /// and what reached the files before that ([`RecordSummary::written`]).
     #[error(
         "stopped with {} messages in {} file(s)",
@@ -76,7 +76,7 @@ pub enum RecordError {
 }
 
 impl RecordError {
-    /// What a session that had started received and wrote before it stopped on this error
+    /// What a recording that had started received and wrote before it stopped on this error
     /// (None: it never started). Every front end prints its line, so a failed recording still
     /// says how much of it is on disk.
     pub fn summary(&self) -> Option<&RecordSummary> {

@@ -28,7 +28,7 @@ pub const MESSAGE_ENCODING: &str = "json";
 pub const SCHEMA_ENCODING: &str = "jsonschema";
 /// Chunk size, uncompressed bytes of records: small enough that a recording killed by SIGKILL,
 /// or stopped by a full disk, loses little (a reader recovers every finished chunk), large
-/// enough to keep the index small and to give zstd enough to compress (a session's 256 KiB
+/// enough to keep the index small and to give zstd enough to compress (a 1 kHz run's 256 KiB
 /// chunks compress to about 0.36; the whole file at once would reach 0.34). The sink closes the chunks itself (not the MCAP writer), so it knows
 /// which messages are in finished chunks.
 const CHUNK_BYTES: u64 = 256 * 1024;

@@ -92,7 +92,7 @@ pub trait Source {
 }
 
 /// The subscription to `T`'s topic with the largest buffer the topic allows, without a
-/// listener: the recorder polls on its own clock ([`crate::session`]), so no publisher
+/// listener: the recorder polls on its own clock ([`crate::recording`]), so no publisher
 /// notifies it and no sample wakes it.
 pub struct TopicSource<T: TopicMessage> {
     reader: Reader<T>,

@@ -78,7 +78,7 @@ impl<T> Tap<T> {
         }
     }
 
-    /// Hands `item` over, waiting for room: only for the end of a session, never per message.
+    /// Hands `item` over, waiting for room: only for the end of a recording, never per message.
     pub fn send_blocking(&self, item: T) -> bool {
         self.tx.send(item).is_ok()
     }

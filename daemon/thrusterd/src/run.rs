@@ -193,10 +193,10 @@ struct Daemon {
     /// In lockstep: vehicle time at which the next periodic status is due, ns.
     next_status_ns: u64,
     pending_estimate: bool,
-    /// The predecessor died while controlling (see `session`): hold with the loaded model
+    /// The predecessor died while controlling (see `resume_marker`): hold with the loaded model
     /// as soon as the IMU is up.
     pending_hold: bool,
-    session: Option<crate::session::Session>,
+    resume_marker: Option<crate::resume_marker::ResumeMarker>,
     stale_reported: bool,
     /// The driver's own reports on its outputs (count, rejections, armed, link).
     driver: DriverWatch,
@@ -283,7 +283,7 @@ impl Daemon {
             next_status_ns: 0,
             pending_estimate: false,
             pending_hold: false,
-            session: None,
+            resume_marker: None,
             stale_reported: false,
             driver: DriverWatch::new(),
             driver_verdict: OutputVerdict::Usable,
@@ -318,11 +318,11 @@ impl Daemon {
     fn serve_node(&mut self) -> Result<()> {
         let node = self.ipc.create_node("thrusterd")?;
         // The control server first: it is what tells a live daemon on this namespace apart
-        // from a crashed one, and the session marker of a live daemon must neither be read as
+        // from a crashed one, and the resume marker of a live daemon must neither be read as
         // a crash ("did not stop cleanly ... resuming control") nor overwritten.
         let control = ControlServer::create(&node, &self.ipc)
             .context("another thrusterd already serves this namespace")?;
-        self.open_session();
+        self.open_resume_marker();
         let imu_in = Inbox::<ImuSample>::create(&node, &self.ipc)?;
         let side = SideInputs::new(
             Inbox::<ReconfigEvent>::create(&node, &self.ipc)?,
@@ -596,8 +596,8 @@ impl Daemon {
             );
         }
         // A clean stop: the next start begins idle.
-        if let Some(session) = self.session.take() {
-            session.finish(SHUTDOWN_SAVE_WAIT);
+        if let Some(marker) = self.resume_marker.take() {
+            marker.finish(SHUTDOWN_SAVE_WAIT);
         }
         let mut status = self.status_msg();
         status.set_text(StatusMsg::STOPPED_TEXT);
@@ -1182,9 +1182,9 @@ impl Daemon {
     }
 
     /// Reads what a crashed predecessor was doing and starts this daemon's own marker.
-    fn open_session(&mut self) {
-        use crate::session::{Intent, Session};
-        let (mut session, previous) = Session::open(&self.cfg.runtime.state_dir);
+    fn open_resume_marker(&mut self) {
+        use crate::resume_marker::{Intent, ResumeMarker};
+        let (mut marker, previous) = ResumeMarker::open(&self.cfg.runtime.state_dir);
         let resume = match previous {
             Some(Intent::Hold) if self.pending_estimate => Intent::Hold,
             Some(Intent::Hold) if !self.cfg.runtime.resume_after_crash => {
@@ -1200,7 +1200,7 @@ impl Daemon {
                 warn!("the previous thrusterd did not stop cleanly while controlling, but there is no model to resume with: idle");
                 Intent::Idle
             }
-            Some(Intent::Idle) if session.previous_in_fault() => {
+            Some(Intent::Idle) if marker.previous_in_fault() => {
                 info!("the previous thrusterd did not stop cleanly; it was in Fault and would have recovered to idle: idle");
                 Intent::Idle
             }
@@ -1210,35 +1210,35 @@ impl Daemon {
             }
             None => Intent::Idle,
         };
-        session.record(resume);
-        self.session = Some(session);
+        marker.record(resume);
+        self.resume_marker = Some(marker);
     }
 
-    /// Keeps the session marker in step: controlling and estimating move the vehicle, so a
+    /// Keeps the resume marker in step: controlling and estimating move the vehicle, so a
     /// crash in them resumes control; Fault keeps whatever it will recover to.
     fn record_intent(&mut self, to: thrusterd_core::machine::State) {
         use thrusterd_core::machine::State;
         let intent = match to {
-            State::Active => crate::session::Intent::Hold,
-            s if s.is_estimating() => crate::session::Intent::Hold,
-            State::Idle => crate::session::Intent::Idle,
+            State::Active => crate::resume_marker::Intent::Hold,
+            s if s.is_estimating() => crate::resume_marker::Intent::Hold,
+            State::Idle => crate::resume_marker::Intent::Idle,
             State::Fault => {
                 // What clearing the fault resumes, marked as Fault (an operator's idle or stop
                 // in Fault changes it without a state change: called after every request).
                 let intent = if self.machine.fault_resumes_control() {
-                    crate::session::Intent::Hold
+                    crate::resume_marker::Intent::Hold
                 } else {
-                    crate::session::Intent::Idle
+                    crate::resume_marker::Intent::Idle
                 };
-                if let Some(session) = self.session.as_mut() {
-                    session.record_in_fault(intent);
+                if let Some(marker) = self.resume_marker.as_mut() {
+                    marker.record_in_fault(intent);
                 }
                 return;
             }
             _ => return,
         };
-        if let Some(session) = self.session.as_mut() {
-            session.record(intent);
+        if let Some(marker) = self.resume_marker.as_mut() {
+            marker.record(intent);
         }
     }
 

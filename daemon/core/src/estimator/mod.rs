@@ -8,7 +8,7 @@
 //! - [`paper`]: Doniec, Detweiler and Rus's S * A = T.
 //! - [`analysis`]: rank, actuated DOFs, allocation, thruster diagnosis.
 //! - [`power`]: the first pulse's strength from a model in force and the measured noise.
-//! - [`session`]: one estimation run tying these together, with power escalation and the stop.
+//! - [`run`]: one estimation run tying these together, with power escalation and the stop.
 
 pub mod analysis;
 pub mod config;
@@ -21,7 +21,7 @@ pub mod noise;
 pub mod paper;
 pub mod power;
 pub mod response;
-pub mod session;
+pub mod run;
 
 pub use analysis::{RankReport, ThrusterDiagnosis};
 pub use config::{EstimatorConfig, Method};
@@ -29,4 +29,4 @@ pub use dof::{Dof, DofMask};
 pub use excitation::{Excitation, ExcitationPlan};
 pub use noise::{NoiseLevels, NoiseMeter};
 pub use response::PulseShape;
-pub use session::{Estimate, Estimator, PulseSummary, StopDecision};
+pub use run::{Estimate, Estimator, PulseSummary, StopDecision};

@@ -1,7 +1,7 @@
 //! The link to the autopilot and the receive thread.
 //!
 //! The receive thread blocks on the link, stamps each message with CLOCK_MONOTONIC the
-//! moment it is decoded, forwards the ones the session uses and wakes the driver loop.
+//! moment it is decoded, forwards the ones the conversation uses and wakes the driver loop.
 //! Sending happens on the loop's thread through the same link.
 //!
 //! UDP is ours, not the `mavlink` crate's, because a datagram is input like any other and
@@ -15,7 +15,7 @@
 //!   an empty, undecodable or foreign datagram is counted ([`LinkCounters`]) and dropped.
 //!
 //! TCP and serial go through the crate; there an end of stream is a real failure of the
-//! configured link, which ends the session (the backend reconnects).
+//! configured link, which ends the conversation (the backend reconnects).
 
 use std::io::ErrorKind;
 use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
@@ -339,7 +339,7 @@ impl Link for StreamLink {
     }
 }
 
-/// Only these reach the session; the rest (dozens of streams a GCS link carries) are
+/// Only these reach the conversation; the rest (dozens of streams a GCS link carries) are
 /// dropped here so the loop is woken only for something it uses.
 fn wanted(msg: &MavMessage) -> bool {
     matches!(
@@ -466,7 +466,7 @@ mod tests {
             }
             Recv::Nothing
         };
-        // Before the lock a ground station's heartbeat passes (the session ignores it)
+        // Before the lock a ground station's heartbeat passes (the conversation ignores it)
         // but locks nothing; our sends go nowhere.
         stray
             .send_to(&frame(255, &hb(MavAutopilot::MAV_AUTOPILOT_INVALID)), at)

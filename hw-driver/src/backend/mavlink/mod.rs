@@ -2,18 +2,18 @@
 //!
 //! IMU and depth come from the autopilot's SCALED_IMU2 (or SCALED_IMU / RAW_IMU), ATTITUDE
 //! and SCALED_PRESSURE2 streams; thrust goes out as MAV_CMD_DO_MOTOR_TEST per thruster or
-//! RC_CHANNELS_OVERRIDE. The protocol logic is the pure [`session::Session`]; this module
+//! RC_CHANNELS_OVERRIDE. The protocol logic is the pure [`conversation::Conversation`]; this module
 //! owns the connection and the receive thread ([`io`]). No autopilot parameter is changed.
 //!
-//! A connection that fails after start (TCP closed, serial unplugged) ends the session, not
+//! A connection that fails after start (TCP closed, serial unplugged) ends the conversation, not
 //! the driver: the link is reported down and the connection is opened again every
 //! [`RECONNECT_PERIOD`]. Only a connection that cannot be opened at start is an error (a
 //! wrong address in the configuration).
 
 pub mod battery;
+pub mod conversation;
 pub mod convert;
 pub mod io;
-pub mod session;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
@@ -21,8 +21,8 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use self::conversation::{Conversation, ConversationCounters};
 use self::io::{Incoming, SharedLink};
-use self::session::{Session, SessionCounters};
 use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Supply, Waker};
 use crate::clock::monotonic_ns;
 use crate::config::MavlinkConfig;
@@ -55,7 +55,7 @@ pub struct MavlinkBackend {
     rx: Option<Receiver<Incoming>>,
     rx_stop: Arc<AtomicBool>,
     rx_thread: Option<JoinHandle<()>>,
-    session: Option<Session>,
+    conversation: Option<Conversation>,
     send_errors: u64,
     send_log: LogLimiter,
     stopped: bool,
@@ -65,7 +65,7 @@ impl std::fmt::Debug for MavlinkBackend {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MavlinkBackend")
             .field("address", &self.cfg.address)
-            .field("session", &self.session)
+            .field("conversation", &self.conversation)
             .finish_non_exhaustive()
     }
 }
@@ -84,18 +84,18 @@ impl MavlinkBackend {
             rx: None,
             rx_stop: Arc::new(AtomicBool::new(false)),
             rx_thread: None,
-            session: None,
+            conversation: None,
             send_errors: 0,
             send_log: LogLimiter::default(),
             stopped: false,
         }
     }
 
-    /// The session's counters (zero before `start`).
-    pub fn counters(&self) -> SessionCounters {
-        self.session
+    /// The conversation's counters (zero before `start`).
+    pub fn counters(&self) -> ConversationCounters {
+        self.conversation
             .as_ref()
-            .map(Session::counters)
+            .map(Conversation::counters)
             .unwrap_or_default()
     }
 
@@ -125,7 +125,7 @@ impl MavlinkBackend {
         Ok(())
     }
 
-    /// The connection failed: the session's link is down at once, the receive thread is
+    /// The connection failed: the conversation's link is down at once, the receive thread is
     /// gone, and the connection is opened again from [`Backend::service`].
     fn lost(&mut self, reason: &str, now_ns: u64) {
         tracing::warn!(
@@ -133,7 +133,7 @@ impl MavlinkBackend {
             "MAVLink connection lost: {reason}; reconnecting every {} ms",
             RECONNECT_PERIOD.as_millis()
         );
-        if let Some(s) = self.session.as_mut() {
+        if let Some(s) = self.conversation.as_mut() {
             // Nothing can reach the autopilot any more: the neutral round ArduSub would get
             // is its own, 500 ms after our last motor test (documented).
             s.on_disconnect(reason);
@@ -171,7 +171,7 @@ impl MavlinkBackend {
     /// released, so an autopilot (or router) that comes back from another port is found.
     fn watch_link(&mut self) {
         let up = self
-            .session
+            .conversation
             .as_ref()
             .is_some_and(|s| s.link() == LinkState::Up);
         if self.was_up && !up {
@@ -182,14 +182,15 @@ impl MavlinkBackend {
         self.was_up = up;
     }
 
-    /// Sends what the session queued. Send failures are counted and logged, not fatal: a
+    /// Sends what the conversation queued. Send failures are counted and logged, not fatal: a
     /// lossy tether shows up as a lost link (HEARTBEAT timeout), which is supervised.
     fn flush(&mut self) {
-        let (Some(session), Some(conn)) = (self.session.as_mut(), self.conn.as_ref()) else {
+        let (Some(conversation), Some(conn)) = (self.conversation.as_mut(), self.conn.as_ref())
+        else {
             return;
         };
-        let header = session.header();
-        for msg in session.drain_outgoing() {
+        let header = conversation.header();
+        for msg in conversation.drain_outgoing() {
             if let Err(e) = conn.send(&header, &msg) {
                 self.send_errors += 1;
                 if let Some(suppressed) = self.send_log.allow() {
@@ -200,13 +201,13 @@ impl MavlinkBackend {
     }
 
     fn drain_incoming(&mut self) -> Result<(), BackendError> {
-        let (Some(rx), Some(session)) = (self.rx.as_ref(), self.session.as_mut()) else {
+        let (Some(rx), Some(conversation)) = (self.rx.as_ref(), self.conversation.as_mut()) else {
             return Ok(());
         };
         let lost = loop {
             match rx.try_recv() {
                 Ok(Incoming::Message { t_ns, header, msg }) => {
-                    session.on_message(t_ns, &header, &msg)
+                    conversation.on_message(t_ns, &header, &msg)
                 }
                 Ok(Incoming::Closed(reason)) => break format!("closed: {reason}"),
                 Err(TryRecvError::Empty) => return Ok(()),
@@ -239,7 +240,11 @@ impl Backend for MavlinkBackend {
     fn start(&mut self, waker: Waker, now_ns: u64) -> Result<(), BackendError> {
         self.waker = Some(waker);
         self.open()?;
-        self.session = Some(Session::new(self.cfg.clone(), self.outputs.clone(), now_ns));
+        self.conversation = Some(Conversation::new(
+            self.cfg.clone(),
+            self.outputs.clone(),
+            now_ns,
+        ));
         tracing::info!(
             address = %self.cfg.address,
             output = ?self.cfg.output,
@@ -253,11 +258,14 @@ impl Backend for MavlinkBackend {
         self.drain_incoming()?;
         // ACKs processed above may have queued the next request.
         self.flush();
-        Ok(self.session.as_mut().and_then(Session::take_reading))
+        Ok(self
+            .conversation
+            .as_mut()
+            .and_then(Conversation::take_reading))
     }
 
     fn write_outputs(&mut self, outputs: &[Pwm], now_ns: u64) -> Result<(), BackendError> {
-        if let Some(s) = self.session.as_mut() {
+        if let Some(s) = self.conversation.as_mut() {
             s.set_outputs(outputs);
             // At once, not at the next resend: this is the command path's latency.
             s.service(now_ns);
@@ -273,7 +281,7 @@ impl Backend for MavlinkBackend {
 
     fn service(&mut self, now_ns: u64) -> Result<(), BackendError> {
         self.try_reconnect(now_ns);
-        if let Some(s) = self.session.as_mut() {
+        if let Some(s) = self.conversation.as_mut() {
             s.service(now_ns);
         }
         // Before the peer is forgotten: the link-down neutral round goes to the autopilot.
@@ -283,18 +291,26 @@ impl Backend for MavlinkBackend {
     }
 
     fn next_deadline_ns(&self) -> Option<u64> {
-        let session = self.session.as_ref().map(Session::next_deadline_ns);
-        [session, self.reconnect_at_ns].into_iter().flatten().min()
+        let conversation = self
+            .conversation
+            .as_ref()
+            .map(Conversation::next_deadline_ns);
+        [conversation, self.reconnect_at_ns]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
     fn supply(&self, now_ns: u64) -> Supply {
-        self.session
+        self.conversation
             .as_ref()
             .map_or_else(Supply::default, |s| s.supply(now_ns))
     }
 
     fn armed(&self) -> bool {
-        self.session.as_ref().is_some_and(Session::autopilot_armed)
+        self.conversation
+            .as_ref()
+            .is_some_and(Conversation::autopilot_armed)
     }
 
     fn stats(&self) -> Vec<(&'static str, u64)> {
@@ -316,9 +332,9 @@ impl Backend for MavlinkBackend {
     }
 
     fn link(&self) -> LinkState {
-        self.session
+        self.conversation
             .as_ref()
-            .map_or(LinkState::Connecting, Session::link)
+            .map_or(LinkState::Connecting, Conversation::link)
     }
 
     fn stop(&mut self) -> Result<(), BackendError> {
@@ -330,7 +346,7 @@ impl Backend for MavlinkBackend {
             if i > 0 {
                 std::thread::sleep(STOP_GAP);
             }
-            if let Some(s) = self.session.as_mut() {
+            if let Some(s) = self.conversation.as_mut() {
                 s.shutdown(monotonic_ns());
             }
             self.flush();

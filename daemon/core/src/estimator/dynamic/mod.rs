@@ -63,7 +63,7 @@ pub struct DynamicTerms {
     pub imu_position: Option<ImuPosition>,
     /// The rotation rows' noise level beyond the gyro's white noise at rest (RMS over the axes
     /// of sqrt(max(0, sigma^2 - 2 white^2))), rad/s: rotation neither thrust nor the
-    /// vehicle's dynamics explain, such as a swell's torque (set by the session, which knows
+    /// vehicle's dynamics explain, such as a swell's torque (set by the estimation run, which knows
     /// the rest's noise; 0 until then).
     pub unexplained_rate_radps: f64,
 }

@@ -69,7 +69,7 @@ struct Pending {
 
 /// Counters for the status line and tests.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SessionCounters {
+pub struct ConversationCounters {
     /// Readings produced.
     pub readings: u64,
     /// IMU messages dropped because the link was not up.
@@ -92,7 +92,7 @@ pub struct SessionCounters {
 
 /// See the module docs.
 #[derive(Debug)]
-pub struct Session {
+pub struct Conversation {
     cfg: MavlinkConfig,
     outputs: Vec<OutputSpec>,
     started_ns: u64,
@@ -115,20 +115,20 @@ pub struct Session {
     last_thrust_ns: Option<u64>,
     next_heartbeat_ns: u64,
     outgoing: Vec<MavMessage>,
-    counters: SessionCounters,
+    counters: ConversationCounters,
     refusal_log: LogLimiter,
     text_log: LogLimiter,
     implausible_log: LogLimiter,
 }
 
-impl Session {
-    /// A session for `outputs` (thruster order), started at `now_ns`: outputs neutral,
+impl Conversation {
+    /// A conversation for `outputs` (thruster order), started at `now_ns`: outputs neutral,
     /// our first HEARTBEAT due at once.
     pub fn new(cfg: MavlinkConfig, outputs: Vec<OutputSpec>, now_ns: u64) -> Self {
         let pwm = outputs.iter().map(|o| o.neutral).collect();
         let target = (cfg.target_system != 0 && cfg.target_component != 0)
             .then_some((cfg.target_system, cfg.target_component));
-        Session {
+        Conversation {
             cfg,
             outputs,
             started_ns: now_ns,
@@ -148,7 +148,7 @@ impl Session {
             last_thrust_ns: None,
             next_heartbeat_ns: now_ns,
             outgoing: Vec::new(),
-            counters: SessionCounters::default(),
+            counters: ConversationCounters::default(),
             refusal_log: LogLimiter::default(),
             text_log: LogLimiter::new(20, std::time::Duration::from_secs(10)),
             implausible_log: LogLimiter::default(),
@@ -216,7 +216,7 @@ impl Session {
     }
 
     /// Counters.
-    pub fn counters(&self) -> SessionCounters {
+    pub fn counters(&self) -> ConversationCounters {
         self.counters
     }
 
@@ -230,7 +230,7 @@ impl Session {
         self.readings.pop_front()
     }
 
-    /// Sets the pulses (thruster order); they go out on the next [`Session::service`] if
+    /// Sets the pulses (thruster order); they go out on the next [`Conversation::service`] if
     /// they changed.
     pub fn set_outputs(&mut self, pwm: &[Pwm]) {
         if self.pwm.as_slice() != pwm {
@@ -245,7 +245,7 @@ impl Session {
         &self.pwm
     }
 
-    /// The next time [`Session::service`] has work without a new message.
+    /// The next time [`Conversation::service`] has work without a new message.
     pub fn next_deadline_ns(&self) -> u64 {
         // Only deadlines that `service` moves forward, or the loop would spin on one that
         // stays in the past (thrust waits for a target; the link timer only runs while up).
@@ -677,7 +677,7 @@ impl Session {
         self.push_thrust(now_ns);
     }
 
-    /// Queues the messages that end the session: neutral thrust now (whatever the resend
+    /// Queues the messages that end the conversation: neutral thrust now (whatever the resend
     /// timer says) and, if we armed the vehicle, a disarm command.
     pub fn shutdown(&mut self, now_ns: u64) {
         self.neutral_round(now_ns);
@@ -829,9 +829,9 @@ mod tests {
             .collect()
     }
 
-    /// A session with the link up (armed as given) and the set-up requests acknowledged.
-    fn up(armed: bool) -> Session {
-        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+    /// A conversation with the link up (armed as given) and the set-up requests acknowledged.
+    fn up(armed: bool) -> Conversation {
+        let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
         s.on_message(1, &hdr(AP.0, AP.1), &ap_heartbeat(armed));
         s.service(1);
         for _ in 0..3 {
@@ -848,12 +848,12 @@ mod tests {
         s
     }
 
-    /// Our HEARTBEAT every `heartbeat_ms` on the session's own clock: one at the start, none
+    /// Our HEARTBEAT every `heartbeat_ms` on the conversation's own clock: one at the start, none
     /// before the period is up, the next at the deadline (the process test, on the wall clock
     /// of a shared machine, checks only that they keep coming at about 1 Hz).
     #[test]
     fn heartbeats_every_heartbeat_ms() {
-        let heartbeats = |s: &mut Session| {
+        let heartbeats = |s: &mut Conversation| {
             s.drain_outgoing()
                 .iter()
                 .filter(|m| matches!(m, MavMessage::HEARTBEAT(_)))
@@ -875,7 +875,7 @@ mod tests {
 
     #[test]
     fn finds_the_autopilot_and_requests_rates_one_at_a_time() {
-        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+        let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
         s.service(0);
         let out = s.drain_outgoing();
         assert!(
@@ -943,7 +943,7 @@ mod tests {
             ..MavlinkConfig::default()
         };
         let timeout = cfg.command_timeout_ms * MS;
-        let mut s = Session::new(cfg, specs(), 0);
+        let mut s = Conversation::new(cfg, specs(), 0);
         s.on_message(0, &hdr(1, 1), &ap_heartbeat(false));
         let mut confirmations = Vec::new();
         let mut t = 0;
@@ -1005,7 +1005,7 @@ mod tests {
 
     #[test]
     fn imu_messages_become_si_readings_with_fresh_depth_only_while_up() {
-        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+        let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
         // Before the link is up: dropped.
         s.on_message(1, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
         assert_eq!(s.take_reading(), None);
@@ -1126,7 +1126,7 @@ mod tests {
             output: OutputMode::RcOverride,
             ..MavlinkConfig::default()
         };
-        let mut s = Session::new(cfg, specs(), 0);
+        let mut s = Conversation::new(cfg, specs(), 0);
         s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
         s.set_outputs(&[Pwm(1600), Pwm(1400)]);
         s.service(2);
@@ -1156,7 +1156,7 @@ mod tests {
             pressure_rate_hz: 0.0,
             ..MavlinkConfig::default()
         };
-        let mut s = Session::new(cfg, specs(), 0);
+        let mut s = Conversation::new(cfg, specs(), 0);
         s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
         s.service(2);
         s.on_message(
@@ -1253,7 +1253,7 @@ mod tests {
 
     #[test]
     fn a_vehicle_disarmed_from_the_start_is_known_as_such() {
-        let mut s = Session::new(MavlinkConfig::default(), specs(), 0);
+        let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
         assert_eq!(s.armed_state(), None);
         s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
         assert_eq!(s.armed_state(), Some(false));
@@ -1267,7 +1267,7 @@ mod tests {
             imu_message: ImuMessage::RawImu,
             ..MavlinkConfig::default()
         };
-        let mut s = Session::new(cfg, specs(), 0);
+        let mut s = Conversation::new(cfg, specs(), 0);
         s.on_message(1, &hdr(1, 1), &ap_heartbeat(true));
         let raw = |z: i16, mag: [i16; 3]| {
             MavMessage::RAW_IMU(RAW_IMU_DATA {

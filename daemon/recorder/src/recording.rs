@@ -1,4 +1,4 @@
-//! A recording session: subscribe, drain every topic until told to stop, hand each message to
+//! A recording: subscribe, drain every topic until told to stop, hand each message to
 //! the consumers (the MCAP writer, live views), finish the file with the counts and losses.
 //!
 //! The caller's thread drains the subscribers (copy out of shared memory, JSON once) and hands
@@ -8,7 +8,7 @@
 //! draining of the 128-sample subscriber buffers; when a consumer's queue is full the message
 //! is dropped for it alone and counted, so memory stays bounded.
 //!
-//! A write error (a full disk) stops the writer, and with it the session: the error comes back
+//! A write error (a full disk) stops the writer, and with it the recording: the error comes back
 //! as [`RecordError::Stopped`] with the summary of what was received and what reached the
 //! files before it.
 
@@ -35,7 +35,7 @@ use crate::RecordError;
 /// drain that comes late by 100 ms still loses nothing.
 pub const DRAIN_PERIOD: Duration = Duration::from_millis(10);
 
-/// Default capacity of the queue to the MCAP writer, in messages: 16 s of a 1 kHz session
+/// Default capacity of the queue to the MCAP writer, in messages: 16 s of a 1 kHz run
 /// with telemetry at every sample (about 4 000 messages/s, docs/recording.md), about 25 MB of
 /// JSON at most. A disk stalled for longer loses messages (counted) instead of growing memory.
 pub const DEFAULT_QUEUE: usize = 65_536;
@@ -165,7 +165,7 @@ pub fn record_on(
     stream_on(node, ipc, Some(options), Vec::new(), stop, ready)
 }
 
-/// The general session: every topic of the namespace to the MCAP files of `record` (if any)
+/// The general recording: every topic of the namespace to the MCAP files of `record` (if any)
 /// and to each of `live` (each behind its own bounded queue, see [`crate::tap`]), until `stop`
 /// or `record`'s duration. `ready` as in [`record_on`].
 pub fn stream_on(
@@ -233,7 +233,7 @@ pub fn stream_on(
         summary.written = written.messages;
         write_error = written.error;
     }
-    // The writer's error first: it is what stopped the session.
+    // The writer's error first: it is what stopped the recording.
     match write_error.or(last.err()) {
         None => Ok(summary),
         Some(source) => Err(RecordError::Stopped {

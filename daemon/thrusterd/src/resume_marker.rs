@@ -1,4 +1,4 @@
-//! The session marker: a small file in the state directory that exists while a thrusterd
+//! The resume marker: a small file in the state directory that exists while a thrusterd
 //! runs and says what it would resume after a crash.
 //!
 //! systemd restarts a crashed daemon (`Restart=on-failure`) within seconds, usually with the
@@ -20,7 +20,12 @@ use std::time::Duration;
 use tracing::warn;
 
 /// File name of the marker inside the state directory.
-pub const SESSION_FILE: &str = "session";
+pub const MARKER_FILE: &str = "resume";
+
+/// The marker's name before 2026-11-27 ("session" now means the lab's run of the processes
+/// only): read at start when there is no [`MARKER_FILE`], then removed, so a daemon updated
+/// while its predecessor's marker was on the disk still resumes.
+const LEGACY_FILE: &str = "session";
 
 /// What a restarted daemon resumes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -40,7 +45,7 @@ impl Intent {
     }
 }
 
-pub struct Session {
+pub struct ResumeMarker {
     path: PathBuf,
     /// What was last handed to the writer (a repeat is not written again).
     queued: Option<(Intent, bool)>,
@@ -73,7 +78,7 @@ impl MarkerWriter {
     fn spawn(path: PathBuf) -> std::io::Result<MarkerWriter> {
         let (tx, rx) = mpsc::channel::<Msg>();
         std::thread::Builder::new()
-            .name("session-marker".into())
+            .name("resume-marker".into())
             .spawn(move || {
                 crate::solver::lower_priority();
                 let mut warned = false;
@@ -110,13 +115,24 @@ impl MarkerWriter {
     }
 }
 
-impl Session {
+impl ResumeMarker {
     /// Reads the marker a predecessor left (None: it stopped cleanly, or this is the first
     /// start) and starts this daemon's own. Called once, before the loop: it reads a file.
-    pub fn open(state_dir: &Path) -> (Session, Option<Intent>) {
-        let path = state_dir.join(SESSION_FILE);
+    pub fn open(state_dir: &Path) -> (ResumeMarker, Option<Intent>) {
+        let path = state_dir.join(MARKER_FILE);
+        let legacy = state_dir.join(LEGACY_FILE);
         let mut previous_in_fault = false;
-        let previous = match fs::read_to_string(&path) {
+        let read = match fs::read_to_string(&path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                let read = fs::read_to_string(&legacy);
+                if read.is_ok() {
+                    let _ = fs::remove_file(&legacy);
+                }
+                read
+            }
+            read => read,
+        };
+        let previous = match read {
             Ok(text) => {
                 previous_in_fault = text.lines().any(|l| l == "state=fault");
                 Some(parse(&text))
@@ -129,17 +145,19 @@ impl Session {
         };
         let writer = MarkerWriter::spawn(path.clone())
             .map_err(|e| {
-                warn!("the session marker's thread did not start ({e}): written on the control thread")
+                warn!(
+                    "the resume marker's thread did not start ({e}): written on the control thread"
+                )
             })
             .ok();
-        let session = Session {
+        let marker = ResumeMarker {
             path,
             queued: None,
             previous_in_fault,
             writer,
             warned: false,
         };
-        (session, previous)
+        (marker, previous)
     }
 
     /// Marks what a restart would resume (never waits: the write is the marker thread's).
@@ -147,7 +165,7 @@ impl Session {
         self.write(intent, false);
     }
 
-    /// As [`Session::record`], marked as in Fault: a restart says so, and resumes what
+    /// As [`ResumeMarker::record`], marked as in Fault: a restart says so, and resumes what
     /// clearing the fault would have resumed.
     pub fn record_in_fault(&mut self, intent: Intent) {
         self.write(intent, true);
@@ -208,7 +226,7 @@ impl Session {
 fn write_marker(path: &Path, intent: Intent, in_fault: bool, warned: &mut bool) {
     let tmp = path.with_extension("tmp");
     let state = if in_fault { "state=fault\n" } else { "" };
-    let text = format!("thrusterd session\nresume={}\n{state}", intent.word());
+    let text = format!("thrusterd resume marker\nresume={}\n{state}", intent.word());
     let result = path
         .parent()
         .map_or(Ok(()), fs::create_dir_all)
@@ -252,7 +270,7 @@ mod tests {
     #[test]
     fn the_newest_marker_wins_and_finish_removes_it_after_queued_writes() {
         let dir = tempfile::tempdir().unwrap();
-        let (mut s, _) = Session::open(dir.path());
+        let (mut s, _) = ResumeMarker::open(dir.path());
         for k in 0..200 {
             if k % 2 == 0 {
                 s.record(Intent::Hold);
@@ -262,52 +280,68 @@ mod tests {
         }
         s.record(Intent::Hold);
         assert!(s.sync(WAIT));
-        let text = fs::read_to_string(dir.path().join(SESSION_FILE)).unwrap();
-        assert_eq!(text, "thrusterd session\nresume=hold\n");
+        let text = fs::read_to_string(dir.path().join(MARKER_FILE)).unwrap();
+        assert_eq!(text, "thrusterd resume marker\nresume=hold\n");
         s.record(Intent::Idle);
         s.finish(WAIT);
         assert!(
-            !dir.path().join(SESSION_FILE).exists(),
+            !dir.path().join(MARKER_FILE).exists(),
             "removed after the queued write"
         );
-        assert!(!dir.path().join("session.tmp").exists());
+        assert!(!dir.path().join("resume.tmp").exists());
     }
 
     #[test]
     fn a_marker_left_behind_gives_the_predecessors_intent_and_a_clean_stop_removes_it() {
         let dir = tempfile::tempdir().unwrap();
-        let (mut s, previous) = Session::open(dir.path());
+        let (mut s, previous) = ResumeMarker::open(dir.path());
         assert_eq!(previous, None);
         s.record(Intent::Hold);
         assert!(s.sync(WAIT), "the marker's thread wrote it");
         // The process dies here: the next start sees the marker.
-        let (mut s2, previous) = Session::open(dir.path());
+        let (mut s2, previous) = ResumeMarker::open(dir.path());
         assert_eq!(previous, Some(Intent::Hold));
         s2.record(Intent::Idle);
         assert!(s2.sync(WAIT));
-        let (s3, previous) = Session::open(dir.path());
+        let (s3, previous) = ResumeMarker::open(dir.path());
         assert_eq!(previous, Some(Intent::Idle));
         s3.finish(WAIT);
-        assert_eq!(Session::open(dir.path()).1, None);
+        assert_eq!(ResumeMarker::open(dir.path()).1, None);
     }
 
     /// Issue 27: after kill -9 in Fault the restart said "it was idle".
     #[test]
     fn a_marker_written_in_fault_says_so_and_what_it_would_recover_to() {
         let dir = tempfile::tempdir().unwrap();
-        let (mut s, _) = Session::open(dir.path());
+        let (mut s, _) = ResumeMarker::open(dir.path());
         s.record(Intent::Hold);
         s.record_in_fault(Intent::Hold);
         assert!(s.sync(WAIT));
-        let (mut s2, previous) = Session::open(dir.path());
+        let (mut s2, previous) = ResumeMarker::open(dir.path());
         assert_eq!(previous, Some(Intent::Hold));
         assert!(s2.previous_in_fault());
         s2.record(Intent::Idle);
         assert!(s2.sync(WAIT));
-        let (s3, previous) = Session::open(dir.path());
+        let (s3, previous) = ResumeMarker::open(dir.path());
         assert_eq!(previous, Some(Intent::Idle));
         assert!(!s3.previous_in_fault());
         s3.finish(WAIT);
+    }
+
+    #[test]
+    fn a_marker_under_its_old_name_is_read_once_and_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        fs::write(
+            dir.path().join(LEGACY_FILE),
+            "thrusterd session\nresume=hold\nstate=fault\n",
+        )
+        .unwrap();
+        let (m, previous) = ResumeMarker::open(dir.path());
+        assert_eq!(previous, Some(Intent::Hold));
+        assert!(m.previous_in_fault());
+        assert!(!dir.path().join(LEGACY_FILE).exists());
+        m.finish(WAIT);
+        assert_eq!(ResumeMarker::open(dir.path()).1, None);
     }
 
     #[test]
