@@ -3,8 +3,10 @@
 //! logging setup (journald under systemd, else stderr), systemd's notify protocol (READY,
 //! WATCHDOG) and the quiet exit on a closed stdout pipe ([`pipe`]) are shared by thrusterd and
 //! thrusterctl as well, and so is raising the control thread to real-time priority ([`realtime`]).
+//! Every driver limits its repeated warnings with one [`LogLimiter`].
 
 pub mod load;
+pub mod log_limit;
 #[cfg(feature = "process")]
 pub mod logging;
 #[cfg(feature = "process")]
@@ -17,6 +19,7 @@ pub mod shutdown;
 pub mod systemd;
 
 pub use load::{locate, parse_toml, read_text, LoadError, Range};
+pub use log_limit::LogLimiter;
 #[cfg(feature = "process")]
 pub use shutdown::Shutdown;
 #[cfg(feature = "process")]

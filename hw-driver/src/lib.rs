@@ -22,4 +22,3 @@ pub mod clock;
 pub mod config;
 pub mod core;
 pub mod driver;
-pub mod log_limit;

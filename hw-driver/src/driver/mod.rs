@@ -34,9 +34,9 @@ use crate::clock::monotonic_ns;
 use crate::config::{BackendKind, Settings};
 use crate::core::controller::{Controller, Counters, Outcome, OutputState};
 use crate::core::pwm::{OutputMap, Pwm};
-use crate::log_limit::LogLimiter;
 use shutdown::Shutdown;
 use status::StatusReporter;
+use thruster_driver_kit::LogLimiter;
 use wake::WakePipe;
 
 /// Node name of the driver in iceoryx2 listings.

@@ -24,6 +24,7 @@ mod realtime;
 mod stepping;
 
 use std::time::{Duration, Instant};
+use thruster_driver_kit::LogLimiter;
 
 use thruster_protocol::services::{Inbox, IpcConfig, IpcError, IpcNode, Port};
 use thruster_protocol::validate::{RejectCounters, RejectReason};
@@ -162,43 +163,6 @@ struct Ports {
     _tidy: thruster_protocol::services::TidyOnDrop,
 }
 
-/// Limits repeated warnings to a few per window, then reports how many were suppressed.
-#[derive(Debug)]
-struct LogLimiter {
-    window_end: Instant,
-    logged: u32,
-    suppressed: u64,
-}
-
-impl LogLimiter {
-    const PER_WINDOW: u32 = 5;
-    const WINDOW: Duration = Duration::from_secs(10);
-
-    fn new() -> Self {
-        LogLimiter {
-            window_end: Instant::now() + Self::WINDOW,
-            logged: 0,
-            suppressed: 0,
-        }
-    }
-
-    /// `Some(suppressed since the last logged one)` when this occurrence may be logged.
-    fn allow(&mut self) -> Option<u64> {
-        let now = Instant::now();
-        if now >= self.window_end {
-            self.window_end = now + Self::WINDOW;
-            self.logged = 0;
-        }
-        if self.logged < Self::PER_WINDOW {
-            self.logged += 1;
-            Some(std::mem::take(&mut self.suppressed))
-        } else {
-            self.suppressed += 1;
-            None
-        }
-    }
-}
-
 /// The simulator process: settings, physics, scenario and ports.
 pub struct Driver {
     settings: Settings,
@@ -314,7 +278,7 @@ impl Driver {
             applied: 0,
             timeouts: 0,
             clipped: 0,
-            reject_log: LogLimiter::new(),
+            reject_log: LogLimiter::default(),
             spin: wait::AdaptiveSpin::new(settings.lockstep.spin()),
             started: None,
             next_housekeeping: now,

@@ -17,7 +17,7 @@ use crate::clock::monotonic_ns;
 use crate::config::LinuxConfig;
 use crate::core::axes::AxisMap;
 use crate::core::pwm::Pwm;
-use crate::log_limit::LogLimiter;
+use thruster_driver_kit::LogLimiter;
 
 /// Standard gravity, m/s^2, for pressure -> depth.
 pub const G: f64 = 9.80665;

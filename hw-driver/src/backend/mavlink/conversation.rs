@@ -47,7 +47,7 @@ use crate::backend::{LinkState, OutputSpec, SensorReading, Supply};
 pub const SUPPLY_STALE_NS: u64 = 5_000_000_000;
 use crate::config::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
 use crate::core::pwm::Pwm;
-use crate::log_limit::LogLimiter;
+use thruster_driver_kit::LogLimiter;
 
 const MS: u64 = 1_000_000;
 

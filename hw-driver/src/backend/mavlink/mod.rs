@@ -27,7 +27,7 @@ use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Supply,
 use crate::clock::monotonic_ns;
 use crate::config::MavlinkConfig;
 use crate::core::pwm::Pwm;
-use crate::log_limit::LogLimiter;
+use thruster_driver_kit::LogLimiter;
 
 /// How often the final neutral is sent on stop, and the gap between sends: UDP may drop
 /// one datagram, not three in a row.
