@@ -18,7 +18,7 @@ pub mod shutdown;
 #[cfg(feature = "process")]
 pub mod systemd;
 
-pub use load::{locate, parse_toml, read_text, LoadError, Range};
+pub use load::{locate, parse_toml, read_text, LoadError, Range, SettingsError};
 pub use log_limit::LogLimiter;
 #[cfg(feature = "process")]
 pub use shutdown::Shutdown;

@@ -248,6 +248,32 @@ fn line_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// Problems with a driver's settings: its file, or a setting neither on the command line nor
+/// in the file, or a command-line value out of range. One type for every driver (thruster-sim,
+/// thruster-hw), so they word these errors alike.
+#[derive(Debug, thiserror::Error)]
+pub enum SettingsError {
+    /// The config file could not be read or parsed, or a value in it is invalid.
+    #[error(transparent)]
+    File(#[from] LoadError),
+    /// A required setting is neither on the command line nor in the file.
+    #[error("missing `{key}`: give {flag} or set `{key}` in the config file")]
+    Missing {
+        /// Key in the config file.
+        key: &'static str,
+        /// The command-line option.
+        flag: &'static str,
+    },
+    /// A command-line value is out of range.
+    #[error("{flag}: {reason}")]
+    Argument {
+        /// The option, e.g. `--rate`.
+        flag: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -20,29 +20,8 @@ use crate::sim::SimOptions;
 /// Default IMU sample rate of the driver, Hz.
 pub const DEFAULT_RATE_HZ: f64 = 200.0;
 
-/// Problems with the settings.
-#[derive(Debug, thiserror::Error)]
-pub enum SettingsError {
-    /// The config file could not be read or parsed, or a value in it is invalid.
-    #[error(transparent)]
-    File(#[from] LoadError),
-    /// A required setting is neither on the command line nor in the file.
-    #[error("missing `{key}`: give {flag} or set `{key}` in the config file")]
-    Missing {
-        /// Key in the config file.
-        key: &'static str,
-        /// The command-line option.
-        flag: &'static str,
-    },
-    /// A command-line value is out of range.
-    #[error("{flag}: {reason}")]
-    Argument {
-        /// The option, e.g. `--rate`.
-        flag: &'static str,
-        /// What is wrong.
-        reason: String,
-    },
-}
+/// Problems with the settings (one type for every driver).
+pub use thruster_driver_kit::SettingsError;
 
 /// How the sample clock runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]

@@ -67,21 +67,8 @@ pub struct Overrides {
     pub backend: Option<BackendKind>,
 }
 
-/// Problems with the settings.
-#[derive(Debug, thiserror::Error)]
-pub enum SettingsError {
-    /// The config file could not be read or parsed, or a value in it is invalid.
-    #[error(transparent)]
-    File(#[from] LoadError),
-    /// A required setting is neither on the command line nor in the file.
-    #[error("missing `{key}`: give {flag} or set `{key}` in the config file")]
-    Missing {
-        /// Key in the config file.
-        key: &'static str,
-        /// The command-line option.
-        flag: &'static str,
-    },
-}
+/// Problems with the settings (one type for every driver).
+pub use thruster_driver_kit::SettingsError;
 
 /// The config file as written. All keys but `[[thruster]]` are optional.
 #[derive(Debug, Clone, Deserialize)]
