@@ -7,9 +7,13 @@
 //!
 //! One load at a time: a thread stuck in a read keeps its load in flight, and later loads are
 //! refused with the path and how long it has been stuck, so stuck threads cannot pile up.
+//!
+//! The loop installs its own copy of what was read and hands the thread's back to it to be
+//! freed there: a free into another thread's malloc arena can wait on that arena's lock
+//! (`solver.rs`). The thread waits at most [`GIVE_BACK_WAIT`] for it.
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{self, Receiver, TryRecvError};
+use std::sync::mpsc::{self, Receiver, SyncSender, TryRecvError};
 use std::time::{Duration, Instant};
 
 use thrusterd_core::estimator::EstimatorConfig;
@@ -22,12 +26,21 @@ use crate::store;
 /// 2 s by default.
 pub const ANSWER_WAIT: Duration = Duration::from_millis(1000);
 
+/// How long a reading thread waits, once it has handed over its result, for that result to
+/// come back to be freed (the loop copies it at once; this only bounds a thread whose loop
+/// went away).
+const GIVE_BACK_WAIT: Duration = Duration::from_secs(10);
+
+type Read = Result<PreparedModel, LoadError>;
+
 /// A load in flight.
 struct InFlight {
     token: u64,
     path: PathBuf,
     since: Instant,
-    done: Receiver<Result<PreparedModel, LoadError>>,
+    done: Receiver<Read>,
+    /// The thread's result goes back on this to be freed where it was made.
+    give_back: SyncSender<Read>,
     /// The operator was already answered ("still reading").
     answered: bool,
 }
@@ -89,6 +102,7 @@ impl Loader {
             ));
         }
         let (tx, done) = mpsc::sync_channel(1);
+        let (give_back, given_back) = mpsc::sync_channel::<Read>(1);
         let owned = path.to_path_buf();
         let cfg = self.estimator.clone();
         std::thread::Builder::new()
@@ -96,7 +110,10 @@ impl Loader {
             .spawn(move || {
                 // Parsing a large file is seconds of CPU: never at the control thread's cost.
                 crate::solver::lower_priority();
-                let _ = tx.send(read(&owned, &cfg));
+                if tx.send(read(&owned, &cfg)).is_ok() {
+                    // Freed here, where it was allocated (dropped at the end of this scope).
+                    let _ = given_back.recv_timeout(GIVE_BACK_WAIT);
+                }
             })
             .map_err(|e| format!("cannot start a thread to read {}: {e}", path.display()))?;
         self.in_flight = Some(InFlight {
@@ -104,6 +121,7 @@ impl Loader {
             path: path.to_path_buf(),
             since: Instant::now(),
             done,
+            give_back,
             answered: false,
         });
         Ok(())
@@ -115,7 +133,13 @@ impl Loader {
             return Progress::Nothing;
         };
         let result = match f.done.try_recv() {
-            Ok(r) => r,
+            Ok(theirs) => {
+                let mine = theirs.clone();
+                // Never waits (a channel of one, used once); if the thread is gone, it is
+                // freed here.
+                let _ = f.give_back.try_send(theirs);
+                mine
+            }
             Err(TryRecvError::Empty) => {
                 if !f.answered && f.since.elapsed() >= ANSWER_WAIT {
                     f.answered = true;
