@@ -101,9 +101,112 @@ pub fn init(default_filter: &str) -> LogOutput {
     output
 }
 
+/// Log calls made on the calling thread never wait for journald from now on: a message that
+/// finds journald's queue full is dropped (other threads wait up to 500 ms for room first;
+/// vendor/README.md). For control loops: a stalled journald must not stall them.
+pub fn never_wait_on_this_thread() {
+    tracing_journald::never_wait_on_this_thread();
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A stalled journald (a socket nobody reads: the kernel queues `net.unix.max_dgram_qlen`
+    /// datagrams, 10 by default) never blocks a log call on a control loop's thread: the
+    /// journald layer's socket is non-blocking (vendor/tracing-journald), so later messages
+    /// are dropped and counted. With the published crate the eleventh call blocks until
+    /// journald reads, and the thread never finishes here.
+    #[test]
+    fn a_stalled_journald_never_blocks_the_thread_that_logs() {
+        use std::os::unix::net::UnixDatagram;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("journal.socket");
+        let journald = UnixDatagram::bind(&path).unwrap(); // bound, never read while logging
+        let layer = tracing_journald::Layer::with_socket_path(&path).unwrap();
+        let dispatch = tracing::Dispatch::new(tracing_subscriber::registry().with(layer));
+        let logging = dispatch.clone();
+        const LINES: u64 = 1000;
+        let (done, finished) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            never_wait_on_this_thread();
+            tracing::dispatcher::with_default(&logging, || {
+                for k in 0..LINES {
+                    tracing::warn!(k, "a warning while journald is stalled");
+                }
+            });
+            let _ = done.send(());
+        });
+        assert!(
+            finished
+                .recv_timeout(std::time::Duration::from_secs(30))
+                .is_ok(),
+            "logging to a stalled journald blocked the thread that logs"
+        );
+        let dropped = dispatch
+            .downcast_ref::<tracing_journald::Layer>()
+            .expect("the journald layer")
+            .dropped();
+        // What journald would read once it wakes: the messages that were queued.
+        journald.set_nonblocking(true).unwrap();
+        let mut buf = vec![0u8; 64 * 1024];
+        let mut queued = 0;
+        while let Ok(n) = journald.recv(&mut buf) {
+            if n > 0 {
+                queued += 1;
+            }
+        }
+        println!("{LINES} warnings to a stalled journald: {queued} queued, {dropped} dropped");
+        assert!(dropped > 0, "nothing was dropped: the queue never filled");
+        assert_eq!(
+            queued + dropped,
+            LINES,
+            "every message either queued or counted as dropped ({queued} queued, {dropped} dropped)"
+        );
+    }
+
+    /// Any other thread waits a little for a busy journald (a burst of start-up lines beyond
+    /// the kernel's queue) and loses nothing; a stalled one costs it at most 500 ms a message.
+    #[test]
+    fn other_threads_wait_a_bounded_time_for_a_busy_journald() {
+        use std::os::unix::net::UnixDatagram;
+        use std::time::{Duration, Instant};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("journal.socket");
+        let journald = UnixDatagram::bind(&path).unwrap();
+        let layer = tracing_journald::Layer::with_socket_path(&path).unwrap();
+        let dispatch = tracing::Dispatch::new(tracing_subscriber::registry().with(layer));
+        let logging = dispatch.clone();
+        const LINES: u64 = 64;
+        let (done, finished) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            tracing::dispatcher::with_default(&logging, || {
+                for k in 0..LINES {
+                    tracing::info!(k, "start-up line");
+                }
+            });
+            let _ = done.send(());
+        });
+        // Journald reads only from 30 ms on: the queue is full by then.
+        std::thread::sleep(Duration::from_millis(30));
+        journald.set_nonblocking(true).unwrap();
+        let mut buf = vec![0u8; 64 * 1024];
+        let mut read = 0;
+        let until = Instant::now() + Duration::from_secs(20);
+        while read < LINES && Instant::now() < until {
+            match journald.recv(&mut buf) {
+                Ok(n) if n > 0 => read += 1,
+                _ => std::thread::sleep(Duration::from_millis(1)),
+            }
+        }
+        assert!(finished.recv_timeout(Duration::from_secs(20)).is_ok());
+        let dropped = dispatch
+            .downcast_ref::<tracing_journald::Layer>()
+            .expect("the journald layer")
+            .dropped();
+        println!("{LINES} start-up lines, journald 30 ms late: {read} read, {dropped} dropped");
+        assert_eq!((read, dropped), (LINES, 0), "a busy journald lost lines");
+    }
 
     #[test]
     fn journal_stream_values() {

@@ -384,6 +384,9 @@ impl Daemon {
         }
         self.raise_control_thread();
         info!(thrusters = self.machine.thrusters(), "thrusterd serving");
+        // From here this thread answers samples: a log line that finds journald's queue full
+        // is dropped rather than waited for (a stalled journald must not stall control).
+        thruster_driver_kit::logging::never_wait_on_this_thread();
         let mut systemd = thruster_driver_kit::Systemd::new();
         systemd.ready();
         self.publish_status(&out.status);

@@ -208,6 +208,9 @@ fn run_inner(
         last_reported: None,
     };
     let mut wait_errors = 0;
+    // This thread drives the thrusters: a log line that finds journald's queue full is
+    // dropped rather than waited for (a stalled journald must not stall the outputs).
+    thruster_driver_kit::logging::never_wait_on_this_thread();
     loop {
         if stop.requested() {
             break;
