@@ -420,6 +420,36 @@ for _ in $(seq 40); do [ "$(ipc_usage)" = "$before" ] && break; sleep 0.25; done
     || fail "leaks: a watch killed with -9 left files 10 s later: before $before, now $(ipc_usage)"
 say "leaks: a watch killed with -9 ($during while it ran) left nothing once the daemon searched for dead nodes"
 
+# A stalled journald never stalls control (issue 25): journald stopped (SIGSTOP), the daemon's
+# control thread logs more warnings than the kernel queues for it (an operator's refused
+# `abort`, one warning each), and every call is still answered at once (exit 4, refused; 0 for
+# a first one that found something to abort), the daemon not restarted, the IMU flowing. With the published tracing-journald the call after
+# the queue filled blocked the control thread: the calls timed out (exit 5) until systemd's
+# watchdog restarted the daemon.
+QLEN=$(inside "cat /proc/sys/net/unix/max_dgram_qlen")
+CALLS=$((QLEN + 20))
+PID_D=$(prop thrusterd MainPID); NR_D=$(prop thrusterd NRestarts)
+JCONT="systemctl kill --signal=SIGCONT systemd-journald"
+inside "systemctl kill --signal=SIGSTOP systemd-journald" || fail "journald: could not stop systemd-journald"
+t_stall=$(now)
+# setpriv, not runuser: runuser's PAM session logs to the stalled journald itself.
+codes=$(inside "for i in \$(seq $CALLS); do setpriv --reuid alice --regid alice --init-groups thrusterctl --namespace $NS --ipc-root $IPC abort >/dev/null 2>&1; echo \$?; done" | sort | uniq -c | tr -s ' \n' ' ')
+stalled_s=$(awk -v a="$t_stall" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }')
+st=$(inside "setpriv --reuid alice --regid alice --init-groups thrusterctl --namespace $NS --ipc-root $IPC status --json" | tr -d '\n') \
+    || { inside "$JCONT"; fail "journald stalled: the daemon did not answer status: $st"; }
+pid_after=$(prop thrusterd MainPID); nr_after=$(prop thrusterd NRestarts)
+inside "$JCONT"
+# Answered means exit 4 (refused) or 0 (the first may find something to abort); 5 is a
+# timeout: the control thread did not answer.
+unanswered=$(echo "$codes" | awk '{ for (i = 1; i < NF; i += 2) if ($(i + 1) != 0 && $(i + 1) != 4) n += $i } END { print n + 0 }')
+[ "$unanswered" = 0 ] \
+    || fail "journald stalled: $unanswered of $CALLS calls not answered (count code: $codes) in ${stalled_s} s"
+[ "$pid_after" = "$PID_D" ] && [ "$nr_after" = "$NR_D" ] \
+    || fail "journald stalled: thrusterd restarted (pid $PID_D -> $pid_after, NRestarts $NR_D -> $nr_after)"
+imu_good "$st" || fail "journald stalled: status without the IMU above 150 Hz: $st"
+sleep 1
+say "journald stalled ${stalled_s} s (queue of $QLEN): $CALLS abort calls (count code:$codes), each refusal a warning on the control thread, all answered, no restart, IMU flowing"
+
 # The bridge stops cleanly (SIGTERM: server closed, summary logged).
 inside "systemctl stop thruster-bridge"
 [ "$(prop thruster-bridge Result)" = success ] \
