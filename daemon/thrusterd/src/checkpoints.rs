@@ -38,6 +38,8 @@ struct Snapshot {
     id: u64,
     place: Place,
     first_seq: u64,
+    /// What the copy cost the control thread (logged with its checkpoint).
+    copy_us: u128,
 }
 
 /// The writer's answer: the parts (or why none), and the copy back to be freed where it was
@@ -46,6 +48,7 @@ struct Written {
     parts: Result<(usize, Vec<CheckpointMsg>), String>,
     id: u64,
     imu_count: u64,
+    copy_us: u128,
     serialise_us: u128,
     copy: Box<Machine>,
 }
@@ -102,6 +105,7 @@ fn write(snap: Snapshot) -> Written {
         parts,
         id: snap.id,
         imu_count: snap.place.imu_count,
+        copy_us: snap.copy_us,
         serialise_us: started.elapsed().as_micros(),
         copy: snap.machine,
     }
@@ -122,8 +126,6 @@ pub struct Checkpoints {
     id: u64,
     seq: u64,
     failures: u64,
-    /// The last copy's cost on the control thread, us (logged with its checkpoint).
-    copy_us: u128,
 }
 
 impl Checkpoints {
@@ -143,7 +145,6 @@ impl Checkpoints {
             id: 0,
             seq: 0,
             failures: 0,
-            copy_us: 0,
         }
     }
 
@@ -184,13 +185,14 @@ impl Checkpoints {
             ..place
         };
         let copied = std::time::Instant::now();
+        let machine = Box::new(machine.clone());
         let snap = Snapshot {
-            machine: Box::new(machine.clone()),
+            machine,
             id: self.id,
             place,
             first_seq: self.seq,
+            copy_us: copied.elapsed().as_micros(),
         };
-        self.copy_us = copied.elapsed().as_micros();
         if writer.tx.try_send(ToWriter::Write(snap)).is_err() {
             return self.failed("its writer thread is gone or stuck");
         }
@@ -231,6 +233,7 @@ impl Checkpoints {
             parts,
             id,
             imu_count,
+            copy_us,
             serialise_us,
             copy,
         } = written;
@@ -259,7 +262,6 @@ impl Checkpoints {
             return self.failed(&e);
         }
         self.seq += count;
-        let copy_us = self.copy_us;
         if id == 0 {
             info!(
                 bytes,
