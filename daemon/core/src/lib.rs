@@ -3,6 +3,7 @@
 //! files come in as text (`config::DaemonConfig::from_toml_str`, `model_file::from_json`), and
 //! the daemon binary reads and writes them.
 
+pub mod allocation;
 pub mod attitude;
 pub mod checkpoint_parts;
 pub mod config;

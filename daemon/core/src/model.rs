@@ -6,7 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use thruster_protocol::validate::limits::{MAX_ALLOCATION, MAX_EFFECTIVENESS};
 
-use crate::estimator::analysis::{allocation, rank_report};
+use crate::allocation::{self, pseudo_inverse};
+use crate::estimator::analysis::rank_report;
 use crate::estimator::dynamic::DynamicTerms;
 use crate::estimator::{Dof, DofMask, Estimate, EstimatorConfig, Method};
 
@@ -171,7 +172,7 @@ impl Model {
             version: 0,
             source: ModelSource::Nominal,
             method: Method::Forward,
-            allocation: allocation(&effectiveness, rank.actuated, rank.rank),
+            allocation: pseudo_inverse(&effectiveness, rank.actuated, rank.rank),
             std_err: DMatrix::from_element(6, n, f64::NAN),
             actuated: rank.actuated,
             rel_err_rot: f64::NAN,
@@ -189,7 +190,7 @@ impl Model {
     pub fn with_derived_allocation(mut self, cfg: &EstimatorConfig) -> Model {
         let known_err = self.std_err.map(|v| if v.is_finite() { v } else { 0.0 });
         let rank = rank_report(&self.effectiveness, &known_err, cfg);
-        self.allocation = allocation(&self.effectiveness, rank.actuated, rank.rank);
+        self.allocation = pseudo_inverse(&self.effectiveness, rank.actuated, rank.rank);
         self.actuated = rank.actuated;
         self
     }
@@ -255,10 +256,7 @@ impl Model {
     /// Thruster commands for a desired motion (6, DOF order). Unactuated DOFs contribute
     /// nothing because their allocation columns are zero.
     pub fn allocate(&self, desired: &[f64; 6], out: &mut [f64]) {
-        let n = self.thrusters().min(out.len());
-        for (i, o) in out.iter_mut().enumerate().take(n) {
-            *o = (0..6).map(|j| self.allocation[(i, j)] * desired[j]).sum();
-        }
+        allocation::product(&self.allocation, desired, out);
     }
 
     pub fn is_actuated(&self, dof: Dof) -> bool {

@@ -1,6 +1,6 @@
 //! What an estimated effectiveness matrix says about the vehicle: how many independent motions
-//! the thrusters can make (rank), which of the six DOFs those are, the allocation that never
-//! commands the others, and the health of each thruster.
+//! the thrusters can make (rank), which of the six DOFs those are, and the health of each
+//! thruster. The allocation built from the rank report is `crate::allocation`'s.
 //!
 //! Significance is judged in standard-error units: the matrix is scaled row by row by its
 //! typical standard error, so estimation noise becomes roughly i.i.d. N(0, 1) and a pure-noise
@@ -11,10 +11,10 @@ use serde::Serialize;
 
 use super::config::EstimatorConfig;
 use super::dof::{Dof, DofMask};
-use super::linalg::{pinv_keep, singular_left};
+use super::linalg::singular_left;
 
 /// Singular values below this fraction of the largest are round-off, whatever the noise says.
-const NUMERICAL_REL_TOL: f64 = 1e-9;
+pub(crate) const NUMERICAL_REL_TOL: f64 = 1e-9;
 
 /// Rank and DOF report.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -162,31 +162,6 @@ fn assign_dofs(
     taken
 }
 
-/// Allocation (N x 6): thruster commands per unit of desired motion in each DOF.
-///
-/// The rank-`rank` truncated pseudo-inverse of the actuated rows of `b`; the columns of
-/// unactuated DOFs are zero, so whatever a controller asks of those, no thruster is commanded
-/// for it (the paper's all-aligned robot "learned" to heave, sway and roll and oscillated).
-pub fn allocation(b: &DMatrix<f64>, actuated: DofMask, rank: usize) -> DMatrix<f64> {
-    let n = b.ncols();
-    let rows: Vec<usize> = Dof::ALL
-        .iter()
-        .filter(|d| actuated.contains(**d))
-        .map(|d| d.index())
-        .collect();
-    let mut out = DMatrix::zeros(n, 6);
-    if rows.is_empty() || rank == 0 {
-        return out;
-    }
-    let sub = b.select_rows(rows.iter());
-    // Exactly the `rank` largest singular values, independent of absolute scale.
-    let sub_pinv = pinv_keep(&sub, rank, NUMERICAL_REL_TOL);
-    for (c, &row) in rows.iter().enumerate() {
-        out.set_column(row, &sub_pinv.column(c));
-    }
-    out
-}
-
 /// Per-thruster diagnosis.
 ///
 /// `b`/`std_err`: the 6 x N estimate. `split`/`split_se`: the 6 x 2N fit with separate forward
@@ -277,6 +252,7 @@ pub fn diagnose(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::allocation::pseudo_inverse as allocation;
 
     fn aligned_truth() -> DMatrix<f64> {
         // Three thrusters pushing along x at different y/z: pitch, yaw and surge only.

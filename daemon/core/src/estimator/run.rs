@@ -7,7 +7,7 @@
 
 use nalgebra::{DMatrix, Vector3};
 
-use super::analysis::{allocation, diagnose, rank_report, RankReport, ThrusterDiagnosis};
+use super::analysis::{diagnose, rank_report, RankReport, ThrusterDiagnosis};
 use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
 use super::dynamic::lag_search::{
@@ -21,6 +21,7 @@ use super::linalg::singular_right;
 use super::noise::NoiseLevels;
 use super::paper::PaperLs;
 use super::response::PulseShape;
+use crate::allocation::pseudo_inverse;
 use crate::navigation::DepthAid;
 
 mod closed_loop;
@@ -843,7 +844,7 @@ impl Estimator {
             }
         }
         let rank = rank_report(&b, &std_err, &self.cfg);
-        let alloc = allocation(&b, rank.actuated, rank.rank);
+        let alloc = pseudo_inverse(&b, rank.actuated, rank.rank);
         let split = self.split_fit(&sigmas);
         let thruster = diagnose(
             &b,
@@ -979,7 +980,7 @@ impl Estimator {
         }
         sol.terms.unexplained_rate_radps = unexplained(&sol.sigma, &self.noise.gyro_white_sigma);
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
-        let alloc = allocation(&sol.b, rank.actuated, rank.rank);
+        let alloc = pseudo_inverse(&sol.b, rank.actuated, rank.rank);
         let thruster = diagnose(
             &sol.b,
             &sol.std_err,
