@@ -1,6 +1,8 @@
 //! The machine itself: routes every input to the state it is in, and owns the states and their
-//! changes (`transition`), faults and recovery, levelling before a run, and control. The model
-//! slot (`models`) and the estimation run (`estimation`) hold what they own.
+//! changes (`transition`, `next_phase`: both through `enter`), faults and recovery. Its other
+//! methods live in the child modules, one job each: `requests`, `swaps`, `open_loop` (the
+//! estimation with the thrusters free) and `under_control`. The model slot (`models`) and the
+//! estimation run (`estimation`) hold what they own.
 
 use nalgebra::{UnitQuaternion, Vector3};
 use thruster_protocol::MAX_THRUSTERS;
@@ -24,6 +26,11 @@ use crate::monitor::{MismatchAction, ModelMonitor};
 use crate::refinement::{Refiner, Tick, WindowVerdict};
 use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 use crate::supply::Supply;
+
+mod open_loop;
+mod requests;
+mod swaps;
+mod under_control;
 
 /// Levelling before the noise measurement: the attitude held, and since when it is level.
 #[derive(Clone, serde::Serialize, serde::Deserialize)]
@@ -286,47 +293,6 @@ impl Machine {
         std::mem::take(&mut self.events)
     }
 
-    /// Install a model from a file (at start, or an operator's load request): its
-    /// allocation is derived again from its effectiveness, and it must pass the same checks
-    /// as any swap, the physical bounds included.
-    pub fn load_model(&mut self, model: Model) -> Result<(), Refused> {
-        let model = model.with_derived_allocation(&self.setup.estimator);
-        self.install_loaded(model)
-    }
-
-    /// The same for a model already prepared off the control thread
-    /// ([`Model::prepared`], with the same estimator settings): only the checks against the
-    /// machine (thruster count, confidence) and the swap are left.
-    pub fn load_prepared(&mut self, model: PreparedModel) -> Result<(), Refused> {
-        self.install_loaded(model.into_model())
-    }
-
-    fn install_loaded(&mut self, model: Model) -> Result<(), Refused> {
-        let saved = model.version;
-        self.try_swap(model, ModelSource::Loaded)
-            .map_err(|e| Refused(format!("model not used: {e}")))?;
-        // Versions only go up here: a file older than the model in force gets a new number,
-        // and status says which version it was saved as.
-        let what = match self.models.current() {
-            Some(m) if saved > 0 && m.version != saved => {
-                format!("model loaded (saved as v{saved})")
-            }
-            _ => "model loaded".to_string(),
-        };
-        self.describe_swap(&what);
-        Ok(())
-    }
-
-    /// After an operator's swap (revert, load): status says which model is in force and
-    /// where it came from, instead of the words of the run that made the old one.
-    fn describe_swap(&mut self, what: &str) -> String {
-        let Some(m) = self.models.current() else {
-            return what.to_string();
-        };
-        self.text = format!("{what}: model v{}, {}", m.version, m.provenance());
-        self.text.clone()
-    }
-
     /// In Fault: whether clearing it resumes control (or the interrupted estimation) rather
     /// than idle. What a restart after a crash in Fault should resume.
     pub fn fault_resumes_control(&self) -> bool {
@@ -398,12 +364,7 @@ impl Machine {
             }
             State::MeasureNoise if self.levelling.is_some() => self.level_tick(s, &gyro, dt),
             State::MeasureNoise => {
-                let m = Motion {
-                    gyro,
-                    accel: motion_accel(&accel, &self.attitude.attitude()),
-                    specific_force: accel,
-                    depth: s.depth,
-                };
+                let m = self.motion(s, &gyro, &accel);
                 let elapsed = self.elapsed_s(s.t_ns);
                 // The power whose output (after the deadband jump) the thrusters can still
                 // give, referred, at the present voltage: a saturated pulse would teach the
@@ -487,203 +448,6 @@ impl Machine {
         }
     }
 
-    pub fn on_request(&mut self, req: Request) -> Result<String, Refused> {
-        match req {
-            Request::Estimate => {
-                if self.samples == 0 {
-                    return Err(Refused(NO_IMU_YET.into()));
-                }
-                if self.state == State::Fault {
-                    // What to do first: the fault's own text is long and may be cut.
-                    return Err(Refused(format!(
-                        "in fault: estimate once it clears ({})",
-                        self.text
-                    )));
-                }
-                if let Some(err_deg) = self.beyond_identification_budget() {
-                    return Err(Refused(format!(
-                        "the vehicle is {err_deg:.0} deg from its setpoint, beyond the \
-                         identification budget of {:.0} deg (identification.attitude_budget_deg): \
-                         let it settle, or hold, then estimate",
-                        self.setup.identification.attitude_budget_deg
-                    )));
-                }
-                let t = self.last_t_ns.unwrap_or(0);
-                self.stopped = false;
-                self.start_estimation(t, "estimate requested");
-                Ok(format!("estimating {} thrusters", self.n))
-            }
-            Request::Abort => {
-                if !self.state.is_estimating() {
-                    return Err(Refused(format!(
-                        "nothing to abort (state {})",
-                        self.state.name()
-                    )));
-                }
-                self.run.stop();
-                if self.state == State::Identify && self.models.current().is_some() {
-                    // Under control the vehicle is held: it stays held, by the model in force.
-                    let why = self.describe_swap("estimation aborted: holding attitude");
-                    self.transition(State::Active, &why);
-                    return Ok("aborted; holding attitude".into());
-                }
-                self.transition(State::Idle, "estimation aborted: thrusters neutral");
-                Ok("aborted".into())
-            }
-            Request::Hold => {
-                if self.state == State::Fault {
-                    return Err(Refused("in fault: cannot hold".into()));
-                }
-                if self.models.current().is_none() {
-                    return Err(Refused("no model yet: estimate first".into()));
-                }
-                if self.samples == 0 {
-                    return Err(Refused(NO_IMU_YET.into()));
-                }
-                self.run.stop();
-                self.stopped = false;
-                self.target = None;
-                self.controller.reset();
-                self.transition(State::Active, "holding attitude");
-                Ok("holding".into())
-            }
-            Request::Idle => {
-                self.run.stop();
-                let t = self.last_t_ns.unwrap_or(0);
-                if self.state == State::Fault {
-                    self.resume = Resume::Idle;
-                    return Ok("will stay idle after the fault clears".into());
-                }
-                self.phase_start_ns = t;
-                self.transition(State::Idle, "idle on request: thrusters neutral");
-                Ok("idle".into())
-            }
-            Request::Stop => {
-                // Whatever runs (an estimation, its solve, levelling, control) ends here; the
-                // next command is neutral. The model in force stays, so `hold` can resume.
-                self.run.stop();
-                self.levelling = None;
-                self.controller.reset();
-                self.stopped = true;
-                self.resume = Resume::Idle;
-                let t = self.last_t_ns.unwrap_or(0);
-                if self.state == State::Fault {
-                    // Already neutral; after the fault clears it stays idle.
-                    return Ok(
-                        "emergency stop: in fault, thrusters neutral; idle after it \
-                               clears, until estimate or hold"
-                            .into(),
-                    );
-                }
-                self.phase_start_ns = t;
-                self.transition(
-                    State::Idle,
-                    "emergency stop: thrusters neutral until estimate or hold",
-                );
-                Ok("emergency stop: thrusters neutral until estimate or hold".into())
-            }
-            Request::Revert => {
-                let Some(prev) = self.models.take_previous() else {
-                    return Err(Refused("no previous model to revert to".into()));
-                };
-                let source = prev.source;
-                self.try_swap(prev, source)
-                    .map_err(|e| Refused(format!("revert refused: {e}")))?;
-                Ok(self.describe_swap("reverted to the previous model"))
-            }
-        }
-    }
-
-    /// Pulse strength for the next estimation (a fraction of full command, within the
-    /// configured maximum): the operator's `estimate --power`.
-    pub fn set_estimation_power(&mut self, power: f64) -> Result<(), Refused> {
-        let max = self.setup.estimator.max_power;
-        if !(power.is_finite() && power > 0.0 && power <= max) {
-            return Err(Refused(format!("power {power} is not in (0, {max}]")));
-        }
-        self.setup.estimator.initial_power = power;
-        Ok(())
-    }
-
-    /// A new attitude (body to NED) and optional depth to hold.
-    pub fn on_setpoint(&mut self, attitude: UnitQuaternion<f64>, depth: Option<f64>) {
-        self.target = Some(Target { attitude, depth });
-    }
-
-    /// An operator's setpoint in which some angles may be left out: those keep the value held
-    /// now (the current target's, or, before any target, what control would hold: level at
-    /// the current heading). Depth left out keeps the held depth, as angles do.
-    pub fn on_setpoint_input(&mut self, s: &SetpointInput) {
-        let held = match &self.target {
-            Some(t) => t.attitude.euler_angles(),
-            None => (0.0, 0.0, self.attitude.attitude().euler_angles().2),
-        };
-        let held = [held.0, held.1, held.2];
-        let (r, p, y) = s.attitude.euler_angles();
-        let want = [r, p, y];
-        let pick = |i: usize| if s.keep[i] { held[i] } else { want[i] };
-        let attitude = UnitQuaternion::from_euler_angles(pick(0), pick(1), pick(2));
-        let depth = match s.depth {
-            DepthInput::Keep => self.target.as_ref().and_then(|t| t.depth),
-            DepthInput::Release => None,
-            DepthInput::Hold(d) => Some(d),
-        };
-        self.on_setpoint(attitude, depth);
-    }
-
-    pub fn on_reconfig(&mut self, r: Reconfig) {
-        let count = r.count.clamp(1, MAX_THRUSTERS);
-        let count_changed = count != self.n;
-        self.n = count;
-        self.geometry = r.geometry.clone().filter(|g| g.positions.len() == count);
-        let t = self.last_t_ns.unwrap_or(0);
-        // After an emergency stop a reconfiguration swaps models but drives no thruster.
-        let mut estimate =
-            self.setup.machine.on_reconfig == ReconfigPolicy::Estimate && !self.stopped;
-        // Before any swap: what the learned model in force says about the unchanged rest.
-        let prior = self.carry_over(r.change, count);
-        if self.state.is_estimating() {
-            self.run.stop();
-        }
-        match self.geometry.clone() {
-            Some(g) => {
-                let key = g.key();
-                if let Some(cached) = self.models.cached(key) {
-                    // Seen before: its learned model is back at once, no pulses needed.
-                    if self.try_swap(cached, ModelSource::Cache).is_ok() {
-                        estimate = false;
-                    }
-                } else {
-                    let b = nominal_effectiveness(&self.setup.body, &g.positions, &g.directions);
-                    let mut nominal = Model::nominal(b, Some(key));
-                    nominal.made_t_ns = self.last_t_ns.unwrap_or(0);
-                    let _ = self.try_swap(nominal, ModelSource::Nominal);
-                }
-            }
-            None => {
-                if count_changed {
-                    self.models.drop_current();
-                    self.events.push(Event::ModelDropped(format!(
-                        "{}: now {count} thrusters and no declared geometry",
-                        r.what
-                    )));
-                }
-            }
-        }
-        if estimate {
-            self.start_estimation_with(t, &format!("{}: re-estimating", r.what), prior);
-        } else if self.models.current().is_some() && self.state != State::Fault {
-            if self.state.is_estimating() || self.state == State::Active {
-                self.transition(State::Active, &format!("{}: model swapped", r.what));
-            }
-        } else if self.state != State::Fault {
-            self.transition(
-                State::Idle,
-                &format!("{}: no model, waiting for an estimate request", r.what),
-            );
-        }
-    }
-
     pub fn status(&self) -> StatusSnapshot {
         let (pulse, planned, power) = match self.run.estimator() {
             Some(e) => (e.pulses(), e.plan_extent(), e.power()),
@@ -738,14 +502,31 @@ impl Machine {
         t_ns.saturating_sub(self.phase_start_ns) as f64 * 1e-9
     }
 
+    /// A change of state the operator is told of: status says `why`, and a StateChanged
+    /// event carries it when the state is another one. The phase clock restarts at the last
+    /// sample.
     fn transition(&mut self, to: State, why: &str) {
+        self.enter(to, self.last_t_ns, why.to_string(), Some(why));
+    }
+
+    /// A step between the phases of one estimation (Pulse, Settle, Solve): the phase clock
+    /// restarts at `t_ns` and status says where the run is, but no event is raised (an
+    /// operator follows one estimation, not each of its pulses).
+    fn next_phase(&mut self, to: State, t_ns: u64, text: String) {
+        self.enter(to, Some(t_ns), text, None);
+    }
+
+    /// Every change of state goes through here: the state, the status text, the phase clock
+    /// (restarted at `phase_start`, when there is one), what leaving or entering a state
+    /// ends or starts, and the event (`announce`, raised only when the state changes).
+    fn enter(&mut self, to: State, phase_start: Option<u64>, text: String, announce: Option<&str>) {
         let from = self.state;
         self.state = to;
-        self.text = why.to_string();
+        self.text = text;
         if to != State::MeasureNoise {
             self.levelling = None;
         }
-        if let Some(t) = self.last_t_ns {
+        if let Some(t) = phase_start {
             self.phase_start_ns = t;
         }
         if to == State::Active && from != State::Active {
@@ -753,12 +534,23 @@ impl Machine {
             self.monitor.reset(self.n);
             self.refiner.reset();
         }
-        if from != to {
+        if let (true, Some(why)) = (from != to, announce) {
             self.events.push(Event::StateChanged {
                 from,
                 to,
                 why: why.to_string(),
             });
+        }
+    }
+
+    /// This sample as the estimation sees it: the rate, the acceleration with gravity taken
+    /// out along the filtered attitude, the specific force as measured, the depth.
+    fn motion(&self, s: &ImuInput, gyro: &Vector3<f64>, accel: &Vector3<f64>) -> Motion {
+        Motion {
+            gyro: *gyro,
+            accel: motion_accel(accel, &self.attitude.attitude()),
+            specific_force: *accel,
+            depth: s.depth,
         }
     }
 
@@ -790,593 +582,12 @@ impl Machine {
         }
     }
 
-    /// What an estimation after `change` (now `count` thrusters) keeps from the model in force.
-    fn carry_over(&self, change: ThrusterChange, count: usize) -> Option<DynamicPrior> {
-        let cfg = &self.setup.identification;
-        if !cfg.carry_over {
-            return None;
-        }
-        carried_over(
-            self.models.current()?,
-            change,
-            count,
-            cfg.carry_over_se_scale,
-        )
-    }
-
-    fn start_estimation(&mut self, t_ns: u64, why: &str) {
-        self.start_estimation_with(t_ns, why, None);
-    }
-
-    /// An estimation starts, keeping `prior` (see `identification::carry_over`).
-    fn start_estimation_with(&mut self, t_ns: u64, why: &str, prior: Option<DynamicPrior>) {
-        let kept = if prior.is_some() {
-            "; the other thrusters' columns are kept"
-        } else {
-            ""
-        };
-        let why = &format!("{why}{kept}");
-        self.last_t_ns = self.last_t_ns.or(Some(t_ns));
-        // Controlling with a model: identify under control (see `crate::identification`).
-        let controlling =
-            matches!(self.state, State::Active | State::Identify) || self.levelling.is_some();
-        if controlling
-            && self.models.current().is_some()
-            && EstimationRun::closed_loop_possible(&self.setup)
-        {
-            self.levelling = None;
-            self.run
-                .begin_closed_loop(t_ns, &self.setup.identification, self.n);
-            self.run.carry(prior, &self.setup.identification);
-            self.transition(
-                State::Identify,
-                &format!("{why}: identifying under control"),
-            );
-            return;
-        }
-        self.run.restart();
-        self.run.carry(prior, &self.setup.identification);
-        // Controlling with a model: level the vehicle first (see MachineConfig::level_max_s).
-        // A reconfiguration while levelling levels on (the vehicle is no more at rest).
-        self.levelling = ((self.state == State::Active || self.levelling.is_some())
-            && self.models.current().is_some()
-            && self.setup.machine.level_max_s > 0.0)
-            .then(|| Levelling {
-                target: Target {
-                    attitude: UnitQuaternion::from_euler_angles(
-                        0.0,
-                        0.0,
-                        self.attitude.attitude().euler_angles().2,
-                    ),
-                    depth: self.target.and_then(|t| t.depth),
-                },
-                level_since_ns: None,
-            });
-        let then = if self.levelling.is_some() {
-            "levelling, then measuring noise at rest"
-        } else {
-            "measuring noise at rest"
-        };
-        self.transition(State::MeasureNoise, &format!("{why}: {then}"));
-    }
-
-    /// Levelling before the noise measurement: the controller holds level at the heading the
-    /// estimation started with (no monitor: the model is about to be replaced). Ends, thrusters
-    /// neutral and the noise clock restarted, once level for `level_hold_s` or after
-    /// `level_max_s` whatever the tilt.
-    fn level_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
-        let elapsed = self.elapsed_s(s.t_ns);
-        let meas = self.measured(s, gyro);
-        let (Some(model), Some(lev)) = (self.models.current(), self.levelling.as_mut()) else {
-            self.levelling = None;
-            return Command::neutral(self.n);
-        };
-        let up = meas.attitude * Vector3::z();
-        let tilt_deg = up.z.clamp(-1.0, 1.0).acos().to_degrees();
-        let m = &self.setup.machine;
-        if tilt_deg <= m.level_tilt_deg {
-            lev.level_since_ns.get_or_insert(s.t_ns);
-        } else {
-            lev.level_since_ns = None;
-        }
-        let level_for = lev
-            .level_since_ns
-            .map_or(0.0, |t| s.t_ns.saturating_sub(t) as f64 * 1e-9);
-        if level_for >= m.level_hold_s || elapsed >= m.level_max_s {
-            self.levelling = None;
-            self.controller.reset();
-            self.phase_start_ns = s.t_ns;
-            self.text = if level_for >= m.level_hold_s {
-                "level: measuring noise at rest".to_string()
-            } else {
-                format!("still {tilt_deg:.0} deg tilted after levelling: measuring noise")
-            };
-            return Command::neutral(self.n);
-        }
-        let mut cmd = Command::neutral(self.n);
-        cmd.mode = Mode::Controlling;
-        let n = self.n.min(model.thrusters());
-        let target = lev.target;
-        self.last_desired = self
-            .controller
-            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
-        finish(&mut cmd, self.setup.machine.deadband);
-        cmd
-    }
-
-    fn start_pulse(&mut self, t_ns: u64) -> Command {
-        let mut cmd = Command::neutral(self.n);
-        cmd.mode = Mode::Estimating;
-        if let Some(k) = self.run.begin_pulse(t_ns, &mut cmd.thrust) {
-            self.phase_start_ns = t_ns;
-            let from = self.state;
-            self.state = State::Pulse;
-            self.text = format!("pulse {k}");
-            if from != State::Pulse && from != State::Settle {
-                self.events.push(Event::StateChanged {
-                    from,
-                    to: State::Pulse,
-                    why: "noise measured: pulsing".into(),
-                });
-            }
-        }
-        finish(&mut cmd, self.setup.machine.deadband);
-        cmd
-    }
-
-    fn pulse_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, accel: &Vector3<f64>) -> Command {
-        let elapsed = self.elapsed_s(s.t_ns);
-        let m = Motion {
-            gyro: *gyro,
-            accel: motion_accel(accel, &self.attitude.attitude()),
-            specific_force: *accel,
-            depth: s.depth,
-        };
-        let mut cmd = Command::neutral(self.n);
-        cmd.mode = Mode::Estimating;
-        let step = self.run.pulse_sample(
-            s.t_ns,
-            elapsed,
-            &m,
-            self.setup.machine.pulse_s,
-            &mut cmd.thrust,
-        );
-        match step {
-            PulseStep::NoRun => {
-                self.transition(State::Idle, "internal: pulse without an estimator");
-            }
-            PulseStep::Pulsing => {
-                finish(&mut cmd, self.setup.machine.deadband);
-                return cmd;
-            }
-            PulseStep::Ended {
-                gate: Some(d),
-                pulses,
-            } if d.is_stop() => {
-                // A limit: the run's model is solved while the thrusters rest.
-                self.run
-                    .submit_pulse(s.t_ns, Purpose::Conclude, self.geometry_key());
-                self.state = State::Solve;
-                self.phase_start_ns = s.t_ns;
-                self.text = format!("solving the model of {pulses} pulses");
-            }
-            PulseStep::Ended { gate, .. } if self.run.back_to_back() => {
-                // Back to back the excitation goes on while the decision is out, as it did
-                // when the decision was made on this sample: a stop applied at its due sample
-                // ends the next pulse early and swaps in the model of the data up to here, the
-                // same model as then (a rest at neutral instead changed every later pulse's
-                // excitation, and with it every model learned after the first stop point).
-                let purpose = if gate.is_some() {
-                    Purpose::Progress
-                } else {
-                    Purpose::Decide
-                };
-                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
-                return self.start_pulse(s.t_ns);
-            }
-            PulseStep::Ended { gate, pulses } => {
-                let purpose = if gate.is_some() {
-                    Purpose::Progress
-                } else {
-                    // The bound decides: the pause after the pulse (longer than the solve's
-                    // budget by default) does not end before the decision is applied.
-                    Purpose::Decide
-                };
-                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
-                self.state = State::Settle;
-                self.phase_start_ns = s.t_ns;
-                self.text = format!("settling after pulse {pulses}");
-            }
-        }
-        Command::neutral(self.n)
-    }
-
-    fn geometry_key(&self) -> Option<u64> {
-        self.geometry.as_ref().map(|g| g.key())
-    }
-
-    /// A solve's result at its due sample (see `crate::solve`). The queue is emptied when
-    /// a run stops, so every result applied belongs to the run under way.
-    fn apply_solve(&mut self, purpose: Purpose, result: SolveResult) {
-        let decision = result.decision;
-        self.run.hint_lag(&result.estimate);
-        match purpose {
-            Purpose::Progress => self.run.keep_estimate(result.estimate),
-            Purpose::Decide | Purpose::Conclude if decision.is_stop() => {
-                self.solve(decision, result)
-            }
-            Purpose::Decide => self.run.keep_estimate(result.estimate),
-            Purpose::Conclude => {
-                // A limit that is no stop cannot come from the estimator; never leave the
-                // run stuck in Solve.
-                self.run.stop();
-                self.transition(State::Idle, "internal: a concluding solve did not stop");
-            }
-            Purpose::Interval if decision.is_stop() => self.solve_under_control(decision, result),
-            // The refinement's own (see `Refiner::observe`); never the run's.
-            Purpose::Window => {}
-            Purpose::Interval => {
-                self.run.keep_estimate(result.estimate);
-                let t = self.last_t_ns.unwrap_or(0);
-                let excited = self.run.excited_s(t);
-                self.text = format!("identifying under control: {excited:.0} s of dither");
-            }
-        }
-    }
-
-    fn settle_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, accel: &Vector3<f64>) -> Command {
-        let elapsed = self.elapsed_s(s.t_ns);
-        let m = Motion {
-            gyro: *gyro,
-            accel: motion_accel(accel, &self.attitude.attitude()),
-            specific_force: *accel,
-            depth: s.depth,
-        };
-        let k = self.setup.estimator.k_sigma;
-        let Some(quiet_for) = self.run.settle_sample(s.t_ns, &m, k) else {
-            return Command::neutral(self.n);
-        };
-        if self.run.waiting_for(Purpose::Decide) {
-            // The stop decision is out: the pause goes on at neutral (the samples feed the
-            // fit) until it is applied.
-            return Command::neutral(self.n);
-        }
-        let m = &self.setup.machine;
-        if (elapsed >= m.settle_min_s && quiet_for >= m.settle_quiet_s) || elapsed >= m.settle_max_s
-        {
-            return self.start_pulse(s.t_ns);
-        }
-        Command::neutral(self.n)
-    }
-
-    /// While controlling with closed-loop identification: the attitude error (deg) when it is
-    /// beyond the identification's budget, where no dither would be applied and the run could
-    /// not learn (an operator's request is refused then; an automatic start waits in Identify,
-    /// its dither faded out, until the vehicle is back within the budget).
-    fn beyond_identification_budget(&self) -> Option<f64> {
-        let controlling = self.state == State::Active && self.models.current().is_some();
-        if !(controlling && EstimationRun::closed_loop_possible(&self.setup)) {
-            return None;
-        }
-        let target = self.target?;
-        let err_deg = self
-            .attitude
-            .attitude()
-            .angle_to(&target.attitude)
-            .to_degrees();
-        (err_deg > self.setup.identification.attitude_budget_deg).then_some(err_deg)
-    }
-
-    /// Under control: the controller output with the dither on top, the estimator fed with
-    /// the total command; at a stop the new model is swapped in without a bump (the target and
-    /// the controller's state stay).
-    fn identify_tick(
-        &mut self,
-        s: &ImuInput,
-        gyro: &Vector3<f64>,
-        accel: &Vector3<f64>,
-        dt: f64,
-    ) -> Command {
-        if self.models.current().is_none() {
-            self.run.stop();
-            self.transition(State::Idle, "no model to identify under: thrusters neutral");
-            return Command::neutral(self.n);
-        }
-        let (meas, target) = self.measured_and_target(s, gyro);
-        let attitude = meas.attitude;
-        let Some(model) = self.models.current() else {
-            return Command::neutral(self.n);
-        };
-        let mut cmd = Command::neutral(self.n);
-        cmd.mode = Mode::Estimating;
-        let n = self.n.min(model.thrusters());
-        self.last_desired = self
-            .controller
-            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
-        let m = Motion {
-            gyro: *gyro,
-            accel: motion_accel(accel, &attitude),
-            specific_force: *accel,
-            depth: s.depth,
-        };
-        let err_deg = attitude.angle_to(&target.attitude).to_degrees();
-        let step = self.run.closed_loop_sample(
-            s.t_ns,
-            &m,
-            &self.attitude.gyro_bias(),
-            err_deg,
-            &self.setup,
-            Some(model),
-            self.n,
-            &mut cmd.thrust[..n],
-        );
-        finish(&mut cmd, self.setup.machine.deadband);
-        match step {
-            // The text stays the transition's (why the identification began) until the
-            // first decision: a status reader must be able to see it.
-            ClosedStep::Holding | ClosedStep::Exciting => {}
-            ClosedStep::Decide { elapsed_s } => {
-                let key = self.geometry_key();
-                self.run
-                    .submit_interval(s.t_ns, elapsed_s, &self.setup, key);
-            }
-        }
-        cmd
-    }
-
-    fn solve_under_control(&mut self, decision: StopDecision, result: SolveResult) {
-        let key = self.geometry_key();
-        let t_ns = self.last_t_ns.unwrap_or(0);
-        let seconds = self.run.excited_s(t_ns);
-        let Some((candidate, _)) = self.run.conclude(result) else {
-            return;
-        };
-        let why = match decision {
-            StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
-                "identified under control in {seconds:.1} s (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
-            ),
-            _ => format!("identification limit reached after {seconds:.1} s"),
-        };
-        match self.try_swap(candidate, ModelSource::Estimated) {
-            Ok(()) => {
-                if let Some(k) = key {
-                    self.models.remember_current(k);
-                }
-                self.transition(
-                    State::Active,
-                    &format!("{why}: new model, holding attitude"),
-                );
-            }
-            Err(e) => self.transition(
-                State::Active,
-                &format!("{why}: model rejected ({e}); old model kept"),
-            ),
-        }
-    }
-
-    fn solve(&mut self, decision: StopDecision, result: SolveResult) {
-        self.state = State::Solve;
-        let key = self.geometry_key();
-        let Some((candidate, pulses)) = self.run.conclude(result) else {
-            self.transition(State::Idle, "internal: a stopping solve made no model");
-            return;
-        };
-        let why = match decision {
-            StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
-                "converged after {pulses} pulses (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
-            ),
-            StopDecision::PlanComplete => format!("planned {pulses} pulses done"),
-            StopDecision::MaxPulses => format!("pulse limit {pulses} reached"),
-            StopDecision::Continue => "stopped".into(),
-        };
-        // The status text holds 128 bytes: the IMU's position leads, the bound is in the
-        // rejection event and the model's dynamics.
-        let imu_note = match candidate.dynamics.as_ref().and_then(|d| d.imu_position) {
-            Some(p) if p.contradicted => Some(format!(
-                "IMU found at {} m, not as configured (estimator.imu_position_m)",
-                fmt_xyz(&p.position_m)
-            )),
-            _ => None,
-        };
-        let why = match &imu_note {
-            Some(note) => format!("{why}; {note}"),
-            None => why,
-        };
-        // Rotation that neither thrust nor the vehicle's own dynamics explain (a swell, a
-        // tether): the fit absorbed it somewhere, and its bound does not know it.
-        let (unexplained, tilt_deg) = candidate.dynamics.as_ref().map_or((0.0, 0.0), |d| {
-            (d.unexplained_rate_radps, d.max_tilt_rad.to_degrees())
-        });
-        let limit = self.setup.machine.max_unexplained_rate_radps;
-        if unexplained > limit {
-            let text = format!(
-                "{unexplained:.3} rad/s of rotation unexplained (limit {limit:.3}; water?), tilted {tilt_deg:.0} deg: model rejected; old model kept"
-            );
-            self.events.push(Event::ModelRejected(text.clone()));
-            self.transition(self.after_refusal(), &text);
-            return;
-        }
-        match self.try_swap(candidate, ModelSource::Estimated) {
-            Ok(()) => {
-                if let Some(k) = key {
-                    self.models.remember_current(k);
-                }
-                if self.setup.machine.control_after_estimate {
-                    self.target = None;
-                    self.controller.reset();
-                    self.transition(
-                        State::Active,
-                        &format!("{why}: new model, holding attitude"),
-                    );
-                    // A burst that already reached the target needs no refining.
-                    let coarse = self.models.current().is_some_and(|m| {
-                        m.rel_err_rot.max(m.rel_err_acc) > self.setup.estimator.target_rel_err
-                    });
-                    if self.run.was_burst() && coarse {
-                        let t = self.last_t_ns.unwrap_or(0);
-                        self.start_estimation(t, &format!("{why}: burst model in"));
-                    }
-                } else {
-                    self.transition(State::Idle, &format!("{why}: new model"));
-                }
-            }
-            Err(e) => {
-                let next = self.after_refusal();
-                let text = match &imu_note {
-                    Some(note) => format!("{note}: model rejected; old model kept"),
-                    None => format!("{why}: model rejected ({e}); old model kept"),
-                };
-                self.transition(next, &text);
-            }
-        }
-    }
-
-    /// Where a refused estimate leaves the vehicle: holding with the old model, if there is
-    /// one and control follows estimation, else Idle (thrusters neutral).
-    fn after_refusal(&self) -> State {
-        if self.models.current().is_some() && self.setup.machine.control_after_estimate {
-            State::Active
-        } else {
-            State::Idle
-        }
-    }
-
-    /// Validate and install a model between two ticks: the monitor judges the new one on fresh
-    /// data only.
-    fn try_swap(
-        &mut self,
-        model: Model,
-        source: ModelSource,
-    ) -> Result<(), crate::model::SwapRejection> {
-        match self
-            .models
-            .swap(model, source, self.n, self.setup.machine.max_swap_rel_err)
-        {
-            Ok(installed) => {
-                self.monitor.reset(self.n);
-                self.refiner.reset();
-                self.events.push(Event::ModelSwapped(Box::new(installed)));
-                Ok(())
-            }
-            Err(e) => {
-                self.events.push(Event::ModelRejected(e.to_string()));
-                Err(e)
-            }
-        }
-    }
-
     /// What the controller sees of this sample: filtered attitude, bias-free rate, depth.
     fn measured(&self, s: &ImuInput, gyro: &Vector3<f64>) -> Measured {
         Measured {
             attitude: self.attitude.attitude(),
             rate: gyro - self.attitude.gyro_bias(),
             depth: s.depth,
-        }
-    }
-
-    /// What the controller sees of this sample, and the target it holds. Without a setpoint,
-    /// hold level at the current heading and depth: a vehicle may enter Active still swinging
-    /// from the last pulse, and that tilt is nothing to keep.
-    fn measured_and_target(&mut self, s: &ImuInput, gyro: &Vector3<f64>) -> (Measured, Target) {
-        let meas = self.measured(s, gyro);
-        let heading = meas.attitude.euler_angles().2;
-        let target = *self.target.get_or_insert_with(|| Target {
-            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, heading),
-            depth: s.depth,
-        });
-        (meas, target)
-    }
-
-    fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
-        if self.models.current().is_none() {
-            return Command::neutral(self.n);
-        }
-        let (meas, target) = self.measured_and_target(s, gyro);
-        let attitude = meas.attitude;
-        let Some(model) = self.models.current() else {
-            return Command::neutral(self.n);
-        };
-        let mut cmd = Command::neutral(self.n);
-        cmd.mode = Mode::Controlling;
-        let n = self.n.min(model.thrusters());
-        self.last_desired = self
-            .controller
-            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
-        let err_rad = attitude.angle_to(&target.attitude);
-        let verdict = self.refiner.observe(
-            &Tick {
-                t_ns: s.t_ns,
-                gyro,
-                gyro_bias: &self.attitude.gyro_bias(),
-                attitude: &attitude,
-                specific_force: &Vector3::from(s.accel),
-                depth: s.depth,
-                err_deg: err_rad.to_degrees(),
-                setpoint: &target.attitude,
-            },
-            model,
-            self.run.levels(),
-            &self.setup.estimator,
-            &mut cmd.thrust[..n],
-        );
-        // The monitor compares in model units: the command sent (dither included) before
-        // deadband compensation.
-        let gravity_body = attitude.inverse() * Vector3::z();
-        let mismatch = self.monitor.observe(
-            dt,
-            err_rad,
-            &meas.rate,
-            &gravity_body,
-            &model.effectiveness,
-            &cmd.thrust[..n],
-        );
-        finish(&mut cmd, self.setup.machine.deadband);
-        if let Some(m) = mismatch {
-            self.on_mismatch(s.t_ns, m.to_string(), ThrusterChange::Unknown);
-        } else if let Some(v) = verdict.filter(|v| v.changed) {
-            self.on_mismatch(s.t_ns, v.to_string(), ThrusterChange::Moved(v.thruster));
-        } else if let Some(fused) = self.refiner.take_refined() {
-            self.install_refined(fused.model);
-        }
-        cmd
-    }
-
-    /// A model the continuous refinement updated: checked like every other and swapped in.
-    /// The monitor and the refiner keep going: the model moved by a window's worth of drift,
-    /// not to a new vehicle.
-    fn install_refined(&mut self, model: Model) {
-        match self.models.swap(
-            model,
-            ModelSource::Estimated,
-            self.n,
-            self.setup.machine.max_swap_rel_err,
-        ) {
-            Ok(installed) => {
-                if let Some(k) = installed.geometry_key {
-                    self.models.remember_current(k);
-                }
-                self.events.push(Event::ModelSwapped(Box::new(installed)));
-            }
-            Err(e) => self
-                .events
-                .push(Event::ModelRejected(format!("refined model: {e}"))),
-        }
-    }
-
-    /// The monitor (or the refinement, which names the thruster: `change`) found the
-    /// thrusters doing something else than the model says.
-    fn on_mismatch(&mut self, t_ns: u64, why: String, change: ThrusterChange) {
-        self.refiner.reset();
-        self.events.push(Event::MismatchDetected(why.clone()));
-        self.monitor.reset(self.n);
-        match self.monitor.action() {
-            MismatchAction::Estimate => {
-                let prior = self.carry_over(change, self.n);
-                self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior)
-            }
-            MismatchAction::Report | MismatchAction::Off => {
-                self.text = format!("holding attitude; {why}");
-            }
         }
     }
 }

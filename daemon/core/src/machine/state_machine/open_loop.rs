@@ -1,0 +1,347 @@
+//! The estimation with the thrusters free: levelling, the noise at rest, pulses and settles,
+//! the solves and the model they conclude in.
+
+// The machine's fields and helpers are the parent's: these are its methods, by job.
+use super::*;
+
+impl Machine {
+    /// What an estimation after `change` (now `count` thrusters) keeps from the model in force.
+    pub(super) fn carry_over(&self, change: ThrusterChange, count: usize) -> Option<DynamicPrior> {
+        let cfg = &self.setup.identification;
+        if !cfg.carry_over {
+            return None;
+        }
+        carried_over(
+            self.models.current()?,
+            change,
+            count,
+            cfg.carry_over_se_scale,
+        )
+    }
+
+    pub(super) fn start_estimation(&mut self, t_ns: u64, why: &str) {
+        self.start_estimation_with(t_ns, why, None);
+    }
+
+    /// An estimation starts, keeping `prior` (see `identification::carry_over`).
+    pub(super) fn start_estimation_with(
+        &mut self,
+        t_ns: u64,
+        why: &str,
+        prior: Option<DynamicPrior>,
+    ) {
+        let kept = if prior.is_some() {
+            "; the other thrusters' columns are kept"
+        } else {
+            ""
+        };
+        let why = &format!("{why}{kept}");
+        self.last_t_ns = self.last_t_ns.or(Some(t_ns));
+        // Controlling with a model: identify under control (see `crate::identification`).
+        let controlling =
+            matches!(self.state, State::Active | State::Identify) || self.levelling.is_some();
+        if controlling
+            && self.models.current().is_some()
+            && EstimationRun::closed_loop_possible(&self.setup)
+        {
+            self.levelling = None;
+            self.run
+                .begin_closed_loop(t_ns, &self.setup.identification, self.n);
+            self.run.carry(prior, &self.setup.identification);
+            self.transition(
+                State::Identify,
+                &format!("{why}: identifying under control"),
+            );
+            return;
+        }
+        self.run.restart();
+        self.run.carry(prior, &self.setup.identification);
+        // Controlling with a model: level the vehicle first (see MachineConfig::level_max_s).
+        // A reconfiguration while levelling levels on (the vehicle is no more at rest).
+        self.levelling = ((self.state == State::Active || self.levelling.is_some())
+            && self.models.current().is_some()
+            && self.setup.machine.level_max_s > 0.0)
+            .then(|| Levelling {
+                target: Target {
+                    attitude: UnitQuaternion::from_euler_angles(
+                        0.0,
+                        0.0,
+                        self.attitude.attitude().euler_angles().2,
+                    ),
+                    depth: self.target.and_then(|t| t.depth),
+                },
+                level_since_ns: None,
+            });
+        let then = if self.levelling.is_some() {
+            "levelling, then measuring noise at rest"
+        } else {
+            "measuring noise at rest"
+        };
+        self.transition(State::MeasureNoise, &format!("{why}: {then}"));
+    }
+
+    /// Levelling before the noise measurement: the controller holds level at the heading the
+    /// estimation started with (no monitor: the model is about to be replaced). Ends, thrusters
+    /// neutral and the noise clock restarted, once level for `level_hold_s` or after
+    /// `level_max_s` whatever the tilt.
+    pub(super) fn level_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
+        let elapsed = self.elapsed_s(s.t_ns);
+        let meas = self.measured(s, gyro);
+        let (Some(model), Some(lev)) = (self.models.current(), self.levelling.as_mut()) else {
+            self.levelling = None;
+            return Command::neutral(self.n);
+        };
+        let up = meas.attitude * Vector3::z();
+        let tilt_deg = up.z.clamp(-1.0, 1.0).acos().to_degrees();
+        let m = &self.setup.machine;
+        if tilt_deg <= m.level_tilt_deg {
+            lev.level_since_ns.get_or_insert(s.t_ns);
+        } else {
+            lev.level_since_ns = None;
+        }
+        let level_for = lev
+            .level_since_ns
+            .map_or(0.0, |t| s.t_ns.saturating_sub(t) as f64 * 1e-9);
+        if level_for >= m.level_hold_s || elapsed >= m.level_max_s {
+            self.levelling = None;
+            self.controller.reset();
+            self.phase_start_ns = s.t_ns;
+            self.text = if level_for >= m.level_hold_s {
+                "level: measuring noise at rest".to_string()
+            } else {
+                format!("still {tilt_deg:.0} deg tilted after levelling: measuring noise")
+            };
+            return Command::neutral(self.n);
+        }
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Controlling;
+        let n = self.n.min(model.thrusters());
+        let target = lev.target;
+        self.last_desired = self
+            .controller
+            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
+        finish(&mut cmd, self.setup.machine.deadband);
+        cmd
+    }
+
+    pub(super) fn start_pulse(&mut self, t_ns: u64) -> Command {
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Estimating;
+        if let Some(k) = self.run.begin_pulse(t_ns, &mut cmd.thrust) {
+            // The first pulse is the estimation's news; the ones after a settle are phases.
+            let first = !matches!(self.state, State::Pulse | State::Settle);
+            let announce = first.then_some("noise measured: pulsing");
+            self.enter(State::Pulse, Some(t_ns), format!("pulse {k}"), announce);
+        }
+        finish(&mut cmd, self.setup.machine.deadband);
+        cmd
+    }
+
+    pub(super) fn pulse_tick(
+        &mut self,
+        s: &ImuInput,
+        gyro: &Vector3<f64>,
+        accel: &Vector3<f64>,
+    ) -> Command {
+        let elapsed = self.elapsed_s(s.t_ns);
+        let m = self.motion(s, gyro, accel);
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Estimating;
+        let step = self.run.pulse_sample(
+            s.t_ns,
+            elapsed,
+            &m,
+            self.setup.machine.pulse_s,
+            &mut cmd.thrust,
+        );
+        match step {
+            PulseStep::NoRun => {
+                self.transition(State::Idle, "internal: pulse without an estimator");
+            }
+            PulseStep::Pulsing => {
+                finish(&mut cmd, self.setup.machine.deadband);
+                return cmd;
+            }
+            PulseStep::Ended {
+                gate: Some(d),
+                pulses,
+            } if d.is_stop() => {
+                // A limit: the run's model is solved while the thrusters rest.
+                self.run
+                    .submit_pulse(s.t_ns, Purpose::Conclude, self.geometry_key());
+                self.next_phase(
+                    State::Solve,
+                    s.t_ns,
+                    format!("solving the model of {pulses} pulses"),
+                );
+            }
+            PulseStep::Ended { gate, .. } if self.run.back_to_back() => {
+                // Back to back the excitation goes on while the decision is out, as it did
+                // when the decision was made on this sample: a stop applied at its due sample
+                // ends the next pulse early and swaps in the model of the data up to here, the
+                // same model as then (a rest at neutral instead changed every later pulse's
+                // excitation, and with it every model learned after the first stop point).
+                let purpose = if gate.is_some() {
+                    Purpose::Progress
+                } else {
+                    Purpose::Decide
+                };
+                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
+                return self.start_pulse(s.t_ns);
+            }
+            PulseStep::Ended { gate, pulses } => {
+                let purpose = if gate.is_some() {
+                    Purpose::Progress
+                } else {
+                    // The bound decides: the pause after the pulse (longer than the solve's
+                    // budget by default) does not end before the decision is applied.
+                    Purpose::Decide
+                };
+                self.run.submit_pulse(s.t_ns, purpose, self.geometry_key());
+                self.next_phase(
+                    State::Settle,
+                    s.t_ns,
+                    format!("settling after pulse {pulses}"),
+                );
+            }
+        }
+        Command::neutral(self.n)
+    }
+
+    pub(super) fn geometry_key(&self) -> Option<u64> {
+        self.geometry.as_ref().map(|g| g.key())
+    }
+
+    /// A solve's result at its due sample (see `crate::solve`). The queue is emptied when
+    /// a run stops, so every result applied belongs to the run under way.
+    pub(super) fn apply_solve(&mut self, purpose: Purpose, result: SolveResult) {
+        let decision = result.decision;
+        self.run.hint_lag(&result.estimate);
+        match purpose {
+            Purpose::Progress => self.run.keep_estimate(result.estimate),
+            Purpose::Decide | Purpose::Conclude if decision.is_stop() => {
+                self.solve(decision, result)
+            }
+            Purpose::Decide => self.run.keep_estimate(result.estimate),
+            Purpose::Conclude => {
+                // A limit that is no stop cannot come from the estimator; never leave the
+                // run stuck in Solve.
+                self.run.stop();
+                self.transition(State::Idle, "internal: a concluding solve did not stop");
+            }
+            Purpose::Interval if decision.is_stop() => self.solve_under_control(decision, result),
+            // The refinement's own (see `Refiner::observe`); never the run's.
+            Purpose::Window => {}
+            Purpose::Interval => {
+                self.run.keep_estimate(result.estimate);
+                let t = self.last_t_ns.unwrap_or(0);
+                let excited = self.run.excited_s(t);
+                self.text = format!("identifying under control: {excited:.0} s of dither");
+            }
+        }
+    }
+
+    pub(super) fn settle_tick(
+        &mut self,
+        s: &ImuInput,
+        gyro: &Vector3<f64>,
+        accel: &Vector3<f64>,
+    ) -> Command {
+        let elapsed = self.elapsed_s(s.t_ns);
+        let m = self.motion(s, gyro, accel);
+        let k = self.setup.estimator.k_sigma;
+        let Some(quiet_for) = self.run.settle_sample(s.t_ns, &m, k) else {
+            return Command::neutral(self.n);
+        };
+        if self.run.waiting_for(Purpose::Decide) {
+            // The stop decision is out: the pause goes on at neutral (the samples feed the
+            // fit) until it is applied.
+            return Command::neutral(self.n);
+        }
+        let m = &self.setup.machine;
+        if (elapsed >= m.settle_min_s && quiet_for >= m.settle_quiet_s) || elapsed >= m.settle_max_s
+        {
+            return self.start_pulse(s.t_ns);
+        }
+        Command::neutral(self.n)
+    }
+
+    pub(super) fn solve(&mut self, decision: StopDecision, result: SolveResult) {
+        // Solve until this call's transition says what came of it (its event is from Solve).
+        let t = self.last_t_ns.unwrap_or(self.phase_start_ns);
+        self.next_phase(State::Solve, t, "concluding the estimation".into());
+        let key = self.geometry_key();
+        let Some((candidate, pulses)) = self.run.conclude(result) else {
+            self.transition(State::Idle, "internal: a stopping solve made no model");
+            return;
+        };
+        let why = match decision {
+            StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
+                "converged after {pulses} pulses (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
+            ),
+            StopDecision::PlanComplete => format!("planned {pulses} pulses done"),
+            StopDecision::MaxPulses => format!("pulse limit {pulses} reached"),
+            StopDecision::Continue => "stopped".into(),
+        };
+        // The status text holds 128 bytes: the IMU's position leads, the bound is in the
+        // rejection event and the model's dynamics.
+        let imu_note = match candidate.dynamics.as_ref().and_then(|d| d.imu_position) {
+            Some(p) if p.contradicted => Some(format!(
+                "IMU found at {} m, not as configured (estimator.imu_position_m)",
+                fmt_xyz(&p.position_m)
+            )),
+            _ => None,
+        };
+        let why = match &imu_note {
+            Some(note) => format!("{why}; {note}"),
+            None => why,
+        };
+        // Rotation that neither thrust nor the vehicle's own dynamics explain (a swell, a
+        // tether): the fit absorbed it somewhere, and its bound does not know it.
+        let (unexplained, tilt_deg) = candidate.dynamics.as_ref().map_or((0.0, 0.0), |d| {
+            (d.unexplained_rate_radps, d.max_tilt_rad.to_degrees())
+        });
+        let limit = self.setup.machine.max_unexplained_rate_radps;
+        if unexplained > limit {
+            let text = format!(
+                "{unexplained:.3} rad/s of rotation unexplained (limit {limit:.3}; water?), tilted {tilt_deg:.0} deg: model rejected; old model kept"
+            );
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(self.after_refusal(), &text);
+            return;
+        }
+        match self.try_swap(candidate, ModelSource::Estimated) {
+            Ok(()) => {
+                if let Some(k) = key {
+                    self.models.remember_current(k);
+                }
+                if self.setup.machine.control_after_estimate {
+                    self.target = None;
+                    self.controller.reset();
+                    self.transition(
+                        State::Active,
+                        &format!("{why}: new model, holding attitude"),
+                    );
+                    // A burst that already reached the target needs no refining.
+                    let coarse = self.models.current().is_some_and(|m| {
+                        m.rel_err_rot.max(m.rel_err_acc) > self.setup.estimator.target_rel_err
+                    });
+                    if self.run.was_burst() && coarse {
+                        let t = self.last_t_ns.unwrap_or(0);
+                        self.start_estimation(t, &format!("{why}: burst model in"));
+                    }
+                } else {
+                    self.transition(State::Idle, &format!("{why}: new model"));
+                }
+            }
+            Err(e) => {
+                let next = self.after_refusal();
+                let text = match &imu_note {
+                    Some(note) => format!("{note}: model rejected; old model kept"),
+                    None => format!("{why}: model rejected ({e}); old model kept"),
+                };
+                self.transition(next, &text);
+            }
+        }
+    }
+}

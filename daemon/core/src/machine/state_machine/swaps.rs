@@ -1,0 +1,104 @@
+//! Putting a model in force: every swap (learned, refined, loaded) is checked and announced
+//! here, and a refused one says where it leaves the vehicle.
+
+// The machine's fields and helpers are the parent's: these are its methods, by job.
+use super::*;
+
+impl Machine {
+    /// Install a model from a file (at start, or an operator's load request): its
+    /// allocation is derived again from its effectiveness, and it must pass the same checks
+    /// as any swap, the physical bounds included.
+    pub fn load_model(&mut self, model: Model) -> Result<(), Refused> {
+        let model = model.with_derived_allocation(&self.setup.estimator);
+        self.install_loaded(model)
+    }
+
+    /// The same for a model already prepared off the control thread
+    /// ([`Model::prepared`], with the same estimator settings): only the checks against the
+    /// machine (thruster count, confidence) and the swap are left.
+    pub fn load_prepared(&mut self, model: PreparedModel) -> Result<(), Refused> {
+        self.install_loaded(model.into_model())
+    }
+
+    pub(super) fn install_loaded(&mut self, model: Model) -> Result<(), Refused> {
+        let saved = model.version;
+        self.try_swap(model, ModelSource::Loaded)
+            .map_err(|e| Refused(format!("model not used: {e}")))?;
+        // Versions only go up here: a file older than the model in force gets a new number,
+        // and status says which version it was saved as.
+        let what = match self.models.current() {
+            Some(m) if saved > 0 && m.version != saved => {
+                format!("model loaded (saved as v{saved})")
+            }
+            _ => "model loaded".to_string(),
+        };
+        self.describe_swap(&what);
+        Ok(())
+    }
+
+    /// After an operator's swap (revert, load): status says which model is in force and
+    /// where it came from, instead of the words of the run that made the old one.
+    pub(super) fn describe_swap(&mut self, what: &str) -> String {
+        let Some(m) = self.models.current() else {
+            return what.to_string();
+        };
+        self.text = format!("{what}: model v{}, {}", m.version, m.provenance());
+        self.text.clone()
+    }
+
+    /// Validate and install a model between two ticks: the monitor judges the new one on fresh
+    /// data only.
+    pub(super) fn try_swap(
+        &mut self,
+        model: Model,
+        source: ModelSource,
+    ) -> Result<(), crate::model::SwapRejection> {
+        match self
+            .models
+            .swap(model, source, self.n, self.setup.machine.max_swap_rel_err)
+        {
+            Ok(installed) => {
+                self.monitor.reset(self.n);
+                self.refiner.reset();
+                self.events.push(Event::ModelSwapped(Box::new(installed)));
+                Ok(())
+            }
+            Err(e) => {
+                self.events.push(Event::ModelRejected(e.to_string()));
+                Err(e)
+            }
+        }
+    }
+
+    /// Where a refused estimate leaves the vehicle: holding with the old model, if there is
+    /// one and control follows estimation, else Idle (thrusters neutral).
+    pub(super) fn after_refusal(&self) -> State {
+        if self.models.current().is_some() && self.setup.machine.control_after_estimate {
+            State::Active
+        } else {
+            State::Idle
+        }
+    }
+
+    /// A model the continuous refinement updated: checked like every other and swapped in.
+    /// The monitor and the refiner keep going: the model moved by a window's worth of drift,
+    /// not to a new vehicle.
+    pub(super) fn install_refined(&mut self, model: Model) {
+        match self.models.swap(
+            model,
+            ModelSource::Estimated,
+            self.n,
+            self.setup.machine.max_swap_rel_err,
+        ) {
+            Ok(installed) => {
+                if let Some(k) = installed.geometry_key {
+                    self.models.remember_current(k);
+                }
+                self.events.push(Event::ModelSwapped(Box::new(installed)));
+            }
+            Err(e) => self
+                .events
+                .push(Event::ModelRejected(format!("refined model: {e}"))),
+        }
+    }
+}

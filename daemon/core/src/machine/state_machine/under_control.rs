@@ -1,0 +1,196 @@
+//! Holding attitude with a model: control ticks with the refinement and the monitor watching,
+//! identification under control after a change, and what a mismatch starts.
+
+// The machine's fields and helpers are the parent's: these are its methods, by job.
+use super::*;
+
+impl Machine {
+    /// While controlling with closed-loop identification: the attitude error (deg) when it is
+    /// beyond the identification's budget, where no dither would be applied and the run could
+    /// not learn (an operator's request is refused then; an automatic start waits in Identify,
+    /// its dither faded out, until the vehicle is back within the budget).
+    pub(super) fn beyond_identification_budget(&self) -> Option<f64> {
+        let controlling = self.state == State::Active && self.models.current().is_some();
+        if !(controlling && EstimationRun::closed_loop_possible(&self.setup)) {
+            return None;
+        }
+        let target = self.target?;
+        let err_deg = self
+            .attitude
+            .attitude()
+            .angle_to(&target.attitude)
+            .to_degrees();
+        (err_deg > self.setup.identification.attitude_budget_deg).then_some(err_deg)
+    }
+
+    /// Under control: the controller output with the dither on top, the estimator fed with
+    /// the total command; at a stop the new model is swapped in without a bump (the target and
+    /// the controller's state stay).
+    pub(super) fn identify_tick(
+        &mut self,
+        s: &ImuInput,
+        gyro: &Vector3<f64>,
+        accel: &Vector3<f64>,
+        dt: f64,
+    ) -> Command {
+        if self.models.current().is_none() {
+            self.run.stop();
+            self.transition(State::Idle, "no model to identify under: thrusters neutral");
+            return Command::neutral(self.n);
+        }
+        let (meas, target) = self.measured_and_target(s, gyro);
+        let attitude = meas.attitude;
+        let Some(model) = self.models.current() else {
+            return Command::neutral(self.n);
+        };
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Estimating;
+        let n = self.n.min(model.thrusters());
+        self.last_desired = self
+            .controller
+            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
+        // The filter's attitude, which `measured` gave the controller.
+        let m = self.motion(s, gyro, accel);
+        let err_deg = attitude.angle_to(&target.attitude).to_degrees();
+        let step = self.run.closed_loop_sample(
+            s.t_ns,
+            &m,
+            &self.attitude.gyro_bias(),
+            err_deg,
+            &self.setup,
+            Some(model),
+            self.n,
+            &mut cmd.thrust[..n],
+        );
+        finish(&mut cmd, self.setup.machine.deadband);
+        match step {
+            // The text stays the transition's (why the identification began) until the
+            // first decision: a status reader must be able to see it.
+            ClosedStep::Holding | ClosedStep::Exciting => {}
+            ClosedStep::Decide { elapsed_s } => {
+                let key = self.geometry_key();
+                self.run
+                    .submit_interval(s.t_ns, elapsed_s, &self.setup, key);
+            }
+        }
+        cmd
+    }
+
+    pub(super) fn solve_under_control(&mut self, decision: StopDecision, result: SolveResult) {
+        let key = self.geometry_key();
+        let t_ns = self.last_t_ns.unwrap_or(0);
+        let seconds = self.run.excited_s(t_ns);
+        let Some((candidate, _)) = self.run.conclude(result) else {
+            return;
+        };
+        let why = match decision {
+            StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
+                "identified under control in {seconds:.1} s (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
+            ),
+            _ => format!("identification limit reached after {seconds:.1} s"),
+        };
+        match self.try_swap(candidate, ModelSource::Estimated) {
+            Ok(()) => {
+                if let Some(k) = key {
+                    self.models.remember_current(k);
+                }
+                self.transition(
+                    State::Active,
+                    &format!("{why}: new model, holding attitude"),
+                );
+            }
+            Err(e) => self.transition(
+                State::Active,
+                &format!("{why}: model rejected ({e}); old model kept"),
+            ),
+        }
+    }
+
+    /// What the controller sees of this sample, and the target it holds. Without a setpoint,
+    /// hold level at the current heading and depth: a vehicle may enter Active still swinging
+    /// from the last pulse, and that tilt is nothing to keep.
+    pub(super) fn measured_and_target(
+        &mut self,
+        s: &ImuInput,
+        gyro: &Vector3<f64>,
+    ) -> (Measured, Target) {
+        let meas = self.measured(s, gyro);
+        let heading = meas.attitude.euler_angles().2;
+        let target = *self.target.get_or_insert_with(|| Target {
+            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, heading),
+            depth: s.depth,
+        });
+        (meas, target)
+    }
+
+    pub(super) fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
+        if self.models.current().is_none() {
+            return Command::neutral(self.n);
+        }
+        let (meas, target) = self.measured_and_target(s, gyro);
+        let attitude = meas.attitude;
+        let Some(model) = self.models.current() else {
+            return Command::neutral(self.n);
+        };
+        let mut cmd = Command::neutral(self.n);
+        cmd.mode = Mode::Controlling;
+        let n = self.n.min(model.thrusters());
+        self.last_desired = self
+            .controller
+            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
+        let err_rad = attitude.angle_to(&target.attitude);
+        let verdict = self.refiner.observe(
+            &Tick {
+                t_ns: s.t_ns,
+                gyro,
+                gyro_bias: &self.attitude.gyro_bias(),
+                attitude: &attitude,
+                specific_force: &Vector3::from(s.accel),
+                depth: s.depth,
+                err_deg: err_rad.to_degrees(),
+                setpoint: &target.attitude,
+            },
+            model,
+            self.run.levels(),
+            &self.setup.estimator,
+            &mut cmd.thrust[..n],
+        );
+        // The monitor compares in model units: the command sent (dither included) before
+        // deadband compensation.
+        let gravity_body = attitude.inverse() * Vector3::z();
+        let mismatch = self.monitor.observe(
+            dt,
+            err_rad,
+            &meas.rate,
+            &gravity_body,
+            &model.effectiveness,
+            &cmd.thrust[..n],
+        );
+        finish(&mut cmd, self.setup.machine.deadband);
+        if let Some(m) = mismatch {
+            self.on_mismatch(s.t_ns, m.to_string(), ThrusterChange::Unknown);
+        } else if let Some(v) = verdict.filter(|v| v.changed) {
+            self.on_mismatch(s.t_ns, v.to_string(), ThrusterChange::Moved(v.thruster));
+        } else if let Some(fused) = self.refiner.take_refined() {
+            self.install_refined(fused.model);
+        }
+        cmd
+    }
+
+    /// The monitor (or the refinement, which names the thruster: `change`) found the
+    /// thrusters doing something else than the model says.
+    pub(super) fn on_mismatch(&mut self, t_ns: u64, why: String, change: ThrusterChange) {
+        self.refiner.reset();
+        self.events.push(Event::MismatchDetected(why.clone()));
+        self.monitor.reset(self.n);
+        match self.monitor.action() {
+            MismatchAction::Estimate => {
+                let prior = self.carry_over(change, self.n);
+                self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior)
+            }
+            MismatchAction::Report | MismatchAction::Off => {
+                self.text = format!("holding attitude; {why}");
+            }
+        }
+    }
+}
