@@ -187,8 +187,8 @@ fn bench(c: &mut Criterion) {
 /// candidate change times), N = 8 and 16, every candidate live and every row judged.
 fn change_test(c: &mut Criterion) {
     use nalgebra::{DMatrix, UnitQuaternion};
+    use thrusterd_core::adaptation::refinement::{change_test::ChangeTest, RefinementConfig};
     use thrusterd_core::model::Model;
-    use thrusterd_core::refinement::{change_test::ChangeTest, RefinementConfig};
     for n in [8usize, 16] {
         let b = DMatrix::from_fn(6, n, |r, i| ((r * 7 + i * 3) % 11) as f64 - 5.0);
         let model = Model::nominal(b, None);

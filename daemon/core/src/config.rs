@@ -7,14 +7,14 @@ use serde::{Deserialize, Serialize};
 use thruster_driver_kit::{parse_toml, LoadError, Range};
 use thruster_protocol::services::{IpcConfig, IpcError, DEFAULT_ROOT_BASE};
 
+use crate::adaptation::identification::IdentificationConfig;
+use crate::adaptation::monitor::MonitorConfig;
+use crate::adaptation::refinement::RefinementConfig;
 use crate::attitude::AttitudeConfig;
 use crate::controller::ControllerConfig;
 use crate::estimator::EstimatorConfig;
-use crate::identification::IdentificationConfig;
 use crate::machine::{Geometry, MachineConfig, MachineSetup};
 use crate::model::RigidBody;
-use crate::monitor::MonitorConfig;
-use crate::refinement::RefinementConfig;
 use crate::supply::SupplyConfig;
 use thruster_protocol::MAX_THRUSTERS;
 

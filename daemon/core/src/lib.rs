@@ -3,6 +3,7 @@
 //! files come in as text (`config::DaemonConfig::from_toml_str`, `model_file::from_json`), and
 //! the daemon binary reads and writes them.
 
+pub mod adaptation;
 pub mod allocation;
 pub mod attitude;
 pub mod checkpoint_parts;
@@ -10,13 +11,10 @@ pub mod config;
 pub mod controller;
 pub mod driver_watch;
 pub mod estimator;
-pub mod identification;
 pub mod machine;
 pub mod model;
 pub mod model_file;
-pub mod monitor;
 pub mod navigation;
-pub mod refinement;
 mod serde_arrays;
 pub mod solve;
 pub mod study;

@@ -1,14 +1,14 @@
 //! Closed-loop identification in one process, against the simulator's truth: AMOUR-5's top
 //! thruster is rotated 45 degrees and announced while the machine holds level; the machine
 //! swaps in the new geometry's nominal model, keeps holding with it and learns the new model
-//! from a dither on top of the controller's commands (`thrusterd_core::identification`).
+//! from a dither on top of the controller's commands (`thrusterd_core::adaptation::identification`).
 //! In-process runs are deterministic: the numbers in the comments are what these seeds gave.
 
 mod common;
 use common::{vehicle, Reestimation, Run};
 use thruster_sim::NoisePreset;
+use thrusterd_core::adaptation::identification::IdentificationConfig;
 use thrusterd_core::estimator::EstimatorConfig;
-use thrusterd_core::identification::IdentificationConfig;
 use thrusterd_core::machine::{Machine, MachineSetup, Mode, State};
 use thrusterd_core::model::ModelSource;
 

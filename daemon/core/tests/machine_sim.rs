@@ -544,7 +544,7 @@ fn a_setpoint_with_angles_left_out_keeps_the_held_ones() {
         ..MachineSetup::default()
     };
     setup.machine.deadband = 0.05;
-    setup.monitor.action = thrusterd_core::monitor::MismatchAction::Report;
+    setup.monitor.action = thrusterd_core::adaptation::monitor::MismatchAction::Report;
     run.machine = Machine::new(setup);
     run.run_for(1.0);
     run.estimate();

@@ -1,5 +1,5 @@
 //! Continuous refinement in one process, against the simulator's truth: while the machine
-//! holds AMOUR-5 through pitch manoeuvres, the background fit (`thrusterd_core::refinement`)
+//! holds AMOUR-5 through pitch manoeuvres, the background fit (`thrusterd_core::adaptation::refinement`)
 //! must stay quiet on an unchanged vehicle and find the top thruster rotated 45 degrees, at a
 //! realistic IMU and at the paper's (where the older monitor is blind by design). The monitor's
 //! own test is off here (infinite threshold), so every mismatch is the refinement's.
@@ -20,9 +20,9 @@ use common::Run;
 use nalgebra::UnitQuaternion;
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::NoisePreset;
+use thrusterd_core::adaptation::monitor::MismatchAction;
+use thrusterd_core::adaptation::refinement::RefinementConfig;
 use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
-use thrusterd_core::monitor::MismatchAction;
-use thrusterd_core::refinement::RefinementConfig;
 
 fn holding(noise: NoisePreset, seed: u64) -> Run {
     holding_with(noise, seed, RefinementConfig::default())
@@ -822,7 +822,7 @@ mod bound {
     pub const VARIANTS: usize = 4;
     /// ORACLE with the true attitude and velocity in its nuisance terms (model and state
     /// error zero), ORACLE with the attitude filter's attitude, LEARNED (the filter's too),
-    /// and MODULE: `thrusterd_core::refinement::change_test` with the shipped settings on the
+    /// and MODULE: `thrusterd_core::adaptation::refinement::change_test` with the shipped settings on the
     /// same inputs as in the machine (its statistic whatever the share of the move).
     pub const NAMES: [&str; VARIANTS] = ["oracle", "oracle+filter", "learned", "module"];
 
@@ -1181,7 +1181,7 @@ mod bound {
         oracle: [Oracle; 2],
         learned: Learned,
         pub glr: [Glr; 3],
-        module: thrusterd_core::refinement::change_test::ChangeTest,
+        module: thrusterd_core::adaptation::refinement::change_test::ChangeTest,
         model_units: Vec<f64>,
         sp: UnitQuaternion<f64>,
         yaw: f64,
@@ -1193,7 +1193,10 @@ mod bound {
         sq: [[f64; 3]; VARIANTS],
         count: u64,
         /// The module's first verdict (seconds into the `fly`, the statistic), if any.
-        pub module_found: Option<(f64, thrusterd_core::refinement::change_test::ChangeStat)>,
+        pub module_found: Option<(
+            f64,
+            thrusterd_core::adaptation::refinement::change_test::ChangeStat,
+        )>,
     }
 
     impl Flight {
@@ -1206,7 +1209,7 @@ mod bound {
                 oracle: [Oracle::new(run), Oracle::new(run)],
                 learned: Learned::new(run),
                 glr: [0, 1, 2].map(|v| Glr::new(n, dt, tau[v], horizon, spacing)),
-                module: thrusterd_core::refinement::change_test::ChangeTest::new({
+                module: thrusterd_core::adaptation::refinement::change_test::ChangeTest::new({
                     let mut c = RefinementConfig::default();
                     if let Ok(v) = std::env::var("DB_MODEL_FLOOR") {
                         c.change_model_floor = v.parse().unwrap();

@@ -7,8 +7,8 @@ mod common;
 use common::{rel_err, Run};
 use nalgebra::UnitQuaternion;
 use thruster_sim::{NoisePreset, Scenario};
+use thrusterd_core::adaptation::refinement::RefinementConfig;
 use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
-use thrusterd_core::refinement::RefinementConfig;
 
 fn holding(noise: NoisePreset, seed: u64, update: bool, rate_hz: f64) -> Run {
     holding_tuned(noise, seed, update, rate_hz, |_| {})

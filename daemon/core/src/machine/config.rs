@@ -3,13 +3,13 @@
 use serde::{Deserialize, Serialize};
 
 use super::types::Geometry;
+use crate::adaptation::identification::IdentificationConfig;
+use crate::adaptation::monitor::MonitorConfig;
+use crate::adaptation::refinement::RefinementConfig;
 use crate::attitude::AttitudeConfig;
 use crate::controller::ControllerConfig;
 use crate::estimator::EstimatorConfig;
-use crate::identification::IdentificationConfig;
 use crate::model::RigidBody;
-use crate::monitor::MonitorConfig;
-use crate::refinement::RefinementConfig;
 
 /// What a reconfiguration event leads to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

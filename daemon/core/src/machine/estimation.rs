@@ -6,12 +6,12 @@ use nalgebra::Vector3;
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::MachineSetup;
+use crate::adaptation::identification::IdentificationConfig;
 use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::power::pulse_power;
 use crate::estimator::{
     Estimate, Estimator, EstimatorConfig, Method, NoiseLevels, NoiseMeter, StopDecision,
 };
-use crate::identification::IdentificationConfig;
 use crate::model::{Model, ModelSource};
 use crate::navigation::rest_drift::RestDrift;
 

@@ -15,15 +15,15 @@ use super::types::{
     finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
     SetpointInput, State, StatusSnapshot, NO_IMU_YET,
 };
+use crate::adaptation::identification::carry_over::{carried_over, ThrusterChange};
+use crate::adaptation::monitor::{MismatchAction, ModelMonitor};
+use crate::adaptation::refinement::{Refiner, Tick, WindowVerdict};
 use crate::attitude::AttitudeFilter;
 use crate::controller::{Controller, Measured, Target};
 use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::response::motion_accel;
 use crate::estimator::{Estimate, NoiseLevels, StopDecision};
-use crate::identification::carry_over::{carried_over, ThrusterChange};
 use crate::model::{nominal_effectiveness, Model, ModelSource, PreparedModel};
-use crate::monitor::{MismatchAction, ModelMonitor};
-use crate::refinement::{Refiner, Tick, WindowVerdict};
 use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 use crate::supply::Supply;
 

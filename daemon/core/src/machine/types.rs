@@ -24,7 +24,7 @@ pub enum State {
     Active,
     Fault,
     /// Estimating under control: the controller holds the setpoint with the model in force
-    /// while a dither excites the thrusters (see `crate::identification`).
+    /// while a dither excites the thrusters (see `crate::adaptation::identification`).
     Identify,
 }
 
@@ -138,7 +138,7 @@ pub enum Request {
 #[error("{0}")]
 pub struct Refused(pub String);
 
-pub use crate::identification::carry_over::ThrusterChange;
+pub use crate::adaptation::identification::carry_over::ThrusterChange;
 
 /// A reconfiguration event, validated.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

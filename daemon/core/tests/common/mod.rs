@@ -193,7 +193,7 @@ impl Run {
     /// the identification section replaced.
     pub fn with_identification(
         &mut self,
-        identification: thrusterd_core::identification::IdentificationConfig,
+        identification: thrusterd_core::adaptation::identification::IdentificationConfig,
     ) {
         let mut setup = thrusterd_core::machine::MachineSetup {
             thrusters: self.sim.thruster_count(),

@@ -1,5 +1,5 @@
 //! The estimator under control: the dynamic method fed with whatever command was sent (the
-//! controller's plus a dither), instead of its own pulses. See `crate::identification`.
+//! controller's plus a dither), instead of its own pulses. See `crate::adaptation::identification`.
 
 use nalgebra::Vector3;
 

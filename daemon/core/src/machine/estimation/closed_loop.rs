@@ -7,8 +7,8 @@ use nalgebra::Vector3;
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::{EstimationRun, Motion};
+use crate::adaptation::identification::{Dither, IdentificationConfig};
 use crate::estimator::Method;
-use crate::identification::{Dither, IdentificationConfig};
 use crate::machine::config::MachineSetup;
 use crate::model::Model;
 use crate::solve::Purpose;

@@ -37,7 +37,7 @@ impl Machine {
         };
         let why = &format!("{why}{kept}");
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
-        // Controlling with a model: identify under control (see `crate::identification`).
+        // Controlling with a model: identify under control (see `crate::adaptation::identification`).
         let controlling =
             matches!(self.state, State::Active | State::Identify) || self.levelling.is_some();
         if controlling

@@ -242,7 +242,7 @@ mod tests {
     }
 
     fn window(b: DMatrix<f64>, se: f64) -> Estimate {
-        crate::refinement::test_window_estimate(b, se)
+        crate::adaptation::refinement::test_window_estimate(b, se)
     }
 
     fn b() -> DMatrix<f64> {

@@ -1,0 +1,318 @@
+//! The estimates themselves: the forward (static) fit, the dynamic model's fit (with the lag
+//! searched and the IMU's position found), the paper's method, and the stop rule's bound.
+
+// The estimator's fields and helpers are the parent's: these are its methods, by job.
+use super::*;
+
+impl Estimator {
+    /// Converged once both error bounds reached the target (every thruster excited).
+    /// The acceleration rows' bound leaves out what no more data removes (the IMU position's
+    /// tolerance or gap, [`ImuPosition`](super::dynamic::imu_position::ImuPosition)): waiting
+    /// for it would only run to the pulse limit.
+    pub(super) fn bound_decision(&self, e: &Estimate) -> StopDecision {
+        let share = e
+            .dynamics
+            .as_ref()
+            .and_then(|d| d.imu_position)
+            .map_or(0.0, |p| p.rel_err_share);
+        let reducible_acc = (e.rel_err_acc.powi(2) - share.powi(2)).max(0.0).sqrt();
+        if e.excited
+            && e.rel_err_rot <= self.cfg.target_rel_err
+            && reducible_acc <= self.cfg.target_rel_err
+        {
+            StopDecision::Converged {
+                rel_err_rot: e.rel_err_rot,
+                rel_err_acc: e.rel_err_acc,
+            }
+        } else {
+            StopDecision::Continue
+        }
+    }
+
+    /// Noise standard deviation per axis of a group: the at-rest level, or the residual level
+    /// when that is larger and well determined (in the water, pulses stir up more than rest).
+    pub(super) fn group_sigma(&self, g: usize, sol: &ForwardSolution) -> [f64; 3] {
+        let rest = if g == ROT {
+            self.noise.gyro_sigma
+        } else {
+            self.noise.accel_sigma
+        };
+        match sol.residual_var {
+            Some(var) if sol.residual_dof >= MIN_RESIDUAL_DOF => {
+                std::array::from_fn(|a| rest[a].max(var[a].sqrt()))
+            }
+            _ => rest,
+        }
+    }
+
+    pub(super) fn forward_estimate(&self) -> Estimate {
+        let n = self.thrusters();
+        let sols = [self.forward[ROT].solve(), self.forward[ACC].solve()];
+        let sigmas = [
+            self.group_sigma(ROT, &sols[ROT]),
+            self.group_sigma(ACC, &sols[ACC]),
+        ];
+        let excited = sols.iter().all(|s| s.rank == n);
+        let b = stack(&sols[ROT].b, &sols[ACC].b);
+        let mut std_err = DMatrix::zeros(6, n);
+        let mut rel = [f64::INFINITY; 2];
+        for g in [ROT, ACC] {
+            let sol = &sols[g];
+            let gram = if g == ROT {
+                self.forward[ROT].gram()
+            } else {
+                self.forward[ACC].gram()
+            };
+            for a in 0..3 {
+                for i in 0..n {
+                    std_err[(3 * g + a, i)] = if gram[(i, i)] > 0.0 {
+                        sigmas[g][a] * sol.gram_inv[(i, i)].max(0.0).sqrt()
+                    } else {
+                        f64::INFINITY
+                    };
+                }
+            }
+            if sol.rank == n {
+                let trace = sol.gram_inv.trace();
+                let var: f64 = sigmas[g].iter().map(|s| s * s * trace).sum();
+                let norm = sol.b.norm();
+                rel[g] = if norm > 0.0 {
+                    var.sqrt() / norm
+                } else {
+                    f64::INFINITY
+                };
+            }
+        }
+        let rank = rank_report(&b, &std_err, &self.cfg);
+        let alloc = pseudo_inverse(&b, rank.actuated, rank.rank);
+        let split = self.split_fit(&sigmas);
+        let thruster = diagnose(
+            &b,
+            &std_err,
+            &self.max_command,
+            split.as_ref().map(|(sb, sse)| (sb, sse)),
+            self.nominal.as_ref(),
+            &self.cfg,
+        );
+        Estimate {
+            method: Method::Forward,
+            thrusters: n,
+            pulses: self.pulses,
+            samples: self.samples,
+            effectiveness: b,
+            std_err,
+            allocation: alloc,
+            rel_err_rot: rel[ROT],
+            rel_err_acc: rel[ACC],
+            sigma: [
+                sigmas[ROT][0],
+                sigmas[ROT][1],
+                sigmas[ROT][2],
+                sigmas[ACC][0],
+                sigmas[ACC][1],
+                sigmas[ACC][2],
+            ],
+            rank,
+            thruster,
+            excited,
+            dynamics: None,
+        }
+    }
+
+    pub(super) fn dynamic_estimate(&self) -> Estimate {
+        let n = self.thrusters();
+        let rest = self.rest_sigma();
+        let Some(run) = self.dynamic.as_ref() else {
+            let zeros = DMatrix::zeros(6, n);
+            let inf = DMatrix::from_element(6, n, f64::INFINITY);
+            let rank = rank_report(&zeros, &inf, &self.cfg);
+            return Estimate {
+                method: Method::Dynamic,
+                thrusters: n,
+                pulses: self.pulses,
+                samples: self.samples,
+                allocation: DMatrix::zeros(n, 6),
+                thruster: diagnose(&zeros, &inf, &self.max_command, None, None, &self.cfg),
+                effectiveness: zeros,
+                std_err: inf,
+                rel_err_rot: f64::INFINITY,
+                rel_err_acc: f64::INFINITY,
+                sigma: rest,
+                rank,
+                excited: false,
+                dynamics: None,
+            };
+        };
+        // The lag learned from the data when asked (and the data decides), else the configured.
+        let learned = self
+            .learns_lag()
+            .then(|| learn_common_lag(run, &self.lag_range()))
+            .flatten();
+        self.dynamic_estimate_with(run, learned, true)
+    }
+
+    /// What the configuration says of the IMU's position.
+    pub(super) fn imu_setting(&self) -> ImuSetting {
+        ImuSetting {
+            position_m: Vector3::from(self.cfg.imu_position_m),
+            learn: self.cfg.learn_imu_position,
+            tolerance_m: self.cfg.imu_position_tolerance_m,
+        }
+    }
+
+    /// The dynamic estimate from `run`, or from the fit at a learned lag when there is one,
+    /// its acceleration rows referred from the IMU to the vehicle's centre. `search`: the lag
+    /// was searched (and is searched again once the IMU is found off the centre), else only
+    /// fitted at.
+    pub(super) fn dynamic_estimate_with(
+        &self,
+        run: &DynamicRun,
+        learned: Option<LagFit>,
+        search: bool,
+    ) -> Estimate {
+        let n = self.thrusters();
+        let rest = self.rest_sigma();
+        let setting = self.imu_setting();
+        let raw_solve = |fit: &DynamicRun| {
+            fit.solve(
+                &rest,
+                self.cfg.model_error_floor,
+                self.cfg.term_prior_sd,
+                self.prior.as_ref(),
+            )
+        };
+        let solve = |fit: &DynamicRun, lag: &Option<LagFit>| {
+            let mut sol = raw_solve(fit);
+            if let Some(l) = lag {
+                l.widen(&mut sol, &raw_solve(&l.above), &raw_solve(&l.below));
+            }
+            fit.refer_to_centre(&mut sol, &setting);
+            sol
+        };
+        let mut lag = learned;
+        let mut sol = solve(lag.as_ref().map_or(run, |l| &l.run), &lag);
+        // The navigation's velocity is the IMU's. With the IMU away from the centre, fit again
+        // with the centre's velocity (the lag searched again with it) and find the position
+        // again: the damping and Coriolis terms it feeds moved the position found by 4-8 cm on
+        // eight_vectored, and the lag by 2 % (docs/study.md).
+        for _ in 0..IMU_REFITS {
+            let Some(p) = sol.terms.imu_position else {
+                break;
+            };
+            if p.position_m.norm() < 1e-3 {
+                break;
+            }
+            let imu = p.position_m;
+            let again = match &lag {
+                Some(l) if search => learn_common_lag_centred(run, &self.lag_range(), &imu),
+                Some(l) => fit_at_centred(run, l.lag_s, l.sd_ln, &imu),
+                None => None,
+            };
+            if again.is_some() {
+                lag = again;
+                sol = solve(&lag.as_ref().expect("just set").run, &lag);
+            } else {
+                let Some(fit) = run.refit_with(run.lags(), run.lags_learned(), &imu) else {
+                    break;
+                };
+                sol = solve(&fit, &lag);
+            }
+        }
+        sol.terms.unexplained_rate_radps = unexplained(&sol.sigma, &self.noise.gyro_white_sigma);
+        let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
+        let alloc = pseudo_inverse(&sol.b, rank.actuated, rank.rank);
+        let thruster = diagnose(
+            &sol.b,
+            &sol.std_err,
+            &self.max_command,
+            sol.split.as_ref().map(|(sb, sse)| (sb, sse)),
+            self.nominal.as_ref(),
+            &self.cfg,
+        );
+        Estimate {
+            method: Method::Dynamic,
+            thrusters: n,
+            pulses: self.pulses,
+            samples: self.samples,
+            effectiveness: sol.b,
+            std_err: sol.std_err,
+            allocation: alloc,
+            rel_err_rot: sol.rel_err[ROT],
+            rel_err_acc: sol.rel_err[ACC],
+            sigma: sol.sigma,
+            rank,
+            thruster,
+            excited: sol.excited,
+            dynamics: Some(sol.terms),
+        }
+    }
+
+    /// The forward/reverse split fit (6 x 2N) and its standard errors, once every thruster has
+    /// pushed both ways.
+    pub(super) fn split_fit(&self, sigmas: &[[f64; 3]; 2]) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
+        let two_n = 2 * self.thrusters();
+        let sols = [self.split[ROT].solve(), self.split[ACC].solve()];
+        if sols.iter().any(|s| s.rank < two_n) {
+            return None;
+        }
+        let b = stack(&sols[ROT].b, &sols[ACC].b);
+        let mut se = DMatrix::zeros(6, two_n);
+        for g in [ROT, ACC] {
+            for a in 0..3 {
+                for i in 0..two_n {
+                    se[(3 * g + a, i)] = sigmas[g][a] * sols[g].gram_inv[(i, i)].max(0.0).sqrt();
+                }
+            }
+        }
+        Some((b, se))
+    }
+
+    pub(super) fn paper_estimate(&self) -> Estimate {
+        let n = self.thrusters();
+        let a_rot = self.paper[ROT].inverse_model();
+        let a_acc = self.paper[ACC].inverse_model();
+        let b = self.paper_effectiveness();
+        // The paper projects desired motion onto thrusters with A directly: t = x A.
+        let mut alloc = DMatrix::zeros(n, 6);
+        for a in 0..3 {
+            alloc.set_column(a, &a_rot.row(a).transpose());
+            alloc.set_column(3 + a, &a_acc.row(a).transpose());
+        }
+        let nan = DMatrix::from_element(6, n, f64::NAN);
+        let (mut sv, _) = singular_right(&b);
+        sv.truncate(6);
+        let top = sv.first().copied().unwrap_or(0.0);
+        let rank = RankReport {
+            rank: sv.iter().filter(|s| **s > top * 1e-9).count(),
+            singular_values: sv,
+            threshold: f64::NAN,
+            dof_share: [1.0; 6],
+            // The paper's method has no notion of a missing DOF: it drives all six.
+            actuated: DofMask::ALL,
+        };
+        let thruster = diagnose(&b, &nan, &self.max_command, None, None, &self.cfg);
+        Estimate {
+            method: Method::Paper,
+            thrusters: n,
+            pulses: self.pulses,
+            samples: self.samples,
+            effectiveness: b,
+            std_err: nan,
+            allocation: alloc,
+            rel_err_rot: f64::NAN,
+            rel_err_acc: f64::NAN,
+            sigma: [
+                self.noise.gyro_sigma[0],
+                self.noise.gyro_sigma[1],
+                self.noise.gyro_sigma[2],
+                self.noise.accel_sigma[0],
+                self.noise.accel_sigma[1],
+                self.noise.accel_sigma[2],
+            ],
+            rank,
+            thruster,
+            excited: self.paper[ROT].rows() > 0 && self.paper[ACC].rows() > 0,
+            dynamics: None,
+        }
+    }
+}
