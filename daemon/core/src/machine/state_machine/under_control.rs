@@ -38,17 +38,15 @@ impl Machine {
             self.transition(State::Idle, "no model to identify under: thrusters neutral");
             return Command::neutral(self.n);
         }
-        let (meas, target) = self.measured_and_target(s, gyro);
+        let Some((mut cmd, meas, target)) = self.controller_command(s, gyro, dt, Mode::Estimating)
+        else {
+            return Command::neutral(self.n);
+        };
         let attitude = meas.attitude;
         let Some(model) = self.models.current() else {
             return Command::neutral(self.n);
         };
-        let mut cmd = Command::neutral(self.n);
-        cmd.mode = Mode::Estimating;
         let n = self.n.min(model.thrusters());
-        self.last_desired = self
-            .controller
-            .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
         // The filter's attitude, which `measured` gave the controller.
         let m = self.motion(s, gyro, accel);
         let err_deg = attitude.angle_to(&target.attitude).to_degrees();
@@ -123,21 +121,40 @@ impl Machine {
         (meas, target)
     }
 
-    pub(super) fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
-        if self.models.current().is_none() {
-            return Command::neutral(self.n);
-        }
+    /// The controller's command for this sample toward the target (held level at the current
+    /// heading and depth when none was set), in `mode`, before anything is added to it; what
+    /// the controller saw and held. None without a model.
+    fn controller_command(
+        &mut self,
+        s: &ImuInput,
+        gyro: &Vector3<f64>,
+        dt: f64,
+        mode: Mode,
+    ) -> Option<(Command, Measured, Target)> {
         let (meas, target) = self.measured_and_target(s, gyro);
-        let attitude = meas.attitude;
-        let Some(model) = self.models.current() else {
-            return Command::neutral(self.n);
-        };
+        let model = self.models.current()?;
         let mut cmd = Command::neutral(self.n);
-        cmd.mode = Mode::Controlling;
+        cmd.mode = mode;
         let n = self.n.min(model.thrusters());
         self.last_desired = self
             .controller
             .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
+        Some((cmd, meas, target))
+    }
+
+    pub(super) fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
+        if self.models.current().is_none() {
+            return Command::neutral(self.n);
+        }
+        let Some((mut cmd, meas, target)) = self.controller_command(s, gyro, dt, Mode::Controlling)
+        else {
+            return Command::neutral(self.n);
+        };
+        let attitude = meas.attitude;
+        let Some(model) = self.models.current() else {
+            return Command::neutral(self.n);
+        };
+        let n = self.n.min(model.thrusters());
         let err_rad = attitude.angle_to(&target.attitude);
         let verdict = self.refiner.observe(
             &Tick {
