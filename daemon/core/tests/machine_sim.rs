@@ -183,6 +183,42 @@ fn aligned_thrusters_are_reported_with_heave_sway_roll_unactuated() {
     }
 }
 
+/// An estimation is told as three changes of state (it starts, it pulses, it ends), whatever
+/// number of pulses and settles lie between: those are phases (`next_phase`), seen in the
+/// status text, not events. The end comes from Solve, the phase the concluding solve is in.
+#[test]
+fn an_estimation_announces_its_start_its_pulses_and_its_end_and_nothing_between() {
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 2);
+    run.run_for(1.0);
+    run.machine.take_events();
+    run.machine.on_request(Request::Estimate).unwrap();
+    let mut texts = Vec::new();
+    let mut changes = Vec::new();
+    let start = run.sim.time_s();
+    while run.sim.time_s() - start < 30.0 && run.machine.state() != State::Active {
+        run.tick();
+        texts.push(run.machine.status().text);
+        for e in run.machine.take_events() {
+            if let Event::StateChanged { from, to, .. } = e {
+                changes.push((from, to));
+            }
+        }
+    }
+    assert_eq!(run.machine.state(), State::Active, "no model in 30 s");
+    assert_eq!(
+        changes,
+        vec![
+            (State::Idle, State::MeasureNoise),
+            (State::MeasureNoise, State::Pulse),
+            (State::Solve, State::Active),
+        ]
+    );
+    // The default dynamic run pulses back to back (no settles): many pulses, one event.
+    let mut pulses: Vec<&String> = texts.iter().filter(|t| t.starts_with("pulse ")).collect();
+    pulses.dedup();
+    assert!(pulses.len() > 10, "pulses seen in status: {pulses:?}");
+}
+
 #[test]
 fn imu_gap_mid_pulse_faults_to_neutral_and_recovers() {
     let mut run = Run::new("amour5", NoisePreset::Realistic, 3);
