@@ -53,7 +53,7 @@ pub use effectiveness::{effectiveness, rank};
 pub use load::LoadError;
 pub use random::random_vehicle;
 pub use scenario::{Action, Event, Scenario};
-pub use sensors::{ImuNoise, ImuReading, NoisePreset, SensorBiases, SensorConfig};
+pub use sensors::{ImuNoise, NoisePreset, SensorBiases, SensorConfig};
 pub use sim::{Change, ChangeKind, InitialState, SimError, SimOptions, Simulator};
 pub use thruster::{sanitize_command, steady_thrust, Thruster};
 pub use vehicle::{Body, Dof6, ThrusterModel, ThrusterSpec, Vehicle};

@@ -10,6 +10,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
+use thruster_protocol::ImuReading;
 
 use crate::load::{check_finite, LoadError};
 
@@ -209,22 +210,6 @@ impl SensorConfig {
     }
 }
 
-/// One sample of every sensor, as the driver publishes it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ImuReading {
-    /// Simulation time, ns since the start.
-    pub t_ns: u64,
-    /// Angular rate, body frame, rad/s.
-    pub gyro: [f64; 3],
-    /// Specific force (acceleration minus gravity), body frame, m/s^2: about [0, 0, -9.81] when
-    /// level and at rest.
-    pub accel: [f64; 3],
-    /// Magnetic field, body frame, uT.
-    pub mag: [f64; 3],
-    /// Depth of the CO, m, positive down.
-    pub depth: f64,
-}
-
 /// The true motion the sensors observe.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SensorTruth {
@@ -316,18 +301,20 @@ impl Imu {
         &self.biases
     }
 
-    /// Noise-free reading of `truth`.
+    /// Noise-free reading of `truth`. Every channel is present (the simulated vehicle has a
+    /// magnetometer and a depth sensor); `seq` is 0: the driver numbers what it publishes.
     pub fn ideal(&self, t_ns: u64, truth: &SensorTruth) -> ImuReading {
         let f = specific_force(truth, &Vector3::from(self.config.lever_arm_m));
         let mag = truth
             .attitude
             .inverse_transform_vector(&Vector3::from(self.config.mag_field_ned_ut));
         ImuReading {
+            seq: 0,
             t_ns,
             gyro: truth.omega.into(),
             accel: f.into(),
-            mag: mag.into(),
-            depth: truth.depth_m,
+            mag: Some(mag.into()),
+            depth: Some(truth.depth_m),
         }
     }
 
@@ -356,12 +343,16 @@ impl Imu {
             }
             out
         };
+        // Fields in this order: the noise is drawn gyro, accel, mag, depth (a seed's stream).
         ImuReading {
+            seq: 0,
             t_ns,
             gyro: noisy(rng, ideal.gyro, &self.biases.gyro, n.gyro_std_radps),
             accel: noisy(rng, ideal.accel, &self.biases.accel, n.accel_std_mps2),
-            mag: noisy(rng, ideal.mag, &self.biases.mag, n.mag_std_ut),
-            depth: ideal.depth + normal(rng, n.depth_std_m),
+            mag: ideal
+                .mag
+                .map(|m| noisy(rng, m, &self.biases.mag, n.mag_std_ut)),
+            depth: ideal.depth.map(|d| d + normal(rng, n.depth_std_m)),
         }
     }
 }
@@ -423,8 +414,9 @@ mod tests {
         let q = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
         let r = imu.ideal(0, &still(q));
         // Facing east, north is to port (-y).
-        assert!((r.mag[0]).abs() < 1e-9 && (r.mag[1] + 20.0).abs() < 1e-9);
-        assert!((r.mag[2] - 45.0).abs() < 1e-9);
+        let mag = r.mag.expect("the simulator has a magnetometer");
+        assert!((mag[0]).abs() < 1e-9 && (mag[1] + 20.0).abs() < 1e-9);
+        assert!((mag[2] - 45.0).abs() < 1e-9);
     }
 
     #[test]

@@ -13,10 +13,10 @@ use crate::dynamics::{RigidBody, State};
 use crate::effectiveness::effectiveness_at;
 use crate::load::{check_finite, LoadError};
 use crate::scenario::Action;
-use crate::sensors::{Imu, ImuReading, SensorBiases, SensorConfig, SensorTruth};
+use crate::sensors::{Imu, SensorBiases, SensorConfig, SensorTruth};
 use crate::thruster::{Thruster, FIXED_SUPPLY_V};
 use crate::vehicle::{ThrusterSpec, Vehicle};
-use thruster_protocol::MAX_THRUSTERS;
+use thruster_protocol::{ImuReading, MAX_THRUSTERS};
 
 /// Errors of the simulator.
 #[derive(Debug, thiserror::Error)]

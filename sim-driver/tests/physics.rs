@@ -264,8 +264,8 @@ fn accelerometer_at_rest_reads_gravity_as_specific_force() {
         r.accel
     );
     assert!(Vector3::from(r.gyro).norm() < 1e-12);
-    assert!((r.depth - 30.0).abs() < 1e-9);
-    assert!((Vector3::from(r.mag) - Vector3::new(20.0, 0.0, 45.0)).norm() < 1e-9);
+    assert!((r.depth.unwrap() - 30.0).abs() < 1e-9);
+    assert!((Vector3::from(r.mag.unwrap()) - Vector3::new(20.0, 0.0, 45.0)).norm() < 1e-9);
     // Tilted and still, it reads -R^T g.
     let q = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
     let mut state = *sim.state();
@@ -307,8 +307,8 @@ fn noise_presets_have_their_stated_std() {
                 gyro[i].push(r.gyro[i] - ideal.gyro[i] - b.gyro[i]);
                 accel[i].push(r.accel[i] - ideal.accel[i] - b.accel[i]);
             }
-            mag.push(r.mag[0] - ideal.mag[0] - b.mag[0]);
-            depth.push(r.depth - ideal.depth);
+            mag.push(r.mag.unwrap()[0] - ideal.mag.unwrap()[0] - b.mag[0]);
+            depth.push(r.depth.unwrap() - ideal.depth.unwrap());
         }
         // 20 000 samples: the std estimate has a relative sd of 0.5 %; allow 3 %.
         let close = |est: f64, want: f64, what: &str| {
@@ -339,7 +339,7 @@ fn no_noise_preset_is_exact() {
     }
 }
 
-fn run(seed: u64) -> Vec<thruster_sim::ImuReading> {
+fn run(seed: u64) -> Vec<thruster_protocol::ImuReading> {
     let vehicle = load("amour5_top45");
     let sensors = SensorConfig {
         noise: NoisePreset::Realistic,

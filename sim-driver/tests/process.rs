@@ -266,7 +266,8 @@ fn assert_namespace_clean(ns: &IpcConfig) {
     assert_eq!(namespace_files(ns).unwrap(), Vec::<PathBuf>::new());
 }
 
-fn assert_matches_replica(got: &ImuSample, want: &thruster_sim::ImuReading) {
+fn assert_matches_replica(got: &ImuSample, want: &thruster_protocol::ImuReading) {
+    let want = want.to_sample();
     assert_eq!(got.t_ns, want.t_ns, "seq {}", got.seq);
     let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-9);
     assert!(

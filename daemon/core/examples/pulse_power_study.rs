@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use nalgebra::DMatrix;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
-use thrusterd_core::machine::{Geometry, ImuInput, Machine, MachineSetup, Request, State};
+use thrusterd_core::machine::{Geometry, Machine, MachineSetup, Request, State};
 
 struct Outcome {
     power: f64,
@@ -50,14 +50,7 @@ fn estimate_once(name: &str, noise: NoisePreset, snr: f64, seed: u64) -> Result<
     let mut m = Machine::new(setup);
     let tick = |m: &mut Machine, sim: &mut Simulator| -> Result<()> {
         let r = sim.advance_and_sample();
-        let cmd = m.on_imu(&ImuInput {
-            seq: 0,
-            t_ns: r.t_ns,
-            gyro: r.gyro,
-            accel: r.accel,
-            mag: Some(r.mag),
-            depth: Some(r.depth),
-        });
+        let cmd = m.on_imu(&r);
         sim.set_commands(&cmd.thrust[..cmd.count])?;
         Ok(())
     };

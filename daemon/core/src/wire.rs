@@ -16,15 +16,9 @@ use crate::machine::{
 };
 use crate::model::{Model, ModelSource};
 
+/// The machine's input for a wire sample: the protocol's one conversion.
 pub fn imu_input(s: &ImuSample) -> ImuInput {
-    ImuInput {
-        seq: s.seq,
-        t_ns: s.t_ns,
-        gyro: s.gyro,
-        accel: s.accel,
-        mag: s.has_mag().then_some(s.mag),
-        depth: s.has_depth().then_some(s.depth),
-    }
+    ImuInput::from_sample(s)
 }
 
 /// The thrust message answering IMU sample `imu`.

@@ -11,7 +11,7 @@ use thruster_sim::sim::SimOptions;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::dynamic::DynamicTerms;
 use thrusterd_core::estimator::{EstimatorConfig, Method};
-use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Request, State};
+use thrusterd_core::machine::{Machine, MachineSetup, Request, State};
 use thrusterd_core::navigation::{DepthAid, Navigator};
 
 /// Every vehicle file but `eight_vectored_lag80ms_curve`, whose thrust curve (~ command^1.5,
@@ -60,14 +60,7 @@ struct Outcome {
 
 fn tick(machine: &mut Machine, sim: &mut Simulator) {
     let r = sim.advance_and_sample();
-    let cmd = machine.on_imu(&ImuInput {
-        seq: 0,
-        t_ns: r.t_ns,
-        gyro: r.gyro,
-        accel: r.accel,
-        mag: Some(r.mag),
-        depth: Some(r.depth),
-    });
+    let cmd = machine.on_imu(&r);
     for v in &cmd.thrust[..cmd.count] {
         assert!(v.is_finite() && v.abs() <= 1.0, "command {v}");
     }
@@ -445,7 +438,7 @@ fn navigation_run(
     let mut state = *sim.state();
     state.nu = nalgebra::Vector6::zeros();
     sim.set_state(state);
-    let mut nav = Navigator::at_rest(&rest, 0.0, Some(r0.depth), aid);
+    let mut nav = Navigator::at_rest(&rest, 0.0, r0.depth, aid);
     let (mut worst_v, mut worst_att, mut peak_v, mut sum_v2) = (0.0f64, 0.0f64, 0.0f64, 0.0);
     let steps = 800;
     for k in 0..steps {
@@ -474,7 +467,7 @@ fn navigation_run(
             r.t_ns as f64 * 1e-9,
             &(Vector3::from(r.gyro) - gyro0),
             &Vector3::from(r.accel),
-            Some(r.depth),
+            r.depth,
         );
         let e = (s.velocity - sim.linear_velocity()).norm();
         worst_v = worst_v.max(e);

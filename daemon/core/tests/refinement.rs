@@ -1284,14 +1284,7 @@ mod bound {
                 ];
                 let g = [0, 1, 2].map(|v| self.glr[v].observe(&e[v]));
                 let mut stats = [g[0], g[1], g[2], Stat::default()];
-                let cmd = run.machine.on_imu(&thrusterd_core::machine::ImuInput {
-                    seq: 0,
-                    t_ns: r.t_ns,
-                    gyro: r.gyro,
-                    accel: r.accel,
-                    mag: Some(r.mag),
-                    depth: Some(r.depth),
-                });
+                let cmd = run.machine.on_imu(&r);
                 let sent = &cmd.thrust[..cmd.count];
                 run.sim.set_commands(sent).unwrap();
                 for (m, &c) in self.model_units.iter_mut().zip(sent) {

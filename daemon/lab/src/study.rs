@@ -12,7 +12,7 @@ use clap::Args;
 use nalgebra::DMatrix;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::{EstimatorConfig, Excitation, Method};
-use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Request, State};
+use thrusterd_core::machine::{Machine, MachineSetup, Request, State};
 use thrusterd_core::study::plot::{render, Grid, Panel, Series};
 
 use crate::excursion::Excursion;
@@ -138,14 +138,7 @@ pub fn run_one(
         if let Some(v) = sim.dvl_measurement() {
             machine.on_dvl(v.into());
         }
-        let cmd = machine.on_imu(&ImuInput {
-            seq: 0,
-            t_ns: r.t_ns,
-            gyro: r.gyro,
-            accel: r.accel,
-            mag: Some(r.mag),
-            depth: Some(r.depth),
-        });
+        let cmd = machine.on_imu(&r);
         sim.set_commands(&cmd.thrust[..cmd.count])?;
         Ok(())
     };

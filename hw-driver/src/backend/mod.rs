@@ -7,7 +7,8 @@
 //!
 //! A further backend, e.g. a Navigator board's PCA9685 on I2C driven from user space,
 //! implements [`Backend`]: outputs are pulse widths per configured channel, sensors come as
-//! [`SensorReading`]s in SI units and the body frame; a backend that receives on its own
+//! the protocol's [`ImuReading`]s (SI units, body frame, `seq` left 0: the driver numbers
+//! what it publishes, and `t_ns` on CLOCK_MONOTONIC); a backend that receives on its own
 //! thread calls the [`Waker`] so the loop does not poll.
 
 pub mod linux;
@@ -17,22 +18,9 @@ use std::fmt;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use crate::core::pwm::Pwm;
+use thruster_protocol::ImuReading;
 
-/// One IMU reading in SI units, body frame (x forward, y starboard, z down).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SensorReading {
-    /// When it was read, ns of CLOCK_MONOTONIC (the driver's clock).
-    pub t_ns: u64,
-    /// Angular rate, rad/s.
-    pub gyro: [f64; 3],
-    /// Specific force, m/s^2, gravity included (level at rest: about [0, 0, -9.81]).
-    pub accel: [f64; 3],
-    /// Magnetic field, uT, when the hardware has a magnetometer.
-    pub mag: Option<[f64; 3]>,
-    /// Depth, m, positive down, when the hardware has a pressure sensor.
-    pub depth: Option<f64>,
-}
+use crate::core::pwm::Pwm;
 
 /// The supply (battery) as the hardware measures it; `None` where it does not.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -167,7 +155,7 @@ pub trait Backend {
     fn start(&mut self, waker: Waker, now_ns: u64) -> Result<(), BackendError>;
 
     /// The next reading not returned yet, if any; never blocks. Called until `None`.
-    fn read_sensors(&mut self, now_ns: u64) -> Result<Option<SensorReading>, BackendError>;
+    fn read_sensors(&mut self, now_ns: u64) -> Result<Option<ImuReading>, BackendError>;
 
     /// Outputs these pulses from now on.
     fn write_outputs(&mut self, outputs: &[Pwm], now_ns: u64) -> Result<(), BackendError>;

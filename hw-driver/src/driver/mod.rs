@@ -24,12 +24,12 @@ use std::time::Duration;
 use iceoryx2::prelude::CallbackProgression;
 use thruster_protocol::services::{create_waitset, Inbox, IpcConfig, IpcError, Port};
 use thruster_protocol::validate::limits::{MAX_DEPTH_M, MIN_DEPTH_M};
-use thruster_protocol::{DriverStatusMsg, ImuSample, ThrustCommand, Validate};
+use thruster_protocol::{DriverStatusMsg, ImuReading, ImuSample, ThrustCommand, Validate};
 use tracing::{error, info, warn};
 
 use crate::backend::linux::LinuxBackend;
 use crate::backend::mavlink::MavlinkBackend;
-use crate::backend::{Backend, BackendError, LinkState, OutputSpec, SensorReading};
+use crate::backend::{Backend, BackendError, LinkState, OutputSpec};
 use crate::clock::monotonic_ns;
 use crate::config::{BackendKind, Settings};
 use crate::core::controller::{Controller, Counters, Outcome, OutputState};
@@ -353,30 +353,21 @@ impl Loop {
         Ok(())
     }
 
-    fn publish(&mut self, imu: &Port<ImuSample>, r: SensorReading) -> Result<(), DriverError> {
-        let mut s = ImuSample {
+    fn publish(&mut self, imu: &Port<ImuSample>, r: ImuReading) -> Result<(), DriverError> {
+        let mut r = ImuReading {
             seq: self.seq + 1,
             // Strictly increasing even if two readings share a clock value.
             t_ns: r.t_ns.max(self.last_t_ns + 1),
-            gyro: r.gyro,
-            accel: r.accel,
-            mag: r.mag.unwrap_or([0.0; 3]),
-            depth: 0.0,
-            flags: if r.mag.is_some() {
-                ImuSample::HAS_MAG
-            } else {
-                0
-            },
+            ..r
         };
         if let Some(d) = r.depth {
-            if d.is_finite() && (MIN_DEPTH_M..=MAX_DEPTH_M).contains(&d) {
-                s.depth = d;
-                s.flags |= ImuSample::HAS_DEPTH;
-            } else {
+            if !(d.is_finite() && (MIN_DEPTH_M..=MAX_DEPTH_M).contains(&d)) {
                 // A bad depth must not cost the gyro and accelerometer: drop only the depth.
+                r.depth = None;
                 self.depth_dropped += 1;
             }
         }
+        let s = r.to_sample();
         if let Err(reason) = s.validate() {
             self.sensor_rejected += 1;
             if let Some(suppressed) = self.sensor_log.allow() {

@@ -359,7 +359,7 @@ impl Driver {
     /// Takes the next sample (seq + 1) at the current simulation time.
     fn take_sample(&mut self) -> Result<ImuSample, DriverError> {
         let reading = self.sim.sample();
-        if !convert::reading_is_finite(&reading) {
+        if !reading.is_finite() {
             return Err(DriverError::Diverged {
                 t_s: self.sim.time_s(),
             });
@@ -380,7 +380,8 @@ impl Driver {
             if self.clipped == 0 {
                 warn!(
                     t_s = self.sim.time_s(),
-                    depth_m = reading.depth,
+                    // The simulator always has depth; NaN would say it had none.
+                    depth_m = reading.depth.unwrap_or(f64::NAN),
                     "sensor values clipped to the protocol's ranges (the simulator has no free \
                      surface: a buoyant vehicle left alone rises above it)"
                 );

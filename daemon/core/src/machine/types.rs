@@ -63,16 +63,9 @@ impl Geometry {
     }
 }
 
-/// One validated IMU sample.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ImuInput {
-    pub seq: u64,
-    pub t_ns: u64,
-    pub gyro: [f64; 3],
-    pub accel: [f64; 3],
-    pub mag: Option<[f64; 3]>,
-    pub depth: Option<f64>,
-}
+/// One validated IMU sample: the protocol's one IMU reading (what every driver publishes and
+/// the simulator's sensors return), under the name the machine's API has always used.
+pub use thruster_protocol::ImuReading as ImuInput;
 
 /// Why the thrusters are doing what they do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

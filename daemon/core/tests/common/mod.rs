@@ -92,15 +92,7 @@ impl Run {
     pub fn next_input(&mut self) -> ImuInput {
         let period = self.sim.sample_period_ns();
         self.sim.step_to((self.sim.time_ns() / period + 1) * period);
-        let r = self.sim.sample();
-        ImuInput {
-            seq: 0,
-            t_ns: r.t_ns,
-            gyro: r.gyro,
-            accel: r.accel,
-            mag: Some(r.mag),
-            depth: Some(r.depth),
-        }
+        self.sim.sample()
     }
 
     pub fn tick(&mut self) {

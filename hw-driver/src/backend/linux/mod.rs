@@ -12,7 +12,9 @@ use std::time::Duration;
 
 use self::iio::{find_device, Channel, Pressure, Vector3};
 use self::pwm::PwmChannel;
-use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Supply, Waker};
+use thruster_protocol::ImuReading;
+
+use super::{Backend, BackendError, LinkState, OutputSpec, Supply, Waker};
 use crate::clock::monotonic_ns;
 use crate::config::LinuxConfig;
 use crate::core::axes::AxisMap;
@@ -142,7 +144,7 @@ impl LinuxBackend {
         })
     }
 
-    fn read(&self, sensors: &Sensors) -> Result<SensorReading, BackendError> {
+    fn read(&self, sensors: &Sensors) -> Result<ImuReading, BackendError> {
         // Stamped before the first (gyro) read: the gyro is what the controller reacts to.
         let t_ns = monotonic_ns();
         let gyro = sensors.imu_axes.apply(sensors.gyro.read()?);
@@ -159,7 +161,8 @@ impl LinuxBackend {
             )),
             None => None,
         };
-        Ok(SensorReading {
+        Ok(ImuReading {
+            seq: 0,
             t_ns,
             gyro,
             accel,
@@ -207,7 +210,7 @@ impl Backend for LinuxBackend {
         Ok(())
     }
 
-    fn read_sensors(&mut self, now_ns: u64) -> Result<Option<SensorReading>, BackendError> {
+    fn read_sensors(&mut self, now_ns: u64) -> Result<Option<ImuReading>, BackendError> {
         self.poll_supply(now_ns);
         let Some(sensors) = &self.sensors else {
             return Ok(None);

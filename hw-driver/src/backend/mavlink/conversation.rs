@@ -40,14 +40,15 @@ use mavlink::{MavHeader, MessageData};
 use tracing::{debug, info, warn};
 
 use super::battery::{self, SupplyReading};
-use super::convert::{depth_from_hpa, implausible, plausible_mag, scaled_imu, ImuSi};
-use crate::backend::{LinkState, OutputSpec, SensorReading, Supply};
+use super::convert::{depth_from_hpa, implausible, plausible_mag, scaled_imu};
+use crate::backend::{LinkState, OutputSpec, Supply};
 
 /// A supply reading older than this is not reported, ns (ArduSub sends SYS_STATUS at 1-2 Hz).
 pub const SUPPLY_STALE_NS: u64 = 5_000_000_000;
 use crate::config::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
 use crate::core::pwm::Pwm;
 use thruster_driver_kit::LogLimiter;
+use thruster_protocol::ImuReading;
 
 const MS: u64 = 1_000_000;
 
@@ -109,7 +110,7 @@ pub struct Conversation {
     depth: Option<(u64, f64)>,
     /// The newest supply reading and when it came.
     supply: Option<(u64, SupplyReading)>,
-    readings: VecDeque<SensorReading>,
+    readings: VecDeque<ImuReading>,
     pwm: Vec<Pwm>,
     thrust_dirty: bool,
     last_thrust_ns: Option<u64>,
@@ -226,7 +227,7 @@ impl Conversation {
     }
 
     /// The next reading, oldest first.
-    pub fn take_reading(&mut self) -> Option<SensorReading> {
+    pub fn take_reading(&mut self) -> Option<ImuReading> {
         self.readings.pop_front()
     }
 
@@ -416,7 +417,7 @@ impl Conversation {
         }
     }
 
-    fn on_imu(&mut self, t_ns: u64, mut imu: ImuSi) {
+    fn on_imu(&mut self, t_ns: u64, mut imu: ImuReading) {
         if self.link != LinkState::Up {
             self.counters.dropped_link_down += 1;
             return;
@@ -453,12 +454,11 @@ impl Conversation {
         if self.readings.len() >= MAX_PENDING_READINGS {
             self.readings.pop_front();
         }
-        self.readings.push_back(SensorReading {
+        self.readings.push_back(ImuReading {
             t_ns,
             gyro,
-            accel: imu.accel,
-            mag: imu.mag,
             depth,
+            ..imu
         });
         self.counters.readings += 1;
     }
@@ -726,7 +726,7 @@ pub fn motor_test(sys: u8, comp: u8, channel: u32, pwm: Pwm, timeout_s: f32) -> 
     })
 }
 
-fn imu2(d: &SCALED_IMU2_DATA) -> ImuSi {
+fn imu2(d: &SCALED_IMU2_DATA) -> ImuReading {
     scaled_imu(
         [d.xacc, d.yacc, d.zacc],
         [d.xgyro, d.ygyro, d.zgyro],
@@ -734,7 +734,7 @@ fn imu2(d: &SCALED_IMU2_DATA) -> ImuSi {
     )
 }
 
-fn imu1(d: &SCALED_IMU_DATA) -> ImuSi {
+fn imu1(d: &SCALED_IMU_DATA) -> ImuReading {
     scaled_imu(
         [d.xacc, d.yacc, d.zacc],
         [d.xgyro, d.ygyro, d.zgyro],
@@ -742,7 +742,7 @@ fn imu1(d: &SCALED_IMU_DATA) -> ImuSi {
     )
 }
 
-fn raw(d: &RAW_IMU_DATA) -> ImuSi {
+fn raw(d: &RAW_IMU_DATA) -> ImuReading {
     scaled_imu(
         [d.xacc, d.yacc, d.zacc],
         [d.xgyro, d.ygyro, d.zgyro],

@@ -9,6 +9,8 @@
 //!
 //! SCALED_PRESSURE2 (the Bar30 on ArduSub's second barometer): `press_abs` in hPa.
 
+use thruster_protocol::ImuReading;
+
 /// ArduPilot's GRAVITY_MSS, m/s^2 per g.
 pub const GRAVITY_MSS: f64 = 9.80665;
 
@@ -21,23 +23,16 @@ pub const RADPS_PER_MRADPS: f64 = 1e-3;
 /// mgauss -> uT (1 gauss = 100 uT).
 pub const UT_PER_MGAUSS: f64 = 0.1;
 
-/// One IMU message in SI units.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ImuSi {
-    /// rad/s.
-    pub gyro: [f64; 3],
-    /// m/s^2, specific force.
-    pub accel: [f64; 3],
-    /// uT; `None` when all three are zero (no compass: ArduPilot sends zeros).
-    pub mag: Option<[f64; 3]>,
-}
-
-/// Converts the nine fields of a SCALED_IMU-style message.
-pub fn scaled_imu(acc: [i16; 3], gyro: [i16; 3], mag: [i16; 3]) -> ImuSi {
-    ImuSi {
+/// The reading in the nine fields of a SCALED_IMU-style message: the magnetometer `None` when
+/// all three are zero (no compass: ArduPilot sends zeros). The message has no time, depth or
+/// number: `t_ns`, `depth` and `seq` are left for the conversation (it stamps the reading on
+/// receipt and adds the depth of its own pressure message) and the driver.
+pub fn scaled_imu(acc: [i16; 3], gyro: [i16; 3], mag: [i16; 3]) -> ImuReading {
+    ImuReading {
         gyro: gyro.map(|v| f64::from(v) * RADPS_PER_MRADPS),
         accel: acc.map(|v| f64::from(v) * MS2_PER_MG),
         mag: (mag != [0, 0, 0]).then(|| mag.map(|v| f64::from(v) * UT_PER_MGAUSS)),
+        ..ImuReading::default()
     }
 }
 
@@ -57,7 +52,7 @@ pub const MAX_MAG_UT: f64 = 1000.0;
 
 /// Why a reading is not physically plausible, if it is not. The magnetometer is judged on
 /// its own by [`plausible_mag`]: a bad compass must not cost the gyro and accelerometer.
-pub fn implausible(imu: &ImuSi) -> Option<&'static str> {
+pub fn implausible(imu: &ImuReading) -> Option<&'static str> {
     let over = |v: &[f64; 3], max: f64| v.iter().any(|x| !x.is_finite() || x.abs() > max);
     if over(&imu.accel, MAX_ACCEL_MSS) {
         Some("acceleration beyond 3 g")
@@ -93,12 +88,12 @@ mod tests {
             implausible(&scaled_imu([0, 0, -1000], [0, 0, i16::MAX], [0; 3])),
             None
         );
-        let spin = ImuSi {
+        let spin = ImuReading {
             gyro: [0.0, 0.0, 40.0],
             ..rest
         };
         assert_eq!(implausible(&spin), Some("angular rate beyond 2000 deg/s"));
-        let nan = ImuSi {
+        let nan = ImuReading {
             accel: [f64::NAN, 0.0, 0.0],
             ..rest
         };

@@ -23,7 +23,9 @@ use std::time::{Duration, Instant};
 
 use self::conversation::{Conversation, ConversationCounters};
 use self::io::{Incoming, SharedLink};
-use super::{Backend, BackendError, LinkState, OutputSpec, SensorReading, Supply, Waker};
+use thruster_protocol::ImuReading;
+
+use super::{Backend, BackendError, LinkState, OutputSpec, Supply, Waker};
 use crate::clock::monotonic_ns;
 use crate::config::MavlinkConfig;
 use crate::core::pwm::Pwm;
@@ -254,7 +256,7 @@ impl Backend for MavlinkBackend {
         self.service(now_ns)
     }
 
-    fn read_sensors(&mut self, _now_ns: u64) -> Result<Option<SensorReading>, BackendError> {
+    fn read_sensors(&mut self, _now_ns: u64) -> Result<Option<ImuReading>, BackendError> {
         self.drain_incoming()?;
         // ACKs processed above may have queued the next request.
         self.flush();
