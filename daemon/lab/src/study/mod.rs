@@ -1,6 +1,7 @@
 //! `thrusterctl study`: research run in one process against the simulator's physics or pure
 //! arithmetic, no daemon: the estimation methods scored on every vehicle (the default, in
-//! [`methods`]), the paper's Fig. 2 ([`fig2`]) and the first pulse's power ([`pulse_power`]).
+//! [`methods`]), the paper's Fig. 2 ([`fig2`]), the first pulse's power ([`pulse_power`]) and
+//! the research sweeps ([`sweep`]).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -12,9 +13,10 @@ pub mod fig2;
 pub mod fig2_figures;
 pub mod methods;
 pub mod pulse_power;
+pub mod sweep;
 
 /// Without a subcommand, the methods study (`thrusterctl study --out DIR`, as before the
-/// subcommands existed); a subcommand runs one of the other studies instead.
+/// subcommands existed); a subcommand runs one of the other studies, or a sweep, instead.
 #[derive(Args, Debug)]
 #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct StudyArgs {
@@ -45,6 +47,9 @@ pub enum StudyCommand {
     /// The first estimation of four vehicles with the first pulse's power fixed or sized to
     /// the noise, seeds 1-3: prints power, tilt, rotation error and time (docs/study.md).
     PulsePower,
+    /// A research sweep by name (`--list` lists them): prints its table; knobs are environment
+    /// variables. Use a release build: `cargo run --release -p thrusterctl -- study sweep NAME`.
+    Sweep(sweep::SweepArgs),
 }
 
 pub fn run(args: StudyArgs) -> Result<()> {
@@ -57,6 +62,7 @@ pub fn run(args: StudyArgs) -> Result<()> {
             pulses,
         }) => run_fig2(&out, seed, configs, pulses),
         Some(StudyCommand::PulsePower) => pulse_power::run(),
+        Some(StudyCommand::Sweep(args)) => sweep::run(args),
     }
 }
 
