@@ -1,5 +1,5 @@
-//! thrusterd's pure core: estimator, attitude filter, controller, model and the state machine,
-//! plus the paper's simulation study. No IPC, no clocks, no files: configuration and model
+//! thrusterd's pure core: estimator, attitude filter, controller, model and the state machine
+//! (the paper's simulation study lives in the lab, `thrusterctl study fig2`). No IPC, no clocks, no files: configuration and model
 //! files come in as text (`config::DaemonConfig::from_toml_str`, `model_file::from_json`), and
 //! the daemon binary reads and writes them.
 
@@ -17,6 +17,5 @@ pub mod model_file;
 pub mod navigation;
 mod serde_arrays;
 pub mod solve;
-pub mod study;
 pub mod supply;
 pub mod wire;

@@ -1,4 +1,5 @@
-//! Behaviour of the estimator as the daemon, the simulator and the study drive it.
+//! Behaviour of the estimator as the daemon and the simulator drive it (the paper's study,
+//! which drives it too, is tested where it lives: thruster-lab's `study::fig2`).
 
 use nalgebra::{DMatrix, DVector, Vector3};
 use rand::{Rng, SeedableRng};
@@ -7,9 +8,6 @@ use rand_distr::{Distribution, StandardNormal};
 
 use thrusterd_core::estimator::{
     Dof, Estimator, EstimatorConfig, Excitation, Method, NoiseLevels, PulseShape, StopDecision,
-};
-use thrusterd_core::study::fig2::{
-    random_configuration, run_study, to_csv, StudyParams, CSV_HEADER,
 };
 
 /// A plausible 6 x 5 effectiveness (AMOUR-like: sway unactuated).
@@ -416,70 +414,6 @@ fn automatic_stop_fires_at_the_target_and_means_it() {
     }
     // A 1-sigma bound of 5 %: the actual error stays under twice that nearly always.
     assert!(hits >= 38, "{hits}/40 runs within 2x the target");
-}
-
-#[test]
-fn forward_error_matches_the_cramer_rao_bound() {
-    // The forward regression is efficient: its mean squared relative error over many random
-    // configurations matches the Cramer-Rao value sigma^2 3 tr(G^-1) / ||M||^2 within 10 %.
-    for excitation in [Excitation::RoundRobin, Excitation::Orthogonal] {
-        let (n, p, pulses, configs) = (4, 50.0, 24, 600);
-        let mut err2 = [0.0; 2];
-        let mut crlb2 = [0.0; 2];
-        for c in 0..configs {
-            let mut rng = ChaCha8Rng::seed_from_u64(7000 + c as u64);
-            let (r, a) = random_configuration(&mut rng, n);
-            let cfg = EstimatorConfig {
-                excitation,
-                ..EstimatorConfig::forward()
-            };
-            let mut est = Estimator::new(cfg, n, NoiseLevels::isotropic(0.25, 0.05));
-            let mut gram = DMatrix::<f64>::zeros(n, n);
-            for k in 0..pulses {
-                let u = DVector::from_iterator(n, est.plan().pattern(k).iter().map(|s| s * p));
-                let rot = &r * &u;
-                let acc = &a * &u;
-                est.push_observation(
-                    u.as_slice(),
-                    &(Vector3::new(rot[0], rot[1], rot[2]) + gauss(&mut rng, 0.25)),
-                    &(Vector3::new(acc[0], acc[1], acc[2]) + gauss(&mut rng, 0.05)),
-                );
-                gram += &u * u.transpose();
-            }
-            let b = est.forward_effectiveness();
-            let tr = gram.try_inverse().unwrap().trace();
-            err2[0] += ((b.rows(0, 3) - &r).norm() / r.norm()).powi(2);
-            err2[1] += ((b.rows(3, 3) - &a).norm() / a.norm()).powi(2);
-            crlb2[0] += 0.25f64.powi(2) * 3.0 * tr / r.norm_squared();
-            crlb2[1] += 0.05f64.powi(2) * 3.0 * tr / a.norm_squared();
-        }
-        for g in 0..2 {
-            let ratio = (err2[g] / crlb2[g]).sqrt();
-            assert!(
-                (0.9..=1.1).contains(&ratio),
-                "{excitation:?} group {g}: RMS error / CRLB = {ratio}"
-            );
-        }
-    }
-}
-
-#[test]
-fn study_output_is_deterministic_for_a_seed() {
-    let params = StudyParams {
-        thrusters: vec![2, 4],
-        powers: vec![20.0, 50.0],
-        configs: 8,
-        pulses: 12,
-        seed: 42,
-    };
-    let a = to_csv(&run_study(&params));
-    let b = to_csv(&run_study(&params));
-    assert_eq!(a, b);
-    assert!(a.starts_with(CSV_HEADER));
-    // 2 N x 2 p x 3 plans x 2 methods x 12 pulses, plus the header.
-    assert_eq!(a.lines().count(), 1 + 2 * 2 * 3 * 2 * 12);
-    let other = to_csv(&run_study(&StudyParams { seed: 43, ..params }));
-    assert_ne!(a, other, "the seed must matter");
 }
 
 /// Issue 27: `estimate --wait` read "pulse 40 of 32" and ran to "pulse 60 of 32" when the

@@ -508,7 +508,7 @@ fn an_estimation_started_mid_manoeuvre_levels_the_vehicle_first() {
 /// With the declared geometry as the model in force, the first pulse is only as strong as the
 /// measured noise needs: with a realistic IMU the 0.2 floor (the vehicle tilts less than half
 /// as far and the model comes out better, measured 17 vs 43 deg and 0.12 vs 0.16 error by
-/// `cargo run --release -p thrusterd-core --example pulse_power_study`), at the paper's noise the
+/// `cargo run --release -p thrusterctl -- study pulse-power`), at the paper's noise the
 /// configured 0.8 as before.
 #[test]
 fn with_a_declared_geometry_the_pulses_are_as_strong_as_the_noise_needs() {

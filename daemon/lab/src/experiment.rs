@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use crate::plot::{nice_range, render, Grid, Panel, Series};
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use nalgebra::{Quaternion, UnitQuaternion};
@@ -17,7 +18,6 @@ use serde_json::{json, Value};
 use thruster_protocol::{
     DaemonState, ModelMsg, RequestKind, ThrustMode, TruthMsg, VehicleStateMsg, MAX_THRUSTERS,
 };
-use thrusterd_core::study::plot::{nice_range, render, Grid, Panel, Series};
 
 use crate::recording::{run_path, RECORD_PACE};
 use crate::scoring::{

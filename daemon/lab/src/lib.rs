@@ -6,6 +6,7 @@
 pub mod demo;
 pub mod excursion;
 pub mod experiment;
+pub mod plot;
 pub mod recording;
 pub mod scoring;
 pub mod seeds;

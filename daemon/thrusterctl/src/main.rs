@@ -38,8 +38,9 @@ enum Command {
     /// scored against the truth.
     #[cfg(feature = "lab")]
     Experiment(thruster_lab::experiment::ExperimentArgs),
-    /// The estimation methods against the simulator's truth in one process (no daemon): every
-    /// vehicle x noise x method x seed; writes runs.csv, trace.csv and error-vs-time figures.
+    /// Research in one process (no daemon): by default the estimation methods against the
+    /// simulator's truth, every vehicle x noise x method x seed (runs.csv, trace.csv and
+    /// error-vs-time figures); `fig2`, `pulse-power` and the research `sweep`s as subcommands.
     #[cfg(feature = "lab")]
     Study(thruster_lab::study::StudyArgs),
     /// Not in this build: thrusterctl was built without the simulation lab (feature `lab`).
@@ -106,15 +107,22 @@ fn command() -> clap::Command {
         if !LAB_VERBS.contains(&sub.get_name()) {
             return sub;
         }
-        sub.mut_args(|a| {
-            let refused = ["namespace", "ipc_root", "timeout_ms"].contains(&a.get_id().as_str());
-            if refused {
-                a.hide(true)
-            } else {
-                a
-            }
-        })
+        hide_refused(sub)
     })
+}
+
+/// The operator's options hidden on a lab verb and its own subcommands (`study fig2`,
+/// `study sweep`), which refuse them alike.
+fn hide_refused(cmd: clap::Command) -> clap::Command {
+    cmd.mut_args(|a| {
+        let refused = ["namespace", "ipc_root", "timeout_ms"].contains(&a.get_id().as_str());
+        if refused {
+            a.hide(true)
+        } else {
+            a
+        }
+    })
+    .mut_subcommands(hide_refused)
 }
 
 fn parse_cli() -> Cli {
@@ -195,6 +203,26 @@ mod tests {
                 assert!(
                     !help.contains(hidden),
                     "{verb} --help offers {hidden}:\n{help}"
+                );
+            }
+        }
+        // And on the lab verbs' own subcommands (`study fig2`, `study sweep`).
+        let study = cmd.find_subcommand_mut("study").unwrap();
+        let nested: Vec<String> = study
+            .get_subcommands()
+            .map(|s| s.get_name().to_string())
+            .collect();
+        assert!(nested.iter().any(|n| n == "fig2"), "{nested:?}");
+        for name in nested {
+            let help = study
+                .find_subcommand_mut(&name)
+                .unwrap()
+                .render_long_help()
+                .to_string();
+            for hidden in ["--namespace", "--ipc-root", "--timeout-ms"] {
+                assert!(
+                    !help.contains(hidden),
+                    "study {name} --help offers {hidden}:\n{help}"
                 );
             }
         }

@@ -1,5 +1,5 @@
-//! thrusterd: the thruster-configuration daemon (`run`), its offline studies (`study`) and the
-//! replay of a recorded session (`replay`).
+//! thrusterd: the thruster-configuration daemon (`run`) and the replay of a recorded session
+//! (`replay`). The offline studies live in the lab (`thrusterctl study`).
 
 mod checkpoints;
 mod config_file;
@@ -13,7 +13,6 @@ mod saver;
 mod side_inputs;
 mod solver;
 mod store;
-mod study;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -44,11 +43,6 @@ enum Command {
     /// Run a recording (MCAP) through the state machine and estimator offline and print the
     /// model: the daemon's, with the recording's configuration; another's with --config.
     Replay(replay::ReplayArgs),
-    /// Offline studies of the estimator (no vehicle, no IPC).
-    Study {
-        #[command(subcommand)]
-        study: study::Study,
-    },
 }
 
 /// Exit code of a configuration that cannot be used (file or command line): a script tells
@@ -85,7 +79,6 @@ fn run(cli: Cli) -> Result<()> {
             println!("{}", toml::to_string_pretty(&cfg)?);
             Ok(())
         }
-        Command::Study { study } => study::run(study),
         Command::Replay(args) => replay::run(args),
     }
 }

@@ -1,8 +1,9 @@
 //! Turns study rows into the figures of docs/study.md (pure: returns file names and contents).
 
+use thrusterd_core::estimator::{Excitation, Method};
+
 use super::fig2::StudyRow;
-use super::plot::{render, Grid, Panel, Series};
-use crate::estimator::{Excitation, Method};
+use crate::plot::{render, Grid, Panel, Series};
 
 const BLUE: &str = "#1f5fbf";
 const RED: &str = "#c8321e";

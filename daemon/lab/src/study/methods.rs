@@ -1,4 +1,4 @@
-//! `thrusterctl study`: every vehicle file x noise preset x estimation method x seed, the
+//! `thrusterctl study --out DIR`: every vehicle file x noise preset x estimation method x seed, the
 //! machine driving the simulator's physics in one process (no IPC: faster than the processes,
 //! the same pure core the daemon runs), scored against the simulator's truth. Writes
 //! DIR/runs.csv (one row per run), DIR/trace.csv (the estimate's error after every pulse) and
@@ -7,13 +7,13 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::plot::{render, Grid, Panel, Series};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use nalgebra::DMatrix;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::{EstimatorConfig, Excitation, Method};
 use thrusterd_core::machine::{Machine, MachineSetup, Request, State};
-use thrusterd_core::study::plot::{render, Grid, Panel, Series};
 
 use crate::excursion::Excursion;
 use crate::session::config_file;
@@ -28,10 +28,11 @@ const ALL_VEHICLES: [&str; 6] = [
 ];
 
 #[derive(Args, Debug)]
-pub struct StudyArgs {
-    /// Output folder (created if missing).
-    #[arg(long)]
-    pub out: PathBuf,
+pub struct MethodsArgs {
+    /// Output folder (created if missing). Required without a subcommand; an `Option` only
+    /// because the subcommands (fig2, pulse-power, sweep) share the command line.
+    #[arg(long, required = true)]
+    pub out: Option<PathBuf>,
     /// Noise presets, comma separated (none, realistic, paper).
     #[arg(long, default_value = "none,realistic,paper", value_delimiter = ',')]
     pub noise: Vec<String>,
@@ -188,7 +189,11 @@ pub fn run_one(
     })
 }
 
-pub fn run(args: StudyArgs) -> Result<()> {
+pub fn run(args: MethodsArgs) -> Result<()> {
+    let out = args
+        .out
+        .clone()
+        .context("the methods study needs --out DIR")?;
     let vehicles: Vec<String> = if args.vehicles.is_empty() {
         ALL_VEHICLES.iter().map(|s| s.to_string()).collect()
     } else {
@@ -216,8 +221,7 @@ pub fn run(args: StudyArgs) -> Result<()> {
                 .map(|x| (v.as_str(), x))
         })
         .collect::<Result<Vec<_>>>()?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
 
     let mut runs = String::from(
         "vehicle,noise,method,seed,err_rot,err_acc,seconds,pulses,tilt_deg,heading_deg,bound_rot,bound_acc\n",
@@ -275,13 +279,13 @@ pub fn run(args: StudyArgs) -> Result<()> {
             });
         }
     }
-    write(&args.out.join("runs.csv"), &runs)?;
-    write(&args.out.join("trace.csv"), &traces)?;
+    write(&out.join("runs.csv"), &runs)?;
+    write(&out.join("trace.csv"), &traces)?;
     for (noise, _) in &noises {
         let svg = figure(noise, &curves);
-        write(&args.out.join(format!("error_vs_time_{noise}.svg")), &svg)?;
+        write(&out.join(format!("error_vs_time_{noise}.svg")), &svg)?;
     }
-    println!("wrote {}", args.out.display());
+    println!("wrote {}", out.display());
     Ok(())
 }
 
@@ -366,8 +370,8 @@ mod tests {
     #[test]
     fn study_writes_its_tables_and_figures_and_separates_the_methods() {
         let dir = tempfile::tempdir().unwrap();
-        run(StudyArgs {
-            out: dir.path().to_path_buf(),
+        run(MethodsArgs {
+            out: Some(dir.path().to_path_buf()),
             noise: vec!["none".into()],
             methods: vec!["dynamic".into(), "forward".into()],
             seeds: 1,
@@ -394,8 +398,8 @@ mod tests {
     #[test]
     fn unknown_names_are_refused_with_the_allowed_ones() {
         let dir = tempfile::tempdir().unwrap();
-        let e = run(StudyArgs {
-            out: dir.path().to_path_buf(),
+        let e = run(MethodsArgs {
+            out: Some(dir.path().to_path_buf()),
             noise: vec!["loud".into()],
             methods: vec!["dynamic".into()],
             seeds: 1,

@@ -5,14 +5,14 @@
 //! the power used, the largest roll/pitch tilt during the estimation, the rotation model's
 //! error against the simulator's truth and the estimation time.
 //!
-//! cargo run --release -p thrusterd-core --example pulse_power_study
-
-use std::path::PathBuf;
+//! cargo run --release -p thrusterctl -- study pulse-power
 
 use anyhow::{Context, Result};
 use nalgebra::DMatrix;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::machine::{Geometry, Machine, MachineSetup, Request, State};
+
+use crate::session::config_file;
 
 struct Outcome {
     power: f64,
@@ -26,9 +26,7 @@ fn rel_err_rot(est: &DMatrix<f64>, truth: &DMatrix<f64>) -> f64 {
 }
 
 fn estimate_once(name: &str, noise: NoisePreset, snr: f64, seed: u64) -> Result<Outcome> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../config/vehicles")
-        .join(format!("{name}.toml"));
+    let path = config_file(&format!("vehicles/{name}.toml"));
     let v = Vehicle::load(&path).with_context(|| format!("loading {}", path.display()))?;
     let mut setup = MachineSetup {
         thrusters: v.thrusters.len(),
@@ -82,7 +80,8 @@ fn estimate_once(name: &str, noise: NoisePreset, snr: f64, seed: u64) -> Result<
     })
 }
 
-fn main() -> Result<()> {
+/// `thrusterctl study pulse-power`: the table of docs/study.md, "Pulse power".
+pub fn run() -> Result<()> {
     println!("vehicle       noise      pulse_snr  power  tilt max deg  err rot  time s   (seeds 1-3, mean)");
     for name in ["amour5", "amour5_top45", "six_dof", "four_up"] {
         for noise in [NoisePreset::Paper, NoisePreset::Realistic] {

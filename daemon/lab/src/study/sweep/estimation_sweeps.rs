@@ -1,0 +1,481 @@
+//! The dynamic-model estimator's research sweeps (docs/study.md), moved from thrusterd-core's
+//! tests/dynamic_estimator.rs: each prints a table, knobs from environment variables.
+
+use thruster_sim::disturbance::WaterPreset;
+use thruster_sim::{NoisePreset, SensorConfig};
+use thrusterd_core::estimator::EstimatorConfig;
+
+use super::estimation::*;
+
+/// The measurement behind docs/study.md's accelerometer-bias table: AMOUR-5, the realistic IMU
+/// with turn-on bias 0, 0.05 (the preset) and 0.2 m/s^2, seeds 1-10. Slow; run with
+/// `cargo run --release -p thrusterctl -- study sweep bias_sweep`.
+pub(super) fn bias_sweep() {
+    for state in [0.0, 0.02, 0.05, 0.1] {
+        let cfg = EstimatorConfig {
+            accel_bias_std: state,
+            ..EstimatorConfig::dynamic()
+        };
+        for bias in [0.0, 0.05, 0.2] {
+            let (mut rot, mut acc, mut secs) = (0.0, 0.0, 0.0);
+            let seeds = 1..=10u64;
+            let n = seeds.clone().count() as f64;
+            for seed in seeds {
+                let o = estimate_with("amour5", realistic_with_accel_bias(bias), seed, cfg.clone());
+                rot += o.err_rot / n;
+                acc += o.err_acc / n;
+                secs += o.seconds / n;
+            }
+            println!(
+                "bias state prior {state:.2}, accel bias {bias:.2}: err_rot {rot:.4} err_acc {acc:.4} in {secs:.2} s"
+            );
+        }
+    }
+}
+
+/// The measurement behind docs/study.md's standard-error table: coverage at the realistic
+/// IMU and the paper's noise over seeds 1-10. Slow; run with
+/// `cargo run --release -p thrusterctl -- study sweep coverage_sweep`.
+pub(super) fn coverage_sweep() {
+    for noise in [
+        NoisePreset::None,
+        NoisePreset::Realistic,
+        NoisePreset::Paper,
+    ] {
+        let sensors = SensorConfig {
+            rate_hz: 200.0,
+            noise,
+            ..SensorConfig::default()
+        };
+        let (honest, ols, m) = coverage(&sensors, 1..=10);
+        println!(
+            "{noise:?}: |err|/se < 2 for B, damping, restoring: honest {:.2?}, i.i.d. {:.2?}; err_rot {:.4} err_acc {:.4} in {:.2} s",
+            honest, ols, m[0], m[1], m[2]
+        );
+    }
+}
+
+pub(super) fn presets_sweep() {
+    for state in [0.0, 0.1] {
+        for noise in [
+            NoisePreset::None,
+            NoisePreset::Realistic,
+            NoisePreset::Paper,
+        ] {
+            let (mut rot, mut acc, mut secs) = (0.0, 0.0, 0.0);
+            for seed in 1..=5u64 {
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let cfg = EstimatorConfig {
+                    accel_bias_std: state,
+                    ..EstimatorConfig::dynamic()
+                };
+                let o = estimate_with("amour5", sensors, seed, cfg);
+                rot += o.err_rot / 5.0;
+                acc += o.err_acc / 5.0;
+                secs += o.seconds / 5.0;
+            }
+            println!("prior {state} {noise:?} seeds 1-5: err_rot {rot:.4} err_acc {acc:.4} in {secs:.2} s");
+        }
+    }
+}
+
+/// The stop threshold against the time to model at the paper's noise on AMOUR-5: mean err_rot,
+/// err_acc and vehicle seconds over seeds 1-5 (the target's seeds) and 6-10 (held out), for
+/// each `target_rel_err`. Run with
+/// `cargo run --release -p thrusterctl -- study sweep stop_threshold_sweep`.
+pub(super) fn stop_threshold_sweep() {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Paper,
+        ..SensorConfig::default()
+    };
+    for target in [0.05, 0.055, 0.058, 0.06, 0.065] {
+        for seeds in [1..=5u64, 6..=10, 1..=20] {
+            let label = format!("{seeds:?}");
+            let runs = seeds.clone().count() as f64;
+            let (mut rot, mut acc, mut secs, mut worst) = (0.0, 0.0, 0.0, 0.0f64);
+            for seed in seeds {
+                let cfg = EstimatorConfig {
+                    target_rel_err: target,
+                    ..EstimatorConfig::dynamic()
+                };
+                let o = estimate_with("amour5", sensors.clone(), seed, cfg);
+                rot += o.err_rot / runs;
+                acc += o.err_acc / runs;
+                secs += o.seconds / runs;
+                worst = worst.max(o.err_rot);
+            }
+            println!(
+                "target {target:.3} seeds {label}: err_rot {rot:.4} (worst {worst:.4}) err_acc {acc:.4} in {secs:.2} s"
+            );
+        }
+    }
+}
+
+/// Every vehicle file at every noise preset, seeds 1-5 (the in-process equivalent of
+/// `thrusterctl study --methods dynamic --seeds 5`): per vehicle and noise, and the mean over
+/// the six. Run with
+/// `cargo run --release -p thrusterctl -- study sweep vehicles_sweep`.
+pub(super) fn vehicles_sweep() {
+    for noise in [
+        NoisePreset::None,
+        NoisePreset::Realistic,
+        NoisePreset::Paper,
+    ] {
+        let mut all = [0.0; 4];
+        for name in VEHICLES {
+            let mut m = [0.0; 4];
+            for seed in 1..=5u64 {
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let o = estimate_with(name, sensors, seed, EstimatorConfig::dynamic());
+                m[0] += o.err_rot / 5.0;
+                m[1] += o.err_acc / 5.0;
+                m[2] += o.seconds / 5.0;
+                m[3] = f64::max(m[3], o.max_tilt_deg);
+            }
+            println!(
+                "{name} {noise:?}: {:.3} / {:.3}, {:.1} s, {:.0} deg",
+                m[0], m[1], m[2], m[3]
+            );
+            for k in 0..3 {
+                all[k] += m[k] / VEHICLES.len() as f64;
+            }
+            all[3] = f64::max(all[3], m[3]);
+        }
+        println!(
+            "all six {noise:?}: {:.3} / {:.3} in {:.1} s, largest tilt {:.0} deg",
+            all[0], all[1], all[2], all[3]
+        );
+    }
+}
+
+/// Per vehicle: the learned rotation-row rate damping and roll/pitch restoring against the
+/// simulator's, relative, and in honest standard errors; the decisive runs behind
+/// docs/study.md ("Where the coefficients' errors come from"). Run with
+/// `cargo run --release -p thrusterctl -- study sweep coefficient_error_by_vehicle`;
+/// knobs: COEF_NOISE (none, realistic, paper; noisy runs take seeds 1-3), COEF_RATE (IMU Hz),
+/// COEF_LAG (the estimator's spin-up time constant, s; the simulator's is 0.1), COEF_BIAS_STATE
+/// (`accel_bias_std`), COEF_SYMMETRIC, COEF_DVL and COEF_NEUTRAL (the [`Ideal`] inputs).
+pub(super) fn coefficient_error_by_vehicle() {
+    let noise = match std::env::var("COEF_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::None,
+    };
+    for name in VEHICLES {
+        let (lin, restoring) = true_terms(name);
+        for seed in 1..=3u64 {
+            let rate_hz = std::env::var("COEF_RATE").map_or(200.0, |r| r.parse().unwrap());
+            let sensors = SensorConfig {
+                rate_hz,
+                noise,
+                ..SensorConfig::default()
+            };
+            let mut cfg = EstimatorConfig::dynamic();
+            if let Ok(lag) = std::env::var("COEF_LAG") {
+                cfg.spin_up_s = lag.parse().unwrap();
+            }
+            if let Ok(prior) = std::env::var("COEF_BIAS_STATE") {
+                cfg.accel_bias_std = prior.parse().unwrap();
+            }
+            let ideal = Ideal {
+                symmetric_thrusters: std::env::var_os("COEF_SYMMETRIC").is_some(),
+                true_velocity: std::env::var_os("COEF_DVL").is_some(),
+                neutral: std::env::var_os("COEF_NEUTRAL").is_some(),
+                ..Ideal::default()
+            };
+            let o = estimate_ideal(name, sensors, seed, cfg, ideal);
+            let mut line = format!(
+                "{name:15} seed {seed}: rot {:.4} acc {:.4}",
+                o.err_rot, o.err_acc
+            );
+            for (row, term, truth) in [
+                (0, "p", lin[(0, 3)]),
+                (1, "q", lin[(1, 4)]),
+                (2, "r", lin[(2, 5)]),
+                (0, "down_y", restoring[(0, 1)]),
+                (1, "down_x", restoring[(1, 0)]),
+            ] {
+                let (c, se) = o.terms.get(row, term).unwrap();
+                line += &format!(
+                    " {term} {:+.3} ({:.1} se)",
+                    (c - truth) / truth.abs().max(1e-9),
+                    (c - truth).abs() / se
+                );
+            }
+            println!("{line}");
+            if noise == NoisePreset::None {
+                break;
+            }
+        }
+    }
+}
+
+pub(super) fn lag_sweep() {
+    let noise = match std::env::var("LAG_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::None,
+    };
+    let learn = std::env::var("LAG_LEARN").map_or(true, |v| v != "0");
+    let names = std::env::var("LAG_VEHICLES").unwrap_or("amour5,eight_vectored".into());
+    let n_seeds: u64 = std::env::var("LAG_SEEDS").map_or(1, |s| s.parse().unwrap());
+    let seeds = 1..=n_seeds;
+    let taus = std::env::var("LAG_TAUS").unwrap_or("0.03,0.05,0.08,0.1,0.15,0.2".into());
+    for name in names.split(',') {
+        for tau in taus.split(',').map(|t| t.parse::<f64>().unwrap()) {
+            for seed in seeds.clone() {
+                let mut sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                if let Ok(g) = std::env::var("LAG_GYRO_ONLY") {
+                    let mut n = NoisePreset::Paper.params();
+                    n.gyro_std_radps = 0.0;
+                    n.accel_std_mps2 = 0.0;
+                    if let Ok(v) = g.parse::<f64>() {
+                        n.gyro_std_radps = v;
+                    } else if g == "gyro" {
+                        n.gyro_std_radps = 0.25;
+                    } else {
+                        n.accel_std_mps2 = 0.49;
+                    }
+                    sensors.custom_noise = Some(n);
+                }
+                let mut cfg = EstimatorConfig::dynamic();
+                cfg.learn_spin_up = learn;
+                if let Ok(p) = std::env::var("LAG_MIN_POWER") {
+                    cfg.min_power = p.parse().unwrap();
+                }
+                if std::env::var("LAG_FORCE").is_ok() {
+                    // Learn whatever the gyro noise (the decisive runs at the paper's noise).
+                    cfg.spin_up_max_gyro_sigma = f64::INFINITY;
+                }
+                if let Ok(b) = std::env::var("LAG_BIAS_STD") {
+                    cfg.accel_bias_std = b.parse().unwrap();
+                }
+                if let Ok(t) = std::env::var("LAG_TARGET") {
+                    cfg.target_rel_err = t.parse().unwrap();
+                }
+                if let Ok(p) = std::env::var("LAG_PULSES") {
+                    cfg.max_pulses = p.parse().unwrap();
+                }
+                if std::env::var("LAG_TOLD").is_ok() {
+                    // The decisive comparison: the true lag given, nothing learned.
+                    cfg.learn_spin_up = false;
+                    cfg.spin_up_s = tau;
+                }
+                let t0 = std::time::Instant::now();
+                let ideal = Ideal {
+                    true_velocity: std::env::var("LAG_DVL").is_ok(),
+                    symmetric_thrusters: std::env::var("LAG_SYM").is_ok(),
+                    noise_s: std::env::var("LAG_NOISE_S")
+                        .ok()
+                        .map(|v| v.parse().unwrap()),
+                    ..Ideal::default()
+                };
+                let v = with_lag(name, tau);
+                let tau = true_lag(&v);
+                let o = estimate_on(v, sensors, seed, cfg, ideal);
+                println!(
+                "{name} tau {tau:.3} seed {seed}: learned {:.4} err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",
+                o.spin_up_s,
+                o.err_rot,
+                o.err_acc,
+                o.bound[0],
+                o.bound[1],
+                o.seconds,
+                t0.elapsed().as_secs_f64()
+            );
+            }
+        }
+    }
+}
+
+/// The IMU off the centre and the water, over seeds (docs/study.md, "The IMU off the centre"):
+/// LA_VEHICLES, LA_SEEDS, LA_NOISE (none|realistic|paper), LA_ARM (x,y,z m), LA_TOLD (the
+/// daemon is told LA_ARM), LA_TOL (tolerance, m), LA_WATER (current|moderate|rough),
+/// LA_NO_CURRENT (the preset's waves alone), LA_WAVE_PART (force|torque|heave|surge: that
+/// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s).
+pub(super) fn imu_and_water_sweep() {
+    let noise = match std::env::var("LA_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::None,
+    };
+    let arm: Vec<f64> = std::env::var("LA_ARM")
+        .unwrap_or("0.15,0.05,-0.10".into())
+        .split(',')
+        .map(|s| s.parse().unwrap())
+        .collect();
+    let names = std::env::var("LA_VEHICLES").unwrap_or("amour5,eight_vectored".into());
+    let seeds: u64 = std::env::var("LA_SEEDS").map_or(1, |s| s.parse().unwrap());
+    for name in names.split(',') {
+        for seed in 1..=seeds {
+            let sensors = SensorConfig {
+                rate_hz: 200.0,
+                noise,
+                lever_arm_m: [arm[0], arm[1], arm[2]],
+                ..SensorConfig::default()
+            };
+            let mut cfg = EstimatorConfig::dynamic();
+            if let Ok(v) = std::env::var("LA_LEARN") {
+                cfg.learn_imu_position = v != "0";
+            }
+            if let Ok(v) = std::env::var("LA_SEG") {
+                cfg.segment_s = v.parse().unwrap();
+            }
+            if let Ok(v) = std::env::var("LA_TOL") {
+                cfg.imu_position_tolerance_m = v.parse().unwrap();
+            }
+            if std::env::var("LA_TOLD").is_ok() {
+                cfg.imu_position_m = [arm[0], arm[1], arm[2]];
+            }
+            let water = match std::env::var("LA_WATER").as_deref() {
+                Ok("current") => WaterPreset::Current,
+                Ok("moderate") => WaterPreset::Moderate,
+                Ok("rough") => WaterPreset::Rough,
+                _ => WaterPreset::Still,
+            };
+            let ideal = Ideal {
+                allow_refusal: true,
+                water,
+                true_velocity: std::env::var("LA_DVL").is_ok(),
+                no_current: std::env::var("LA_NO_CURRENT").is_ok(),
+                wave_part: std::env::var("LA_WAVE_PART")
+                    .ok()
+                    .map(|v| &*Box::leak(v.into_boxed_str())),
+                ..Ideal::default()
+            };
+            let o = estimate_ideal(name, sensors, seed, cfg, ideal);
+            let p = o.terms.imu_position.unwrap();
+            let l = p.learned.unwrap();
+            let sd = l.sd_m();
+            println!(
+                "  sigma {:?} unexplained {:.4} rad/s",
+                o.sigma.map(|v| (v * 1e4).round() / 1e4),
+                o.terms.unexplained_rate_radps
+            );
+            println!(
+                "{name} seed {seed}: tilt {:.0} refused {} lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} (share {:.4}) in {:.2} s; used [{:.4} {:.4} {:.4}] learned [{:.4} {:.4} {:.4}] sd [{:.4} {:.4} {:.4}] contradicted {}",
+                o.max_tilt_deg, o.refused, o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], p.rel_err_share, o.seconds, p.position_m[0], p.position_m[1], p.position_m[2], l.position_m[0], l.position_m[1], l.position_m[2], sd[0], sd[1], sd[2], p.contradicted
+            );
+        }
+    }
+}
+
+/// The measurement behind docs/study.md's "Vehicles the estimator was not told about (issue
+/// 31)": AMOUR-5 and eight_vectored with thrusters that differ from the daemon's assumptions
+/// (`MISMATCHES`), per case and noise the mean and range of err_rot / err_acc against the
+/// simulator's symmetric truth, the largest error / bound (the daemon's own rel_err_rot /
+/// rel_err_acc), the fraction of B's entries within 2 standard errors, the vehicle seconds to
+/// the model and how many were refused. Knobs: MM_NOISE = none | realistic | paper (default
+/// none), MM_SEEDS = the last seed (default 1), MM_VEHICLES (default amour5,eight_vectored),
+/// MM_CASES = indices into MISMATCHES (default all), MM_TOLD (set: the daemon told the true
+/// reverse ratio, dead band and lag, learning the lag off: the decisive comparison). For example
+/// `MM_NOISE=realistic MM_SEEDS=5 cargo run --release -p thrusterctl -- study sweep mismatch_sweep`.
+pub(super) fn mismatch_sweep() {
+    let noise = match std::env::var("MM_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::None,
+    };
+    let n_seeds: u64 = std::env::var("MM_SEEDS").map_or(1, |s| s.parse().unwrap());
+    let names = std::env::var("MM_VEHICLES").unwrap_or("amour5,eight_vectored".into());
+    let cases: Vec<usize> = std::env::var("MM_CASES")
+        .map_or((0..MISMATCHES.len()).collect(), |s| {
+            s.split(',').map(|c| c.parse().unwrap()).collect()
+        });
+    let mut summary = Vec::new();
+    for name in names.split(',') {
+        for &c in &cases {
+            let (what, m) = MISMATCHES[c];
+            let mut rot = Vec::new();
+            let mut acc = Vec::new();
+            let mut ratio = 0.0f64;
+            let mut covered = 0;
+            let mut within = 0.0;
+            let mut secs = Vec::new();
+            let mut refused = 0;
+            let mut lags = Vec::new();
+            for seed in 1..=n_seeds {
+                let t0 = std::time::Instant::now();
+                let mut cfg = EstimatorConfig::dynamic();
+                let mut ideal = Ideal {
+                    allow_refusal: true,
+                    ..Ideal::default()
+                };
+                if std::env::var("MM_TOLD").is_ok() {
+                    // The decisive comparison: the daemon told the thrusters' true constants.
+                    if let Some(r) = m.reverse_ratio {
+                        cfg.reverse_ratio = r;
+                    }
+                    ideal.deadband = m.deadband;
+                    if let Some(tau) = m.lag_s {
+                        cfg.spin_up_s = tau;
+                        cfg.learn_spin_up = false;
+                    }
+                }
+                let sensors = SensorConfig {
+                    rate_hz: 200.0,
+                    noise,
+                    ..SensorConfig::default()
+                };
+                let o = estimate_on(mismatched(name, m), sensors, seed, cfg, ideal);
+                println!(
+                    "{name} {what} {noise:?} seed {seed}: err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} B within 2 se {:.2} lag {:.4} ({}) refused {} tilt {:.0} deg unexplained {:.4} in {:.2} s (wall {:.1} s)",
+                    o.err_rot,
+                    o.err_acc,
+                    o.bound[0],
+                    o.bound[1],
+                    b_within_2se(&o),
+                    o.spin_up_s,
+                    if o.spin_up_learned { "learned" } else { "configured" },
+                    o.refused,
+                    o.max_tilt_deg,
+                    o.terms.unexplained_rate_radps,
+                    o.seconds,
+                    t0.elapsed().as_secs_f64()
+                );
+                rot.push(o.err_rot);
+                acc.push(o.err_acc);
+                ratio = ratio
+                    .max(o.err_rot / o.bound[0])
+                    .max(o.err_acc / o.bound[1]);
+                if o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1] {
+                    covered += 1;
+                }
+                within += b_within_2se(&o) / n_seeds as f64;
+                secs.push(o.seconds);
+                refused += o.refused as usize;
+                lags.push(o.spin_up_s);
+            }
+            let stats = |v: &[f64]| {
+                let mean = v.iter().sum::<f64>() / v.len() as f64;
+                let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                format!("{mean:.3} ({lo:.3}-{hi:.3})")
+            };
+            summary.push(format!(
+                "| {name} | {what} | {noise:?} | {} | {} | {covered}/{n_seeds}, <= {ratio:.2} x | {within:.2} | {} | lag {} | refused {refused} |",
+                stats(&rot),
+                stats(&acc),
+                stats(&secs),
+                stats(&lags),
+            ));
+        }
+    }
+    println!("| vehicle | differs | noise | err_rot mean (min-max) | err_acc mean (min-max) | within bound, largest err/bound | B within 2 se | vehicle-s | lag | refused |");
+    for line in summary {
+        println!("{line}");
+    }
+}

@@ -1,0 +1,295 @@
+//! The identification under control's research sweeps, moved from thrusterd-core's
+//! tests/closed_loop.rs: each prints a table, knobs from environment variables.
+
+use thruster_sim::NoisePreset;
+use thrusterd_core::adaptation::identification::IdentificationConfig;
+use thrusterd_core::estimator::EstimatorConfig;
+use thrusterd_core::machine::{Machine, State};
+
+use super::in_process::{vehicle, Reestimation, Run, VEHICLES};
+
+/// The same with the machine's identification section replaced (None: the defaults), calling
+/// `observe` after every sample of the re-estimation.
+fn rotate_while_holding_with(
+    noise: NoisePreset,
+    seed: u64,
+    identification: Option<IdentificationConfig>,
+    observe: impl FnMut(&Machine, f64),
+) -> (Run, Reestimation) {
+    let v = vehicle("amour5");
+    let mut run = Run::new("amour5", noise, seed);
+    if let Some(identification) = identification {
+        run.with_identification(identification);
+    }
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(3.0);
+    assert_eq!(run.machine.state(), State::Active);
+    let r = run.announced_rotation_observed(&v, observe);
+    (run, r)
+}
+
+/// A comma-separated list from the environment (`1-5` also for integer ranges), or `default`.
+fn env_list<T: std::str::FromStr + Copy>(key: &str, default: &[T]) -> Vec<T> {
+    let Ok(text) = std::env::var(key) else {
+        return default.to_vec();
+    };
+    let mut out = Vec::new();
+    for item in text.split(',').map(str::trim).filter(|t| !t.is_empty()) {
+        if let Some((a, b)) = item.split_once('-') {
+            if let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) {
+                for k in a..=b {
+                    out.push(
+                        k.to_string()
+                            .parse()
+                            .unwrap_or_else(|_| panic!("{key}: {k}")),
+                    );
+                }
+                continue;
+            }
+        }
+        out.push(item.parse().unwrap_or_else(|_| panic!("{key}: {item}")));
+    }
+    out
+}
+
+/// The bounds of the estimates made during one re-estimation (every `estimator.segment_s`).
+#[derive(Debug, Default)]
+struct Bounds {
+    /// The estimate in place at the announcement (the first model's): not this run's.
+    stale: Option<(f64, f64)>,
+    started: bool,
+    fresh: bool,
+    /// The last estimate's error bounds, rotation and acceleration rows.
+    last: (f64, f64),
+    /// Seconds after the announcement when each bound first reached the stop target.
+    t_rot: Option<f64>,
+    t_acc: Option<f64>,
+}
+
+impl Bounds {
+    fn observe(&mut self, m: &Machine, t: f64, target: f64) {
+        let now = m.last_estimate().map(|e| (e.rel_err_rot, e.rel_err_acc));
+        if !self.started {
+            self.started = true;
+            self.stale = now;
+        }
+        // Not only in Identify: the estimate that stops the run is made on the sample the
+        // machine leaves Identify.
+        let Some((r, a)) = now else { return };
+        if !self.fresh && now == self.stale {
+            return;
+        }
+        self.fresh = true;
+        self.last = (r, a);
+        if r <= target && self.t_rot.is_none() {
+            self.t_rot = Some(t);
+        }
+        if a <= target && self.t_acc.is_none() {
+            self.t_acc = Some(t);
+        }
+    }
+}
+
+/// One row of the sweep: took_s, err_rot, err_acc, max_tilt, mean_err, b_rot, b_acc, t_rot, t_acc.
+fn line(label: &str, v: &[f64; 7], t_rot: Option<f64>, t_acc: Option<f64>) -> String {
+    let t = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.1}"));
+    format!(
+        "{label:>5} {:>6.1} {:>7.3} {:>7.3} {:>8.1} {:>8.1} {:>6.3} {:>6.3} {:>7} {:>7} ",
+        v[0],
+        v[1],
+        v[2],
+        v[3],
+        v[4],
+        v[5],
+        v[6],
+        t(t_rot),
+        t(t_acc)
+    )
+}
+
+/// A measuring tool, not a check: on every vehicle file, noise-free, thruster K (CO_THRUSTER,
+/// default 0) turned 45 degrees about an axis across its direction and announced, with the
+/// carry-over on and off. Knobs: CO_NOISE (none|realistic|paper), CO_SEEDS.
+pub(super) fn carry_over_on_every_vehicle() {
+    use nalgebra::Vector3;
+    use thrusterd_core::machine::ThrusterChange;
+    let k: usize = std::env::var("CO_THRUSTER").map_or(0, |v| v.parse().unwrap());
+    let noise = match std::env::var("CO_NOISE").as_deref() {
+        Ok("paper") => NoisePreset::Paper,
+        Ok("realistic") => NoisePreset::Realistic,
+        _ => NoisePreset::None,
+    };
+    let seeds = env_list("CO_SEEDS", &[1u64]);
+    println!(
+        "{noise:?}, thruster {k} turned 45 deg; err_rot / err_acc vs truth, took, largest tilt"
+    );
+    for name in VEHICLES {
+        for carry in [true, false] {
+            let mut sum = [0.0; 4];
+            for &seed in &seeds {
+                let v = vehicle(name);
+                let mut run = Run::with_vehicle(v.clone(), noise, seed, 200.0);
+                run.with_identification(IdentificationConfig {
+                    carry_over: carry,
+                    ..IdentificationConfig::default()
+                });
+                run.run_for(1.0);
+                run.estimate();
+                run.run_for(3.0);
+                let d = Vector3::from(v.thrusters[k].direction);
+                let across = if d.x.abs() < 0.9 {
+                    Vector3::x()
+                } else {
+                    Vector3::y()
+                };
+                let axis = d.cross(&across).normalize();
+                let r = run.announced_turn(
+                    &v,
+                    k,
+                    axis.into(),
+                    45.0,
+                    ThrusterChange::Moved(k),
+                    |_, _| {},
+                );
+                for (s, x) in sum
+                    .iter_mut()
+                    .zip([r.err_rot, r.err_acc, r.took_s, r.max_tilt_deg])
+                {
+                    *s += x / seeds.len() as f64;
+                }
+            }
+            println!(
+                "{name:>15} carry {carry:>5}: {:.3} / {:.3} in {:.1} s, {:.1} deg",
+                sum[0], sum[1], sum[2], sum[3]
+            );
+        }
+    }
+}
+
+/// A measuring tool, not a check: the announced rotation with the identification section
+/// overridden from the environment, every combination of the lists given, one row per seed and
+/// the mean. Knobs (comma lists; unset: the default): ID_NOISE (none|realistic|paper, default
+/// paper), ID_SEEDS (default 1-5), ID_HOLD_S, ID_DITHER, ID_DITHER_MAX, ID_BUDGET, ID_MIN_S,
+/// ID_MAX_S, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
+/// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
+/// `-` never; the mean row's over the seeds that did, counted after it): which rows hold the
+/// stop back.
+///   `cargo run --release -p thrusterctl -- study sweep sweep_identification`
+pub(super) fn sweep_identification() {
+    let d = IdentificationConfig::default();
+    let target = EstimatorConfig::default().target_rel_err;
+    let noises: Vec<String> = std::env::var("ID_NOISE")
+        .unwrap_or_else(|_| "paper".into())
+        .split(',')
+        .map(|s| s.trim().to_lowercase())
+        .collect();
+    let seeds: Vec<u64> = env_list("ID_SEEDS", &[1, 2, 3, 4, 5]);
+    let mut cfgs = vec![d.clone()];
+    let mut vary = |key: &str, default: f64, set: fn(&mut IdentificationConfig, f64)| {
+        cfgs = env_list(key, &[default])
+            .into_iter()
+            .flat_map(|v| {
+                cfgs.iter().map(move |c| {
+                    let mut c = c.clone();
+                    set(&mut c, v);
+                    c
+                })
+            })
+            .collect();
+    };
+    vary("ID_MAX_S", d.max_s, |c, v| c.max_s = v);
+    vary("ID_MIN_S", d.min_s, |c, v| c.min_s = v);
+    vary("ID_BUDGET", d.attitude_budget_deg, |c, v| {
+        c.attitude_budget_deg = v
+    });
+    vary("ID_DITHER", d.dither, |c, v| c.dither = v);
+    vary("ID_DITHER_MAX", d.dither_max, |c, v| c.dither_max = v);
+    vary("ID_HOLD_S", d.hold_s, |c, v| c.hold_s = v);
+    vary("ID_FOCUS", d.focus_gain, |c, v| c.focus_gain = v);
+    vary("ID_FOCUS_OTHERS", d.focus_others, |c, v| c.focus_others = v);
+    vary("ID_SE_SCALE", d.carry_over_se_scale, |c, v| {
+        c.carry_over_se_scale = v
+    });
+    vary("ID_CARRY", if d.carry_over { 1.0 } else { 0.0 }, |c, v| {
+        c.carry_over = v > 0.0
+    });
+    for name in &noises {
+        let noise = match name.as_str() {
+            "none" => NoisePreset::None,
+            "realistic" => NoisePreset::Realistic,
+            "paper" => NoisePreset::Paper,
+            other => panic!("ID_NOISE: {other}"),
+        };
+        for cfg in &cfgs {
+            println!(
+                "== noise {name} hold_s {} dither {} dither_max {} budget {} min_s {} max_s {} \
+                 carry_over {} se_scale {} focus {} others {} (stop target {target})",
+                cfg.hold_s,
+                cfg.dither,
+                cfg.dither_max,
+                cfg.attitude_budget_deg,
+                cfg.min_s,
+                cfg.max_s,
+                cfg.carry_over,
+                cfg.carry_over_se_scale,
+                cfg.focus_gain,
+                cfg.focus_others,
+            );
+            println!(
+                "{:>5} {:>6} {:>7} {:>7} {:>8} {:>8} {:>6} {:>6} {:>7} {:>7} source",
+                "seed",
+                "took_s",
+                "err_rot",
+                "err_acc",
+                "max_tilt",
+                "mean_err",
+                "b_rot",
+                "b_acc",
+                "t_rot",
+                "t_acc"
+            );
+            let mut sum = [0.0f64; 7];
+            let (mut t_rot, mut t_acc) = ((0.0, 0), (0.0, 0));
+            for &seed in &seeds {
+                let mut b = Bounds::default();
+                // The defaults: the machine exactly as Run builds it.
+                let ident = (*cfg != d).then(|| cfg.clone());
+                let (_, r) =
+                    rotate_while_holding_with(noise, seed, ident, |m, s| b.observe(m, s, target));
+                let row = [
+                    r.took_s,
+                    r.err_rot,
+                    r.err_acc,
+                    r.max_tilt_deg,
+                    r.mean_err_deg,
+                    b.last.0,
+                    b.last.1,
+                ];
+                println!(
+                    "{}{:?}",
+                    line(&seed.to_string(), &row, b.t_rot, b.t_acc),
+                    r.source
+                );
+                for (s, v) in sum.iter_mut().zip(row) {
+                    *s += v;
+                }
+                for (acc, reached) in [(&mut t_rot, b.t_rot), (&mut t_acc, b.t_acc)] {
+                    if let Some(v) = reached {
+                        acc.0 += v;
+                        acc.1 += 1;
+                    }
+                }
+            }
+            let k = seeds.len().max(1) as f64;
+            let m = sum.map(|s| s / k);
+            let mean_t = |(s, n): (f64, usize)| (n > 0).then(|| s / n as f64);
+            println!(
+                "{} (t_rot, t_acc: mean over the {} / {} seeds that reached the target)",
+                line("mean", &m, mean_t(t_rot), mean_t(t_acc)),
+                t_rot.1,
+                t_acc.1
+            );
+        }
+    }
+}

@@ -1,0 +1,262 @@
+//! The state machine closed around the simulator's physics, in one process: the harness the
+//! in-process sweeps share. A copy of thrusterd-core's tests/common (the core's asserting
+//! tests keep theirs: the core may not depend on the lab), less what no sweep uses.
+
+use nalgebra::DMatrix;
+use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
+use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Mode, Request, State};
+
+/// Every vehicle file in config/vehicles, for sweeps over all of them.
+pub const VEHICLES: [&str; 6] = [
+    "aligned",
+    "amour5",
+    "amour5_top45",
+    "eight_vectored",
+    "four_up",
+    "six_dof",
+];
+
+/// The vehicle file config/vehicles/NAME.toml, through the simulator's loader; panics with the
+/// file's error (a sweep cannot go on without its vehicle).
+pub fn vehicle(name: &str) -> Vehicle {
+    let path = crate::session::config_file(&format!("vehicles/{name}.toml"));
+    Vehicle::load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()))
+}
+
+pub struct Run {
+    pub machine: Machine,
+    pub sim: Simulator,
+    pub last_mode: Mode,
+    pub max_abs_cmd: f64,
+    /// The command takes effect this long after its sample, us, drawn uniformly from the
+    /// range for every sample (a deterministic hash of its time): as through the driver in
+    /// real time (thruster-sim steps the physics to the command's arrival). None: at once.
+    /// Set by measuring sweeps (`RUN_LATENCY_US` there), never by an environment variable in
+    /// a test CI runs.
+    pub latency_us: Option<(u64, u64)>,
+}
+
+impl Run {
+    pub fn new(name: &str, noise: NoisePreset, seed: u64) -> Run {
+        Run::with_rate(name, noise, seed, 200.0)
+    }
+
+    pub fn with_rate(name: &str, noise: NoisePreset, seed: u64, rate_hz: f64) -> Run {
+        Run::with_vehicle(vehicle(name), noise, seed, rate_hz)
+    }
+
+    /// The same for a vehicle built or edited in the test.
+    pub fn with_vehicle(v: Vehicle, noise: NoisePreset, seed: u64, rate_hz: f64) -> Run {
+        let n = v.thrusters.len();
+        let sensors = SensorConfig {
+            rate_hz,
+            noise,
+            ..SensorConfig::default()
+        };
+        let sim = Simulator::new(v, sensors, seed).unwrap();
+        let mut setup = MachineSetup {
+            thrusters: n,
+            ..MachineSetup::default()
+        };
+        // No driver between machine and physics here: the daemon compensates the T200 deadband
+        // itself, as it would for a driver that does not.
+        setup.machine.deadband = 0.05;
+        let machine = Machine::new(setup);
+        Run {
+            machine,
+            sim,
+            last_mode: Mode::Neutral,
+            max_abs_cmd: 0.0,
+            latency_us: None,
+        }
+    }
+
+    /// The simulator stepped to the next sample on the sensor's grid (a command may have
+    /// arrived mid-period), and that sample as the machine takes it.
+    pub fn next_input(&mut self) -> ImuInput {
+        let period = self.sim.sample_period_ns();
+        self.sim.step_to((self.sim.time_ns() / period + 1) * period);
+        self.sim.sample()
+    }
+
+    pub fn tick(&mut self) {
+        let input = self.next_input();
+        let cmd = self.machine.on_imu(&input);
+        assert_eq!(cmd.count, self.sim.thruster_count());
+        for v in &cmd.thrust[..cmd.count] {
+            assert!(v.is_finite() && v.abs() <= 1.0, "command {v}");
+            self.max_abs_cmd = self.max_abs_cmd.max(v.abs());
+        }
+        assert!(cmd.thrust[cmd.count..].iter().all(|v| *v == 0.0));
+        self.last_mode = cmd.mode;
+        if let Some((lo, hi)) = self.latency_us {
+            let h = input.t_ns.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
+            let us = lo + h % (hi - lo + 1);
+            self.sim.step_to(input.t_ns + us * 1000);
+        }
+        self.sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
+    }
+
+    pub fn run_for(&mut self, s: f64) {
+        self.run_until(s, |_| false);
+    }
+
+    pub fn run_until(&mut self, max_s: f64, done: impl Fn(&Machine) -> bool) -> f64 {
+        let start = self.sim.time_s();
+        while self.sim.time_s() - start < max_s {
+            self.tick();
+            if done(&self.machine) {
+                break;
+            }
+        }
+        self.sim.time_s() - start
+    }
+
+    /// Symmetric truth: the model is linear, so it learns the mean of forward and reverse gain.
+    pub fn truth(&self) -> DMatrix<f64> {
+        let (fwd, rev) = self.sim.truth();
+        (fwd + rev) * 0.5
+    }
+
+    pub fn estimate(&mut self) -> f64 {
+        self.machine.on_request(Request::Estimate).unwrap();
+        self.run_until(120.0, |m| m.state() == State::Active)
+    }
+}
+
+pub fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
+    (est.rows(rows, 3) - truth.rows(rows, 3)).norm() / truth.rows(rows, 3).norm()
+}
+
+/// The vehicle's declared geometry.
+pub fn geometry(v: &Vehicle) -> thrusterd_core::machine::Geometry {
+    thrusterd_core::machine::Geometry {
+        positions: v.thrusters.iter().map(|t| t.position_m).collect(),
+        directions: v.thrusters.iter().map(|t| t.direction).collect(),
+    }
+}
+
+/// What a re-estimation did to the vehicle and what it learned.
+#[derive(Debug, Clone, Copy)]
+pub struct Reestimation {
+    /// Vehicle time from its start until control with the new model, s.
+    pub took_s: f64,
+    /// Largest tilt (true attitude, angle of body z from down), deg.
+    pub max_tilt_deg: f64,
+    /// Mean angle between the true attitude and level at the starting heading, deg.
+    pub mean_err_deg: f64,
+    /// The new model against the new truth, rotation and acceleration rows.
+    pub err_rot: f64,
+    pub err_acc: f64,
+    pub source: thrusterd_core::model::ModelSource,
+}
+
+impl Run {
+    /// AMOUR-5's top thruster "T" rotated 45 degrees about x, unannounced.
+    pub fn rotate_top(&mut self) {
+        self.sim
+            .apply(&thruster_sim::Action::Rotate {
+                thruster: "T".into(),
+                axis: [1.0, 0.0, 0.0],
+                angle_deg: 45.0,
+            })
+            .unwrap();
+    }
+
+    /// A new machine as `Run` builds it (the vehicle's thruster count, deadband 0.05), with
+    /// the identification section replaced.
+    pub fn with_identification(
+        &mut self,
+        identification: thrusterd_core::adaptation::identification::IdentificationConfig,
+    ) {
+        let mut setup = thrusterd_core::machine::MachineSetup {
+            thrusters: self.sim.thruster_count(),
+            identification,
+            ..thrusterd_core::machine::MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        self.machine = Machine::new(setup);
+    }
+
+    /// The same, calling `observe` with the machine and the seconds since the announcement
+    /// after every sample (the sweep in closed_loop.rs watches the error bounds with it).
+    pub fn announced_rotation_observed(
+        &mut self,
+        v: &Vehicle,
+        observe: impl FnMut(&Machine, f64),
+    ) -> Reestimation {
+        let top = thrusterd_core::machine::ThrusterChange::Moved(0);
+        self.announced_rotation_as(v, top, observe)
+    }
+
+    /// The same, the announcement saying `change` (which may name the wrong thruster).
+    pub fn announced_rotation_as(
+        &mut self,
+        v: &Vehicle,
+        change: thrusterd_core::machine::ThrusterChange,
+        observe: impl FnMut(&Machine, f64),
+    ) -> Reestimation {
+        self.announced_turn(v, 0, [1.0, 0.0, 0.0], 45.0, change, observe)
+    }
+
+    /// Thruster `index` of `v` turned by `angle_deg` about `axis` (body frame) and announced
+    /// as `change` with the new geometry, the machine holding level: as [`Self::announced_rotation_observed`].
+    pub fn announced_turn(
+        &mut self,
+        v: &Vehicle,
+        index: usize,
+        axis: [f64; 3],
+        angle_deg: f64,
+        change: thrusterd_core::machine::ThrusterChange,
+        mut observe: impl FnMut(&Machine, f64),
+    ) -> Reestimation {
+        use nalgebra::{Unit, UnitQuaternion, Vector3};
+        self.sim
+            .apply(&thruster_sim::Action::Rotate {
+                thruster: v.thrusters[index].name.clone(),
+                axis,
+                angle_deg,
+            })
+            .unwrap();
+        let mut moved = geometry(v);
+        let r = UnitQuaternion::from_axis_angle(
+            &Unit::new_normalize(Vector3::from(axis)),
+            angle_deg.to_radians(),
+        );
+        moved.directions[index] = (r * Vector3::from(moved.directions[index])).into();
+        let before = self.machine.model().map_or(0, |m| m.version);
+        self.machine.on_reconfig(thrusterd_core::machine::Reconfig {
+            count: v.thrusters.len(),
+            geometry: Some(moved),
+            change,
+            what: "top thruster rotated".into(),
+        });
+        let heading = self.sim.roll_pitch_yaw()[2];
+        let level = UnitQuaternion::from_euler_angles(0.0, 0.0, heading);
+        let start = self.sim.time_s();
+        let (mut max_tilt, mut err_sum, mut k) = (0.0f64, 0.0, 0u64);
+        while self.sim.time_s() - start < 120.0 {
+            self.tick();
+            let q = self.sim.attitude();
+            let down = q.inverse() * Vector3::z();
+            max_tilt = max_tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
+            err_sum += q.angle_to(&level).to_degrees();
+            k += 1;
+            observe(&self.machine, self.sim.time_s() - start);
+            let m = &self.machine;
+            if m.state() == State::Active && m.model().is_some_and(|m| m.version > before + 1) {
+                break;
+            }
+        }
+        let model = self.machine.model().unwrap().clone();
+        let truth = self.truth();
+        Reestimation {
+            took_s: self.sim.time_s() - start,
+            max_tilt_deg: max_tilt,
+            mean_err_deg: err_sum / k.max(1) as f64,
+            err_rot: rel_err(&model.effectiveness, &truth, 0),
+            err_acc: rel_err(&model.effectiveness, &truth, 3),
+            source: model.source,
+        }
+    }
+}

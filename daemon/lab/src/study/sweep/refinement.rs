@@ -1,0 +1,443 @@
+//! The continuous refinement's research sweeps (docs/experiments.md), moved from
+//! thrusterd-core's tests/refinement.rs: each prints a table, knobs from environment
+//! variables; the soaks end in a panic naming the false alarms, as they did as tests.
+
+use nalgebra::UnitQuaternion;
+use thruster_sim::disturbance::WaterPreset;
+use thruster_sim::NoisePreset;
+use thrusterd_core::adaptation::monitor::MismatchAction;
+use thrusterd_core::adaptation::refinement::RefinementConfig;
+use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
+
+use super::in_process::{Run, VEHICLES};
+
+/// [`holding`] with the refinement's settings replaced.
+fn holding_with(noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> Run {
+    holding_on("amour5", noise, seed, refinement)
+}
+
+/// [`holding_with`] on another vehicle file.
+fn holding_on(vehicle: &str, noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> Run {
+    holding_on_prior(vehicle, noise, seed, refinement, None)
+}
+
+/// [`holding_on`] with the estimator's terms prior (`term_prior_sd`, default off) replaced:
+/// for `detection_bound`'s decisive runs (`DB_TERM_PRIOR`); no asserting test sets it.
+pub(super) fn holding_on_prior(
+    vehicle: &str,
+    noise: NoisePreset,
+    seed: u64,
+    refinement: RefinementConfig,
+    term_prior_sd: Option<f64>,
+) -> Run {
+    let mut run = Run::new(vehicle, noise, seed);
+    let mut setup = MachineSetup {
+        thrusters: run.sim.thruster_count(),
+        refinement,
+        ..MachineSetup::default()
+    };
+    setup.machine.deadband = 0.05;
+    if let Some(v) = term_prior_sd {
+        setup.estimator.term_prior_sd = v;
+    }
+    // The monitor's own test never fires (infinite threshold); its action still decides what
+    // a mismatch does: re-estimate.
+    setup.monitor.action = MismatchAction::Estimate;
+    setup.monitor.z = f64::INFINITY;
+    run.machine = Machine::new(setup);
+    run.run_for(1.0);
+    run.estimate();
+    run.machine.take_events();
+    run
+}
+
+/// Pitch steps of +-20 deg every 4 s for `seconds`; the first mismatch's time, if any.
+fn pitch_until_mismatch(run: &mut Run, seconds: f64) -> Option<(f64, String)> {
+    pitch_scored(run, seconds).0
+}
+
+/// [`pitch_until_mismatch`], and the mean angle between the true attitude and the setpoint
+/// over the samples flown, deg.
+fn pitch_scored(run: &mut Run, seconds: f64) -> (Option<(f64, String)>, f64) {
+    let (mut sum, mut k) = (0.0, 0u64);
+    let found = pitch_with(run, seconds, |sp, run| {
+        sum += run.sim.attitude().angle_to(sp).to_degrees();
+        k += 1;
+    });
+    (found, sum / k.max(1) as f64)
+}
+
+fn pitch_with(
+    run: &mut Run,
+    seconds: f64,
+    mut each: impl FnMut(&UnitQuaternion<f64>, &Run),
+) -> Option<(f64, String)> {
+    let yaw = run.sim.roll_pitch_yaw()[2];
+    let depth = run.sim.position_ned().z;
+    let start = run.sim.time_s();
+    let mut step = 0;
+    let mut sp = UnitQuaternion::identity();
+    while run.sim.time_s() - start < seconds {
+        let t = run.sim.time_s() - start;
+        if t >= 4.0 * step as f64 {
+            let p: f64 = [20.0, -20.0][step % 2];
+            sp = UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw);
+            run.machine.on_setpoint(sp, Some(depth));
+            step += 1;
+        }
+        run.tick();
+        each(&sp, run);
+        for e in run.machine.take_events() {
+            if let Event::MismatchDetected(why) = e {
+                return Some((t, why));
+            }
+        }
+        assert_eq!(
+            run.machine.state(),
+            State::Active,
+            "left control at {t:.1} s"
+        );
+    }
+    None
+}
+
+/// What `khz_hold` varies; the default is the shipped setup.
+struct KhzSettings {
+    seconds: f64,
+    /// The deadband the machine compensates (0.05: the T200's, as thruster-sim's driver does
+    /// in the daemon's setup). With 0 the model is linear where the thrust is not, and the
+    /// change test took that for a yaw thruster's change after 13 s (seed 1).
+    deadband: f64,
+    change_test: bool,
+    latency_us: Option<(u64, u64)>,
+}
+
+impl Default for KhzSettings {
+    fn default() -> Self {
+        KhzSettings {
+            seconds: 180.0,
+            deadband: 0.05,
+            change_test: true,
+            latency_us: None,
+        }
+    }
+}
+
+/// Estimates at 1 kHz and the paper's noise, then holds through pitch 0 / 10 deg steps every
+/// 20 s for `seconds`; panics on any mismatch reported or on leaving Active. The number of
+/// refinement windows judged.
+fn khz_hold(seed: u64, k: KhzSettings) -> usize {
+    let mut run = Run::with_rate("amour5", NoisePreset::Paper, seed, 1000.0);
+    run.latency_us = k.latency_us;
+    let mut setup = MachineSetup {
+        thrusters: 5,
+        ..MachineSetup::default()
+    };
+    // No driver in between: the machine compensates the deadband itself.
+    setup.machine.deadband = k.deadband;
+    setup.refinement.change_test = k.change_test;
+    run.machine = Machine::new(setup);
+    run.run_for(1.0);
+    run.estimate();
+    run.machine.take_events();
+    let yaw = run.sim.roll_pitch_yaw()[2];
+    let depth = run.sim.position_ned().z;
+    let start = run.sim.time_s();
+    let mut step = 0;
+    let mut windows = 0;
+    while run.sim.time_s() - start < k.seconds {
+        let t = run.sim.time_s() - start;
+        if t >= 20.0 * step as f64 {
+            let p: f64 = [10.0, 0.0][step % 2];
+            run.machine.on_setpoint(
+                UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw),
+                Some(depth),
+            );
+            step += 1;
+        }
+        let before = run.machine.refinement().copied();
+        run.tick();
+        if run.machine.refinement().copied() != before {
+            windows += 1;
+        }
+        for e in run.machine.take_events() {
+            assert!(
+                !matches!(e, Event::MismatchDetected(_)),
+                "seed {seed}: false alarm at {t:.1} s: {e:?}"
+            );
+        }
+        assert_eq!(
+            run.machine.state(),
+            State::Active,
+            "seed {seed} at {t:.1} s"
+        );
+    }
+    windows
+}
+
+/// Hold level at the current heading and depth for `seconds`; the first mismatch's time (s
+/// from the start of this call) and text, if any.
+fn level_until_mismatch(run: &mut Run, seconds: f64) -> Option<(f64, String)> {
+    level_with(run, seconds, |_| {})
+}
+
+/// [`level_until_mismatch`], calling `each` after every sample.
+fn level_with(run: &mut Run, seconds: f64, mut each: impl FnMut(&Run)) -> Option<(f64, String)> {
+    let yaw = run.sim.roll_pitch_yaw()[2];
+    let depth = run.sim.position_ned().z;
+    run.machine.on_setpoint(
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+        Some(depth),
+    );
+    let start = run.sim.time_s();
+    while run.sim.time_s() - start < seconds {
+        run.tick();
+        each(run);
+        let t = run.sim.time_s() - start;
+        for e in run.machine.take_events() {
+            if let Event::MismatchDetected(why) = e {
+                return Some((t, why));
+            }
+        }
+        assert_eq!(
+            run.machine.state(),
+            State::Active,
+            "left control at {t:.1} s"
+        );
+    }
+    None
+}
+
+/// The false-alarm flight of the soaks: `seconds` of pitch steps, then (if nothing was
+/// reported) as long holding level; the mismatch of each part, if any.
+type Mismatch = Option<(f64, String)>;
+
+fn quiet_flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
+    let pitch = pitch_until_mismatch(run, seconds);
+    let level = if pitch.is_none() {
+        level_until_mismatch(run, seconds)
+    } else {
+        None
+    };
+    (pitch, level)
+}
+
+/// The shipped refinement settings (the per-sample change test on, as by default: see
+/// `RefinementConfig::change_test`). What the asserting tests use: no environment variable
+/// changes it.
+fn shipped_change_test() -> RefinementConfig {
+    let c = RefinementConfig::default();
+    assert!(c.change_test, "the change test is on by default");
+    c
+}
+
+/// [`shipped_change_test`] with the measuring runs' overrides from the environment (the
+/// ignored measuring tools only).
+fn with_change_test() -> RefinementConfig {
+    let mut c = shipped_change_test();
+    if let Ok(v) = std::env::var("CT_UPDATE") {
+        c.update = v == "1";
+    }
+    // Overrides for the measuring runs: (variable, the setting it replaces).
+    for (key, field) in [
+        ("CT_FLOOR", &mut c.change_model_floor),
+        ("CT_SHARE", &mut c.change_min_share),
+        ("CT_NOISE_S", &mut c.change_noise_s),
+        ("CT_TAU", &mut c.change_tau_s),
+        ("CT_CHI2", &mut c.change_chi2),
+        ("CT_TERM_Z", &mut c.change_term_z),
+        ("CT_WARMUP", &mut c.change_warmup_s),
+        ("CT_MAX_ERROR", &mut c.change_max_error_deg),
+    ] {
+        if let Ok(v) = std::env::var(key) {
+            *field = v.parse().unwrap_or_else(|_| panic!("{key}: {v}"));
+        }
+    }
+    c
+}
+
+/// The 1 kHz hold with knobs, for the change test's runs in docs/experiments.md: KHZ_SEEDS
+/// (comma list, default 1,2,3), KHZ_SECONDS (180), KHZ_DEADBAND (0.05), KHZ_CHANGE_TEST=0
+/// (turn it off), RUN_LATENCY_US (`A` or `A-B`: the command takes effect that long after its
+/// sample, as through the driver in real time). A measuring tool; run with
+/// `cargo run --release -p thrusterctl -- study sweep khz_sweep`.
+pub(super) fn khz_sweep() {
+    let seeds: Vec<u64> = std::env::var("KHZ_SEEDS").map_or(vec![1, 2, 3], |v| {
+        v.split(',').map(|x| x.trim().parse().unwrap()).collect()
+    });
+    let latency_us = std::env::var("RUN_LATENCY_US")
+        .ok()
+        .map(|v| match v.split_once('-') {
+            Some((a, b)) => (a.parse().unwrap(), b.parse().unwrap()),
+            None => (v.parse().unwrap(), v.parse().unwrap()),
+        });
+    for seed in seeds {
+        let k = KhzSettings {
+            seconds: std::env::var("KHZ_SECONDS").map_or(180.0, |v| v.parse().unwrap()),
+            deadband: std::env::var("KHZ_DEADBAND").map_or(0.05, |v| v.parse().unwrap()),
+            change_test: std::env::var("KHZ_CHANGE_TEST").map_or(true, |v| v != "0"),
+            latency_us,
+        };
+        let windows = khz_hold(seed, k);
+        println!("seed {seed}: no alarm, {windows} refinement windows");
+    }
+}
+
+/// The refinement's dither against detection and hold at a given noise: for each seed, 120 s
+/// of pitch steps on the unchanged vehicle (a false alarm ends it), then the top thruster
+/// rotated and up to 120 s more. Prints the first alarm, the detection time and the mean
+/// angle from the setpoint. A measuring tool; knobs RF_NOISE (paper, realistic), RF_SEEDS
+/// (comma list), RF_DITHER (comma list). Run with
+/// `cargo run --release -p thrusterctl -- study sweep dither_sweep`.
+pub(super) fn dither_sweep() {
+    let noise = match std::env::var("RF_NOISE").as_deref() {
+        Ok("realistic") => NoisePreset::Realistic,
+        _ => NoisePreset::Paper,
+    };
+    let list = |key: &str, default: &str| -> Vec<f64> {
+        std::env::var(key)
+            .unwrap_or_else(|_| default.into())
+            .split(',')
+            .map(|v| v.trim().parse().unwrap_or_else(|_| panic!("{key}: {v}")))
+            .collect()
+    };
+    for dither in list("RF_DITHER", "0.1") {
+        let (mut found_sum, mut found_n, mut alarms, mut err_sum) = (0.0, 0, 0, 0.0);
+        let seeds = list("RF_SEEDS", "1,2,3,4");
+        for &seed in &seeds {
+            let cfg = RefinementConfig {
+                dither,
+                ..RefinementConfig::default()
+            };
+            let term_prior = std::env::var("DB_TERM_PRIOR")
+                .ok()
+                .map(|v| v.parse().expect("DB_TERM_PRIOR"));
+            let mut run = holding_on_prior("amour5", noise, seed as u64, cfg, term_prior);
+            let (quiet, err) = pitch_scored(&mut run, 120.0);
+            err_sum += err;
+            let found = if quiet.is_none() {
+                run.rotate_top();
+                pitch_until_mismatch(&mut run, 120.0)
+            } else {
+                alarms += 1;
+                None
+            };
+            if let Some((t, _)) = &found {
+                found_sum += t;
+                found_n += 1;
+            }
+            println!(
+                "dither {dither} seed {seed}: false alarm {:?}, found after {:?}, mean error {err:.2} deg",
+                quiet.map(|q| q.0),
+                found.map(|f| f.0)
+            );
+        }
+        println!(
+            "dither {dither}: {alarms} false alarms in {} x 120 s, found in {found_n} (mean {:.1} s), mean error {:.2} deg",
+            seeds.len(),
+            found_sum / found_n.max(1) as f64,
+            err_sum / seeds.len() as f64
+        );
+    }
+}
+
+/// The false-alarm soak for the change test: `CT_MINUTES` (default 10) through pitch steps
+/// (+-20 deg every 4 s), then as long again holding level, on an unchanged vehicle at the
+/// paper's noise with the shipped settings and the change test on, seeds `CT_SEEDS` (default
+/// 1-5; CT_NOISE realistic or none for another IMU; CT_WATER a water preset that comes up
+/// after the estimation); no mismatch may be reported. Then the
+/// top thruster rotated while holding level: prints the detection time. A measuring tool (minutes of vehicle
+/// time per seed): `cargo run --release -p thrusterctl -- study sweep change_test_soak`.
+pub(super) fn change_test_soak() {
+    let minutes: f64 = std::env::var("CT_MINUTES").map_or(10.0, |v| v.parse().unwrap());
+    let seeds: Vec<u64> = std::env::var("CT_SEEDS")
+        .unwrap_or_else(|_| "1,2,3,4,5".into())
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    let mut alarms = Vec::new();
+    for seed in seeds {
+        let noise = match std::env::var("CT_NOISE").as_deref() {
+            Ok("realistic") => NoisePreset::Realistic,
+            Ok("none") => NoisePreset::None,
+            _ => NoisePreset::Paper,
+        };
+        let mut run = holding_with(noise, seed, with_change_test());
+        // CT_WATER (current|moderate|rough): the model learned in still water, then the water
+        // comes up (issue 32 item 5: a swell is not a moved thruster).
+        let water = match std::env::var("CT_WATER").as_deref() {
+            Ok("current") => Some(WaterPreset::Current),
+            Ok("moderate") => Some(WaterPreset::Moderate),
+            Ok("rough") => Some(WaterPreset::Rough),
+            _ => None,
+        };
+        if let Some(w) = water {
+            run.sim.set_disturbance(w.disturbance()).unwrap();
+        }
+        let (pitch, level) = quiet_flight(&mut run, minutes * 60.0);
+        println!("seed {seed}: pitch steps {pitch:?}, level {level:?}");
+        if level.is_some() || pitch.is_some() {
+            alarms.push((seed, level, pitch));
+            continue;
+        }
+        run.rotate_top();
+        let mut tilt = 0.0f64;
+        let mut track = |run: &Run| {
+            let down = run.machine.attitude().inverse() * nalgebra::Vector3::z();
+            tilt = tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
+        };
+        // CT_AFTER: the flight after the change, pitch steps (the hot-swap experiment's) or
+        // level (default).
+        let after = std::env::var("CT_AFTER").unwrap_or_else(|_| "level".into());
+        let found = if after == "pitch" {
+            pitch_with(&mut run, 60.0, |_, run| track(run))
+        } else {
+            level_with(&mut run, 60.0, &mut track)
+        };
+        println!(
+            "seed {seed}: rotated top thruster found ({after}) after {found:?}; largest tilt (filter) {tilt:.1} deg"
+        );
+    }
+    assert!(alarms.is_empty(), "false alarms: {alarms:?}");
+}
+
+/// The change test (`with_change_test`) on every vehicle file: `CT_MINUTES` (default 5) of pitch
+/// steps (+-20 deg every 4 s) then as long holding level, unchanged, at each noise of
+/// `CT_NOISES` (default none,realistic,paper), seeds `CT_SEEDS` (default 1; CT_VEHICLES a
+/// subset, CT_CHANGE_TEST=0 the windows alone); prints every
+/// mismatch reported (a false alarm) and fails on any. A measuring tool: `cargo run --release -p thrusterctl -- study sweep change_test_on_every_vehicle`.
+pub(super) fn change_test_on_every_vehicle() {
+    let minutes: f64 = std::env::var("CT_MINUTES").map_or(5.0, |v| v.parse().unwrap());
+    let list = |key: &str, default: &str| -> Vec<String> {
+        std::env::var(key)
+            .unwrap_or_else(|_| default.into())
+            .split(',')
+            .map(|v| v.trim().to_string())
+            .collect()
+    };
+    let mut alarms = Vec::new();
+    for vehicle in list("CT_VEHICLES", &VEHICLES.join(",")) {
+        for noise in list("CT_NOISES", "none,realistic,paper") {
+            let preset = match noise.as_str() {
+                "none" => NoisePreset::None,
+                "realistic" => NoisePreset::Realistic,
+                _ => NoisePreset::Paper,
+            };
+            for seed in list("CT_SEEDS", "1") {
+                let seed: u64 = seed.parse().unwrap();
+                // CT_CHANGE_TEST=0: the windows alone (is an alarm the change test's?).
+                let cfg = RefinementConfig {
+                    change_test: std::env::var("CT_CHANGE_TEST").map_or(true, |v| v != "0"),
+                    ..with_change_test()
+                };
+                let mut run = holding_on(&vehicle, preset, seed, cfg);
+                let (pitch, level) = quiet_flight(&mut run, minutes * 60.0);
+                println!("{vehicle} {noise} seed {seed}: pitch steps {pitch:?}, level {level:?}");
+                if pitch.is_some() || level.is_some() {
+                    alarms.push((vehicle.clone(), noise.clone(), seed, pitch, level));
+                }
+            }
+        }
+    }
+    assert!(alarms.is_empty(), "false alarms: {alarms:#?}");
+}
