@@ -1,7 +1,9 @@
 //! The house rules of docs/architecture.md ("Layout: what each package may depend on"), checked
 //! on the sources so a move that breaks them fails here instead of in review:
 //! - inside a package, files do not import each other in circles;
-//! - the pure core's dependency tree holds no IPC, signal, logging or systemd crate.
+//! - the pure core's dependency tree holds no IPC, signal, logging or systemd crate;
+//! - no product file is over 900 lines before its unit tests (issue 28);
+//! - the core holds no study, no plotting and no dependency on the lab (issue 28).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -316,4 +318,126 @@ fn the_pure_core_does_no_io() {
         src.display()
     );
     assert!(uses.is_empty(), "IO in the pure core:\n{}", uses.join("\n"));
+}
+
+/// The longest a product file may be, in lines before its unit tests (`mod tests {`): one
+/// file, one job, read in one sitting (issue 28).
+const MAX_LINES: usize = 900;
+
+/// Files still over [`MAX_LINES`]: being split under issue 28. The list only shrinks: a file
+/// on it that is back under the limit fails the test below until it is taken off.
+const OVER_MAX_LINES: &[&str] = &[
+    "daemon/core/src/estimator/run.rs",
+    "daemon/core/src/machine/state_machine.rs",
+    "daemon/core/src/refinement/mod.rs",
+    "daemon/thrusterd/src/run.rs",
+    "tests/src/bin/season.rs",
+];
+
+/// Lines of a file before its unit tests.
+fn product_lines(text: &str) -> usize {
+    text.split("mod tests {")
+        .next()
+        .unwrap_or(text)
+        .lines()
+        .count()
+}
+
+#[test]
+fn no_product_file_is_over_900_lines() {
+    let mut over = Vec::new();
+    let mut seen = 0;
+    for package in packages() {
+        let mut files = Vec::new();
+        rust_files(&workspace().join(&package).join("src"), &mut files);
+        for file in files {
+            seen += 1;
+            let lines = product_lines(&std::fs::read_to_string(&file).unwrap());
+            let rel = file.strip_prefix(workspace()).unwrap().to_string_lossy();
+            // On Windows-style paths too: the list is written with '/'.
+            let rel = rel.replace('\\', "/");
+            let allowed = OVER_MAX_LINES.contains(&rel.as_str());
+            if lines > MAX_LINES && !allowed {
+                over.push(format!("{rel}: {lines} lines"));
+            }
+            if lines <= MAX_LINES && allowed {
+                over.push(format!(
+                    "{rel}: {lines} lines, now under {MAX_LINES}: take it off OVER_MAX_LINES"
+                ));
+            }
+        }
+    }
+    assert!(seen > 100, "only {seen} files under the packages' src/");
+    for listed in OVER_MAX_LINES {
+        assert!(
+            workspace().join(listed).exists(),
+            "{listed} is on OVER_MAX_LINES but gone: take it off"
+        );
+    }
+    assert!(
+        over.is_empty(),
+        "files over {MAX_LINES} lines:\n{}",
+        over.join("\n")
+    );
+    // The counter itself: the unit tests after `mod tests {` do not count.
+    let text = format!("{}mod tests {{\n{}", "x\n".repeat(3), "y\n".repeat(5000));
+    assert_eq!(product_lines(&text), 3);
+}
+
+/// What makes a file plotting code: it writes SVG.
+fn writes_svg(text: &str) -> bool {
+    text.contains("<svg")
+}
+
+/// Research lives in the lab (issue 28): the core has no study, no plotting and no way to
+/// reach the lab.
+#[test]
+fn the_core_has_no_study_no_plotting_and_no_lab() {
+    let core = workspace().join("daemon/core");
+    let src = core.join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    assert!(
+        files.len() > 30,
+        "only {} files under {}",
+        files.len(),
+        src.display()
+    );
+    let mut found = Vec::new();
+    for file in &files {
+        let module = module_of(&src, file);
+        let text = code(&std::fs::read_to_string(file).unwrap());
+        if module.iter().any(|m| m == "study" || m.starts_with("plot")) {
+            found.push(format!("{}: a study or plot module", file.display()));
+        }
+        if text.contains("mod study") {
+            found.push(format!("{}: declares mod study", file.display()));
+        }
+        if writes_svg(&text) {
+            found.push(format!("{}: writes SVG", file.display()));
+        }
+    }
+    let manifest: toml::Value =
+        toml::from_str(&std::fs::read_to_string(core.join("Cargo.toml")).unwrap()).unwrap();
+    for section in ["dependencies", "dev-dependencies", "build-dependencies"] {
+        if manifest
+            .get(section)
+            .and_then(|d| d.get("thruster-lab"))
+            .is_some()
+        {
+            found.push(format!(
+                "daemon/core/Cargo.toml: thruster-lab in [{section}]"
+            ));
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "research in the core:\n{}",
+        found.join("\n")
+    );
+    // The SVG check itself: the lab's writer is caught by it.
+    let lab_plot = workspace().join("daemon/lab/src/plot.rs");
+    assert!(writes_svg(&code(
+        &std::fs::read_to_string(lab_plot).unwrap()
+    )));
 }

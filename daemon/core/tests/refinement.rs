@@ -154,7 +154,7 @@ fn at_the_papers_noise_a_rotated_thruster_is_found_and_an_unchanged_one_is_not()
 /// Holding through the soak's manoeuvres (pitch 0 / 10 deg every 20 s) at 1 kHz and the
 /// paper's noise, with the shipped settings (monitor and change test included): nothing
 /// changed, so nothing may be reported. This is where one window deciding failed (see the
-/// module docs). The knobs of the runs in docs/experiments.md are `khz_sweep`'s.
+/// module docs). The knobs of the runs in docs/experiments.md are the lab's `khz_sweep`'s.
 #[test]
 fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_minutes() {
     for seed in [1, 2, 3] {
@@ -368,9 +368,9 @@ fn at_the_papers_noise_the_change_test_finds_a_rotated_thruster_within_seconds()
     assert!(mean < 6.0, "mean {mean:.2} s: {results:?}");
 }
 
-/// The false-alarm check CI runs, a short version of [`change_test_soak`] and
-/// [`change_test_on_every_vehicle`] (config/thrusterd.toml's "no false alarm" rests on the long
-/// ones; docs/experiments.md quotes their figures and commands): with the shipped settings
+/// The false-alarm check CI runs, a short version of the lab's sweeps `change_test_soak` and
+/// `change_test_on_every_vehicle` (`thrusterctl study sweep NAME`; config/thrusterd.toml's "no
+/// false alarm" rests on the long ones; docs/research-log.md quotes their figures and commands): with the shipped settings
 /// (no environment variable read), an unchanged vehicle flown through pitch steps (+-20 deg
 /// every 4 s) and then as long holding level raises no mismatch, and the refinement judged
 /// meanwhile (a window ended). AMOUR-5 at the paper's noise, seeds 1-5, 2 + 2 minutes each.

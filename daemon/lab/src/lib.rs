@@ -3,6 +3,7 @@
 //! operator's client and scores the result against the simulator's truth ([`scoring`]).
 //! Not part of a vehicle build (thrusterctl's `lab` feature).
 
+pub mod child;
 pub mod demo;
 pub mod excursion;
 pub mod experiment;
@@ -12,4 +13,5 @@ pub mod scoring;
 pub mod seeds;
 pub mod session;
 pub mod study;
+pub mod vehicle;
 pub mod water;

@@ -1,0 +1,201 @@
+//! The experiment's text report and its output folder (per-run CSV, the figure, the JSON).
+
+use super::*;
+
+pub(super) fn fmt(v: &Value) -> String {
+    match v.as_f64() {
+        Some(x) => format!("{x:.2}"),
+        None if v.is_null() => "-".into(),
+        None => v.to_string(),
+    }
+}
+
+/// What followed a change, in the order it happens; what did not happen is said in words, not
+/// as "-" (the oracle does not re-estimate; an announced change is told, not detected).
+pub(super) fn hot_swap_events(h: &Value) -> String {
+    let after = |key: &str| h[key].as_f64().map(|v| format!("{v:.2} s"));
+    let mut parts = vec![match after("reestimation_start_delay_s") {
+        Some(t) => format!("re-estimation began after {t}"),
+        None => "no re-estimation".to_string(),
+    }];
+    if let Some(t) = after("detection_delay_s") {
+        parts.push(format!("mismatch in status after {t}"));
+    }
+    if let Some(t) = after("first_swap_delay_s") {
+        let source = h["first_swap_source"].as_str().unwrap_or("unknown source");
+        parts.push(format!("first swap after {t} ({source})"));
+    }
+    if let Some(t) = after("new_model_delay_s") {
+        parts.push(format!("new model after {t}"));
+    }
+    let threshold = fmt(&h["recovery_threshold_deg"]);
+    parts.push(match after("recovered_after_s") {
+        Some(t) => format!("recovered (2 s windows < {threshold} deg) after {t}"),
+        None => format!("not recovered (2 s windows < {threshold} deg)"),
+    });
+    parts.join(", ")
+}
+
+/// A settled error in words: "settled 1.23 deg", or "not settled" where no step was held long enough
+/// to count (issue 27: it read "settled - deg").
+pub(super) fn settled(v: &Value) -> String {
+    match v.as_f64() {
+        Some(x) => format!("settled {x:.2} deg"),
+        None => "not settled".into(),
+    }
+}
+
+pub(super) fn print_report(name: Name, outs: &[RunOutput], summary: &Value) {
+    println!(
+        "experiment {} (noise {}, seed {})",
+        name.id(),
+        summary["noise"].as_str().unwrap_or("paper"),
+        summary["seed"]
+    );
+    for o in outs {
+        let v = &summary["runs"][o.spec.label];
+        println!();
+        println!("run {}: {}", o.spec.label, o.spec.title);
+        let m = &v["model"];
+        println!(
+            "  model: {} ({} {}), actuated {}, error vs truth rot {} acc {}",
+            m["start"].as_str().unwrap_or(""),
+            m["source"].as_str().unwrap_or(""),
+            m["method"].as_str().unwrap_or(""),
+            m["actuated"]
+                .as_array()
+                .map(|a| a
+                    .iter()
+                    .filter_map(|x| x.as_str())
+                    .collect::<Vec<_>>()
+                    .join(","))
+                .unwrap_or_default(),
+            fmt(&m["rel_err_rot_vs_truth"]),
+            fmt(&m["rel_err_acc_vs_truth"]),
+        );
+        if let Some(e) = v["estimation_vehicle_s"].as_f64() {
+            println!(
+                "  estimated in {e:.1} vehicle s ({} pulses)",
+                v["estimation_pulses"]
+            );
+        }
+        println!(
+            "  mean angular error {} deg ({}; max {}), mean |yaw error| {} deg over {} s of hold",
+            fmt(&v["mean_err_deg"]),
+            settled(&v["settled_mean_err_deg"]),
+            fmt(&v["max_err_deg"]),
+            fmt(&v["mean_abs_yaw_err_deg"]),
+            fmt(&v["hold_s"]),
+        );
+        if let Some(groups) = v["per_maneuver"].as_object() {
+            for (g, s) in groups {
+                println!(
+                    "    {g:>5}: mean {} deg, {}, |yaw error| mean {} max {} deg",
+                    fmt(&s["mean_err_deg"]),
+                    settled(&s["settled_mean_err_deg"]),
+                    fmt(&s["mean_abs_yaw_err_deg"]),
+                    fmt(&s["max_abs_yaw_err_deg"]),
+                );
+            }
+        }
+        let osc = &v["oscillation"];
+        println!(
+            "  oscillation: roll rate rms {} deg/s, sway {} / heave {} m/s rms, high-passed error rms {} deg, thrust activity {} /s",
+            fmt(&osc["roll_rate_rms_deg_s"]),
+            fmt(&osc["sway_vel_rms_m_s"]),
+            fmt(&osc["heave_vel_rms_m_s"]),
+            fmt(&osc["high_passed_err_rms_deg"]),
+            fmt(&osc["thrust_activity_per_s"]),
+        );
+        if !v["monitor_mismatch_at_s"].is_null() {
+            println!(
+                "  model-mismatch monitor fired at {} s",
+                fmt(&v["monitor_mismatch_at_s"])
+            );
+        }
+        let h = &v["hot_swap"];
+        if !h.is_null() {
+            // One clock with the figure: its x axis is time since this run's hold began (the
+            // first estimation takes a different time per run, so the change, at one vehicle
+            // time for all, sits at a different x per row).
+            let since_hold = match (h["t_change_s"].as_f64(), v["hold_start_s"].as_f64()) {
+                (Some(c), Some(h0)) => format!("{:.2}", c - h0),
+                _ => "-".into(),
+            };
+            // The re-estimation's start is its first command's sample time; the mismatch is
+            // seen in a status, published up to a status period after the monitor fired and
+            // started the re-estimation: so the status can read later than the start.
+            println!(
+                "  change {since_hold} s after the hold began (vehicle time {} s): {}",
+                fmt(&h["t_change_s"]),
+                hot_swap_events(h)
+            );
+            let r = &h["reestimation"];
+            if !r.is_null() {
+                println!(
+                    "  while re-estimating ({} vehicle-s): largest tilt {} deg, heading change {} deg, error from the setpoint {} deg",
+                    fmt(&r["vehicle_s"]),
+                    fmt(&r["max_tilt_deg"]),
+                    fmt(&r["max_heading_change_deg"]),
+                    fmt(&r["max_err_deg"]),
+                );
+            }
+            for part in ["before", "during", "after"] {
+                println!(
+                    "    {part:>6}: mean error {} deg (max {}), |yaw error| {} deg, while pitching {} deg",
+                    fmt(&h[part]["mean_err_deg"]),
+                    fmt(&h[part]["max_err_deg"]),
+                    fmt(&h[part]["mean_abs_yaw_err_deg"]),
+                    fmt(&h[part]["mean_abs_yaw_err_pitching_deg"]),
+                );
+            }
+        }
+        println!(
+            "  {:.1} s wall clock{}, shutdown {}",
+            o.wall_s,
+            o.pace.map(|p| format!(" at pace {p}")).unwrap_or_default(),
+            if o.shutdown.clean {
+                "clean"
+            } else {
+                "NOT clean"
+            }
+        );
+    }
+    println!();
+    println!("headline: {}", summary["headline"]);
+}
+
+pub(super) fn write_out(dir: &Path, name: Name, outs: &[RunOutput], summary: &Value) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for o in outs {
+        let mut csv = String::from(
+            "t_s,setpoint_roll_deg,setpoint_pitch_deg,setpoint_yaw_deg,roll_deg,pitch_deg,yaw_deg,err_deg,yaw_err_deg,state,step\n",
+        );
+        for r in &o.rows {
+            let _ = writeln!(
+                csv,
+                "{:.3},{:.2},{:.2},{:.2},{:.3},{:.3},{:.3},{:.3},{:.3},{},{}",
+                r.t,
+                r.sp[0],
+                r.sp[1],
+                r.sp[2],
+                r.tru[0],
+                r.tru[1],
+                r.tru[2],
+                r.err,
+                r.yaw_err,
+                r.state.name(),
+                o.spec.plan.steps[r.step].label.replace(' ', "_"),
+            );
+        }
+        let path = dir.join(format!("{}_{}.csv", name.id(), o.spec.label));
+        std::fs::write(&path, csv).with_context(|| format!("writing {}", path.display()))?;
+    }
+    let svg = figure(name, outs);
+    let path = dir.join(format!("{}.svg", name.id()));
+    std::fs::write(&path, svg).with_context(|| format!("writing {}", path.display()))?;
+    let path = dir.join(format!("{}.json", name.id()));
+    std::fs::write(&path, serde_json::to_string_pretty(summary)? + "\n")
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}

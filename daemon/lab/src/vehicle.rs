@@ -1,0 +1,81 @@
+//! The lab's vehicle files, read through the simulator's one loader (`thruster_sim::Vehicle`):
+//! the file the simulator runs is the file the lab counts thrusters in and declares to the
+//! daemon, checked the same way.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use thruster_protocol::MAX_THRUSTERS;
+use thruster_sim::Vehicle;
+
+/// The vehicle file at `path`, loaded and checked by the simulator, with 1 to
+/// [`MAX_THRUSTERS`] thrusters.
+pub fn load(path: &Path) -> Result<Vehicle> {
+    let vehicle = Vehicle::load(path).with_context(|| format!("{}", path.display()))?;
+    let n = vehicle.thrusters.len();
+    if !(1..=MAX_THRUSTERS).contains(&n) {
+        bail!(
+            "{}: {n} thrusters ([[thruster]] tables), expected 1..{MAX_THRUSTERS}",
+            path.display()
+        );
+    }
+    Ok(vehicle)
+}
+
+/// The declared geometry of a vehicle as the daemon wants it: positions from the centre of
+/// mass (the file's are from the centre of origin; the body's `cg_m`, default [0, 0, 0.02] as
+/// in the simulator's BlueROV2 body), and the direction of positive thrust (a `reversed`
+/// thruster pushes the other way; the loader has normalised it).
+pub fn declared_geometry(vehicle: &Vehicle) -> Vec<([f64; 3], [f64; 3])> {
+    let cg = vehicle.body.cg_m;
+    vehicle
+        .thrusters
+        .iter()
+        .map(|t| {
+            let sign = if t.reversed { -1.0 } else { 1.0 };
+            let p = t.position_m;
+            (
+                [p[0] - cg[0], p[1] - cg[1], p[2] - cg[2]],
+                t.direction.map(|x| sign * x),
+            )
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn declared_geometry_is_from_the_centre_of_mass_with_reversal() {
+        let text = r#"
+            [[thruster]]
+            name = "a"
+            position_m = [0.2, 0.0, -0.15]
+            direction = [0.0, 0.0, -1.0]
+            [[thruster]]
+            name = "b"
+            position_m = [0, -0.2, 0]
+            direction = [1.0, 0.0, 0.0]
+            reversed = true
+        "#;
+        let g = declared_geometry(&Vehicle::from_toml_str(text, "test").unwrap());
+        assert_eq!(g.len(), 2);
+        assert_eq!(g[0].1, [0.0, 0.0, -1.0]);
+        assert!((g[0].0[2] - (-0.17)).abs() < 1e-12, "{:?}", g[0].0);
+        assert_eq!(g[1].0, [0.0, -0.2, -0.02]);
+        assert_eq!(g[1].1, [-1.0, 0.0, 0.0]);
+        let with_cg = format!("[body]\ncg_m = [0.0, 0.0, 0.0]\n{text}");
+        let v = Vehicle::from_toml_str(&with_cg, "test").unwrap();
+        assert_eq!(declared_geometry(&v)[0].0, [0.2, 0.0, -0.15]);
+    }
+
+    #[test]
+    fn a_vehicle_without_thrusters_is_refused_with_its_count() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("none.toml");
+        std::fs::write(&file, "# no [[thruster]] tables\n").unwrap();
+        let e = load(&file).unwrap_err();
+        assert!(e.to_string().contains("0 thrusters"), "{e}");
+    }
+}
