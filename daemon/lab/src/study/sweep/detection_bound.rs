@@ -7,8 +7,8 @@ use thruster_sim::NoisePreset;
 use thrusterd_core::adaptation::refinement::RefinementConfig;
 use thrusterd_core::machine::State;
 
-use super::in_process::Run;
 use super::refinement::holding_on_prior;
+use thruster_inprocess::Run;
 
 /// The best detection time any detector could reach, measured: a generalized-likelihood-ratio
 /// (GLR) change test per thruster column on the gyro's innovations (see [`bound`]), run beside

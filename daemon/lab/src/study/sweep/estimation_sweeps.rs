@@ -5,7 +5,7 @@ use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::{NoisePreset, SensorConfig};
 use thrusterd_core::estimator::EstimatorConfig;
 
-use super::estimation::*;
+use thruster_inprocess::estimation::*;
 
 /// The measurement behind docs/study.md's accelerometer-bias table: AMOUR-5, the realistic IMU
 /// with turn-on bias 0, 0.05 (the preset) and 0.2 m/s^2, seeds 1-10. Slow; run with

@@ -6,7 +6,7 @@ use thrusterd_core::adaptation::identification::IdentificationConfig;
 use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::{Machine, State};
 
-use super::in_process::{vehicle, Reestimation, Run, VEHICLES};
+use thruster_inprocess::{vehicle, Reestimation, Run, VEHICLES};
 
 /// The same with the machine's identification section replaced (None: the defaults), calling
 /// `observe` after every sample of the re-estimation.

@@ -9,10 +9,8 @@ use anyhow::Result;
 use clap::Args;
 
 mod detection_bound;
-mod estimation;
 mod estimation_sweeps;
 mod identification;
-mod in_process;
 mod refinement;
 mod refinement_update;
 

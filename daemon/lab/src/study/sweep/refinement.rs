@@ -9,7 +9,7 @@ use thrusterd_core::adaptation::monitor::MismatchAction;
 use thrusterd_core::adaptation::refinement::RefinementConfig;
 use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
 
-use super::in_process::{Run, VEHICLES};
+use thruster_inprocess::{Run, VEHICLES};
 
 /// [`holding`] with the refinement's settings replaced.
 fn holding_with(noise: NoisePreset, seed: u64, refinement: RefinementConfig) -> Run {

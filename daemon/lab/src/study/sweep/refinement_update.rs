@@ -6,7 +6,7 @@ use thruster_sim::{NoisePreset, Scenario};
 use thrusterd_core::adaptation::refinement::RefinementConfig;
 use thrusterd_core::machine::{Event, Machine, MachineSetup};
 
-use super::in_process::{rel_err, vehicle, Run, VEHICLES};
+use thruster_inprocess::{rel_err, vehicle, Run, VEHICLES};
 
 fn holding_tuned(
     noise: NoisePreset,

@@ -1,9 +1,11 @@
-//! The state machine closed around the simulator's physics, in one process: the harness the
-//! in-process sweeps share. A copy of thrusterd-core's tests/common (the core's asserting
-//! tests keep theirs: the core may not depend on the lab), less what no sweep uses.
+//! The machine and the simulator stepped together (`Run`), with the measurements the tests and
+//! sweeps make of a run: a re-estimation's way to a new model, errors against the truth.
+
+use std::path::PathBuf;
 
 use nalgebra::DMatrix;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
+use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::{ImuInput, Machine, MachineSetup, Mode, Request, State};
 
 /// Every vehicle file in config/vehicles, for sweeps over all of them.
@@ -16,11 +18,11 @@ pub const VEHICLES: [&str; 6] = [
     "six_dof",
 ];
 
-/// The vehicle file config/vehicles/NAME.toml, through the simulator's loader; panics with the
-/// file's error (a sweep cannot go on without its vehicle).
 pub fn vehicle(name: &str) -> Vehicle {
-    let path = crate::session::config_file(&format!("vehicles/{name}.toml"));
-    Vehicle::load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()))
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config/vehicles")
+        .join(format!("{name}.toml"));
+    Vehicle::load(&path).unwrap()
 }
 
 pub struct Run {
@@ -39,6 +41,19 @@ pub struct Run {
 impl Run {
     pub fn new(name: &str, noise: NoisePreset, seed: u64) -> Run {
         Run::with_rate(name, noise, seed, 200.0)
+    }
+
+    /// The same with the static forward method and the settings it was tuned with.
+    pub fn forward(name: &str, noise: NoisePreset, seed: u64) -> Run {
+        let mut run = Run::new(name, noise, seed);
+        let mut setup = MachineSetup {
+            thrusters: run.sim.thruster_count(),
+            estimator: EstimatorConfig::forward(),
+            ..MachineSetup::default()
+        };
+        setup.machine.deadband = 0.05;
+        run.machine = Machine::new(setup);
+        run
     }
 
     pub fn with_rate(name: &str, noise: NoisePreset, seed: u64, rate_hz: f64) -> Run {
@@ -143,6 +158,8 @@ pub struct Reestimation {
     pub took_s: f64,
     /// Largest tilt (true attitude, angle of body z from down), deg.
     pub max_tilt_deg: f64,
+    /// Largest heading change from where it started, deg.
+    pub max_heading_deg: f64,
     /// Mean angle between the true attitude and level at the starting heading, deg.
     pub mean_err_deg: f64,
     /// The new model against the new truth, rotation and acceleration rows.
@@ -178,6 +195,13 @@ impl Run {
         self.machine = Machine::new(setup);
     }
 
+    /// The top thruster of AMOUR-5 rotated 45 degrees about x and announced with its new
+    /// geometry while the machine holds level: runs until control resumes with a new model
+    /// (at most 120 s) and measures the way there against the simulator's truth.
+    pub fn announced_rotation(&mut self, v: &Vehicle) -> Reestimation {
+        self.announced_rotation_observed(v, |_, _| {})
+    }
+
     /// The same, calling `observe` with the machine and the seconds since the announcement
     /// after every sample (the sweep in closed_loop.rs watches the error bounds with it).
     pub fn announced_rotation_observed(
@@ -200,7 +224,7 @@ impl Run {
     }
 
     /// Thruster `index` of `v` turned by `angle_deg` about `axis` (body frame) and announced
-    /// as `change` with the new geometry, the machine holding level: as [`Self::announced_rotation_observed`].
+    /// as `change` with the new geometry, the machine holding level: as [`Self::announced_rotation`].
     pub fn announced_turn(
         &mut self,
         v: &Vehicle,
@@ -234,12 +258,16 @@ impl Run {
         let heading = self.sim.roll_pitch_yaw()[2];
         let level = UnitQuaternion::from_euler_angles(0.0, 0.0, heading);
         let start = self.sim.time_s();
-        let (mut max_tilt, mut err_sum, mut k) = (0.0f64, 0.0, 0u64);
+        let (mut max_tilt, mut max_heading, mut err_sum, mut k) = (0.0f64, 0.0f64, 0.0, 0u64);
         while self.sim.time_s() - start < 120.0 {
             self.tick();
             let q = self.sim.attitude();
             let down = q.inverse() * Vector3::z();
             max_tilt = max_tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
+            let dh = (q.euler_angles().2 - heading + std::f64::consts::PI)
+                .rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            max_heading = max_heading.max(dh.abs().to_degrees());
             err_sum += q.angle_to(&level).to_degrees();
             k += 1;
             observe(&self.machine, self.sim.time_s() - start);
@@ -253,6 +281,7 @@ impl Run {
         Reestimation {
             took_s: self.sim.time_s() - start,
             max_tilt_deg: max_tilt,
+            max_heading_deg: max_heading,
             mean_err_deg: err_sum / k.max(1) as f64,
             err_rot: rel_err(&model.effectiveness, &truth, 0),
             err_acc: rel_err(&model.effectiveness, &truth, 3),

@@ -1,7 +1,5 @@
-//! The dynamic-model estimation in one process, scored against the simulator's truth: the
-//! harness of the estimation sweeps ([`super::estimation_sweeps`]). A copy of the harness of
-//! thrusterd-core's tests/dynamic_estimator.rs (the core's asserting tests keep theirs: the
-//! core may not depend on the lab).
+//! The dynamic-model estimation in one process, scored against the simulator's truth: what
+//! thrusterd-core's estimator tests assert on and the lab's estimation sweeps print.
 
 use nalgebra::{DMatrix, Matrix3, Matrix6, UnitQuaternion, Vector3};
 use thruster_sim::disturbance::WaterPreset;
@@ -12,12 +10,12 @@ use thrusterd_core::estimator::dynamic::DynamicTerms;
 use thrusterd_core::estimator::{EstimatorConfig, Method};
 use thrusterd_core::machine::{Machine, MachineSetup, Request, State};
 
-pub(super) use super::in_process::vehicle;
+pub use crate::run::vehicle;
 
 /// Every vehicle file but `eight_vectored_lag80ms_curve`, whose thrust curve (~ command^1.5,
 /// 30 N reverse) a linear model per thruster misses by 9-10 % against a bound of 2 %
 /// (docs/study.md, "Learning the thruster lag"; issue 29 item 5 is open).
-pub(super) const VEHICLES: [&str; 8] = [
+pub const VEHICLES: [&str; 8] = [
     "amour5",
     "amour5_top45",
     "six_dof",
@@ -28,28 +26,31 @@ pub(super) const VEHICLES: [&str; 8] = [
     "amour5_lag200ms",
 ];
 
-pub(super) struct Outcome {
-    pub(super) err_rot: f64,
-    pub(super) err_acc: f64,
-    pub(super) seconds: f64,
-    pub(super) max_tilt_deg: f64,
+pub struct Outcome {
+    pub err_rot: f64,
+    pub err_acc: f64,
+    pub seconds: f64,
+    pub max_tilt_deg: f64,
     /// The lag the model was fitted with, s (learned unless learning is off).
-    pub(super) spin_up_s: f64,
+    pub spin_up_s: f64,
     /// Whether `spin_up_s` was learned (false: the configured one).
-    pub(super) spin_up_learned: bool,
+    pub spin_up_learned: bool,
     /// The daemon's own error bounds, rotation and acceleration rows.
-    pub(super) bound: [f64; 2],
-    pub(super) terms: DynamicTerms,
+    pub bound: [f64; 2],
+    pub terms: DynamicTerms,
     /// Learned B minus the symmetric truth, its honest and its i.i.d. standard errors.
-    pub(super) b_err: DMatrix<f64>,
-    pub(super) b_se: DMatrix<f64>,
+    pub b_err: DMatrix<f64>,
+    pub b_se: DMatrix<f64>,
+    /// The rank the estimate found and how many DOFs it actuates.
+    pub rank: usize,
+    pub actuated: usize,
     /// The machine refused the model (only with `Ideal::allow_refusal`).
-    pub(super) refused: bool,
+    pub refused: bool,
     /// The noise the fit used per DOF row (the larger of the rest's and the residuals').
-    pub(super) sigma: [f64; 6],
+    pub sigma: [f64; 6],
 }
 
-pub(super) fn tick(machine: &mut Machine, sim: &mut Simulator) {
+pub fn tick(machine: &mut Machine, sim: &mut Simulator) {
     let r = sim.advance_and_sample();
     let cmd = machine.on_imu(&r);
     for v in &cmd.thrust[..cmd.count] {
@@ -58,33 +59,44 @@ pub(super) fn tick(machine: &mut Machine, sim: &mut Simulator) {
     sim.set_commands(&cmd.thrust[..cmd.count]).unwrap();
 }
 
+/// One estimation from rest on the vehicle file `name`, the IMU at 200 Hz with `noise`, the
+/// default dynamic method.
+pub fn estimate(name: &str, noise: NoisePreset, seed: u64) -> Outcome {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise,
+        ..SensorConfig::default()
+    };
+    estimate_with(name, sensors, seed, EstimatorConfig::dynamic())
+}
+
 /// What the decisive runs take away from the estimator's inputs, so that what is left of a
 /// coefficient's error against the truth can be attributed (docs/study.md).
 #[derive(Debug, Clone, Copy, Default)]
-pub(super) struct Ideal {
+pub struct Ideal {
     /// Thrusters as strong in reverse as forward (and `reverse_ratio` 1): no asymmetry for
     /// the one symmetric column per thruster to miss.
-    pub(super) symmetric_thrusters: bool,
+    pub symmetric_thrusters: bool,
     /// A perfect DVL: the simulator's true body velocity at every sample.
-    pub(super) true_velocity: bool,
+    pub true_velocity: bool,
     /// Buoyancy equal to weight: the body does not rise during the rest before the pulses.
-    pub(super) neutral: bool,
+    pub neutral: bool,
     /// The machine may refuse the model (the outcome is then the refused estimate's).
-    pub(super) allow_refusal: bool,
+    pub allow_refusal: bool,
     /// Current, waves, a tether (default: still water).
-    pub(super) water: WaterPreset,
+    pub water: WaterPreset,
     /// Without the preset's current (its waves alone).
-    pub(super) no_current: bool,
+    pub no_current: bool,
     /// The dead band the machine compensates (default 0.05, the simulator's default).
-    pub(super) deadband: Option<f64>,
+    pub deadband: Option<f64>,
     /// Only this part of the waves: "force", "torque", "heave" or "surge" (a sweep's
     /// LA_WAVE_PART; default all of them).
-    pub(super) wave_part: Option<&'static str>,
+    pub wave_part: Option<&'static str>,
     /// The noise measurement's length, s (a sweep's LAG_NOISE_S; default the shipped one).
-    pub(super) noise_s: Option<f64>,
+    pub noise_s: Option<f64>,
 }
 
-pub(super) fn estimate_with(
+pub fn estimate_with(
     name: &str,
     sensors: SensorConfig,
     seed: u64,
@@ -93,7 +105,7 @@ pub(super) fn estimate_with(
     estimate_ideal(name, sensors, seed, estimator, Ideal::default())
 }
 
-pub(super) fn estimate_ideal(
+pub fn estimate_ideal(
     name: &str,
     sensors: SensorConfig,
     seed: u64,
@@ -104,7 +116,7 @@ pub(super) fn estimate_ideal(
 }
 
 /// The same on a vehicle given whole (its hidden constants changed by the caller).
-pub(super) fn estimate_on(
+pub fn estimate_on(
     mut v: Vehicle,
     sensors: SensorConfig,
     seed: u64,
@@ -211,13 +223,15 @@ pub(super) fn estimate_on(
         b_err: &est.effectiveness - &truth,
         b_se: est.std_err.clone(),
         refused: machine.model().is_none(),
+        rank: est.rank.rank,
+        actuated: est.rank.actuated.count(),
         sigma: est.sigma,
     }
 }
 
 /// The simulator's own coefficients in the dynamic model's form (DOF-order rows): how the rate
 /// terms p, q, r (linear damping) and gravity's direction (restoring) enter nu_dot.
-pub(super) fn true_terms(name: &str) -> (Matrix6<f64>, nalgebra::Matrix6x3<f64>) {
+pub fn true_terms(name: &str) -> (Matrix6<f64>, nalgebra::Matrix6x3<f64>) {
     let v = vehicle(name);
     let rb = RigidBody::new(&v.body).unwrap();
     let p = rb.mass_matrix_inverse();
@@ -246,7 +260,7 @@ pub(super) fn true_terms(name: &str) -> (Matrix6<f64>, nalgebra::Matrix6x3<f64>)
 }
 
 /// The realistic IMU with the accelerometer's turn-on bias set to `bias_std` (m/s^2 per axis).
-pub(super) fn realistic_with_accel_bias(bias_std: f64) -> SensorConfig {
+pub fn realistic_with_accel_bias(bias_std: f64) -> SensorConfig {
     let mut noise = NoisePreset::Realistic.params();
     noise.accel_bias_init_std = bias_std;
     SensorConfig {
@@ -260,7 +274,7 @@ pub(super) fn realistic_with_accel_bias(bias_std: f64) -> SensorConfig {
 /// Fractions of |error| / standard error below 2 over `seeds` on AMOUR-5 with `sensors`, for
 /// (B entries, rotation-row rate damping, roll/pitch restoring), with the honest standard
 /// errors and with the i.i.d. ones; and the mean err_rot, err_acc, vehicle seconds.
-pub(super) fn coverage(
+pub fn coverage(
     sensors: &SensorConfig,
     seeds: std::ops::RangeInclusive<u64>,
 ) -> ([f64; 3], [f64; 3], [f64; 3]) {
@@ -270,7 +284,7 @@ pub(super) fn coverage(
 
 /// [`coverage`] and the largest |error| / honest standard error per group.
 #[allow(clippy::type_complexity)]
-pub(super) fn coverage_and_worst(
+pub fn coverage_and_worst(
     sensors: &SensorConfig,
     seeds: std::ops::RangeInclusive<u64>,
     true_velocity: bool,
@@ -361,7 +375,7 @@ pub(super) fn coverage_and_worst(
 
 /// A vehicle whose every thruster spins up with time constant `tau_s` (the daemon is not
 /// told); 0 keeps the file's.
-pub(super) fn with_lag(name: &str, tau_s: f64) -> Vehicle {
+pub fn with_lag(name: &str, tau_s: f64) -> Vehicle {
     let mut v = vehicle(name);
     for t in &mut v.thrusters {
         if tau_s > 0.0 {
@@ -372,7 +386,7 @@ pub(super) fn with_lag(name: &str, tau_s: f64) -> Vehicle {
 }
 
 /// The mean spin-up time constant of a vehicle's thrusters, s.
-pub(super) fn true_lag(v: &Vehicle) -> f64 {
+pub fn true_lag(v: &Vehicle) -> f64 {
     v.thrusters.iter().map(|t| t.time_constant_s).sum::<f64>() / v.thrusters.len() as f64
 }
 
@@ -382,24 +396,24 @@ pub(super) fn true_lag(v: &Vehicle) -> f64 {
 /// the simulator's default) and starts from a 0.1 s lag (`spin_up_s`, learned since issue
 /// 29). `None` keeps the vehicle file's value; the daemon is told none of them.
 #[derive(Debug, Clone, Copy, Default)]
-pub(super) struct Mismatch {
+pub struct Mismatch {
     /// Every thruster's reverse thrust at full command over its forward thrust.
-    pub(super) reverse_ratio: Option<f64>,
+    pub reverse_ratio: Option<f64>,
     /// Every thruster's dead band (fraction of full command); the machine still compensates 0.05.
-    pub(super) deadband: Option<f64>,
+    pub deadband: Option<f64>,
     /// Every thruster's spin-up time constant, s.
-    pub(super) lag_s: Option<f64>,
+    pub lag_s: Option<f64>,
 }
 
 /// The thrusters as the daemon assumes them (each vehicle file's own).
-pub(super) const MATCHED: Mismatch = Mismatch {
+pub const MATCHED: Mismatch = Mismatch {
     reverse_ratio: None,
     deadband: None,
     lag_s: None,
 };
 
 /// The cases of issue 31 item 1, with the matched vehicle first.
-pub(super) const MISMATCHES: [(&str, Mismatch); 7] = [
+pub const MISMATCHES: [(&str, Mismatch); 7] = [
     ("matched", MATCHED),
     (
         "reverse 0.6",
@@ -446,7 +460,7 @@ pub(super) const MISMATCHES: [(&str, Mismatch); 7] = [
 ];
 
 /// The vehicle file `name` with every thruster changed as `m` says (the daemon not told).
-pub(super) fn mismatched(name: &str, m: Mismatch) -> Vehicle {
+pub fn mismatched(name: &str, m: Mismatch) -> Vehicle {
     let mut v = vehicle(name);
     for t in &mut v.thrusters {
         if let Some(r) = m.reverse_ratio {
@@ -464,7 +478,7 @@ pub(super) fn mismatched(name: &str, m: Mismatch) -> Vehicle {
 
 /// The fraction of B's entries whose error against the symmetric truth is within 2 of the
 /// model's own standard errors.
-pub(super) fn b_within_2se(o: &Outcome) -> f64 {
+pub fn b_within_2se(o: &Outcome) -> f64 {
     let hits = o
         .b_err
         .iter()

@@ -1,0 +1,14 @@
+//! The state machine closed around the simulator's physics in one process (no IPC), scored
+//! against the simulator's truth: the harness thrusterd-core's asserting tests and the lab's
+//! research sweeps (`thrusterctl study sweep NAME`) share, so a sweep measures exactly what a
+//! test asserts on. Not a product crate: nothing of a vehicle build depends on it.
+//!
+//! - [`run`]: the machine and the simulator stepped together (`Run`), re-estimations and their
+//!   measurements, the vehicle files.
+//! - [`estimation`]: one estimation from rest on a vehicle, its outcome against the truth, and
+//!   the vehicles with hidden constants changed (lag, reverse ratio, dead band).
+
+pub mod estimation;
+pub mod run;
+
+pub use run::*;
