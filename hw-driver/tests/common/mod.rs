@@ -437,6 +437,60 @@ pub const NEUTRAL: [u16; 4] = [1500, 1500, 1510, 1500];
 /// Their ranges.
 pub const RANGES: [(u16, u16); 4] = [(1100, 1900), (1100, 1900), (1100, 1900), (1200, 1800)];
 
+/// The driver's config file for fake hardware `fx` on `ns`: the four thrusters, a 200 ms
+/// watchdog, `arming_ms`, `extra` top-level lines and `section_extra` lines in the backend's
+/// section.
+pub fn config<F: Fixture>(
+    ns: &IpcConfig,
+    arming_ms: u64,
+    extra: &str,
+    section_extra: &str,
+    fx: &F,
+) -> String {
+    format!(
+        "namespace = \"{}\"\nbackend = \"{}\"\nwatchdog_ms = 200\narming_ms = {arming_ms}\n\
+         status_period_ms = 1000\n{extra}\n{}{}",
+        ns.namespace(),
+        F::BACKEND,
+        thrusters(F::CHANNELS),
+        fx.section(section_extra)
+    )
+}
+
+/// A backend on its fake hardware as the driver contract's conformance suite
+/// (`thruster_driver_kit::conformance`) starts it: the four thrusters, IMU at 100 Hz, a
+/// 100 ms arming hold. The config file lives in `dir`, removed with it.
+pub struct Contract<F: Fixture> {
+    pub fx: F,
+    dir: tempfile::TempDir,
+}
+
+impl<F: Fixture> thruster_driver_kit::conformance::DriverUnderTest for Contract<F> {
+    const NAME: &'static str = F::BACKEND;
+    const RATE_HZ: f64 = 100.0;
+    const THRUSTERS: usize = 4;
+
+    fn start(ns: &IpcConfig) -> (Self, thruster_driver_kit::conformance::DriverProcess) {
+        let fx = F::new();
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = dir.path().join("thruster-hw.toml");
+        fs::write(&cfg, config(ns, 100, "", "", &fx)).unwrap();
+        let proc = thruster_driver_kit::conformance::DriverProcess::spawn(
+            BIN,
+            &["run", "--config", cfg.to_str().unwrap()],
+        )
+        .unwrap();
+        (Contract { fx, dir }, proc)
+    }
+}
+
+impl<F: Fixture> Contract<F> {
+    /// Where the config file is.
+    pub fn dir(&self) -> &Path {
+        self.dir.path()
+    }
+}
+
 /// A running driver on fake hardware with the test as its daemon. Fields drop in order:
 /// process first, then our ports, the fake hardware, and last the namespace (purged).
 pub struct Harness<F: Fixture> {
@@ -469,14 +523,7 @@ impl<F: Fixture> Harness<F> {
     /// As [`Harness::start_with`] with fake hardware made by the test.
     pub fn start_fx(arming_ms: u64, extra: &str, section_extra: &str, fx: F) -> Harness<F> {
         let ns = NamespaceGuard::unique_for_test(F::BACKEND).unwrap();
-        let config = format!(
-            "namespace = \"{}\"\nbackend = \"{}\"\nwatchdog_ms = 200\narming_ms = {arming_ms}\n\
-             status_period_ms = 1000\n{extra}\n{}{}",
-            ns.namespace(),
-            F::BACKEND,
-            thrusters(F::CHANNELS),
-            fx.section(section_extra)
-        );
+        let config = config(&ns, arming_ms, extra, section_extra, &fx);
         let daemon = Daemon::new(&ns);
         let proc = Proc::run(&config, &[]);
         Harness {

@@ -126,7 +126,8 @@ pub struct Summary {
     pub samples: u64,
     /// Commands applied.
     pub applied: u64,
-    /// Lockstep samples that got no answer in time.
+    /// Lockstep samples that got no answer in time; in real time, the watchdog's expiries
+    /// (both are `watchdog_expiries` on driver_status).
     pub timeouts: u64,
     /// Commands rejected, by category.
     pub rejected: RejectCounters,

@@ -65,6 +65,8 @@ impl Driver {
                     t_s = self.sim.time_s(),
                     "no valid thrust command within the watchdog: thrust neutral"
                 );
+                // Counted as lockstep counts its timeouts: driver_status reports expiries.
+                self.timeouts += 1;
                 self.go_neutral();
             }
             self.sim.step_to(next_t_ns);
