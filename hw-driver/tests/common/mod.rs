@@ -8,14 +8,12 @@ pub mod fake_sysfs;
 pub mod inotify;
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use thruster_hw::clock::monotonic_ns;
-use thruster_protocol::services::{
-    cleanup_dead_nodes, namespace_files, Inbox, IpcConfig, IpcNode, NamespaceGuard, Port, SHM_DIR,
-};
+use thruster_protocol::services::{Inbox, IpcConfig, IpcNode, NamespaceGuard, Port};
 use thruster_protocol::{DriverStatusMsg, ImuSample, ThrustCommand, ThrustMode};
 
 use fake_autopilot::FakeAutopilot;
@@ -248,26 +246,9 @@ impl Daemon {
     }
 }
 
-/// Every process of the namespace has exited and dropped its ports: only iceoryx2's own
-/// residue (the global_mgmt segment and empty directories) is left, which the guard purges.
-pub fn assert_namespace_clean(ns: &IpcConfig) {
-    let census = cleanup_dead_nodes(ns).unwrap();
-    assert_eq!(
-        (census.alive, census.dead_cleaned, census.dead_failed),
-        (0, 0, 0),
-        "nodes left: {census:?}"
-    );
-    let leftovers: Vec<PathBuf> = namespace_files(ns)
-        .unwrap()
-        .into_iter()
-        .filter(|p| !p.is_dir())
-        .filter(|p| {
-            let name = p.file_name().unwrap().to_string_lossy();
-            !(p.starts_with(SHM_DIR) && name.ends_with(".global_mgmt"))
-        })
-        .collect();
-    assert!(leftovers.is_empty(), "files left: {leftovers:#?}");
-}
+/// Every process of the namespace has exited and dropped its ports (the driver contract's
+/// suite checks the same).
+pub use thruster_driver_kit::conformance::assert_namespace_clean;
 
 // ---- backend fixtures ----------------------------------------------------------------------
 
