@@ -3,8 +3,12 @@
 //! logging setup (journald under systemd, else stderr), systemd's notify protocol (READY,
 //! WATCHDOG) and the quiet exit on a closed stdout pipe ([`pipe`]) are shared by thrusterd and
 //! thrusterctl as well, and so is raising the control thread to real-time priority ([`realtime`]).
-//! Every driver limits its repeated warnings with one [`LogLimiter`].
+//! Every driver limits its repeated warnings with one [`LogLimiter`]. Behind feature
+//! `conformance` (tests only): the driver contract's conformance suite ([`conformance`]), run
+//! by the simulator's and every hardware backend's own test file.
 
+#[cfg(feature = "conformance")]
+pub mod conformance;
 pub mod load;
 pub mod log_limit;
 #[cfg(feature = "process")]

@@ -1,7 +1,13 @@
-//! The conformance suite: the same tests against every backend, each with the real
-//! `thruster-hw` process on fake hardware (a fake ArduSub on loopback UDP; a fake sysfs
-//! tree with PWM and IIO) and the test as the daemon over real iceoryx2. Each test has its
-//! own namespace and leaves no process and no file behind.
+//! The conformance suites, against every backend, each with the real `thruster-hw` process
+//! on fake hardware (a fake ArduSub on loopback UDP; a fake sysfs tree with PWM and IIO) and
+//! the test as the daemon over real iceoryx2. Each test has its own namespace and leaves no
+//! process and no file behind.
+//!
+//! - The driver contract's suite (`thruster_driver_kit::conformance`, modules
+//!   `contract_mavlink` and `contract_linux`): what every driver does, seen through the
+//!   protocol only; the simulator runs the same suite (sim-driver/tests/conformance.rs).
+//! - The hardware suite below (modules `mavlink` and `linux`): what reaches the outputs as
+//!   pulses, and the IMU's units, which only hardware backends have.
 //!
 //! The tests run one at a time (a lock): they measure timing, and the machine has 2 cores.
 //! Precise timing rules are unit-tested in `core::watchdog`; the margins here are generous.
@@ -375,3 +381,8 @@ macro_rules! conformance {
 }
 
 conformance!(mavlink: Mavlink, linux: Linux);
+
+thruster_driver_kit::conformance_suite!(
+    contract_mavlink: Contract<Mavlink>,
+    contract_linux: Contract<Linux>,
+);

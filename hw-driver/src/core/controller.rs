@@ -11,9 +11,9 @@ use std::fmt;
 use thruster_protocol::validate::{RejectCounters, RejectReason};
 use thruster_protocol::ThrustCommand;
 
-use super::gate::{CommandGate, Verdict};
 use super::pwm::{OutputMap, Pwm};
 use super::watchdog::{Refusal, Watchdog, WatchdogState};
+use thruster_protocol::gate::{Answerable, CommandGate, GateSettings, SampleTimes, Verdict};
 
 /// What happened to one command.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -86,7 +86,14 @@ impl Controller {
     pub fn new(maps: Vec<OutputMap>, start_ns: u64, arming_ns: u64, watchdog_ns: u64) -> Self {
         let neutral: Vec<Pwm> = maps.iter().map(OutputMap::neutral).collect();
         Controller {
-            gate: CommandGate::new(maps.len()),
+            gate: CommandGate::new(
+                maps.len(),
+                GateSettings {
+                    // Samples are stamped by a real clock: the gate remembers their times.
+                    sample_times: SampleTimes::Remembered,
+                    answerable: Answerable::SinceApplied,
+                },
+            ),
             watchdog: Watchdog::new(start_ns, arming_ns, watchdog_ns),
             commanded: neutral.clone(),
             neutral,

@@ -8,14 +8,12 @@ pub mod fake_sysfs;
 pub mod inotify;
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use thruster_hw::clock::monotonic_ns;
-use thruster_protocol::services::{
-    cleanup_dead_nodes, namespace_files, Inbox, IpcConfig, IpcNode, NamespaceGuard, Port, SHM_DIR,
-};
+use thruster_protocol::services::{Inbox, IpcConfig, IpcNode, NamespaceGuard, Port};
 use thruster_protocol::{DriverStatusMsg, ImuSample, ThrustCommand, ThrustMode};
 
 use fake_autopilot::FakeAutopilot;
@@ -248,26 +246,9 @@ impl Daemon {
     }
 }
 
-/// Every process of the namespace has exited and dropped its ports: only iceoryx2's own
-/// residue (the global_mgmt segment and empty directories) is left, which the guard purges.
-pub fn assert_namespace_clean(ns: &IpcConfig) {
-    let census = cleanup_dead_nodes(ns).unwrap();
-    assert_eq!(
-        (census.alive, census.dead_cleaned, census.dead_failed),
-        (0, 0, 0),
-        "nodes left: {census:?}"
-    );
-    let leftovers: Vec<PathBuf> = namespace_files(ns)
-        .unwrap()
-        .into_iter()
-        .filter(|p| !p.is_dir())
-        .filter(|p| {
-            let name = p.file_name().unwrap().to_string_lossy();
-            !(p.starts_with(SHM_DIR) && name.ends_with(".global_mgmt"))
-        })
-        .collect();
-    assert!(leftovers.is_empty(), "files left: {leftovers:#?}");
-}
+/// Every process of the namespace has exited and dropped its ports (the driver contract's
+/// suite checks the same).
+pub use thruster_driver_kit::conformance::assert_namespace_clean;
 
 // ---- backend fixtures ----------------------------------------------------------------------
 
@@ -437,6 +418,60 @@ pub const NEUTRAL: [u16; 4] = [1500, 1500, 1510, 1500];
 /// Their ranges.
 pub const RANGES: [(u16, u16); 4] = [(1100, 1900), (1100, 1900), (1100, 1900), (1200, 1800)];
 
+/// The driver's config file for fake hardware `fx` on `ns`: the four thrusters, a 200 ms
+/// watchdog, `arming_ms`, `extra` top-level lines and `section_extra` lines in the backend's
+/// section.
+pub fn config<F: Fixture>(
+    ns: &IpcConfig,
+    arming_ms: u64,
+    extra: &str,
+    section_extra: &str,
+    fx: &F,
+) -> String {
+    format!(
+        "namespace = \"{}\"\nbackend = \"{}\"\nwatchdog_ms = 200\narming_ms = {arming_ms}\n\
+         status_period_ms = 1000\n{extra}\n{}{}",
+        ns.namespace(),
+        F::BACKEND,
+        thrusters(F::CHANNELS),
+        fx.section(section_extra)
+    )
+}
+
+/// A backend on its fake hardware as the driver contract's conformance suite
+/// (`thruster_driver_kit::conformance`) starts it: the four thrusters, IMU at 100 Hz, a
+/// 100 ms arming hold. The config file lives in `dir`, removed with it.
+pub struct Contract<F: Fixture> {
+    pub fx: F,
+    dir: tempfile::TempDir,
+}
+
+impl<F: Fixture> thruster_driver_kit::conformance::DriverUnderTest for Contract<F> {
+    const NAME: &'static str = F::BACKEND;
+    const RATE_HZ: f64 = 100.0;
+    const THRUSTERS: usize = 4;
+
+    fn start(ns: &IpcConfig) -> (Self, thruster_driver_kit::conformance::DriverProcess) {
+        let fx = F::new();
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = dir.path().join("thruster-hw.toml");
+        fs::write(&cfg, config(ns, 100, "", "", &fx)).unwrap();
+        let proc = thruster_driver_kit::conformance::DriverProcess::spawn(
+            BIN,
+            &["run", "--config", cfg.to_str().unwrap()],
+        )
+        .unwrap();
+        (Contract { fx, dir }, proc)
+    }
+}
+
+impl<F: Fixture> Contract<F> {
+    /// Where the config file is.
+    pub fn dir(&self) -> &Path {
+        self.dir.path()
+    }
+}
+
 /// A running driver on fake hardware with the test as its daemon. Fields drop in order:
 /// process first, then our ports, the fake hardware, and last the namespace (purged).
 pub struct Harness<F: Fixture> {
@@ -469,14 +504,7 @@ impl<F: Fixture> Harness<F> {
     /// As [`Harness::start_with`] with fake hardware made by the test.
     pub fn start_fx(arming_ms: u64, extra: &str, section_extra: &str, fx: F) -> Harness<F> {
         let ns = NamespaceGuard::unique_for_test(F::BACKEND).unwrap();
-        let config = format!(
-            "namespace = \"{}\"\nbackend = \"{}\"\nwatchdog_ms = 200\narming_ms = {arming_ms}\n\
-             status_period_ms = 1000\n{extra}\n{}{}",
-            ns.namespace(),
-            F::BACKEND,
-            thrusters(F::CHANNELS),
-            fx.section(section_extra)
-        );
+        let config = config(&ns, arming_ms, extra, section_extra, &fx);
         let daemon = Daemon::new(&ns);
         let proc = Proc::run(&config, &[]);
         Harness {

@@ -23,9 +23,9 @@ use std::time::{Duration, Instant};
 use thruster_protocol::ThrustCommand;
 use tracing::{debug, info, warn};
 
-use super::gate::Verdict;
 use super::wait::{recv_until, Received};
 use super::{Driver, DriverError, StopReason};
+use thruster_protocol::gate::Verdict;
 
 /// Pause between re-sends of the first sample while nobody subscribes.
 const SUBSCRIBER_POLL: Duration = Duration::from_millis(20);
@@ -201,7 +201,7 @@ impl Driver {
     ) -> Result<Answer, DriverError> {
         loop {
             match recv_until(&self.ports.thrust, deadline, spin, &self.stop)? {
-                Received::Message(cmd) => match self.gate.check(&cmd, k..=k) {
+                Received::Message(cmd) => match self.gate.check(&cmd) {
                     Verdict::Accept => return Ok(Answer::Valid(cmd)),
                     Verdict::Stale => {
                         debug!(imu_seq = cmd.imu_seq, k, "late answer dropped");

@@ -2,7 +2,7 @@
 //!
 //! The rest of this crate is pure; this module owns the clock, the iceoryx2 ports and the
 //! files. Per sample it publishes an [`ImuSample`] on `<ns>/imu` (+ its event), applies the
-//! [`ThrustCommand`]s that pass the [`gate`], plays the scenario, announces changes on
+//! [`ThrustCommand`]s that pass the protocol's command gate ([`thruster_protocol::gate`]), plays the scenario, announces changes on
 //! `<ns>/reconfig`, publishes the true effectiveness on `<ns>/truth` (history 1) at start,
 //! after every change and at the end, and the true vehicle state on `<ns>/vehicle` before
 //! every sample.
@@ -13,7 +13,6 @@
 //! - [`Mode::Lockstep`](crate::settings::Mode): see `lockstep.rs`.
 
 pub mod convert;
-pub mod gate;
 pub mod shutdown;
 pub mod stats_file;
 pub mod truth_file;
@@ -26,6 +25,7 @@ mod stepping;
 use std::time::{Duration, Instant};
 use thruster_driver_kit::LogLimiter;
 
+use thruster_protocol::gate::{Answerable, CommandGate, GateSettings, SampleTimes};
 use thruster_protocol::services::{Inbox, IpcConfig, IpcError, IpcNode, Port};
 use thruster_protocol::validate::{RejectCounters, RejectReason};
 use thruster_protocol::{
@@ -39,7 +39,6 @@ use crate::scenario::{Action, Event, Scenario};
 use crate::settings::{Mode, Settings};
 use crate::sim::{SimError, Simulator};
 use crate::vehicle::Vehicle;
-use gate::CommandGate;
 use shutdown::Shutdown;
 use stats_file::{StatsFile, StatsFileError};
 use truth_file::{TruthEntry, TruthFile, TruthFileError};
@@ -127,7 +126,8 @@ pub struct Summary {
     pub samples: u64,
     /// Commands applied.
     pub applied: u64,
-    /// Lockstep samples that got no answer in time.
+    /// Lockstep samples that got no answer in time; in real time, the watchdog's expiries
+    /// (both are `watchdog_expiries` on driver_status).
     pub timeouts: u64,
     /// Commands rejected, by category.
     pub rejected: RejectCounters,
@@ -259,7 +259,19 @@ impl Driver {
         let period_ns = settings.sample_period_ns();
         let now = Instant::now();
         Ok(Driver {
-            gate: CommandGate::new(sim.thruster_count(), period_ns),
+            gate: CommandGate::new(
+                sim.thruster_count(),
+                GateSettings {
+                    // The simulator's sample clock is exact: sample seq is at (seq - 1) periods.
+                    sample_times: SampleTimes::Grid { period_ns },
+                    // Lockstep waits for the answer to the newest sample; real time applies
+                    // any answer not older than the last one applied.
+                    answerable: match settings.mode {
+                        Mode::Lockstep => Answerable::NewestOnly,
+                        Mode::Realtime => Answerable::SinceApplied,
+                    },
+                },
+            ),
             sim,
             scenario,
             truth_file,
@@ -365,6 +377,7 @@ impl Driver {
             });
         }
         self.imu_seq += 1;
+        self.gate.published(self.imu_seq, reading.t_ns);
         self.state = convert::vehicle_state(self.imu_seq, &self.sim);
         if let Some(v) = self.sim.dvl_measurement() {
             self.dvl_seq += 1;

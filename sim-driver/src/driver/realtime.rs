@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 
 use tracing::warn;
 
-use super::gate::Verdict;
 use super::wait::{recv_until, Received};
 use super::{Driver, DriverError, StopReason};
+use thruster_protocol::gate::Verdict;
 
 /// Lag behind the wall clock after which pacing restarts from now instead of publishing a
 /// burst of overdue samples (the process was suspended or starved).
@@ -27,7 +27,6 @@ impl Driver {
         let mut origin = Instant::now();
         self.send_sample(&first)?;
         let mut last_valid: Option<Instant> = None;
-        let mut last_applied_seq = 0u64;
         loop {
             // Checked before waiting: the last sample is not followed by a period of waiting.
             if self.duration_reached() {
@@ -37,28 +36,25 @@ impl Driver {
             let deadline = origin + Duration::from_nanos(next_t_ns);
             loop {
                 match recv_until(&self.ports.thrust, deadline, Duration::ZERO, &self.stop)? {
-                    Received::Message(cmd) => {
-                        let answerable = last_applied_seq.max(1)..=self.imu_seq;
-                        match self.gate.check(&cmd, answerable) {
-                            Verdict::Accept => {
-                                let now = Instant::now();
-                                let arrived_ns = now.saturating_duration_since(origin).as_nanos();
-                                let arrived_ns = u64::try_from(arrived_ns).unwrap_or(u64::MAX);
-                                self.sim.step_to(arrived_ns.min(next_t_ns));
-                                self.hold(cmd.thrusters())?;
-                                if let Some(stats) = &mut self.stats {
-                                    stats.answered(cmd.imu_seq, now);
-                                }
-                                last_valid = Some(now);
-                                last_applied_seq = cmd.imu_seq;
+                    Received::Message(cmd) => match self.gate.check(&cmd) {
+                        Verdict::Accept => {
+                            let now = Instant::now();
+                            let arrived_ns = now.saturating_duration_since(origin).as_nanos();
+                            let arrived_ns = u64::try_from(arrived_ns).unwrap_or(u64::MAX);
+                            self.sim.step_to(arrived_ns.min(next_t_ns));
+                            self.hold(cmd.thrusters())?;
+                            if let Some(stats) = &mut self.stats {
+                                stats.answered(cmd.imu_seq, now);
                             }
-                            Verdict::Stale => {}
-                            Verdict::Reject(reason) => {
-                                self.log_rejection(&cmd, &reason);
-                                self.go_neutral();
-                            }
+                            last_valid = Some(now);
+                            self.gate.applied(cmd.imu_seq);
                         }
-                    }
+                        Verdict::Stale => {}
+                        Verdict::Reject(reason) => {
+                            self.log_rejection(&cmd, &reason);
+                            self.go_neutral();
+                        }
+                    },
                     Received::Timeout => break,
                     Received::Shutdown => return Ok(StopReason::Signal),
                 }
@@ -69,6 +65,8 @@ impl Driver {
                     t_s = self.sim.time_s(),
                     "no valid thrust command within the watchdog: thrust neutral"
                 );
+                // Counted as lockstep counts its timeouts: driver_status reports expiries.
+                self.timeouts += 1;
                 self.go_neutral();
             }
             self.sim.step_to(next_t_ns);

@@ -16,23 +16,29 @@
 //!   cargo build -p thrusterd -p thrusterctl -p thruster-sim -p system-tests --bins
 //!   target/debug/season --hours 8 --out out/season
 
+mod clients;
+mod polls;
+mod probe;
+
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitCode, ExitStatus, Stdio};
+use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use system_tests::season::{
-    row_text, scenario_toml, verdict, Census, Ending, Entry, Lag, Limits, Link, Plan, ProcFigures,
-    Row, Ticker, HEADER, NS_PER_S,
+    row_text, scenario_toml, verdict, Ending, Lag, Limits, Link, Plan, Row, Ticker, HEADER,
+    NS_PER_S,
 };
-use system_tests::soak::{parse_proc_status, DaemonCounts};
-use system_tests::{bin, state, wait_for, Proc, World, BIN_DIR_ENV};
+use system_tests::soak::DaemonCounts;
+use system_tests::{bin, state, Proc, World, BIN_DIR_ENV};
 use thruster_driver_kit::Shutdown;
-use thruster_protocol::services::{
-    cleanup_dead_nodes, namespace_files, tidy_residue, ControlClient, Inbox, IpcConfig, SHM_DIR,
-};
-use thruster_protocol::{ControlRequest, DriverStatusMsg, RequestKind, StatusMsg};
+use thruster_protocol::services::{cleanup_dead_nodes, namespace_files, tidy_residue, Inbox};
+use thruster_protocol::{DriverStatusMsg, StatusMsg};
+
+use clients::{end_recording, end_watch, Recording, Watch, MIN_LIFE};
+use polls::{ctl_quiet, estimate, Inflight, Pollers};
+use probe::{census, file_names, load1, proc_figures};
 
 #[derive(Parser)]
 #[command(
@@ -109,209 +115,6 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-/// RSS and open descriptors of a process now (zeros once it is gone).
-fn proc_figures(pid: u32) -> ProcFigures {
-    let rss_kib = std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|t| parse_proc_status(&t))
-        .map_or(0, |m| m.rss_kib);
-    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count() as u64);
-    ProcFigures { rss_kib, fds }
-}
-
-/// The namespace's files now, in /dev/shm and under its root.
-fn census(ipc: &IpcConfig) -> Result<Census> {
-    // Clients come and go while the tree is walked: a file that vanished mid-walk fails the
-    // listing; list again.
-    let mut tries = 0;
-    let files = loop {
-        match namespace_files(ipc) {
-            Ok(f) => break f,
-            Err(_) if tries < 20 => {
-                tries += 1;
-                std::thread::sleep(Duration::from_millis(5));
-            }
-            Err(e) => return Err(e.into()),
-        }
-    };
-    let entries: Vec<Entry> = files
-        .into_iter()
-        .filter_map(|path| {
-            // A file may go between the listing and this (a client leaving): not counted.
-            let m = path.symlink_metadata().ok()?;
-            Some(Entry {
-                is_dir: m.is_dir(),
-                len: if m.is_dir() { 0 } else { m.len() },
-                path,
-            })
-        })
-        .collect();
-    Ok(Census::of(&entries, Path::new(SHM_DIR)))
-}
-
-/// Names (with sizes) of the namespace's files now: "path (bytes)".
-fn file_names(ipc: &IpcConfig) -> std::collections::BTreeSet<String> {
-    namespace_files(ipc)
-        .unwrap_or_default()
-        .into_iter()
-        .filter_map(|p| {
-            let m = p.symlink_metadata().ok()?;
-            (!m.is_dir()).then(|| format!("{} ({} B)", p.display(), m.len()))
-        })
-        .collect()
-}
-
-/// One operator poll the way `thrusterctl status` does it, in this process: a fresh node,
-/// control client and status inbox, a Status request, the published status; all dropped.
-/// Returns the vehicle time the answer carries (when the poll was served).
-fn poll_in_process(ipc: &IpcConfig) -> Result<u64> {
-    let node = ipc.create_node("season-poll")?;
-    let inbox: Inbox<StatusMsg> = Inbox::create_with_buffer(&node, ipc, 1)?;
-    let client = ControlClient::create(&node, ipc)?;
-    let r = client.call(
-        ControlRequest::new(RequestKind::Status),
-        Duration::from_secs(2),
-    )?;
-    anyhow::ensure!(r.is_ok(), "status refused: {}", r.text());
-    let s = wait_for(&inbox, Duration::from_secs(2), |_| true).context("no status published")?;
-    Ok(s.vehicle_time_ns)
-}
-
-/// In-process polls run on worker threads, each with its own fresh node per poll (iceoryx2
-/// ports are not Send; a node per thread is fine): a poll mostly waits (about 100 ms for the
-/// daemon's status to reach a new subscriber), and one at a time could not keep up with one
-/// per vehicle-second at 20x.
-struct Pollers {
-    jobs: Option<std::sync::mpsc::Sender<u64>>,
-    results: std::sync::mpsc::Receiver<(u64, Duration, Result<u64, String>)>,
-    threads: Vec<std::thread::JoinHandle<()>>,
-    pending: u64,
-    max_pending: u64,
-}
-
-impl Pollers {
-    fn new(ipc: &IpcConfig, n: usize) -> Pollers {
-        let (job_tx, job_rx) = std::sync::mpsc::channel::<u64>();
-        let (res_tx, results) = std::sync::mpsc::channel();
-        let job_rx = std::sync::Arc::new(std::sync::Mutex::new(job_rx));
-        let threads = (0..n)
-            .map(|_| {
-                let (ipc, job_rx, res_tx) = (ipc.clone(), job_rx.clone(), res_tx.clone());
-                std::thread::spawn(move || loop {
-                    let job = job_rx.lock().unwrap().recv();
-                    let Ok(due) = job else { return };
-                    let t0 = Instant::now();
-                    let r = poll_in_process(&ipc).map_err(|e| format!("{e:#}"));
-                    if res_tx.send((due, t0.elapsed(), r)).is_err() {
-                        return;
-                    }
-                })
-            })
-            .collect();
-        Pollers {
-            jobs: Some(job_tx),
-            results,
-            threads,
-            pending: 0,
-            max_pending: 0,
-        }
-    }
-
-    fn submit(&mut self, due: u64) {
-        if let Some(j) = &self.jobs {
-            let _ = j.send(due);
-            self.pending += 1;
-            self.max_pending = self.max_pending.max(self.pending);
-        }
-    }
-
-    /// Results so far into `tally`; with `wait`, until every job is done.
-    fn collect(&mut self, tally: &mut Tally, wait: bool) {
-        loop {
-            let r = if wait && self.pending > 0 {
-                self.results.recv_timeout(Duration::from_secs(30)).ok()
-            } else {
-                self.results.try_recv().ok()
-            };
-            let Some((due, took, r)) = r else { return };
-            self.pending -= 1;
-            tally.inproc_wall += took;
-            if let Ok(served_ns) = r {
-                tally.served_lag.record(due, served_ns);
-            }
-            if let Err(e) = r {
-                tally.polls_failed += 1;
-                if tally.poll_errors.len() < 20 {
-                    tally
-                        .poll_errors
-                        .push(format!("in-process poll due at {due} ns: {e}"));
-                }
-            }
-        }
-    }
-
-    fn join(mut self) {
-        self.stop();
-    }
-
-    fn stop(&mut self) {
-        self.jobs = None;
-        for t in self.threads.drain(..) {
-            let _ = t.join();
-        }
-    }
-}
-
-/// However `run` returns (an error included), the poll threads drop their nodes before the
-/// world purges the namespace (a live node makes the purge refuse and leaves files).
-impl Drop for Pollers {
-    fn drop(&mut self) {
-        self.stop();
-    }
-}
-
-/// Poll processes in flight, killed and reaped when dropped (std's `Child` does neither: one
-/// left running keeps its node alive and the namespace could not be purged).
-#[derive(Default)]
-struct Inflight(Vec<(Child, Instant)>);
-
-impl Drop for Inflight {
-    fn drop(&mut self) {
-        for (c, _) in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-/// A real `thrusterctl` process with output discarded (the poll processes: thousands).
-fn ctl_quiet(ns: &str, args: &[&str]) -> Result<Child> {
-    Command::new(bin("thrusterctl"))
-        .args(["--namespace", ns])
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .context("spawning thrusterctl")
-}
-
-/// A watch client and when (vehicle ns) and how it ends.
-struct Watch {
-    proc: Proc,
-    stop_ns: u64,
-    ending: Ending,
-    started: Instant,
-}
-
-/// The recorder session in progress.
-struct Recording {
-    proc: Proc,
-    stop_ns: u64,
-    stem: PathBuf,
-    started: Instant,
 }
 
 /// Copies the binaries to `dir` and makes [`bin`] use them: other builds in the shared target
@@ -938,72 +741,4 @@ fn run(args: &Args) -> Result<ExitCode> {
     } else {
         ExitCode::SUCCESS
     })
-}
-
-/// `thrusterctl estimate` as a real process; false when the daemon refused (busy with the
-/// re-estimation a reconfiguration started).
-fn estimate(ns: &str) -> Result<bool> {
-    let st = ctl_quiet(ns, &["estimate"])?.wait()?;
-    Ok(st.success())
-}
-
-/// Least wall time a watch or recorder runs before it is signalled: thrusterctl installs its
-/// SIGTERM handler once the command starts waiting, and a signal before that kills it
-/// uncleanly (no operator stops a command within a second of starting it).
-const MIN_LIFE: Duration = Duration::from_millis(1500);
-
-/// Signals a watch client as planned and reaps it; a SIGTERM must end it cleanly.
-fn end_watch(mut w: Watch, tally: &mut Tally) {
-    if let Some(rest) = MIN_LIFE.checked_sub(w.started.elapsed()) {
-        std::thread::sleep(rest);
-    }
-    w.proc.signal(w.ending.signal());
-    match w.proc.wait_timeout(Duration::from_secs(10)) {
-        Some(st) => {
-            if w.ending == Ending::Term && !st.success() {
-                tally
-                    .watch_failures
-                    .push(format!("thrusterctl watch exited {st} on SIGTERM"));
-            }
-        }
-        None => tally.watch_failures.push(format!(
-            "thrusterctl watch still running 10 s after SIG{}",
-            w.ending.signal()
-        )),
-    }
-    let _ = std::fs::remove_file(&w.proc.log);
-}
-
-/// Stops the recorder (SIGTERM), counts the files it rotated through and removes them.
-fn end_recording(mut r: Recording, dir: &Path, tally: &mut Tally) {
-    if let Some(rest) = MIN_LIFE.checked_sub(r.started.elapsed()) {
-        std::thread::sleep(rest);
-    }
-    r.proc.signal("TERM");
-    let st: Option<ExitStatus> = r.proc.wait_timeout(Duration::from_secs(60));
-    match st {
-        Some(st) if st.success() => {}
-        other => tally.recorder_failures.push(format!(
-            "thrusterctl record ended {other:?}: {}",
-            r.proc.log_text().lines().last().unwrap_or("")
-        )),
-    }
-    let stem = r.stem.file_name().unwrap().to_string_lossy().to_string();
-    if let Ok(entries) = std::fs::read_dir(dir) {
-        for e in entries.flatten() {
-            let name = e.file_name().to_string_lossy().to_string();
-            if name.starts_with(&format!("{stem}.")) || name.starts_with(&format!("{stem}-")) {
-                tally.recorded_files += 1;
-                tally.recorded_bytes += e.metadata().map_or(0, |m| m.len());
-                let _ = std::fs::remove_file(e.path());
-            }
-        }
-    }
-}
-
-fn load1() -> f64 {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().and_then(|v| v.parse().ok()))
-        .unwrap_or(f64::NAN)
 }
