@@ -242,7 +242,7 @@ pub(super) fn runs(name: Name, t_change: f64, vehicle: &'static str) -> Vec<RunS
                     change: Some((t_change, false)),
                     // The mismatch monitor is deliberately blind at the paper's 0.25 rad/s gyro
                     // noise (lower thresholds gave false alarms there, see
-                    // daemon/core/src/monitor.rs); the refinement's change test is not (see
+                    // daemon/core/src/adaptation/monitor.rs); the refinement's change test is not (see
                     // `silent-paper`); this run shows the unannounced change with a realistic
                     // IMU.
                     noise: "realistic",
