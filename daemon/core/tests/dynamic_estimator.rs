@@ -6,7 +6,7 @@ use nalgebra::{DMatrix, Vector3};
 use thruster_inprocess::estimation::*;
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::dynamics::RigidBody;
-use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
+use thruster_sim::{NoisePreset, SensorConfig, Simulator};
 use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::navigation::{DepthAid, Navigator};
 
@@ -671,92 +671,6 @@ fn a_model_the_water_made_is_refused() {
             o.err_acc
         );
     }
-}
-
-/// Issue 31: how a vehicle's thrusters differ from what the daemon assumes. The daemon (and
-/// these tests' machine) assumes a reverse/forward thrust ratio of 0.78 (`reverse_ratio`, the
-/// simulator's T200 40.2 / 51.5 N), compensates a dead band of 0.05 (`machine.deadband` here:
-/// the simulator's default) and starts from a 0.1 s lag (`spin_up_s`, learned since issue
-/// 29). `None` keeps the vehicle file's value; the daemon is told none of them.
-#[derive(Debug, Clone, Copy, Default)]
-struct Mismatch {
-    /// Every thruster's reverse thrust at full command over its forward thrust.
-    reverse_ratio: Option<f64>,
-    /// Every thruster's dead band (fraction of full command); the machine still compensates 0.05.
-    deadband: Option<f64>,
-    /// Every thruster's spin-up time constant, s.
-    lag_s: Option<f64>,
-}
-
-/// The thrusters as the daemon assumes them (each vehicle file's own).
-const MATCHED: Mismatch = Mismatch {
-    reverse_ratio: None,
-    deadband: None,
-    lag_s: None,
-};
-
-/// The cases of issue 31 item 1, with the matched vehicle first.
-const MISMATCHES: [(&str, Mismatch); 7] = [
-    ("matched", MATCHED),
-    (
-        "reverse 0.6",
-        Mismatch {
-            reverse_ratio: Some(0.6),
-            ..MATCHED
-        },
-    ),
-    (
-        "reverse 0.95",
-        Mismatch {
-            reverse_ratio: Some(0.95),
-            ..MATCHED
-        },
-    ),
-    (
-        "dead band 0",
-        Mismatch {
-            deadband: Some(0.0),
-            ..MATCHED
-        },
-    ),
-    (
-        "dead band 0.1",
-        Mismatch {
-            deadband: Some(0.1),
-            ..MATCHED
-        },
-    ),
-    (
-        "lag 0.05 s",
-        Mismatch {
-            lag_s: Some(0.05),
-            ..MATCHED
-        },
-    ),
-    (
-        "lag 0.15 s",
-        Mismatch {
-            lag_s: Some(0.15),
-            ..MATCHED
-        },
-    ),
-];
-
-/// The vehicle file `name` with every thruster changed as `m` says (the daemon not told).
-fn mismatched(name: &str, m: Mismatch) -> Vehicle {
-    let mut v = vehicle(name);
-    for t in &mut v.thrusters {
-        if let Some(r) = m.reverse_ratio {
-            t.reverse_max_n = r * t.forward_max_n;
-        }
-        if let Some(db) = m.deadband {
-            t.deadband = db;
-        }
-        if let Some(tau) = m.lag_s {
-            t.time_constant_s = tau;
-        }
-    }
-    v
 }
 
 /// One mismatched run, the machine allowed to refuse the model (the outcome is then the

@@ -7,8 +7,11 @@
 //!   measurements, the vehicle files.
 //! - [`estimation`]: one estimation from rest on a vehicle, its outcome against the truth, and
 //!   the vehicles with hidden constants changed (lag, reverse ratio, dead band).
+//! - [`holding`]: holding attitude with the refinement and the change test on, through pitch
+//!   steps or level, until a mismatch; the 1 kHz hold.
 
 pub mod estimation;
+pub mod holding;
 pub mod run;
 
 pub use run::*;

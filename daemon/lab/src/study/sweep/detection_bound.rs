@@ -7,7 +7,7 @@ use thruster_sim::NoisePreset;
 use thrusterd_core::adaptation::refinement::RefinementConfig;
 use thrusterd_core::machine::State;
 
-use super::refinement::holding_on_prior;
+use thruster_inprocess::holding::holding_on_prior;
 use thruster_inprocess::Run;
 
 /// The best detection time any detector could reach, measured: a generalized-likelihood-ratio
