@@ -9,9 +9,11 @@
 //!   the vehicles with hidden constants changed (lag, reverse ratio, dead band).
 //! - [`holding`]: holding attitude with the refinement and the change test on, through pitch
 //!   steps or level, until a mismatch; the 1 kHz hold.
+//! - [`model_update`]: the refinement's updates followed while a thruster degrades.
 
 pub mod estimation;
 pub mod holding;
+pub mod model_update;
 pub mod run;
 
 pub use run::*;
