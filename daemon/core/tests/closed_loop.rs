@@ -5,7 +5,7 @@
 //! In-process runs are deterministic: the numbers in the comments are what these seeds gave.
 
 mod common;
-use common::{vehicle, Reestimation, Run};
+use common::{env_list, rotate_while_holding_with, vehicle, Reestimation, Run};
 use thruster_sim::NoisePreset;
 use thrusterd_core::adaptation::identification::IdentificationConfig;
 use thrusterd_core::machine::{Machine, MachineSetup, Mode, State};
@@ -19,27 +19,6 @@ fn rotate_while_holding(noise: NoisePreset, seed: u64) -> (Run, Reestimation) {
         ModelSource::Estimated,
         "{noise:?} seed {seed}: {r:?}"
     );
-    (run, r)
-}
-
-/// The same with the machine's identification section replaced (None: the defaults), calling
-/// `observe` after every sample of the re-estimation.
-fn rotate_while_holding_with(
-    noise: NoisePreset,
-    seed: u64,
-    identification: Option<IdentificationConfig>,
-    observe: impl FnMut(&Machine, f64),
-) -> (Run, Reestimation) {
-    let v = vehicle("amour5");
-    let mut run = Run::new("amour5", noise, seed);
-    if let Some(identification) = identification {
-        run.with_identification(identification);
-    }
-    run.run_for(1.0);
-    run.estimate();
-    run.run_for(3.0);
-    assert_eq!(run.machine.state(), State::Active);
-    let r = run.announced_rotation_observed(&v, observe);
     (run, r)
 }
 
@@ -280,30 +259,6 @@ fn an_estimate_beyond_the_attitude_budget_is_refused_with_the_reason() {
     run.run_for(6.0);
     run.machine.on_request(Request::Estimate).unwrap();
     assert_eq!(run.machine.state(), State::Identify);
-}
-
-/// A comma-separated list from the environment (`1-5` also for integer ranges), or `default`.
-fn env_list<T: std::str::FromStr + Copy>(key: &str, default: &[T]) -> Vec<T> {
-    let Ok(text) = std::env::var(key) else {
-        return default.to_vec();
-    };
-    let mut out = Vec::new();
-    for item in text.split(',').map(str::trim).filter(|t| !t.is_empty()) {
-        if let Some((a, b)) = item.split_once('-') {
-            if let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) {
-                for k in a..=b {
-                    out.push(
-                        k.to_string()
-                            .parse()
-                            .unwrap_or_else(|_| panic!("{key}: {k}")),
-                    );
-                }
-                continue;
-            }
-        }
-        out.push(item.parse().unwrap_or_else(|_| panic!("{key}: {item}")));
-    }
-    out
 }
 
 /// A silent change, found by the refinement while the vehicle flies +-20 deg pitch steps with a

@@ -289,3 +289,48 @@ impl Run {
         }
     }
 }
+
+/// A comma-separated list from the environment (`1-5` also for integer ranges), or `default`.
+pub fn env_list<T: std::str::FromStr + Copy>(key: &str, default: &[T]) -> Vec<T> {
+    let Ok(text) = std::env::var(key) else {
+        return default.to_vec();
+    };
+    let mut out = Vec::new();
+    for item in text.split(',').map(str::trim).filter(|t| !t.is_empty()) {
+        if let Some((a, b)) = item.split_once('-') {
+            if let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) {
+                for k in a..=b {
+                    out.push(
+                        k.to_string()
+                            .parse()
+                            .unwrap_or_else(|_| panic!("{key}: {k}")),
+                    );
+                }
+                continue;
+            }
+        }
+        out.push(item.parse().unwrap_or_else(|_| panic!("{key}: {item}")));
+    }
+    out
+}
+
+/// The same with the machine's identification section replaced (None: the defaults), calling
+/// `observe` after every sample of the re-estimation.
+pub fn rotate_while_holding_with(
+    noise: NoisePreset,
+    seed: u64,
+    identification: Option<thrusterd_core::adaptation::identification::IdentificationConfig>,
+    observe: impl FnMut(&Machine, f64),
+) -> (Run, Reestimation) {
+    let v = vehicle("amour5");
+    let mut run = Run::new("amour5", noise, seed);
+    if let Some(identification) = identification {
+        run.with_identification(identification);
+    }
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(3.0);
+    assert_eq!(run.machine.state(), State::Active);
+    let r = run.announced_rotation_observed(&v, observe);
+    (run, r)
+}
