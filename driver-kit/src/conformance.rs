@@ -16,9 +16,7 @@
 //! Each test has its own iceoryx2 namespace ([`NamespaceGuard::unique_for_test`]) and the
 //! process is killed and reaped in a `Drop` guard if the test fails.
 
-use std::fs;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -50,75 +48,8 @@ pub trait DriverUnderTest: Sized {
     fn start(ns: &IpcConfig) -> (Self, DriverProcess);
 }
 
-/// A driver child process, killed and reaped when dropped (its log printed if the test is
-/// failing); its stderr goes to a file in a temp dir removed with it.
-pub struct DriverProcess {
-    child: Child,
-    dir: tempfile::TempDir,
-    status: Option<ExitStatus>,
-    name: String,
-}
-
-impl DriverProcess {
-    /// Runs `bin args...` with `RUST_LOG=info`, stdin and stdout closed.
-    pub fn spawn(bin: impl AsRef<Path>, args: &[&str]) -> std::io::Result<DriverProcess> {
-        let dir = tempfile::tempdir()?;
-        // A file, not a pipe: nobody reads during the run and a full pipe would block.
-        let err = fs::File::create(dir.path().join("stderr.log"))?;
-        let bin = bin.as_ref();
-        let child = Command::new(bin)
-            .args(args)
-            .env("RUST_LOG", "info")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(err)
-            .spawn()?;
-        Ok(DriverProcess {
-            child,
-            dir,
-            status: None,
-            name: bin.display().to_string(),
-        })
-    }
-
-    /// A directory that lives as long as the process (for its config file).
-    pub fn dir(&self) -> &Path {
-        self.dir.path()
-    }
-
-    /// Its stderr so far.
-    pub fn log(&self) -> String {
-        fs::read_to_string(self.dir.path().join("stderr.log")).unwrap_or_default()
-    }
-
-    /// SIGTERM, then waits up to `within` for the exit (reaping it).
-    pub fn terminate(&mut self, within: Duration) -> Option<ExitStatus> {
-        // SAFETY: kill(2) on our own child, not reaped yet (status is None until reaped).
-        if self.status.is_none() {
-            unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
-        }
-        let end = Instant::now() + within;
-        while self.status.is_none() && Instant::now() < end {
-            self.status = self.child.try_wait().ok().flatten();
-            if self.status.is_none() {
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        }
-        self.status
-    }
-}
-
-impl Drop for DriverProcess {
-    fn drop(&mut self) {
-        if self.status.is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-        if std::thread::panicking() {
-            eprintln!("---- {} log ----\n{}", self.name, self.log());
-        }
-    }
-}
+/// A driver's process: the one test launcher's ([`crate::test_process`]).
+pub use crate::test_process::TestProcess as DriverProcess;
 
 /// The test in the daemon's place: receives IMU samples and driver status, sends commands.
 pub struct TestDaemon {
@@ -302,7 +233,7 @@ impl<D: DriverUnderTest> Run<D> {
             ns,
         } = self;
         let status = proc.terminate(Duration::from_secs(2));
-        let log = proc.log();
+        let log = proc.log_text();
         assert!(
             status.is_some(),
             "{}: no exit within 2 s of SIGTERM\n{log}",

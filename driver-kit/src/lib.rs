@@ -21,6 +21,8 @@ pub mod realtime;
 pub mod shutdown;
 #[cfg(feature = "process")]
 pub mod systemd;
+#[cfg(any(feature = "test-process", test))]
+pub mod test_process;
 
 pub use load::{locate, parse_toml, read_text, LoadError, Range, SettingsError};
 pub use log_limit::LogLimiter;

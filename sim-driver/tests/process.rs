@@ -8,8 +8,9 @@
 
 use std::fs;
 use std::path::PathBuf;
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Command, ExitStatus};
 use std::time::{Duration, Instant};
+use thruster_driver_kit::test_process::{Launch, TestProcess};
 
 use thruster_protocol::services::{
     cleanup_dead_nodes, namespace_files, purge_namespace, Inbox, IpcConfig, IpcNode,
@@ -52,36 +53,13 @@ fn replica(vehicle: &str, noise: NoisePreset, seed: u64) -> Simulator {
 
 // ---- child processes -------------------------------------------------------------------
 
-/// A child process that is always killed and reaped, also when the test panics (its log is
-/// printed then).
-struct Proc {
-    child: Child,
-    log: PathBuf,
-    _dir: tempfile::TempDir,
-    status: Option<ExitStatus>,
-}
+/// thruster-sim as a child process: the one test launcher's (`TestProcess`: always killed and
+/// reaped, its log printed when the test panics), with what these tests ask of it.
+struct Proc(TestProcess);
 
 impl Proc {
     fn spawn(args: &[&str]) -> Proc {
-        let dir = tempfile::tempdir().unwrap();
-        let log = dir.path().join("stderr.log");
-        // A file, not a pipe: nobody reads during the run and a full pipe would block the
-        // child.
-        let err = fs::File::create(&log).unwrap();
-        let child = Command::new(BIN)
-            .args(args)
-            .env("RUST_LOG", "info")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(err)
-            .spawn()
-            .unwrap();
-        Proc {
-            child,
-            log,
-            _dir: dir,
-            status: None,
-        }
+        Proc(TestProcess::spawn(BIN, args).unwrap())
     }
 
     fn run(ns: &IpcConfig, vehicle: &str, extra: &[&str]) -> Proc {
@@ -98,73 +76,28 @@ impl Proc {
     }
 
     fn signal(&self, sig: &str) {
-        let ok = Command::new("kill")
-            .args([&format!("-{sig}"), &self.child.id().to_string()])
-            .status()
-            .unwrap()
-            .success();
-        assert!(ok, "kill -{sig} failed");
+        self.0.signal(sig);
     }
 
     /// Waits for the exit (reaping the child); `None` when it is still running at `within`.
     fn wait_exit(&mut self, within: Duration) -> Option<ExitStatus> {
-        let end = Instant::now() + within;
-        while Instant::now() < end {
-            if let Some(s) = self.child.try_wait().unwrap() {
-                self.status = Some(s);
-                return Some(s);
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        None
+        self.0.wait_timeout(within)
     }
 
     /// SIGTERM; asserts exit code 0 within a second.
     fn terminate(&mut self) {
-        self.signal("TERM");
         let t0 = Instant::now();
-        let status = self.wait_exit(Duration::from_secs(1));
-        assert!(
-            status.is_some(),
-            "no exit within 1 s of SIGTERM\n{}",
-            self.log()
-        );
-        assert_eq!(status.unwrap().code(), Some(0), "{}", self.log());
+        self.0.stop_cleanly(Duration::from_secs(1));
         assert!(t0.elapsed() < Duration::from_secs(1));
     }
 
     fn log(&self) -> String {
-        fs::read_to_string(&self.log).unwrap_or_default()
+        self.0.log_text()
     }
 
     /// The value of `key=` in the final summary line.
     fn summary_value(&self, key: &str) -> u64 {
-        let log = self.log();
-        let line = log
-            .lines()
-            .find(|l| l.contains("thruster-sim stopped"))
-            .unwrap_or_else(|| panic!("no summary in log:\n{log}"));
-        let at = line
-            .find(&format!(" {key}="))
-            .unwrap_or_else(|| panic!("no {key} in {line}"));
-        line[at + key.len() + 2..]
-            .split(|c: char| !c.is_ascii_digit())
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap_or_else(|_| panic!("{key} not a number in {line}"))
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if self.status.is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-        if std::thread::panicking() {
-            eprintln!("---- thruster-sim log ----\n{}", self.log());
-        }
+        self.0.summary_value("thruster-sim stopped", key)
     }
 }
 
@@ -1010,24 +943,16 @@ fn a_stepped_run_takes_exactly_the_samples_it_is_allowed() {
     {
         let mut responder = Proc::spawn(&["respond", "--namespace", ns.namespace(), "--neutral"]);
         let spawn = || {
-            let dir = tempfile::tempdir().unwrap();
-            let log = dir.path().join("stderr.log");
             let v = vehicle_path("six_dof");
-            let child = Command::new(BIN)
-                .args(["run", "--namespace", ns.namespace(), "--vehicle"])
-                .arg(&v)
-                .args(["--noise", "none", "--lockstep", "--stepped"])
-                .stdin(Stdio::piped())
-                .stdout(Stdio::piped())
-                .stderr(fs::File::create(&log).unwrap())
-                .spawn()
-                .unwrap();
-            (child, log, dir)
+            Launch::new(std::path::Path::new(BIN))
+                .args(&["run", "--namespace", ns.namespace(), "--vehicle"])
+                .args(&[v.to_str().unwrap()])
+                .args(&["--noise", "none", "--lockstep", "--stepped"])
+                .spawn_piped()
+                .unwrap()
         };
-        let (mut sim, log, _dir) = spawn();
-        let mut to_sim = sim.stdin.take().unwrap();
+        let (mut sim, mut to_sim, out) = spawn();
         let (tx, lines) = mpsc::channel();
-        let out = sim.stdout.take().unwrap();
         std::thread::spawn(move || {
             for l in BufReader::new(out).lines().map_while(Result::ok) {
                 let _ = tx.send(l);
@@ -1052,15 +977,8 @@ fn a_stepped_run_takes_exactly_the_samples_it_is_allowed() {
         writeln!(to_sim, "run 1").unwrap();
         assert_eq!(next(), format!("at 12 {}", 11 * PERIOD_NS));
         writeln!(to_sim, "walk 3").unwrap();
-        let deadline = Instant::now() + TIMEOUT;
-        let status = loop {
-            if let Some(s) = sim.try_wait().unwrap() {
-                break s;
-            }
-            assert!(Instant::now() < deadline, "no exit on a bad line");
-            std::thread::sleep(Duration::from_millis(10));
-        };
-        let text = fs::read_to_string(&log).unwrap();
+        let status = sim.wait_timeout(TIMEOUT).expect("no exit on a bad line");
+        let text = sim.log_text();
         assert!(!status.success(), "a bad line must fail the run\n{text}");
         assert!(
             text.contains("walk 3"),
@@ -1068,25 +986,16 @@ fn a_stepped_run_takes_exactly_the_samples_it_is_allowed() {
         );
 
         // A controller that goes away (its end of stdin closed) ends the run cleanly.
-        let (mut sim, log, _dir) = spawn();
-        let mut from_sim = BufReader::new(sim.stdout.take().unwrap());
+        let (mut sim, to_sim, out) = spawn();
+        let mut from_sim = BufReader::new(out);
         let mut first = String::new();
         from_sim.read_line(&mut first).unwrap();
         assert_eq!(first.trim(), "at 1 0");
-        drop(sim.stdin.take());
-        let deadline = Instant::now() + TIMEOUT;
-        let status = loop {
-            if let Some(s) = sim.try_wait().unwrap() {
-                break s;
-            }
-            assert!(Instant::now() < deadline, "no exit when stdin closed");
-            std::thread::sleep(Duration::from_millis(10));
-        };
-        assert!(
-            status.success(),
-            "{}",
-            fs::read_to_string(&log).unwrap_or_default()
-        );
+        drop(to_sim);
+        let status = sim
+            .wait_timeout(TIMEOUT)
+            .expect("no exit when stdin closed");
+        assert!(status.success(), "{}", sim.log_text());
         responder.terminate();
     }
     assert_namespace_clean(&ns);

@@ -1,12 +1,13 @@
 //! Helpers shared by the system tests: the real binaries started as separate processes on a
 //! private iceoryx2 namespace, always reaped, and the namespace purged afterwards.
 
-use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
+use std::process::{ChildStdin, ChildStdout, Command, ExitStatus};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Once;
+
 use std::time::{Duration, Instant};
+use thruster_driver_kit::test_process::{Launch, TestProcess};
 
 use thruster_protocol::services::{
     ControlClient, Inbox, IpcConfig, IpcNode, NamespaceGuard, TopicMessage,
@@ -102,11 +103,24 @@ pub fn build_binaries() {
     });
 }
 
-/// A child process that is killed and reaped however the test ends.
-pub struct Proc {
-    pub name: String,
-    child: Option<Child>,
-    pub log: PathBuf,
+/// One of our binaries as a child process: driver-kit's one test launcher (`TestProcess`:
+/// killed and reaped however the test ends, its log printed when the test panics, signals by
+/// name), started from this workspace's build with its log in a world's folder. Everything
+/// else (`signal`, `wait_timeout`, `stop`, `log_text`, `is_running`, `pid`, `log`, `name`)
+/// is the launcher's, through `Deref`.
+pub struct Proc(TestProcess);
+
+impl std::ops::Deref for Proc {
+    type Target = TestProcess;
+    fn deref(&self) -> &TestProcess {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Proc {
+    fn deref_mut(&mut self) -> &mut TestProcess {
+        &mut self.0
+    }
 }
 
 impl Proc {
@@ -128,53 +142,26 @@ impl Proc {
         env: &[(&str, &str)],
         logs: &Path,
     ) -> Proc {
-        let log = Proc::new_log(name, logs);
-        let out = File::options()
-            .write(true)
-            .create_new(true)
-            .open(&log)
-            .unwrap_or_else(|e| panic!("creating {}: {e}", log.display()));
-        let err = out.try_clone().unwrap();
-        let child = Command::new(path)
+        let launched = Launch::new(path)
+            .name(name)
             .args(args)
-            .stdin(Stdio::null())
-            .stdout(out)
-            .stderr(err)
-            .env("RUST_LOG", "info")
-            .envs(env.iter().copied())
+            .envs(env)
+            .log_to(Proc::new_log(name, logs))
             .spawn()
             .unwrap_or_else(|e| panic!("spawning {name}: {e}"));
-        Proc {
-            name: name.to_string(),
-            child: Some(child),
-            log,
-        }
+        Proc(launched)
     }
 
     /// As `spawn`, with standard input and output piped to the caller (a protocol such as the
     /// simulator's stepping); standard error goes to the log.
     pub fn spawn_piped(name: &str, args: &[&str], logs: &Path) -> (Proc, ChildStdin, ChildStdout) {
-        let log = Proc::new_log(name, logs);
-        let err = File::options()
-            .write(true)
-            .create_new(true)
-            .open(&log)
-            .unwrap_or_else(|e| panic!("creating {}: {e}", log.display()));
-        let mut child = Command::new(bin(name))
+        let (launched, stdin, stdout) = Launch::new(&bin(name))
+            .name(name)
             .args(args)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(err)
-            .env("RUST_LOG", "info")
-            .spawn()
+            .log_to(Proc::new_log(name, logs))
+            .spawn_piped()
             .unwrap_or_else(|e| panic!("spawning {name}: {e}"));
-        let (stdin, stdout) = (child.stdin.take().unwrap(), child.stdout.take().unwrap());
-        let proc = Proc {
-            name: name.to_string(),
-            child: Some(child),
-            log,
-        };
-        (proc, stdin, stdout)
+        (Proc(launched), stdin, stdout)
     }
 
     /// A fresh log file name in `logs`. One file per process: two of the same binary (say, two
@@ -188,55 +175,9 @@ impl Proc {
         ))
     }
 
-    pub fn pid(&self) -> u32 {
-        self.child.as_ref().map(|c| c.id()).unwrap_or(0)
-    }
-
-    /// Send a signal (e.g. libc SIGTERM = 15) through kill(1), keeping the crate free of libc.
-    pub fn signal(&self, sig: &str) {
-        let _ = Command::new("kill")
-            .args([&format!("-{sig}"), &self.pid().to_string()])
-            .status();
-    }
-
-    /// Wait for exit up to `timeout`; None if still running.
-    pub fn wait_timeout(&mut self, timeout: Duration) -> Option<ExitStatus> {
-        let child = self.child.as_mut()?;
-        let start = Instant::now();
-        loop {
-            if let Ok(Some(status)) = child.try_wait() {
-                self.child = None;
-                return Some(status);
-            }
-            if start.elapsed() > timeout {
-                return None;
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-    }
-
-    /// SIGTERM, then wait; the exit status.
+    /// SIGTERM, then wait; the exit status (panics with the log after 5 s).
     pub fn stop(&mut self) -> ExitStatus {
-        self.signal("TERM");
-        match self.wait_timeout(Duration::from_secs(5)) {
-            Some(s) => s,
-            None => panic!(
-                "{} did not exit within 5 s of SIGTERM\n{}",
-                self.name,
-                self.log_text()
-            ),
-        }
-    }
-
-    pub fn log_text(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-
-    pub fn is_running(&mut self) -> bool {
-        match self.child.as_mut() {
-            Some(c) => matches!(c.try_wait(), Ok(None)),
-            None => false,
-        }
+        self.0.stop_within(Duration::from_secs(5))
     }
 }
 
@@ -245,15 +186,6 @@ pub fn first_exited<'a>(procs: &mut [(&'a str, &mut Proc)]) -> Option<&'a str> {
     procs
         .iter_mut()
         .find_map(|(name, p)| (!p.is_running()).then_some(*name))
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
 }
 
 /// A test's private world: namespace (purged on drop), temp folder for logs and state.

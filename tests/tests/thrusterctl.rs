@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 use system_tests::cli::{ctl, estimate_wait_stepped, expect_code, text};
 use system_tests::vehicle_clock::STEPPED_DAEMON;
-use system_tests::{bin, state, workspace, Operator, World};
+use system_tests::{bin, state, workspace, Operator, Proc, World};
 use thruster_protocol::{DaemonState, ModelSource};
 
 const LONG: Duration = Duration::from_secs(60);
@@ -427,12 +427,11 @@ fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
     let files = || thruster_protocol::services::namespace_files(world.ipc()).unwrap();
     let before = files();
 
-    let mut client = Command::new(bin("thrusterctl"))
-        .args(["--namespace", &world.namespace(), "watch"])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("thrusterctl runs");
+    let mut client = Proc::spawn(
+        "thrusterctl",
+        &["--namespace", &world.namespace(), "watch"],
+        world.dir.path(),
+    );
     // The client's own files: those that appeared while it ran.
     let mut theirs: Vec<std::path::PathBuf> = Vec::new();
     let deadline = Instant::now() + Duration::from_secs(20);
@@ -448,11 +447,13 @@ fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
         "the client made too few files to judge: {theirs:?}"
     );
     assert!(
-        client.try_wait().unwrap().is_none(),
+        client.is_running(),
         "the watch ended by itself: the kill would test nothing"
     );
-    client.kill().unwrap();
-    client.wait().unwrap();
+    client.signal("KILL");
+    client
+        .wait_timeout(Duration::from_secs(10))
+        .expect("the killed client reaped");
     let killed = Instant::now();
 
     let deadline = killed + Duration::from_secs(10);

@@ -9,9 +9,10 @@ pub mod inotify;
 
 use std::fs;
 use std::path::Path;
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::ExitStatus;
 use std::time::{Duration, Instant};
 
+use thruster_driver_kit::test_process::TestProcess;
 use thruster_hw::clock::monotonic_ns;
 use thruster_protocol::services::{Inbox, IpcConfig, IpcNode, NamespaceGuard, Port};
 use thruster_protocol::{DriverStatusMsg, ImuSample, ThrustCommand, ThrustMode};
@@ -25,13 +26,10 @@ pub const MS: u64 = 1_000_000;
 
 // ---- the child process -------------------------------------------------------------------
 
-/// The `thruster-hw` child, always killed and reaped (also when the test panics; its log
-/// is printed then). Its config file and log live in a temp dir removed with it.
-pub struct Proc {
-    child: Child,
-    dir: tempfile::TempDir,
-    status: Option<ExitStatus>,
-}
+/// The `thruster-hw` child: the one test launcher's (`TestProcess`: always killed and reaped,
+/// its log printed when the test panics), and the folder its config file lives in (removed
+/// after the process is gone: fields drop in order).
+pub struct Proc(TestProcess, tempfile::TempDir);
 
 impl Proc {
     /// Writes `config` to a file and runs `thruster-hw run --config FILE extra...`.
@@ -39,95 +37,41 @@ impl Proc {
         let dir = tempfile::tempdir().unwrap();
         let cfg = dir.path().join("thruster-hw.toml");
         fs::write(&cfg, config).unwrap();
-        // A file, not a pipe: nobody reads during the run and a full pipe would block.
-        let err = fs::File::create(dir.path().join("stderr.log")).unwrap();
-        let child = Command::new(BIN)
-            .args(["run", "--config", cfg.to_str().unwrap()])
-            .args(extra)
-            .env("RUST_LOG", "info")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(err)
-            .spawn()
-            .unwrap();
-        Proc {
-            child,
-            dir,
-            status: None,
-        }
+        let mut args = vec!["run", "--config", cfg.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        Proc(TestProcess::spawn(BIN, &args).unwrap(), dir)
     }
 
     pub fn pid(&self) -> i32 {
-        self.child.id() as i32
+        self.0.pid() as i32
     }
 
     pub fn signal(&self, sig: i32) {
-        // SAFETY: plain kill(2) on our own child, which is not reaped yet.
-        let rc = unsafe { libc::kill(self.pid(), sig) };
-        assert_eq!(rc, 0, "kill: {}", std::io::Error::last_os_error());
+        self.0.signal_number(sig);
     }
 
     /// Waits for the exit (reaping the child); `None` if still running at `within`.
     pub fn wait_exit(&mut self, within: Duration) -> Option<ExitStatus> {
-        let end = Instant::now() + within;
-        while Instant::now() < end {
-            if let Some(s) = self.child.try_wait().unwrap() {
-                self.status = Some(s);
-                return Some(s);
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        None
+        self.0.wait_timeout(within)
     }
 
     /// SIGTERM; asserts a clean exit (code 0) within a second.
     pub fn terminate(&mut self) {
-        self.signal(libc::SIGTERM);
-        let status = self.wait_exit(Duration::from_secs(1));
-        assert!(
-            status.is_some(),
-            "no exit within 1 s of SIGTERM\n{}",
-            self.log()
-        );
-        assert_eq!(status.unwrap().code(), Some(0), "{}", self.log());
+        self.0.stop_cleanly(Duration::from_secs(1));
     }
 
     pub fn log(&self) -> String {
-        fs::read_to_string(self.dir.path().join("stderr.log")).unwrap_or_default()
+        self.0.log_text()
     }
 
+    /// Where its config file is.
     pub fn dir(&self) -> &Path {
-        self.dir.path()
+        self.1.path()
     }
 
     /// The value of `key=` in the final summary line.
     pub fn summary_value(&self, key: &str) -> u64 {
-        let log = self.log();
-        let line = log
-            .lines()
-            .find(|l| l.contains("thruster-hw stopped"))
-            .unwrap_or_else(|| panic!("no summary in log:\n{log}"));
-        let at = line
-            .find(&format!(" {key}="))
-            .unwrap_or_else(|| panic!("no {key} in {line}"));
-        line[at + key.len() + 2..]
-            .split(|c: char| !c.is_ascii_digit())
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap_or_else(|_| panic!("{key} not a number in {line}"))
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if self.status.is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-        if std::thread::panicking() {
-            eprintln!("---- thruster-hw log ----\n{}", self.log());
-        }
+        self.0.summary_value("thruster-hw stopped", key)
     }
 }
 
