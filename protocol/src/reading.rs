@@ -78,18 +78,6 @@ impl ImuReading {
     }
 }
 
-impl From<&ImuSample> for ImuReading {
-    fn from(s: &ImuSample) -> Self {
-        ImuReading::from_sample(s)
-    }
-}
-
-impl From<&ImuReading> for ImuSample {
-    fn from(r: &ImuReading) -> Self {
-        r.to_sample()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -117,9 +105,9 @@ mod tests {
             depth: None,
             ..r
         };
-        let s = ImuSample::from(&bare);
+        let s = bare.to_sample();
         assert_eq!((s.flags, s.mag, s.depth), (0, [0.0; 3], 0.0));
-        assert_eq!(ImuReading::from(&s), bare);
+        assert_eq!(ImuReading::from_sample(&s), bare);
     }
 
     #[test]

@@ -131,6 +131,8 @@ impl Machine {
         dt: f64,
         mode: Mode,
     ) -> Option<(Command, Measured, Target)> {
+        // Without a model nothing is held: no target is taken either.
+        self.models.current()?;
         let (meas, target) = self.measured_and_target(s, gyro);
         let model = self.models.current()?;
         let mut cmd = Command::neutral(self.n);
@@ -143,9 +145,6 @@ impl Machine {
     }
 
     pub(super) fn control_tick(&mut self, s: &ImuInput, gyro: &Vector3<f64>, dt: f64) -> Command {
-        if self.models.current().is_none() {
-            return Command::neutral(self.n);
-        }
         let Some((mut cmd, meas, target)) = self.controller_command(s, gyro, dt, Mode::Controlling)
         else {
             return Command::neutral(self.n);
