@@ -5,10 +5,11 @@
 //! IMU: at the paper's noise the refinement's windows are too uncertain to update the model
 //! (docs/experiments.md).
 
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use thruster_protocol::TruthMsg;
 
-use super::{num, stat, steps, Row, RunOutput, RunSpec, Start};
+use super::{num, stat, steps, Num, Row, RunOutput, RunSpec, Start};
 use crate::scoring::Plan;
 
 /// The scenario action: L falls to 70 % over 60 s.
@@ -73,42 +74,55 @@ pub(super) fn truth_moved(a: &TruthMsg, b: &TruthMsg) -> f64 {
     (num / den.max(f64::MIN_POSITIVE)).sqrt()
 }
 
-/// The run's scores: the model against the truth at the end, what the daemon did, and the
-/// hold once the loss is complete.
-pub(super) fn summary(out: &RunOutput) -> Value {
+/// A degrade run's scores: the model against the truth at the end, what the daemon did, and
+/// the hold once the loss is complete.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct Scores {
+    pub(super) t_change_s: Num,
+    pub(super) err_rot_vs_truth_end: Num,
+    pub(super) err_acc_vs_truth_end: Num,
+    pub(super) refinements: usize,
+    pub(super) new_models_after_change: usize,
+    pub(super) mismatch_reports: usize,
+    pub(super) after_mean_err_deg: Num,
+    pub(super) after_max_err_deg: Num,
+    pub(super) after_mean_abs_yaw_err_deg: Num,
+}
+
+pub(super) fn summary(out: &RunOutput) -> Scores {
     let t_c = out.spec.change.map_or(f64::NAN, |c| c.0);
     let after = |r: &Row| r.t >= t_c + OVER_S;
     let e = stat(&out.rows, after, |r| r.err);
-    json!({
-        "t_change_s": num(t_c),
-        "err_rot_vs_truth_end": num(out.final_truth.relative_error(&out.final_model, 0)),
-        "err_acc_vs_truth_end": num(out.final_truth.relative_error(&out.final_model, 3)),
-        "refinements": out.refinements,
-        "new_models_after_change": out.swaps.iter().filter(|s| s.t >= t_c).count(),
-        "mismatch_reports": out.mismatch_reports,
-        "after_mean_err_deg": num(e.mean),
-        "after_max_err_deg": num(e.max),
-        "after_mean_abs_yaw_err_deg": num(stat(&out.rows, after, |r| r.yaw_err.abs()).mean),
-    })
+    Scores {
+        t_change_s: num(t_c),
+        err_rot_vs_truth_end: num(out.final_truth.relative_error(&out.final_model, 0)),
+        err_acc_vs_truth_end: num(out.final_truth.relative_error(&out.final_model, 3)),
+        refinements: out.refinements,
+        new_models_after_change: out.swaps.iter().filter(|s| s.t >= t_c).count(),
+        mismatch_reports: out.mismatch_reports,
+        after_mean_err_deg: num(e.mean),
+        after_max_err_deg: num(e.max),
+        after_mean_abs_yaw_err_deg: num(stat(&out.rows, after, |r| r.yaw_err.abs()).mean),
+    }
 }
 
-pub(super) fn headline(refined: &Value, fixed: &Value, oracle: &Value) -> Value {
-    let d = |v: &Value, k: &str| v["degrade"][k].as_f64().unwrap_or(f64::NAN);
+pub(super) fn headline(refined: &Scores, fixed: &Scores, oracle: &Scores) -> Value {
     let (rot, acc) = (
-        d(refined, "err_rot_vs_truth_end"),
-        d(refined, "err_acc_vs_truth_end"),
+        refined.err_rot_vs_truth_end.get(),
+        refined.err_acc_vs_truth_end.get(),
     );
     json!({
         "claim": "the refined model follows a thruster losing 30 % over a minute to within 0.05 of the truth, without a re-estimation",
         "refined_err_rot": num(rot),
         "refined_err_acc": num(acc),
-        "fixed_err_rot": num(d(fixed, "err_rot_vs_truth_end")),
-        "fixed_err_acc": num(d(fixed, "err_acc_vs_truth_end")),
-        "refined_refinements": refined["degrade"]["refinements"],
-        "refined_new_models": refined["degrade"]["new_models_after_change"],
-        "refined_after_mean_err_deg": num(d(refined, "after_mean_err_deg")),
-        "fixed_after_mean_err_deg": num(d(fixed, "after_mean_err_deg")),
-        "oracle_after_mean_err_deg": num(d(oracle, "after_mean_err_deg")),
+        "fixed_err_rot": num(fixed.err_rot_vs_truth_end.get()),
+        "fixed_err_acc": num(fixed.err_acc_vs_truth_end.get()),
+        "refined_refinements": refined.refinements,
+        "refined_new_models": refined.new_models_after_change,
+        "refined_after_mean_err_deg": num(refined.after_mean_err_deg.get()),
+        "fixed_after_mean_err_deg": num(fixed.after_mean_err_deg.get()),
+        "oracle_after_mean_err_deg": num(oracle.after_mean_err_deg.get()),
         "holds": rot <= 0.05 && acc <= 0.05,
     })
 }

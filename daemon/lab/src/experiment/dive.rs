@@ -5,9 +5,10 @@
 //! at the start is ~25 % too strong at the end without compensation; the claim is that with it
 //! the hold error of the last 5 minutes is within 15 % of the first 5 minutes'.
 
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
-use super::{num, stat, steps, Row, RunOutput, RunSpec};
+use super::{num, stat, steps, Num, Row, RunOutput, RunSpec};
 use crate::scoring::Plan;
 
 /// The dive's length, vehicle seconds from the simulator's start (the hold begins after the
@@ -73,43 +74,55 @@ fn window(out: &RunOutput, from: f64, to: f64) -> (f64, f64) {
     (all, settled)
 }
 
-pub(super) fn summary(out: &RunOutput) -> Value {
+/// A dive run's scores: the battery, and the hold of the first 5 minutes against the last 5.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct Scores {
+    pub(super) voltage_start_v: Num,
+    pub(super) voltage_end_v: Num,
+    pub(super) hold_s: Num,
+    pub(super) hold_err_first_5min_deg: Num,
+    pub(super) hold_err_last_5min_deg: Num,
+    pub(super) last_over_first: Num,
+    pub(super) settled_err_first_5min_deg: Num,
+    pub(super) settled_err_last_5min_deg: Num,
+    pub(super) refinements: usize,
+    pub(super) new_models: usize,
+}
+
+pub(super) fn summary(out: &RunOutput) -> Scores {
     let end = out.rows.last().map_or(0.0, |r| r.t - out.hold_start);
     let (first, first_settled) = window(out, 0.0, WINDOW_S);
     let (last, last_settled) = window(out, end - WINDOW_S, end + 1.0);
-    json!({
-        "voltage_start_v": num(out.truth.supply_voltage_v),
-        "voltage_end_v": num(out.final_truth.supply_voltage_v),
-        "hold_s": num(end),
-        "hold_err_first_5min_deg": num(first),
-        "hold_err_last_5min_deg": num(last),
-        "last_over_first": num(last / first),
-        "settled_err_first_5min_deg": num(first_settled),
-        "settled_err_last_5min_deg": num(last_settled),
-        "refinements": out.refinements,
-        "new_models": out.swaps.len(),
-    })
+    Scores {
+        voltage_start_v: num(out.truth.supply_voltage_v),
+        voltage_end_v: num(out.final_truth.supply_voltage_v),
+        hold_s: num(end),
+        hold_err_first_5min_deg: num(first),
+        hold_err_last_5min_deg: num(last),
+        last_over_first: num(last / first),
+        settled_err_first_5min_deg: num(first_settled),
+        settled_err_last_5min_deg: num(last_settled),
+        refinements: out.refinements,
+        new_models: out.swaps.len(),
+    }
 }
 
-pub(super) fn headline(compensated: &Value, uncompensated: &Value) -> Value {
-    let d = |v: &Value, k: &str| v["dive"][k].clone();
-    let ratio = |v: &Value| v["dive"]["last_over_first"].as_f64().unwrap_or(f64::NAN);
+pub(super) fn headline(compensated: &Scores, uncompensated: &Scores) -> Value {
+    let run = |d: &Scores| {
+        json!({
+            "hold_err_first_5min_deg": d.hold_err_first_5min_deg,
+            "hold_err_last_5min_deg": d.hold_err_last_5min_deg,
+            "last_over_first": d.last_over_first,
+            "voltage_end_v": d.voltage_end_v,
+        })
+    };
     json!({
         "claim": "holding through a 30-minute dive from a full to a nearly empty battery, the hold error of the last 5 minutes is within 15 % of the first 5 minutes' when the commands are referred to the reference voltage",
-        "voltage_start_v": d(compensated, "voltage_start_v"),
-        "voltage_end_v": d(compensated, "voltage_end_v"),
-        "compensated": {
-            "hold_err_first_5min_deg": d(compensated, "hold_err_first_5min_deg"),
-            "hold_err_last_5min_deg": d(compensated, "hold_err_last_5min_deg"),
-            "last_over_first": d(compensated, "last_over_first"),
-            "voltage_end_v": d(compensated, "voltage_end_v"),
-        },
-        "uncompensated": {
-            "hold_err_first_5min_deg": d(uncompensated, "hold_err_first_5min_deg"),
-            "hold_err_last_5min_deg": d(uncompensated, "hold_err_last_5min_deg"),
-            "last_over_first": d(uncompensated, "last_over_first"),
-            "voltage_end_v": d(uncompensated, "voltage_end_v"),
-        },
-        "holds": ratio(compensated) <= 1.15,
+        "voltage_start_v": compensated.voltage_start_v,
+        "voltage_end_v": compensated.voltage_end_v,
+        "compensated": run(compensated),
+        "uncompensated": run(uncompensated),
+        "holds": compensated.last_over_first.get() <= 1.15,
     })
 }

@@ -7,11 +7,12 @@
 //! the setpoint in effect at each vehicle sample; the pure scoring lives in [`crate::scoring`].
 //!
 //! One file per job: [`plan`] (the runs as data, the daemon's config and the scenario each
-//! gets), [`drive`] (one run started, driven and recorded), [`results`] (the scores as JSON and
-//! the headline read back by path), [`report`] (the text and the output folder) and [`figure`]
-//! (the SVG); [`degrade`] and [`dive`] hold their experiments' runs and scores. This file is the
-//! command line and the loop over runs and seeds. The children share this module's imports
-//! (`use super::*`): one list for the whole experiment.
+//! gets), [`drive`] (one run started, driven and recorded), [`results`] (the scores computed and
+//! the headline from them), [`scores`] (the results as types, their JSON the output),
+//! [`report`] (the text and the output folder) and [`figure`] (the SVG); [`degrade`] and
+//! [`dive`] hold their experiments' runs and scores. This file is the command line and the
+//! loop over runs and seeds. The children share this module's imports (`use super::*`): one
+//! list for the whole experiment.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -40,12 +41,14 @@ mod figure;
 mod plan;
 mod report;
 mod results;
+mod scores;
 
 use drive::*;
 use figure::*;
 use plan::*;
 use report::*;
 use results::*;
+use scores::*;
 
 const DOFS: [&str; 6] = ["roll", "pitch", "yaw", "surge", "sway", "heave"];
 /// Samples this long after a setpoint step are its transient; "settled" errors leave them out.
@@ -188,7 +191,7 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
             };
             let (_, summary) =
                 run_seed(&bins, &one, &specs).with_context(|| format!("seed {seed}"))?;
-            headlines.push(summary["headline"].clone());
+            headlines.push(summary.headline);
         }
         if args.json {
             println!(
@@ -208,9 +211,9 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         write_out(dir, args.name, &outs, &summary)?;
     }
     if args.json {
-        println!("{summary}");
+        println!("{}", summary.json()?);
     } else {
-        print_report(args.name, &outs, &summary);
+        print_report(args.name, &outs, &summary)?;
     }
     Ok(())
 }
@@ -220,7 +223,7 @@ fn run_seed(
     bins: &Binaries,
     args: &ExperimentArgs,
     specs: &[RunSpec],
-) -> Result<(Vec<RunOutput>, Value)> {
+) -> Result<(Vec<RunOutput>, Summary)> {
     let mut outs = Vec::new();
     for spec in specs {
         if !args.json {
@@ -228,33 +231,29 @@ fn run_seed(
         }
         outs.push(run_one(bins, args, spec)?);
     }
-    let mut runs_json = serde_json::Map::new();
+    let mut runs = Runs::default();
     for o in &outs {
         let mut v = common(o);
-        if args.name == Name::HotSwap {
-            v["hot_swap"] = hot_swap(o);
-        }
-        if args.name == Name::Degrade {
-            v["degrade"] = degrade::summary(o);
-        }
-        if args.name == Name::Dive {
-            v["dive"] = dive::summary(o);
-        }
-        v["noise"] = json!(o.spec.noise);
-        runs_json.insert(o.spec.label.into(), v);
+        v.hot_swap = (args.name == Name::HotSwap).then(|| hot_swap(o));
+        v.degrade = (args.name == Name::Degrade).then(|| degrade::summary(o));
+        v.dive = (args.name == Name::Dive).then(|| dive::summary(o));
+        runs.0.insert(o.spec.label.into(), v);
     }
-    let headline = headline(args.name, &runs_json)?;
-    let summary = json!({
-        "experiment": args.name.id(),
-        "seed": args.seed,
-        "vehicle_as_is": args.water.json()?,
-        "noise": args.noise.clone().unwrap_or_else(|| "paper (per run: runs.*.noise)".into()),
-        "pace_requested": args.pace,
-        "sim_has_pace": bins.sim_pace,
-        "daemon_has_monitor": bins.daemon_monitor,
-        "runs": runs_json,
-        "headline": headline,
-    });
+    let headline = headline(args.name, &runs)?;
+    let summary = Summary {
+        experiment: args.name.id().into(),
+        seed: args.seed,
+        vehicle_as_is: args.water.json()?,
+        noise: args
+            .noise
+            .clone()
+            .unwrap_or_else(|| "paper (per run: runs.*.noise)".into()),
+        pace_requested: args.pace,
+        sim_has_pace: bins.sim_pace,
+        daemon_has_monitor: bins.daemon_monitor,
+        runs,
+        headline,
+    };
     Ok((outs, summary))
 }
 
@@ -283,22 +282,27 @@ mod tests {
     /// happen. In order, the status's lag named, and absent events said in words.
     #[test]
     fn hot_swap_events_in_order_and_in_words() {
-        let silent = json!({
-            "reestimation_start_delay_s": 0.31,
-            "detection_delay_s": 0.35,
-            "first_swap_delay_s": 5.3,
-            "first_swap_source": "Estimated",
-            "new_model_delay_s": 5.3,
-            "recovery_threshold_deg": 13.18,
-            "recovered_after_s": 1.72,
-        });
+        let silent = HotSwapScores {
+            reestimation_start_delay_s: num(0.31),
+            detection_delay_s: num(0.35),
+            first_swap_delay_s: num(5.3),
+            first_swap_source: Some("Estimated".into()),
+            new_model_delay_s: num(5.3),
+            recovery_threshold_deg: num(13.18),
+            recovered_after_s: num(1.72),
+            ..HotSwapScores::default()
+        };
         assert_eq!(
             hot_swap_events(&silent),
             "re-estimation began after 0.31 s, mismatch in status after 0.35 s, first swap after \
              5.30 s (Estimated), new model after 5.30 s, recovered (2 s windows < 13.18 deg) \
              after 1.72 s"
         );
-        let oracle = json!({"recovery_threshold_deg": 12.18, "recovered_after_s": null});
+        let oracle = HotSwapScores {
+            recovery_threshold_deg: num(12.18),
+            recovered_after_s: Num::NONE,
+            ..HotSwapScores::default()
+        };
         let text = hot_swap_events(&oracle);
         assert_eq!(
             text,
@@ -322,8 +326,8 @@ mod tests {
             &[panel(vec![]), panel(vec![(12.0, 20.0)])],
             30.0
         ));
-        assert_eq!(settled(&Value::Null), "not settled");
-        assert_eq!(settled(&json!(1.234)), "settled 1.23 deg");
+        assert_eq!(settled(Num::NONE), "not settled");
+        assert_eq!(settled(num(1.234)), "settled 1.23 deg");
     }
 
     #[test]
