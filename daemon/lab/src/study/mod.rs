@@ -1,7 +1,7 @@
 //! `thrusterctl study`: research run in one process against the simulator's physics or pure
 //! arithmetic, no daemon: the estimation methods scored on every vehicle (the default, in
 //! [`methods`]), the paper's Fig. 2 ([`fig2`]), the first pulse's power ([`pulse_power`]) and
-//! the research sweeps ([`sweep`]).
+//! the research sweeps ([`sweep`]) and the time-to-model limit ([`time_limit`]).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -14,6 +14,7 @@ pub mod fig2_figures;
 pub mod methods;
 pub mod pulse_power;
 pub mod sweep;
+pub mod time_limit;
 
 /// Without a subcommand, the methods study (`thrusterctl study --out DIR`, as before the
 /// subcommands existed); a subcommand runs one of the other studies, or a sweep, instead.
@@ -50,6 +51,10 @@ pub enum StudyCommand {
     /// A research sweep by name (`--list` lists them): prints its table; knobs are environment
     /// variables. Use a release build: `cargo run --release -p thrusterctl -- study sweep NAME`.
     Sweep(sweep::SweepArgs),
+    /// Issue 30: the least excitation time in which any candidate excitation within the
+    /// budgets (|command| <= 1, tilt <= 30 / 10 deg) can reach the targets, by the dynamic
+    /// model's Cramer-Rao bound; `--check` runs the real estimator on them. Use a release build.
+    TimeLimit(time_limit::TimeLimitArgs),
 }
 
 pub fn run(args: StudyArgs) -> Result<()> {
@@ -63,6 +68,7 @@ pub fn run(args: StudyArgs) -> Result<()> {
         }) => run_fig2(&out, seed, configs, pulses),
         Some(StudyCommand::PulsePower) => pulse_power::run(),
         Some(StudyCommand::Sweep(args)) => sweep::run(args),
+        Some(StudyCommand::TimeLimit(args)) => time_limit::run(args),
     }
 }
 
