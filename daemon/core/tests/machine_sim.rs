@@ -219,6 +219,58 @@ fn an_estimation_announces_its_start_its_pulses_and_its_end_and_nothing_between(
     assert!(pulses.len() > 10, "pulses seen in status: {pulses:?}");
 }
 
+/// Issue 30: an estimation asked for from idle adopts the rest the vehicle already took
+/// (`machine.rest_from_idle`, on by default) and pulses at the next sample; idle for less than
+/// `noise_s`, or just after a reconfiguration (the vehicle was handled), it still measures the
+/// noise for `noise_s` after the start. The figures are vehicle seconds in MeasureNoise.
+#[test]
+fn an_estimation_asked_for_from_idle_pulses_on_the_rest_already_taken() {
+    let noise_s = MachineSetup::default().machine.noise_s;
+    // Vehicle seconds from the start of the estimation to its first pulse.
+    let to_first_pulse = |run: &mut Run| {
+        let start = run.sim.time_s();
+        run.run_until(5.0, |m| m.state() == State::Pulse);
+        assert_eq!(run.machine.state(), State::Pulse, "no pulse in 5 s");
+        run.sim.time_s() - start
+    };
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 2);
+    run.run_for(1.5);
+    run.machine.on_request(Request::Estimate).unwrap();
+    let waited = to_first_pulse(&mut run);
+    assert!(
+        waited <= 0.006,
+        "idle 1.5 s: first pulse after {waited:.3} s"
+    );
+    // The model it makes is as good as with the rest measured after the request.
+    run.run_until(30.0, |m| m.state() == State::Active);
+    let err = rel_err(&run.machine.model().unwrap().effectiveness, &run.truth(), 0);
+    assert!(err <= 0.03, "err_rot {err:.4}");
+
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 2);
+    run.run_for(0.5);
+    run.machine.on_request(Request::Estimate).unwrap();
+    let waited = to_first_pulse(&mut run);
+    assert!(
+        (noise_s..noise_s + 0.02).contains(&waited),
+        "idle 0.5 s: first pulse after {waited:.3} s"
+    );
+
+    let mut run = Run::new("amour5", NoisePreset::Realistic, 2);
+    run.run_for(3.0);
+    run.machine.on_reconfig(Reconfig {
+        count: 5,
+        geometry: None,
+        change: thrusterd_core::machine::ThrusterChange::Unknown,
+        what: "thrusters changed".into(),
+    });
+    assert_eq!(run.machine.state(), State::MeasureNoise);
+    let waited = to_first_pulse(&mut run);
+    assert!(
+        (noise_s..noise_s + 0.02).contains(&waited),
+        "after a reconfiguration: first pulse after {waited:.3} s"
+    );
+}
+
 #[test]
 fn imu_gap_mid_pulse_faults_to_neutral_and_recovers() {
     let mut run = Run::new("amour5", NoisePreset::Realistic, 3);

@@ -27,6 +27,14 @@ pub struct MachineConfig {
     /// Rest period for the noise levels, s (default 1.0: 200 samples at 200 Hz put the sigma
     /// within ~5 %).
     pub noise_s: f64,
+    /// An estimation asked for while idle counts the rest the vehicle took while idle, up to
+    /// the request, towards `noise_s` (default true): after `noise_s` idle it pulses at the
+    /// next sample. Why: the rest after the request was a fixed second of every
+    /// time-to-model, a fifth of it with a realistic IMU (issue 30). The rest is the same
+    /// one, taken earlier: the last 1-2 `noise_s` of an unbroken idle spell with no
+    /// reconfiguration in it (`machine::estimation::idle_rest`). Estimations that start
+    /// while controlling, or on a reconfiguration, still measure after the start.
+    pub rest_from_idle: bool,
     /// An estimation that starts while the daemon controls (a reconfiguration, a mismatch, a
     /// request) first levels the vehicle with the model in force, for at most this long, s
     /// (default 5; 0 = pulse from wherever the vehicle is). Why: started mid-manoeuvre, the
@@ -89,6 +97,7 @@ impl Default for MachineConfig {
     fn default() -> Self {
         MachineConfig {
             noise_s: 1.0,
+            rest_from_idle: true,
             level_max_s: 5.0,
             level_tilt_deg: 5.0,
             level_hold_s: 1.0,

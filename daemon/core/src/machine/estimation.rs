@@ -16,9 +16,14 @@ use crate::model::{Model, ModelSource};
 use crate::navigation::rest_drift::RestDrift;
 
 mod closed_loop;
+mod idle_rest;
 pub(super) use closed_loop::{ClosedLoop, ClosedStep};
+pub(super) use idle_rest::{IdleRest, TakenRest};
 
 use crate::solve::{Purpose, SolveResult, Solver};
+
+/// The fewest samples a noise measurement is made of, however short `noise_s` is.
+pub(super) const MIN_REST_SAMPLES: u64 = 10;
 
 /// The estimation run's owner number for its solver (see `solve::owner_of`).
 pub(super) const ESTIMATION: u64 = 0;
@@ -58,6 +63,9 @@ pub(super) struct EstimationRun {
     quiet_since_ns: Option<u64>,
     /// What the noise measurement (or the hold before an identification) saw.
     rest: Rest,
+    /// Rest taken before the run began (while idle, `IdleRest`), s: counted towards
+    /// `machine.noise_s`.
+    rested_s: f64,
     /// Under control (state Identify): the dither and its clock.
     closed: Option<ClosedLoop>,
     /// This open-loop run is a burst: its model is refined under control next.
@@ -78,6 +86,7 @@ impl EstimationRun {
             last_estimate: None,
             quiet_since_ns: None,
             rest: Rest::default(),
+            rested_s: 0.0,
             closed: None,
             burst: false,
             prior: None,
@@ -121,10 +130,19 @@ impl EstimationRun {
         self.solver.cancel();
         self.noise = NoiseMeter::new();
         self.rest = Rest::default();
+        self.rested_s = 0.0;
         self.est = None;
         self.closed = None;
         self.burst = false;
         self.prior = None;
+    }
+
+    /// The run just begun starts from the rest the vehicle took while idle: its noise and
+    /// rest stand for (the first part of) the noise measurement.
+    pub(super) fn adopt_rest(&mut self, taken: TakenRest) {
+        self.noise = taken.noise;
+        self.rest = taken.rest;
+        self.rested_s = taken.span_s;
     }
 
     /// Whether the run that just concluded was an open-loop burst to be refined under control.
@@ -234,23 +252,29 @@ impl EstimationRun {
         self.levels
     }
 
-    /// One sample at rest, `elapsed_s` into the noise measurement. Once it is long enough, the
-    /// levels are kept and the estimator is built, its first power sized to the noise with the
-    /// model in force: then true (pulse now). `power_cap` (in (0, 1]) bounds every pulse's
-    /// power: the largest the thrusters can give at the present supply voltage, so a pulse
-    /// the estimator believes it applied is the one applied (`crate::supply`).
+    /// One sample at rest, at `t_ns`, into the noise measurement.
+    pub(super) fn rest_sample(&mut self, m: &Motion, t_ns: u64) {
+        self.noise.push(&m.gyro.into(), &m.accel.into());
+        // On the sample clock, so a rest taken while idle (`adopt_rest`) goes on seamlessly.
+        self.rest.push(m, t_ns as f64 * 1e-9);
+    }
+
+    /// The noise measurement, `elapsed_s` into it (its rest samples given to `rest_sample`).
+    /// Once it is long enough, the levels are kept and the estimator is built, its first power
+    /// sized to the noise with the model in force: then true (pulse now). `power_cap` (in
+    /// (0, 1]) bounds every pulse's power: the largest the thrusters can give at the present
+    /// supply voltage, so a pulse the estimator believes it applied is the one applied
+    /// (`crate::supply`).
     pub(super) fn measure_noise(
         &mut self,
-        m: &Motion,
         elapsed_s: f64,
         setup: &MachineSetup,
         model: Option<&Model>,
         n: usize,
         power_cap: f64,
     ) -> bool {
-        self.noise.push(&m.gyro.into(), &m.accel.into());
-        self.rest.push(m, elapsed_s);
-        if !(elapsed_s >= setup.machine.noise_s && self.noise.samples() >= 10) {
+        let rested_s = elapsed_s + self.rested_s;
+        if !(rested_s >= setup.machine.noise_s && self.noise.samples() >= MIN_REST_SAMPLES) {
             return false;
         }
         let levels = self.noise.levels();

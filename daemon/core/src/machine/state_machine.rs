@@ -9,7 +9,7 @@ use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::{MachineSetup, ReconfigPolicy};
 use super::estimation::ESTIMATION;
-use super::estimation::{ClosedStep, EstimationRun, Motion, PulseStep};
+use super::estimation::{ClosedStep, EstimationRun, IdleRest, Motion, PulseStep, MIN_REST_SAMPLES};
 use super::models::ModelSlot;
 use super::types::{
     finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
@@ -65,6 +65,9 @@ pub struct Machine {
     models: ModelSlot,
     geometry: Option<Geometry>,
     run: EstimationRun,
+    /// The rest the vehicle takes while idle, for an estimation asked for from idle
+    /// (`machine.rest_from_idle`).
+    idle_rest: IdleRest,
     levelling: Option<Levelling>,
     resume: Resume,
     /// An emergency stop holds the thrusters off: set by `Request::Stop`, cleared only by an
@@ -109,6 +112,7 @@ impl Machine {
             models: ModelSlot::default(),
             geometry: None,
             run: EstimationRun::new(setup.machine.solve_budget_s),
+            idle_rest: IdleRest::default(),
             levelling: None,
             resume: Resume::Idle,
             stopped: false,
@@ -352,7 +356,14 @@ impl Machine {
         }
 
         match self.state {
-            State::Idle | State::Solve => Command::neutral(self.n),
+            State::Idle => {
+                if self.setup.machine.rest_from_idle {
+                    let m = self.motion(s, &gyro, &accel);
+                    self.idle_rest.push(s.t_ns, &m, self.setup.machine.noise_s);
+                }
+                Command::neutral(self.n)
+            }
+            State::Solve => Command::neutral(self.n),
             State::Fault => {
                 if self.output_block.is_none() {
                     self.good_samples += 1;
@@ -371,8 +382,8 @@ impl Machine {
                 // estimator a weaker thruster than it has.
                 let db = self.setup.machine.deadband.clamp(0.0, 0.5);
                 let cap = ((self.supply.attainable() - db) / (1.0 - db)).clamp(0.0, 1.0);
+                self.run.rest_sample(&m, s.t_ns);
                 let ready = self.run.measure_noise(
-                    &m,
                     elapsed,
                     &self.setup,
                     self.models.current(),
@@ -523,6 +534,10 @@ impl Machine {
         let from = self.state;
         self.state = to;
         self.text = text;
+        if from != State::Idle || to != State::Idle {
+            // The rest while idle is the rest of one unbroken idle spell.
+            self.idle_rest.clear();
+        }
         if to != State::MeasureNoise {
             self.levelling = None;
         }

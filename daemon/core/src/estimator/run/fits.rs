@@ -18,7 +18,7 @@ impl Estimator {
         let reducible_acc = (e.rel_err_acc.powi(2) - share.powi(2)).max(0.0).sqrt();
         if e.excited
             && e.rel_err_rot <= self.cfg.target_rel_err
-            && reducible_acc <= self.cfg.target_rel_err
+            && reducible_acc <= self.cfg.acc_target()
         {
             StopDecision::Converged {
                 rel_err_rot: e.rel_err_rot,

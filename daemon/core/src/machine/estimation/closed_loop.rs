@@ -103,7 +103,7 @@ impl EstimationRun {
             let held_s = t_ns.saturating_sub(c.start_ns) as f64 * 1e-9;
             self.rest.push(m, held_s);
             c.sent[..command.len()].copy_from_slice(command);
-            if held_s < setup.machine.noise_s || self.noise.samples() < 10 {
+            if held_s < setup.machine.noise_s || self.noise.samples() < super::MIN_REST_SAMPLES {
                 return ClosedStep::Holding;
             }
             c.gyro_bias = *gyro_bias;

@@ -56,6 +56,17 @@ impl Machine {
         }
         self.run.restart();
         self.run.carry(prior, &self.setup.identification);
+        // From idle, the rest the vehicle has just taken is the noise measurement, or its
+        // first part (`machine.rest_from_idle`).
+        if self.state == State::Idle && self.setup.machine.rest_from_idle {
+            let now = self.last_t_ns.unwrap_or(t_ns);
+            if let Some(taken) =
+                self.idle_rest
+                    .take(now, self.setup.machine.noise_s, MIN_REST_SAMPLES)
+            {
+                self.run.adopt_rest(taken);
+            }
+        }
         // Controlling with a model: level the vehicle first (see MachineConfig::level_max_s).
         // A reconfiguration while levelling levels on (the vehicle is no more at rest).
         self.levelling = ((self.state == State::Active || self.levelling.is_some())
@@ -324,7 +335,8 @@ impl Machine {
                     );
                     // A burst that already reached the target needs no refining.
                     let coarse = self.models.current().is_some_and(|m| {
-                        m.rel_err_rot.max(m.rel_err_acc) > self.setup.estimator.target_rel_err
+                        let e = &self.setup.estimator;
+                        m.rel_err_rot > e.target_rel_err || m.rel_err_acc > e.acc_target()
                     });
                     if self.run.was_burst() && coarse {
                         let t = self.last_t_ns.unwrap_or(0);

@@ -155,6 +155,8 @@ impl Machine {
         self.n = count;
         self.geometry = r.geometry.clone().filter(|g| g.positions.len() == count);
         let t = self.last_t_ns.unwrap_or(0);
+        // The vehicle was changed, so handled: its rest must be taken after the change.
+        self.idle_rest.clear();
         // After an emergency stop a reconfiguration swaps models but drives no thruster.
         let mut estimate =
             self.setup.machine.on_reconfig == ReconfigPolicy::Estimate && !self.stopped;

@@ -13,6 +13,7 @@ mod estimation_sweeps;
 mod identification;
 mod refinement;
 mod refinement_update;
+mod time_to_model;
 
 #[derive(Args, Debug)]
 pub struct SweepArgs {
@@ -34,6 +35,12 @@ pub struct Sweep {
 
 /// Every sweep, in the order of the files they came from.
 pub const SWEEPS: &[Sweep] = &[
+    Sweep {
+        name: "ttm_sweep",
+        knobs: "TTM_*",
+        about: "time to model from an idle request, in-process, its settings varied (issue 30)",
+        run: time_to_model::ttm_sweep,
+    },
     Sweep {
         name: "carry_over_on_every_vehicle",
         knobs: "CO_*",
