@@ -283,17 +283,6 @@ pub fn bound(
     bound_with(s, b, sigma, lag_unknown, true)
 }
 
-/// [`bound`] with the terms marked in `known` taken as known.
-pub fn bound_known(
-    s: &Snapshot,
-    b: &DMatrix<f64>,
-    sigma: (f64, f64),
-    lag_unknown: bool,
-    known: &[bool; TERMS],
-) -> Option<Bound> {
-    bound_core(s, b, sigma, lag_unknown, known)
-}
-
 /// [`bound`] with the damping, restoring and Coriolis terms unknown (`terms_unknown`, the
 /// estimator's case) or known (the floor a model with known dynamics would have).
 pub fn bound_with(
@@ -303,16 +292,7 @@ pub fn bound_with(
     lag_unknown: bool,
     terms_unknown: bool,
 ) -> Option<Bound> {
-    bound_core(s, b, sigma, lag_unknown, &[!terms_unknown; TERMS])
-}
-
-fn bound_core(
-    s: &Snapshot,
-    b: &DMatrix<f64>,
-    sigma: (f64, f64),
-    lag_unknown: bool,
-    known: &[bool; TERMS],
-) -> Option<Bound> {
+    let known = &[!terms_unknown; TERMS];
     let n = b.ncols();
     let sig = [sigma.0, sigma.1];
     // Per group: M_bb^-1, M_bd.
