@@ -679,6 +679,64 @@ fn a_model_the_water_made_is_refused() {
     }
 }
 
+/// Issue 32, a steady current: a vehicle that has just met it is pitched and dragged during
+/// the rest before the excitation (AMOUR-5 swings +-0.09 rad/s). The rest's mean gyro was
+/// taken for the bias and its mean attitude for the start, and the models came out 5-7 % off
+/// under bounds of 2-3 % (`navigation::rest_rotation` now nets the rotation the
+/// accelerometer saw out of the bias and starts from the rest's last attitude). Requested
+/// 3 and 4 s after entering the current (two phases of the swing). Measured
+/// (`LA_WATER=current LA_IDLE_S=3|4 ... imu_and_water_sweep`), err_rot / err_acc:
+/// - noise-free, AMOUR-5: 0.0159 / 0.0132 and 0.0149 / 0.0113 (before: 0.0206 / 0.0323,
+///   0.0266 / 0.0226); eight_vectored: 0.0127 / 0.0183, 0.0138 / 0.0146 (before 0.0128 /
+///   0.0437, 0.0128 / 0.0392).
+/// - realistic IMU, 4 s, seeds 1-3: AMOUR-5 0.0045-0.0065 / 0.0083-0.0198 (before
+///   0.051-0.059 / 0.045-0.050); eight_vectored 0.0099-0.0177 / 0.0197-0.0252 (before
+///   0.014-0.028 / 0.036-0.041), every error within 1.5 of its bound.
+#[test]
+fn a_vehicle_swinging_in_a_current_during_its_rest_is_learned_against_the_truth() {
+    let run = |name: &str, noise: NoisePreset, seed: u64, idle_s: f64| {
+        let sensors = SensorConfig {
+            rate_hz: 200.0,
+            noise,
+            ..SensorConfig::default()
+        };
+        let ideal = Ideal {
+            allow_refusal: true,
+            water: WaterPreset::Current,
+            idle_s: Some(idle_s),
+            ..Ideal::default()
+        };
+        estimate_ideal(name, sensors, seed, EstimatorConfig::dynamic(), ideal)
+    };
+    for name in ["amour5", "eight_vectored"] {
+        for idle_s in [3.0, 4.0] {
+            let o = run(name, NoisePreset::None, 1, idle_s);
+            assert!(
+                !o.refused && o.err_rot <= 0.02 && o.err_acc <= 0.022,
+                "{name}, noise-free, {idle_s} s: err_rot {:.4} err_acc {:.4}",
+                o.err_rot,
+                o.err_acc
+            );
+        }
+        for seed in 1..=3 {
+            let o = run(name, NoisePreset::Realistic, seed, 4.0);
+            assert!(
+                !o.refused && o.err_rot <= 0.027 && o.err_acc <= 0.033,
+                "{name}, realistic, seed {seed}: err_rot {:.4} err_acc {:.4}",
+                o.err_rot,
+                o.err_acc
+            );
+            assert!(
+                o.err_rot <= 1.5 * o.bound[0] && o.err_acc <= 1.5 * o.bound[1],
+                "{name}, realistic, seed {seed}: err {:.4} / {:.4} against bounds {:?}",
+                o.err_rot,
+                o.err_acc,
+                o.bound
+            );
+        }
+    }
+}
+
 /// One mismatched run, the machine allowed to refuse the model (the outcome is then the
 /// refused estimate's, `refused` true).
 fn estimate_mismatched(name: &str, m: Mismatch, noise: NoisePreset, seed: u64) -> Outcome {

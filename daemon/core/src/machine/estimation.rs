@@ -9,11 +9,13 @@ use super::config::MachineSetup;
 use crate::adaptation::identification::IdentificationConfig;
 use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::power::pulse_power;
+use crate::estimator::response::GRAVITY;
 use crate::estimator::{
     Estimate, Estimator, EstimatorConfig, Method, NoiseLevels, NoiseMeter, StopDecision,
 };
 use crate::model::{Model, ModelSource};
 use crate::navigation::rest_drift::RestDrift;
+use crate::navigation::rest_rotation::RestRotation;
 
 mod closed_loop;
 mod idle_rest;
@@ -277,7 +279,7 @@ impl EstimationRun {
         if !(rested_s >= setup.machine.noise_s && self.noise.samples() >= MIN_REST_SAMPLES) {
             return false;
         }
-        let levels = self.noise.levels();
+        let levels = self.rest.correct(self.noise.levels());
         self.levels = Some(levels);
         let mut cfg = setup.estimator.clone();
         let cap = if power_cap.is_finite() {
@@ -406,31 +408,37 @@ impl EstimationRun {
     }
 }
 
-/// What the rest before an estimation measured, for its navigation: the mean raw specific
-/// force (the starting attitude) and the depth's trend (the vertical velocity at its end).
+/// What the rest before an estimation measured, for its navigation: how the vehicle turned
+/// (the attitude at its end, and the gyro's bias net of that turning, `rest_rotation`) and
+/// the depth's trend (the vertical velocity at its end).
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub(super) struct Rest {
-    force_sum: Vector3<f64>,
-    force_samples: u64,
+    rotation: RestRotation,
     drift: RestDrift,
 }
 
 impl Rest {
     /// One sample `t_s` into the rest.
     pub(super) fn push(&mut self, m: &Motion, t_s: f64) {
-        if m.specific_force.iter().all(|v| v.is_finite()) {
-            self.force_sum += m.specific_force;
-            self.force_samples += 1;
-        }
+        self.rotation.push(t_s, &m.gyro, &m.specific_force);
         if let Some(d) = m.depth {
             self.drift.push(t_s, d);
         }
     }
 
+    /// `levels` (measured over this rest) with the gyro's bias net of the rotation the
+    /// accelerometer saw: a vehicle swinging during its rest does not leave its mean rate in
+    /// the bias.
+    pub(super) fn correct(&self, mut levels: NoiseLevels) -> NoiseLevels {
+        let mean = Vector3::from(levels.gyro_baseline);
+        levels.gyro_baseline = self.rotation.gyro_bias(&mean, GRAVITY).into();
+        levels
+    }
+
     /// `est`, told where its navigation starts.
     pub(super) fn start(&self, mut est: Estimator) -> Estimator {
-        if self.force_samples > 0 {
-            est = est.with_rest_specific_force(self.force_sum / self.force_samples as f64);
+        if let Some(f) = self.rotation.force_at_end(GRAVITY) {
+            est = est.with_rest_specific_force(f);
         }
         if let Some(w) = self.drift.velocity_down() {
             est = est.with_rest_velocity_down(w);

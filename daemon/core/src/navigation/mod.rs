@@ -21,6 +21,7 @@
 
 pub mod bias_filter;
 pub mod rest_drift;
+pub mod rest_rotation;
 
 use nalgebra::{UnitQuaternion, Vector3};
 

@@ -305,7 +305,9 @@ pub(super) fn lag_sweep() {
 /// LA_VEHICLES, LA_SEEDS, LA_NOISE (none|realistic|paper), LA_ARM (x,y,z m), LA_TOLD (the
 /// daemon is told LA_ARM), LA_TOL (tolerance, m), LA_WATER (current|moderate|rough),
 /// LA_NO_CURRENT (the preset's waves alone), LA_WAVE_PART (force|torque|heave|surge: that
-/// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s).
+/// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s), LA_IDLE_S (idle before
+/// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
+/// that part of the preset's noise alone).
 pub(super) fn imu_and_water_sweep() {
     let noise = match std::env::var("LA_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -321,12 +323,39 @@ pub(super) fn imu_and_water_sweep() {
     let seeds: u64 = std::env::var("LA_SEEDS").map_or(1, |s| s.parse().unwrap());
     for name in names.split(',') {
         for seed in 1..=seeds {
-            let sensors = SensorConfig {
+            let mut sensors = SensorConfig {
                 rate_hz: 200.0,
                 noise,
                 lever_arm_m: [arm[0], arm[1], arm[2]],
                 ..SensorConfig::default()
             };
+            if let Ok(part) = std::env::var("LA_NOISE_ONLY") {
+                // One part of the preset's noise alone: which one matters. "gyro" / "accel":
+                // that sensor's white noise and bias; "white": no biases; "bias": biases only.
+                let mut n = noise.params();
+                let (gyro, accel, white, bias) = match part.as_str() {
+                    "gyro" => (true, false, true, true),
+                    "accel" => (false, true, true, true),
+                    "white" => (true, true, true, false),
+                    "bias" => (true, true, false, true),
+                    other => panic!("LA_NOISE_ONLY: {other} is not gyro, accel, white or bias"),
+                };
+                if !gyro || !white {
+                    n.gyro_std_radps = 0.0;
+                }
+                if !gyro || !bias {
+                    n.gyro_bias_walk = 0.0;
+                    n.gyro_bias_init_std = 0.0;
+                }
+                if !accel || !white {
+                    n.accel_std_mps2 = 0.0;
+                }
+                if !accel || !bias {
+                    n.accel_bias_walk = 0.0;
+                    n.accel_bias_init_std = 0.0;
+                }
+                sensors.custom_noise = Some(n);
+            }
             let mut cfg = EstimatorConfig::dynamic();
             if let Ok(v) = std::env::var("LA_LEARN") {
                 cfg.learn_imu_position = v != "0";
@@ -354,6 +383,8 @@ pub(super) fn imu_and_water_sweep() {
                 wave_part: std::env::var("LA_WAVE_PART")
                     .ok()
                     .map(|v| &*Box::leak(v.into_boxed_str())),
+                idle_s: std::env::var("LA_IDLE_S").ok().map(|v| v.parse().unwrap()),
+                noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
             };
             let o = estimate_ideal(name, sensors, seed, cfg, ideal);
