@@ -17,7 +17,7 @@ use thrusterd_core::estimator::EstimatorConfig;
 use crate::estimation::{estimate_observed, Ideal, Outcome};
 
 mod response;
-use response::{print_simulated, print_smoothed};
+use response::{print_leaky, print_simulated, print_smoothed};
 
 /// The simulator's truth at one sample, in the log's terms.
 #[derive(Debug, Clone, Copy)]
@@ -180,6 +180,9 @@ pub fn probe(
     }
     if let Ok(spec) = std::env::var("LAG_PROBE_SMOOTH") {
         print_smoothed(&run, &spec, &truth, weights);
+    }
+    if let Ok(spec) = std::env::var("LAG_PROBE_LEAK") {
+        print_leaky(&run, &spec, &truth, weights);
     }
     if let Ok(spec) = std::env::var("LAG_PROBE_SIM") {
         print_simulated(&run, &spec, &truth, weights);

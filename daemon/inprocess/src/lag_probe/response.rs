@@ -26,6 +26,11 @@ fn simulate(
     let n = run.thrusters();
     let (b, theta) = (&sol.b, &sol.terms.coefficients);
     let constant = TERMS - 2;
+    // LAG_PROBE_DECAY: the slowest velocity decay allowed, 1/s (default 0.5: 2 s).
+    let slowest: f64 = std::env::var("LAG_PROBE_DECAY")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.5);
     let mut lag = vec![0.0; n];
     let mut lag_abs = 0.0;
     let (mut w, mut v) = (Vector3::zeros(), Vector3::zeros());
@@ -62,7 +67,7 @@ fn simulate(
                     // Thrust and each axis's own linear damping, held stable (at least a 2 s
                     // decay): what of the response the thrust drives.
                     wd[a] += theta[(a, RATE + a)].min(-0.5) * w[a];
-                    md[a] += theta[(3 + a, VELOCITY + a)].min(-0.5) * v[a];
+                    md[a] += theta[(3 + a, VELOCITY + a)].min(-slowest) * v[a];
                     continue;
                 }
                 for j in 0..TERMS {
@@ -217,4 +222,44 @@ fn touches_velocity(j: usize) -> bool {
         }
     }
     false
+}
+
+/// LAG_PROBE_LEAK="tau[,T]": the lag learned with the velocity dead-reckoned again from the
+/// log's acceleration with a leak of 1/tau (a first-order high-pass: the tilt's slow drift out,
+/// the pulses' response kept), and with T the terms' rate true as well.
+pub(super) fn print_leaky(
+    run: &DynamicRun,
+    spec: &str,
+    truth: &HashMap<u64, Truth>,
+    weights: &[f64; 6],
+) {
+    let mut parts = spec.split(',');
+    let tau: f64 = parts.next().and_then(|v| v.parse().ok()).unwrap_or(1.0);
+    let true_rate = parts.next() == Some("T");
+    let mut v = Vector3::zeros();
+    let mut last: Option<(f64, Vector3<f64>)> = None;
+    let Some(mapped) = run.with_log_mapped(|smp| {
+        let accel = smp.motion - smp.rate.cross(&v);
+        if let Some((t0, a0)) = last {
+            let dt = (smp.t_s - t0).min(0.1);
+            v += (0.5 * (accel + a0) - v / tau) * dt;
+        }
+        last = Some((smp.t_s, accel));
+        let mut out = *smp;
+        out.velocity = v;
+        if true_rate {
+            if let Some(t) = truth.get(&((smp.t_s * 1e9).round() as u64)) {
+                out.rate = t.rate;
+            }
+        }
+        out
+    }) else {
+        return;
+    };
+    let lag = learn_common_lag_weighted(&mapped, &LagRange::default(), &Vector3::zeros(), weights)
+        .map_or(f64::NAN, |l| l.lag_s);
+    println!(
+        "  leaky velocity tau {tau}{}: {lag:.4}",
+        if true_rate { ", true rate" } else { "" }
+    );
 }

@@ -229,8 +229,12 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
 /// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
-/// attitude, v the velocity, m the acceleration rows' output; "-" none), with LAG_PROBE_ROWS
-/// (rot|acc) the lag's profile scored on that group of rows alone.
+/// attitude, v the velocity, z the velocity zeroed, m the acceleration rows' output, n that
+/// output true plus the paper's accelerometer noise; "-" none), with LAG_PROBE_ROWS
+/// (rot|acc) the lag's profile scored on that group of rows alone; LAG_PROBE_ERR (the
+/// navigation's errors), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
+/// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
+/// `response` module).
 pub(super) fn lag_sweep() {
     let noise = match std::env::var("LAG_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
