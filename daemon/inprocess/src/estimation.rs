@@ -132,11 +132,25 @@ pub fn estimate_ideal(
 
 /// The same on a vehicle given whole (its hidden constants changed by the caller).
 pub fn estimate_on(
+    v: Vehicle,
+    sensors: SensorConfig,
+    seed: u64,
+    estimator: EstimatorConfig,
+    ideal: Ideal,
+) -> Outcome {
+    estimate_observed(v, sensors, seed, estimator, ideal, &mut |_, _| {})
+}
+
+/// [`estimate_on`] with `observe` called after every sample of the estimation (the machine
+/// and the simulator at that sample): for decisive runs that need the truth beside what the
+/// estimator saw ([`crate::lag_probe`]).
+pub fn estimate_observed(
     mut v: Vehicle,
     sensors: SensorConfig,
     seed: u64,
     estimator: EstimatorConfig,
     ideal: Ideal,
+    observe: &mut dyn FnMut(&Machine, &Simulator),
 ) -> Outcome {
     let name = v.name.clone();
     let mut estimator = estimator;
@@ -211,6 +225,7 @@ pub fn estimate_on(
             machine.on_dvl([v.x, v.y, v.z]);
         }
         tick(&mut machine, &mut sim);
+        observe(&machine, &sim);
         let down = sim.attitude().inverse_transform_vector(&Vector3::z());
         max_tilt = max_tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());
     }

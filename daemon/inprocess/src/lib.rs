@@ -9,10 +9,13 @@
 //!   the vehicles with hidden constants changed (lag, reverse ratio, dead band).
 //! - [`holding`]: holding attitude with the refinement and the change test on, through pitch
 //!   steps or level, until a mismatch; the 1 kHz hold.
+//! - [`lag_probe`]: the thruster lag learned again from one estimation's log with inputs
+//!   replaced by the simulator's truth (issue 29's bias at the paper's gyro noise).
 //! - [`model_update`]: the refinement's updates followed while a thruster degrades.
 
 pub mod estimation;
 pub mod holding;
+pub mod lag_probe;
 pub mod model_update;
 pub mod run;
 

@@ -461,6 +461,11 @@ impl Estimator {
         &self.plan
     }
 
+    /// The dynamic method's fit so far (None before the first pulse or for the static methods).
+    pub fn dynamic_fit(&self) -> Option<&DynamicRun> {
+        self.dynamic.as_ref()
+    }
+
     /// Pulses completed so far.
     pub fn pulses(&self) -> usize {
         self.pulses

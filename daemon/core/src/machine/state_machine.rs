@@ -22,6 +22,7 @@ use crate::attitude::AttitudeFilter;
 use crate::controller::{Controller, Measured, Target};
 use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::response::motion_accel;
+use crate::estimator::Estimator;
 use crate::estimator::{Estimate, NoiseLevels, StopDecision};
 use crate::model::{nominal_effectiveness, Model, ModelSource, PreparedModel};
 use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
@@ -179,6 +180,12 @@ impl Machine {
             }
             _ => None,
         }
+    }
+
+    /// The estimator of the estimation under way (None between runs): read-only, for the lab's
+    /// decisive runs, which refit its logged samples with parts of them replaced by the truth.
+    pub fn estimator(&self) -> Option<&Estimator> {
+        self.run.estimator()
     }
 
     /// For `telemetry`: the estimation run (its progress).

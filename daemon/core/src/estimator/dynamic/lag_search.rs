@@ -122,11 +122,24 @@ impl LagFit {
 /// The profile score of a fit: sum over the six outputs of ln(residual variance). None while
 /// an output has no residual degrees of freedom.
 pub fn profile_score(run: &DynamicRun) -> Option<f64> {
+    profile_score_weighted(run, &ALL_OUTPUTS)
+}
+
+/// Every output counted once in the score.
+pub const ALL_OUTPUTS: [f64; 6] = [1.0; 6];
+
+/// [`profile_score`] with output a's ln(residual variance) weighted by `weights[a]` (DOF order):
+/// the lab's decisive runs score one group of rows alone.
+pub fn profile_score_weighted(run: &DynamicRun, weights: &[f64; 6]) -> Option<f64> {
     let mut score = 0.0;
-    for ls in [&run.rot, &run.acc] {
+    for (g, ls) in [&run.rot, &run.acc].into_iter().enumerate() {
         let var = ls.residual_variance()?;
         // A noise-free fit can leave an exactly zero residual: floored, not -inf.
-        score += var.iter().map(|v| v.max(1e-300).ln()).sum::<f64>();
+        score += var
+            .iter()
+            .zip(&weights[3 * g..3 * g + 3])
+            .map(|(v, w)| w * v.max(1e-300).ln())
+            .sum::<f64>();
     }
     Some(score)
 }
@@ -171,7 +184,18 @@ pub fn learn_common_lag_centred(
     range: &LagRange,
     imu_m: &Vector3<f64>,
 ) -> Option<LagFit> {
+    learn_common_lag_weighted(run, range, imu_m, &ALL_OUTPUTS)
+}
+
+/// [`learn_common_lag_centred`] scored by [`profile_score_weighted`] with `weights`.
+pub fn learn_common_lag_weighted(
+    run: &DynamicRun,
+    range: &LagRange,
+    imu_m: &Vector3<f64>,
+    weights: &[f64; 6],
+) -> Option<LagFit> {
     run.log()?;
+    let profile_score = |r: &DynamicRun| profile_score_weighted(r, weights);
     let refit = |lag: f64| run.refit_with(&[lag], true, imu_m);
     let (lo, hi) = (
         range.min_s.max(1e-4).ln(),

@@ -208,6 +208,16 @@ impl DynamicRun {
         self.log.as_ref()
     }
 
+    /// This run with its log's samples replaced by `f`'s (None without a log): for the lab's
+    /// decisive runs ([`SampleLog::mapped`]); refit it to see the fit on the changed inputs.
+    pub fn with_log_mapped(&self, f: impl FnMut(&Navigated) -> Navigated) -> Option<DynamicRun> {
+        let log = self.log.as_ref()?.mapped(f);
+        Some(DynamicRun {
+            log: Some(log),
+            ..self.clone()
+        })
+    }
+
     /// Report the lags in use as learned (they came from an earlier run that learned them).
     pub fn mark_lag_learned(&mut self) {
         self.lags_learned = true;

@@ -122,6 +122,17 @@ impl SampleLog {
         self.dropped
     }
 
+    /// A copy with every sample replaced by `f`'s (the same commands): for the lab's decisive
+    /// runs, which put the truth in place of one input to see what the fit does with it.
+    pub fn mapped(&self, mut f: impl FnMut(&Navigated) -> Navigated) -> SampleLog {
+        let mut out = SampleLog::new(self.n, self.commands.len() / self.n.max(1) + 1);
+        out.commands.extend_from_slice(&self.commands);
+        for s in self.iter() {
+            out.push(f(s));
+        }
+        out
+    }
+
     /// Every sample, in order.
     pub fn iter(&self) -> impl Iterator<Item = &Navigated> {
         self.sealed

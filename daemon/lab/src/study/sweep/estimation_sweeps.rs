@@ -219,6 +219,22 @@ pub(super) fn coefficient_error_by_vehicle() {
     }
 }
 
+/// The thrusters' lag learned on vehicles whose lag the daemon is not told (docs/study.md,
+/// "Learning the thruster lag (issue 29)"): learned lag, err_rot / err_acc and the bounds per
+/// vehicle, true lag and seed. Knobs: LAG_NOISE (none|realistic|paper), LAG_VEHICLES,
+/// LAG_TAUS, LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_TOLD (the true lag given), LAG_FORCE (learn
+/// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
+/// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_PULSES, LAG_DVL
+/// (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_NOISE_S (the rest's length, s), and
+/// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
+/// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
+/// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
+/// attitude, v the velocity, z the velocity zeroed, m the acceleration rows' output, n that
+/// output true plus the paper's accelerometer noise; "-" none), with LAG_PROBE_ROWS
+/// (rot|acc) the lag's profile scored on that group of rows alone; LAG_PROBE_ERR (the
+/// navigation's errors), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
+/// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
+/// `response` module).
 pub(super) fn lag_sweep() {
     let noise = match std::env::var("LAG_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -285,6 +301,33 @@ pub(super) fn lag_sweep() {
                 };
                 let v = with_lag(name, tau);
                 let tau = true_lag(&v);
+                if let Ok(p) = std::env::var("LAG_PROBE") {
+                    use thruster_inprocess::lag_probe::{probe, Replace};
+                    // "1": the named variants; else comma-separated letters (Replace::from_letters).
+                    let variants: Vec<(String, Replace)> = if p == "1" {
+                        Vec::new()
+                    } else {
+                        p.split(',')
+                            .map(|l| (l.to_string(), Replace::from_letters(l)))
+                            .collect()
+                    };
+                    // LAG_PROBE_ROWS: rot or acc scores that group of rows alone.
+                    let weights = match std::env::var("LAG_PROBE_ROWS").as_deref() {
+                        Ok("rot") => [1.0, 1.0, 1.0, 0.0, 0.0, 0.0],
+                        Ok("acc") => [0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+                        _ => [1.0; 6],
+                    };
+                    let (o, lags) = probe(v, sensors, seed, cfg, ideal, &variants, &weights);
+                    let line: Vec<String> =
+                        lags.iter().map(|(n, l)| format!("{n} {l:.4}")).collect();
+                    println!(
+                        "{name} tau {tau:.3} seed {seed}: learned {:.4} err_rot {:.4} | {}",
+                        o.spin_up_s,
+                        o.err_rot,
+                        line.join(", ")
+                    );
+                    continue;
+                }
                 let o = estimate_on(v, sensors, seed, cfg, ideal);
                 println!(
                 "{name} tau {tau:.3} seed {seed}: learned {:.4} err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",

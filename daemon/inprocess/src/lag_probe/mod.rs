@@ -1,0 +1,308 @@
+//! Issue 29's open item: at the paper's gyro noise the learned thruster lag is biased short.
+//! Which of the estimator's inputs does it? One estimation is run as usual while the
+//! simulator's truth is recorded at every sample; the dynamic fit's log (what the fit saw
+//! after the navigation) is then learned from again with one input at a time replaced by the
+//! truth, the rest left as measured (docs/study.md, "Where the short lag comes from"). Found:
+//! the terms' inputs, the navigated velocity and the measured rate (errors-in-variables).
+
+use std::collections::HashMap;
+
+use nalgebra::Vector3;
+use thruster_sim::{SensorConfig, Vehicle};
+use thrusterd_core::estimator::dynamic::lag_search::{learn_common_lag_weighted, LagRange};
+use thrusterd_core::estimator::dynamic::sample_log::Navigated;
+use thrusterd_core::estimator::dynamic::DynamicRun;
+use thrusterd_core::estimator::EstimatorConfig;
+
+use crate::estimation::{estimate_observed, Ideal, Outcome};
+
+mod response;
+use response::{print_leaky, print_simulated, print_smoothed};
+
+/// The simulator's truth at one sample, in the log's terms.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Truth {
+    pub(crate) rate: Vector3<f64>,
+    pub(crate) velocity: Vector3<f64>,
+    pub(crate) down: Vector3<f64>,
+    /// Body acceleration (noise-free specific force plus gravity), m/s^2.
+    pub(crate) motion: Vector3<f64>,
+}
+
+/// Which of the log's inputs are replaced by the truth.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Replace {
+    /// The rotation rows' output (the gyro they are fitted to).
+    pub target_gyro: bool,
+    /// The rate the terms are built from (damping, |w|w, Coriolis).
+    pub rate: bool,
+    /// The attitude: the gravity direction in the terms and in the acceleration rows' output.
+    pub down: bool,
+    /// The body velocity in the terms.
+    pub velocity: bool,
+    /// The body velocity in the terms set to zero (the velocity terms left out).
+    pub zero_velocity: bool,
+    /// The acceleration rows' output whole (noise-free specific force, true gravity).
+    pub motion: bool,
+    /// With `motion`: white noise of this standard deviation added to it (m/s^2, seeded): the
+    /// accelerometer's noise without the navigation's errors.
+    pub motion_noise: f64,
+}
+
+/// The variants a probe learns the lag on, by name.
+pub const VARIANTS: [(&str, Replace); 9] = [
+    ("as measured", NONE),
+    (
+        "target gyro true",
+        Replace {
+            target_gyro: true,
+            ..NONE
+        },
+    ),
+    ("term rate true", Replace { rate: true, ..NONE }),
+    (
+        "rotation inputs true",
+        Replace {
+            target_gyro: true,
+            rate: true,
+            ..NONE
+        },
+    ),
+    ("attitude true", Replace { down: true, ..NONE }),
+    (
+        "velocity true",
+        Replace {
+            velocity: true,
+            ..NONE
+        },
+    ),
+    (
+        "acc output true",
+        Replace {
+            motion: true,
+            ..NONE
+        },
+    ),
+    (
+        "all but target gyro",
+        Replace {
+            rate: true,
+            down: true,
+            velocity: true,
+            motion: true,
+            ..NONE
+        },
+    ),
+    (
+        "all true",
+        Replace {
+            target_gyro: true,
+            rate: true,
+            down: true,
+            velocity: true,
+            zero_velocity: false,
+            motion: true,
+            motion_noise: 0.0,
+        },
+    ),
+];
+
+const NONE: Replace = Replace {
+    target_gyro: false,
+    rate: false,
+    down: false,
+    velocity: false,
+    zero_velocity: false,
+    motion: false,
+    motion_noise: 0.0,
+};
+
+impl Replace {
+    /// From letters: g the target gyro, r the terms' rate, d the attitude, v the velocity, z
+    /// the velocity zeroed, m the acceleration rows' output, n that output true plus the
+    /// paper's accelerometer noise ("-": nothing).
+    pub fn from_letters(s: &str) -> Replace {
+        Replace {
+            target_gyro: s.contains('g'),
+            rate: s.contains('r'),
+            down: s.contains('d'),
+            velocity: s.contains('v'),
+            zero_velocity: s.contains('z'),
+            motion: s.contains('m') || s.contains('n'),
+            // The paper's accelerometer, 0.05 g.
+            motion_noise: if s.contains('n') { 0.49 } else { 0.0 },
+        }
+    }
+}
+
+/// One estimation on `v` and the lag learned from its last log with each of `variants`
+/// (default [`VARIANTS`]), the profile's outputs weighted by `weights` (DOF order; ones: the
+/// estimator's score): the outcome, the variants' names and lags (NaN where nothing was
+/// learned).
+pub fn probe(
+    v: Vehicle,
+    sensors: SensorConfig,
+    seed: u64,
+    cfg: EstimatorConfig,
+    ideal: Ideal,
+    variants: &[(String, Replace)],
+    weights: &[f64; 6],
+) -> (Outcome, Vec<(String, f64)>) {
+    let gravity = v.body.gravity_mps2;
+    let mut truth: HashMap<u64, Truth> = HashMap::new();
+    let mut last: Option<DynamicRun> = None;
+    let mut pulses = usize::MAX;
+    let outcome = estimate_observed(v, sensors, seed, cfg, ideal, &mut |machine, sim| {
+        let down = sim.attitude().inverse_transform_vector(&Vector3::z());
+        let ideal = sim.ideal_sample();
+        truth.insert(
+            sim.time_ns(),
+            Truth {
+                rate: sim.angular_velocity(),
+                velocity: sim.linear_velocity(),
+                down,
+                motion: Vector3::from(ideal.accel) + down * gravity,
+            },
+        );
+        // The run as the last decision saw it: snapshot when a pulse ends.
+        if let Some(est) = machine.estimator() {
+            if est.pulses() != pulses {
+                pulses = est.pulses();
+                last = est.dynamic_fit().cloned();
+            }
+        }
+    });
+    let Some(run) = last else {
+        return (outcome, Vec::new());
+    };
+    if std::env::var_os("LAG_PROBE_ERR").is_some() {
+        print_errors(&run, &truth);
+    }
+    if let Ok(spec) = std::env::var("LAG_PROBE_SMOOTH") {
+        print_smoothed(&run, &spec, &truth, weights);
+    }
+    if let Ok(spec) = std::env::var("LAG_PROBE_LEAK") {
+        print_leaky(&run, &spec, &truth, weights);
+    }
+    if let Ok(spec) = std::env::var("LAG_PROBE_SIM") {
+        print_simulated(&run, &spec, &truth, weights);
+    }
+    let default: Vec<(String, Replace)> =
+        VARIANTS.iter().map(|(n, r)| (n.to_string(), *r)).collect();
+    let variants = if variants.is_empty() {
+        &default[..]
+    } else {
+        variants
+    };
+    let lags = variants
+        .iter()
+        .map(|(name, r)| {
+            let mut rng = Normal(0x9e37_79b9_7f4a_7c15 ^ seed);
+            let mapped = run.with_log_mapped(|s| replaced(s, r, &truth, gravity, &mut rng));
+            let lag = mapped
+                .and_then(|m| {
+                    learn_common_lag_weighted(&m, &LagRange::default(), &Vector3::zeros(), weights)
+                })
+                .map_or(f64::NAN, |l| l.lag_s);
+            (name.clone(), lag)
+        })
+        .collect();
+    (outcome, lags)
+}
+
+/// Sample `s` with the inputs `r` names replaced by the truth at its time.
+fn replaced(
+    s: &Navigated,
+    r: &Replace,
+    truth: &HashMap<u64, Truth>,
+    gravity: f64,
+    rng: &mut Normal,
+) -> Navigated {
+    let Some(t) = truth.get(&((s.t_s * 1e9).round() as u64)) else {
+        return *s;
+    };
+    let mut out = *s;
+    if r.target_gyro {
+        out.gyro = t.rate;
+    }
+    if r.rate {
+        // LAG_PROBE_RNOISE: white noise of that many rad/s on the true rate (the terms' noise
+        // without the target's).
+        let sd: f64 = std::env::var("LAG_PROBE_RNOISE")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0);
+        out.rate = t.rate + Vector3::from_fn(|_, _| sd * rng.sample());
+    }
+    if r.velocity {
+        out.velocity = t.velocity;
+    }
+    if r.zero_velocity {
+        out.velocity = Vector3::zeros();
+    }
+    if r.down {
+        out.down = t.down;
+        // The navigated gravity in the acceleration rows' output goes with the attitude.
+        out.motion += (t.down - s.down) * gravity;
+    }
+    if r.motion {
+        out.motion = t.motion + Vector3::from_fn(|_, _| r.motion_noise * rng.sample());
+    }
+    out
+}
+
+/// Standard normal draws (xorshift64 and Box-Muller): the probe's own noise, seeded.
+struct Normal(u64);
+
+impl Normal {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+
+    fn sample(&mut self) -> f64 {
+        let (u, v) = (self.uniform(), self.uniform());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+}
+
+/// RMS over the log of the navigated inputs' errors against the truth and of the truth itself,
+/// per axis (a lab print for the decisive runs).
+fn print_errors(run: &DynamicRun, truth: &HashMap<u64, Truth>) {
+    let Some(log) = run.log() else { return };
+    let mut err = [[0.0f64; 3]; 5];
+    let mut sig = [[0.0f64; 3]; 5];
+    let mut n = 0.0;
+    for s in log.iter() {
+        let Some(t) = truth.get(&((s.t_s * 1e9).round() as u64)) else {
+            continue;
+        };
+        n += 1.0;
+        let pairs = [
+            (s.gyro, t.rate),
+            (s.rate, t.rate),
+            (s.down, t.down),
+            (s.velocity, t.velocity),
+            (s.motion, t.motion),
+        ];
+        for (k, (m, tr)) in pairs.iter().enumerate() {
+            for a in 0..3 {
+                err[k][a] += (m[a] - tr[a]).powi(2);
+                sig[k][a] += tr[a].powi(2);
+            }
+        }
+    }
+    for (k, name) in ["gyro", "rate", "down", "velocity", "motion"]
+        .iter()
+        .enumerate()
+    {
+        let f = |v: [f64; 3]| v.map(|x| format!("{:.4}", (x / n).sqrt())).join(" ");
+        println!(
+            "  {name:8}: error rms {} | truth rms {}",
+            f(err[k]),
+            f(sig[k])
+        );
+    }
+}
