@@ -19,6 +19,7 @@ impl Estimator {
         if e.excited
             && e.rel_err_rot <= self.cfg.target_rel_err
             && reducible_acc <= self.cfg.acc_target()
+            && !self.better_within_reach(&[e.rel_err_rot, reducible_acc])
         {
             StopDecision::Converged {
                 rel_err_rot: e.rel_err_rot,
@@ -27,6 +28,22 @@ impl Estimator {
         } else {
             StopDecision::Continue
         }
+    }
+
+    /// Whether one of `bounds` (relative, 1 sigma) is above `reach_rel_err` and would reach it
+    /// by `max_pulses`: its statistical part falling as 1/sqrt(pulses), the model-error floor
+    /// (which no data removes) not at all.
+    pub(super) fn better_within_reach(&self, bounds: &[f64]) -> bool {
+        let reach = self.cfg.reach_rel_err;
+        if reach <= 0.0 || self.pulses == 0 || self.pulses >= self.cfg.max_pulses {
+            return false;
+        }
+        let floor2 = self.cfg.model_error_floor.powi(2);
+        let left = self.pulses as f64 / self.cfg.max_pulses as f64;
+        bounds.iter().any(|&b| {
+            let projected = (floor2 + (b * b - floor2).max(0.0) * left).sqrt();
+            b > reach && projected <= reach
+        })
     }
 
     /// Noise standard deviation per axis of a group: the at-rest level, or the residual level
