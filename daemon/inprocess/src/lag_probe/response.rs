@@ -149,7 +149,7 @@ pub(super) fn print_simulated(
                 out.velocity = v;
             }
             if what.contains('T') {
-                if let Some(t) = truth.get(&((smp.t_s * 1e9).round() as u64)) {
+                if let Some(t) = truth_at(truth, smp.t_s) {
                     out.rate = t.rate;
                 }
             }
@@ -193,7 +193,7 @@ pub(super) fn print_smoothed(
         out.rate = smooth[k];
         k += 1;
         if true_v {
-            if let Some(t) = truth.get(&((smp.t_s * 1e9).round() as u64)) {
+            if let Some(t) = truth_at(truth, smp.t_s) {
                 out.velocity = t.velocity;
             }
         }
@@ -201,8 +201,7 @@ pub(super) fn print_smoothed(
     }) else {
         return;
     };
-    let lag = learn_common_lag_weighted(&mapped, &LagRange::default(), &Vector3::zeros(), weights)
-        .map_or(f64::NAN, |l| l.lag_s);
+    let lag = lag_of(&mapped, weights);
     println!(
         "  smoothed over {w}{}: {lag:.4}",
         if true_v { ", true velocity" } else { "" }
@@ -248,7 +247,7 @@ pub(super) fn print_leaky(
         let mut out = *smp;
         out.velocity = v;
         if true_rate {
-            if let Some(t) = truth.get(&((smp.t_s * 1e9).round() as u64)) {
+            if let Some(t) = truth_at(truth, smp.t_s) {
                 out.rate = t.rate;
             }
         }
@@ -256,10 +255,20 @@ pub(super) fn print_leaky(
     }) else {
         return;
     };
-    let lag = learn_common_lag_weighted(&mapped, &LagRange::default(), &Vector3::zeros(), weights)
-        .map_or(f64::NAN, |l| l.lag_s);
+    let lag = lag_of(&mapped, weights);
     println!(
         "  leaky velocity tau {tau}{}: {lag:.4}",
         if true_rate { ", true rate" } else { "" }
     );
+}
+
+/// The truth at vehicle time `t_s` (s), keyed by its nanosecond.
+fn truth_at(truth: &HashMap<u64, Truth>, t_s: f64) -> Option<&Truth> {
+    truth.get(&((t_s * 1e9).round() as u64))
+}
+
+/// The lag learned from `run`'s log scored with `weights` (NaN when it cannot be).
+fn lag_of(run: &DynamicRun, weights: &[f64; 6]) -> f64 {
+    learn_common_lag_weighted(run, &LagRange::default(), &Vector3::zeros(), weights)
+        .map_or(f64::NAN, |l| l.lag_s)
 }
