@@ -101,6 +101,9 @@ pub struct Ideal {
     pub rest_from_idle: Option<bool>,
     /// How long the machine idles before the request, s (default `IDLE_BEFORE_REQUEST_S`).
     pub idle_s: Option<f64>,
+    /// A tether pulling this many newtons aft at the stern, varying 30 % over 20 s (the lab's
+    /// `--tether`), from the simulator's start.
+    pub tether_n: Option<f64>,
 }
 
 /// How long the machine idles, reading the IMU, before the estimation is asked for, s: so the
@@ -167,6 +170,14 @@ pub fn estimate_observed(
     let mut disturbance = ideal.water.disturbance();
     if ideal.no_current {
         disturbance.current_ned_mps = [0.0; 3];
+    }
+    if let Some(pull) = ideal.tether_n {
+        disturbance.tether = Some(thruster_sim::disturbance::TetherConfig {
+            attach_m: [-0.3, 0.0, 0.0],
+            pull_ned_n: [-pull, 0.0, 0.0],
+            vary_ned_n: [-0.3 * pull, 0.0, 0.0],
+            period_s: 20.0,
+        });
     }
     match ideal.wave_part {
         Some("force") => disturbance
