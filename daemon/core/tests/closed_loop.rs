@@ -94,9 +94,7 @@ fn a_change_announced_for_the_wrong_thruster_is_not_pinned_on_the_old_column() {
 
 /// Without some dither on the thrusters the prior covers, their commands are the controller's
 /// reaction to the motion alone, confounded with the damping and restoring terms: noise-free
-/// the fit then ended 0.086 / 0.046 off the truth (0.004 / 0.010 with 0.1 of the amplitude).
-/// (0.016 / 0.095 before the rest's own rotation was netted out of the gyro's bias,
-/// `navigation::rest_rotation`: this rest rolls at 0.018 rad/s.)
+/// the fit then ended 0.016 / 0.095 off the truth (0.004 / 0.010 with 0.1 of the amplitude).
 #[test]
 fn noise_free_the_thrusters_the_prior_covers_keep_some_dither() {
     let none = IdentificationConfig {
@@ -104,10 +102,7 @@ fn noise_free_the_thrusters_the_prior_covers_keep_some_dither() {
         ..IdentificationConfig::default()
     };
     let (_, r) = rotate_while_holding_with(NoisePreset::None, 1, Some(none), |_, _| {});
-    assert!(
-        r.err_rot > 0.04 || r.err_acc > 0.04,
-        "no dither on the others: {r:?}"
-    );
+    assert!(r.err_acc > 0.05, "no dither on the others: {r:?}");
     let (_, r) = rotate_while_holding(NoisePreset::None, 1);
     assert!(r.err_rot < 0.01 && r.err_acc < 0.02, "{r:?}");
 }

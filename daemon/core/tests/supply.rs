@@ -172,13 +172,11 @@ fn a_draining_battery_is_not_a_weakening_thruster() {
         ratio(&b_blind)
     );
     assert!(v0 - v1 > 2.5, "the pack drained: {v0} -> {v1}");
-    // Measured (noise-free, seed 1): compensated 0.154 away, |B| x1.150 (no refinement
+    // Measured (noise-free, seed 1): compensated 0.099 away, |B| x1.095 (one refinement
     // instead of two, and near empty the top of the command range saturates); uncompensated
-    // 0.357 away, |B| x0.645: it learned the battery. (Before the rests' own rotation was
-    // netted out of the gyro's bias, `navigation::rest_rotation`, whose rests here turn at
-    // 0.005-0.015 rad/s: 0.123, x1.121; 0.290, x0.719.)
-    assert!(d_comp < 0.2, "compensated {d_comp}");
+    // 0.294 away, |B| x0.716: it learned the battery.
+    assert!(d_comp < 0.15, "compensated {d_comp}");
     assert!(d_blind > 2.0 * d_comp, "uncompensated {d_blind}");
-    assert!((0.9..1.2).contains(&ratio(&b_comp)), "{}", ratio(&b_comp));
+    assert!((0.9..1.15).contains(&ratio(&b_comp)), "{}", ratio(&b_comp));
     assert!(ratio(&b_blind) < 0.8, "{}", ratio(&b_blind));
 }

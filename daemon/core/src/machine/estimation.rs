@@ -415,15 +415,25 @@ impl EstimationRun {
 pub(super) struct Rest {
     rotation: RestRotation,
     drift: RestDrift,
+    /// Held under control (the hold before an identification): the thrusters' own
+    /// accelerations are in the specific force, which then tells nothing of a turn, so the
+    /// navigation starts from its mean as before.
+    held: bool,
 }
 
 impl Rest {
-    /// One sample `t_s` into the rest.
+    /// One sample `t_s` into the rest, the thrusters neutral.
     pub(super) fn push(&mut self, m: &Motion, t_s: f64) {
         self.rotation.push(t_s, &m.gyro, &m.specific_force);
         if let Some(d) = m.depth {
             self.drift.push(t_s, d);
         }
+    }
+
+    /// One sample `t_s` into a hold under control (see `held`).
+    pub(super) fn push_held(&mut self, m: &Motion, t_s: f64) {
+        self.held = true;
+        self.push(m, t_s);
     }
 
     /// `levels` (measured over this rest) with the gyro's bias net of the rotation the
@@ -437,7 +447,12 @@ impl Rest {
 
     /// `est`, told where its navigation starts.
     pub(super) fn start(&self, mut est: Estimator) -> Estimator {
-        if let Some(f) = self.rotation.force_at_end(GRAVITY) {
+        let force = if self.held {
+            self.rotation.mean_force()
+        } else {
+            self.rotation.force_at_end(GRAVITY)
+        };
+        if let Some(f) = force {
             est = est.with_rest_specific_force(f);
         }
         if let Some(w) = self.drift.velocity_down() {

@@ -101,7 +101,7 @@ impl EstimationRun {
             // Holding: the rest (starting attitude and vertical velocity) and the noise.
             self.noise.push(&m.gyro.into(), &m.accel.into());
             let held_s = t_ns.saturating_sub(c.start_ns) as f64 * 1e-9;
-            self.rest.push(m, held_s);
+            self.rest.push_held(m, held_s);
             c.sent[..command.len()].copy_from_slice(command);
             if held_s < setup.machine.noise_s || self.noise.samples() < super::MIN_REST_SAMPLES {
                 return ClosedStep::Holding;
