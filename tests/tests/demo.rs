@@ -163,3 +163,39 @@ fn a_model_the_water_made_is_refused() {
     assert_eq!(v["clean_exit"], true);
     assert_eq!(v["files_left"], 0);
 }
+
+/// Issue 29 through the processes: eight_vectored with T200 thrusters from the measured table
+/// on the shipped 4S pack (20 mOhm; it sags from 16.8 to 13.7-14.8 V under the pulses, read
+/// every 100 ms), noise-free, the daemon configured for T200 thrusters by the demo (`[supply]
+/// linearize`) and told nothing of the pack. Scored against the truth at the 16 V the model
+/// is referred to (`truth_voltage_v`). Measured 0.0060 / 0.0063; before the sag was predicted
+/// and the pulses capped under it 0.089 / 0.089 (every pulse at full power saturated), and
+/// 0.112 / 0.113 without `linearize` (a linear model of the T200's curve).
+#[test]
+fn t200_thrusters_on_a_sagging_pack_are_learned_at_the_reference_voltage() {
+    let v = demo(&[
+        "--noise",
+        "none",
+        "--vehicle",
+        "config/vehicles/eight_vectored_t200.toml",
+    ]);
+    let f = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k}: {v}"));
+    let (rot, acc) = (f("err_rot"), f("err_acc"));
+    println!(
+        "eight_vectored_t200: err {rot:.4} / {acc:.4} at {:.2} V, truth at {:.2} V",
+        f("supply_voltage_v"),
+        f("truth_voltage_v")
+    );
+    assert_eq!(v["linearize"], true, "{v}");
+    assert_eq!(f("truth_voltage_v"), 16.0);
+    assert!(
+        f("supply_voltage_v") < 15.5,
+        "the pack sagged and drained: {v}"
+    );
+    assert!(
+        rot < 0.015 && acc < 0.015,
+        "errors {rot:.4} / {acc:.4}: {v}"
+    );
+    assert_eq!(v["clean_exit"], true);
+    assert_eq!(v["files_left"], 0);
+}

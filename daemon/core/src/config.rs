@@ -305,6 +305,11 @@ impl DaemonConfig {
                 SupplyConfig::REFERENCE_RANGE,
             ),
             (
+                "supply.sag_prior_ohm".into(),
+                self.supply.sag_prior_ohm,
+                SupplyConfig::SAG_PRIOR_RANGE,
+            ),
+            (
                 "machine.level_max_s".into(),
                 m.level_max_s,
                 Range::at_least(0.0),

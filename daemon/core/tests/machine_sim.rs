@@ -588,6 +588,8 @@ fn with_a_declared_geometry_the_pulses_are_as_strong_as_the_noise_needs() {
             last_mode: Mode::Neutral,
             max_abs_cmd: 0.0,
             latency_us: None,
+            supply_report_ns: None,
+            next_report_ns: 0,
         };
         run.run_for(1.0);
         run.machine.on_request(Request::Estimate).unwrap();

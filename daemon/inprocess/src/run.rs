@@ -36,6 +36,12 @@ pub struct Run {
     /// Set by measuring sweeps (`RUN_LATENCY_US` there), never by an environment variable in
     /// a test CI runs.
     pub latency_us: Option<(u64, u64)>,
+    /// The simulator's battery voltage handed to the machine every this many ns of vehicle
+    /// time, before the sample that follows (a driver's report: thruster-sim's every 100 ms).
+    /// None: never (the machine runs without a reading).
+    pub supply_report_ns: Option<u64>,
+    /// Vehicle time the next report is due at, ns.
+    pub next_report_ns: u64,
 }
 
 impl Run {
@@ -83,6 +89,8 @@ impl Run {
             last_mode: Mode::Neutral,
             max_abs_cmd: 0.0,
             latency_us: None,
+            supply_report_ns: None,
+            next_report_ns: 0,
         }
     }
 
@@ -96,6 +104,12 @@ impl Run {
 
     pub fn tick(&mut self) {
         let input = self.next_input();
+        if let (Some(every), Some(b)) = (self.supply_report_ns, self.sim.battery()) {
+            if input.t_ns >= self.next_report_ns {
+                self.machine.on_supply(Some(b.voltage_v()));
+                self.next_report_ns = input.t_ns + every;
+            }
+        }
         let cmd = self.machine.on_imu(&input);
         assert_eq!(cmd.count, self.sim.thruster_count());
         for v in &cmd.thrust[..cmd.count] {

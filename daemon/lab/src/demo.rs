@@ -13,6 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Quaternion, UnitQuaternion};
 use thruster_protocol::{DynamicsMsg, ModelMsg, TruthMsg};
 
+use crate::model_truth::{model_voltage_v, truth_at};
 use crate::session::{config_file, latest, Binaries, DaemonConfig, Session, SessionSpec};
 
 const DOFS: [&str; 6] = ["roll", "pitch", "yaw", "surge", "sway", "heave"];
@@ -83,6 +84,13 @@ struct Summary {
     /// The simulated thrusters' mean spin-up time constant, s, from the vehicle file (the
     /// daemon is not told it).
     spin_up_true_s: Option<f64>,
+    /// The simulator's supply voltage when the model was scored, V.
+    supply_voltage_v: f64,
+    /// The voltage the truth was taken at: the daemon's reference when it referred or
+    /// linearized its commands, else the supply's (`model_truth`).
+    truth_voltage_v: f64,
+    /// Whether the daemon commanded through the T200's curve (`[supply] linearize`).
+    linearize: bool,
     /// The IMU position and water the simulator had ([`crate::water::WaterArgs::json`]).
     as_is: serde_json::Value,
     clean_exit: bool,
@@ -115,6 +123,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         .vehicle
         .clone()
         .unwrap_or_else(|| config_file("vehicles/amour5.toml"));
+    let daemon_config = demo_daemon_config(&args, &vehicle)?;
     let spec = SessionSpec {
         tag: "demo",
         vehicle: vehicle.clone(),
@@ -127,10 +136,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         // busy 2-core VM). Paced to 5x real time, 1 kHz of samples at the simulator's default
         // 200 Hz IMU: the rate the recorder is specified (and tested) for.
         pace: (args.record.is_some() && !args.realtime).then_some(crate::recording::RECORD_PACE),
-        daemon_config: args
-            .daemon_config
-            .clone()
-            .map_or(DaemonConfig::Defaults, DaemonConfig::File),
+        daemon_config,
         scenario: None,
         sim_config: args.water.sim_config()?,
         record: args
@@ -143,7 +149,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
     spec.check()?;
     let bins = Binaries::locate()?;
     let mut session = Session::start(&bins, &spec)?;
-    let result = drive(&args, &mut session, &vehicle);
+    let supply = spec.daemon_config.supply()?;
+    let result = drive(&args, &mut session, &vehicle, &supply);
     let recorded = session.stop_recording();
     let shutdown = session.finish();
     if let Some(refused) = result
@@ -183,7 +190,33 @@ pub fn run(args: DemoArgs) -> Result<()> {
     Ok(())
 }
 
-fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summary> {
+/// The operator's file, else the defaults, configured for T200 thrusters when the vehicle
+/// has them (`[supply] linearize`, as their operator would from the data sheet: the daemon is
+/// still told nothing of the battery, the lag or the water).
+fn demo_daemon_config(args: &DemoArgs, vehicle: &Path) -> Result<DaemonConfig> {
+    if let Some(file) = &args.daemon_config {
+        return Ok(DaemonConfig::File(file.clone()));
+    }
+    // A vehicle file that cannot be read is answered by the spec's check, as before.
+    let Ok(v) = crate::vehicle::load(vehicle) else {
+        return Ok(DaemonConfig::Defaults);
+    };
+    Ok(if crate::vehicle::all_t200(&v) {
+        DaemonConfig::Text(format!(
+            "[vehicle]\nthrusters = {}\n[supply]\nlinearize = true\n",
+            v.thrusters.len()
+        ))
+    } else {
+        DaemonConfig::Defaults
+    })
+}
+
+fn drive(
+    args: &DemoArgs,
+    session: &mut Session,
+    vehicle: &Path,
+    supply: &thrusterd_core::supply::SupplyConfig,
+) -> Result<Summary> {
     let (first, truth) = session.ready()?;
     let wall = Instant::now();
     let t0 = first.vehicle_time_ns;
@@ -219,7 +252,16 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
     let model = session.model()?;
     let excursion = session.last_excursion().filter(|e| e.samples > 0);
     let dynamics = session.dynamics(model.version)?;
-    let truth = latest(session.truth_inbox())?.unwrap_or(truth);
+    let published = latest(session.truth_inbox())?.unwrap_or(truth);
+    // Scored at the voltage the model describes: the daemon's reference when it referred or
+    // linearized its commands (`model_truth`).
+    let truth_voltage_v = model_voltage_v(
+        supply,
+        done.supply_compensation()
+            .unwrap_or(thruster_protocol::SupplyCompensation::NoReading),
+        published.supply_voltage_v,
+    );
+    let truth = truth_at(vehicle, &published, truth_voltage_v)?;
     let err_rot = truth.relative_error(&model, 0);
     let err_acc = truth.relative_error(&model, 3);
     let actuated: Vec<&'static str> = (0..6)
@@ -315,6 +357,9 @@ fn drive(args: &DemoArgs, session: &mut Session, vehicle: &Path) -> Result<Summa
         estimation_heading_deg: excursion.map(|e| e.max_heading_deg),
         dynamics,
         spin_up_true_s: true_spin_up_s(vehicle),
+        supply_voltage_v: published.supply_voltage_v,
+        truth_voltage_v,
+        linearize: supply.linearize,
         as_is: args.water.json()?,
         clean_exit: false,
         leftovers: 0,
@@ -400,6 +445,9 @@ fn report(args: &DemoArgs, s: &Summary) {
             "imu_position_m": s.dynamics.as_ref().map(|d| d.imu_position_m),
             "imu_learned_m": s.dynamics.as_ref().map(|d| d.imu_learned_m),
             "imu_position_contradicted": s.dynamics.as_ref().map(|d| d.imu_position_contradicted == 1),
+            "supply_voltage_v": s.supply_voltage_v,
+            "truth_voltage_v": s.truth_voltage_v,
+            "linearize": s.linearize,
             "vehicle_as_is": s.as_is,
             "effectiveness": s.matrices,
             "clean_exit": s.clean_exit,
@@ -407,6 +455,12 @@ fn report(args: &DemoArgs, s: &Summary) {
         });
         println!("{obj}");
         return;
+    }
+    if (s.truth_voltage_v - s.supply_voltage_v).abs() > 1e-9 {
+        println!(
+            "truth taken at {:.2} V, the voltage the model is referred to (supply {:.2} V)",
+            s.truth_voltage_v, s.supply_voltage_v
+        );
     }
     println!("actuated: {}", s.actuated.join(", "));
     if let (Some(a), Some(l), Some(p)) = (

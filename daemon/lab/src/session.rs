@@ -187,6 +187,22 @@ pub enum DaemonConfig {
     Text(String),
 }
 
+impl DaemonConfig {
+    /// The `[supply]` section the daemon runs with (its default without a file), parsed by
+    /// the daemon's own loader: what the lab scores a model's voltage by.
+    pub fn supply(&self) -> Result<thrusterd_core::supply::SupplyConfig> {
+        let (text, origin) = match self {
+            DaemonConfig::Defaults => return Ok(Default::default()),
+            DaemonConfig::File(p) => (
+                std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?,
+                p.display().to_string(),
+            ),
+            DaemonConfig::Text(t) => (t.clone(), "generated thrusterd.toml".to_string()),
+        };
+        Ok(thrusterd_core::config::DaemonConfig::from_toml_str(&text, &origin)?.supply)
+    }
+}
+
 /// The daemon refused the model an estimation made (its status text says why).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModelRefused(pub String);

@@ -42,6 +42,16 @@ pub fn declared_geometry(vehicle: &Vehicle) -> Vec<([f64; 3], [f64; 3])> {
         .collect()
 }
 
+/// Whether every thruster of `vehicle` is a T200 from the measured table: the daemon of such a
+/// vehicle is configured for it (`[supply] linearize`: commands through the T200's curve and
+/// over its ESC's dead zone), as its operator would from the thrusters' data sheet.
+pub fn all_t200(vehicle: &Vehicle) -> bool {
+    vehicle
+        .thrusters
+        .iter()
+        .all(|t| t.model == thruster_sim::ThrusterModel::T200)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -50,6 +50,10 @@ mod solves;
 /// finer than the T200 table resolves (~0.4 % thrust per 50 mV), coarse enough that a
 /// driver's ADC noise does not fill the journal.
 const SUPPLY_STEP_V: f64 = 0.01;
+/// A steady supply voltage is handed to the machine again after this long, ns of the driver's
+/// clock: the sag line (`thrusterd_core::supply::Sag`) needs readings under changing load even
+/// when the voltage does not move (a regulated bench supply, a stiff pack).
+const SUPPLY_EVERY_NS: u64 = 1_000_000_000;
 
 #[derive(Args)]
 pub struct RunArgs {
@@ -211,6 +215,8 @@ struct Daemon {
     driver_verdict: OutputVerdict,
     /// The supply voltage last handed to the machine, V.
     supply_v: Option<f64>,
+    /// The driver's time of the reading last handed to the machine, ns.
+    supply_taken_ns: u64,
     /// The thruster count the latest report was judged for; `None` when a new report came.
     /// Judging again only then keeps the per-round work (and its text) off the hot path.
     driver_judged_for: Option<usize>,
@@ -295,6 +301,7 @@ impl Daemon {
             driver: DriverWatch::new(),
             driver_verdict: OutputVerdict::Usable,
             supply_v: None,
+            supply_taken_ns: 0,
             driver_judged_for: None,
             journal: None,
             checkpoints: None,

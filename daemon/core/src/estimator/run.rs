@@ -509,6 +509,23 @@ impl Estimator {
             .max(begun)
     }
 
+    /// Caps the pulse power at `cap` (in (0, 1]) from the next pulse on: what the thrusters
+    /// can give now (a sagging pack). A linear model learns from any power; a saturated pulse
+    /// would teach it a weaker thruster than it has. The dynamic method's power is otherwise
+    /// constant, so it returns to the configured power when the cap allows; the static
+    /// methods' raised power is only lowered.
+    pub fn cap_power(&mut self, cap: f64) {
+        if !cap.is_finite() {
+            return;
+        }
+        let cap = cap.clamp(0.05, 1.0);
+        self.power = if self.cfg.method == Method::Dynamic {
+            self.cfg.initial_power.min(self.cfg.max_power).min(cap)
+        } else {
+            self.power.min(cap)
+        };
+    }
+
     /// The thrust to apply for the next pulse: power times the plan's sign pattern, in [-1, 1].
     /// Starts the pulse; feed its samples with `push_pulse_sample`, then call `end_pulse`.
     /// The pulse starts just after the last rest sample.

@@ -317,14 +317,18 @@ impl EstimationRun {
         true
     }
 
-    /// Begin the next pulse at `t_ns`, its thrust written into `thrust`: the pulse's number
-    /// (None without an estimator).
+    /// Begin the next pulse at `t_ns`, its thrust written into `thrust`, its power no more
+    /// than `power_cap`: the pulse's number (None without an estimator).
     pub(super) fn begin_pulse(
         &mut self,
         t_ns: u64,
+        power_cap: Option<f64>,
         thrust: &mut [f64; MAX_THRUSTERS],
     ) -> Option<usize> {
         let est = self.est.as_mut()?;
+        if let Some(cap) = power_cap {
+            est.cap_power(cap);
+        }
         let u = est.begin_pulse_at(t_ns as f64 * 1e-9);
         for (o, v) in thrust.iter_mut().zip(u) {
             *o = *v;

@@ -324,7 +324,8 @@ impl Machine {
     /// The supply voltage the driver reports (V, validated), or `None` when it stopped
     /// reporting one: from the next sample on, commands are referred to it (`[supply]`).
     pub fn on_supply(&mut self, voltage_v: Option<f64>) {
-        self.supply.on_voltage(voltage_v);
+        let t_s = self.last_t_ns.map_or(0.0, |t| t as f64 * 1e-9);
+        self.supply.on_reading(t_s, voltage_v);
     }
 
     fn respond(&mut self, s: &ImuInput) -> Command {

@@ -6,18 +6,23 @@
 use super::*;
 
 impl Daemon {
-    /// Hands the machine the driver's supply voltage when it moved by [`SUPPLY_STEP_V`] or
-    /// came or went, and journals it (replay hands the machine the same values at the same
-    /// samples).
-    pub(super) fn take_supply(&mut self, voltage_v: Option<f64>) {
+    /// Hands the machine the driver's supply voltage (taken at the report's `time_ns`) when it
+    /// moved by [`SUPPLY_STEP_V`], came or went, or [`SUPPLY_EVERY_NS`] after the last one
+    /// handed over (a pack that does not sag under a pulse is a point of its sag line too),
+    /// and journals it (replay hands the machine the same values at the same samples).
+    pub(super) fn take_supply(&mut self, voltage_v: Option<f64>, time_ns: u64) {
         let moved = match (self.supply_v, voltage_v) {
-            (Some(a), Some(b)) => (a - b).abs() >= SUPPLY_STEP_V,
+            (Some(a), Some(b)) => {
+                (a - b).abs() >= SUPPLY_STEP_V
+                    || time_ns >= self.supply_taken_ns.saturating_add(SUPPLY_EVERY_NS)
+            }
             (None, None) => false,
             _ => true,
         };
         if !moved {
             return;
         }
+        self.supply_taken_ns = time_ns;
         if voltage_v.is_none() {
             warn!("the driver no longer reports a supply voltage: commands are not compensated");
         } else if self.supply_v.is_none() {
@@ -102,7 +107,7 @@ impl Daemon {
                 Ok(()) => {
                     self.driver.observe(&report, self.machine.thrusters());
                     self.driver_judged_for = None;
-                    self.take_supply(report.supply_voltage());
+                    self.take_supply(report.supply_voltage(), report.time_ns);
                 }
                 Err(reason) => {
                     self.rejected.record(&reason);

@@ -138,7 +138,14 @@ impl Machine {
     pub(super) fn start_pulse(&mut self, t_ns: u64) -> Command {
         let mut cmd = Command::neutral(self.n);
         cmd.mode = Mode::Estimating;
-        if let Some(k) = self.run.begin_pulse(t_ns, &mut cmd.thrust) {
+        // What the thrusters give with the pack sagging under all of them, once the readings
+        // have shown its sag (the cap at the rest's end knew only the resting voltage).
+        let power_cap = (self.supply.state() == thruster_protocol::SupplyCompensation::Active)
+            .then(|| {
+                let db = self.setup.machine.deadband.clamp(0.0, 0.5);
+                ((self.supply.attainable_loaded(self.n) - db) / (1.0 - db)).clamp(0.0, 1.0)
+            });
+        if let Some(k) = self.run.begin_pulse(t_ns, power_cap, &mut cmd.thrust) {
             // The first pulse is the estimation's news; the ones after a settle are phases.
             let first = !matches!(self.state, State::Pulse | State::Settle);
             let announce = first.then_some("noise measured: pulsing");

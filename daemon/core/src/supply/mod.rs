@@ -20,8 +20,12 @@
 //! top of the command range is lost). Without a voltage reading (no driver measures one) the
 //! commands go out unchanged, as before, and status says so. Pure: readings in, commands out.
 
+mod sag;
+
 use serde::{Deserialize, Serialize};
 use thruster_driver_kit::Range;
+
+pub use sag::Sag;
 use thruster_protocol::SupplyCompensation;
 use thruster_table::ThrusterTable;
 
@@ -55,6 +59,13 @@ pub struct SupplyConfig {
     /// A driver that jumps the dead zone itself (thruster-hw's `deadband_us`) must not have
     /// it jumped twice. Issue 29 item 5; measured in docs/experiments.md ("The dead zone").
     pub linearize: bool,
+    /// The pack's resistance assumed until the readings show its sag (Ohm, in [0, 0.5]):
+    /// estimation pulses are capped at what the thrusters give with the pack sagging by this
+    /// under all of them. Default 0.05, a weak 4S pack with its wiring (the simulator's is
+    /// 0.02): too high only lowers the first pulses' power, too low lets them saturate and
+    /// teach a weaker thruster. Once the readings spread over the pulses' current the fitted
+    /// line (`sag`) replaces it.
+    pub sag_prior_ohm: f64,
 }
 
 impl Default for SupplyConfig {
@@ -63,11 +74,20 @@ impl Default for SupplyConfig {
             compensation: CompensationModel::T200,
             reference_voltage_v: 16.0,
             linearize: false,
+            sag_prior_ohm: 0.05,
         }
     }
 }
 
 impl SupplyConfig {
+    /// The range of `sag_prior_ohm`: the slopes the fitted line believes.
+    pub const SAG_PRIOR_RANGE: Range = Range {
+        lo: 0.0,
+        hi: sag::MAX_RESISTANCE_OHM,
+        lo_open: false,
+        hi_open: false,
+    };
+
     /// The range of `reference_voltage_v`: the measured voltages.
     pub const REFERENCE_RANGE: Range = Range {
         lo: 10.0,
@@ -88,6 +108,11 @@ pub struct Supply {
     /// Full forward and reverse thrust at the reference voltage, N (reverse negative): the
     /// scale of a linearized command.
     full_n: (f64, f64),
+    /// The pack's sag under load, learned from the readings (`sag`).
+    sag: Sag,
+    /// The current the last commands sent draw by the table, A: what a reading that comes
+    /// before the next sample was taken under.
+    draw_a: f64,
 }
 
 impl Supply {
@@ -104,6 +129,8 @@ impl Supply {
             config,
             table,
             voltage_v: None,
+            sag: Sag::default(),
+            draw_a: 0.0,
         }
     }
 
@@ -117,6 +144,14 @@ impl Supply {
             }
             _ => None,
         }
+    }
+
+    /// The supply voltage whose thrust a model learned now describes: the reference when
+    /// commands are referred (a reading) or linearized (commands go out as at the reference);
+    /// `None` when commands pass unchanged and the model is the thrusters' at whatever voltage
+    /// they had. What a model is scored against (the lab's truth for the model).
+    pub fn model_voltage_v(&self) -> Option<f64> {
+        self.out_voltage().map(|_| self.config.reference_voltage_v)
     }
 
     /// The thrust a referred command `c` asks for, N.
@@ -138,6 +173,20 @@ impl Supply {
         self.voltage_v = voltage_v.filter(|v| v.is_finite() && *v > 0.0);
     }
 
+    /// A reading taken at vehicle time `t_s`, under the commands last sent: the reading, and a
+    /// point of the pack's sag line.
+    pub fn on_reading(&mut self, t_s: f64, voltage_v: Option<f64>) {
+        self.on_voltage(voltage_v);
+        if let Some(v) = self.voltage_v {
+            self.sag.on_reading(t_s, v, self.draw_a);
+        }
+    }
+
+    /// The pack's learned sag line `(E, R)`, once the readings fix it.
+    pub fn sag_line(&self) -> Option<(f64, f64)> {
+        self.sag.line()
+    }
+
     /// The last reading, V.
     pub fn voltage_v(&self) -> Option<f64> {
         self.voltage_v
@@ -152,25 +201,63 @@ impl Supply {
         }
     }
 
-    /// Carries commands referred to the reference voltage to the present one, in place.
-    /// Whatever happens every command ends finite and in [-1, 1].
-    pub fn to_present(&self, commands: &mut [f64]) {
-        let present = self.out_voltage();
-        for u in commands {
-            let c = if u.is_finite() {
+    /// Carries commands referred to the reference voltage to the present one, in place: the
+    /// voltage the pack will give under these commands when its sag is known (`sag`), else
+    /// the last reading. Whatever happens every command ends finite and in [-1, 1].
+    pub fn to_present(&mut self, commands: &mut [f64]) {
+        for u in commands.iter_mut() {
+            *u = if u.is_finite() {
                 u.clamp(-1.0, 1.0)
             } else {
                 0.0
             };
-            let out = match present {
-                Some(v) if c != 0.0 => self.table.command_for_thrust(v, self.wanted_n(c)),
-                _ => c,
-            };
-            *u = if out.is_finite() {
-                out.clamp(-1.0, 1.0)
-            } else {
-                0.0
-            };
+        }
+        let Some(read) = self.out_voltage() else {
+            return;
+        };
+        let mut v = read;
+        if let (Some(_), Some((e, r))) = (self.voltage_v, self.sag.line()) {
+            // The voltage under the draw of the commands it gives: a fixed point, contracting
+            // (R dI/dV is a few percent), three steps from the last draw are within mV. Never
+            // below 70 % of the open-circuit voltage, whatever the fit says.
+            let mut draw = self.draw_a;
+            for _ in 0..3 {
+                v = (e - r * draw).clamp(0.7 * e, e);
+                draw = commands
+                    .iter()
+                    .map(|c| self.current_a(v, self.out_command(v, *c)))
+                    .sum();
+            }
+        }
+        let mut draw = 0.0;
+        for u in commands.iter_mut() {
+            *u = self.out_command(v, *u);
+            draw += self.current_a(v, *u);
+        }
+        self.draw_a = draw;
+    }
+
+    /// The command sent at voltage `v` for the referred command `c` (finite, in [-1, 1]).
+    fn out_command(&self, v: f64, c: f64) -> f64 {
+        let out = if c != 0.0 {
+            self.table.command_for_thrust(v, self.wanted_n(c))
+        } else {
+            0.0
+        };
+        if out.is_finite() {
+            out.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// The current one thruster draws at command `u` and voltage `v`, A, by the table.
+    fn current_a(&self, v: f64, u: f64) -> f64 {
+        let i = self.table.current_at_command(v, u);
+        if i.is_finite() {
+            i.max(0.0)
+        } else {
+            0.0
         }
     }
 
@@ -190,12 +277,59 @@ impl Supply {
         }
     }
 
+    /// The largest referred command magnitude every one of `thrusters` thrusters can be given
+    /// at once, in both directions, with the pack sagging under their draw (`sag`), less the
+    /// same 2 % margin: what an estimation pulse may ask without saturating. Without a learned
+    /// sag line, [`Supply::attainable`].
+    pub fn attainable_loaded(&self, thrusters: usize) -> f64 {
+        let line = match (self.state(), self.sag.line(), self.voltage_v) {
+            (SupplyCompensation::Active, Some(line), _) => line,
+            // Not yet shown: the prior, from the last reading (the pack at rest).
+            (SupplyCompensation::Active, None, Some(v)) => (v, self.config.sag_prior_ohm),
+            _ => return self.attainable(),
+        };
+        let (e, r) = line;
+        // g(a): what the voltage under n thrusters at a gives; decreasing in a, so the
+        // fixed point a = g(a) is bracketed and found by bisection (once per pulse).
+        let g = |a: f64| {
+            let mut v = e;
+            for _ in 0..3 {
+                let each = [a, -a]
+                    .map(|c| self.current_a(v, self.out_command(v, c)))
+                    .into_iter()
+                    .fold(0.0, f64::max);
+                v = (e - r * thrusters as f64 * each).clamp(0.7 * e, e);
+            }
+            let fwd = self.referred_at(v, 1.0).abs();
+            let rev = self.referred_at(v, -1.0).abs();
+            (0.98 * fwd.min(rev)).min(1.0)
+        };
+        let (mut lo, mut hi) = (0.0, 1.0);
+        if g(hi) >= hi {
+            return 1.0;
+        }
+        for _ in 0..12 {
+            let mid = 0.5 * (lo + hi);
+            if g(mid) >= mid {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
+
     /// The command referred to the reference voltage that `u` (sent at the present voltage)
     /// amounts to: the inverse of [`Supply::to_present`] where the output did not saturate.
     pub fn referred(&self, u: f64) -> f64 {
-        let Some(v) = self.out_voltage() else {
-            return u;
-        };
+        match self.out_voltage() {
+            Some(v) => self.referred_at(v, u),
+            None => u,
+        }
+    }
+
+    /// The referred command that `u`, sent at voltage `v`, amounts to.
+    fn referred_at(&self, v: f64, u: f64) -> f64 {
         let thrust = self.table.thrust_at_command(v, u);
         if self.config.linearize {
             let full = if thrust >= 0.0 {
