@@ -247,9 +247,11 @@ fn degrade_the_refined_model_follows_a_weakening_thruster() {
 }
 
 /// The dive drains the battery over 30 vehicle minutes in both runs, and the daemon refers
-/// its commands to the reference voltage in one of them. The target (compensated
-/// last/first hold error <= 1.15) is not asserted: measured over seeds it scatters from 0.8 to
-/// 1.4 in both runs, and a battery that stays full gives 1.12-1.16 as well (docs/experiments.md).
+/// its commands to the reference voltage (and linearizes them) in one of them. The issue's
+/// target (compensated last/first hold error <= 1.15) is not asserted: measured over seeds it
+/// scatters from 0.76 to 1.64 in both runs, and a battery that stays full gives 1.12-1.16 as
+/// well (docs/experiments.md). The compensated run keeps the thrust the model asks for as the
+/// pack falls and ends it lower (measured 12.95-12.99 V under load, against 13.0-13.5 V).
 #[test]
 fn dive_drains_the_battery_from_full_to_nearly_empty_in_both_runs() {
     let v = experiment("dive");
@@ -258,7 +260,7 @@ fn dive_drains_the_battery_from_full_to_nearly_empty_in_both_runs() {
     assert!((16.3..16.8).contains(&start), "{h}");
     for run in ["compensated", "uncompensated"] {
         let end = f(h, &[run, "voltage_end_v"]);
-        assert!((13.2..14.2).contains(&end), "{run}: {h}");
+        assert!((12.7..14.2).contains(&end), "{run}: {h}");
         let d = &v["runs"][run]["dive"];
         assert!(f(d, &["hold_s"]) > 1700.0, "{run}: {d}");
         assert_eq!(

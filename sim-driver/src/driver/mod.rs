@@ -565,9 +565,12 @@ impl Driver {
 
     /// Holds `u` (already validated by the gate) until the next command.
     ///
-    /// Like a real driver (thruster-hw jumps the ESC's +-25 us), this one owns the actuator's
-    /// deadband: a command u != 0 goes to the thruster as sign(u) (db + (1 - db) |u|), so thrust
-    /// is proportional to what the daemon asked for.
+    /// Like a real driver (thruster-hw jumps the ESC's +-25 us), this one owns a power-law
+    /// actuator's deadband: a command u != 0 goes to the thruster as sign(u) (db + (1 - db)
+    /// |u|), so thrust is proportional to what the daemon asked for. A `t200` thruster's dead
+    /// zone is the measured table's: the command goes out as the PWM 1500 + 400 u us, as
+    /// ArduSub's or thruster-hw's with `deadband_us = 0` does (the daemon's `[supply]
+    /// linearize` steps over it; jumped here as well it would be jumped twice).
     fn hold(&mut self, u: &[f64]) -> Result<(), DriverError> {
         let mut out = [0.0; thruster_protocol::MAX_THRUSTERS];
         let n = u.len().min(out.len());
@@ -577,6 +580,7 @@ impl Driver {
                 .vehicle()
                 .thrusters
                 .get(i)
+                .filter(|t| t.model != crate::vehicle::ThrusterModel::T200)
                 .map(|t| t.deadband)
                 .unwrap_or(0.0);
             *o = if v == 0.0 {

@@ -24,6 +24,9 @@ const WINDOW_S: f64 = 300.0;
 pub(super) const CAPACITY_AH: f64 = 4.6;
 pub(super) const HOTEL_A: f64 = 8.0;
 
+/// The T200 ESC's dead zone as a share of full command: +-25 us of +-400 us around 1500 us.
+const T200_DEAD_ZONE: f64 = 25.0 / 400.0;
+
 pub(super) fn runs(base: RunSpec, vehicle: &'static str) -> Vec<RunSpec> {
     let plan = Plan {
         steps: steps(&[
@@ -44,16 +47,22 @@ pub(super) fn runs(base: RunSpec, vehicle: &'static str) -> Vec<RunSpec> {
         ..base
     };
     vec![
+        // Both runs step over the T200's dead zone (the simulator's driver sends the command
+        // as the PWM, as ArduSub does), so the two differ in the voltage only: the
+        // compensated one through the table (`linearize`, as a T200 vehicle's operator
+        // configures it), the uncompensated one by the machine's generic jump.
         RunSpec {
             label: "compensated",
-            title: "commands referred to 16 V through the T200 table",
+            title: "commands referred to 16 V and linearized through the T200 table",
             compensation: "t200",
+            linearize: true,
             ..run.clone()
         },
         RunSpec {
             label: "uncompensated",
-            title: "commands as computed, whatever the voltage",
+            title: "commands as computed, whatever the voltage (the dead zone jumped)",
             compensation: "none",
+            deadband: T200_DEAD_ZONE,
             ..run
         },
     ]

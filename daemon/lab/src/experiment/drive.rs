@@ -43,6 +43,8 @@ pub(super) struct RunOutput {
     pub(super) estimation: Option<(f64, u32)>,
     pub(super) model: ModelMsg,
     pub(super) truth: TruthMsg,
+    /// The truth the first model is scored against: at the voltage it describes.
+    pub(super) model_truth: TruthMsg,
     pub(super) hold_start: f64,
     pub(super) rows: Vec<Row>,
     pub(super) swaps: Vec<Swap>,
@@ -151,7 +153,8 @@ pub(super) fn run_one(bins: &Binaries, args: &ExperimentArgs, spec: &RunSpec) ->
     };
     let wall = Instant::now();
     let mut session = Session::start(bins, &session_spec)?;
-    let result = drive(&mut session, spec);
+    let supply = session_spec.daemon_config.supply()?;
+    let result = drive(&mut session, spec, &vehicle, &supply);
     let recorded = session.stop_recording();
     let pace = session.pace;
     let shutdown = session.finish();
@@ -200,8 +203,27 @@ pub(super) fn load_truth(session: &mut Session, truth: &TruthMsg) -> Result<()> 
     Ok(())
 }
 
-pub(super) fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> {
+pub(super) fn drive(
+    session: &mut Session,
+    spec: &RunSpec,
+    vehicle: &Path,
+    supply: &thrusterd_core::supply::SupplyConfig,
+) -> Result<RunOutput> {
     let (first, truth) = session.ready()?;
+    // The truth at the voltage a model describes (`model_truth`): the daemon's reference
+    // when a battery's reading is referred or the commands linearized. What the first model
+    // is scored against, and what an oracle start loads.
+    // The truth at ready serves as the published one (the inbox's later ones are the run's).
+    let compensation = if truth.battery == 1 && spec.compensation == "t200" {
+        thruster_protocol::SupplyCompensation::Active
+    } else {
+        thruster_protocol::SupplyCompensation::NoReading
+    };
+    let model_truth = crate::model_truth::truth_at(
+        vehicle,
+        &truth,
+        crate::model_truth::model_voltage_v(supply, compensation, truth.supply_voltage_v),
+    )?;
     let estimation = match spec.start {
         Start::Estimate => {
             let done = session.estimate(Duration::from_secs(180), &mut |_| {})?;
@@ -219,7 +241,7 @@ pub(super) fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> 
             None
         }
         Start::Oracle => {
-            load_truth(session, &truth)?;
+            load_truth(session, &model_truth)?;
             session.wait_status("the true model", Duration::from_secs(30), &mut |s| {
                 s.model_version >= 1
             })?;
@@ -437,6 +459,7 @@ pub(super) fn drive(session: &mut Session, spec: &RunSpec) -> Result<RunOutput> 
         estimation,
         model,
         truth,
+        model_truth,
         hold_start,
         rows,
         swaps,

@@ -133,7 +133,8 @@ pub struct ExperimentArgs {
     #[arg(long, default_value_t = dive::CAPACITY_AH)]
     pub capacity_ah: f64,
     /// Every run's daemon commands through the thruster's curve (`[supply] linearize`: thrust
-    /// linear in the command, the T200's dead zone stepped over).
+    /// linear in the command, the T200's dead zone stepped over; the dive's compensated run
+    /// always does).
     #[arg(long)]
     pub linearize: bool,
     /// Every run's simulated IMU position and water (the daemon is told neither).
@@ -157,7 +158,7 @@ pub fn run(args: ExperimentArgs) -> Result<()> {
         if let Some((_, hotel)) = s.battery {
             s.battery = Some((args.capacity_ah, hotel));
         }
-        s.linearize = args.linearize;
+        s.linearize |= args.linearize;
     }
     if let Some(noise) = &args.noise {
         let noise: &'static str = match noise.as_str() {

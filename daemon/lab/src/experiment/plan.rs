@@ -49,6 +49,8 @@ pub(super) struct RunSpec {
     pub(super) linearize: bool,
     /// The vehicle's `[battery]` capacity (Ah) and hotel load (A) replaced by these.
     pub(super) battery: Option<(f64, f64)>,
+    /// `[machine] deadband`: the dead zone the daemon steps over itself (0: none).
+    pub(super) deadband: f64,
 }
 
 pub(super) fn steps(list: &[(&'static str, [f64; 3], f64)]) -> Vec<Step> {
@@ -79,6 +81,7 @@ pub(super) fn runs(name: Name, t_change: f64, vehicle: &'static str) -> Vec<RunS
         compensation: "t200",
         linearize: false,
         battery: None,
+        deadband: 0.0,
     };
     match name {
         Name::ManualVsLearned => {
@@ -311,6 +314,9 @@ pub(super) fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> 
         "[supply]\ncompensation = \"{}\"\nlinearize = {}",
         spec.compensation, spec.linearize
     );
+    if spec.deadband > 0.0 {
+        let _ = writeln!(t, "[machine]\ndeadband = {}", spec.deadband);
+    }
     Ok(t)
 }
 
