@@ -243,6 +243,23 @@ impl DaemonConfig {
                 return Err(out_of_range(&format!("estimator.{key}"), range, &v));
             }
         }
+        if let Some(p) = self.supply.power_law_exponent {
+            if !SupplyConfig::EXPONENT_RANGE.contains(p) {
+                return Err(out_of_range(
+                    "supply.power_law_exponent",
+                    SupplyConfig::EXPONENT_RANGE,
+                    &p,
+                ));
+            }
+            if self.supply.compensation != crate::supply::CompensationModel::None {
+                return Err(LoadError::value(
+                    origin,
+                    text,
+                    "supply.power_law_exponent",
+                    "another make's curve has no voltage table: set supply.compensation = \"none\"",
+                ));
+            }
+        }
         self.estimator
             .check_dof_priority()
             .map_err(|e| LoadError::value(origin, text, "estimator.dof_priority", e.why))?;
@@ -532,6 +549,25 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "d.toml:2:23: supply.reference_voltage_v: must be in [10, 20], got 24"
+        );
+        let e = DaemonConfig::from_toml_str(
+            "[supply]\nlinearize = true\npower_law_exponent = 1.5\n",
+            "d.toml",
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "d.toml:3:22: supply.power_law_exponent: another make's curve has no voltage table: \
+             set supply.compensation = \"none\""
+        );
+        let e = DaemonConfig::from_toml_str(
+            "[supply]\ncompensation = \"none\"\npower_law_exponent = 4\n",
+            "d.toml",
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "d.toml:3:22: supply.power_law_exponent: must be in [0.5, 3], got 4"
         );
         let e = DaemonConfig::from_toml_str("[supply]\ncompensation = \"linear\"\n", "d.toml")
             .unwrap_err();

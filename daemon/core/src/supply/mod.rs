@@ -66,6 +66,12 @@ pub struct SupplyConfig {
     /// teach a weaker thruster. Once the readings spread over the pulses' current the fitted
     /// line (`sag`) replaces it.
     pub sag_prior_ohm: f64,
+    /// Thrusters of another make, from their data sheet: thrust ~ |u|^exponent beyond a dead
+    /// band their driver steps over (thruster-sim's power-law thrusters), exponent in
+    /// [0.5, 3]. With `linearize` a command c then goes out as sign(c) |c|^(1/exponent), so
+    /// thrust is linear in it. No voltage table exists for such a curve: it needs
+    /// `compensation = "none"`. Default unset: the T200's table.
+    pub power_law_exponent: Option<f64>,
 }
 
 impl Default for SupplyConfig {
@@ -75,11 +81,20 @@ impl Default for SupplyConfig {
             reference_voltage_v: 16.0,
             linearize: false,
             sag_prior_ohm: 0.05,
+            power_law_exponent: None,
         }
     }
 }
 
 impl SupplyConfig {
+    /// The range of `power_law_exponent`: thrust from linear to cubic in the command.
+    pub const EXPONENT_RANGE: Range = Range {
+        lo: 0.5,
+        hi: 3.0,
+        lo_open: false,
+        hi_open: false,
+    };
+
     /// The range of `sag_prior_ohm`: the slopes the fitted line believes.
     pub const SAG_PRIOR_RANGE: Range = Range {
         lo: 0.0,
@@ -134,9 +149,20 @@ impl Supply {
         }
     }
 
+    /// The exponent commands are linearized through, for another make's power-law curve.
+    fn power_law(&self) -> Option<f64> {
+        self.config
+            .power_law_exponent
+            .filter(|p| self.config.linearize && p.is_finite() && *p > 0.0)
+    }
+
     /// The voltage commands go out at: the reading when compensating, the reference when
-    /// only linearizing; None: commands pass unchanged.
+    /// only linearizing; None: commands pass unchanged (or through a power law, which has no
+    /// voltage).
     fn out_voltage(&self) -> Option<f64> {
+        if self.power_law().is_some() {
+            return None;
+        }
         match (self.config.compensation, self.voltage_v) {
             (CompensationModel::T200, Some(v)) => Some(v),
             (CompensationModel::T200, None) if self.config.linearize => {
@@ -211,6 +237,12 @@ impl Supply {
             } else {
                 0.0
             };
+        }
+        if let Some(p) = self.power_law() {
+            for u in commands.iter_mut() {
+                *u = (u.signum() * u.abs().powf(1.0 / p)).clamp(-1.0, 1.0);
+            }
+            return;
         }
         let Some(read) = self.out_voltage() else {
             return;
@@ -322,6 +354,9 @@ impl Supply {
     /// The command referred to the reference voltage that `u` (sent at the present voltage)
     /// amounts to: the inverse of [`Supply::to_present`] where the output did not saturate.
     pub fn referred(&self, u: f64) -> f64 {
+        if let Some(p) = self.power_law() {
+            return u.signum() * u.abs().powf(p);
+        }
         match self.out_voltage() {
             Some(v) => self.referred_at(v, u),
             None => u,
@@ -416,6 +451,40 @@ mod tests {
             (u[0] - 0.5).abs() < 1e-9 && (u[1] + 0.3).abs() < 1e-9,
             "{u:?}"
         );
+    }
+
+    /// Another make's curve: thrust ~ |u|^1.5 is linear in the referred command, with or
+    /// without a reading (no voltage table), and the inverse holds.
+    #[test]
+    fn a_power_law_curve_is_linearized_through_its_exponent() {
+        let mut s = Supply::new(SupplyConfig {
+            compensation: CompensationModel::None,
+            linearize: true,
+            power_law_exponent: Some(1.5),
+            ..SupplyConfig::default()
+        });
+        for reading in [None, Some(13.0)] {
+            s.on_voltage(reading);
+            let asked = [0.02, 0.3, 0.8, 1.0, -0.02, -0.5, 0.0, f64::NAN, 3.0];
+            let mut u = asked;
+            s.to_present(&mut u);
+            for (c, out) in asked.iter().zip(u) {
+                let c = if c.is_finite() {
+                    c.clamp(-1.0, 1.0)
+                } else {
+                    0.0
+                };
+                assert!(out.is_finite() && out.abs() <= 1.0);
+                // thrust / full = |out|^1.5 = |c|
+                assert!(
+                    (out.signum() * out.abs().powf(1.5) - c).abs() < 1e-12,
+                    "{c}: {out}"
+                );
+                assert!((s.referred(out) - c).abs() < 1e-12);
+            }
+            assert_eq!(s.attainable(), 1.0);
+            assert_eq!(s.model_voltage_v(), None);
+        }
     }
 
     fn linearized() -> Supply {
