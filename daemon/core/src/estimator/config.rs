@@ -183,6 +183,13 @@ pub struct EstimatorConfig {
     /// position is used, the estimate says so, and the bound counts the tolerance;
     /// otherwise the configured one is used and the bound counts the gap.
     pub learn_imu_position: bool,
+    /// Dynamic method, open loop: fit each thruster's forward and reverse gain apart (2N
+    /// thrust columns, as the closed-loop identification does) instead of one gain and a
+    /// shared mean-|command| term; the model's B is their mean. Default false. Measured
+    /// (docs/study.md, "T200 thrusters on a sagging pack", the split columns): thrusters weak
+    /// in reverse and curved ones come inside 0.02 noise-free where one column is 0.03; what
+    /// it costs at the paper's noise is in the same section.
+    pub split_thrust: bool,
     /// Dynamic method: how far, m, the centre of mass may sit from the point
     /// `imu_position_m` is measured from (default 0.03): a gap within it is the drawings'
     /// origin, not a wrong position.
@@ -231,6 +238,7 @@ impl Default for EstimatorConfig {
             term_prior_sd: 0.0,
             imu_position_m: [0.0; 3],
             learn_imu_position: true,
+            split_thrust: false,
             imu_position_tolerance_m: 0.03,
         }
     }

@@ -360,8 +360,10 @@ impl Estimator {
     }
 
     /// A dynamic fit whose navigation starts from the rest measured before the run (level and
-    /// still without one); `split` fits forward and reverse thrust apart.
-    fn dynamic_run(&self, split: bool) -> DynamicRun {
+    /// still without one); `split` fits forward and reverse thrust apart; `open_loop`: the
+    /// pulsed estimation's own run (one command per pulse: a log for the lag search, and a
+    /// split bound that keeps its model-error floor), not the identification under control.
+    fn dynamic_run(&self, split: bool, open_loop: bool) -> DynamicRun {
         let rest = self
             .rest_force
             .unwrap_or(Vector3::new(0.0, 0.0, -super::response::GRAVITY));
@@ -372,14 +374,19 @@ impl Estimator {
             self.navigation_aid(),
         );
         let mut run = if split {
-            DynamicRun::split(n, lag, segment, &rest, aid)
+            let run = DynamicRun::split(n, lag, segment, &rest, aid);
+            if open_loop {
+                run.keep_floor()
+            } else {
+                run
+            }
         } else {
             DynamicRun::new(n, lag, segment, &rest, aid)
         };
-        // Open loop only: the log keeps one command per pulse, and under control (split) the
-        // command changes every sample; there the lag is the model's (`EstimatorConfig::
-        // spin_up_s` set from it by the caller).
-        if !split && (self.learns_lag() || self.cfg.learn_imu_position) {
+        // The open-loop estimation only: the log keeps one command per pulse, split or not
+        // (under control the command changes every sample; there the lag is the model's,
+        // `EstimatorConfig::spin_up_s` set from it by the caller).
+        if open_loop && (self.learns_lag() || self.cfg.learn_imu_position) {
             run = run.with_log(self.cfg.max_pulses + 1);
         }
         if self.lag_inherited {
@@ -552,7 +559,7 @@ impl Estimator {
             })
             .collect();
         if self.cfg.method == Method::Dynamic && self.dynamic.is_none() {
-            self.dynamic = Some(self.dynamic_run(false));
+            self.dynamic = Some(self.dynamic_run(self.cfg.split_thrust, true));
         }
         let split = split_regressor(&u);
         for (m, v) in self.max_command.iter_mut().zip(&u) {

@@ -107,6 +107,11 @@ pub struct DynamicRun {
     split: bool,
     /// Thrust columns: n, or 2n when split.
     cols: usize,
+    /// Split, whether B's bound keeps `model_error_floor` (the open-loop estimation's split,
+    /// `EstimatorConfig::split_thrust`: its residue is not only the asymmetry); the
+    /// closed-loop identification's split drops it.
+    #[serde(default)]
+    floor_when_split: bool,
     /// Each thruster's spin-up time constant, s (the split columns i and n + i share one).
     lags: Vec<f64>,
     /// Whether `lags` were learned ([`lag_search`]) rather than configured.
@@ -174,6 +179,7 @@ impl DynamicRun {
             n,
             split,
             cols,
+            floor_when_split: false,
             lags: vec![lag_s.max(0.0); n],
             lags_learned: false,
             segment_s: segment_s.max(1e-3),
@@ -193,6 +199,12 @@ impl DynamicRun {
             log: None,
             last_command: u32::MAX,
         }
+    }
+
+    /// Split, B's bound keeps the model-error floor (see `floor_when_split`).
+    pub fn keep_floor(mut self) -> Self {
+        self.floor_when_split = true;
+        self
     }
 
     /// Keep every navigated sample (room for `max_commands` distinct commands, one per
@@ -258,6 +270,7 @@ impl DynamicRun {
                 .collect(),
             lags_learned: learned,
             log: None,
+            floor_when_split: self.floor_when_split,
             ..Self::with_columns(
                 self.n,
                 self.split,
@@ -533,7 +546,11 @@ impl DynamicRun {
             // block's entries, so the block's bound gains model_error_floor in quadrature. It is
             // the thrusters' asymmetry landing in one symmetric column; split, forward and
             // reverse are fitted apart and there is no such bias.
-            let floor = if self.split { 0.0 } else { model_error_floor };
+            let floor = if self.split && !self.floor_when_split {
+                0.0
+            } else {
+                model_error_floor
+            };
             let floor2 = floor.powi(2) * norm2 / (3 * n).max(1) as f64;
             for row in 3 * g..3 * g + 3 {
                 for i in 0..n {

@@ -18,7 +18,7 @@ impl Estimator {
             return false;
         }
         self.pulse = None;
-        self.dynamic = Some(self.dynamic_run(true));
+        self.dynamic = Some(self.dynamic_run(true, false));
         true
     }
 
