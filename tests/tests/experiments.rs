@@ -250,8 +250,8 @@ fn degrade_the_refined_model_follows_a_weakening_thruster() {
 /// its commands to the reference voltage (and linearizes them) in one of them. The issue's
 /// target (compensated last/first hold error <= 1.15) is not asserted: measured over seeds it
 /// scatters from 0.76 to 1.64 in both runs, and a battery that stays full gives 1.12-1.16 as
-/// well (docs/experiments.md). The compensated run keeps the thrust the model asks for as the
-/// pack falls and ends it lower (measured 12.95-12.99 V under load, against 13.0-13.5 V).
+/// well (docs/experiments.md). The compensated run ends the dive lower (measured 12.95-12.99 V
+/// under load, against 13.0-13.5 V; why is not decided, docs/experiments.md).
 #[test]
 fn dive_drains_the_battery_from_full_to_nearly_empty_in_both_runs() {
     let v = experiment("dive");
