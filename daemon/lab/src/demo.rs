@@ -13,7 +13,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Quaternion, UnitQuaternion};
 use thruster_protocol::{DynamicsMsg, ModelMsg, TruthMsg};
 
-use crate::model_truth::{model_voltage_v, truth_at};
+use crate::model_truth::truth_for_model;
 use crate::session::{config_file, latest, Binaries, DaemonConfig, Session, SessionSpec};
 
 const DOFS: [&str; 6] = ["roll", "pitch", "yaw", "surge", "sway", "heave"];
@@ -257,13 +257,8 @@ fn drive(
     let published = latest(session.truth_inbox())?.unwrap_or(truth);
     // Scored at the voltage the model describes: the daemon's reference when it referred or
     // linearized its commands (`model_truth`).
-    let truth_voltage_v = model_voltage_v(
-        supply,
-        done.supply_compensation()
-            .unwrap_or(thruster_protocol::SupplyCompensation::NoReading),
-        published.supply_voltage_v,
-    );
-    let truth = truth_at(vehicle, &published, truth_voltage_v)?;
+    let truth = truth_for_model(vehicle, supply, &published)?;
+    let truth_voltage_v = truth.supply_voltage_v;
     let err_rot = truth.relative_error(&model, 0);
     let err_acc = truth.relative_error(&model, 3);
     let actuated: Vec<&'static str> = (0..6)

@@ -15,22 +15,28 @@ use std::path::Path;
 
 use anyhow::{bail, Result};
 use nalgebra::DMatrix;
-use thruster_protocol::{SupplyCompensation, TruthMsg, DOF_COUNT};
+use thruster_protocol::{TruthMsg, DOF_COUNT};
 use thruster_sim::{SensorConfig, Simulator};
 use thrusterd_core::supply::{Supply, SupplyConfig};
 
-/// The voltage whose truth a model learned under `supply` describes: the daemon's reference
-/// when it referred or linearized its commands, else the thrusters' present one.
-pub fn model_voltage_v(
+/// The truth a model learned under `supply` is scored against: `published` carried to the
+/// voltage the model describes ([`model_voltage_v`]).
+pub fn truth_for_model(
+    vehicle_file: &Path,
     supply: &SupplyConfig,
-    compensation: SupplyCompensation,
-    published_v: f64,
-) -> f64 {
+    published: &TruthMsg,
+) -> Result<TruthMsg> {
+    truth_at(vehicle_file, published, model_voltage_v(supply, published))
+}
+
+/// The voltage whose truth a model learned under `supply` describes: the daemon's reference
+/// when it referred or linearized its commands, else the thrusters' present one. The
+/// simulator's driver reports the voltage exactly when it models a battery (`battery`), and
+/// the daemon's own `Supply` decides what it does with the reading.
+pub fn model_voltage_v(supply: &SupplyConfig, published: &TruthMsg) -> f64 {
     let mut s = Supply::new(supply.clone());
-    if compensation == SupplyCompensation::Active {
-        s.on_voltage(Some(published_v));
-    }
-    s.model_voltage_v().unwrap_or(published_v)
+    s.on_voltage((published.battery == 1).then_some(published.supply_voltage_v));
+    s.model_voltage_v().unwrap_or(published.supply_voltage_v)
 }
 
 /// `published` carried to `voltage_v` for the vehicle in `vehicle_file`; the published message
@@ -117,25 +123,28 @@ mod tests {
 
     #[test]
     fn the_model_voltage_is_the_reference_only_when_commands_are_referred_or_linearized() {
+        let battery = TruthMsg {
+            supply_voltage_v: 15.2,
+            battery: 1,
+            ..TruthMsg::default()
+        };
+        let fixed = TruthMsg {
+            battery: 0,
+            ..battery
+        };
         let on = SupplyConfig::default();
-        assert_eq!(model_voltage_v(&on, SupplyCompensation::Active, 15.2), 16.0);
-        assert_eq!(
-            model_voltage_v(&on, SupplyCompensation::NoReading, 15.2),
-            15.2
-        );
+        assert_eq!(model_voltage_v(&on, &battery), 16.0);
+        assert_eq!(model_voltage_v(&on, &fixed), 15.2);
         let linear = SupplyConfig {
             linearize: true,
             ..SupplyConfig::default()
         };
-        assert_eq!(
-            model_voltage_v(&linear, SupplyCompensation::NoReading, 15.2),
-            16.0
-        );
+        assert_eq!(model_voltage_v(&linear, &fixed), 16.0);
         let off = SupplyConfig {
             compensation: CompensationModel::None,
             ..SupplyConfig::default()
         };
-        assert_eq!(model_voltage_v(&off, SupplyCompensation::Off, 15.2), 15.2);
+        assert_eq!(model_voltage_v(&off, &battery), 15.2);
     }
 
     #[test]

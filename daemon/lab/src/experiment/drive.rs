@@ -213,18 +213,9 @@ pub(super) fn drive(
     let (first, truth) = session.ready()?;
     // The truth at the voltage a model describes (`model_truth`): the daemon's reference
     // when a battery's reading is referred or the commands linearized. What the first model
-    // is scored against, and what an oracle start loads.
-    // The truth at ready serves as the published one (the inbox's later ones are the run's).
-    let compensation = if truth.battery == 1 && spec.compensation == "t200" {
-        thruster_protocol::SupplyCompensation::Active
-    } else {
-        thruster_protocol::SupplyCompensation::NoReading
-    };
-    let model_truth = crate::model_truth::truth_at(
-        vehicle,
-        &truth,
-        crate::model_truth::model_voltage_v(supply, compensation, truth.supply_voltage_v),
-    )?;
+    // is scored against, and what an oracle start loads. The truth at ready serves as the
+    // published one (the inbox's later ones are the run's).
+    let model_truth = crate::model_truth::truth_for_model(vehicle, supply, &truth)?;
     let estimation = match spec.start {
         Start::Estimate => {
             let done = session.estimate(Duration::from_secs(180), &mut |_| {})?;
