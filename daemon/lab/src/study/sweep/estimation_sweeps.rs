@@ -224,7 +224,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// vehicle, true lag and seed. Knobs: LAG_NOISE (none|realistic|paper), LAG_VEHICLES,
 /// LAG_TAUS, LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
-/// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_PULSES, LAG_DVL
+/// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_PULSES, LAG_PULSE_S (machine.pulse_s), LAG_DVL
 /// (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
@@ -295,6 +295,9 @@ pub(super) fn lag_sweep() {
                     true_velocity: std::env::var("LAG_DVL").is_ok(),
                     symmetric_thrusters: std::env::var("LAG_SYM").is_ok(),
                     noise_s: std::env::var("LAG_NOISE_S")
+                        .ok()
+                        .map(|v| v.parse().unwrap()),
+                    pulse_s: std::env::var("LAG_PULSE_S")
                         .ok()
                         .map(|v| v.parse().unwrap()),
                     ..Ideal::default()
