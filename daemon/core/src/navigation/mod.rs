@@ -214,14 +214,23 @@ impl Navigator {
             // Body-frame strapdown (the NED form is the same equation, but its discretisation
             // moved the noise-free pitch restoring coefficient from 8.5 % to 12 % off).
             let g_body = self.down() * self.gravity;
-            let accel = f + g_body - rate.cross(&self.velocity);
-            let mean_accel = if first {
-                accel
+            let drive = f + g_body;
+            // Implicit trapezoid: the transport term -omega x v at the step's end uses the
+            // step's end velocity, (I + dt/2 [omega]x) v_k = v_(k-1) + dt/2 (a_(k-1) +
+            // drive_k). The explicit form took omega_k x v_(k-1), an error of dt^2/2 omega x a
+            // per step that does not cancel: ~1 cm/s over a 4 s excitation at 200 Hz, which
+            // moved the noise-free pitch damping by ~10 % (docs/study.md).
+            let prev = if first {
+                drive - rate.cross(&self.velocity)
             } else {
-                0.5 * (accel + self.last_accel)
+                self.last_accel
             };
-            self.velocity += mean_accel * dt;
-            self.last_accel = accel;
+            let rhs = self.velocity + 0.5 * dt * (prev + drive);
+            let m = nalgebra::Matrix3::identity() + rate.cross_matrix() * (0.5 * dt);
+            if let Some(v) = m.lu().solve(&rhs) {
+                self.velocity = v;
+            }
+            self.last_accel = drive - rate.cross(&self.velocity);
             if self.aid.kalman {
                 let c = self.attitude.to_rotation_matrix().into_inner();
                 self.filter.predict(dt, &c, &f);
