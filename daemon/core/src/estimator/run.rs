@@ -759,14 +759,14 @@ impl Estimator {
     /// Go on pulsing, or stop (and why).
     pub fn stop_decision(&self) -> StopDecision {
         self.stop_gate()
-            .unwrap_or_else(|| self.bound_decision(&self.estimate()))
+            .unwrap_or_else(|| self.bound_decision(&self.estimate(), true))
     }
 
     /// The same with the estimate of this moment already made (the machine makes one after
     /// every pulse): the solve is not done twice.
     pub fn stop_decision_with(&self, estimate: &Estimate) -> StopDecision {
         self.stop_gate()
-            .unwrap_or_else(|| self.bound_decision(estimate))
+            .unwrap_or_else(|| self.bound_decision(estimate, true))
     }
 
     /// The decision when it does not depend on the estimate; None when the bound decides.

@@ -51,8 +51,12 @@ pub struct RefinementConfig {
     /// are followed through `inflate_above`; 0.01 made the model follow every window.
     pub drift_per_sqrt_s: f64,
     /// A window's standard errors are multiplied by this before it is weighed against the
-    /// model (default 2: the window fits' own errors understate their real error, the same
-    /// reason the change test needs two windows).
+    /// model, in the fusion and in the judgement of a change (default 2: the window fits' own
+    /// errors understate their real error, the same reason the change test needs two windows).
+    /// In the judgement since 2026-11-29: four_up's model, learned tighter once the stop waits
+    /// for a bound within reach, met a window that "moved" thruster 4 by 185 % with chi2 306
+    /// over the window's unscaled errors, and a single window above `chi2_single_window` was
+    /// reported at once (realistic IMU, seed 4, 46 s of pitch steps; docs/study.md).
     pub window_se_scale: f64,
     /// ... and only a window whose rotation bound is at most this updates it (default 0.1:
     /// with a realistic IMU windows end at 0.01-0.06, at the paper's noise at 0.15).

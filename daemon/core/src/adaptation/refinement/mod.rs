@@ -532,14 +532,15 @@ fn judge(
             let d = e.effectiveness[(j, i)] - b[(j, i)];
             // The difference of two estimates: the window's error and the model's own. With
             // the window's alone, a model learned at the paper's noise (its columns 5-15 %
-            // off) was "changed" about once a minute on an unchanged vehicle.
+            // off) was "changed" about once a minute on an unchanged vehicle. The window's
+            // scaled as in the fusion (`window_se_scale`): its own understate it.
             let model_se = model.std_err[(j, i)];
             let model_var = if model_se.is_finite() {
                 model_se * model_se
             } else {
                 0.0
             };
-            let var = e.std_err[(j, i)].powi(2) + model_var;
+            let var = (cfg.window_se_scale * e.std_err[(j, i)]).powi(2) + model_var;
             d2 += d * d;
             if var.is_finite() && var > 0.0 {
                 chi2 += d * d / var;

@@ -69,6 +69,6 @@ impl Estimator {
         if elapsed_s < min_s {
             return StopDecision::Continue;
         }
-        self.bound_decision(estimate)
+        self.bound_decision(estimate, false)
     }
 }

@@ -224,7 +224,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// vehicle, true lag and seed. Knobs: LAG_NOISE (none|realistic|paper), LAG_VEHICLES,
 /// LAG_TAUS, LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
-/// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_PULSES, LAG_PULSE_S (machine.pulse_s), LAG_DVL
+/// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (machine.pulse_s), LAG_DVL
 /// (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
@@ -281,6 +281,9 @@ pub(super) fn lag_sweep() {
                 }
                 if let Ok(t) = std::env::var("LAG_TARGET") {
                     cfg.target_rel_err = t.parse().unwrap();
+                }
+                if let Ok(r) = std::env::var("LAG_REACH") {
+                    cfg.reach_rel_err = r.parse().unwrap();
                 }
                 if let Ok(p) = std::env::var("LAG_PULSES") {
                     cfg.max_pulses = p.parse().unwrap();
@@ -354,7 +357,7 @@ pub(super) fn lag_sweep() {
 /// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s), LA_IDLE_S (idle before
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
-/// `--tether`).
+/// `--tether`), LA_REACH (`reach_rel_err`).
 pub(super) fn imu_and_water_sweep() {
     let noise = match std::env::var("LA_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -412,6 +415,9 @@ pub(super) fn imu_and_water_sweep() {
             }
             if let Ok(v) = std::env::var("LA_TOL") {
                 cfg.imu_position_tolerance_m = v.parse().unwrap();
+            }
+            if let Ok(r) = std::env::var("LA_REACH") {
+                cfg.reach_rel_err = r.parse().unwrap();
             }
             if std::env::var("LA_TOLD").is_ok() {
                 cfg.imu_position_m = [arm[0], arm[1], arm[2]];
