@@ -220,12 +220,8 @@ impl Navigator {
             // drive_k). The explicit form took omega_k x v_(k-1), an error of dt^2/2 omega x a
             // per step that does not cancel: ~1 cm/s over a 4 s excitation at 200 Hz, which
             // moved the noise-free pitch damping by ~10 % (docs/study.md).
-            let prev = if first {
-                drive - rate.cross(&self.velocity)
-            } else {
-                self.last_accel
-            };
-            let rhs = self.velocity + 0.5 * dt * (prev + drive);
+            // (The first sample has dt = 0: the velocity stays, and a_(k-1) starts there.)
+            let rhs = self.velocity + 0.5 * dt * (self.last_accel + drive);
             let m = nalgebra::Matrix3::identity() + rate.cross_matrix() * (0.5 * dt);
             if let Some(v) = m.lu().solve(&rhs) {
                 self.velocity = v;
