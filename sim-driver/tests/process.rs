@@ -556,7 +556,8 @@ fn lockstep_waits_for_a_subscriber_then_survives_a_silent_daemon() {
         )
         .unwrap();
         let mut sim = Proc::run(&ns, "amour5", &["--config", cfg.to_str().unwrap()]);
-        // Nobody subscribes for a while, then the subscriber takes longer than the timeout
+        // Nobody is there for a while (the simulator waits for a thrust publisher and sends
+        // nothing), then the peer takes longer than the timeout
         // to answer the first sample: no vehicle time may pass meanwhile.
         std::thread::sleep(Duration::from_millis(400));
         let mut peer = Peer::new(&ns);
@@ -613,7 +614,10 @@ fn lockstep_waits_for_a_subscriber_then_survives_a_silent_daemon() {
         );
         sim.terminate();
         assert!(sim.summary_value("timeouts") >= 11);
-        assert!(sim.log().contains("waiting for a subscriber"));
+        // Nothing was sent before the peer (its thrust publisher) was there.
+        assert!(sim
+            .log()
+            .contains("waiting for a publisher of thrust commands"));
         assert!(sim
             .log()
             .contains("waiting for the answer to the first sample"));

@@ -10,6 +10,7 @@ use iceoryx2::prelude::{
 };
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+use iceoryx2::service::port_factory::PortFactory as _;
 
 use super::error::{ice, IpcError};
 use super::retry::retry_creation;
@@ -239,6 +240,11 @@ impl<T: TopicMessage> Inbox<T> {
         &self.reader.service
     }
 
+    /// How many publishers the topic has now (see [`Reader::publishers`]).
+    pub fn publishers(&self) -> usize {
+        self.reader.publishers()
+    }
+
     /// The listener to attach to a wait set.
     pub fn listener(&self) -> &Listener<Ipc> {
         &self.listener
@@ -260,6 +266,8 @@ impl<T: TopicMessage> Inbox<T> {
 pub struct Reader<T: TopicMessage> {
     subscriber: Subscriber<Ipc, T, ()>,
     service: String,
+    /// The service's port factory: who else is connected (`publishers`).
+    factory: PubSubFactory<Ipc, T, ()>,
 }
 
 impl<T: TopicMessage> Reader<T> {
@@ -282,7 +290,13 @@ impl<T: TopicMessage> Reader<T> {
         Ok(Self {
             subscriber,
             service,
+            factory,
         })
+    }
+
+    /// How many publishers the topic has now (any process, this one included).
+    pub fn publishers(&self) -> usize {
+        self.factory.dynamic_config().number_of_publishers()
     }
 
     /// The next buffered message (oldest first), copied out; `None` when the buffer is empty.

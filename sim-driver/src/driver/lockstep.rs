@@ -14,7 +14,12 @@
 //! With `--stepped`, before step 4 the simulator may take the next sample only when its
 //! controller allows it (`stepping.rs`).
 //!
-//! Start: sample 1 is re-sent every 20 ms until a subscriber receives it, and its answer is
+//! Start: nothing is sent until the thrust topic has a publisher (the daemon, which subscribes
+//! to every input before it creates that publisher): the driver's first report, the vehicle
+//! state and a DVL measurement go out with sample 1, and a daemon that started after the
+//! simulator would miss them, so what it learns would depend on which process the machine
+//! started first (a lost first supply reading moved eight_vectored_t200's model by 1e-6).
+//! Then sample 1 is re-sent every 20 ms until a subscriber receives it, and its answer is
 //! awaited without a time limit, so the simulator waits for the daemon without consuming
 //! vehicle time.
 
@@ -166,10 +171,15 @@ impl Driver {
         &mut self,
         first: &thruster_protocol::ImuSample,
     ) -> Result<bool, DriverError> {
+        if !self.wait_for_answerer()? {
+            return Ok(false);
+        }
         let mut logged = false;
         loop {
-            // A daemon that subscribes to the truth before the IMU finds it there.
+            // A daemon that subscribes to the truth (or the reports) before the IMU finds
+            // them there.
             self.ports.truth.update_connections()?;
+            self.ports.driver_status.update_connections()?;
             if self.send_sample(first)? > 0 {
                 if logged {
                     info!("subscriber found: lockstep starts");
@@ -190,6 +200,26 @@ impl Driver {
             }
             std::thread::sleep(SUBSCRIBER_POLL);
         }
+    }
+
+    /// Waits until the thrust topic has a publisher, the process that will answer; false on
+    /// shutdown.
+    fn wait_for_answerer(&mut self) -> Result<bool, DriverError> {
+        let mut logged = false;
+        while self.ports.thrust.publishers() == 0 {
+            if !logged {
+                info!(
+                    service = self.ports.thrust.service_name(),
+                    "waiting for a publisher of thrust commands (the daemon) before the first sample"
+                );
+                logged = true;
+            }
+            if self.stop.requested() {
+                return Ok(false);
+            }
+            std::thread::sleep(SUBSCRIBER_POLL);
+        }
+        Ok(true)
     }
 
     /// Waits until `deadline` for the command answering sample `k`.

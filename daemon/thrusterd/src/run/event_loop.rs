@@ -121,7 +121,10 @@ impl Daemon {
         let control = ControlServer::create(node, &self.ipc)
             .context("another thrusterd already serves this namespace")?;
         self.open_resume_marker();
-        let imu_in = Inbox::<ImuSample>::create(node, &self.ipc)?;
+        // Every input before the IMU, and the thrust publisher after them all: a simulator in
+        // lockstep starts (sends the driver's first report and the first sample) once the
+        // thrust topic has a publisher, so whatever it sends with the first sample finds this
+        // daemon subscribed, whichever process started first (one seed, one result).
         let side = SideInputs::new(
             Inbox::<ReconfigEvent>::create(node, &self.ipc)?,
             Inbox::<Setpoint>::create(node, &self.ipc)?,
@@ -129,6 +132,7 @@ impl Daemon {
             // Optional: only a vehicle with a DVL publishes here.
             Inbox::<DvlSample>::create(node, &self.ipc)?,
         );
+        let imu_in = Inbox::<ImuSample>::create(node, &self.ipc)?;
         let thrust = Port::<ThrustCommand>::create(node, &self.ipc)?;
         // Off (every_n = 0): no service at all, so nothing in the loop pays for it.
         let telemetry = match self.cfg.telemetry.every_n {
