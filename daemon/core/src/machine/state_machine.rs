@@ -161,6 +161,12 @@ impl Machine {
         self.refiner.last()
     }
 
+    /// The change test's largest statistic at the last control tick (passed or not), for
+    /// tracing a detection or a false alarm.
+    pub fn change_stat(&self) -> Option<crate::adaptation::refinement::change_test::ChangeStat> {
+        self.refiner.change_stat()
+    }
+
     /// The desired motion (DOF order) of the last control tick.
     pub fn last_desired(&self) -> [f64; 6] {
         self.last_desired

@@ -182,7 +182,8 @@ pub(super) fn change_test_soak() {
 /// The change test (`with_change_test`) on every vehicle file: `CT_MINUTES` (default 5) of pitch
 /// steps (+-20 deg every 4 s) then as long holding level, unchanged, at each noise of
 /// `CT_NOISES` (default none,realistic,paper), seeds `CT_SEEDS` (default 1; CT_VEHICLES a
-/// subset, CT_CHANGE_TEST=0 the windows alone); prints every
+/// subset, CT_CHANGE_TEST=0 the windows alone, CT_TRACE=1 how much of the flight the test
+/// judged and the seconds before an alarm); prints every
 /// mismatch reported (a false alarm) and fails on any. A measuring tool: `cargo run --release -p thrusterctl -- study sweep change_test_on_every_vehicle`.
 pub(super) fn change_test_on_every_vehicle() {
     let minutes: f64 = std::env::var("CT_MINUTES").map_or(5.0, |v| v.parse().unwrap());
@@ -209,7 +210,11 @@ pub(super) fn change_test_on_every_vehicle() {
                     ..with_change_test()
                 };
                 let mut run = holding_on(&vehicle, preset, seed, cfg);
-                let (pitch, level) = quiet_flight(&mut run, minutes * 60.0);
+                let (pitch, level) = if std::env::var("CT_TRACE").is_ok_and(|v| v == "1") {
+                    traced_flight(&mut run, minutes * 60.0)
+                } else {
+                    quiet_flight(&mut run, minutes * 60.0)
+                };
                 println!("{vehicle} {noise} seed {seed}: pitch steps {pitch:?}, level {level:?}");
                 if pitch.is_some() || level.is_some() {
                     alarms.push((vehicle.clone(), noise.clone(), seed, pitch, level));
@@ -218,4 +223,82 @@ pub(super) fn change_test_on_every_vehicle() {
         }
     }
     assert!(alarms.is_empty(), "false alarms: {alarms:#?}");
+}
+
+/// [`quiet_flight`] that prints, on a mismatch, the last 8 s before it every 0.1 s: the
+/// change test's largest statistic, the true attitude against the setpoint, the commands
+/// (CT_TRACE=1; what decides whether an alarm is the test's or the vehicle's).
+fn traced_flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
+    use std::collections::VecDeque;
+    let mut trace: VecDeque<String> = VecDeque::new();
+    let mut k = 0u64;
+    // Per minute: the largest chi-square, and the largest share among statistics over the
+    // threshold (how close the test runs to an alarm).
+    let (mut minute, mut max_chi2, mut max_share) = (0u64, 0.0f64, 0.0f64);
+    // Samples, and samples at which the test judged a candidate (it has a statistic).
+    let (mut samples, mut judged) = (0u64, 0u64);
+    let mut each = |sp: Option<&nalgebra::UnitQuaternion<f64>>, run: &Run| {
+        k += 1;
+        samples += 1;
+        judged += u64::from(run.machine.change_stat().is_some());
+        if let Some(s) = run.machine.change_stat() {
+            max_chi2 = max_chi2.max(s.chi2);
+            if s.chi2 > 60.0 {
+                max_share = max_share.max(s.share);
+            }
+        }
+        let m = (run.sim.time_s() / 60.0) as u64;
+        if m != minute {
+            println!(
+                "  minute {minute}: max chi2 {max_chi2:.0}, max share over chi2 60 {max_share:.2}, model version {:?}, tilt {:.1} deg",
+                run.machine.model().map(|m| m.version),
+                run.sim.roll_pitch_yaw()[0].hypot(run.sim.roll_pitch_yaw()[1]).to_degrees()
+            );
+            (minute, max_chi2, max_share) = (m, 0.0, 0.0);
+        }
+        if k % 20 != 0 {
+            return;
+        }
+        let rpy = run.sim.roll_pitch_yaw();
+        let sp = sp.map_or([f64::NAN; 3], |q| {
+            let (r, p, y) = q.euler_angles();
+            [r, p, y]
+        });
+        let stat = run.machine.change_stat();
+        let cmd = run.sim.commands();
+        trace.push_back(format!(
+            "t {:8.2} rpy {:6.1} {:6.1} {:7.1} sp_p {:6.1} stat {} cmd {:?}",
+            run.sim.time_s(),
+            rpy[0].to_degrees(),
+            rpy[1].to_degrees(),
+            rpy[2].to_degrees(),
+            sp[1].to_degrees(),
+            stat.map_or("-".into(), |s| format!(
+                "th{} chi2 {:7.1} share {:5.2} since {:4.1}",
+                s.thruster, s.chi2, s.share, s.since_s
+            )),
+            cmd.iter()
+                .map(|v| (v * 100.0).round() / 100.0)
+                .collect::<Vec<_>>()
+        ));
+        if trace.len() > 80 {
+            trace.pop_front();
+        }
+    };
+    let pitch = pitch_with(run, seconds, |sp, run| each(Some(sp), run));
+    let level = if pitch.is_none() {
+        level_with(run, seconds, |run| each(None, run))
+    } else {
+        None
+    };
+    println!(
+        "  judged at {judged} of {samples} samples ({:.1} %)",
+        100.0 * judged as f64 / samples.max(1) as f64
+    );
+    if pitch.is_some() || level.is_some() {
+        for line in &trace {
+            println!("  {line}");
+        }
+    }
+    (pitch, level)
 }
