@@ -256,7 +256,7 @@ fn traced_flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
             );
             (minute, max_chi2, max_share) = (m, 0.0, 0.0);
         }
-        if k % 20 != 0 {
+        if !k.is_multiple_of(20) {
             return;
         }
         let rpy = run.sim.roll_pitch_yaw();
