@@ -152,7 +152,11 @@ pub(super) fn change_test_soak() {
         if let Some(w) = water {
             run.sim.set_disturbance(w.disturbance()).unwrap();
         }
-        let (pitch, level) = quiet_flight(&mut run, minutes * 60.0);
+        let (pitch, level) = if std::env::var("CT_TRACE").is_ok_and(|v| v == "1") {
+            traced_flight(&mut run, minutes * 60.0)
+        } else {
+            quiet_flight(&mut run, minutes * 60.0)
+        };
         println!("seed {seed}: pitch steps {pitch:?}, level {level:?}");
         if level.is_some() || pitch.is_some() {
             alarms.push((seed, level, pitch));
