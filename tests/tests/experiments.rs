@@ -248,10 +248,14 @@ fn degrade_the_refined_model_follows_a_weakening_thruster() {
 
 /// The dive drains the battery over 30 vehicle minutes in both runs, and the daemon refers
 /// its commands to the reference voltage (and linearizes them) in one of them. The issue's
-/// target (compensated last/first hold error <= 1.15) is not asserted: measured over seeds it
-/// scatters from 0.76 to 1.64 in both runs, and a battery that stays full gives 1.12-1.16 as
-/// well (docs/experiments.md). The compensated run ends the dive lower (measured 12.95-12.99 V
-/// under load, against 13.0-13.5 V; why is not decided, docs/experiments.md).
+/// ratio on the whole hold error (compensated last/first <= 1.15) is not asserted: over seeds
+/// it scatters from 0.75 to 1.64 in both runs alike, because the heading follows the
+/// magnetometer's bias as it wanders. On the tilt alone (roll and pitch, what the thrusters'
+/// strength moves) the compensated ratio is 1.03-1.10 and the uncompensated one 1.29-1.33
+/// on AMOUR-5, seeds 1-5 (docs/experiments.md); seed 1: 1.09 and 1.32. So the tilt's
+/// ratio is asserted: at most 1.15 compensated, at least 1.2 uncompensated. The compensated
+/// run ends the dive lower (measured 12.95-12.99 V under load, against 13.0-13.5 V; why is not
+/// decided, docs/experiments.md).
 #[test]
 fn dive_drains_the_battery_from_full_to_nearly_empty_in_both_runs() {
     let v = experiment("dive");
@@ -272,4 +276,8 @@ fn dive_drains_the_battery_from_full_to_nearly_empty_in_both_runs() {
             assert!(e > 0.0 && e < 15.0, "{run} {k}: {d}");
         }
     }
+    let tilt = |run: &str| f(h, &[run, "tilt_last_over_first"]);
+    assert!(tilt("compensated") <= 1.15, "{h}");
+    assert!(tilt("uncompensated") >= 1.2, "{h}");
+    assert_eq!(h["holds_on_tilt"], true, "{h}");
 }

@@ -312,8 +312,7 @@ fn drive(
                     let q = quat(v.attitude);
                     sum += q.angle_to(&target).to_degrees();
                     // Tilt: angle between the body z axes; heading: yaw difference.
-                    let z = nalgebra::Vector3::z();
-                    tilt_sum += (q * z).angle(&(target * z)).to_degrees();
+                    tilt_sum += crate::scoring::tilt_error_deg(&q, &target);
                     let dyaw = q.euler_angles().2 - target.euler_angles().2;
                     yaw_sum += dyaw.sin().atan2(dyaw.cos()).abs().to_degrees();
                     count += 1;

@@ -121,6 +121,14 @@ pub fn angle_error_deg(truth: &UnitQuaternion<f64>, setpoint: &UnitQuaternion<f6
     truth.angle_to(setpoint).to_degrees()
 }
 
+/// Tilt error: the angle between the true body z axis and the setpoint's, degrees (the
+/// roll and pitch part of the error, whatever the heading; a magnetometer's bias moves the
+/// heading the controller holds, not this).
+pub fn tilt_error_deg(truth: &UnitQuaternion<f64>, setpoint: &UnitQuaternion<f64>) -> f64 {
+    let z = nalgebra::Vector3::z();
+    (truth * z).angle(&(setpoint * z)).to_degrees()
+}
+
 /// Heading error (true minus setpoint), wrapped, degrees.
 pub fn yaw_error_deg(truth: &UnitQuaternion<f64>, setpoint: &UnitQuaternion<f64>) -> f64 {
     wrap_deg(euler_deg(truth)[2] - euler_deg(setpoint)[2])

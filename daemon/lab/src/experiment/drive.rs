@@ -16,6 +16,8 @@ pub(super) struct Row {
     pub(super) err: f64,
     /// Heading error, degrees (signed).
     pub(super) yaw_err: f64,
+    /// Tilt error (the body z axes' angle), degrees.
+    pub(super) tilt_err: f64,
     /// Seconds since the current step began.
     pub(super) since_step: f64,
     pub(super) step: usize,
@@ -374,6 +376,7 @@ pub(super) fn drive(
                 tru,
                 err: angle_error_deg(&q, &target),
                 yaw_err: yaw_error_deg(&q, &target),
+                tilt_err: tilt_error_deg(&q, &target),
                 since_step: t - step_t,
                 step: step.unwrap_or(0),
                 state,

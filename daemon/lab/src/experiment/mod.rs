@@ -29,8 +29,8 @@ use thruster_protocol::{
 use crate::plot::{nice_range, render, Grid, Panel, Series};
 use crate::recording::{run_path, RECORD_PACE};
 use crate::scoring::{
-    angle_error_deg, euler_deg, high_pass_rms, recovered_at, window_means, wrap_deg, yaw_error_deg,
-    Plan, Stats, Step,
+    angle_error_deg, euler_deg, high_pass_rms, recovered_at, tilt_error_deg, window_means,
+    wrap_deg, yaw_error_deg, Plan, Stats, Step,
 };
 use crate::session::{config_file, Binaries, DaemonConfig, Session, SessionSpec, Shutdown};
 
@@ -269,6 +269,7 @@ mod tests {
             tru: [0.0; 3],
             err: 0.0,
             yaw_err: 0.0,
+            tilt_err: 0.0,
             since_step: 0.0,
             step: 0,
             state,
