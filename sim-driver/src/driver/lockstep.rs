@@ -18,7 +18,7 @@
 //! to every input before it creates that publisher): the driver's first report, the vehicle
 //! state and a DVL measurement go out with sample 1, and a daemon that started after the
 //! simulator would miss them, so what it learns would depend on which process the machine
-//! started first (a lost first supply reading moved eight_vectored_t200's model by 1e-6).
+//! started first (a lost first supply reading moved eight_vectored_t200's err_rot by 2e-8).
 //! Then sample 1 is re-sent every 20 ms until a subscriber receives it, and its answer is
 //! awaited without a time limit, so the simulator waits for the daemon without consuming
 //! vehicle time.

@@ -152,11 +152,7 @@ pub(super) fn change_test_soak() {
         if let Some(w) = water {
             run.sim.set_disturbance(w.disturbance()).unwrap();
         }
-        let (pitch, level) = if std::env::var("CT_TRACE").is_ok_and(|v| v == "1") {
-            traced_flight(&mut run, minutes * 60.0)
-        } else {
-            quiet_flight(&mut run, minutes * 60.0)
-        };
+        let (pitch, level) = flight(&mut run, minutes * 60.0);
         println!("seed {seed}: pitch steps {pitch:?}, level {level:?}");
         if level.is_some() || pitch.is_some() {
             alarms.push((seed, level, pitch));
@@ -214,11 +210,7 @@ pub(super) fn change_test_on_every_vehicle() {
                     ..with_change_test()
                 };
                 let mut run = holding_on(&vehicle, preset, seed, cfg);
-                let (pitch, level) = if std::env::var("CT_TRACE").is_ok_and(|v| v == "1") {
-                    traced_flight(&mut run, minutes * 60.0)
-                } else {
-                    quiet_flight(&mut run, minutes * 60.0)
-                };
+                let (pitch, level) = flight(&mut run, minutes * 60.0);
                 println!("{vehicle} {noise} seed {seed}: pitch steps {pitch:?}, level {level:?}");
                 if pitch.is_some() || level.is_some() {
                     alarms.push((vehicle.clone(), noise.clone(), seed, pitch, level));
@@ -229,38 +221,47 @@ pub(super) fn change_test_on_every_vehicle() {
     assert!(alarms.is_empty(), "false alarms: {alarms:#?}");
 }
 
+/// [`quiet_flight`], traced with CT_TRACE=1 ([`traced_flight`]).
+fn flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
+    if std::env::var("CT_TRACE").is_ok_and(|v| v == "1") {
+        traced_flight(run, seconds)
+    } else {
+        quiet_flight(run, seconds)
+    }
+}
+
 /// [`quiet_flight`] that prints, on a mismatch, the last 8 s before it every 0.1 s: the
 /// change test's largest statistic, the true attitude against the setpoint, the commands
 /// (CT_TRACE=1; what decides whether an alarm is the test's or the vehicle's).
 fn traced_flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
     use std::collections::VecDeque;
     let mut trace: VecDeque<String> = VecDeque::new();
-    let mut k = 0u64;
+    let threshold = with_change_test().change_chi2;
     // Per minute: the largest chi-square, and the largest share among statistics over the
     // threshold (how close the test runs to an alarm).
     let (mut minute, mut max_chi2, mut max_share) = (0u64, 0.0f64, 0.0f64);
     // Samples, and samples at which the test judged a candidate (it has a statistic).
     let (mut samples, mut judged) = (0u64, 0u64);
     let mut each = |sp: Option<&nalgebra::UnitQuaternion<f64>>, run: &Run| {
-        k += 1;
         samples += 1;
-        judged += u64::from(run.machine.change_stat().is_some());
-        if let Some(s) = run.machine.change_stat() {
+        let stat = run.machine.change_stat();
+        if let Some(s) = stat {
+            judged += 1;
             max_chi2 = max_chi2.max(s.chi2);
-            if s.chi2 > 60.0 {
+            if s.chi2 > threshold {
                 max_share = max_share.max(s.share);
             }
         }
         let m = (run.sim.time_s() / 60.0) as u64;
         if m != minute {
             println!(
-                "  minute {minute}: max chi2 {max_chi2:.0}, max share over chi2 60 {max_share:.2}, model version {:?}, tilt {:.1} deg",
+                "  minute {minute}: max chi2 {max_chi2:.0}, max share over chi2 {threshold} {max_share:.2}, model version {:?}, tilt {:.1} deg",
                 run.machine.model().map(|m| m.version),
                 run.sim.roll_pitch_yaw()[0].hypot(run.sim.roll_pitch_yaw()[1]).to_degrees()
             );
             (minute, max_chi2, max_share) = (m, 0.0, 0.0);
         }
-        if !k.is_multiple_of(20) {
+        if !samples.is_multiple_of(20) {
             return;
         }
         let rpy = run.sim.roll_pitch_yaw();
@@ -268,7 +269,6 @@ fn traced_flight(run: &mut Run, seconds: f64) -> (Mismatch, Mismatch) {
             let (r, p, y) = q.euler_angles();
             [r, p, y]
         });
-        let stat = run.machine.change_stat();
         let cmd = run.sim.commands();
         trace.push_back(format!(
             "t {:8.2} rpy {:6.1} {:6.1} {:7.1} sp_p {:6.1} stat {} cmd {:?}",
