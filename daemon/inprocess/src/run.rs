@@ -336,6 +336,18 @@ pub fn rotate_while_holding_with(
     identification: Option<thrusterd_core::adaptation::identification::IdentificationConfig>,
     observe: impl FnMut(&Machine, f64),
 ) -> (Run, Reestimation) {
+    rotate_while_holding_in(noise, seed, identification, None, observe)
+}
+
+/// The same in moving water: the first model is learned in still water, then `water` comes
+/// up (None: still water throughout) and the vehicle holds in it 20 s before the announcement.
+pub fn rotate_while_holding_in(
+    noise: NoisePreset,
+    seed: u64,
+    identification: Option<thrusterd_core::adaptation::identification::IdentificationConfig>,
+    water: Option<thruster_sim::DisturbanceConfig>,
+    observe: impl FnMut(&Machine, f64),
+) -> (Run, Reestimation) {
     let v = vehicle("amour5");
     let mut run = Run::new("amour5", noise, seed);
     if let Some(identification) = identification {
@@ -344,6 +356,10 @@ pub fn rotate_while_holding_with(
     run.run_for(1.0);
     run.estimate();
     run.run_for(3.0);
+    if let Some(water) = water {
+        run.sim.set_disturbance(water).unwrap();
+        run.run_for(20.0);
+    }
     assert_eq!(run.machine.state(), State::Active);
     let r = run.announced_rotation_observed(&v, observe);
     (run, r)

@@ -352,7 +352,7 @@ pub(super) fn lag_sweep() {
 
 /// The IMU off the centre and the water, over seeds (docs/study.md, "The IMU off the centre"):
 /// LA_VEHICLES, LA_SEEDS, LA_NOISE (none|realistic|paper), LA_ARM (x,y,z m), LA_TOLD (the
-/// daemon is told LA_ARM), LA_TOL (tolerance, m), LA_WATER (current|moderate|rough),
+/// daemon is told LA_ARM), LA_TOLD_AT (x,y,z m: the daemon is told this position instead), LA_TOL (tolerance, m), LA_WATER (current|moderate|rough),
 /// LA_NO_CURRENT (the preset's waves alone), LA_WAVE_PART (force|torque|heave|surge: that
 /// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s), LA_IDLE_S (idle before
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
@@ -421,6 +421,10 @@ pub(super) fn imu_and_water_sweep() {
             }
             if std::env::var("LA_TOLD").is_ok() {
                 cfg.imu_position_m = [arm[0], arm[1], arm[2]];
+            }
+            if let Ok(at) = std::env::var("LA_TOLD_AT") {
+                let at: Vec<f64> = at.split(',').map(|s| s.parse().unwrap()).collect();
+                cfg.imu_position_m = [at[0], at[1], at[2]];
             }
             let water = match std::env::var("LA_WATER").as_deref() {
                 Ok("current") => WaterPreset::Current,

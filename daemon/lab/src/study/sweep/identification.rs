@@ -6,7 +6,8 @@ use thrusterd_core::adaptation::identification::IdentificationConfig;
 use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::Machine;
 
-use thruster_inprocess::{env_list, rotate_while_holding_with, vehicle, Run, VEHICLES};
+use thruster_inprocess::{env_list, rotate_while_holding_in, vehicle, Run, VEHICLES};
+use thruster_sim::disturbance::WaterPreset;
 
 /// The bounds of the estimates made during one re-estimation (every `estimator.segment_s`).
 #[derive(Debug, Default)]
@@ -20,6 +21,8 @@ struct Bounds {
     /// Seconds after the announcement when each bound first reached the stop target.
     t_rot: Option<f64>,
     t_acc: Option<f64>,
+    /// The last estimate's rotation neither thrust nor the dynamics explain, rad/s.
+    unexplained: f64,
 }
 
 impl Bounds {
@@ -37,6 +40,10 @@ impl Bounds {
         }
         self.fresh = true;
         self.last = (r, a);
+        self.unexplained = m
+            .last_estimate()
+            .and_then(|e| e.dynamics.as_ref())
+            .map_or(0.0, |d| d.unexplained_rate_radps);
         if r <= target && self.t_rot.is_none() {
             self.t_rot = Some(t);
         }
@@ -126,7 +133,11 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// overridden from the environment, every combination of the lists given, one row per seed and
 /// the mean. Knobs (comma lists; unset: the default): ID_NOISE (none|realistic|paper, default
 /// paper), ID_SEEDS (default 1-5), ID_HOLD_S, ID_DITHER, ID_DITHER_MAX, ID_BUDGET, ID_MIN_S,
-/// ID_MAX_S, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
+/// ID_MAX_S, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1), ID_WATER (still|current|moderate|rough: the
+/// water comes up after the first model, 20 s before the announcement), ID_WAVE_PART
+/// (force|torque: that part of the swell alone). The last column is the final estimate's
+/// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
+/// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
 /// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
 /// `-` never; the mean row's over the seeds that did, counted after it): which rows hold the
 /// stop back.
@@ -169,6 +180,24 @@ pub(super) fn sweep_identification() {
     vary("ID_CARRY", if d.carry_over { 1.0 } else { 0.0 }, |c, v| {
         c.carry_over = v > 0.0
     });
+    let water = match std::env::var("ID_WATER").as_deref() {
+        Ok("current") => Some(WaterPreset::Current),
+        Ok("moderate") => Some(WaterPreset::Moderate),
+        Ok("rough") => Some(WaterPreset::Rough),
+        Ok("still") | Err(_) => None,
+        Ok(other) => panic!("ID_WATER: {other} is not still, current, moderate or rough"),
+    };
+    let water = water.map(|w| {
+        let mut d = w.disturbance();
+        // One part of the swell alone (the current stays): which of the two breaks the fit.
+        match std::env::var("ID_WAVE_PART").as_deref() {
+            Ok("force") => d.waves.iter_mut().for_each(|w| w.torque_body_nm = [0.0; 3]),
+            Ok("torque") => d.waves.iter_mut().for_each(|w| w.force_ned_n = [0.0; 3]),
+            Ok(other) => panic!("ID_WAVE_PART: {other} is not force or torque"),
+            Err(_) => {}
+        }
+        d
+    });
     for name in &noises {
         let noise = match name.as_str() {
             "none" => NoisePreset::None,
@@ -210,8 +239,9 @@ pub(super) fn sweep_identification() {
                 let mut b = Bounds::default();
                 // The defaults: the machine exactly as Run builds it.
                 let ident = (*cfg != d).then(|| cfg.clone());
-                let (_, r) =
-                    rotate_while_holding_with(noise, seed, ident, |m, s| b.observe(m, s, target));
+                let (_, r) = rotate_while_holding_in(noise, seed, ident, water.clone(), |m, s| {
+                    b.observe(m, s, target)
+                });
                 let row = [
                     r.took_s,
                     r.err_rot,
@@ -222,9 +252,10 @@ pub(super) fn sweep_identification() {
                     b.last.1,
                 ];
                 println!(
-                    "{}{:?}",
+                    "{}{:?} unexplained {:.4} rad/s",
                     line(&seed.to_string(), &row, b.t_rot, b.t_acc),
-                    r.source
+                    r.source,
+                    b.unexplained
                 );
                 for (s, v) in sum.iter_mut().zip(row) {
                     *s += v;
