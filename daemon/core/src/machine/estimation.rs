@@ -19,6 +19,7 @@ use crate::navigation::rest_rotation::RestRotation;
 
 mod closed_loop;
 mod idle_rest;
+pub use closed_loop::Excitation;
 pub(super) use closed_loop::{ClosedLoop, ClosedStep};
 pub(super) use idle_rest::{IdleRest, TakenRest};
 

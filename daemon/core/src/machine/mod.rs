@@ -26,6 +26,7 @@ mod types;
 pub use crate::solve::{SolveJob, SolveResult, SolverMode, MAX_OUTSTANDING};
 pub use checkpoint::{CheckpointError, FORMAT as CHECKPOINT_FORMAT};
 pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
+pub use estimation::Excitation;
 pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};
 pub use types::{

@@ -167,6 +167,12 @@ impl Machine {
         self.refiner.change_stat()
     }
 
+    /// The identification under control's dither against the controller's command so far
+    /// (None outside one).
+    pub fn identification_excitation(&self) -> Option<crate::machine::Excitation> {
+        self.run.excitation()
+    }
+
     /// The desired motion (DOF order) of the last control tick.
     pub fn last_desired(&self) -> [f64; 6] {
         self.last_desired

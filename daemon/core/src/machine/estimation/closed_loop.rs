@@ -29,6 +29,63 @@ pub(in crate::machine) struct ClosedLoop {
     gyro_bias: Vector3<f64>,
     /// Dither amplitude, sized to the noise when the dither starts.
     amplitude: f64,
+    /// How the dither compared with the controller's own command since it started.
+    #[serde(default)]
+    excitation: Excitation,
+}
+
+/// The dither against the controller's own command over an identification: what share of the
+/// run was excited, and how much of the commands' variation was the dither's.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+pub struct Excitation {
+    samples: u64,
+    fade_sum: f64,
+    dither_sq: f64,
+    #[serde(with = "crate::serde_arrays::array")]
+    control_sum: [f64; MAX_THRUSTERS],
+    #[serde(with = "crate::serde_arrays::array")]
+    control_sq: [f64; MAX_THRUSTERS],
+}
+
+impl Excitation {
+    fn push(&mut self, fade: f64, control: &[f64], sent: &[f64]) {
+        self.samples += 1;
+        self.fade_sum += fade;
+        for (i, (c, s)) in control.iter().zip(sent).enumerate() {
+            self.dither_sq += (s - c) * (s - c);
+            self.control_sum[i] += c;
+            self.control_sq[i] += c * c;
+        }
+    }
+
+    /// The mean share of the dither applied (1: never faded by the attitude error).
+    pub fn mean_fade(&self) -> f64 {
+        if self.samples == 0 {
+            return 0.0;
+        }
+        self.fade_sum / self.samples as f64
+    }
+
+    /// The dither's share of the commands' variance: its power over its own and the
+    /// controller's variation about its mean, summed over the thrusters.
+    pub fn dither_share(&self) -> f64 {
+        if self.samples == 0 {
+            return 0.0;
+        }
+        let n = self.samples as f64;
+        let control: f64 = self
+            .control_sum
+            .iter()
+            .zip(&self.control_sq)
+            .map(|(s, q)| (q - s * s / n).max(0.0))
+            .sum();
+        let total = self.dither_sq + control;
+        if total > 0.0 {
+            self.dither_sq / total
+        } else {
+            0.0
+        }
+    }
 }
 
 /// What one sample under control led to.
@@ -65,7 +122,13 @@ impl EstimationRun {
             sent: [0.0; MAX_THRUSTERS],
             gyro_bias: Vector3::zeros(),
             amplitude: cfg.dither,
+            excitation: Excitation::default(),
         });
+    }
+
+    /// The dither against the controller's command so far (None open loop).
+    pub(in crate::machine) fn excitation(&self) -> Option<Excitation> {
+        self.closed.as_ref().map(|c| c.excitation)
     }
 
     /// Seconds of dither so far (0 while holding or open loop).
@@ -136,9 +199,16 @@ impl EstimationRun {
             m.depth,
             &c.sent[..k],
         );
-        let amplitude = c.amplitude * cfg.fade(err_deg);
-        c.dither
-            .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
+        let fade = cfg.fade(err_deg);
+        let mut control = [0.0; MAX_THRUSTERS];
+        control[..k].copy_from_slice(command);
+        c.dither.add_to(
+            t_s,
+            c.amplitude * fade,
+            setup.estimator.reverse_ratio,
+            command,
+        );
+        c.excitation.push(fade, &control[..k], command);
         c.sent[..k].copy_from_slice(command);
         if t_ns < c.next_decision_ns || self.solver.waiting_for(Purpose::Interval) {
             return ClosedStep::Exciting;

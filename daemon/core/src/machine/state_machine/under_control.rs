@@ -78,6 +78,7 @@ impl Machine {
         let key = self.geometry_key();
         let t_ns = self.last_t_ns.unwrap_or(0);
         let seconds = self.run.excited_s(t_ns);
+        let share = self.run.excitation().map(|x| x.dither_share());
         let Some((candidate, _)) = self.run.conclude(result) else {
             return;
         };
@@ -87,6 +88,19 @@ impl Machine {
             ),
             _ => format!("identification limit reached after {seconds:.1} s"),
         };
+        // The controller's answer to the water was most of what the thrusters did: the fit
+        // takes it for thrust (issue 32: rough water, 57 % off under a 14 % bound).
+        let limit = self.setup.identification.min_dither_share;
+        if let Some(share) = share.filter(|s| *s < limit) {
+            let text = format!(
+                "{why}: the dither was {:.0} % of the commands' variation (limit {:.0} %; the controller answering the water?): model rejected; old model kept",
+                100.0 * share,
+                100.0 * limit
+            );
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(State::Active, &text);
+            return;
+        }
         match self.try_swap(candidate, ModelSource::Estimated) {
             Ok(()) => {
                 if let Some(k) = key {

@@ -23,10 +23,15 @@ struct Bounds {
     t_acc: Option<f64>,
     /// The last estimate's rotation neither thrust nor the dynamics explain, rad/s.
     unexplained: f64,
+    /// The identification's mean dither fade and the dither's share of the commands' variance.
+    excitation: (f64, f64),
 }
 
 impl Bounds {
     fn observe(&mut self, m: &Machine, t: f64, target: f64) {
+        if let Some(x) = m.identification_excitation() {
+            self.excitation = (x.mean_fade(), x.dither_share());
+        }
         let now = m.last_estimate().map(|e| (e.rel_err_rot, e.rel_err_acc));
         if !self.started {
             self.started = true;
@@ -252,10 +257,12 @@ pub(super) fn sweep_identification() {
                     b.last.1,
                 ];
                 println!(
-                    "{}{:?} unexplained {:.4} rad/s",
+                    "{}{:?} unexplained {:.4} rad/s fade {:.2} dither share {:.2}",
                     line(&seed.to_string(), &row, b.t_rot, b.t_acc),
                     r.source,
-                    b.unexplained
+                    b.unexplained,
+                    b.excitation.0,
+                    b.excitation.1
                 );
                 for (s, v) in sum.iter_mut().zip(row) {
                     *s += v;
