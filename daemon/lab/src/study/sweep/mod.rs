@@ -126,6 +126,12 @@ pub const SWEEPS: &[Sweep] = &[
         run: refinement::change_test_soak,
     },
     Sweep {
+        name: "refinement_in_water",
+        knobs: "RW_*",
+        about: "the model in force's error while the refinement updates it in moving water",
+        run: refinement::refinement_in_water,
+    },
+    Sweep {
         name: "change_test_on_every_vehicle",
         knobs: "CT_*",
         about: "the change test on every vehicle and noise, unchanged: no alarm allowed",

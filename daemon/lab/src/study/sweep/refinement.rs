@@ -179,6 +179,66 @@ pub(super) fn change_test_soak() {
     assert!(alarms.is_empty(), "false alarms: {alarms:?}");
 }
 
+/// Does the refinement's update carry a swell into the model? AMOUR-5 learns in still water,
+/// then the water `RW_WATER` (current|moderate|rough, default moderate) comes up and it holds
+/// level `RW_MINUTES` (default 10) with the refinement updating and the change test off
+/// (`RW_CHANGE_TEST=1`: on), at `RW_NOISE` (none|realistic|paper, default realistic), seeds
+/// `RW_SEEDS` (default 1,2,3). Prints, every minute, the model in force's error against the
+/// truth, its own bound and its refinement count, and any mismatch (the run stops there).
+/// A measuring tool: `cargo run --release -p thrusterctl -- study sweep refinement_in_water`.
+pub(super) fn refinement_in_water() {
+    let minutes: f64 = std::env::var("RW_MINUTES").map_or(10.0, |v| v.parse().unwrap());
+    let seeds: Vec<u64> = std::env::var("RW_SEEDS")
+        .unwrap_or_else(|_| "1,2,3".into())
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    let noise = match std::env::var("RW_NOISE").as_deref() {
+        Ok("none") => NoisePreset::None,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::Realistic,
+    };
+    let water = match std::env::var("RW_WATER").as_deref() {
+        Ok("current") => WaterPreset::Current,
+        Ok("rough") => WaterPreset::Rough,
+        Ok("still") => WaterPreset::Still,
+        _ => WaterPreset::Moderate,
+    };
+    let cfg = RefinementConfig {
+        change_test: std::env::var("RW_CHANGE_TEST").is_ok_and(|v| v == "1"),
+        ..shipped_change_test()
+    };
+    for seed in seeds {
+        let mut run = holding_with(noise, seed, cfg.clone());
+        run.sim.set_disturbance(water.disturbance()).unwrap();
+        let show = |run: &Run, t: f64| {
+            let m = run.machine.model().expect("holding with a model");
+            let truth = run.truth();
+            println!(
+                "seed {seed} {:>5.0} s: err {:.3} / {:.3}, bound {:.3} / {:.3}, version {} refinements {}",
+                t,
+                thruster_inprocess::rel_err(&m.effectiveness, &truth, 0),
+                thruster_inprocess::rel_err(&m.effectiveness, &truth, 3),
+                m.rel_err_rot,
+                m.rel_err_acc,
+                m.version,
+                m.refinements
+            );
+        };
+        show(&run, 0.0);
+        for minute in 1..=minutes.ceil() as u64 {
+            if let Some((t, why)) = level_with(&mut run, 60.0, |_| {}) {
+                println!(
+                    "seed {seed}: mismatch after {:.1} s: {why}",
+                    (minute - 1) as f64 * 60.0 + t
+                );
+                break;
+            }
+            show(&run, minute as f64 * 60.0);
+        }
+    }
+}
+
 /// The change test (`with_change_test`) on every vehicle file: `CT_MINUTES` (default 5) of pitch
 /// steps (+-20 deg every 4 s) then as long holding level, unchanged, at each noise of
 /// `CT_NOISES` (default none,realistic,paper), seeds `CT_SEEDS` (default 1; CT_VEHICLES a
