@@ -26,6 +26,7 @@ fn with_change_test() -> RefinementConfig {
         ("CT_TERM_Z", &mut c.change_term_z),
         ("CT_WARMUP", &mut c.change_warmup_s),
         ("CT_MAX_ERROR", &mut c.change_max_error_deg),
+        ("CT_MIN_AGE", &mut c.change_min_age_s),
     ] {
         if let Ok(v) = std::env::var(key) {
             *field = v.parse().unwrap_or_else(|_| panic!("{key}: {v}"));
