@@ -66,6 +66,9 @@ pub struct Machine {
     models: ModelSlot,
     geometry: Option<Geometry>,
     run: EstimationRun,
+    /// How far the water moved the vehicle while held (`identification::sea_state`).
+    #[serde(default)]
+    sea_state: crate::adaptation::identification::sea_state::SeaState,
     /// The rest the vehicle takes while idle, for an estimation asked for from idle
     /// (`machine.rest_from_idle`).
     idle_rest: IdleRest,
@@ -113,6 +116,7 @@ impl Machine {
             models: ModelSlot::default(),
             geometry: None,
             run: EstimationRun::new(setup.machine.solve_budget_s),
+            sea_state: Default::default(),
             idle_rest: IdleRest::default(),
             levelling: None,
             resume: Resume::Idle,
@@ -165,6 +169,12 @@ impl Machine {
     /// tracing a detection or a false alarm.
     pub fn change_stat(&self) -> Option<crate::adaptation::refinement::change_test::ChangeStat> {
         self.refiner.change_stat()
+    }
+
+    /// The RMS attitude error while held, deg, over the last ~10 s of settled control (None
+    /// until known; `identification::sea_state`).
+    pub fn sea_state_deg(&self) -> Option<f64> {
+        self.sea_state.rms_deg()
     }
 
     /// The identification under control's dither against the controller's command so far

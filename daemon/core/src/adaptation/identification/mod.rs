@@ -16,6 +16,7 @@
 //! machine calls it with the vehicle time.
 
 pub mod carry_over;
+pub mod sea_state;
 
 use serde::{Deserialize, Serialize};
 use thruster_driver_kit::Range;
@@ -87,6 +88,14 @@ pub struct IdentificationConfig {
     /// 0.92, moderate water 0.84-0.89 (2x outside its bound, not caught: the steps' share is
     /// too close). docs/study.md, "Under control in moving water".
     pub min_dither_share: f64,
+    /// ... and only when the water had moved the vehicle: its RMS attitude error while held
+    /// before the identification (`sea_state`) above this, deg (default 3; unknown, as right
+    /// after an estimation: no refusal). Why both: on `aligned` in still water a vehicle
+    /// tumbling on its nominal model after a change leaves no room for dither either (share
+    /// 0.003), but its fit is the model it needs (7.6 % off, noise-free); rough water read
+    /// 15-17 deg, moderate 6.3-6.6, still water held 20 s 0.72. docs/study.md, "Under control
+    /// in moving water".
+    pub min_sea_state_deg: f64,
 }
 
 impl Default for IdentificationConfig {
@@ -106,14 +115,20 @@ impl Default for IdentificationConfig {
             focus_gain: 1.7,
             focus_others: 0.1,
             min_dither_share: 0.5,
+            min_sea_state_deg: 3.0,
         }
     }
 }
 
 impl IdentificationConfig {
     /// (key, value, allowed range) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 12] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 13] {
         [
+            (
+                "identification.min_sea_state_deg",
+                self.min_sea_state_deg,
+                Range::closed(0.0, 180.0),
+            ),
             (
                 "identification.min_dither_share",
                 self.min_dither_share,

@@ -89,11 +89,16 @@ impl Machine {
             _ => format!("identification limit reached after {seconds:.1} s"),
         };
         // The controller's answer to the water was most of what the thrusters did: the fit
-        // takes it for thrust (issue 32: rough water, 57 % off under a 14 % bound).
-        let limit = self.setup.identification.min_dither_share;
-        if let Some(share) = share.filter(|s| *s < limit) {
+        // takes it for thrust (issue 32: rough water, 57 % off under a 14 % bound). Only when
+        // the water had moved the held vehicle (`sea_state`): a vehicle tumbling in still
+        // water on a bad model leaves no room for dither either, and its fit is the model it
+        // needs.
+        let cfg = &self.setup.identification;
+        let (limit, sea_deg) = (cfg.min_dither_share, self.sea_state.rms_deg());
+        let sea_deg = sea_deg.filter(|d| *d > cfg.min_sea_state_deg);
+        if let (Some(share), Some(sea_deg)) = (share.filter(|s| *s < limit), sea_deg) {
             let text = format!(
-                "{why}: the dither was {:.0} % of the commands' variation (limit {:.0} %; the controller answering the water?): model rejected; old model kept",
+                "{why}: the dither was {:.0} % of the commands' variation (limit {:.0} %) with the water moving the held vehicle by {sea_deg:.1} deg RMS: the fit takes the controller's answer for thrust: model rejected; old model kept",
                 100.0 * share,
                 100.0 * limit
             );
@@ -169,6 +174,8 @@ impl Machine {
         };
         let n = self.n.min(model.thrusters());
         let err_rad = attitude.angle_to(&target.attitude);
+        self.sea_state
+            .push(s.t_ns, self.phase_start_ns, dt, err_rad.to_degrees());
         let verdict = self.refiner.observe(
             &Tick {
                 t_ns: s.t_ns,

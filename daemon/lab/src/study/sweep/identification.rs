@@ -25,12 +25,18 @@ struct Bounds {
     unexplained: f64,
     /// The identification's mean dither fade and the dither's share of the commands' variance.
     excitation: (f64, f64),
+    /// The RMS attitude error while held before it (`Machine::sea_state_deg`), deg.
+    sea_deg: f64,
 }
 
 impl Bounds {
     fn observe(&mut self, m: &Machine, t: f64, target: f64) {
         if let Some(x) = m.identification_excitation() {
             self.excitation = (x.mean_fade(), x.dither_share());
+        }
+        // While identifying: what the guard reads (the control ticks before it).
+        if m.state() == thrusterd_core::machine::State::Identify {
+            self.sea_deg = m.sea_state_deg().unwrap_or(f64::NAN);
         }
         let now = m.last_estimate().map(|e| (e.rel_err_rot, e.rel_err_acc));
         if !self.started {
@@ -257,12 +263,13 @@ pub(super) fn sweep_identification() {
                     b.last.1,
                 ];
                 println!(
-                    "{}{:?} unexplained {:.4} rad/s fade {:.2} dither share {:.2}",
+                    "{}{:?} unexplained {:.4} rad/s fade {:.2} dither share {:.2} sea {:.1} deg",
                     line(&seed.to_string(), &row, b.t_rot, b.t_acc),
                     r.source,
                     b.unexplained,
                     b.excitation.0,
-                    b.excitation.1
+                    b.excitation.1,
+                    b.sea_deg
                 );
                 for (s, v) in sum.iter_mut().zip(row) {
                     *s += v;
