@@ -240,11 +240,32 @@ fn shm_files(ipc: &IpcConfig) -> Result<Vec<PathBuf>, IpcError> {
     Ok(out)
 }
 
+/// Every path below `dir`. Processes may be creating and removing files meanwhile (the
+/// daemon's reaper removes a dead client's while a test lists them): an entry that is gone
+/// by the time it is looked at is not listed, rather than failing the whole listing (CI saw
+/// `stat ... .event: No such file or directory` once).
 fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), IpcError> {
-    for entry in fs::read_dir(dir).map_err(io("list", dir))? {
-        let path = entry.map_err(io("list", dir))?.path();
+    let gone = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
+    let entries = match fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if gone(&e) => return Ok(()),
+        Err(e) => return Err(io("list", dir)(e)),
+    };
+    for entry in entries {
+        let entry = match entry {
+            Ok(entry) => entry,
+            Err(e) if gone(&e) => continue,
+            Err(e) => return Err(io("list", dir)(e)),
+        };
+        let path = entry.path();
+        // The kind from the directory listing itself: no second look that could race.
+        let kind = match entry.file_type() {
+            Ok(kind) => kind,
+            Err(e) if gone(&e) => continue,
+            Err(e) => return Err(io("stat", &path)(e)),
+        };
         out.push(path.clone());
-        if path.symlink_metadata().map_err(io("stat", &path))?.is_dir() {
+        if kind.is_dir() {
             walk(&path, out)?;
         }
     }
