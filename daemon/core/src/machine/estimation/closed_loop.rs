@@ -34,12 +34,11 @@ pub(in crate::machine) struct ClosedLoop {
     excitation: Excitation,
 }
 
-/// The dither against the controller's own command over an identification: what share of the
-/// run was excited, and how much of the commands' variation was the dither's.
+/// The dither against the controller's own command over an identification: how much of the
+/// commands' variation was the dither's.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct Excitation {
     samples: u64,
-    fade_sum: f64,
     dither_sq: f64,
     #[serde(with = "crate::serde_arrays::array")]
     control_sum: [f64; MAX_THRUSTERS],
@@ -48,22 +47,13 @@ pub struct Excitation {
 }
 
 impl Excitation {
-    fn push(&mut self, fade: f64, control: &[f64], sent: &[f64]) {
+    fn push(&mut self, control: &[f64], sent: &[f64]) {
         self.samples += 1;
-        self.fade_sum += fade;
         for (i, (c, s)) in control.iter().zip(sent).enumerate() {
             self.dither_sq += (s - c) * (s - c);
             self.control_sum[i] += c;
             self.control_sq[i] += c * c;
         }
-    }
-
-    /// The mean share of the dither applied (1: never faded by the attitude error).
-    pub fn mean_fade(&self) -> f64 {
-        if self.samples == 0 {
-            return 0.0;
-        }
-        self.fade_sum / self.samples as f64
     }
 
     /// The dither's share of the commands' variance: its power over its own and the
@@ -199,16 +189,12 @@ impl EstimationRun {
             m.depth,
             &c.sent[..k],
         );
-        let fade = cfg.fade(err_deg);
         let mut control = [0.0; MAX_THRUSTERS];
         control[..k].copy_from_slice(command);
-        c.dither.add_to(
-            t_s,
-            c.amplitude * fade,
-            setup.estimator.reverse_ratio,
-            command,
-        );
-        c.excitation.push(fade, &control[..k], command);
+        let amplitude = c.amplitude * cfg.fade(err_deg);
+        c.dither
+            .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
+        c.excitation.push(&control[..k], command);
         c.sent[..k].copy_from_slice(command);
         if t_ns < c.next_decision_ns || self.solver.waiting_for(Purpose::Interval) {
             return ClosedStep::Exciting;

@@ -94,9 +94,10 @@ impl Machine {
         // water on a bad model leaves no room for dither either, and its fit is the model it
         // needs.
         let cfg = &self.setup.identification;
-        let (limit, sea_deg) = (cfg.min_dither_share, self.sea_state.rms_deg());
-        let sea_deg = sea_deg.filter(|d| *d > cfg.min_sea_state_deg);
-        if let (Some(share), Some(sea_deg)) = (share.filter(|s| *s < limit), sea_deg) {
+        let limit = cfg.min_dither_share;
+        let low_share = share.filter(|s| *s < limit);
+        let sea_up = (self.sea_state.rms_deg()).filter(|d| *d > cfg.min_sea_state_deg);
+        if let (Some(share), Some(sea_deg)) = (low_share, sea_up) {
             let text = format!(
                 "{why}: the dither was {:.0} % of the commands' variation (limit {:.0} %) with the water moving the held vehicle by {sea_deg:.1} deg RMS: the fit takes the controller's answer for thrust: model rejected; old model kept",
                 100.0 * share,

@@ -7,7 +7,6 @@ use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::Machine;
 
 use thruster_inprocess::{env_list, rotate_while_holding_in, vehicle, Run, VEHICLES};
-use thruster_sim::disturbance::WaterPreset;
 
 /// The bounds of the estimates made during one re-estimation (every `estimator.segment_s`).
 #[derive(Debug, Default)]
@@ -23,8 +22,8 @@ struct Bounds {
     t_acc: Option<f64>,
     /// The last estimate's rotation neither thrust nor the dynamics explain, rad/s.
     unexplained: f64,
-    /// The identification's mean dither fade and the dither's share of the commands' variance.
-    excitation: (f64, f64),
+    /// The dither's share of the commands' variance in the identification.
+    dither_share: f64,
     /// The RMS attitude error while held before it (`Machine::sea_state_deg`), deg.
     sea_deg: f64,
 }
@@ -32,7 +31,7 @@ struct Bounds {
 impl Bounds {
     fn observe(&mut self, m: &Machine, t: f64, target: f64) {
         if let Some(x) = m.identification_excitation() {
-            self.excitation = (x.mean_fade(), x.dither_share());
+            self.dither_share = x.dither_share();
         }
         // While identifying: what the guard reads (the control ticks before it).
         if m.state() == thrusterd_core::machine::State::Identify {
@@ -191,24 +190,21 @@ pub(super) fn sweep_identification() {
     vary("ID_CARRY", if d.carry_over { 1.0 } else { 0.0 }, |c, v| {
         c.carry_over = v > 0.0
     });
-    let water = match std::env::var("ID_WATER").as_deref() {
-        Ok("current") => Some(WaterPreset::Current),
-        Ok("moderate") => Some(WaterPreset::Moderate),
-        Ok("rough") => Some(WaterPreset::Rough),
-        Ok("still") | Err(_) => None,
-        Ok(other) => panic!("ID_WATER: {other} is not still, current, moderate or rough"),
-    };
-    let water = water.map(|w| {
-        let mut d = w.disturbance();
-        // One part of the swell alone (the current stays): which of the two breaks the fit.
-        match std::env::var("ID_WAVE_PART").as_deref() {
-            Ok("force") => d.waves.iter_mut().for_each(|w| w.torque_body_nm = [0.0; 3]),
-            Ok("torque") => d.waves.iter_mut().for_each(|w| w.force_ned_n = [0.0; 3]),
-            Ok(other) => panic!("ID_WAVE_PART: {other} is not force or torque"),
-            Err(_) => {}
-        }
-        d
-    });
+    // Still water: no water comes up (and no 20 s hold before the announcement).
+    let still = thruster_sim::disturbance::WaterPreset::Still;
+    let water = super::water_from_env("ID_WATER")
+        .filter(|w| *w != still)
+        .map(|w| {
+            let mut d = w.disturbance();
+            // One part of the swell alone (the current stays): which of the two breaks the fit.
+            match std::env::var("ID_WAVE_PART").as_deref() {
+                Ok("force") => d.waves.iter_mut().for_each(|w| w.torque_body_nm = [0.0; 3]),
+                Ok("torque") => d.waves.iter_mut().for_each(|w| w.force_ned_n = [0.0; 3]),
+                Ok(other) => panic!("ID_WAVE_PART: {other} is not force or torque"),
+                Err(_) => {}
+            }
+            d
+        });
     for name in &noises {
         let noise = match name.as_str() {
             "none" => NoisePreset::None,
@@ -263,12 +259,11 @@ pub(super) fn sweep_identification() {
                     b.last.1,
                 ];
                 println!(
-                    "{}{:?} unexplained {:.4} rad/s fade {:.2} dither share {:.2} sea {:.1} deg",
+                    "{}{:?} unexplained {:.4} rad/s dither share {:.2} sea {:.1} deg",
                     line(&seed.to_string(), &row, b.t_rot, b.t_acc),
                     r.source,
                     b.unexplained,
-                    b.excitation.0,
-                    b.excitation.1,
+                    b.dither_share,
                     b.sea_deg
                 );
                 for (s, v) in sum.iter_mut().zip(row) {

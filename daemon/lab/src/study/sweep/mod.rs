@@ -182,6 +182,17 @@ pub fn run(args: SweepArgs) -> Result<()> {
     Ok(())
 }
 
+/// A water preset named by the environment variable `key` (the demo's `--water` names;
+/// unset: None), for the sweeps that bring the water up mid-run.
+fn water_from_env(key: &str) -> Option<thruster_sim::disturbance::WaterPreset> {
+    use clap::ValueEnum;
+    let name = std::env::var(key).ok()?;
+    Some(
+        thruster_sim::disturbance::WaterPreset::from_str(&name, true)
+            .unwrap_or_else(|e| panic!("{key}: {e}")),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -189,22 +189,13 @@ pub(super) fn change_test_soak() {
 /// A measuring tool: `cargo run --release -p thrusterctl -- study sweep refinement_in_water`.
 pub(super) fn refinement_in_water() {
     let minutes: f64 = std::env::var("RW_MINUTES").map_or(10.0, |v| v.parse().unwrap());
-    let seeds: Vec<u64> = std::env::var("RW_SEEDS")
-        .unwrap_or_else(|_| "1,2,3".into())
-        .split(',')
-        .map(|v| v.trim().parse().unwrap())
-        .collect();
+    let seeds: Vec<u64> = thruster_inprocess::env_list("RW_SEEDS", &[1, 2, 3]);
     let noise = match std::env::var("RW_NOISE").as_deref() {
         Ok("none") => NoisePreset::None,
         Ok("paper") => NoisePreset::Paper,
         _ => NoisePreset::Realistic,
     };
-    let water = match std::env::var("RW_WATER").as_deref() {
-        Ok("current") => WaterPreset::Current,
-        Ok("rough") => WaterPreset::Rough,
-        Ok("still") => WaterPreset::Still,
-        _ => WaterPreset::Moderate,
-    };
+    let water = super::water_from_env("RW_WATER").unwrap_or(WaterPreset::Moderate);
     let cfg = RefinementConfig {
         change_test: std::env::var("RW_CHANGE_TEST").is_ok_and(|v| v == "1"),
         ..shipped_change_test()
