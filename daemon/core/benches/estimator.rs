@@ -138,6 +138,79 @@ fn bench(c: &mut Criterion) {
                 })
             },
         );
+        // Under control (the identification): one sample of the split fit by least squares,
+        // and the same instrumented in a sea (`estimator::dynamic::instruments`: the
+        // instruments' sums and a least-squares twin besides); then an estimate after 10 s.
+        for instrumented in [false, true] {
+            let name = if instrumented {
+                "closed_loop_sample_update_instrumented"
+            } else {
+                "closed_loop_sample_update"
+            };
+            let fresh = || {
+                let mut est = Estimator::new(
+                    EstimatorConfig::default(),
+                    n,
+                    NoiseLevels::isotropic(0.002, 0.03),
+                )
+                .with_rest_specific_force(REST_FORCE);
+                if instrumented {
+                    est.begin_instrumented_closed_loop();
+                } else {
+                    est.begin_closed_loop();
+                }
+                est
+            };
+            let samples: Vec<_> = (0..200).map(|k| dynamic_sample(k as f64 * 0.005)).collect();
+            let command = |k: u64| -> Vec<f64> {
+                (0..n)
+                    .map(|i| 0.3 * (((k / 10) as usize + i) % 3) as f64 - 0.3)
+                    .collect()
+            };
+            let commands: Vec<Vec<f64>> = (0..200).map(command).collect();
+            let signs: Vec<Vec<f64>> = commands
+                .iter()
+                .map(|u| u.iter().map(|v| v.signum()).collect())
+                .collect();
+            c.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
+                let mut est = fresh();
+                let mut k = 0u64;
+                b.iter(|| {
+                    k += 1;
+                    let j = (k % 200) as usize;
+                    let (w, f) = &samples[j];
+                    est.push_commanded_sample(
+                        black_box(k as f64 * 0.005),
+                        w,
+                        f,
+                        Some(5.0),
+                        &commands[j],
+                        instrumented.then_some(&signs[j][..]),
+                    )
+                })
+            });
+            let mut est = fresh();
+            for k in 1..=2000u64 {
+                let j = (k % 200) as usize;
+                let (w, f) = &samples[j];
+                est.push_commanded_sample(
+                    k as f64 * 0.005,
+                    w,
+                    f,
+                    Some(5.0),
+                    &commands[j],
+                    instrumented.then_some(&signs[j][..]),
+                );
+            }
+            let name = if instrumented {
+                "closed_loop_estimate_instrumented"
+            } else {
+                "closed_loop_estimate"
+            };
+            c.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
+                b.iter(|| black_box(est.estimate()))
+            });
+        }
         // A full dynamic estimate after 64 pulses (the default stops at a bound or 80 pulses).
         let dynamic = warmed_dynamic(n, 64);
         c.bench_with_input(BenchmarkId::new("dynamic_estimate", n), &n, |b, _| {

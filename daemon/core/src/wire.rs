@@ -329,6 +329,7 @@ mod tests {
                 0.03,
             )),
             unexplained_rate_radps: 0.0,
+            instrumented: [false; 2],
         });
         let d = dynamics_msg(0, &m).unwrap();
         assert!(d.validate().is_ok(), "{:?}", d.validate());

@@ -263,20 +263,34 @@ fn an_estimate_beyond_the_attitude_budget_is_refused_with_the_reason() {
     assert_eq!(run.machine.state(), State::Identify);
 }
 
+/// The model in force after `rotate_while_holding_in` against its own bounds: (error / bound)
+/// for the rotation and acceleration rows.
+fn coverage(run: &Run, r: &Reestimation) -> (f64, f64) {
+    let m = run.machine.model().unwrap();
+    (r.err_rot / m.rel_err_rot, r.err_acc / m.rel_err_acc)
+}
+
 /// In rough water (current 0.5 m/s, a 0.15 Hz swell of 20 N and 2 Nm) AMOUR-5 cannot be held
 /// within the identification's attitude budget: the dither fades out and the commands are
-/// mostly the controller answering the swell, which a fit under control takes for thrust.
-/// Noise-free, before the check, that model was swapped in 57 % / 65 % off the truth under
-/// bounds of 14 % / 16 % (docs/study.md, "Under control in moving water"). Now it is refused
-/// with the reason and the nominal model of the announced geometry stays (13 % / 19 % off, as
-/// a nominal model claims no accuracy); the machine keeps holding. Measured: dither share
-/// 0.10, the held vehicle's sea state 16.5 deg RMS, one refusal in the 120 s.
+/// mostly the controller answering the swell (dither share 0.10, the held vehicle's sea state
+/// 16.5 deg RMS). Noise-free:
+/// - by least squares (`instrument = never`) the fit takes that answer for thrust: 57 % / 65 %
+///   off the truth under bounds of 14 % / 16 %;
+/// - with the dither as the thrust's instrument (the default in a sea) nothing confidently
+///   wrong comes of it noise-free (refused for confidence), but at a realistic IMU 7 of 10
+///   seeds were up to 2.3x outside their rotation bound (the terms, their own instruments,
+///   still take the swell);
+///
+/// so the share check stays: the model is refused with the reason (once in the 120 s), the
+/// nominal model of the announced geometry stays and the machine keeps holding.
+/// docs/study.md, "Under control in moving water".
 #[test]
 fn in_rough_water_the_model_the_controller_made_is_refused_and_holding_goes_on() {
     use thruster_sim::disturbance::WaterPreset;
+    use thrusterd_core::adaptation::identification::Instrument;
     use thrusterd_core::machine::Event;
-    let rough = Some(WaterPreset::Rough.disturbance());
-    let (mut run, r) = rotate_while_holding_in(NoisePreset::None, 1, None, rough, |_, _| {});
+    let rough = || Some(WaterPreset::Rough.disturbance());
+    let (mut run, r) = rotate_while_holding_in(NoisePreset::None, 1, None, rough(), |_, _| {});
     assert_eq!(r.source, ModelSource::Nominal, "{r:?}");
     assert!(r.took_s >= 119.0, "no model swapped in: {r:?}");
     assert_eq!(run.machine.state(), State::Active);
@@ -292,20 +306,100 @@ fn in_rough_water_the_model_the_controller_made_is_refused_and_holding_goes_on()
     assert!(
         refusals.len() == 1
             && refusals.iter().all(|w| {
-                w.contains("% of the commands' variation (limit 50 %") && w.contains("deg RMS")
+                w.contains("% of the commands' variation (limit 50 %")
+                    && w.contains("deg RMS")
+                    && w.contains("the dither as the thrust's instrument")
             }),
         "{refusals:?}"
     );
-    // The decisive run: without the check the same identification swaps in its model, far
-    // outside its own bound.
+    // The decisive runs, without the check: by least squares the model is far outside its
+    // own bound; instrumented it is within it (noise-free).
     let unchecked = IdentificationConfig {
         min_dither_share: 0.0,
         ..IdentificationConfig::default()
     };
-    let rough = Some(WaterPreset::Rough.disturbance());
-    let (_, r) = rotate_while_holding_in(NoisePreset::None, 1, Some(unchecked), rough, |_, _| {});
+    let least_squares = IdentificationConfig {
+        instrument: Instrument::Never,
+        ..unchecked.clone()
+    };
+    let (_, r) = rotate_while_holding_in(
+        NoisePreset::None,
+        1,
+        Some(least_squares),
+        rough(),
+        |_, _| {},
+    );
     assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
     assert!(r.err_rot > 0.3 && r.err_acc > 0.3, "{r:?}");
+    // Instrumented and unchecked, nothing confidently wrong gets in either: measured, its
+    // acceleration bound says 53 % (the IMU position's share: the rotation rows' terms are
+    // loose) and the model is refused for confidence.
+    let (run, r) =
+        rotate_while_holding_in(NoisePreset::None, 1, Some(unchecked), rough(), |_, _| {});
+    if r.source == ModelSource::Estimated {
+        let (rot, acc) = coverage(&run, &r);
+        assert!(
+            rot <= 1.5 && acc <= 1.5,
+            "{r:?}: error / bound {rot:.2} / {acc:.2}"
+        );
+    } else {
+        assert!(
+            run.machine
+                .status()
+                .text
+                .contains("model confidence too low"),
+            "{}",
+            run.machine.status().text
+        );
+    }
+}
+
+/// In moderate water (current 0.3 m/s, a 0.15 Hz swell of 10 N / 1 Nm) AMOUR-5 holds within
+/// its budget, the dither is 84-89 % of the commands, and the least-squares fit still takes the
+/// controller's answer to the swell for thrust: error / bound 2.1 noise-free and up to 2.4 at a
+/// realistic IMU (seeds 1-5; 2.7 over seeds 1-10). With the dither as the thrust's instrument
+/// (the default when the held vehicle swung more than 3 deg RMS) the model stays within its
+/// bound: 1.33 noise-free, at most 1.0 over seeds 1-10 at a realistic IMU, in the same 5 s.
+/// docs/study.md, "Under control in moving water".
+#[test]
+fn in_moderate_water_the_instrumented_identification_stays_within_its_bound() {
+    use thruster_sim::disturbance::WaterPreset;
+    use thrusterd_core::adaptation::identification::Instrument;
+    let moderate = || Some(WaterPreset::Moderate.disturbance());
+    let least_squares = IdentificationConfig {
+        instrument: Instrument::Never,
+        ..IdentificationConfig::default()
+    };
+    for (noise, seed) in [(NoisePreset::None, 1), (NoisePreset::Realistic, 5)] {
+        let (run, r) = rotate_while_holding_in(noise, seed, None, moderate(), |_, _| {});
+        assert_eq!(r.source, ModelSource::Estimated, "{noise:?} {seed}: {r:?}");
+        assert!(
+            run.machine
+                .status()
+                .text
+                .contains("the dither as the thrust's instrument"),
+            "{}",
+            run.machine.status().text
+        );
+        let (rot, acc) = coverage(&run, &r);
+        assert!(
+            rot <= 1.5 && acc <= 1.5,
+            "{noise:?} {seed}: {r:?}: error / bound {rot:.2} / {acc:.2}"
+        );
+        assert!(r.took_s <= 8.0, "{noise:?} {seed}: {r:?}");
+        let (run, r) = rotate_while_holding_in(
+            noise,
+            seed,
+            Some(least_squares.clone()),
+            moderate(),
+            |_, _| {},
+        );
+        let (rot, acc) = coverage(&run, &r);
+        assert!(
+            rot.max(acc) > 1.8,
+            "least squares {noise:?} {seed}: {r:?}: error / bound {rot:.2} / {acc:.2}"
+        );
+    }
 }
 
 /// The other side of the refusal above: a vehicle that tumbles in still water on the nominal

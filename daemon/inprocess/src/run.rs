@@ -200,12 +200,18 @@ impl Run {
         &mut self,
         identification: thrusterd_core::adaptation::identification::IdentificationConfig,
     ) {
+        self.with_setup(|setup| setup.identification = identification);
+    }
+
+    /// A new machine as `Run` builds it (the vehicle's thruster count, deadband 0.05), then
+    /// changed by `change`.
+    pub fn with_setup(&mut self, change: impl FnOnce(&mut thrusterd_core::machine::MachineSetup)) {
         let mut setup = thrusterd_core::machine::MachineSetup {
             thrusters: self.sim.thruster_count(),
-            identification,
             ..thrusterd_core::machine::MachineSetup::default()
         };
         setup.machine.deadband = 0.05;
+        change(&mut setup);
         self.machine = Machine::new(setup);
     }
 
@@ -353,6 +359,17 @@ pub fn rotate_while_holding_in(
     if let Some(identification) = identification {
         run.with_identification(identification);
     }
+    rotate_while_holding_on(run, &v, water, observe)
+}
+
+/// [`rotate_while_holding_in`] on a `run` already made (its machine set up as wanted) of
+/// vehicle `v`.
+pub fn rotate_while_holding_on(
+    mut run: Run,
+    v: &Vehicle,
+    water: Option<thruster_sim::DisturbanceConfig>,
+    observe: impl FnMut(&Machine, f64),
+) -> (Run, Reestimation) {
     run.run_for(1.0);
     run.estimate();
     run.run_for(3.0);
@@ -361,6 +378,6 @@ pub fn rotate_while_holding_in(
         run.run_for(20.0);
     }
     assert_eq!(run.machine.state(), State::Active);
-    let r = run.announced_rotation_observed(&v, observe);
+    let r = run.announced_rotation_observed(v, observe);
     (run, r)
 }

@@ -364,6 +364,7 @@ impl Refiner {
             tick.specific_force,
             tick.depth,
             &window.sent[..n],
+            None,
         );
         if self.cfg.dither > 0.0 {
             let fade = ((10.0 - tick.err_deg) / 5.0).clamp(0.0, 1.0);

@@ -25,6 +25,7 @@ use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
+use super::instruments::{self, Instruments};
 use super::prior::PriorEntry;
 use crate::estimator::linalg::sym_pinv;
 
@@ -77,6 +78,54 @@ pub struct SegmentedLs {
     // Closed segments' centred sums, slot s % CLUSTERS (full symmetric Gram matrices).
     cluster_gram: Vec<Arc<DMatrix<f64>>>,
     cluster_xy: Vec<Arc<DMatrix<f64>>>,
+    /// Instruments for the first columns (`with_instruments`): the fit is then
+    /// theta = (Z'X)^-1 Z'y ([`instruments`]).
+    #[serde(default)]
+    iv: Option<Instruments>,
+    /// The open segment's ramp sums, when each segment has a ramp besides its intercept
+    /// (`with_ramp`).
+    #[serde(default)]
+    ramp: Option<RampSums>,
+}
+
+/// Sums over the open segment weighted by tau, the row's index in it: what a ramp per
+/// segment needs besides the plain sums.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct RampSums {
+    /// sum tau x (K), sum tau y, sum tau, sum tau^2.
+    x: DVector<f64>,
+    y: Vector3<f64>,
+    t: f64,
+    tt: f64,
+}
+
+/// What a segment's nuisance (its intercept, and its ramp when there is one) explains of a
+/// cross product: given sum u and sum tau u of one series and the same of another, the part of
+/// sum u v that the projection on the segment's [1, tau] takes out.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Basis {
+    n: f64,
+    t: f64,
+    tt: f64,
+    ramp: bool,
+}
+
+impl Basis {
+    /// The segment's rows.
+    pub(super) fn rows(&self) -> f64 {
+        self.n
+    }
+
+    pub(super) fn explained(&self, au: f64, bu: f64, av: f64, bv: f64) -> f64 {
+        if self.ramp {
+            let det = self.n * self.tt - self.t * self.t;
+            // A one-row segment has no ramp to fit.
+            if det > 1e-9 * self.n * self.tt {
+                return (self.tt * au * av - self.t * (au * bv + bu * av) + self.n * bu * bv) / det;
+            }
+        }
+        au * av / self.n
+    }
 }
 
 impl SegmentedLs {
@@ -101,7 +150,76 @@ impl SegmentedLs {
             cluster_xy: (0..CLUSTERS)
                 .map(|_| Arc::new(DMatrix::zeros(k, 3)))
                 .collect(),
+            iv: None,
+            ramp: None,
         }
+    }
+
+    /// Each segment gets a ramp besides its intercept (in the row's index within the
+    /// segment). Why: the rotation rows regress the integrated rate, so a torque the model
+    /// does not have (a swell's) appears in a segment as a ramp, not a constant; with the
+    /// ramp, each segment has its own constant disturbance torque.
+    pub fn with_ramp(mut self) -> Self {
+        self.ramp = Some(RampSums {
+            x: DVector::zeros(self.k),
+            y: Vector3::zeros(),
+            t: 0.0,
+            tt: 0.0,
+        });
+        self
+    }
+
+    /// The open segment's basis sums.
+    fn basis(&self) -> Basis {
+        Basis {
+            n: self.seg_n as f64,
+            t: self.ramp.as_ref().map_or(0.0, |r| r.t),
+            tt: self.ramp.as_ref().map_or(0.0, |r| r.tt),
+            ramp: self.ramp.is_some(),
+        }
+    }
+
+    /// Column i's sum tau x over the open segment (0 without a ramp).
+    fn ramp_x(&self, i: usize) -> f64 {
+        self.ramp.as_ref().map_or(0.0, |r| r.x[i])
+    }
+
+    /// Output a's sum tau y over the open segment (0 without a ramp).
+    fn ramp_y(&self, a: usize) -> f64 {
+        self.ramp.as_ref().map_or(0.0, |r| r.y[a])
+    }
+
+    /// The open segment's sums for the instruments' centring.
+    fn segment_sums(&self) -> SegmentSums<'_> {
+        SegmentSums {
+            x: &self.seg_x,
+            rx: self.ramp.as_ref().map(|r| &r.x),
+            y: self.seg_y,
+            ry: self.ramp.as_ref().map_or(Vector3::zeros(), |r| r.y),
+            basis: self.basis(),
+        }
+    }
+
+    /// The first `c` columns get instruments ([`Self::add_instrumented`]); the fit is then by
+    /// instrumental variables.
+    pub fn with_instruments(mut self, c: usize) -> Self {
+        self.iv = Some(Instruments::new(c.min(self.k), self.k));
+        self
+    }
+
+    /// Whether the fit is by instrumental variables.
+    pub fn instrumented(&self) -> bool {
+        self.iv.is_some()
+    }
+
+    /// One row with the first columns' instruments `z` (as many as `with_instruments` said;
+    /// without instruments, `z` is ignored).
+    pub fn add_instrumented(&mut self, x: &[f64], z: &[f64], y: &Vector3<f64>) {
+        let tau = self.seg_n as f64;
+        if let Some(iv) = self.iv.as_mut() {
+            iv.add(z, x, y, tau);
+        }
+        self.add(x, y);
     }
 
     /// Columns.
@@ -134,6 +252,15 @@ impl SegmentedLs {
         }
         self.seg_yy += y.component_mul(y);
         self.seg_y += y;
+        if let Some(r) = self.ramp.as_mut() {
+            let tau = self.seg_n as f64;
+            for (rx, xi) in r.x.iter_mut().zip(x) {
+                *rx += tau * xi;
+            }
+            r.y += y * tau;
+            r.t += tau;
+            r.tt += tau * tau;
+        }
         self.seg_n += 1;
         self.rows += 1;
     }
@@ -141,19 +268,28 @@ impl SegmentedLs {
     /// The open segment's centred sums (Gram matrix full), into `gram` and `xy`; its centred
     /// sum of squared outputs is returned.
     fn centred_open(&self, gram: &mut DMatrix<f64>, xy: &mut DMatrix<f64>) -> Vector3<f64> {
-        let n = self.seg_n as f64;
+        let b = self.basis();
         for i in 0..self.k {
-            let si = self.seg_x[i];
+            let (si, ri) = (self.seg_x[i], self.ramp_x(i));
             for j in i..self.k {
-                let v = self.seg_gram[(i, j)] - si * self.seg_x[j] / n;
+                let v = self.seg_gram[(i, j)] - b.explained(si, ri, self.seg_x[j], self.ramp_x(j));
                 gram[(i, j)] = v;
                 gram[(j, i)] = v;
             }
             for a in 0..3 {
-                xy[(i, a)] = self.seg_xy[(i, a)] - si * self.seg_y[a] / n;
+                xy[(i, a)] =
+                    self.seg_xy[(i, a)] - b.explained(si, ri, self.seg_y[a], self.ramp_y(a));
             }
         }
-        self.seg_yy - self.seg_y.component_mul(&self.seg_y) / n
+        self.centred_yy(&b)
+    }
+
+    /// The open segment's sum of squared outputs with its nuisance projected out.
+    fn centred_yy(&self, b: &Basis) -> Vector3<f64> {
+        Vector3::from_fn(|a, _| {
+            let (s, r) = (self.seg_y[a], self.ramp_y(a));
+            self.seg_yy[a] - b.explained(s, r, s, r)
+        })
     }
 
     /// Close the open segment: its intercept is projected out.
@@ -162,22 +298,26 @@ impl SegmentedLs {
             return;
         }
         let slot = (self.segments % CLUSTERS as u64) as usize;
+        if let Some(mut iv) = self.iv.take() {
+            iv.close_segment(slot, &self.segment_sums());
+            self.iv = Some(iv);
+        }
         // Centre into the slot's spare room: the slot is summed into, so centre into the
         // open segment's own buffers first (no allocation).
         let mut g = std::mem::replace(&mut self.seg_gram, DMatrix::zeros(0, 0));
         let mut xy = std::mem::replace(&mut self.seg_xy, DMatrix::zeros(0, 0));
-        let n = self.seg_n as f64;
+        let b = self.basis();
         for i in 0..self.k {
-            let si = self.seg_x[i];
+            let (si, ri) = (self.seg_x[i], self.ramp_x(i));
             for j in i..self.k {
-                g[(i, j)] -= si * self.seg_x[j] / n;
+                g[(i, j)] -= b.explained(si, ri, self.seg_x[j], self.ramp_x(j));
                 g[(j, i)] = g[(i, j)];
             }
             for a in 0..3 {
-                xy[(i, a)] -= si * self.seg_y[a] / n;
+                xy[(i, a)] -= b.explained(si, ri, self.seg_y[a], self.ramp_y(a));
             }
         }
-        self.yy += self.seg_yy - self.seg_y.component_mul(&self.seg_y) / n;
+        self.yy += self.centred_yy(&b);
         self.gram += &g;
         self.xy += &xy;
         // In place unless a solve job still holds this slot (then it is copied first).
@@ -192,6 +332,12 @@ impl SegmentedLs {
         self.seg_yy = Vector3::zeros();
         self.seg_x.fill(0.0);
         self.seg_y = Vector3::zeros();
+        if let Some(r) = self.ramp.as_mut() {
+            r.x.fill(0.0);
+            r.y = Vector3::zeros();
+            r.t = 0.0;
+            r.tt = 0.0;
+        }
     }
 
     /// The centred normal equations over every row so far: the symmetric Gram matrix X'X
@@ -289,6 +435,9 @@ impl SegmentedLs {
 
     /// The fit over every row so far (the open segment counted as if closed now).
     pub fn solve(&self) -> SegmentedSolution {
+        if let Some(iv) = &self.iv {
+            return self.solve_instrumented(iv, None);
+        }
         let Normal {
             g,
             xy,
@@ -344,6 +493,11 @@ impl SegmentedLs {
         priors: &[Vec<PriorEntry>; 3],
         sigma: &[f64; 3],
     ) -> SegmentedSolution {
+        if let Some(iv) = &self.iv {
+            let mut sol = self.solve_instrumented(iv, Some((priors, sigma)));
+            sol.clusters = base.clusters;
+            return sol;
+        }
         let Normal { g, xy, open, .. } = self.normal_equations();
         let k = self.k;
         let mut theta = DMatrix::zeros(k, 3);
@@ -353,24 +507,7 @@ impl SegmentedLs {
             let s2 = sigma[a] * sigma[a];
             let mut ga = g.clone();
             let mut ra = xy.column(a).clone_owned();
-            let mut pa = DMatrix::zeros(k, k);
-            for e in &priors[a] {
-                if !(e.std_err > 0.0 && e.std_err.is_finite() && e.value.is_finite()) {
-                    continue;
-                }
-                let w = s2 / (e.std_err * e.std_err);
-                for &(i, wi) in &e.weights {
-                    if wi == 0.0 || i >= k {
-                        continue;
-                    }
-                    ra[i] += w * wi * e.value;
-                    for &(j, wj) in &e.weights {
-                        if wj != 0.0 && j < k {
-                            pa[(i, j)] += w * wi * wj;
-                        }
-                    }
-                }
-            }
+            let pa = prior_information(k, &priors[a], s2, &mut ra);
             ga += &pa;
             let (inv, _) = scaled_pinv(&ga);
             let th = &inv * &ra;
@@ -395,6 +532,142 @@ impl SegmentedLs {
             ..base
         }
     }
+}
+
+impl SegmentedLs {
+    /// The fit by instrumental variables ([`instruments`]), with a prior's information when
+    /// `prior` (entries and noise per output) is given. Solved as two-stage least squares,
+    /// which is the instrumental-variables estimate when Z'X is invertible and keeps the
+    /// least squares' rank handling when it is not (under control some terms barely move):
+    /// with H = (Z'X)' (Z'Z)^-1 (Z'X), theta = (H + P)^-1 ((Z'X)' (Z'Z)^-1 Z'y + P theta0).
+    /// Covariances: i.i.d. (H + P)^-1 per sigma^2 (in `gram_inv` / `output_inv`); robust
+    /// M (sum_s h_s h_s') M' + (H + P)^-1 sigma^2 P (H + P)^-1, M = (H + P)^-1 (Z'X)' (Z'Z)^-1,
+    /// h_s = sum over the segment of z e.
+    fn solve_instrumented(
+        &self,
+        iv: &Instruments,
+        prior: Option<(&[Vec<PriorEntry>; 3], &[f64; 3])>,
+    ) -> SegmentedSolution {
+        let Normal {
+            g,
+            xy,
+            yy,
+            segments,
+            open,
+        } = self.normal_equations();
+        let k = self.k;
+        let c = iv.instrumented();
+        let sums = iv.sums(&self.segment_sums());
+        let (za, zb) = instruments::instrumented_normal(&g, &xy, &sums.tx, &sums.ty);
+        let zz = instruments::instrument_gram(&g, &sums.tx, &sums.tt);
+        let (zz_inv, _) = scaled_pinv(&zz);
+        // (Z'X)' (Z'Z)^-1: the first stage's projection, shared by H, the right-hand side and M.
+        let proj = za.transpose() * &zz_inv;
+        let mut h = &proj * &za;
+        for i in 0..k {
+            for j in 0..i {
+                let v = 0.5 * (h[(i, j)] + h[(j, i)]);
+                h[(i, j)] = v;
+                h[(j, i)] = v;
+            }
+        }
+        let rhs0 = &proj * &zb;
+        let used = (self.segments.min(CLUSTERS as u64)) as usize;
+        let mut theta = DMatrix::zeros(k, 3);
+        let mut robust_cov: [DMatrix<f64>; 3] = std::array::from_fn(|_| DMatrix::zeros(k, k));
+        let mut output_inv: [DMatrix<f64>; 3] = std::array::from_fn(|_| DMatrix::zeros(k, k));
+        let mut rank = 0;
+        let mut clusters = 0;
+        for a in 0..3 {
+            let mut rhs = rhs0.column(a).clone_owned();
+            let s2 = prior.map_or(0.0, |(_, sigma)| sigma[a] * sigma[a]);
+            let pa = match prior {
+                Some((entries, _)) => prior_information(k, &entries[a], s2, &mut rhs),
+                None => DMatrix::zeros(k, k),
+            };
+            let (inv, r) = scaled_pinv(&(&h + &pa));
+            rank = r;
+            let th = &inv * rhs;
+            let m = &inv * &proj;
+            let iv_clusters = iv
+                .clusters(used)
+                .chain(sums.open.as_ref().map(|(t, y)| (t, y)));
+            let mut data = DMatrix::zeros(k, k);
+            clusters = 0;
+            for ((cg, cxy), (ctx, cty)) in self.clusters(&open).zip(iv_clusters) {
+                clusters += 1;
+                let mut hs = cxy.column(a) - cg * &th;
+                let ht = cty.column(a) - ctx * &th;
+                hs.rows_mut(0, c).copy_from(&ht);
+                let u = &m * hs;
+                data.ger(1.0, &u, &u, 1.0);
+            }
+            if clusters > 1 {
+                data *= clusters as f64 / (clusters as f64 - 1.0);
+            }
+            robust_cov[a] = data + &inv * (&pa * s2) * &inv;
+            output_inv[a] = inv;
+            theta.set_column(a, &th);
+        }
+        let residual_dof = self.rows.saturating_sub(segments + rank as u64);
+        let residual_var = (residual_dof > 0).then(|| {
+            std::array::from_fn(|a| {
+                let th = theta.column(a);
+                let fitted = 2.0 * xy.column(a).dot(&th) - th.dot(&(&g * th));
+                ((yy[a] - fitted) / residual_dof as f64).max(0.0)
+            })
+        });
+        let gram_inv = output_inv[0].clone();
+        SegmentedSolution {
+            theta,
+            gram_inv,
+            output_inv: Some(output_inv),
+            rank,
+            residual_var,
+            residual_dof,
+            robust_cov,
+            clusters,
+        }
+    }
+}
+
+/// A prior's information for one output at noise variance `s2`: returns P (K x K) and adds
+/// P theta0 to `rhs` (the information form of a Gaussian prior, sigma^2 / se^2 w w').
+fn prior_information(
+    k: usize,
+    entries: &[PriorEntry],
+    s2: f64,
+    rhs: &mut DVector<f64>,
+) -> DMatrix<f64> {
+    let mut pa = DMatrix::zeros(k, k);
+    for e in entries {
+        if !(e.std_err > 0.0 && e.std_err.is_finite() && e.value.is_finite()) {
+            continue;
+        }
+        let w = s2 / (e.std_err * e.std_err);
+        for &(i, wi) in &e.weights {
+            if wi == 0.0 || i >= k {
+                continue;
+            }
+            rhs[i] += w * wi * e.value;
+            for &(j, wj) in &e.weights {
+                if wj != 0.0 && j < k {
+                    pa[(i, j)] += w * wi * wj;
+                }
+            }
+        }
+    }
+    pa
+}
+
+/// The open segment's sums the instruments are centred with.
+pub(super) struct SegmentSums<'a> {
+    pub x: &'a DVector<f64>,
+    /// sum tau x, with a ramp.
+    pub rx: Option<&'a DVector<f64>>,
+    pub y: Vector3<f64>,
+    pub ry: Vector3<f64>,
+    pub basis: Basis,
 }
 
 /// The normal equations of a [`SegmentedLs`] and its open segment's centred sums.

@@ -22,6 +22,17 @@ impl Estimator {
         true
     }
 
+    /// [`Self::begin_closed_loop`] with the thrust columns fitted by instrumental variables:
+    /// every sample then brings the dither's signs as their instruments
+    /// (`push_commanded_sample`'s `instruments`; see `dynamic::instruments`).
+    pub fn begin_instrumented_closed_loop(&mut self) -> bool {
+        if !self.begin_closed_loop() {
+            return false;
+        }
+        self.dynamic = self.dynamic.take().map(|run| run.with_instruments());
+        true
+    }
+
     /// One sample under control at `t_s`: bias-free gyro (rad/s), the raw specific force
     /// (m/s^2), depth (m) if measured, and `u`, the command sent during the interval this
     /// sample ends (model units, before any deadband compensation). Ignored before
@@ -33,6 +44,7 @@ impl Estimator {
         specific_force: &Vector3<f64>,
         depth: Option<f64>,
         u: &[f64],
+        instruments: Option<&[f64]>,
     ) {
         let Some(run) = self.dynamic.as_mut() else {
             return;
@@ -45,7 +57,7 @@ impl Estimator {
                 *m = m.max(v.abs());
             }
         }
-        run.push(t_s, gyro, specific_force, depth, Some(u));
+        run.push_instrumented(t_s, gyro, specific_force, depth, Some(u), instruments);
         self.samples += 1;
     }
 

@@ -24,6 +24,9 @@ pub(in crate::machine) struct ClosedLoop {
     /// The command sent after the last sample: it acted during the interval the next sample
     /// ends, and is fitted with that sample.
     sent: [f64; MAX_THRUSTERS],
+    /// The dither's shape sent with it (unit amplitude): the thrust columns' instruments.
+    #[serde(default = "zero_commands", with = "crate::serde_arrays::array")]
+    sent_dither: [f64; MAX_THRUSTERS],
     /// The gyro bias, frozen when the dither starts: the attitude filter's estimate wanders
     /// with the accelerations the dither causes, and a wandering bias is motion to the fit.
     gyro_bias: Vector3<f64>,
@@ -32,6 +35,10 @@ pub(in crate::machine) struct ClosedLoop {
     /// How the dither compared with the controller's own command since it started.
     #[serde(default)]
     excitation: Excitation,
+    /// The thrust columns are fitted with the dither as their instrument
+    /// (`IdentificationConfig::instrument`).
+    #[serde(default)]
+    instrumented: bool,
 }
 
 /// The dither against the controller's own command over an identification: how much of the
@@ -78,6 +85,10 @@ impl Excitation {
     }
 }
 
+fn zero_commands() -> [f64; MAX_THRUSTERS] {
+    [0.0; MAX_THRUSTERS]
+}
+
 /// What one sample under control led to.
 pub(in crate::machine) enum ClosedStep {
     /// Holding without dither, measuring.
@@ -110,9 +121,11 @@ impl EstimationRun {
             excite_from_ns: None,
             next_decision_ns: u64::MAX,
             sent: [0.0; MAX_THRUSTERS],
+            sent_dither: [0.0; MAX_THRUSTERS],
             gyro_bias: Vector3::zeros(),
             amplitude: cfg.dither,
             excitation: Excitation::default(),
+            instrumented: false,
         });
     }
 
@@ -131,7 +144,8 @@ impl EstimationRun {
 
     /// One sample under control. `command` holds the controller's command (model units) for
     /// `n` thrusters and gets the dither added, faded by the attitude error `err_deg`; `m.gyro`
-    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now. A decision
+    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now, `sea_deg` the
+    /// sea state before the identification (`sea_state`; None: not known). A decision
     /// interval that ends while the last one's solve is still out waits for it (the next
     /// sample asks again): decisions are made in order, one at a time.
     #[allow(clippy::too_many_arguments)]
@@ -143,6 +157,7 @@ impl EstimationRun {
         err_deg: f64,
         setup: &MachineSetup,
         model: Option<&Model>,
+        sea_deg: Option<f64>,
         n: usize,
         command: &mut [f64],
     ) -> ClosedStep {
@@ -173,7 +188,16 @@ impl EstimationRun {
             if let Some(p) = model.and_then(|m| m.imu_position_m()) {
                 est = est.with_known_imu_position(p);
             }
-            est.begin_closed_loop();
+            let ident = &setup.identification;
+            let instrumented = ident.instrument.applies(sea_deg, ident.min_sea_state_deg);
+            if let Some(c) = self.closed.as_mut() {
+                c.instrumented = instrumented;
+            }
+            if instrumented {
+                est.begin_instrumented_closed_loop();
+            } else {
+                est.begin_closed_loop();
+            }
             self.est = Some(est);
             return ClosedStep::Holding;
         };
@@ -181,6 +205,7 @@ impl EstimationRun {
             return ClosedStep::Holding;
         };
         let cfg = &setup.identification;
+        let instrumented = c.instrumented;
         let k = command.len();
         est.push_commanded_sample(
             t_s,
@@ -188,6 +213,7 @@ impl EstimationRun {
             &m.specific_force,
             m.depth,
             &c.sent[..k],
+            instrumented.then_some(&c.sent_dither[..k]),
         );
         let mut control = [0.0; MAX_THRUSTERS];
         control[..k].copy_from_slice(command);
@@ -196,6 +222,8 @@ impl EstimationRun {
             .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
         c.excitation.push(&control[..k], command);
         c.sent[..k].copy_from_slice(command);
+        c.dither
+            .instruments(setup.estimator.reverse_ratio, &mut c.sent_dither[..k]);
         if t_ns < c.next_decision_ns || self.solver.waiting_for(Purpose::Interval) {
             return ClosedStep::Exciting;
         }

@@ -6,7 +6,7 @@ use thrusterd_core::adaptation::identification::IdentificationConfig;
 use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::Machine;
 
-use thruster_inprocess::{env_list, rotate_while_holding_in, vehicle, Run, VEHICLES};
+use thruster_inprocess::{env_list, rotate_while_holding_on, vehicle, Run, VEHICLES};
 
 /// The bounds of the estimates made during one re-estimation (every `estimator.segment_s`).
 #[derive(Debug, Default)]
@@ -26,10 +26,27 @@ struct Bounds {
     dither_share: f64,
     /// The RMS attitude error while held before it (`Machine::sea_state_deg`), deg.
     sea_deg: f64,
+    /// `ID_TRACE`: the machine's state and status text as they change.
+    trace: Option<(thrusterd_core::machine::State, String)>,
 }
 
 impl Bounds {
     fn observe(&mut self, m: &Machine, t: f64, target: f64) {
+        if std::env::var_os("ID_TRACE").is_some() {
+            let now = (m.state(), m.status().text);
+            if self.trace.as_ref() != Some(&now) {
+                let share = m
+                    .last_estimate()
+                    .and_then(|e| e.dynamics.as_ref())
+                    .and_then(|d| d.imu_position)
+                    .map(|p| p.rel_err_share);
+                println!(
+                    "  {t:7.2} s {:?}: {} [IMU position's share of the acc bound {share:?}]",
+                    now.0, now.1
+                );
+                self.trace = Some(now);
+            }
+        }
         if let Some(x) = m.identification_excitation() {
             self.dither_share = x.dither_share();
         }
@@ -143,9 +160,11 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// overridden from the environment, every combination of the lists given, one row per seed and
 /// the mean. Knobs (comma lists; unset: the default): ID_NOISE (none|realistic|paper, default
 /// paper), ID_SEEDS (default 1-5), ID_HOLD_S, ID_DITHER, ID_DITHER_MAX, ID_BUDGET, ID_MIN_S,
-/// ID_MAX_S, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1), ID_WATER (still|current|moderate|rough: the
+/// ID_MAX_S, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1), ID_IV (0 never, 1 in a sea, 2 always: the thrust columns by
+/// instrumental variables), ID_MIN_SHARE, ID_WATER (still|current|moderate|rough: the
 /// water comes up after the first model, 20 s before the announcement), ID_WAVE_PART
-/// (force|torque: that part of the swell alone). The last column is the final estimate's
+/// (force|torque: that part of the swell alone), ID_TRACE (print the machine's state and status as they change), ID_SEGMENT
+/// (`estimator.segment_s`, one value), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
 /// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
@@ -190,6 +209,18 @@ pub(super) fn sweep_identification() {
     vary("ID_CARRY", if d.carry_over { 1.0 } else { 0.0 }, |c, v| {
         c.carry_over = v > 0.0
     });
+    // 0 never, 1 in a sea (the default), 2 always.
+    vary("ID_IV", 1.0, |c, v| {
+        use thrusterd_core::adaptation::identification::Instrument;
+        c.instrument = match v as u8 {
+            0 => Instrument::Never,
+            1 => Instrument::InASea,
+            _ => Instrument::Always,
+        }
+    });
+    vary("ID_MIN_SHARE", d.min_dither_share, |c, v| {
+        c.min_dither_share = v
+    });
     // Still water: no water comes up (and no 20 s hold before the announcement).
     let still = thruster_sim::disturbance::WaterPreset::Still;
     let water = super::water_from_env("ID_WATER")
@@ -215,7 +246,8 @@ pub(super) fn sweep_identification() {
         for cfg in &cfgs {
             println!(
                 "== noise {name} hold_s {} dither {} dither_max {} budget {} min_s {} max_s {} \
-                 carry_over {} se_scale {} focus {} others {} (stop target {target})",
+                 carry_over {} se_scale {} focus {} others {} instrument {:?} min_share {} \
+                 (stop target {target})",
                 cfg.hold_s,
                 cfg.dither,
                 cfg.dither_max,
@@ -226,6 +258,8 @@ pub(super) fn sweep_identification() {
                 cfg.carry_over_se_scale,
                 cfg.focus_gain,
                 cfg.focus_others,
+                cfg.instrument,
+                cfg.min_dither_share,
             );
             println!(
                 "{:>5} {:>6} {:>7} {:>7} {:>8} {:>8} {:>6} {:>6} {:>7} {:>7} source",
@@ -245,10 +279,22 @@ pub(super) fn sweep_identification() {
             for &seed in &seeds {
                 let mut b = Bounds::default();
                 // The defaults: the machine exactly as Run builds it.
-                let ident = (*cfg != d).then(|| cfg.clone());
-                let (_, r) = rotate_while_holding_in(noise, seed, ident, water.clone(), |m, s| {
-                    b.observe(m, s, target)
-                });
+                let vehicle_name =
+                    std::env::var("ID_VEHICLE").unwrap_or_else(|_| "amour5".to_string());
+                let mut run = Run::new(&vehicle_name, noise, seed);
+                let segment_s = env_list("ID_SEGMENT", &[]);
+                if *cfg != d || !segment_s.is_empty() {
+                    run.with_setup(|s| {
+                        s.identification = cfg.clone();
+                        if let Some(v) = segment_s.first() {
+                            s.estimator.segment_s = *v;
+                        }
+                    });
+                }
+                let (_, r) =
+                    rotate_while_holding_on(run, &vehicle(&vehicle_name), water.clone(), |m, s| {
+                        b.observe(m, s, target)
+                    });
                 let row = [
                     r.took_s,
                     r.err_rot,
