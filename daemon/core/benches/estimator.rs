@@ -246,6 +246,8 @@ fn bench(c: &mut Criterion) {
         let prior = thrusterd_core::estimator::dynamic::prior::DynamicPrior {
             b: nalgebra::DMatrix::from_element(6, n, 1.0),
             b_std_err: se,
+            spin_up_s: None,
+            imu_position_m: None,
         };
         let carried = dynamic.clone().with_prior(prior);
         c.bench_with_input(

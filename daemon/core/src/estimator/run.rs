@@ -311,6 +311,13 @@ impl Estimator {
         self
     }
 
+    /// The IMU taken where `estimator.imu_position_m` says, not learned (a fit under control
+    /// with no learned position to go by).
+    pub fn with_configured_imu_position(mut self) -> Self {
+        self.cfg.learn_imu_position = false;
+        self
+    }
+
     /// The IMU's position an earlier run found or was told (the model in force's), m: used
     /// as configured, not learned again. For runs under control, whose excitation the
     /// controller shapes and which keep no log to refit the velocity with.

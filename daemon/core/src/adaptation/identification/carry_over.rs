@@ -97,7 +97,12 @@ pub fn carried_over(
     if se.iter().all(|s| !s.is_finite()) {
         return None;
     }
-    Some(DynamicPrior { b, b_std_err: se })
+    Some(DynamicPrior {
+        b,
+        b_std_err: se,
+        spin_up_s: model.learned_spin_up_s(),
+        imu_position_m: model.imu_position_m().map(Into::into),
+    })
 }
 
 #[cfg(test)]

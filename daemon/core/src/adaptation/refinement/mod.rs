@@ -477,9 +477,11 @@ fn open_window(
     if let Some(lag_s) = model.learned_spin_up_s() {
         est = est.with_learned_lag(lag_s);
     }
-    if let Some(p) = model.imu_position_m() {
-        est = est.with_known_imu_position(p);
-    }
+    // Never learned again from closed-loop data (see the identification's hold).
+    est = match model.imu_position_m() {
+        Some(p) => est.with_known_imu_position(p),
+        None => est.with_configured_imu_position(),
+    };
     est.begin_closed_loop();
     Window {
         est,

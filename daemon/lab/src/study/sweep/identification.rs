@@ -35,13 +35,13 @@ impl Bounds {
         if std::env::var_os("ID_TRACE").is_some() {
             let now = (m.state(), m.status().text);
             if self.trace.as_ref() != Some(&now) {
-                let share = m
-                    .last_estimate()
-                    .and_then(|e| e.dynamics.as_ref())
-                    .and_then(|d| d.imu_position)
-                    .map(|p| p.rel_err_share);
+                let share = m.last_estimate().map(|e| {
+                    let p = e.dynamics.as_ref().and_then(|d| d.imu_position);
+                    (e.rel_err_acc, p.map(|p| (p.rel_err_share, p.position_m)))
+                });
                 println!(
-                    "  {t:7.2} s {:?}: {} [IMU position's share of the acc bound {share:?}]",
+                    "  {t:7.2} s {:?}: {} [acc bound, the IMU position's share of it, the \
+                     position: {share:?}]",
                     now.0, now.1
                 );
                 self.trace = Some(now);
