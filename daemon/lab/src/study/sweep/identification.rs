@@ -99,7 +99,9 @@ fn line(label: &str, v: &[f64; 7], t_rot: Option<f64>, t_acc: Option<f64>) -> St
 
 /// A measuring tool, not a check: on every vehicle file, noise-free, thruster K (CO_THRUSTER,
 /// default 0) turned 45 degrees about an axis across its direction and announced, with the
-/// carry-over on and off. Knobs: CO_NOISE (none|realistic|paper), CO_SEEDS.
+/// carry-over on and off. Knobs: CO_NOISE (none|realistic|paper), CO_SEEDS, CO_VEHICLES (a
+/// comma list of vehicle files; default all), CO_TRACE (print each run's machine state and
+/// status as they change).
 pub(super) fn carry_over_on_every_vehicle() {
     use nalgebra::Vector3;
     use thrusterd_core::machine::ThrusterChange;
@@ -113,7 +115,14 @@ pub(super) fn carry_over_on_every_vehicle() {
     println!(
         "{noise:?}, thruster {k} turned 45 deg; err_rot / err_acc vs truth, took, largest tilt"
     );
-    for name in VEHICLES {
+    let only: Option<Vec<String>> = std::env::var("CO_VEHICLES")
+        .ok()
+        .map(|v| v.split(',').map(|s| s.trim().to_string()).collect());
+    let trace = std::env::var_os("CO_TRACE").is_some();
+    for name in VEHICLES
+        .iter()
+        .filter(|n| only.as_ref().is_none_or(|o| o.iter().any(|x| x == *n)))
+    {
         for carry in [true, false] {
             let mut sum = [0.0; 4];
             for &seed in &seeds {
@@ -133,13 +142,22 @@ pub(super) fn carry_over_on_every_vehicle() {
                     Vector3::y()
                 };
                 let axis = d.cross(&across).normalize();
+                let mut last = None;
                 let r = run.announced_turn(
                     &v,
                     k,
                     axis.into(),
                     45.0,
                     ThrusterChange::Moved(k),
-                    |_, _| {},
+                    |m, t| {
+                        if trace {
+                            let now = (m.state(), m.status().text);
+                            if last.as_ref() != Some(&now) {
+                                println!("  seed {seed} {t:7.2} s {:?}: {}", now.0, now.1);
+                                last = Some(now);
+                            }
+                        }
+                    },
                 );
                 for (s, x) in sum
                     .iter_mut()
