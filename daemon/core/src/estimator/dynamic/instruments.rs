@@ -20,7 +20,7 @@ use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
-use super::segmented_ls::{SegmentSums, CLUSTERS};
+use super::segment_basis::{SegmentSums, CLUSTERS};
 use super::DynamicSolution;
 
 /// How far apart (in standard deviations of their difference) the instrumented and the
