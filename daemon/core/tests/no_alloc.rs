@@ -130,13 +130,24 @@ fn answering_a_sample_does_not_allocate() {
 /// only the once-per-second decisions (`estimator.segment_s`: the tick that hands out the
 /// solve job, and the tick its result is applied at, `machine.solve_budget_s` later) and a
 /// window's or run's start allocate; every other tick allocates nothing.
+/// The same with the thrust columns instrumented (`identification.instrument = "always"`:
+/// the instruments' sums, a ramp per segment, a least-squares twin).
 #[test]
 fn under_control_only_the_decisions_allocate() {
-    let mut m = Machine::new(MachineSetup {
+    use thrusterd_core::adaptation::identification::Instrument;
+    for instrument in [Instrument::InASea, Instrument::Always] {
+        under_control_with(instrument);
+    }
+}
+
+fn under_control_with(instrument: thrusterd_core::adaptation::identification::Instrument) {
+    let mut setup = MachineSetup {
         thrusters: 4,
         geometry: Some(four_thrusters()),
         ..MachineSetup::default()
-    });
+    };
+    setup.identification.instrument = instrument;
+    let mut m = Machine::new(setup);
     let mut k = 0;
     count(&mut m, &mut k, 10);
     m.on_request(Request::Hold).unwrap();
@@ -155,7 +166,7 @@ fn under_control_only_the_decisions_allocate() {
     // long the dither has run).
     assert!(
         identify <= 10,
-        "identifying: {identify} of 1000 ticks allocated"
+        "identifying ({instrument:?}): {identify} of 1000 ticks allocated"
     );
 }
 

@@ -102,12 +102,13 @@ pub struct IdentificationConfig {
     /// moved the held vehicle by more than `min_sea_state_deg` before the identification) or
     /// `always`. Measured (announced 45 deg turn of the first thruster, seeds 1-10): in
     /// moderate water AMOUR-5's error / bound is 2.1 / 2.7 (noise-free / realistic IMU) by
-    /// least squares and 1.33 / 1.00 instrumented. Why not always: the instrument learns only
-    /// from the dither's share of the commands, so in still water it costs time
-    /// (eight_vectored noise-free 21 s instead of 5 s; the paper's noise 15.6 s instead of
-    /// 11.4 s), and where the controller's share is small it costs accuracy (eight_vectored in
-    /// moderate water, dither 96 % of the commands: err_acc 0.042 against 0.025, error /
-    /// bound 1.22 against 0.96). docs/study.md, "Under control in moving water".
+    /// least squares and 1.33 / 1.24 instrumented. The instrumented fit is taken per row group
+    /// only where it and least squares disagree (`dynamic::instruments::choose`). Why not
+    /// always: in still water noise-free any difference is significant, and eight_vectored then
+    /// took 16 s instead of 5 s (0.047 off instead of 0.027); where the controller's share of
+    /// the commands is small it costs accuracy (eight_vectored in moderate water, the dither
+    /// 96 % of the commands: err_acc 0.037 against 0.026 mean, error / bound 1.08 against
+    /// 1.00). docs/study.md, "The dither as the thrust's instrument".
     pub instrument: Instrument,
 }
 

@@ -111,7 +111,7 @@ impl Instruments {
     }
 
     /// The open segment's centred sums (its intercept, and its ramp when the fit has one,
-    /// projected out), given the segment's own sums.
+    /// projected out), given the segment's own sums: a copy, for a solve.
     fn centred_open(&self, seg: &SegmentSums) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
         let b = &seg.basis;
         let rt = |i: usize| self.seg_rt.as_ref().map_or(0.0, |r| r[i]);
@@ -130,17 +130,34 @@ impl Instruments {
         (tx, tt, ty)
     }
 
-    /// The segment closes into cluster `slot`.
+    /// The segment closes into cluster `slot`. Centred in the open segment's own buffers, as
+    /// the least squares' sums are: this runs on the sample that closes a segment, which must
+    /// not allocate.
     pub(super) fn close_segment(&mut self, slot: usize, seg: &SegmentSums) {
         if seg.basis.rows() == 0.0 {
             return;
         }
-        let (tx, tt, ty) = self.centred_open(seg);
-        self.tx += &tx;
-        self.tt += &tt;
-        self.ty += &ty;
-        *Arc::make_mut(&mut self.cluster_tx[slot]) += &tx;
-        *Arc::make_mut(&mut self.cluster_ty[slot]) += &ty;
+        let b = &seg.basis;
+        let rx = |j: usize| seg.rx.map_or(0.0, |r| r[j]);
+        for i in 0..self.c {
+            let (ti, ri) = (self.seg_t[i], self.seg_rt.as_ref().map_or(0.0, |r| r[i]));
+            for j in 0..self.k {
+                self.seg_tx[(i, j)] -= b.explained(ti, ri, seg.x[j], rx(j));
+            }
+            for j in 0..self.c {
+                let rj = self.seg_rt.as_ref().map_or(0.0, |r| r[j]);
+                self.seg_tt[(i, j)] -= b.explained(ti, ri, self.seg_t[j], rj);
+            }
+            for a in 0..3 {
+                self.seg_ty[(i, a)] -= b.explained(ti, ri, seg.y[a], seg.ry[a]);
+            }
+        }
+        self.tx += &self.seg_tx;
+        self.tt += &self.seg_tt;
+        self.ty += &self.seg_ty;
+        // In place unless a solve job still holds this slot (then it is copied first).
+        *Arc::make_mut(&mut self.cluster_tx[slot]) += &self.seg_tx;
+        *Arc::make_mut(&mut self.cluster_ty[slot]) += &self.seg_ty;
         self.seg_tx.fill(0.0);
         self.seg_tt.fill(0.0);
         self.seg_ty.fill(0.0);

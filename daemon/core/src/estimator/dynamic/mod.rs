@@ -150,10 +150,12 @@ pub struct DynamicRun {
     /// Instruments for the thrust columns (`with_instruments`, under control).
     #[serde(default)]
     iv: Option<ThrustInstruments>,
-    /// With instruments, the same rows fitted by plain least squares too (rotation,
-    /// acceleration): `solve` takes the instrumented fit only where the two disagree.
+    /// With instruments, the rotation rows fitted by plain least squares too (the
+    /// instrumented ones have a ramp per segment, so their sums differ; the acceleration rows'
+    /// least-squares sums are the instrumented fit's own): `solve` takes the instrumented fit
+    /// only where the two disagree.
     #[serde(default)]
-    least_squares: Option<Box<[SegmentedLs; 2]>>,
+    rot_least_squares: Option<Box<SegmentedLs>>,
 }
 
 /// The thrust columns' instruments: per sample a value per thruster independent of the water
@@ -232,7 +234,7 @@ impl DynamicRun {
             log: None,
             last_command: u32::MAX,
             iv: None,
-            least_squares: None,
+            rot_least_squares: None,
         }
     }
 
@@ -246,7 +248,9 @@ impl DynamicRun {
     /// first sample.
     pub fn with_instruments(mut self) -> Self {
         let c = self.cols;
-        self.least_squares = Some(Box::new([self.rot.clone(), self.acc.clone()]));
+        // Its own cluster slots (a clone would share them, and the first write to each would
+        // copy it on the control thread).
+        self.rot_least_squares = Some(Box::new(SegmentedLs::new(self.rot.width())));
         self.rot = self.rot.with_instruments(c).with_ramp();
         self.acc = self.acc.with_instruments(c);
         let n = self.n;
@@ -498,9 +502,8 @@ impl DynamicRun {
             // A new segment: its own intercept, integrals from zero.
             self.rot.close_segment();
             self.acc.close_segment();
-            if let Some(ls) = self.least_squares.as_mut() {
-                ls[0].close_segment();
-                ls[1].close_segment();
+            if let Some(ls) = self.rot_least_squares.as_mut() {
+                ls.close_segment();
             }
             self.segment_start_s = t_s;
             self.integral.fill(0.0);
@@ -559,9 +562,8 @@ impl DynamicRun {
                 self.rot.add_instrumented(&self.integral, &iv.rot, gyro);
                 self.acc
                     .add_instrumented(&self.direct, &iv.acc, &nav.motion);
-                if let Some(ls) = self.least_squares.as_mut() {
-                    ls[0].add(&self.integral, gyro);
-                    ls[1].add(&self.direct, &nav.motion);
+                if let Some(ls) = self.rot_least_squares.as_mut() {
+                    ls.add(&self.integral, gyro);
                 }
             }
             None => {
@@ -597,8 +599,11 @@ impl DynamicRun {
             )
         };
         let instrumented = fit(&self.rot, &self.acc);
-        match &self.least_squares {
-            Some(ls) => instruments::choose(instrumented, fit(&ls[0], &ls[1]), self.n),
+        match &self.rot_least_squares {
+            Some(rot) => {
+                let least_squares = fit(rot, &self.acc.without_instruments());
+                instruments::choose(instrumented, least_squares, self.n)
+            }
             None => instrumented,
         }
     }

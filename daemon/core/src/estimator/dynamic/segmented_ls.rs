@@ -183,6 +183,15 @@ impl SegmentedLs {
         self.iv.is_some()
     }
 
+    /// The same rows fitted by least squares: a copy without the instruments (it keeps their
+    /// least-squares sums anyway), for a solve to compare with.
+    pub fn without_instruments(&self) -> SegmentedLs {
+        SegmentedLs {
+            iv: None,
+            ..self.clone()
+        }
+    }
+
     /// One row with the first columns' instruments `z` (as many as `with_instruments` said;
     /// without instruments, `z` is ignored).
     pub fn add_instrumented(&mut self, x: &[f64], z: &[f64], y: &Vector3<f64>) {
@@ -465,9 +474,7 @@ impl SegmentedLs {
         sigma: &[f64; 3],
     ) -> SegmentedSolution {
         if let Some(iv) = &self.iv {
-            let mut sol = self.solve_instrumented(iv, Some((priors, sigma)));
-            sol.clusters = base.clusters;
-            return sol;
+            return self.solve_instrumented(iv, Some((priors, sigma)));
         }
         let Normal { g, xy, open, .. } = self.normal_equations();
         let k = self.k;

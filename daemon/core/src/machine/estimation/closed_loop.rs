@@ -235,8 +235,10 @@ impl EstimationRun {
             .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
         c.excitation.push(&control[..k], command);
         c.sent[..k].copy_from_slice(command);
-        c.dither
-            .instruments(setup.estimator.reverse_ratio, &mut c.sent_dither[..k]);
+        if instrumented {
+            c.dither
+                .instruments(setup.estimator.reverse_ratio, &mut c.sent_dither[..k]);
+        }
         if t_ns < c.next_decision_ns || self.solver.waiting_for(Purpose::Interval) {
             return ClosedStep::Exciting;
         }

@@ -95,11 +95,16 @@ impl Machine {
             ),
             _ => format!("identification limit reached after {seconds:.1} s"),
         };
-        match instrumented {
-            [true, true] => why.push_str(" with the dither as the thrust's instrument (the water moving the held vehicle)"),
-            [true, false] => why.push_str(" with the dither as the thrust's instrument in the rotation rows (the water moving the held vehicle)"),
-            [false, true] => why.push_str(" with the dither as the thrust's instrument in the acceleration rows (the water moving the held vehicle)"),
-            [false, false] => {}
+        let rows = match instrumented {
+            [true, true] => Some(""),
+            [true, false] => Some(" in the rotation rows"),
+            [false, true] => Some(" in the acceleration rows"),
+            [false, false] => None,
+        };
+        if let Some(rows) = rows {
+            why.push_str(&format!(
+                " with the dither as the thrust's instrument{rows} (the water moving the held vehicle)"
+            ));
         }
         // The controller's answer to the water was most of what the thrusters did: the fit
         // takes it for thrust (issue 32: rough water, 57 % off under a 14 % bound). Only when
