@@ -389,6 +389,21 @@ impl DaemonConfig {
                 Range::above(0.0),
             ),
             (
+                "machine.lost_hold_deg".into(),
+                m.lost_hold_deg,
+                Range {
+                    lo: 0.0,
+                    hi: 180.0,
+                    lo_open: true,
+                    hi_open: false,
+                },
+            ),
+            (
+                "machine.lost_hold_s".into(),
+                m.lost_hold_s,
+                Range::at_least(0.0),
+            ),
+            (
                 "machine.settle_quiet_s".into(),
                 m.settle_quiet_s,
                 Range::at_least(0.0),

@@ -446,13 +446,16 @@ fn after_an_announced_change_a_fast_thrusters_lag_is_kept() {
 }
 
 /// The other side of the refusal above: a vehicle that tumbles in still water on the nominal
-/// model of its announced geometry (`aligned`, its first thruster turned 45 deg) leaves no
-/// room for dither either (the dither faded out: share 0.003, measured), but nothing is known
-/// to have moved it while it was held (announced 3 s after its first model, still levelling),
-/// so the fit on the controller's fight is swapped in, and it is the model the vehicle needs:
-/// measured 0.076 / 0.033 off the truth after 8 s (the nominal model is 0.99 off). Refusing on
-/// the share alone kept the nominal model and the vehicle tumbling. Announced after 20 s of
-/// holding instead: sea state 0.72 deg RMS, share 0.60, 0.018 / 0.013 after 5 s.
+/// model of its announced geometry leaves no room for dither either, but nothing is known to
+/// have moved it while it was held (announced 3 s after its first model, still levelling), so
+/// the fit on the controller's fight is swapped in, and it is the model the vehicle needs.
+/// The tumble: `aligned`, its first thruster turned 45 deg and announced with its left-handed
+/// L declared right-handed (a mistake in the declaration: the harness made it for every
+/// `aligned` announcement until 2026-11-30, which is how this case was found). Measured,
+/// noise-free: the dither faded out (share 0.003), 0.076 / 0.033 off the truth after 8 s (the
+/// nominal model is 0.99 off). Refusing on the share alone kept the nominal model and the
+/// vehicle tumbling. Announced after 20 s of holding instead: sea state 0.72 deg RMS, share
+/// 0.60, 0.018 / 0.013 after 5 s.
 #[test]
 fn in_still_water_a_tumbling_vehicle_keeps_the_model_its_fight_made() {
     use nalgebra::Vector3;
@@ -472,9 +475,13 @@ fn in_still_water_a_tumbling_vehicle_keeps_the_model_its_fight_made() {
         Vector3::y()
     };
     let axis = d.cross(&across).normalize();
+    // What is declared: L pushing along its direction.
+    let mut declared = v.clone();
+    let l = declared.thrusters.iter().position(|t| t.reversed).unwrap();
+    declared.thrusters[l].reversed = false;
     let mut share = None;
     let r = run.announced_turn(
-        &v,
+        &declared,
         0,
         axis.into(),
         45.0,
@@ -486,6 +493,7 @@ fn in_still_water_a_tumbling_vehicle_keeps_the_model_its_fight_made() {
         },
     );
     let share = share.expect("an identification ran");
+    println!("share {share:.3}: {r:?}");
     assert!(share < 0.5, "the dither was faded out: share {share}");
     assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
     assert!(r.err_rot < 0.15 && r.err_acc < 0.1, "{r:?}");

@@ -46,6 +46,8 @@ fn run_at(volts: f64, reported: Option<f64>, power: f64) -> Run {
     // would ever show its line).
     setup.supply.sag_prior_ohm = 0.0;
     run.machine = Machine::new(setup);
+    // Told once, here, not by the harness's driver-like reports.
+    run.supply_report_ns = None;
     run.machine.on_supply(reported);
     run
 }
@@ -133,6 +135,8 @@ fn hold_while_draining(
     setup.estimator.initial_power = 0.6;
     setup.estimator.max_power = 0.6;
     r.machine = Machine::new(setup);
+    // Told here, every sample or never, not by the harness's driver-like reports.
+    r.supply_report_ns = None;
     r.machine.on_supply(Some(r.sim.supply_voltage_v()));
     let v_start = r.sim.supply_voltage_v();
     let b0 = learned(&mut r);

@@ -91,6 +91,17 @@ pub struct MachineConfig {
     /// change test's noise-free detection moved from 3.8 s to the window's 6.5 s, through the
     /// vehicle's slightly different path). In (0, 1].
     pub solve_budget_s: f64,
+    /// While the daemon controls, an attitude error (on the axes the model actuates) whose mean
+    /// over the last `lost_hold_s` is beyond `lost_hold_deg` means the model in force does not
+    /// hold the vehicle: thrusters neutral, and (with `monitor.action = "estimate"`) an
+    /// estimation from rest, which needs no model; lost again before an operator's estimate or
+    /// hold, or a reconfiguration, the thrusters stay neutral. Defaults 30 deg, 10 s (0 s:
+    /// off). Why: every other check judges a model only while the vehicle is held, so a wrong
+    /// declared geometry was held 36-148 deg off its setpoint for good (`machine::hold_watch`).
+    /// A 100 deg heading error after the pulses is undone in 3-5 s; the limit is not a
+    /// manoeuvre's.
+    pub lost_hold_deg: f64,
+    pub lost_hold_s: f64,
 }
 
 impl Default for MachineConfig {
@@ -113,6 +124,8 @@ impl Default for MachineConfig {
             recover_samples: 20,
             deadband: 0.0,
             solve_budget_s: 0.02,
+            lost_hold_deg: 30.0,
+            lost_hold_s: 10.0,
         }
     }
 }

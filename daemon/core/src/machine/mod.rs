@@ -11,6 +11,8 @@
 //! - `models`: the model slot (the model in force, the previous one, the per-geometry cache);
 //! - `estimation`: one estimation run (noise at rest, pulses and pauses, the candidate), its
 //!   solves handed out as jobs with a due time (`crate::solve`);
+//! - `hold_watch`: whether the model in force holds the vehicle at all (the error beyond a
+//!   limit for too long);
 //! - `state_machine`: the machine itself (routing, state changes, faults, levelling, control);
 //! - `telemetry`: what the machine is doing, one snapshot per sample, for the `telemetry` topic;
 //! - `checkpoint`: the whole state as bytes and back (a late recording's replay starts there).
@@ -18,6 +20,7 @@
 mod checkpoint;
 mod config;
 mod estimation;
+mod hold_watch;
 mod models;
 mod state_machine;
 mod telemetry;

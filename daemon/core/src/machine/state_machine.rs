@@ -10,6 +10,7 @@ use thruster_protocol::MAX_THRUSTERS;
 use super::config::{MachineSetup, ReconfigPolicy};
 use super::estimation::ESTIMATION;
 use super::estimation::{ClosedStep, EstimationRun, IdleRest, Motion, PulseStep, MIN_REST_SAMPLES};
+use super::hold_watch::{actuated_error_deg, HoldLost, HoldWatch, Settling};
 use super::models::ModelSlot;
 use super::types::{
     finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
@@ -95,6 +96,17 @@ pub struct Machine {
     /// command inside the machine is referred, only the outgoing one is carried to the
     /// present voltage (`crate::supply`).
     supply: Supply,
+    /// How long the vehicle has been too far from its setpoint (`machine.lost_hold_*`).
+    #[serde(default)]
+    hold_watch: HoldWatch,
+    /// The hold was lost once and an estimation from rest followed: lost again before an
+    /// operator's estimate or hold, or a reconfiguration, the thrusters stay neutral (no
+    /// estimation loop on a vehicle that cannot be held).
+    #[serde(default)]
+    hold_lost_once: bool,
+    /// Idle after a lost hold, waiting for the vehicle to settle before estimating from rest.
+    #[serde(default)]
+    settling: Option<Settling>,
 }
 
 /// What status says while idle with samples coming and nothing asked.
@@ -130,6 +142,9 @@ impl Machine {
             last_desired: [0.0; 6],
             output_block: None,
             supply: Supply::new(setup.supply.clone()),
+            hold_watch: HoldWatch::default(),
+            hold_lost_once: false,
+            settling: None,
             setup,
         };
         m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);
@@ -391,6 +406,9 @@ impl Machine {
                     let m = self.motion(s, &gyro, &accel);
                     self.idle_rest.push(s.t_ns, &m, self.setup.machine.noise_s);
                 }
+                if self.settling.is_some() {
+                    self.await_settled(s.t_ns);
+                }
                 Command::neutral(self.n)
             }
             State::Solve => Command::neutral(self.n),
@@ -571,6 +589,11 @@ impl Machine {
         if to != State::MeasureNoise {
             self.levelling = None;
         }
+        // Leaving Idle ends the wait for the vehicle to settle (so do an operator's request
+        // and a reconfiguration: `on_request`, `on_reconfig`).
+        if to != State::Idle {
+            self.settling = None;
+        }
         if let Some(t) = phase_start {
             self.phase_start_ns = t;
         }
@@ -578,6 +601,10 @@ impl Machine {
             // Control (re)starts: judge the model on fresh data only.
             self.monitor.reset(self.n);
             self.refiner.reset();
+        }
+        if !matches!(to, State::Active | State::Identify) {
+            // Not controlling: a later hold is a new one (Active <-> Identify is one hold).
+            self.hold_watch.reset();
         }
         if let (true, Some(why)) = (from != to, announce) {
             self.events.push(Event::StateChanged {

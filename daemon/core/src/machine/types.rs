@@ -106,6 +106,9 @@ pub enum Event {
     ModelRejected(String),
     /// While controlling, the thrusters stopped doing what the model says (see `monitor`).
     MismatchDetected(String),
+    /// While controlling, the vehicle stayed beyond `machine.lost_hold_deg` of its setpoint
+    /// for `machine.lost_hold_s`: the model in force does not hold it (see `hold_watch`).
+    HoldLost(String),
     StateChanged {
         from: State,
         to: State,

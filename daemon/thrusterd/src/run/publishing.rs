@@ -85,6 +85,7 @@ impl Daemon {
                 Event::ModelDropped(why) => warn!("model dropped: {why}"),
                 Event::ModelRejected(why) => warn!("model rejected, old one kept: {why}"),
                 Event::MismatchDetected(why) => warn!("{why}"),
+                Event::HoldLost(why) => warn!("{why}"),
                 Event::StateChanged { from, to, why } => {
                     info!("{} -> {}: {why}", from.name(), to.name());
                     self.record_intent(to);

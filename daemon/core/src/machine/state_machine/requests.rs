@@ -6,6 +6,8 @@ use super::*;
 
 impl Machine {
     pub fn on_request(&mut self, req: Request) -> Result<String, Refused> {
+        // The operator decides now: no estimation from rest starts on its own after this.
+        self.settling = None;
         match req {
             Request::Estimate => {
                 if self.samples == 0 {
@@ -28,6 +30,7 @@ impl Machine {
                 }
                 let t = self.last_t_ns.unwrap_or(0);
                 self.stopped = false;
+                self.hold_lost_once = false;
                 self.start_estimation(t, "estimate requested");
                 Ok(format!("estimating {} thrusters", self.n))
             }
@@ -60,6 +63,7 @@ impl Machine {
                 }
                 self.run.stop();
                 self.stopped = false;
+                self.hold_lost_once = false;
                 self.target = None;
                 self.controller.reset();
                 self.transition(State::Active, "holding attitude");
@@ -157,6 +161,8 @@ impl Machine {
         let t = self.last_t_ns.unwrap_or(0);
         // The vehicle was changed, so handled: its rest must be taken after the change.
         self.idle_rest.clear();
+        self.hold_lost_once = false;
+        self.settling = None;
         // After an emergency stop a reconfiguration swaps models but drives no thruster.
         let mut estimate =
             self.setup.machine.on_reconfig == ReconfigPolicy::Estimate && !self.stopped;

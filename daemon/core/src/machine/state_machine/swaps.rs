@@ -60,6 +60,7 @@ impl Machine {
             Ok(installed) => {
                 self.monitor.reset(self.n);
                 self.refiner.reset();
+                self.hold_watch.reset();
                 self.events.push(Event::ModelSwapped(Box::new(installed)));
                 Ok(())
             }

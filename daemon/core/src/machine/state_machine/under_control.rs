@@ -62,6 +62,10 @@ impl Machine {
             &mut cmd.thrust[..n],
         );
         finish(&mut cmd, self.setup.machine.deadband);
+        if let Some(lost) = self.watch_hold(s.t_ns, &attitude, &target.attitude) {
+            self.on_hold_lost(s.t_ns, lost);
+            return Command::neutral(self.n);
+        }
         match step {
             // The text stays the transition's (why the identification began) until the
             // first decision: a status reader must be able to see it.
@@ -232,6 +236,10 @@ impl Machine {
             &cmd.thrust[..n],
         );
         finish(&mut cmd, self.setup.machine.deadband);
+        if let Some(lost) = self.watch_hold(s.t_ns, &attitude, &target.attitude) {
+            self.on_hold_lost(s.t_ns, lost);
+            return Command::neutral(self.n);
+        }
         if let Some(m) = mismatch {
             self.on_mismatch(s.t_ns, m.to_string(), ThrusterChange::Unknown);
         } else if let Some(v) = verdict.filter(|v| v.changed) {
@@ -240,6 +248,77 @@ impl Machine {
             self.install_refined(fused.model);
         }
         cmd
+    }
+
+    /// This control sample's error on the axes the model actuates, into the hold watch.
+    fn watch_hold(
+        &mut self,
+        t_ns: u64,
+        attitude: &UnitQuaternion<f64>,
+        target: &UnitQuaternion<f64>,
+    ) -> Option<HoldLost> {
+        let actuated = self.models.current()?.actuated;
+        let m = &self.setup.machine;
+        let err_deg = actuated_error_deg(attitude, target, actuated);
+        self.hold_watch
+            .observe(t_ns, err_deg, m.lost_hold_deg, m.lost_hold_s)
+    }
+
+    /// The model in force does not hold the vehicle (`hold_watch`): thrusters neutral, so the
+    /// vehicle rights itself on its restoring moment, then an estimation from rest, which
+    /// needs no model (the identification under control does: it dithers on top of it).
+    /// Lost again before an operator's estimate or hold, or a reconfiguration, or with the
+    /// monitor told not to re-estimate on its own: neutral, idle.
+    fn on_hold_lost(&mut self, t_ns: u64, lost: HoldLost) {
+        self.run.stop();
+        self.controller.reset();
+        self.hold_watch.reset();
+        let m = &self.setup.machine;
+        let what = format!(
+            "the vehicle was {:.0} deg from its setpoint on average over {:.0} s \
+             (machine.lost_hold_deg {:.0}, lost_hold_s): the model in force does not hold it (a thruster \
+             declared reversed, misplaced or turned?)",
+            lost.err_deg, lost.for_s, m.lost_hold_deg
+        );
+        self.events.push(Event::HoldLost(what.clone()));
+        self.phase_start_ns = t_ns;
+        let estimate = self.monitor.action() == MismatchAction::Estimate;
+        if self.hold_lost_once || !estimate {
+            let why = if self.hold_lost_once {
+                "lost again"
+            } else {
+                "monitor.action is not \"estimate\""
+            };
+            self.transition(
+                State::Idle,
+                &format!("{what}; {why}: thrusters neutral until an estimate or hold request"),
+            );
+            return;
+        }
+        self.hold_lost_once = true;
+        self.transition(
+            State::Idle,
+            &format!("{what}: thrusters neutral; estimating from rest once the vehicle settles"),
+        );
+        self.settling = Some(Settling::new(t_ns));
+    }
+
+    /// Idle after a lost hold, thrusters neutral: the estimation from rest starts once the
+    /// vehicle has settled (`hold_watch::Settling`).
+    pub(super) fn await_settled(&mut self, t_ns: u64) {
+        let attitude = self.attitude.attitude();
+        let Some(waited_s) = self
+            .settling
+            .as_mut()
+            .and_then(|s| s.observe(t_ns, &attitude))
+        else {
+            return;
+        };
+        self.settling = None;
+        let why = format!(
+            "the hold was lost; the vehicle settled with the thrusters neutral in {waited_s:.1} s"
+        );
+        self.start_estimation(t_ns, &why);
     }
 
     /// The monitor (or the refinement, which names the thruster: `change`) found the

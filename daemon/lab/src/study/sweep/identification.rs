@@ -182,7 +182,9 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// instrumental variables), ID_MIN_SHARE, ID_WATER (still|current|moderate|rough: the
 /// water comes up after the first model, 20 s before the announcement), ID_WAVE_PART
 /// (force|torque: that part of the swell alone), ID_TRACE (print the machine's state and status as they change), ID_SEGMENT
-/// (`estimator.segment_s`, one value), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
+/// (`estimator.segment_s`, one value), ID_LINEARIZE (0/1: `[supply] linearize`, one value; default as
+/// the operator configures the vehicle, `Run`), ID_DEADBAND (`machine.deadband`, one value: a
+/// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
 /// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
@@ -301,11 +303,23 @@ pub(super) fn sweep_identification() {
                     std::env::var("ID_VEHICLE").unwrap_or_else(|_| "amour5".to_string());
                 let mut run = Run::new(&vehicle_name, noise, seed);
                 let segment_s = env_list("ID_SEGMENT", &[]);
-                if *cfg != d || !segment_s.is_empty() {
+                let linearize: Vec<f64> = env_list("ID_LINEARIZE", &[]);
+                let deadband: Vec<f64> = env_list("ID_DEADBAND", &[]);
+                if *cfg != d
+                    || !segment_s.is_empty()
+                    || !linearize.is_empty()
+                    || !deadband.is_empty()
+                {
                     run.with_setup(|s| {
                         s.identification = cfg.clone();
                         if let Some(v) = segment_s.first() {
                             s.estimator.segment_s = *v;
+                        }
+                        if let Some(v) = linearize.first() {
+                            s.supply.linearize = *v > 0.0;
+                        }
+                        if let Some(v) = deadband.first() {
+                            s.machine.deadband = *v;
                         }
                     });
                 }

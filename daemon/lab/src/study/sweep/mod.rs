@@ -11,6 +11,7 @@ use clap::Args;
 mod detection_bound;
 mod estimation_sweeps;
 mod identification;
+mod lost_hold;
 mod refinement;
 mod refinement_update;
 mod time_to_model;
@@ -46,6 +47,12 @@ pub const SWEEPS: &[Sweep] = &[
         knobs: "CO_*",
         about: "every vehicle, a thruster turned 45 deg and announced, carry-over on and off",
         run: identification::carry_over_on_every_vehicle,
+    },
+    Sweep {
+        name: "lost_hold_soak",
+        knobs: "LH_*",
+        about: "every vehicle and water, pitch steps: does the hold watch fire on a held vehicle",
+        run: lost_hold::lost_hold_soak,
     },
     Sweep {
         name: "sweep_identification",

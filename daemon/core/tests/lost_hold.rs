@@ -1,0 +1,180 @@
+//! A model that does not hold the vehicle (`machine.lost_hold_*`, `machine::hold_watch`), on
+//! the simulator: the `aligned` vehicle (five thrusters along x, L a left-handed screw) has
+//! its front thruster T turned 45 deg about z, and the operator's declaration of the new
+//! geometry names L as remounted and declares it right-handed by mistake. The nominal model of
+//! that declaration pushes L the wrong way and the carried-over prior has no column for it:
+//! yaw runs away and the identification under control dithers on a tumbling vehicle.
+//!
+//! Without the watch (seeds 1-5, realistic IMU, 120 s): seed 1 held 40 deg off its setpoint on
+//! the nominal model (0.99 off) for good, status "Active"; seed 5 swapped in a model 0.47 /
+//! 0.17 off. With it: thrusters neutral, the vehicle rights itself, an estimation from rest
+//! learns the vehicle as it is, and it is held again.
+
+use nalgebra::{Unit, UnitQuaternion, Vector3};
+use thruster_sim::NoisePreset;
+use thrusterd_core::machine::{Event, MachineSetup, Reconfig, State, ThrusterChange};
+use thrusterd_core::model::ModelSource;
+
+mod common;
+use common::{geometry, rel_err, vehicle, Run};
+
+/// What the run did after the wrong announcement.
+struct Outcome {
+    /// Vehicle time of the first `HoldLost` event after the announcement, s.
+    lost_at_s: Option<f64>,
+    /// Largest angle to the setpoint over the last 10 s, deg.
+    last_err_deg: f64,
+    /// The state and the model's source at the end.
+    state: State,
+    source: ModelSource,
+    err_rot: f64,
+    err_acc: f64,
+    /// `HoldLost` events in the whole run.
+    lost_events: usize,
+    /// Vehicle time of the first estimated model swapped in, s after the declaration.
+    first_model_s: Option<f64>,
+}
+
+fn wrongly_declared(seed: u64, lost_hold_s: f64, run_s: f64) -> Outcome {
+    let v = vehicle("aligned");
+    let mut run = Run::new("aligned", NoisePreset::Realistic, seed);
+    run.with_setup(|s: &mut MachineSetup| s.machine.lost_hold_s = lost_hold_s);
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(3.0);
+    assert_eq!(run.machine.state(), State::Active);
+    let axis = [0.0, 0.0, 1.0];
+    run.sim
+        .apply(&thruster_sim::Action::Rotate {
+            thruster: "T".into(),
+            axis,
+            angle_deg: 45.0,
+        })
+        .unwrap();
+    let mut declared = geometry(&v);
+    let r = UnitQuaternion::from_axis_angle(
+        &Unit::new_normalize(Vector3::from(axis)),
+        45f64.to_radians(),
+    );
+    declared.directions[0] = (r * Vector3::from(declared.directions[0])).into();
+    // The mistake: L is a left-handed screw (`reversed` in the vehicle file), declared as
+    // pushing along its direction.
+    let l = v.thrusters.iter().position(|t| t.name == "L").unwrap();
+    assert!(v.thrusters[l].reversed);
+    declared.directions[l] = declared.directions[l].map(|d| -d);
+    // What came before the declaration is not this test's.
+    run.machine.take_events();
+    run.machine.on_reconfig(Reconfig {
+        count: v.thrusters.len(),
+        geometry: Some(declared),
+        change: ThrusterChange::Moved(l),
+        what: "front thruster turned".into(),
+    });
+    let start = run.sim.time_s();
+    let (mut lost_at_s, mut lost_events, mut last_err_deg) = (None, 0, 0.0f64);
+    let mut first_model_s = None;
+    let mut last_text = String::new();
+    while run.sim.time_s() - start < run_s {
+        run.tick();
+        let st = run.machine.status().text;
+        if std::env::var_os("LH_TRACE").is_some() && st != last_text {
+            let q = run.sim.attitude();
+            let down = q.inverse() * Vector3::z();
+            println!(
+                "  {:6.2} tilt {:5.1} {:?}: {}",
+                run.sim.time_s() - start,
+                down.z.clamp(-1.0, 1.0).acos().to_degrees(),
+                run.machine.state(),
+                st
+            );
+            last_text = st;
+        }
+        for e in run.machine.take_events() {
+            match e {
+                Event::HoldLost(why) => {
+                    assert!(why.contains("does not hold it"), "{why}");
+                    lost_events += 1;
+                    lost_at_s.get_or_insert(run.sim.time_s() - start);
+                }
+                Event::ModelSwapped(m) if m.source == ModelSource::Estimated => {
+                    first_model_s.get_or_insert(run.sim.time_s() - start);
+                }
+                _ => {}
+            }
+        }
+        if run.sim.time_s() - start > run_s - 10.0 {
+            // The angle to level (the setpoint held after an estimation is level at the
+            // heading it ends at; before the announcement, level at the start's heading).
+            let q = run.sim.attitude();
+            let down = q.inverse() * Vector3::z();
+            let tilt = down.z.clamp(-1.0, 1.0).acos().to_degrees();
+            last_err_deg = last_err_deg.max(tilt);
+        }
+    }
+    let model = run.machine.model().unwrap().clone();
+    let truth = run.truth();
+    Outcome {
+        lost_at_s,
+        last_err_deg,
+        state: run.machine.state(),
+        source: model.source,
+        err_rot: rel_err(&model.effectiveness, &truth, 0),
+        err_acc: rel_err(&model.effectiveness, &truth, 3),
+        lost_events,
+        first_model_s,
+    }
+}
+
+/// Measured (realistic IMU, 120 s after the declaration): with the watch, every seed held
+/// within 1.8 deg at the end on a model 0.003-0.007 / 0.008-0.015 off the truth, four of five
+/// after losing the hold at 10.0 s (their first learned model 21.7-23.2 s after the
+/// declaration); seed 4 identified under control in 5 s without losing it. Without: seed 1 40
+/// deg off on the nominal model.
+#[test]
+fn a_wrongly_declared_thruster_is_caught_and_the_vehicle_learned_from_rest() {
+    let mut lost = 0;
+    for seed in 1..=5 {
+        let o = wrongly_declared(seed, 10.0, 120.0);
+        println!(
+            "seed {seed}: lost at {:?} s ({} events), first model at {:?} s, end {:?} {:?}, \
+             tilt over the last 10 s {:.1} deg, model {:.3} / {:.3}",
+            o.lost_at_s,
+            o.lost_events,
+            o.first_model_s,
+            o.state,
+            o.source,
+            o.last_err_deg,
+            o.err_rot,
+            o.err_acc
+        );
+        assert_eq!(o.state, State::Active, "seed {seed}");
+        assert_eq!(o.source, ModelSource::Estimated, "seed {seed}");
+        assert!(o.err_rot < 0.03 && o.err_acc < 0.05, "seed {seed}");
+        assert!(
+            o.last_err_deg < 5.0,
+            "seed {seed}: {:.1} deg",
+            o.last_err_deg
+        );
+        assert!(
+            o.lost_events <= 1,
+            "seed {seed}: lost {} times",
+            o.lost_events
+        );
+        if o.lost_events == 1 {
+            // Lost at 10 s, settled, estimated from rest.
+            assert!(o.first_model_s.is_some_and(|t| t < 30.0), "seed {seed}");
+        }
+        lost += o.lost_events;
+    }
+    assert!(lost >= 3, "the hold was lost on {lost} of 5 seeds");
+    // Without the watch the first seed is held 40 deg off on the nominal model, for good.
+    let o = wrongly_declared(1, 0.0, 120.0);
+    println!(
+        "off, seed 1: end {:?} {:?}, tilt over the last 10 s {:.1} deg, model {:.3} / {:.3}",
+        o.state, o.source, o.last_err_deg, o.err_rot, o.err_acc
+    );
+    assert_eq!(o.lost_events, 0);
+    assert_eq!(o.state, State::Active);
+    assert!(o.last_err_deg > 20.0, "{:.1} deg", o.last_err_deg);
+    assert!(o.err_rot > 0.5, "{:.3}", o.err_rot);
+}

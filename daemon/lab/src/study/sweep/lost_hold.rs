@@ -1,0 +1,115 @@
+//! Does the hold watch (`machine.lost_hold_*`) ever fire on a vehicle that is held? The false
+//! alarm side of `daemon/core/tests/lost_hold.rs`.
+
+use nalgebra::UnitQuaternion;
+use thruster_inprocess::run::{env_list, Run, VEHICLES};
+use thruster_sim::disturbance::WaterPreset;
+use thruster_sim::NoisePreset;
+use thrusterd_core::machine::{Event, State};
+
+/// A measuring tool, not a check: every vehicle file (LH_VEHICLES, a comma list; default all),
+/// in each water (LH_WATER, default still,current,moderate,rough; the water comes up after the
+/// first model), at LH_NOISE (none|realistic|paper, default realistic), seeds LH_SEEDS (default
+/// 1,2), flies +-20 deg pitch steps every 4 s for LH_MINUTES (default 5) with every check on
+/// (a mismatch re-estimates, as shipped). Per run: the hold-lost events, the mismatches, the
+/// largest 10 s mean of the true angle to the setpoint while the machine controlled (the
+/// watch's quantity, on all axes: a bound on what it saw) and the time not in Active.
+///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
+pub(super) fn lost_hold_soak() {
+    let minutes: f64 = std::env::var("LH_MINUTES").map_or(5.0, |v| v.parse().unwrap());
+    let seeds: Vec<u64> = env_list("LH_SEEDS", &[1, 2]);
+    let noise = match std::env::var("LH_NOISE").as_deref() {
+        Ok("none") => NoisePreset::None,
+        Ok("paper") => NoisePreset::Paper,
+        _ => NoisePreset::Realistic,
+    };
+    let vehicles: Vec<String> = std::env::var("LH_VEHICLES").map_or_else(
+        |_| VEHICLES.iter().map(|s| s.to_string()).collect(),
+        |v| v.split(',').map(|s| s.trim().to_string()).collect(),
+    );
+    let waters: Vec<WaterPreset> = std::env::var("LH_WATER")
+        .unwrap_or_else(|_| "still,current,moderate,rough".into())
+        .split(',')
+        .map(|w| {
+            use clap::ValueEnum;
+            WaterPreset::from_str(w.trim(), true).unwrap_or_else(|e| panic!("LH_WATER: {e}"))
+        })
+        .collect();
+    println!("{noise:?}, {minutes} min of +-20 deg pitch steps every 4 s");
+    println!(
+        "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12}",
+        "vehicle", "water", "seed", "lost", "mismatches", "max 10s mean", "not Active s"
+    );
+    let mut total_lost = 0;
+    for name in &vehicles {
+        for water in &waters {
+            for &seed in &seeds {
+                let mut run = Run::new(name, noise, seed);
+                run.run_for(1.0);
+                run.estimate();
+                run.machine.take_events();
+                if *water != WaterPreset::Still {
+                    run.sim.set_disturbance(water.disturbance()).unwrap();
+                }
+                let (lost, mismatches, worst, away) = fly(&mut run, minutes * 60.0);
+                total_lost += lost;
+                println!(
+                    "{name:>15} {:>9} {seed:>5} {lost:>5} {mismatches:>10} {worst:>13.1} {away:>12.1}",
+                    format!("{water:?}").to_lowercase()
+                );
+            }
+        }
+    }
+    println!("hold lost {total_lost} times in all");
+}
+
+/// Pitch steps for `seconds`: (hold-lost events, mismatches, largest 10 s mean angle to the
+/// setpoint while controlling (deg), vehicle time outside Active (s)).
+fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
+    let yaw = run.sim.roll_pitch_yaw()[2];
+    let depth = run.sim.position_ned().z;
+    let start = run.sim.time_s();
+    let (mut step, mut lost, mut mismatches, mut away) = (0, 0, 0, 0.0);
+    let mut sp = UnitQuaternion::identity();
+    // 10 s of 1 s block means of the angle to the setpoint.
+    let (mut blocks, mut sum, mut k, mut worst) = (Vec::<f64>::new(), 0.0, 0u32, 0.0f64);
+    let dt = 1.0 / 200.0;
+    while run.sim.time_s() - start < seconds {
+        let t = run.sim.time_s() - start;
+        if t >= 4.0 * step as f64 {
+            let p: f64 = [20.0, -20.0][step % 2];
+            sp = UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw);
+            run.machine.on_setpoint(sp, Some(depth));
+            step += 1;
+        }
+        run.tick();
+        for e in run.machine.take_events() {
+            match e {
+                Event::HoldLost(why) => {
+                    println!("    {t:.1} s: {why}");
+                    lost += 1;
+                }
+                Event::MismatchDetected(_) => mismatches += 1,
+                _ => {}
+            }
+        }
+        if matches!(run.machine.state(), State::Active | State::Identify) {
+            sum += run.sim.attitude().angle_to(&sp).to_degrees();
+            k += 1;
+            if k >= 200 {
+                blocks.push(sum / f64::from(k));
+                (sum, k) = (0.0, 0);
+                if blocks.len() > 10 {
+                    blocks.remove(0);
+                }
+                if blocks.len() == 10 {
+                    worst = worst.max(blocks.iter().sum::<f64>() / 10.0);
+                }
+            }
+        } else {
+            away += dt;
+            (blocks, sum, k) = (Vec::new(), 0.0, 0);
+        }
+    }
+    (lost, mismatches, worst, away)
+}
