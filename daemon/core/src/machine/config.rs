@@ -124,7 +124,7 @@ impl Default for MachineConfig {
             recover_samples: 20,
             deadband: 0.0,
             solve_budget_s: 0.02,
-            lost_hold_deg: 30.0,
+            lost_hold_deg: 45.0,
             lost_hold_s: 10.0,
         }
     }

@@ -30,6 +30,7 @@ pub use crate::solve::{SolveJob, SolveResult, SolverMode, MAX_OUTSTANDING};
 pub use checkpoint::{CheckpointError, FORMAT as CHECKPOINT_FORMAT};
 pub use config::{MachineConfig, MachineSetup, ReconfigPolicy};
 pub use estimation::Excitation;
+pub use hold_watch::actuated_error_deg;
 pub use state_machine::Machine;
 pub use telemetry::{Progress, TelemetrySnapshot};
 pub use types::{

@@ -5,15 +5,17 @@ use nalgebra::UnitQuaternion;
 use thruster_inprocess::run::{env_list, Run, VEHICLES};
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::NoisePreset;
-use thrusterd_core::machine::{Event, State};
+use thrusterd_core::machine::{actuated_error_deg, Event, State};
 
 /// A measuring tool, not a check: every vehicle file (LH_VEHICLES, a comma list; default all),
 /// in each water (LH_WATER, default still,current,moderate,rough; the water comes up after the
 /// first model), at LH_NOISE (none|realistic|paper, default realistic), seeds LH_SEEDS (default
 /// 1,2), flies +-20 deg pitch steps every 4 s for LH_MINUTES (default 5) with every check on
 /// (a mismatch re-estimates, as shipped). Per run: the hold-lost events, the mismatches, the
-/// largest 10 s mean of the true angle to the setpoint while the machine controlled (the
-/// watch's quantity, on all axes: a bound on what it saw) and the time not in Active.
+/// largest 10 s mean of the true angle to the setpoint on the axes the model actuates while
+/// the machine controlled (the watch's quantity, from the truth rather than the filter) and
+/// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
+/// LH_TRACE: print the machine's status as it changes, with the angle to the setpoint.
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
     let minutes: f64 = std::env::var("LH_MINUTES").map_or(5.0, |v| v.parse().unwrap());
@@ -35,7 +37,8 @@ pub(super) fn lost_hold_soak() {
             WaterPreset::from_str(w.trim(), true).unwrap_or_else(|e| panic!("LH_WATER: {e}"))
         })
         .collect();
-    println!("{noise:?}, {minutes} min of +-20 deg pitch steps every 4 s");
+    let limit: Option<f64> = std::env::var("LH_DEG").ok().map(|v| v.parse().unwrap());
+    println!("{noise:?}, {minutes} min of +-20 deg pitch steps every 4 s, limit {limit:?}");
     println!(
         "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12}",
         "vehicle", "water", "seed", "lost", "mismatches", "max 10s mean", "not Active s"
@@ -45,6 +48,9 @@ pub(super) fn lost_hold_soak() {
         for water in &waters {
             for &seed in &seeds {
                 let mut run = Run::new(name, noise, seed);
+                if let Some(deg) = limit {
+                    run.with_setup(|s| s.machine.lost_hold_deg = deg);
+                }
                 run.run_for(1.0);
                 run.estimate();
                 run.machine.take_events();
@@ -74,6 +80,8 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
     // 10 s of 1 s block means of the angle to the setpoint.
     let (mut blocks, mut sum, mut k, mut worst) = (Vec::<f64>::new(), 0.0, 0u32, 0.0f64);
     let dt = 1.0 / 200.0;
+    let trace = std::env::var_os("LH_TRACE").is_some();
+    let mut last = String::new();
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
         if t >= 4.0 * step as f64 {
@@ -83,6 +91,18 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
             step += 1;
         }
         run.tick();
+        if trace {
+            let text = run.machine.status().text;
+            if text != last {
+                let d = run.sim.attitude().angle_to(&sp).to_degrees();
+                println!(
+                    "    {t:6.1} s {d:5.1} deg {:?}: {}",
+                    run.machine.state(),
+                    text
+                );
+                last = text;
+            }
+        }
         for e in run.machine.take_events() {
             match e {
                 Event::HoldLost(why) => {
@@ -93,8 +113,12 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
                 _ => {}
             }
         }
-        if matches!(run.machine.state(), State::Active | State::Identify) {
-            sum += run.sim.attitude().angle_to(&sp).to_degrees();
+        let model = run.machine.model().map(|m| m.actuated);
+        if let (true, Some(actuated)) = (
+            matches!(run.machine.state(), State::Active | State::Identify),
+            model,
+        ) {
+            sum += actuated_error_deg(&run.sim.attitude(), &sp, actuated);
             k += 1;
             if k >= 200 {
                 blocks.push(sum / f64::from(k));
