@@ -5,10 +5,10 @@
 //! that declaration pushes L the wrong way and the carried-over prior has no column for it:
 //! yaw runs away and the identification under control dithers on a tumbling vehicle.
 //!
-//! Without the watch (seeds 1-5, realistic IMU, 120 s): seed 1 held 40 deg off its setpoint on
-//! the nominal model (0.99 off) for good, status "Active"; seed 5 swapped in a model 0.47 /
-//! 0.17 off. With it: thrusters neutral, the vehicle rights itself, an estimation from rest
-//! learns the vehicle as it is, and it is held again.
+//! Without the watch (seeds 1-8, realistic IMU, 120 s): seed 2 held 69 deg off its setpoint
+//! on the nominal model (0.99 off) for good, status "Active". With it: thrusters neutral, the
+//! vehicle rights itself, an estimation from rest learns the vehicle as it is, and it is held
+//! again.
 
 use nalgebra::{Unit, UnitQuaternion, Vector3};
 use thruster_sim::NoisePreset;
@@ -125,11 +125,12 @@ fn wrongly_declared(seed: u64, lost_hold_s: f64, run_s: f64) -> Outcome {
     }
 }
 
-/// Measured (realistic IMU, 120 s after the declaration): with the watch, every seed held
-/// within 1.8 deg at the end on a model 0.003-0.007 / 0.008-0.015 off the truth, four of five
-/// after losing the hold at 10.0 s (their first learned model 21.7-23.2 s after the
-/// declaration); seed 4 identified under control in 5 s without losing it. Without: seed 1 40
-/// deg off on the nominal model.
+/// Measured (realistic IMU, 120 s after the declaration, seeds 1-8): with the watch, every
+/// seed held within 1.8 deg at the end on a model 0.004-0.006 / 0.008-0.016 off the truth,
+/// seven of eight after losing the hold at 10.0 s (seeds 1-5: their first learned model
+/// 21.2-22.7 s after the declaration); seed 4 identified under control in 6 s without losing
+/// it. Without: seed 2 69 deg off on the nominal model for good; the others' identifications
+/// under control recovered, with models up to 0.016 / 0.053 off.
 #[test]
 fn a_wrongly_declared_thruster_is_caught_and_the_vehicle_learned_from_rest() {
     let mut lost = 0;
@@ -167,10 +168,10 @@ fn a_wrongly_declared_thruster_is_caught_and_the_vehicle_learned_from_rest() {
         lost += o.lost_events;
     }
     assert!(lost >= 3, "the hold was lost on {lost} of 5 seeds");
-    // Without the watch the first seed is held 40 deg off on the nominal model, for good.
-    let o = wrongly_declared(1, 0.0, 120.0);
+    // Without the watch seed 2 is held 69 deg off on the nominal model, for good.
+    let o = wrongly_declared(2, 0.0, 120.0);
     println!(
-        "off, seed 1: end {:?} {:?}, tilt over the last 10 s {:.1} deg, model {:.3} / {:.3}",
+        "off, seed 2: end {:?} {:?}, tilt over the last 10 s {:.1} deg, model {:.3} / {:.3}",
         o.state, o.source, o.last_err_deg, o.err_rot, o.err_acc
     );
     assert_eq!(o.lost_events, 0);

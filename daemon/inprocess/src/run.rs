@@ -207,17 +207,21 @@ pub fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
     (est.rows(rows, 3) - truth.rows(rows, 3)).norm() / truth.rows(rows, 3).norm()
 }
 
-/// The vehicle's declared geometry: the file's positions (from the CO, where the drivers
-/// announce them from the centre of mass: AMOUR-5's CG is 2 cm below, so its announced
-/// positions are 2 cm off in z, a drawing's error the tests' figures were measured with; not
-/// changed yet, see docs/study.md "A wrong declaration"), and the direction of the force for a
-/// positive command (a `reversed`, left-handed thruster pushes against its `direction`, as
-/// thruster-sim's `reconfig_event` announces it). Before, the direction was the file's: the
-/// `aligned` vehicle's reversed L pushed the wrong way in every nominal model, which spun it
-/// in yaw after an announced change and tumbled it (the study's "aligned at a realistic IMU").
+/// The vehicle's declared geometry, as a driver announces it (thruster-sim's
+/// `reconfig_event`): positions from the centre of mass, directions those of the force for a
+/// positive command (a `reversed`, left-handed thruster pushes against its `direction`).
+/// Before 2026-11-30 the file's own positions and directions were announced here: AMOUR-5's
+/// positions 2 cm off in z (its CG is 2 cm below the CO), and the `aligned` vehicle's reversed
+/// L pushing the wrong way in every nominal model, which spun that vehicle in yaw after an
+/// announced change and tumbled it.
 pub fn geometry(v: &Vehicle) -> thrusterd_core::machine::Geometry {
+    let cg = v.body.cg_m;
     thrusterd_core::machine::Geometry {
-        positions: v.thrusters.iter().map(|t| t.position_m).collect(),
+        positions: v
+            .thrusters
+            .iter()
+            .map(|t| std::array::from_fn(|k| t.position_m[k] - cg[k]))
+            .collect(),
         directions: v
             .thrusters
             .iter()
