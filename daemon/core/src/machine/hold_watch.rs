@@ -170,8 +170,6 @@ pub fn actuated_error_deg(
 mod tests {
     use super::*;
 
-    const S: u64 = 1_000_000_000;
-
     /// Fed at 200 Hz from `from_s` to `to_s` with `err(t)`: the first time it said lost.
     fn feed(
         w: &mut HoldWatch,
