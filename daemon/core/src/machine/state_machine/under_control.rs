@@ -274,31 +274,38 @@ impl Machine {
         self.controller.reset();
         self.hold_watch.reset();
         let m = &self.setup.machine;
-        let what = format!(
-            "the vehicle was {:.0} deg from its setpoint on average over {:.0} s \
-             (machine.lost_hold_deg {:.0}, lost_hold_s): the model in force does not hold it (a thruster \
-             declared reversed, misplaced or turned?)",
+        // The status text is cut at the protocol's 128 bytes: what the daemon does comes
+        // first, why after; the journal's event has it all.
+        let off = format!(
+            "{:.0} deg off the setpoint on average over {:.0} s, machine.lost_hold_deg {:.0}",
             lost.err_deg, lost.for_s, m.lost_hold_deg
         );
-        self.events.push(Event::HoldLost(what.clone()));
+        let cause = "the model in force does not hold it (a thruster declared reversed, \
+                     misplaced or turned?)";
+        self.events
+            .push(Event::HoldLost(format!("hold lost: {off}: {cause}")));
         self.phase_start_ns = t_ns;
         let estimate = self.monitor.action() == MismatchAction::Estimate;
         if self.hold_lost_once || !estimate {
-            let why = if self.hold_lost_once {
-                "lost again"
+            let (what, why) = if self.hold_lost_once {
+                ("hold lost again", "")
             } else {
-                "monitor.action is not \"estimate\""
+                ("hold lost", "monitor.action is not \"estimate\"; ")
             };
             self.transition(
                 State::Idle,
-                &format!("{what}; {why}: thrusters neutral until an estimate or hold request"),
+                &format!(
+                    "{what}: thrusters neutral until an estimate or hold request ({why}{off}: {cause})"
+                ),
             );
             return;
         }
         self.hold_lost_once = true;
         self.transition(
             State::Idle,
-            &format!("{what}: thrusters neutral; estimating from rest once the vehicle settles"),
+            &format!(
+                "hold lost: thrusters neutral, estimating from rest once the vehicle settles ({off}: {cause})"
+            ),
         );
         self.settling = Some(Settling::new(t_ns));
     }
@@ -315,9 +322,8 @@ impl Machine {
             return;
         };
         self.settling = None;
-        let why = format!(
-            "the hold was lost; the vehicle settled with the thrusters neutral in {waited_s:.1} s"
-        );
+        let why =
+            format!("hold lost; the vehicle settled with the thrusters neutral in {waited_s:.1} s");
         self.start_estimation(t_ns, &why);
     }
 
