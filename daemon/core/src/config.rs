@@ -636,6 +636,14 @@ mod tests {
                 "d.toml:2:18: machine.settle_quiet_s: must be in [0, inf), got NaN",
             ),
             (
+                "[machine]\nlost_hold_deg = 0.0\n",
+                "d.toml:2:17: machine.lost_hold_deg: must be in (0, 180], got 0",
+            ),
+            (
+                "[machine]\nlost_hold_s = -1.0\n",
+                "d.toml:2:15: machine.lost_hold_s: must be in [0, inf), got -1",
+            ),
+            (
                 "[machine]\nmax_sample_gap_s = 0.0\n",
                 "d.toml:2:20: machine.max_sample_gap_s: must be in (0, inf), got 0",
             ),
