@@ -95,9 +95,11 @@ pub struct MachineConfig {
     /// over the last `lost_hold_s` is beyond `lost_hold_deg` means the model in force does not
     /// hold the vehicle: thrusters neutral, and (with `monitor.action = "estimate"`) an
     /// estimation from rest, which needs no model; lost again before an operator's estimate or
-    /// hold, or a reconfiguration, the thrusters stay neutral. Defaults 30 deg, 10 s (0 s:
-    /// off). Why: every other check judges a model only while the vehicle is held, so a wrong
-    /// declared geometry was held 36-148 deg off its setpoint for good (`machine::hold_watch`).
+    /// hold, a reconfiguration or a minute held, the thrusters stay neutral. Defaults 45 deg,
+    /// 10 s (0 s: off; 30 deg fired on a held vehicle in rough water with pitch steps, whose
+    /// 10 s mean reached 30.4). Why: every other check judges a model only while the vehicle is
+    /// held, so a wrong declared geometry was held 36-69 deg off its setpoint for good
+    /// (`machine::hold_watch`).
     /// A 100 deg heading error after the pulses is undone in 3-5 s; the limit is not a
     /// manoeuvre's.
     pub lost_hold_deg: f64,

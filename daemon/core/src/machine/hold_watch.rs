@@ -45,7 +45,15 @@ pub struct HoldWatch {
     means: [f64; BLOCKS],
     filled: usize,
     next: usize,
+    /// Since when every full window's mean has been within the limit, ns.
+    #[serde(default)]
+    held_since_ns: Option<u64>,
 }
+
+/// Held this long after a loss, the vehicle's next loss is a new one (an estimation from rest
+/// again, not neutral for good), s: a model that held for a minute was the right one, and
+/// what undoes it later (a thruster lost in the water) is news.
+pub const HELD_CLEARS_S: f64 = 60.0;
 
 impl HoldWatch {
     /// One control sample: `err_deg` the error on the actuated axes ([`actuated_error_deg`]).
@@ -79,10 +87,21 @@ impl HoldWatch {
             return None;
         }
         let mean = self.means.iter().sum::<f64>() / BLOCKS as f64;
-        (mean > limit_deg).then_some(HoldLost {
-            for_s,
-            err_deg: mean,
-        })
+        if mean > limit_deg {
+            self.held_since_ns = None;
+            return Some(HoldLost {
+                for_s,
+                err_deg: mean,
+            });
+        }
+        self.held_since_ns.get_or_insert(t_ns);
+        None
+    }
+
+    /// How long every full window's mean has been within the limit, s (0 before the first).
+    pub fn held_for_s(&self, t_ns: u64) -> f64 {
+        self.held_since_ns
+            .map_or(0.0, |t| t_ns.saturating_sub(t) as f64 * 1e-9)
     }
 
     /// A new model, a new hold: the window starts empty.
@@ -223,6 +242,23 @@ mod tests {
         assert_eq!(feed(&mut w, 0.0, 9.0, |_| 90.0, 10.0), None);
         w.reset();
         assert_eq!(feed(&mut w, 9.0, 18.5, |_| 90.0, 10.0), None);
+    }
+
+    #[test]
+    fn held_counts_from_the_first_full_window_within_the_limit_until_one_is_not() {
+        let at = |s: f64| (s * 1e9) as u64;
+        let mut w = HoldWatch::default();
+        assert_eq!(w.held_for_s(at(5.0)), 0.0);
+        assert_eq!(feed(&mut w, 0.0, 70.0, |_| 5.0, 10.0), None);
+        // The first full window ended at 10 s.
+        assert!(
+            (w.held_for_s(at(70.0)) - 60.0).abs() < 0.01,
+            "{}",
+            w.held_for_s(at(70.0))
+        );
+        // A window beyond the limit ends it.
+        assert!(feed(&mut w, 70.0, 100.0, |_| 90.0, 10.0).is_some());
+        assert_eq!(w.held_for_s(at(100.0)), 0.0);
     }
 
     #[test]

@@ -10,7 +10,7 @@ use thruster_protocol::MAX_THRUSTERS;
 use super::config::{MachineSetup, ReconfigPolicy};
 use super::estimation::ESTIMATION;
 use super::estimation::{ClosedStep, EstimationRun, IdleRest, Motion, PulseStep, MIN_REST_SAMPLES};
-use super::hold_watch::{actuated_error_deg, HoldLost, HoldWatch, Settling};
+use super::hold_watch::{actuated_error_deg, HoldLost, HoldWatch, Settling, HELD_CLEARS_S};
 use super::models::ModelSlot;
 use super::types::{
     finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
@@ -100,8 +100,8 @@ pub struct Machine {
     #[serde(default)]
     hold_watch: HoldWatch,
     /// The hold was lost once and an estimation from rest followed: lost again before an
-    /// operator's estimate or hold, or a reconfiguration, the thrusters stay neutral (no
-    /// estimation loop on a vehicle that cannot be held).
+    /// operator's estimate or hold, a reconfiguration, or a minute held (`HELD_CLEARS_S`), the
+    /// thrusters stay neutral (no estimation loop on a vehicle that cannot be held).
     #[serde(default)]
     hold_lost_once: bool,
     /// Idle after a lost hold, waiting for the vehicle to settle before estimating from rest.

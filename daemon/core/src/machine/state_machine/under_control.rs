@@ -260,8 +260,14 @@ impl Machine {
         let actuated = self.models.current()?.actuated;
         let m = &self.setup.machine;
         let err_deg = actuated_error_deg(attitude, target, actuated);
-        self.hold_watch
-            .observe(t_ns, err_deg, m.lost_hold_deg, m.lost_hold_s)
+        let lost = self
+            .hold_watch
+            .observe(t_ns, err_deg, m.lost_hold_deg, m.lost_hold_s);
+        if self.hold_lost_once && self.hold_watch.held_for_s(t_ns) >= HELD_CLEARS_S {
+            // The model learned after the loss held the vehicle: a later loss is news.
+            self.hold_lost_once = false;
+        }
+        lost
     }
 
     /// The model in force does not hold the vehicle (`hold_watch`): thrusters neutral, so the
