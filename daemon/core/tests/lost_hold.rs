@@ -33,9 +33,21 @@ struct Outcome {
     lost_events: usize,
     /// Vehicle time of the first estimated model swapped in, s after the declaration.
     first_model_s: Option<f64>,
+    /// The largest command sent since the harness's counter was last reset.
+    max_cmd: f64,
 }
 
 fn wrongly_declared(seed: u64, lost_hold_s: f64, run_s: f64) -> Outcome {
+    wrongly_declared_then(seed, lost_hold_s, run_s, |_| {})
+}
+
+/// [`wrongly_declared`], calling `on_lost` with the run at the first `HoldLost` event.
+fn wrongly_declared_then(
+    seed: u64,
+    lost_hold_s: f64,
+    run_s: f64,
+    mut on_lost: impl FnMut(&mut Run),
+) -> Outcome {
     let v = vehicle("aligned");
     let mut run = Run::new("aligned", NoisePreset::Realistic, seed);
     run.with_setup(|s: &mut MachineSetup| s.machine.lost_hold_s = lost_hold_s);
@@ -94,7 +106,10 @@ fn wrongly_declared(seed: u64, lost_hold_s: f64, run_s: f64) -> Outcome {
                 Event::HoldLost(why) => {
                     assert!(why.contains("does not hold it"), "{why}");
                     lost_events += 1;
-                    lost_at_s.get_or_insert(run.sim.time_s() - start);
+                    if lost_at_s.is_none() {
+                        lost_at_s = Some(run.sim.time_s() - start);
+                        on_lost(&mut run);
+                    }
                 }
                 Event::ModelSwapped(m) if m.source == ModelSource::Estimated => {
                     first_model_s.get_or_insert(run.sim.time_s() - start);
@@ -122,6 +137,7 @@ fn wrongly_declared(seed: u64, lost_hold_s: f64, run_s: f64) -> Outcome {
         err_acc: rel_err(&model.effectiveness, &truth, 3),
         lost_events,
         first_model_s,
+        max_cmd: run.max_abs_cmd,
     }
 }
 
@@ -178,4 +194,30 @@ fn a_wrongly_declared_thruster_is_caught_and_the_vehicle_learned_from_rest() {
     assert_eq!(o.state, State::Active);
     assert!(o.last_err_deg > 20.0, "{:.1} deg", o.last_err_deg);
     assert!(o.err_rot > 0.5, "{:.3}", o.err_rot);
+}
+
+/// The operator aborts the estimation from rest the daemon waits to start after a lost hold:
+/// the thrusters stay neutral, idle, until an estimate or hold request.
+#[test]
+fn an_abort_while_waiting_to_estimate_from_rest_keeps_the_thrusters_neutral() {
+    let mut aborted = None;
+    let o = wrongly_declared_then(1, 10.0, 60.0, |run| {
+        assert_eq!(run.machine.state(), State::Idle);
+        assert!(run
+            .machine
+            .status()
+            .text
+            .starts_with("hold lost: thrusters neutral"));
+        aborted = Some(
+            run.machine
+                .on_request(thrusterd_core::machine::Request::Abort),
+        );
+        run.max_abs_cmd = 0.0;
+    });
+    assert_eq!(aborted, Some(Ok("aborted".to_string())));
+    assert_eq!(o.lost_events, 1);
+    assert_eq!(o.state, State::Idle);
+    assert_eq!(o.source, ModelSource::Nominal);
+    assert!(o.first_model_s.is_none(), "{:?}", o.first_model_s);
+    assert_eq!(o.max_cmd, 0.0, "thrust after the abort");
 }

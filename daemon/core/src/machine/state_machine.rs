@@ -589,8 +589,9 @@ impl Machine {
         if to != State::MeasureNoise {
             self.levelling = None;
         }
-        // Leaving Idle ends the wait for the vehicle to settle (so do an operator's request
-        // and a reconfiguration: `on_request`, `on_reconfig`).
+        // Leaving Idle ends the wait for the vehicle to settle (so do an operator's idle,
+        // stop or abort and a reconfiguration: `on_request`, `on_reconfig`; an estimate or
+        // hold leaves Idle).
         if to != State::Idle {
             self.settling = None;
         }
@@ -629,6 +630,9 @@ impl Machine {
     fn fault(&mut self, _t_ns: u64, why: &str) {
         self.resume = match self.state {
             s if s.is_estimating() => Resume::Estimate,
+            // Waiting, neutral, to estimate from rest after a lost hold: the fault's own
+            // neutral spell is a wait too, and the estimation follows it.
+            State::Idle if self.settling.is_some() => Resume::Estimate,
             State::Active => Resume::Active,
             State::Fault => self.resume,
             _ => Resume::Idle,

@@ -6,8 +6,6 @@ use super::*;
 
 impl Machine {
     pub fn on_request(&mut self, req: Request) -> Result<String, Refused> {
-        // The operator decides now: no estimation from rest starts on its own after this.
-        self.settling = None;
         match req {
             Request::Estimate => {
                 if self.samples == 0 {
@@ -35,6 +33,14 @@ impl Machine {
                 Ok(format!("estimating {} thrusters", self.n))
             }
             Request::Abort => {
+                if self.settling.take().is_some() {
+                    // Idle after a lost hold, waiting to estimate from rest: that is what the
+                    // operator aborts.
+                    self.text = "estimation from rest after the lost hold aborted: thrusters \
+                                 neutral until an estimate or hold request"
+                        .into();
+                    return Ok("aborted".into());
+                }
                 if !self.state.is_estimating() {
                     return Err(Refused(format!(
                         "nothing to abort (state {})",
@@ -71,6 +77,7 @@ impl Machine {
             }
             Request::Idle => {
                 self.run.stop();
+                self.settling = None;
                 let t = self.last_t_ns.unwrap_or(0);
                 if self.state == State::Fault {
                     self.resume = Resume::Idle;
@@ -85,6 +92,7 @@ impl Machine {
                 // next command is neutral. The model in force stays, so `hold` can resume.
                 self.run.stop();
                 self.levelling = None;
+                self.settling = None;
                 self.controller.reset();
                 self.stopped = true;
                 self.resume = Resume::Idle;
