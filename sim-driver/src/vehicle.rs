@@ -470,6 +470,34 @@ impl Vehicle {
     pub fn thruster_index(&self, name: &str) -> Option<usize> {
         self.thrusters.iter().position(|t| t.name == name)
     }
+
+    /// The geometry a driver declares for this vehicle, per thruster (position, direction) in
+    /// the protocol's conventions: positions from the centre of mass (the file's are from the
+    /// CO; `[body] cg_m`, default the BlueROV2 body's), directions those of the force for a
+    /// positive command (a `reversed`, left-handed thruster pushes against its `direction`).
+    /// The one conversion the driver's reconfiguration events, the lab and the in-process
+    /// harness share.
+    pub fn declared_geometry(&self) -> Vec<([f64; 3], [f64; 3])> {
+        let cg = self.body.cg_m;
+        self.thrusters
+            .iter()
+            .map(|t| {
+                let sign = if t.reversed { -1.0 } else { 1.0 };
+                (
+                    std::array::from_fn(|k| t.position_m[k] - cg[k]),
+                    t.direction.map(|d| sign * d),
+                )
+            })
+            .collect()
+    }
+
+    /// Whether every thruster is a T200 from the measured table (whose operator configures the
+    /// daemon for it: `[supply] linearize`).
+    pub fn all_t200(&self) -> bool {
+        self.thrusters
+            .iter()
+            .all(|t| t.model == ThrusterModel::T200)
+    }
 }
 
 #[cfg(test)]

@@ -79,24 +79,48 @@ pub fn pitch_scored(run: &mut Run, seconds: f64) -> (Option<(f64, String)>, f64)
     (found, sum / k.max(1) as f64)
 }
 
+/// The soaks' flight plan: pitch +20 and -20 deg in turn every 4 s at the heading and depth
+/// the vehicle had when it began.
+pub struct PitchSteps {
+    yaw: f64,
+    depth: f64,
+    step: usize,
+    setpoint: UnitQuaternion<f64>,
+}
+
+impl PitchSteps {
+    pub fn new(run: &Run) -> PitchSteps {
+        PitchSteps {
+            yaw: run.sim.roll_pitch_yaw()[2],
+            depth: run.sim.position_ned().z,
+            step: 0,
+            setpoint: UnitQuaternion::identity(),
+        }
+    }
+
+    /// At `t` s into the flight: the next step's setpoint handed to the machine when due; the
+    /// setpoint in force.
+    pub fn at(&mut self, run: &mut Run, t: f64) -> UnitQuaternion<f64> {
+        if t >= 4.0 * self.step as f64 {
+            let p: f64 = [20.0, -20.0][self.step % 2];
+            self.setpoint = UnitQuaternion::from_euler_angles(0.0, p.to_radians(), self.yaw);
+            run.machine.on_setpoint(self.setpoint, Some(self.depth));
+            self.step += 1;
+        }
+        self.setpoint
+    }
+}
+
 pub fn pitch_with(
     run: &mut Run,
     seconds: f64,
     mut each: impl FnMut(&UnitQuaternion<f64>, &Run),
 ) -> Option<(f64, String)> {
-    let yaw = run.sim.roll_pitch_yaw()[2];
-    let depth = run.sim.position_ned().z;
+    let mut plan = PitchSteps::new(run);
     let start = run.sim.time_s();
-    let mut step = 0;
-    let mut sp = UnitQuaternion::identity();
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
-        if t >= 4.0 * step as f64 {
-            let p: f64 = [20.0, -20.0][step % 2];
-            sp = UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw);
-            run.machine.on_setpoint(sp, Some(depth));
-            step += 1;
-        }
+        let sp = plan.at(run, t);
         run.tick();
         each(&sp, run);
         for e in run.machine.take_events() {

@@ -48,13 +48,6 @@ pub struct Run {
     pub truth_voltage_v: Option<f64>,
 }
 
-/// Whether every thruster is a T200 from the measured table.
-fn all_t200(v: &Vehicle) -> bool {
-    v.thrusters
-        .iter()
-        .all(|t| t.model == thruster_sim::ThrusterModel::T200)
-}
-
 /// The machine as the vehicle's operator configures it, with no driver between it and the
 /// physics. Power-law thrusters: their dead band is jumped by the machine (`machine.deadband`),
 /// as thruster-sim's driver does for them. T200 thrusters: commanded through the table
@@ -64,7 +57,7 @@ fn all_t200(v: &Vehicle) -> bool {
 /// the processes: under control its model learned the small-signal gain of the raw curve
 /// (42 % under the truth).
 fn operator_setup(v: &Vehicle, setup: &mut MachineSetup) {
-    if all_t200(v) {
+    if v.all_t200() {
         setup.machine.deadband = 0.0;
         setup.supply.linearize = true;
     } else {
@@ -215,18 +208,10 @@ pub fn rel_err(est: &DMatrix<f64>, truth: &DMatrix<f64>, rows: usize) -> f64 {
 /// L pushing the wrong way in every nominal model, which spun that vehicle in yaw after an
 /// announced change and tumbled it.
 pub fn geometry(v: &Vehicle) -> thrusterd_core::machine::Geometry {
-    let cg = v.body.cg_m;
+    let (positions, directions) = v.declared_geometry().into_iter().unzip();
     thrusterd_core::machine::Geometry {
-        positions: v
-            .thrusters
-            .iter()
-            .map(|t| std::array::from_fn(|k| t.position_m[k] - cg[k]))
-            .collect(),
-        directions: v
-            .thrusters
-            .iter()
-            .map(|t| t.direction.map(|d| if t.reversed { -d } else { d }))
-            .collect(),
+        positions,
+        directions,
     }
 }
 

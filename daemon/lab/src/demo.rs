@@ -203,7 +203,7 @@ fn demo_daemon_config(args: &DemoArgs, vehicle: &Path) -> Result<DaemonConfig> {
     let Ok(v) = crate::vehicle::load(vehicle) else {
         return Ok(DaemonConfig::Defaults);
     };
-    Ok(if crate::vehicle::all_t200(&v) {
+    Ok(if v.all_t200() {
         DaemonConfig::Text(format!(
             "[vehicle]\nthrusters = {}\n[supply]\nlinearize = true\n",
             v.thrusters.len()

@@ -22,36 +22,6 @@ pub fn load(path: &Path) -> Result<Vehicle> {
     Ok(vehicle)
 }
 
-/// The declared geometry of a vehicle as the daemon wants it: positions from the centre of
-/// mass (the file's are from the centre of origin; the body's `cg_m`, default [0, 0, 0.02] as
-/// in the simulator's BlueROV2 body), and the direction of positive thrust (a `reversed`
-/// thruster pushes the other way; the loader has normalised it).
-pub fn declared_geometry(vehicle: &Vehicle) -> Vec<([f64; 3], [f64; 3])> {
-    let cg = vehicle.body.cg_m;
-    vehicle
-        .thrusters
-        .iter()
-        .map(|t| {
-            let sign = if t.reversed { -1.0 } else { 1.0 };
-            let p = t.position_m;
-            (
-                [p[0] - cg[0], p[1] - cg[1], p[2] - cg[2]],
-                t.direction.map(|x| sign * x),
-            )
-        })
-        .collect()
-}
-
-/// Whether every thruster of `vehicle` is a T200 from the measured table: the daemon of such a
-/// vehicle is configured for it (`[supply] linearize`: commands through the T200's curve and
-/// over its ESC's dead zone), as its operator would from the thrusters' data sheet.
-pub fn all_t200(vehicle: &Vehicle) -> bool {
-    vehicle
-        .thrusters
-        .iter()
-        .all(|t| t.model == thruster_sim::ThrusterModel::T200)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -69,7 +39,9 @@ mod tests {
             direction = [1.0, 0.0, 0.0]
             reversed = true
         "#;
-        let g = declared_geometry(&Vehicle::from_toml_str(text, "test").unwrap());
+        let g = Vehicle::from_toml_str(text, "test")
+            .unwrap()
+            .declared_geometry();
         assert_eq!(g.len(), 2);
         assert_eq!(g[0].1, [0.0, 0.0, -1.0]);
         assert!((g[0].0[2] - (-0.17)).abs() < 1e-12, "{:?}", g[0].0);
@@ -77,7 +49,7 @@ mod tests {
         assert_eq!(g[1].1, [-1.0, 0.0, 0.0]);
         let with_cg = format!("[body]\ncg_m = [0.0, 0.0, 0.0]\n{text}");
         let v = Vehicle::from_toml_str(&with_cg, "test").unwrap();
-        assert_eq!(declared_geometry(&v)[0].0, [0.2, 0.0, -0.15]);
+        assert_eq!(v.declared_geometry()[0].0, [0.2, 0.0, -0.15]);
     }
 
     #[test]

@@ -114,11 +114,14 @@ pub fn reconfig_event(seq: u64, change: &Change, vehicle: &Vehicle) -> ReconfigE
     ev.set_kind(kind);
     if !matches!(change.kind, ChangeKind::Killed | ChangeKind::Weakened) {
         ev.has_geometry = 1;
-        let cg = vehicle.body.cg_m;
-        for (i, t) in vehicle.thrusters.iter().take(MAX_THRUSTERS).enumerate() {
-            let sign = if t.reversed { -1.0 } else { 1.0 };
-            ev.position[i] = std::array::from_fn(|k| t.position_m[k] - cg[k]);
-            ev.direction[i] = t.direction.map(|d| sign * d);
+        for (i, (p, d)) in vehicle
+            .declared_geometry()
+            .into_iter()
+            .take(MAX_THRUSTERS)
+            .enumerate()
+        {
+            ev.position[i] = p;
+            ev.direction[i] = d;
         }
     }
     ev

@@ -286,7 +286,7 @@ pub(super) fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> 
     let _ = writeln!(t, "[vehicle]\nthrusters = {n}");
     if spec.start == Start::Manual {
         let file = config_file(&format!("vehicles/{}.toml", spec.declared));
-        for (p, d) in crate::vehicle::declared_geometry(&crate::vehicle::load(&file)?) {
+        for (p, d) in crate::vehicle::load(&file)?.declared_geometry() {
             let _ = writeln!(
                 t,
                 "[[vehicle.thruster]]\nposition_m = {p:?}\ndirection = {d:?}"

@@ -1,7 +1,7 @@
 //! Does the hold watch (`machine.lost_hold_*`) ever fire on a vehicle that is held? The false
 //! alarm side of `daemon/core/tests/lost_hold.rs`.
 
-use nalgebra::UnitQuaternion;
+use thruster_inprocess::holding::PitchSteps;
 use thruster_inprocess::run::{env_list, Run, VEHICLES};
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::NoisePreset;
@@ -72,11 +72,9 @@ pub(super) fn lost_hold_soak() {
 /// Pitch steps for `seconds`: (hold-lost events, mismatches, largest 10 s mean angle to the
 /// setpoint while controlling (deg), vehicle time outside Active (s)).
 fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
-    let yaw = run.sim.roll_pitch_yaw()[2];
-    let depth = run.sim.position_ned().z;
+    let mut plan = PitchSteps::new(run);
     let start = run.sim.time_s();
-    let (mut step, mut lost, mut mismatches, mut away) = (0, 0, 0, 0.0);
-    let mut sp = UnitQuaternion::identity();
+    let (mut lost, mut mismatches, mut away) = (0, 0, 0.0);
     // 10 s of 1 s block means of the angle to the setpoint.
     let (mut blocks, mut sum, mut k, mut worst) = (Vec::<f64>::new(), 0.0, 0u32, 0.0f64);
     let dt = 1.0 / 200.0;
@@ -84,12 +82,7 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
     let mut last = String::new();
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
-        if t >= 4.0 * step as f64 {
-            let p: f64 = [20.0, -20.0][step % 2];
-            sp = UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw);
-            run.machine.on_setpoint(sp, Some(depth));
-            step += 1;
-        }
+        let sp = plan.at(run, t);
         run.tick();
         if trace {
             let text = run.machine.status().text;
