@@ -542,6 +542,28 @@ mod tests {
     }
 
     #[test]
+    fn an_unknown_choice_names_its_place_and_the_choices() {
+        let e = DaemonConfig::from_toml_str(
+            "[identification]\nat_limit_unannounced = \"maybe\"\n",
+            "d.toml",
+        )
+        .unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.starts_with("d.toml:2:"), "{msg}");
+        assert!(msg.contains("maybe"), "{msg}");
+        assert!(msg.contains("keep_old") && msg.contains("swap"), "{msg}");
+        let ok = DaemonConfig::from_toml_str(
+            "[identification]\nat_limit_unannounced = \"swap\"\n",
+            "d.toml",
+        )
+        .unwrap();
+        assert_eq!(
+            ok.identification.at_limit_unannounced,
+            crate::adaptation::identification::AtLimit::Swap
+        );
+    }
+
+    #[test]
     fn empty_file_is_all_defaults() {
         let cfg = DaemonConfig::from_toml_str("", "x.toml").unwrap();
         assert_eq!(cfg, DaemonConfig::default());

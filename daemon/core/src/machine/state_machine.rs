@@ -107,6 +107,11 @@ pub struct Machine {
     /// Idle after a lost hold, waiting for the vehicle to settle before estimating from rest.
     #[serde(default)]
     settling: Option<Settling>,
+    /// The identification under way was started by the daemon's own suspicion (the
+    /// refinement's change test or the monitor's mismatch), not an announced change: at its
+    /// limit its model is refused (`identification.at_limit_unannounced`).
+    #[serde(default)]
+    identifying_unannounced: bool,
 }
 
 /// What status says while idle with samples coming and nothing asked.
@@ -145,6 +150,7 @@ impl Machine {
             hold_watch: HoldWatch::default(),
             hold_lost_once: false,
             settling: None,
+            identifying_unannounced: false,
             setup,
         };
         m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);

@@ -110,6 +110,31 @@ pub struct IdentificationConfig {
     /// 96 % of the commands: err_acc 0.037 against 0.026 mean, error / bound 1.08 against
     /// 1.00). docs/study.md, "The dither as the thrust's instrument".
     pub instrument: Instrument,
+    /// What an identification that reached its limit (`max_s`, its bound still above the
+    /// target) does with its model when the daemon's own suspicion started it (the
+    /// refinement's change test or the monitor's mismatch: nothing announced a change):
+    /// `keep_old` (default: the suspected change is not confirmed, its model refused and the
+    /// model in force kept) or `swap`. An announced change (a reconfiguration) swaps at the
+    /// limit either way: its model in force is only the nominal one. Why: with +-20 deg pitch
+    /// steps in a swell the change test's and the monitor's false alarms started
+    /// identifications that ended at the limit with fits far off the truth under bounds that
+    /// did not show it (AMOUR-5 with its top thruster at 45 deg, moderate water at the
+    /// paper's noise: 0.23-0.34 off under 0.05-0.09, by least squares, the sea-state gauge
+    /// never having measured between the steps; rough water at a realistic IMU: 0.36 off
+    /// under 0.15); swapped in, the vehicle lost its hold 10 s later, 50-59 deg off
+    /// (docs/reliability.md, "A suspected change the data cannot confirm"). A change the data
+    /// cannot pin down within `max_s` is no change to act on.
+    pub at_limit_unannounced: AtLimit,
+}
+
+/// What an identification at its limit does with its model
+/// (`IdentificationConfig::at_limit_unannounced`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AtLimit {
+    #[default]
+    KeepOld,
+    Swap,
 }
 
 /// When the identification fits the thrust columns by instrumental variables
@@ -154,6 +179,7 @@ impl Default for IdentificationConfig {
             min_dither_share: 0.5,
             min_sea_state_deg: 3.0,
             instrument: Instrument::InASea,
+            at_limit_unannounced: AtLimit::KeepOld,
         }
     }
 }

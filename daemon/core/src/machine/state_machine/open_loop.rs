@@ -36,6 +36,7 @@ impl Machine {
             ""
         };
         let why = &format!("{why}{kept}");
+        self.identifying_unannounced = false;
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
         // Controlling with a model: identify under control (see `crate::adaptation::identification`).
         let controlling =

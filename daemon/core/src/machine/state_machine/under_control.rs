@@ -3,6 +3,7 @@
 
 // The machine's fields and helpers are the parent's: these are its methods, by job.
 use super::*;
+use crate::adaptation::identification::AtLimit;
 
 impl Machine {
     /// While controlling with closed-loop identification: the attitude error (deg) when it is
@@ -90,6 +91,7 @@ impl Machine {
             .dynamics
             .as_ref()
             .map_or([false; 2], |d| d.instrumented);
+        let bound = (result.estimate.rel_err_rot, result.estimate.rel_err_acc);
         let Some((candidate, _)) = self.run.conclude(result) else {
             return;
         };
@@ -128,6 +130,22 @@ impl Machine {
                 "{why}: the dither was {:.0} % of the commands' variation (limit {:.0} %) with the water moving the held vehicle by {sea_deg:.1} deg RMS: the fit takes the controller's answer for thrust: model rejected; old model kept",
                 100.0 * share,
                 100.0 * limit
+            );
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(State::Active, &text);
+            return;
+        }
+        // A suspected change (the change test's or the monitor's) the data could not pin down
+        // within the limit is not confirmed: the model in force stays (see
+        // `IdentificationConfig::at_limit_unannounced`).
+        let at_limit = !matches!(decision, StopDecision::Converged { .. });
+        if at_limit
+            && self.identifying_unannounced
+            && cfg.at_limit_unannounced == AtLimit::KeepOld
+        {
+            let text = format!(
+                "{why}: the suspected change is not confirmed (bound rot {:.3}, acc {:.3}, above the target): model rejected; old model kept",
+                bound.0, bound.1
             );
             self.events.push(Event::ModelRejected(text.clone()));
             self.transition(State::Active, &text);
@@ -342,7 +360,9 @@ impl Machine {
         match self.monitor.action() {
             MismatchAction::Estimate => {
                 let prior = self.carry_over(change, self.n);
-                self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior)
+                self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior);
+                // Set after the start, which clears it for every other cause.
+                self.identifying_unannounced = true;
             }
             MismatchAction::Report | MismatchAction::Off => {
                 self.text = format!("holding attitude; {why}");

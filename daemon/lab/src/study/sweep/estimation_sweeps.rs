@@ -336,8 +336,10 @@ pub(super) fn lag_sweep() {
                 }
                 let o = estimate_on(v, sensors, seed, cfg, ideal);
                 println!(
-                "{name} tau {tau:.3} seed {seed}: learned {:.4} err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",
+                "{name} tau {tau:.3} seed {seed}: learned {:.4} (sd_ln {:.4}, z {:+.2}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",
                 o.spin_up_s,
+                o.terms.spin_up_sd_ln,
+                (o.spin_up_s / tau).ln() / o.terms.spin_up_sd_ln,
                 o.err_rot,
                 o.err_acc,
                 o.bound[0],

@@ -2,7 +2,8 @@
 //! alarm side of `daemon/core/tests/lost_hold.rs`.
 
 use thruster_inprocess::holding::PitchSteps;
-use thruster_inprocess::run::{env_list, Run, VEHICLES};
+use nalgebra::DMatrix;
+use thruster_inprocess::run::{env_list, rel_err, Run, VEHICLES};
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::NoisePreset;
 use thrusterd_core::machine::{actuated_error_deg, Event, State};
@@ -80,10 +81,16 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
     let dt = 1.0 / 200.0;
     let trace = std::env::var_os("LH_TRACE").is_some();
     let mut last = String::new();
+    let mut last_b = run.machine.model().map(|m| m.effectiveness.clone());
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
         let sp = plan.at(run, t);
         run.tick();
+        let b = run.machine.model().map(|m| &m.effectiveness);
+        if trace && b != last_b.as_ref() {
+            trace_swap(run, t, last_b.as_ref(), b);
+            last_b = b.cloned();
+        }
         if trace {
             let text = run.machine.status().text;
             if text != last {
@@ -129,4 +136,38 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
         }
     }
     (lost, mismatches, worst, away)
+}
+
+/// LH_TRACE: a model swap, the new and the old model against the truth, the new one's own
+/// bound, and how far the new one is from the old (relative, per row group).
+fn trace_swap(run: &Run, t: f64, old: Option<&DMatrix<f64>>, new: Option<&DMatrix<f64>>) {
+    let truth = run.truth();
+    let err = |b: Option<&DMatrix<f64>>, rows| {
+        b.filter(|b| b.shape() == truth.shape())
+            .map_or(f64::NAN, |b| rel_err(b, &truth, rows))
+    };
+    let apart = |rows| match (old, new) {
+        (Some(o), Some(n)) if o.shape() == n.shape() => rel_err(n, o, rows),
+        _ => f64::NAN,
+    };
+    let bound = run
+        .machine
+        .last_estimate()
+        .map_or([f64::NAN; 2], |e| [e.rel_err_rot, e.rel_err_acc]);
+    println!(
+        "    {t:6.1} s swap: new {:.3} / {:.3} (bound {:.3} / {:.3}), old {:.3} / {:.3}, new vs old {:.3} / {:.3}, sea state {:?}, unexplained {:.4} rad/s",
+        err(new, 0),
+        err(new, 3),
+        bound[0],
+        bound[1],
+        err(old, 0),
+        err(old, 3),
+        apart(0),
+        apart(3),
+        run.machine.sea_state_deg(),
+        run.machine
+            .last_estimate()
+            .and_then(|e| e.dynamics.as_ref())
+            .map_or(f64::NAN, |d| d.unexplained_rate_radps)
+    );
 }
