@@ -88,7 +88,10 @@ fn a_change_the_identification_cannot_confirm_in_a_swell_keeps_the_model_in_forc
         swapped.lost
     );
     assert!(kept.unconfirmed >= 1, "no identification reached its limit");
-    assert_eq!(kept.lost, 0, "the hold was lost with the model in force kept");
+    assert_eq!(
+        kept.lost, 0,
+        "the hold was lost with the model in force kept"
+    );
     assert!(
         kept.worst_err_rot < 0.1,
         "a model {:.3} off was swapped in",

@@ -139,9 +139,7 @@ impl Machine {
         // within the limit is not confirmed: the model in force stays (see
         // `IdentificationConfig::at_limit_unannounced`).
         let at_limit = !matches!(decision, StopDecision::Converged { .. });
-        if at_limit
-            && self.identifying_unannounced
-            && cfg.at_limit_unannounced == AtLimit::KeepOld
+        if at_limit && self.identifying_unannounced && cfg.at_limit_unannounced == AtLimit::KeepOld
         {
             let text = format!(
                 "{why}: the suspected change is not confirmed (bound rot {:.3}, acc {:.3}, above the target): model rejected; old model kept",

@@ -1,8 +1,8 @@
 //! Does the hold watch (`machine.lost_hold_*`) ever fire on a vehicle that is held? The false
 //! alarm side of `daemon/core/tests/lost_hold.rs`.
 
-use thruster_inprocess::holding::PitchSteps;
 use nalgebra::DMatrix;
+use thruster_inprocess::holding::PitchSteps;
 use thruster_inprocess::run::{env_list, rel_err, Run, VEHICLES};
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::NoisePreset;
@@ -16,7 +16,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// largest 10 s mean of the true angle to the setpoint on the axes the model actuates while
 /// the machine controlled (the watch's quantity, from the truth rather than the filter) and
 /// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
-/// LH_TRACE: print the machine's status as it changes, with the angle to the setpoint.
+/// LH_TRACE: print the machine's status as it changes, with the angle to the setpoint, and each
+/// model swap against the truth (the new and the old model, the new one's bound, the sea state).
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
     let minutes: f64 = std::env::var("LH_MINUTES").map_or(5.0, |v| v.parse().unwrap());
