@@ -16,7 +16,7 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// largest 10 s mean of the true angle to the setpoint on the axes the model actuates while
 /// the machine controlled (the watch's quantity, from the truth rather than the filter) and
 /// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
-/// LH_TRACE: print the machine's status as it changes, with the angle to the setpoint, and each
+/// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes, with the angle to the setpoint, and each
 /// model swap against the truth (the new and the old model, the new one's bound, the sea state).
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
@@ -110,7 +110,12 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
                     println!("    {t:.1} s: {why}");
                     lost += 1;
                 }
-                Event::MismatchDetected(_) => mismatches += 1,
+                Event::MismatchDetected(why) => {
+                    mismatches += 1;
+                    if std::env::var_os("LH_WHY").is_some() {
+                        println!("    {t:.1} s: mismatch: {why}");
+                    }
+                }
                 _ => {}
             }
         }
