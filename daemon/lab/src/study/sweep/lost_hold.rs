@@ -16,8 +16,9 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// largest 10 s mean of the true angle to the setpoint on the axes the model actuates while
 /// the machine controlled (the watch's quantity, from the truth rather than the filter) and
 /// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
-/// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes, with the angle to the setpoint, and each
-/// model swap against the truth (the new and the old model, the new one's bound, the sea state).
+/// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
+/// with the angle to the setpoint, and each model swap against the truth (the new and the old
+/// model, the new one's bound, the sea state).
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
     let minutes: f64 = std::env::var("LH_MINUTES").map_or(5.0, |v| v.parse().unwrap());
@@ -81,6 +82,7 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
     let (mut blocks, mut sum, mut k, mut worst) = (Vec::<f64>::new(), 0.0, 0u32, 0.0f64);
     let dt = 1.0 / 200.0;
     let trace = std::env::var_os("LH_TRACE").is_some();
+    let why_each = std::env::var_os("LH_WHY").is_some();
     let mut last = String::new();
     let mut last_b = run.machine.model().map(|m| m.effectiveness.clone());
     while run.sim.time_s() - start < seconds {
@@ -112,7 +114,7 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
                 }
                 Event::MismatchDetected(why) => {
                     mismatches += 1;
-                    if std::env::var_os("LH_WHY").is_some() {
+                    if why_each {
                         println!("    {t:.1} s: mismatch: {why}");
                     }
                 }
@@ -161,7 +163,7 @@ fn trace_swap(run: &Run, t: f64, old: Option<&DMatrix<f64>>, new: Option<&DMatri
         .last_estimate()
         .map_or([f64::NAN; 2], |e| [e.rel_err_rot, e.rel_err_acc]);
     println!(
-        "    {t:6.1} s swap: new {:.3} / {:.3} (bound {:.3} / {:.3}), old {:.3} / {:.3}, new vs old {:.3} / {:.3}, sea state {:?}, unexplained {:.4} rad/s",
+        "    {t:6.1} s swap: new {:.3} / {:.3} (bound {:.3} / {:.3}), old {:.3} / {:.3}, new vs old {:.3} / {:.3}, sea state {:?}",
         err(new, 0),
         err(new, 3),
         bound[0],
@@ -170,10 +172,6 @@ fn trace_swap(run: &Run, t: f64, old: Option<&DMatrix<f64>>, new: Option<&DMatri
         err(old, 3),
         apart(0),
         apart(3),
-        run.machine.sea_state_deg(),
-        run.machine
-            .last_estimate()
-            .and_then(|e| e.dynamics.as_ref())
-            .map_or(f64::NAN, |d| d.unexplained_rate_radps)
+        run.machine.sea_state_deg()
     );
 }
