@@ -45,6 +45,8 @@ use thruster_protocol::MAX_THRUSTERS;
 use crate::estimator::dynamic::regressors::{terms, TERMS};
 use crate::model::Model;
 
+use super::calibration::{Calibration, Snapshot};
+
 /// The change test's settings (documented on `RefinementConfig`'s `change_*` keys).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ChangeSettings {
@@ -65,6 +67,12 @@ pub struct ChangeSettings {
     pub term_z: f64,
     /// A candidate is judged from this age on, s.
     pub min_age_s: f64,
+    /// The candidates' variance is calibrated on the apparent moves of batches of this long,
+    /// s, over `calibration_s` of the recent past ([`Calibration`]); 0: not calibrated.
+    #[serde(default)]
+    pub calibration_s: f64,
+    #[serde(default)]
+    pub batch_s: f64,
 }
 
 /// The test's largest statistic at one sample.
@@ -96,6 +104,9 @@ struct Candidate {
     /// Sums of `phi_i phi_k` (i <= k): the diagonal is each thruster's own regression, the
     /// rest the joint fit that names the thruster.
     sum_cross: [[f64; MAX_THRUSTERS]; MAX_THRUSTERS],
+    /// The calibration at `start_ns`, fixed then.
+    #[serde(default)]
+    calibration: Snapshot,
 }
 
 impl Candidate {
@@ -109,6 +120,7 @@ impl Candidate {
         sum_phi: [0.0; MAX_THRUSTERS],
         sum_phi_e: [[0.0; 3]; MAX_THRUSTERS],
         sum_cross: [[0.0; MAX_THRUSTERS]; MAX_THRUSTERS],
+        calibration: Snapshot::NONE,
     };
 }
 
@@ -125,6 +137,18 @@ pub struct ChangeTest {
     last_ns: Option<u64>,
     /// Predicted body rate, rad/s.
     rate: Vector3<f64>,
+    /// Every thruster's signature since the observer started (as a candidate's, from 0 at
+    /// the start): what the calibration regresses on.
+    #[serde(default)]
+    signature: [f64; MAX_THRUSTERS],
+    #[serde(default)]
+    calibration: Calibration,
+    /// When the observer started (its first sample).
+    #[serde(default)]
+    observer_started_ns: u64,
+    /// The thrusters of the model judged against.
+    #[serde(default)]
+    thrusters: usize,
     lag: [f64; MAX_THRUSTERS],
     lag_abs: f64,
     #[serde(with = "crate::serde_arrays::array")]
@@ -154,6 +178,10 @@ impl ChangeTest {
             held_since_ns: [None; 3],
             last_ns: None,
             rate: Vector3::zeros(),
+            signature: [0.0; MAX_THRUSTERS],
+            calibration: Calibration::default(),
+            observer_started_ns: 0,
+            thrusters: 0,
             lag: [0.0; MAX_THRUSTERS],
             lag_abs: 0.0,
             terms: [0.0; TERMS],
@@ -177,6 +205,7 @@ impl ChangeTest {
         self.last_ns = None;
         self.seen = 0;
         self.last_stat = None;
+        self.calibration.reset();
     }
 
     /// The thrusters' spin-up time constant of the model's fit, s.
@@ -225,12 +254,20 @@ impl ChangeTest {
                 c.live = false;
             }
             self.started_ns = None;
+            // The calibration outlives an update of the same thrusters (the refinement's
+            // small moves); a model of other thrusters starts it over.
+            if model.thrusters() != self.thrusters {
+                self.calibration.reset();
+                self.thrusters = model.thrusters();
+            }
         }
         let Some(last) = self.last_ns else {
             // The first sample: the observer starts at the gyro, the lag at the command.
             self.started_ns = Some(t_ns);
             self.last_ns = Some(t_ns);
             self.rate = *rate;
+            self.observer_started_ns = t_ns;
+            self.signature = [0.0; MAX_THRUSTERS];
             self.lag[..n].copy_from_slice(&sent[..n]);
             self.lag_abs = sent[..n].iter().map(|v| v.abs()).sum::<f64>() / n as f64;
             self.mean = [0.0; 3];
@@ -268,23 +305,48 @@ impl ChangeTest {
             }
             c.live = c.rows.iter().any(|&r| r);
         }
+        let mut z = [0.0; 3];
+        let mut inv = [0.0; 3];
+        for j in 0..3 {
+            z[j] = e[j] - self.mean[j];
+            let floor = sigma_floor[j].max(1e-6);
+            inv[j] = 1.0 / self.var[j].max(floor * floor);
+        }
+        // The calibration runs across model versions (the refinement updates the model every
+        // window, 5 s with a realistic IMU, and each update restarts the candidates' warm-up),
+        // on the rows held, once the observer has run `warmup_s`.
+        let observing = (t_ns - self.observer_started_ns) as f64 * 1e-9 >= self.s.warmup_s;
+        if self.s.calibration_s > 0.0 && observing {
+            let keep = (-self.s.batch_s / self.s.calibration_s).exp();
+            let var = std::array::from_fn(|j| 1.0 / inv[j]);
+            self.calibration.add(
+                &self.signature[..n],
+                &z,
+                &var,
+                settled,
+                dt,
+                self.s.batch_s,
+                keep,
+            );
+        }
         if warm && settled.iter().any(|&r| r) {
             if t_ns >= self.next_candidate_ns {
+                // Calibrated, a row is judged only once its calibration has batches.
+                let calibration = if self.s.calibration_s > 0.0 {
+                    self.calibration.snapshot(n)
+                } else {
+                    Snapshot::NONE
+                };
+                let rows = std::array::from_fn(|j| settled[j] && calibration.rows[j]);
                 self.candidates[self.next] = Candidate {
-                    live: true,
-                    rows: settled,
+                    live: rows.iter().any(|&r| r),
+                    rows,
                     start_ns: t_ns,
+                    calibration,
                     ..Candidate::EMPTY
                 };
                 self.next = (self.next + 1) % self.candidates.len();
                 self.next_candidate_ns = t_ns + (self.s.spacing_s * 1e9) as u64;
-            }
-            let mut z = [0.0; 3];
-            let mut inv = [0.0; 3];
-            for j in 0..3 {
-                z[j] = e[j] - self.mean[j];
-                let floor = sigma_floor[j].max(1e-6);
-                inv[j] = 1.0 / self.var[j].max(floor * floor);
             }
             let b = &model.effectiveness;
             let mut col_norm = [0.0; MAX_THRUSTERS];
@@ -336,10 +398,12 @@ impl ChangeTest {
                     // of the judged rows' move, against the whole column.
                     let floor = self.s.model_floor * col_norm[i];
                     let (mut chi2, mut d2) = (0.0, 0.0);
+                    // The variance calibrated against the water (a factor 1 without).
                     for j in (0..3).filter(|&j| c.rows[j]) {
                         let s = c.sum_phi_e[i][j] - c.sum_phi[i] * c.sum_e[j] / c.count;
                         let d = s / f;
-                        chi2 += d * d / (1.0 / (inv[j] * f) + floor * floor);
+                        let var = c.calibration.inflation[i][j] / (inv[j] * f);
+                        chi2 += d * d / (var + floor * floor);
                         d2 += d * d;
                     }
                     let stat = ChangeStat {
@@ -446,6 +510,9 @@ impl ChangeTest {
             self.rate = *rate;
         }
         let keep = 1.0 - gain;
+        for i in 0..n {
+            self.signature[i] = keep * self.signature[i] + dt * self.lag[i];
+        }
         for c in self.candidates.iter_mut().filter(|c| c.live) {
             for i in 0..n {
                 c.phi[i] = keep * c.phi[i] + dt * self.lag[i];
@@ -540,7 +607,7 @@ fn attribute(
                 let r = c.sum_phi_e[k][j] - c.sum_phi[k] * c.sum_e[j] / c.count;
                 d += ginv[(i, k)] * r;
             }
-            chi2 += d * d * inv_var[j] / ginv[(i, i)];
+            chi2 += d * d * inv_var[j] / (ginv[(i, i)] * c.calibration.inflation[i][j]);
             d2 += d * d;
         }
         if best.is_none_or(|b| chi2 > b.1) {
@@ -568,6 +635,8 @@ mod tests {
             lag_s: 0.0,
             term_z: 3.0,
             min_age_s: 1.0,
+            calibration_s: 0.0,
+            batch_s: 2.0,
         }
     }
 

@@ -151,6 +151,24 @@ pub struct RefinementConfig {
     /// 48-92 % after the new model was in; at the paper's noise the rotated thruster is found
     /// on candidates 3-5 s old.
     pub change_min_age_s: f64,
+    /// The change test calibrated against the water (default 120 s; 0: off): every thruster's
+    /// apparent move is fitted on consecutive `change_batch_s` batches of the rows held, and
+    /// their mean square over this recent past (forgetting time constant, s), against what
+    /// the innovation's variance alone gives, is the factor on a candidate's variance. Why: in
+    /// a swell the controller's answer to the waves is in the commands, so the regression
+    /// "finds" moves of 40-200 % of a column; uncalibrated, AMOUR-5 flying pitch steps in
+    /// moderate water (0.3 m/s, 10 N / 1 Nm at 0.15 Hz) had a false alarm on 10 of 10 seeds
+    /// within 10 minutes at every noise preset, and rough water at the paper's noise on 6 of
+    /// 10; calibrated, none from the change test (`change_test_soak`, docs/study.md). In still
+    /// water the factor stays near 1: detection times unchanged (paper's noise through pitch
+    /// steps 4.2-4.5 s). The cost: in a swell at the paper's noise a moved thruster is no
+    /// longer found within 60 s (the windows' 30 s are too short there) ...
+    pub change_calibration_s: f64,
+    /// ... on batches this long, s (default 10, the candidates' horizon: a swell's apparent
+    /// move is coloured, so shorter batches understate it for the older candidates; with 2 s
+    /// batches the 10 s candidates alarmed in moderate water after 115 s, and 2 s batches over
+    /// 30 s cost the realistic IMU's change-test detection in still water, 3.9 s -> 7.0 s).
+    pub change_batch_s: f64,
 }
 
 impl Default for RefinementConfig {
@@ -185,13 +203,15 @@ impl Default for RefinementConfig {
             change_model_floor: 0.0,
             change_term_z: 4.0,
             change_min_age_s: 2.0,
+            change_calibration_s: 120.0,
+            change_batch_s: 10.0,
         }
     }
 }
 
 impl RefinementConfig {
     /// (key, value, allowed range) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 26] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 28] {
         [
             ("refinement.dither", self.dither, Range::closed(0.0, 1.0)),
             ("refinement.hold_s", self.hold_s, Range::above(0.0)),
@@ -307,6 +327,16 @@ impl RefinementConfig {
                 self.change_min_age_s,
                 Range::closed(0.0, self.change_horizon_s),
             ),
+            (
+                "refinement.change_calibration_s",
+                self.change_calibration_s,
+                Range::closed(0.0, 3600.0),
+            ),
+            (
+                "refinement.change_batch_s",
+                self.change_batch_s,
+                Range::closed(0.1, 60.0),
+            ),
         ]
     }
 
@@ -324,6 +354,8 @@ impl RefinementConfig {
             lag_s,
             term_z: self.change_term_z,
             min_age_s: self.change_min_age_s,
+            calibration_s: self.change_calibration_s,
+            batch_s: self.change_batch_s,
         }
     }
 }

@@ -25,6 +25,7 @@
 //! level. Its verdict takes the windows' path: a [`WindowVerdict`] with `changed` (and
 //! `change_test`), which the machine turns into a mismatch.
 
+mod calibration;
 pub mod change_test;
 mod config;
 pub mod fusion;

@@ -27,6 +27,8 @@ fn with_change_test() -> RefinementConfig {
         ("CT_WARMUP", &mut c.change_warmup_s),
         ("CT_MAX_ERROR", &mut c.change_max_error_deg),
         ("CT_MIN_AGE", &mut c.change_min_age_s),
+        ("CT_CAL", &mut c.change_calibration_s),
+        ("CT_BATCH", &mut c.change_batch_s),
     ] {
         if let Ok(v) = std::env::var(key) {
             *field = v.parse().unwrap_or_else(|_| panic!("{key}: {v}"));
