@@ -198,8 +198,8 @@ fn change_test_on_every_vehicle_short_raises_no_false_alarm() {
 /// realistic IMU, then the water comes up (moderate: 0.3 m/s current, 10 N / 1 Nm at 0.15 Hz)
 /// and it flies +-20 deg pitch steps. Uncalibrated, the change test takes the controller's
 /// answer to the waves for a moved thruster within a minute (measured 29.7-33.7 s on seeds
-/// 1-3, 10 of 10 seeds in 10-minute soaks); calibrated against the water (the shipped
-/// `change_calibration_s`), none in 3 minutes, and the rotated top thruster is still found
+/// 1-3, 10 of 10 seeds in 10-minute soaks); calibrated against the water
+/// (`change_calibration_s = 120`, off by default), none in 3 minutes, and the rotated top thruster is still found
 /// in the swell (by the windows: measured 6.4-7.6 s on seeds 1-10). `cargo test -p
 /// thrusterd-core --test refinement -- --nocapture swell`.
 #[test]
@@ -213,8 +213,13 @@ fn in_a_swell_the_calibrated_change_test_is_quiet_and_still_finds_a_rotated_thru
             .unwrap();
         run
     };
-    let uncalibrated = thrusterd_core::adaptation::refinement::RefinementConfig {
-        change_calibration_s: 0.0,
+    let uncalibrated = shipped_change_test();
+    assert_eq!(
+        uncalibrated.change_calibration_s, 0.0,
+        "the shipped default"
+    );
+    let calibrated = thrusterd_core::adaptation::refinement::RefinementConfig {
+        change_calibration_s: 120.0,
         ..shipped_change_test()
     };
     let (t, why) = pitch_until_mismatch(&mut in_the_swell(uncalibrated), 60.0)
@@ -222,7 +227,7 @@ fn in_a_swell_the_calibrated_change_test_is_quiet_and_still_finds_a_rotated_thru
     println!("uncalibrated: a false alarm after {t:.1} s: {why}");
     assert!(why.contains("change test"), "{why}");
 
-    let mut run = in_the_swell(shipped_change_test());
+    let mut run = in_the_swell(calibrated);
     let quiet = pitch_until_mismatch(&mut run, 180.0);
     assert!(quiet.is_none(), "calibrated: false alarm {quiet:?}");
     run.rotate_top();

@@ -8,8 +8,12 @@
 //! few seconds the regression "finds" moves of 40-200 % of a column of the thrusters the
 //! controller uses against the waves, which thruster and which sign changing with the wave
 //! and the manoeuvre (docs/study.md, issue 32 item 5). The statistic's white-noise variance
-//! does not know that; the batches measure it. In still water the batches' moves are the
-//! noise's, and the factor is 1.
+//! does not know that; the batches measure it.
+//!
+//! In still water the factor is not 1 with a realistic IMU: through manoeuvres the model's own
+//! few-percent errors under the trim commands are apparent moves far above the gyro's noise
+//! (AMOUR-5, pitch steps: largest factor 860-1060, mean 31-48; moderate water mean 300-1550),
+//! which is why the calibration is off by default (`RefinementConfig::change_calibration_s`).
 //!
 //! Pure, fixed-size, no allocation; per sample O(rows x thrusters).
 
@@ -98,10 +102,10 @@ impl Calibration {
             b.seconds += dt;
             b.count += 1.0;
             b.sum_z += z[j];
-            for i in 0..n {
-                b.sum_x[i] += x[i];
-                b.sum_xz[i] += x[i] * z[j];
-                b.sum_xx[i] += x[i] * x[i];
+            for (i, &xi) in x.iter().enumerate().take(n) {
+                b.sum_x[i] += xi;
+                b.sum_xz[i] += xi * z[j];
+                b.sum_xx[i] += xi * xi;
             }
             if b.seconds < batch_s {
                 continue;
