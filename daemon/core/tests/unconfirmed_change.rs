@@ -31,12 +31,7 @@ struct Outcome {
 fn pitch_steps_in_a_swell(at_limit: AtLimit, seconds: f64) -> Outcome {
     let mut run = Run::new("amour5_top45", NoisePreset::Paper, 2);
     run.with_setup(|s| s.identification.at_limit_unannounced = at_limit);
-    run.run_for(1.0);
-    run.estimate();
-    run.machine.take_events();
-    run.sim
-        .set_disturbance(WaterPreset::Moderate.disturbance())
-        .unwrap();
+    run.learn_then_water(WaterPreset::Moderate);
     let mut plan = PitchSteps::new(&run);
     let start = run.sim.time_s();
     let mut last = run.machine.model().map(|m| m.effectiveness.clone());

@@ -233,6 +233,17 @@ pub struct Reestimation {
 }
 
 impl Run {
+    /// The lab's start in moving water: the model learned in still water (1 s of settling, an
+    /// estimation, its events dropped), then the water comes up.
+    pub fn learn_then_water(&mut self, water: thruster_sim::disturbance::WaterPreset) {
+        self.run_for(1.0);
+        self.estimate();
+        self.machine.take_events();
+        if water != thruster_sim::disturbance::WaterPreset::Still {
+            self.sim.set_disturbance(water.disturbance()).unwrap();
+        }
+    }
+
     /// AMOUR-5's top thruster "T" rotated 45 degrees about x, unannounced.
     pub fn rotate_top(&mut self) {
         self.sim

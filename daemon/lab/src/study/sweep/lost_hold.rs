@@ -16,6 +16,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// largest 10 s mean of the true angle to the setpoint on the axes the model actuates while
 /// the machine controlled (the watch's quantity, from the truth rather than the filter) and
 /// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
+/// LH_CAL, LH_MON_CAL (s): `refinement.change_calibration_s` and `monitor.calibration_s` (the
+/// calibrations against the water; default the shipped 0, off).
 /// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
 /// with the angle to the setpoint, and each model swap against the truth (the new and the old
 /// model, the new one's bound, the sea state).
@@ -41,6 +43,10 @@ pub(super) fn lost_hold_soak() {
         })
         .collect();
     let limit: Option<f64> = std::env::var("LH_DEG").ok().map(|v| v.parse().unwrap());
+    let change_calibration_s: Option<f64> =
+        std::env::var("LH_CAL").ok().map(|v| v.parse().unwrap());
+    let monitor_calibration_s: Option<f64> =
+        std::env::var("LH_MON_CAL").ok().map(|v| v.parse().unwrap());
     println!("{noise:?}, {minutes} min of +-20 deg pitch steps every 4 s, limit {limit:?}");
     println!(
         "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12}",
@@ -51,15 +57,22 @@ pub(super) fn lost_hold_soak() {
         for water in &waters {
             for &seed in &seeds {
                 let mut run = Run::new(name, noise, seed);
-                if let Some(deg) = limit {
-                    run.with_setup(|s| s.machine.lost_hold_deg = deg);
+                // One setup (each `with_setup` starts from the shipped one).
+                let knobs = [limit, change_calibration_s, monitor_calibration_s];
+                if knobs.iter().any(Option::is_some) {
+                    run.with_setup(|c| {
+                        if let Some(deg) = limit {
+                            c.machine.lost_hold_deg = deg;
+                        }
+                        if let Some(s) = change_calibration_s {
+                            c.refinement.change_calibration_s = s;
+                        }
+                        if let Some(s) = monitor_calibration_s {
+                            c.monitor.calibration_s = s;
+                        }
+                    });
                 }
-                run.run_for(1.0);
-                run.estimate();
-                run.machine.take_events();
-                if *water != WaterPreset::Still {
-                    run.sim.set_disturbance(water.disturbance()).unwrap();
-                }
+                run.learn_then_water(*water);
                 let (lost, mismatches, worst, away) = fly(&mut run, minutes * 60.0);
                 total_lost += lost;
                 println!(

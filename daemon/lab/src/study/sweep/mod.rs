@@ -14,6 +14,7 @@ mod identification;
 mod lost_hold;
 mod refinement;
 mod refinement_update;
+mod silent_change;
 mod time_to_model;
 
 #[derive(Args, Debug)]
@@ -161,6 +162,12 @@ pub const SWEEPS: &[Sweep] = &[
         knobs: "RU_*",
         about: "every vehicle, noise-free, pitch steps with the refinement's updates",
         run: refinement_update::every_vehicle_sweep_with_settings_from_the_environment,
+    },
+    Sweep {
+        name: "silent_change_in_water",
+        knobs: "SC_*",
+        about: "every detector as shipped, in moving water: false alarms, then a rotated thruster",
+        run: silent_change::silent_change_in_water,
     },
 ];
 
