@@ -15,7 +15,10 @@ use thrusterd_core::machine::State;
 /// the run), then its top thruster is rotated 45 deg and it flies on up to 60 s. SC_NOISE
 /// (none|realistic|paper, default realistic), SC_SEEDS (default 1-6), SC_CAL and SC_MON_CAL
 /// (s): `refinement.change_calibration_s` and `monitor.calibration_s` (default the shipped 0);
-/// SC_MONITOR_ONLY=1: the refinement (its windows and change test) off, the monitor alone.
+/// SC_MONITOR_ONLY=1: the refinement (its windows and change test) off, the monitor alone;
+/// SC_NO_INSTRUMENT=1: `identification.instrument = "never"`. Each detection line ends with the
+/// sea state the machine had measured before the change and when it was found (deg RMS, None:
+/// not known).
 /// Per run: the false alarm (time, reason), the detection time and reason, the time to the
 /// new model and its error against the new truth (rotation / acceleration rows).
 ///   `cargo run --release -p thrusterctl -- study sweep silent_change_in_water`
@@ -43,15 +46,20 @@ pub(super) fn silent_change_in_water() {
     };
     let (change_cal, monitor_cal) = (knob("SC_CAL"), knob("SC_MON_CAL"));
     let monitor_only = std::env::var("SC_MONITOR_ONLY").is_ok_and(|v| v == "1");
+    let never_instrument = std::env::var("SC_NO_INSTRUMENT").is_ok_and(|v| v == "1");
     println!(
         "{vehicle}, {noise:?}, {minutes} min unchanged, change test calibration {change_cal:?}, monitor calibration {monitor_cal:?}"
     );
     for water in &waters {
         for &seed in &seeds {
             let mut run = Run::new(&vehicle, noise, seed);
-            if change_cal.is_some() || monitor_cal.is_some() || monitor_only {
+            if change_cal.is_some() || monitor_cal.is_some() || monitor_only || never_instrument {
                 run.with_setup(|c| {
                     c.refinement.enabled = !monitor_only;
+                    if never_instrument {
+                        c.identification.instrument =
+                            thrusterd_core::adaptation::identification::Instrument::Never;
+                    }
                     if let Some(s) = change_cal {
                         c.refinement.change_calibration_s = s;
                     }
@@ -66,11 +74,13 @@ pub(super) fn silent_change_in_water() {
                 println!("{w:>9} seed {seed}: FALSE ALARM after {t:.1} s: {why}");
                 continue;
             }
+            let sea_before = run.machine.sea_state_deg();
             run.rotate_top();
             let Some((t, why)) = pitch_with(&mut run, 60.0, |_, _| {}) else {
                 println!("{w:>9} seed {seed}: quiet; rotation not found within 60 s");
                 continue;
             };
+            let sea = run.machine.sea_state_deg();
             let took = run.run_until(120.0, |m| m.state() == State::Active);
             let truth = run.truth();
             let (rot, acc) = run.machine.model().map_or((f64::NAN, f64::NAN), |m| {
@@ -80,7 +90,7 @@ pub(super) fn silent_change_in_water() {
                 )
             });
             println!(
-                "{w:>9} seed {seed}: quiet; rotation found after {t:.1} s ({why}); new model after {took:.1} s, {rot:.3} / {acc:.3}; {}",
+                "{w:>9} seed {seed}: quiet; rotation found after {t:.1} s ({why}); new model after {took:.1} s, {rot:.3} / {acc:.3}; {}; sea state before {sea_before:.1?}, then {sea:.1?} deg",
                 run.machine.status().text
             );
         }
