@@ -1,5 +1,7 @@
 //! How far the water moved the vehicle while it was held: the running RMS of the attitude
-//! error while controlling, which an identification under control reads when it concludes.
+//! error while controlling, on the axes the model actuates (the caller's `err_deg`: four_up's
+//! unactuated yaw read 22-30 deg in a current), which an identification under control reads
+//! when it concludes.
 //!
 //! Why: a low dither share alone (the commands mostly the controller's) does not say the
 //! controller was answering the water. On `aligned`, its top thruster turned, the nominal

@@ -18,6 +18,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
 /// LH_CAL, LH_MON_CAL (s): `refinement.change_calibration_s` and `monitor.calibration_s` (the
 /// calibrations against the water; default the shipped 0, off).
+/// LH_LEVEL=1: hold level at the starting heading instead of the pitch steps. The last column
+/// is the sea-state gauge at the end (`identification/sea_state.rs`, deg RMS; NaN: not known).
 /// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
 /// with the angle to the setpoint, and each model swap against the truth (the new and the old
 /// model, the new one's bound, the sea state).
@@ -43,14 +45,15 @@ pub(super) fn lost_hold_soak() {
         })
         .collect();
     let limit: Option<f64> = std::env::var("LH_DEG").ok().map(|v| v.parse().unwrap());
+    let level = std::env::var("LH_LEVEL").is_ok_and(|v| v == "1");
     let change_calibration_s: Option<f64> =
         std::env::var("LH_CAL").ok().map(|v| v.parse().unwrap());
     let monitor_calibration_s: Option<f64> =
         std::env::var("LH_MON_CAL").ok().map(|v| v.parse().unwrap());
     println!("{noise:?}, {minutes} min of +-20 deg pitch steps every 4 s, limit {limit:?}");
     println!(
-        "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12}",
-        "vehicle", "water", "seed", "lost", "mismatches", "max 10s mean", "not Active s"
+        "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12} {:>9}",
+        "vehicle", "water", "seed", "lost", "mismatches", "max 10s mean", "not Active s", "sea deg"
     );
     let mut total_lost = 0;
     for name in &vehicles {
@@ -73,10 +76,11 @@ pub(super) fn lost_hold_soak() {
                     });
                 }
                 run.learn_then_water(*water);
-                let (lost, mismatches, worst, away) = fly(&mut run, minutes * 60.0);
+                let (lost, mismatches, worst, away) = fly(&mut run, minutes * 60.0, level);
+                let sea = run.machine.sea_state_deg().unwrap_or(f64::NAN);
                 total_lost += lost;
                 println!(
-                    "{name:>15} {:>9} {seed:>5} {lost:>5} {mismatches:>10} {worst:>13.1} {away:>12.1}",
+                    "{name:>15} {:>9} {seed:>5} {lost:>5} {mismatches:>10} {worst:>13.1} {away:>12.1} {sea:>9.1}",
                     format!("{water:?}").to_lowercase()
                 );
             }
@@ -87,8 +91,17 @@ pub(super) fn lost_hold_soak() {
 
 /// Pitch steps for `seconds`: (hold-lost events, mismatches, largest 10 s mean angle to the
 /// setpoint while controlling (deg), vehicle time outside Active (s)).
-fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
+fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
     let mut plan = PitchSteps::new(run);
+    let level_at = {
+        let yaw = run.sim.roll_pitch_yaw()[2];
+        let level_at = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+        if level {
+            run.machine
+                .on_setpoint(level_at, Some(run.sim.position_ned().z));
+        }
+        level_at
+    };
     let start = run.sim.time_s();
     let (mut lost, mut mismatches, mut away) = (0, 0, 0.0);
     // 10 s of 1 s block means of the angle to the setpoint.
@@ -100,12 +113,15 @@ fn fly(run: &mut Run, seconds: f64) -> (usize, usize, f64, f64) {
     let mut last_b = run.machine.model().map(|m| m.effectiveness.clone());
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
-        let sp = plan.at(run, t);
+        let sp = if level { level_at } else { plan.at(run, t) };
         run.tick();
         let b = run.machine.model().map(|m| &m.effectiveness);
         if trace && b != last_b.as_ref() {
             trace_swap(run, t, last_b.as_ref(), b);
             last_b = b.cloned();
+        }
+        if trace && (t * 200.0).round() as u64 % 2000 == 0 {
+            println!("    {t:6.1} s sea state {:?}", run.machine.sea_state_deg());
         }
         if trace {
             let text = run.machine.status().text;
