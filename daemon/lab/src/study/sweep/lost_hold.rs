@@ -21,7 +21,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// LH_LEVEL=1: hold level at the starting heading instead of the pitch steps. The last column
 /// is the sea-state gauge at the end (`identification/sea_state.rs`, deg RMS; NaN: not known).
 /// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
-/// with the angle to the setpoint, and each model swap against the truth (the new and the old
+/// with the angle to the setpoint, the sea-state gauge every 10 s, and each model swap against
+/// the truth (the new and the old
 /// model, the new one's bound, the sea state).
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
@@ -120,7 +121,7 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
             trace_swap(run, t, last_b.as_ref(), b);
             last_b = b.cloned();
         }
-        if trace && (t * 200.0).round() as u64 % 2000 == 0 {
+        if trace && ((t * 200.0).round() as u64).is_multiple_of(2000) {
             println!("    {t:6.1} s sea state {:?}", run.machine.sea_state_deg());
         }
         if trace {
