@@ -38,7 +38,7 @@ pub(super) struct Calibration {
 
 /// The calibration is used once this many batches (besides the latest) are in; until then the
 /// monitor does not judge.
-pub(super) const MIN_BATCHES: u32 = 3;
+const MIN_BATCHES: u32 = 3;
 
 /// The largest factor: beyond it an axis is as good as not judged.
 const MAX_INFLATION: f64 = 1e6;

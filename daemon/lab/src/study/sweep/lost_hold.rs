@@ -22,8 +22,7 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// is the sea-state gauge at the end (`identification/sea_state.rs`, deg RMS; NaN: not known).
 /// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
 /// with the angle to the setpoint, the sea-state gauge every 10 s, and each model swap against
-/// the truth (the new and the old
-/// model, the new one's bound, the sea state).
+/// the truth (the new and the old model, the new one's bound, the sea state).
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
     let minutes: f64 = std::env::var("LH_MINUTES").map_or(5.0, |v| v.parse().unwrap());
@@ -51,7 +50,12 @@ pub(super) fn lost_hold_soak() {
         std::env::var("LH_CAL").ok().map(|v| v.parse().unwrap());
     let monitor_calibration_s: Option<f64> =
         std::env::var("LH_MON_CAL").ok().map(|v| v.parse().unwrap());
-    println!("{noise:?}, {minutes} min of +-20 deg pitch steps every 4 s, limit {limit:?}");
+    let flight = if level {
+        "held level"
+    } else {
+        "of +-20 deg pitch steps every 4 s"
+    };
+    println!("{noise:?}, {minutes} min {flight}, limit {limit:?}");
     println!(
         "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12} {:>9}",
         "vehicle", "water", "seed", "lost", "mismatches", "max 10s mean", "not Active s", "sea deg"
@@ -90,19 +94,17 @@ pub(super) fn lost_hold_soak() {
     println!("hold lost {total_lost} times in all");
 }
 
-/// Pitch steps for `seconds`: (hold-lost events, mismatches, largest 10 s mean angle to the
-/// setpoint while controlling (deg), vehicle time outside Active (s)).
+/// Pitch steps (or, `level`, a level hold at the starting heading) for `seconds`: (hold-lost
+/// events, mismatches, largest 10 s mean angle to the setpoint while controlling (deg), vehicle
+/// time outside Active (s)).
 fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
     let mut plan = PitchSteps::new(run);
-    let level_at = {
-        let yaw = run.sim.roll_pitch_yaw()[2];
-        let level_at = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
-        if level {
-            run.machine
-                .on_setpoint(level_at, Some(run.sim.position_ned().z));
-        }
-        level_at
-    };
+    let level_at =
+        nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, run.sim.roll_pitch_yaw()[2]);
+    if level {
+        run.machine
+            .on_setpoint(level_at, Some(run.sim.position_ned().z));
+    }
     let start = run.sim.time_s();
     let (mut lost, mut mismatches, mut away) = (0, 0, 0.0);
     // 10 s of 1 s block means of the angle to the setpoint.
