@@ -16,6 +16,7 @@ use crate::estimator::{
 use crate::model::{Model, ModelSource};
 use crate::navigation::rest_drift::RestDrift;
 use crate::navigation::rest_rotation::RestRotation;
+use crate::navigation::rest_shape::RestShape;
 
 mod closed_loop;
 mod idle_rest;
@@ -27,6 +28,12 @@ use crate::solve::{Purpose, SolveResult, Solver};
 
 /// The fewest samples a noise measurement is made of, however short `noise_s` is.
 pub(super) const MIN_REST_SAMPLES: u64 = 10;
+
+/// A rest that saw the vehicle pushed starts over until the noise measurement is this old, s;
+/// then the excitation begins anyway. eight_vectored meeting a 0.3 m/s current is turned
+/// pushed after 1 s and not after 2-3 s (`navigation::rest_shape`); the drag of a faster
+/// current falls as fast.
+pub(super) const MAX_PUSHED_WAIT_S: f64 = 10.0;
 
 /// The estimation run's owner number for its solver (see `solve::owner_of`).
 pub(super) const ESTIMATION: u64 = 0;
@@ -69,6 +76,13 @@ pub(super) struct EstimationRun {
     /// Rest taken before the run began (while idle, `IdleRest`), s: counted towards
     /// `machine.noise_s`.
     rested_s: f64,
+    /// When the rest being measured began, s into the noise measurement: later than 0 once a
+    /// rest that saw the vehicle pushed was started over (`MAX_PUSHED_WAIT_S`).
+    #[serde(default)]
+    rest_from_s: f64,
+    /// How often the rest was started over for a push.
+    #[serde(default)]
+    rest_restarts: u32,
     /// Under control (state Identify): the dither and its clock.
     closed: Option<ClosedLoop>,
     /// This open-loop run is a burst: its model is refined under control next.
@@ -90,6 +104,8 @@ impl EstimationRun {
             quiet_since_ns: None,
             rest: Rest::default(),
             rested_s: 0.0,
+            rest_from_s: 0.0,
+            rest_restarts: 0,
             closed: None,
             burst: false,
             prior: None,
@@ -134,6 +150,8 @@ impl EstimationRun {
         self.noise = NoiseMeter::new();
         self.rest = Rest::default();
         self.rested_s = 0.0;
+        self.rest_from_s = 0.0;
+        self.rest_restarts = 0;
         self.est = None;
         self.closed = None;
         self.burst = false;
@@ -250,6 +268,11 @@ impl EstimationRun {
         self.last_estimate.as_ref()
     }
 
+    /// How often this run's rest started over for a push (`MAX_PUSHED_WAIT_S`).
+    pub(super) fn rest_restarts(&self) -> u32 {
+        self.rest_restarts
+    }
+
     /// The last noise levels measured.
     pub(super) fn levels(&self) -> Option<NoiseLevels> {
         self.levels
@@ -276,8 +299,18 @@ impl EstimationRun {
         n: usize,
         power_cap: f64,
     ) -> bool {
-        let rested_s = elapsed_s + self.rested_s;
+        let rested_s = elapsed_s - self.rest_from_s + self.rested_s;
         if !(rested_s >= setup.machine.noise_s && self.noise.samples() >= MIN_REST_SAMPLES) {
+            return false;
+        }
+        // A rest that saw the vehicle pushed (a current's drag still taking it) would put the
+        // push into the gyro's bias: it starts over, until `MAX_PUSHED_WAIT_S`.
+        if self.rest.pushed() && elapsed_s < MAX_PUSHED_WAIT_S {
+            self.noise = NoiseMeter::new();
+            self.rest = Rest::default();
+            self.rested_s = 0.0;
+            self.rest_from_s = elapsed_s;
+            self.rest_restarts += 1;
             return false;
         }
         let levels = self.rest.correct(self.noise.levels());
@@ -419,6 +452,8 @@ impl EstimationRun {
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub(super) struct Rest {
     rotation: RestRotation,
+    /// Whether what the accelerometer saw was a turn or a push (`rest_shape`).
+    shape: RestShape,
     drift: RestDrift,
     /// Held under control (the hold before an identification): the thrusters' own
     /// accelerations are in the specific force, which then tells nothing of a turn, so the
@@ -430,6 +465,7 @@ impl Rest {
     /// One sample `t_s` into the rest, the thrusters neutral.
     pub(super) fn push(&mut self, m: &Motion, t_s: f64) {
         self.rotation.push(t_s, &m.gyro, &m.specific_force);
+        self.shape.push(t_s, &m.gyro, &m.specific_force);
         if let Some(d) = m.depth {
             self.drift.push(t_s, d);
         }
@@ -439,6 +475,12 @@ impl Rest {
     pub(super) fn push_held(&mut self, m: &Motion, t_s: f64) {
         self.held = true;
         self.push(m, t_s);
+    }
+
+    /// The accelerometer saw the vehicle pushed, not turned, during this rest of the
+    /// thrusters (`rest_shape`): its rotation would take the push for a turn.
+    pub(super) fn pushed(&self) -> bool {
+        !self.held && self.shape.pushed(GRAVITY)
     }
 
     /// `levels` (measured over this rest) with the gyro's bias net of the rotation the

@@ -22,6 +22,7 @@
 pub mod bias_filter;
 pub mod rest_drift;
 pub mod rest_rotation;
+pub mod rest_shape;
 
 use nalgebra::{UnitQuaternion, Vector3};
 

@@ -149,7 +149,14 @@ impl Machine {
         if let Some(k) = self.run.begin_pulse(t_ns, power_cap, &mut cmd.thrust) {
             // The first pulse is the estimation's news; the ones after a settle are phases.
             let first = !matches!(self.state, State::Pulse | State::Settle);
-            let announce = first.then_some("noise measured: pulsing");
+            let news = match self.run.rest_restarts() {
+                0 => "noise measured: pulsing".to_string(),
+                r => format!(
+                    "noise measured: pulsing (the rest started over {r} time{}: the accelerometer saw the vehicle pushed, not turned)",
+                    if r == 1 { "" } else { "s" }
+                ),
+            };
+            let announce = first.then_some(news.as_str());
             self.enter(State::Pulse, Some(t_ns), format!("pulse {k}"), announce);
         }
         finish(&mut cmd, self.setup.machine.deadband);
