@@ -92,6 +92,8 @@ pub struct Ideal {
     /// Only this part of the waves: "force", "torque", "heave" or "surge" (a sweep's
     /// LA_WAVE_PART; default all of them).
     pub wave_part: Option<&'static str>,
+    /// Every wave's force and moment times this (a sweep's LA_WAVE_SCALE; default 1).
+    pub wave_scale: Option<f64>,
     /// The noise measurement's length, s (a sweep's LAG_NOISE_S; default the shipped one).
     pub noise_s: Option<f64>,
     /// One excitation pulse's length, s (default the shipped `machine.pulse_s`).
@@ -178,6 +180,12 @@ pub fn estimate_observed(
             vary_ned_n: [-0.3 * pull, 0.0, 0.0],
             period_s: 20.0,
         });
+    }
+    if let Some(k) = ideal.wave_scale {
+        for w in disturbance.waves.iter_mut() {
+            w.force_ned_n = w.force_ned_n.map(|f| f * k);
+            w.torque_body_nm = w.torque_body_nm.map(|m| m * k);
+        }
     }
     match ideal.wave_part {
         Some("force") => disturbance

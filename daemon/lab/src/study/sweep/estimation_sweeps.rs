@@ -359,7 +359,8 @@ pub(super) fn lag_sweep() {
 /// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s), LA_IDLE_S (idle before
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
-/// `--tether`), LA_REACH (`reach_rel_err`).
+/// `--tether`), LA_REACH (`reach_rel_err`), LA_WAVE_SCALE (every wave's force and moment
+/// times this).
 pub(super) fn imu_and_water_sweep() {
     let noise = match std::env::var("LA_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -443,6 +444,9 @@ pub(super) fn imu_and_water_sweep() {
                     .ok()
                     .map(|v| &*Box::leak(v.into_boxed_str())),
                 idle_s: std::env::var("LA_IDLE_S").ok().map(|v| v.parse().unwrap()),
+                wave_scale: std::env::var("LA_WAVE_SCALE")
+                    .ok()
+                    .map(|v| v.parse().unwrap()),
                 tether_n: std::env::var("LA_TETHER").ok().map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
