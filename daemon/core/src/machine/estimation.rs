@@ -30,9 +30,9 @@ use crate::solve::{Purpose, SolveResult, Solver};
 pub(super) const MIN_REST_SAMPLES: u64 = 10;
 
 /// A rest that saw the vehicle pushed starts over until the noise measurement is this old, s;
-/// then the excitation begins anyway. eight_vectored meeting a 0.3 m/s current is turned
-/// pushed after 1 s and not after 2-3 s (`navigation::rest_shape`); the drag of a faster
-/// current falls as fast.
+/// then the excitation begins anyway. eight_vectored meeting a 0.3 m/s current is seen pushed
+/// over its first second in it and not over the second after (`navigation::rest_shape`): one
+/// restart.
 pub(super) const MAX_PUSHED_WAIT_S: f64 = 10.0;
 
 /// The estimation run's owner number for its solver (see `solve::owner_of`).

@@ -210,8 +210,7 @@ mod tests {
         );
     }
 
-    /// +-20 deg steps every 4 s from `from_s` for `steps` steps, the error `err(t since
-    /// the step, t)`.
+    /// `n` steps of +-20 deg every 4 s from `from_s`, the error `err(t since the step, t)`.
     fn steps(s: &mut SeaState, from_s: f64, n: usize, err: impl Fn(f64, f64) -> f64) {
         for k in 0..n {
             let sp =
