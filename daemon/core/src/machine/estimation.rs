@@ -464,8 +464,10 @@ pub(super) struct Rest {
 impl Rest {
     /// One sample `t_s` into the rest, the thrusters neutral.
     pub(super) fn push(&mut self, m: &Motion, t_s: f64) {
-        self.rotation.push(t_s, &m.gyro, &m.specific_force);
-        self.shape.push(t_s, &m.gyro, &m.specific_force);
+        if self.rotation.push(t_s, &m.gyro, &m.specific_force) {
+            let (t, angle) = self.rotation.last();
+            self.shape.push(t, &angle, &m.specific_force);
+        }
         if let Some(d) = m.depth {
             self.drift.push(t_s, d);
         }

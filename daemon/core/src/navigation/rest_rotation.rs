@@ -69,19 +69,19 @@ impl RestRotation {
     }
 
     /// One sample at `t_s`: raw gyro (rad/s) and specific force (m/s^2), body frame. Samples
-    /// with a non-finite value or a time that does not advance are skipped.
-    pub fn push(&mut self, t_s: f64, gyro: &Vector3<f64>, specific_force: &Vector3<f64>) {
+    /// with a non-finite value or a time that does not advance are skipped: then false.
+    pub fn push(&mut self, t_s: f64, gyro: &Vector3<f64>, specific_force: &Vector3<f64>) -> bool {
         let finite = t_s.is_finite()
             && gyro.iter().all(|v| v.is_finite())
             && specific_force.iter().all(|v| v.is_finite());
         if !finite {
-            return;
+            return false;
         }
         let t0 = *self.t0.get_or_insert(t_s);
         let t = t_s - t0;
         if self.n > 0 {
             if t <= self.last_t {
-                return;
+                return false;
             }
             // Trapezoidal: the angle at the sample, not half a step behind it.
             self.angle += (gyro + self.last_gyro) * (0.5 * (t - self.last_t));
@@ -96,6 +96,13 @@ impl RestRotation {
         self.sff += specific_force.component_mul(specific_force);
         self.sa += self.angle;
         self.sta += self.angle * t;
+        true
+    }
+
+    /// The last sample taken: its time since the first (s) and the gyro's integrated angle
+    /// then (rad, small angles).
+    pub fn last(&self) -> (f64, Vector3<f64>) {
+        (self.last_t, self.angle)
     }
 
     /// Samples taken.

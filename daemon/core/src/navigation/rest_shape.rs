@@ -15,9 +15,9 @@
 //! AMOUR-5 meeting it (a real swing, the Munk moment) at most 1.7; either after 3 s in the
 //! current at most 5.1; still water at most 2.6.
 //!
-//! Running sums of x = (the gyro's integrated angle, the specific force less the first
-//! sample's) and their products with 1, t, t^2 and each other; the difference is linear in x
-//! once the mean force is known, at the end. No allocation.
+//! Running sums of x = (the gyro's integrated angle, from `RestRotation`, and the specific
+//! force less the first sample's) and their products with 1, t, t^2 and each other; the
+//! difference is linear in x once the mean force is known, at the end. No allocation.
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
@@ -35,13 +35,10 @@ const MIN_SAMPLES: u64 = 20;
 
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct RestShape {
-    t0: Option<f64>,
     last_t: f64,
     n: u64,
     /// The first sample's specific force, subtracted from every sample (small sums).
     f0: Vector3<f64>,
-    angle: Vector3<f64>,
-    last_gyro: Vector3<f64>,
     /// Sums of t^k, k = 1..4.
     st: [f64; 4],
     /// Sums of x, t x, t^2 x and x x^T.
@@ -50,30 +47,17 @@ pub struct RestShape {
 }
 
 impl RestShape {
-    /// One sample at `t_s`: raw gyro (rad/s) and specific force (m/s^2). Samples with a
-    /// non-finite value or a time that does not advance are skipped.
-    pub fn push(&mut self, t_s: f64, gyro: &Vector3<f64>, specific_force: &Vector3<f64>) {
-        let finite = t_s.is_finite()
-            && gyro.iter().all(|v| v.is_finite())
-            && specific_force.iter().all(|v| v.is_finite());
-        if !finite {
-            return;
-        }
-        let t0 = *self.t0.get_or_insert(t_s);
-        let t = t_s - t0;
+    /// One sample the rest's rotation took (`RestRotation::push`, which skips the unusable
+    /// ones): `t` s after its first, the gyro's integrated `angle` (rad) and the specific
+    /// force (m/s^2).
+    pub fn push(&mut self, t: f64, angle: &Vector3<f64>, specific_force: &Vector3<f64>) {
         if self.n == 0 {
             self.f0 = *specific_force;
-        } else {
-            if t <= self.last_t {
-                return;
-            }
-            self.angle += (gyro + self.last_gyro) * (0.5 * (t - self.last_t));
         }
         self.last_t = t;
-        self.last_gyro = *gyro;
         self.n += 1;
         let df = specific_force - self.f0;
-        let x = V6::new(self.angle.x, self.angle.y, self.angle.z, df.x, df.y, df.z);
+        let x = V6::new(angle.x, angle.y, angle.z, df.x, df.y, df.z);
         let mut tk = 1.0;
         for k in 0..4 {
             tk *= t;
@@ -137,6 +121,7 @@ impl RestShape {
 
 #[cfg(test)]
 mod tests {
+    use super::super::rest_rotation::RestRotation;
     use super::*;
 
     const G: f64 = 9.80665;
@@ -161,13 +146,17 @@ mod tests {
             }
             (s - 6.0) * sd
         };
-        let mut r = RestShape::default();
+        let (mut rotation, mut r) = (RestRotation::new(), RestShape::default());
         for k in 0..=200 {
             let t = 5.0 + k as f64 * 0.005;
             let (th, q) = theta(t - 5.0);
             let f = Vector3::new(G * th.sin() + accel(t - 5.0), 0.0, -G * th.cos());
+            let f = f + Vector3::new(noise(), noise(), noise());
             let gyro = Vector3::new(noise(), q + bias + noise() * 0.1, noise() * 0.1);
-            r.push(t, &gyro, &(f + Vector3::new(noise(), noise(), noise())));
+            if rotation.push(t, &gyro, &f) {
+                let (t, angle) = rotation.last();
+                r.push(t, &angle, &f);
+            }
         }
         r
     }
