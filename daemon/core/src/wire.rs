@@ -320,6 +320,7 @@ mod tests {
             spin_up_s: 0.07,
             spin_up_learned: true,
             spin_up_sd_ln: 0.01,
+            spin_up_rel_err: [0.0; 2],
             imu_position: Some(ImuPosition::decide(
                 nalgebra::Vector3::zeros(),
                 Learned {

@@ -104,6 +104,7 @@ impl LagFit {
             }
             if norm2 > 0.0 && sol.rel_err[g].is_finite() {
                 sol.rel_err[g] = (sol.rel_err[g].powi(2) + extra / norm2).sqrt();
+                sol.terms.spin_up_rel_err[g] = (extra / norm2).sqrt();
             }
         }
         sol.terms.spin_up_sd_ln = self.sd_ln;

@@ -61,6 +61,11 @@ pub struct DynamicTerms {
     pub spin_up_learned: bool,
     /// One standard deviation of ln(`spin_up_s`) when learned (0 when configured).
     pub spin_up_sd_ln: f64,
+    /// What that uncertainty adds to the rotation and acceleration rows' relative bounds (in
+    /// quadrature, [`lag_search::LagFit::widen`]; 0 when configured): the stop rule projects
+    /// this share apart, since a lag's profile sharpens faster than 1/sqrt(pulses).
+    #[serde(default)]
+    pub spin_up_rel_err: [f64; 2],
     /// The IMU's position from the centre the acceleration rows are referred to
     /// ([`imu_position`]), learned or configured; None before [`DynamicRun::refer_to_centre`].
     pub imu_position: Option<ImuPosition>,
@@ -744,6 +749,7 @@ impl DynamicRun {
                 spin_up_s: self.lags.iter().sum::<f64>() / n.max(1) as f64,
                 spin_up_learned: self.lags_learned,
                 spin_up_sd_ln: 0.0,
+                spin_up_rel_err: [0.0; 2],
                 imu_position: None,
                 unexplained_rate_radps: 0.0,
                 instrumented: [rot_ls.instrumented(), acc_ls.instrumented()],

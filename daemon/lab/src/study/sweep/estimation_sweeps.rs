@@ -225,7 +225,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// LAG_TAUS, LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
-/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_NOISE_S (the rest's length, s), and
+/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
 /// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
@@ -287,6 +287,9 @@ pub(super) fn lag_sweep() {
                 }
                 if let Ok(p) = std::env::var("LAG_PULSES") {
                     cfg.max_pulses = p.parse().unwrap();
+                }
+                if std::env::var("LAG_SPLIT").is_ok() {
+                    cfg.split_thrust = true;
                 }
                 if std::env::var("LAG_TOLD").is_ok() {
                     // The decisive comparison: the true lag given, nothing learned.
