@@ -140,13 +140,16 @@ fn bench(c: &mut Criterion) {
         );
         // Under control (the identification): one sample of the split fit by least squares,
         // and the same instrumented in a sea (`estimator::dynamic::instruments`: the
-        // instruments' sums and a least-squares twin besides); then an estimate after 10 s.
-        for instrumented in [false, true] {
-            let name = if instrumented {
-                "closed_loop_sample_update_instrumented"
-            } else {
-                "closed_loop_sample_update"
+        // instruments' sums and a least-squares twin besides), and the same with the
+        // thrust-curve probe (`estimator::dynamic::thrust_curve`: three more fits, as the
+        // identification runs it); then an estimate after 10 s, and its job copy.
+        for (instrumented, probe) in [(false, false), (true, false), (false, true)] {
+            let suffix = match (instrumented, probe) {
+                (true, _) => "_instrumented",
+                (_, true) => "_curve_probe",
+                _ => "",
             };
+            let name = format!("closed_loop_sample_update{suffix}");
             let fresh = || {
                 let mut est = Estimator::new(
                     EstimatorConfig::default(),
@@ -158,6 +161,9 @@ fn bench(c: &mut Criterion) {
                     est.begin_instrumented_closed_loop();
                 } else {
                     est.begin_closed_loop();
+                }
+                if probe {
+                    est.probe_thrust_curve();
                 }
                 est
             };
@@ -202,13 +208,13 @@ fn bench(c: &mut Criterion) {
                     instrumented.then_some(&signs[j][..]),
                 );
             }
-            let name = if instrumented {
-                "closed_loop_estimate_instrumented"
-            } else {
-                "closed_loop_estimate"
-            };
+            let name = format!("closed_loop_estimate{suffix}");
             c.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
                 b.iter(|| black_box(est.estimate()))
+            });
+            let name = format!("closed_loop_job_copy{suffix}");
+            c.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
+                b.iter(|| black_box(Box::new(est.clone())))
             });
         }
         // A full dynamic estimate after 64 pulses (the default stops at a bound or 80 pulses).

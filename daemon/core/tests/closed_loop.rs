@@ -616,3 +616,54 @@ fn silent_rotation_while_pitching(
         why,
     )
 }
+
+/// A T200 whose curve nobody configured (`[supply] linearize` off: the daemon's defaults with
+/// a driver that passes the PWM, as ArduSub's does): its dead zone and steep top make the
+/// thrust far from linear in the command, and the identification under control learned the
+/// gain at the hold's amplitude, measured 0.50-0.51 / 0.52-0.53 off the truth under bounds of
+/// 0.04-0.05 / 0.06 (realistic IMU, seeds 1-3) and swapped it in. Commands bent to the power
+/// 1.5 explain its data with a ln likelihood ratio of 4000-10000 (linear thrusters, every
+/// vehicle file and water: at most 11.4): the model is refused naming the curve, and the
+/// model in force stays. Linearized, the same change is learned and swapped in.
+#[test]
+fn a_thrust_curve_nobody_configured_is_named_and_its_model_refused() {
+    let v = vehicle("amour5_t200");
+    for linearize in [false, true] {
+        let mut run = Run::new("amour5_t200", NoisePreset::Realistic, 1);
+        run.with_setup(|s| s.supply.linearize = linearize);
+        let mut named = None;
+        let (run, r) = common::rotate_while_holding_on(run, &v, None, |m, t| {
+            let text = m.status().text;
+            if named.is_none() && text.contains("does not follow the command linearly") {
+                named = Some((t, text));
+            }
+        });
+        let curve = run
+            .machine
+            .last_estimate()
+            .and_then(|e| e.dynamics.as_ref())
+            .and_then(|d| d.thrust_curve);
+        println!("linearize {linearize}: {r:?}, {curve:?}, {named:?}");
+        if linearize {
+            assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
+            assert!(named.is_none(), "{named:?}");
+            assert!(r.err_rot < 0.03 && r.err_acc < 0.04, "{r:?}");
+            assert!(
+                curve.is_some_and(|c| c.log_likelihood_ratio < 20.0),
+                "{curve:?}"
+            );
+        } else {
+            let (t, text) = named.expect("the curve named");
+            assert!(t < 25.0, "{t} s: {text}");
+            assert!(
+                text.contains("command^1.50") && text.contains("old model kept"),
+                "{text}"
+            );
+            assert_ne!(r.source, ModelSource::Estimated, "{r:?}");
+            assert!(
+                curve.is_some_and(|c| c.log_likelihood_ratio > 500.0),
+                "{curve:?}"
+            );
+        }
+    }
+}

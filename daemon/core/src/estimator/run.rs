@@ -14,6 +14,7 @@ use super::dynamic::lag_search::{
     fit_at, fit_at_centred, learn_common_lag, learn_common_lag_centred, LagFit, LagRange,
 };
 use super::dynamic::prior::DynamicPrior;
+use super::dynamic::thrust_curve::ThrustCurveProbe;
 use super::dynamic::{DynamicRun, DynamicTerms, ImuSetting};
 use super::excitation::ExcitationPlan;
 use super::forward::{ForwardLs, ForwardSolution};
@@ -267,6 +268,9 @@ pub struct Estimator {
     /// The lag this run's last applied estimate learned and its sd in ln(lag)
     /// (`set_lag_hint`): progress estimates fit at it instead of searching.
     lag_hint: Option<(f64, f64)>,
+    /// Under control, the fit made again with bent commands (`thrust_curve`).
+    #[serde(default)]
+    thrust_curve: Option<ThrustCurveProbe>,
 }
 
 impl Estimator {
@@ -294,6 +298,7 @@ impl Estimator {
             rest_velocity_down: None,
             lag_inherited: false,
             lag_hint: None,
+            thrust_curve: None,
             noise,
             cfg,
         }

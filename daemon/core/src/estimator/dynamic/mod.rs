@@ -19,6 +19,7 @@ pub mod regressors;
 pub mod sample_log;
 pub mod segment_basis;
 pub mod segmented_ls;
+pub mod thrust_curve;
 
 use nalgebra::{DMatrix, Vector3};
 
@@ -79,6 +80,10 @@ pub struct DynamicTerms {
     /// rather than least squares.
     #[serde(default)]
     pub instrumented: [bool; 2],
+    /// Under control: whether commands bent to a power explain the data better than the
+    /// linear model ([`thrust_curve`]); None open loop.
+    #[serde(default)]
+    pub thrust_curve: Option<thrust_curve::ThrustCurveEvidence>,
 }
 
 impl DynamicTerms {
@@ -161,6 +166,10 @@ pub struct DynamicRun {
     /// only where the two disagree.
     #[serde(default)]
     rot_least_squares: Option<Box<SegmentedLs>>,
+    /// The navigation's state at the last sample taken and that sample's time: the
+    /// [`thrust_curve`] probes fit on it instead of navigating again.
+    #[serde(default)]
+    last_nav: Option<(f64, NavState)>,
 }
 
 /// The thrust columns' instruments: per sample a value per thruster independent of the water
@@ -240,6 +249,7 @@ impl DynamicRun {
             last_command: u32::MAX,
             iv: None,
             rot_least_squares: None,
+            last_nav: None,
         }
     }
 
@@ -380,6 +390,11 @@ impl DynamicRun {
         &self.nav
     }
 
+    /// The navigation's state at the last sample taken, with that sample's time.
+    pub fn last_nav(&self) -> Option<&(f64, NavState)> {
+        self.last_nav.as_ref()
+    }
+
     /// The vertical velocity the rest ended with (NED, m/s): the navigation starts from it.
     pub fn start_sinking_at(&mut self, velocity_down: f64) {
         self.nav.start_sinking_at(velocity_down);
@@ -429,6 +444,7 @@ impl DynamicRun {
             return;
         }
         let nav = self.nav.update(t_s, gyro, specific_force, depth);
+        self.last_nav = Some((t_s, nav));
         if let Some(log) = self.log.as_mut() {
             let command = match u {
                 None => u32::MAX,
@@ -750,6 +766,7 @@ impl DynamicRun {
                 spin_up_learned: self.lags_learned,
                 spin_up_sd_ln: 0.0,
                 spin_up_rel_err: [0.0; 2],
+                thrust_curve: None,
                 imu_position: None,
                 unexplained_rate_radps: 0.0,
                 instrumented: [rot_ls.instrumented(), acc_ls.instrumented()],

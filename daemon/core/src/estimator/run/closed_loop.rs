@@ -5,6 +5,7 @@ use nalgebra::Vector3;
 
 use super::{Estimate, Estimator, StopDecision};
 use crate::estimator::config::Method;
+use crate::estimator::dynamic::thrust_curve::ThrustCurveProbe;
 
 impl Estimator {
     /// Start the dynamic fit now, for samples whose command the caller gives
@@ -19,6 +20,7 @@ impl Estimator {
         }
         self.pulse = None;
         self.dynamic = Some(self.dynamic_run(true, false));
+        self.thrust_curve = None;
         true
     }
 
@@ -31,6 +33,16 @@ impl Estimator {
         }
         self.dynamic = self.dynamic.take().map(|run| run.with_instruments());
         true
+    }
+
+    /// Fit the samples from now on again with bent commands too, to tell whether the thrust
+    /// follows the command linearly (`dynamic::thrust_curve`; the estimate's
+    /// `DynamicTerms::thrust_curve`). After `begin_closed_loop`; false, nothing started,
+    /// before. Three more fits per sample: for the identification, not every refinement
+    /// window.
+    pub fn probe_thrust_curve(&mut self) -> bool {
+        self.thrust_curve = self.dynamic.as_ref().map(ThrustCurveProbe::new);
+        self.thrust_curve.is_some()
     }
 
     /// One sample under control at `t_s`: bias-free gyro (rad/s), the raw specific force
@@ -58,6 +70,11 @@ impl Estimator {
             }
         }
         run.push_instrumented(t_s, gyro, specific_force, depth, Some(u), instruments);
+        if let (Some(probe), Some((t_nav, nav))) = (self.thrust_curve.as_mut(), run.last_nav()) {
+            if *t_nav == t_s {
+                probe.push(t_s, gyro, nav, u);
+            }
+        }
         self.samples += 1;
     }
 

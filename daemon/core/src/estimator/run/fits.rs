@@ -270,6 +270,7 @@ impl Estimator {
             }
         }
         sol.terms.unexplained_rate_radps = unexplained(&sol.sigma, &self.noise.gyro_white_sigma);
+        sol.terms.thrust_curve = self.thrust_curve.as_ref().and_then(|c| c.evidence());
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
         let alloc = pseudo_inverse(&sol.b, rank.actuated, rank.rank);
         let thruster = diagnose(

@@ -211,6 +211,9 @@ impl EstimationRun {
             } else {
                 est.begin_closed_loop();
             }
+            if ident.max_curve_evidence > 0.0 {
+                est.probe_thrust_curve();
+            }
             self.est = Some(est);
             return ClosedStep::Holding;
         };

@@ -92,6 +92,11 @@ impl Machine {
             .as_ref()
             .map_or([false; 2], |d| d.instrumented);
         let bound = (result.estimate.rel_err_rot, result.estimate.rel_err_acc);
+        let curve = result
+            .estimate
+            .dynamics
+            .as_ref()
+            .and_then(|d| d.thrust_curve);
         let Some((candidate, _)) = self.run.conclude(result) else {
             return;
         };
@@ -130,6 +135,20 @@ impl Machine {
                 "{why}: the dither was {:.0} % of the commands' variation (limit {:.0} %) with the water moving the held vehicle by {sea_deg:.1} deg RMS: the fit takes the controller's answer for thrust: model rejected; old model kept",
                 100.0 * share,
                 100.0 * limit
+            );
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(State::Active, &text);
+            return;
+        }
+        // The thrust does not follow the command linearly (a curve nobody configured): the
+        // linear model holds only at the hold's amplitude (a T200 without its curve: 50 % off
+        // under a 5 % bound; `identification.max_curve_evidence`).
+        if let Some(c) = curve.filter(|c| {
+            cfg.max_curve_evidence > 0.0 && c.log_likelihood_ratio > cfg.max_curve_evidence
+        }) {
+            let text = format!(
+                "{why}: the thrust does not follow the command linearly (thrust ~ command^{:.2} explains the data better, ln likelihood ratio {:.0}, limit {:.0}): configure the thrusters' curve ([supply] linearize for T200s, power_law_exponent for another make): model rejected; old model kept",
+                c.exponent, c.log_likelihood_ratio, cfg.max_curve_evidence
             );
             self.events.push(Event::ModelRejected(text.clone()));
             self.transition(State::Active, &text);

@@ -26,6 +26,9 @@ struct Bounds {
     dither_share: f64,
     /// The RMS attitude error while held before it (`Machine::sea_state_deg`), deg.
     sea_deg: f64,
+    /// The last estimate's thrust-curve evidence: the best exponent and its ln likelihood
+    /// ratio over the linear model.
+    curve: Option<(f64, f64)>,
     /// `ID_TRACE`: the machine's state and status text as they change.
     trace: Option<(thrusterd_core::machine::State, String)>,
 }
@@ -71,6 +74,11 @@ impl Bounds {
             .last_estimate()
             .and_then(|e| e.dynamics.as_ref())
             .map_or(0.0, |d| d.unexplained_rate_radps);
+        self.curve = m
+            .last_estimate()
+            .and_then(|e| e.dynamics.as_ref())
+            .and_then(|d| d.thrust_curve)
+            .map(|c| (c.exponent, c.log_likelihood_ratio));
         if r <= target && self.t_rot.is_none() {
             self.t_rot = Some(t);
         }
@@ -337,12 +345,14 @@ pub(super) fn sweep_identification() {
                     b.last.1,
                 ];
                 println!(
-                    "{}{:?} unexplained {:.4} rad/s dither share {:.2} sea {:.1} deg",
+                    "{}{:?} unexplained {:.4} rad/s dither share {:.2} sea {:.1} deg curve {}",
                     line(&seed.to_string(), &row, b.t_rot, b.t_acc),
                     r.source,
                     b.unexplained,
                     b.dither_share,
-                    b.sea_deg
+                    b.sea_deg,
+                    b.curve
+                        .map_or("-".to_string(), |(p, lr)| format!("p {p:.2} lnLR {lr:.1}"))
                 );
                 for (s, v) in sum.iter_mut().zip(row) {
                     *s += v;
