@@ -33,6 +33,7 @@ fn every_vehicle_file_loads_with_the_expected_rank() {
         ("eight_vectored", 8, 6),
         ("amour5_lag30ms", 5, 5),
         ("amour5_lag200ms", 5, 5),
+        ("eight_vectored_lag200ms", 8, 6),
         ("eight_vectored_lag80ms_curve", 8, 6),
         ("amour5_t200", 5, 5),
         ("eight_vectored_t200", 8, 6),
