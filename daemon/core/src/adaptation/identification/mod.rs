@@ -132,7 +132,8 @@ pub struct IdentificationConfig {
     /// figures: linear thrusters (every vehicle file, still water to rough, noise-free to the
     /// paper's noise) at most 11.4, mostly 0; T200s whose curve is not configured 4000-10000
     /// (their models 50 % off under bounds of 4-6 %); another make's thrust ~ command^1.5
-    /// 235-1300 at a realistic IMU, but 15-32 at the paper's noise (docs/study.md).
+    /// 236-328 at a realistic IMU (1295 noise-free), but 15-32 at the paper's noise
+    /// (docs/study.md).
     pub max_curve_evidence: f64,
 }
 

@@ -4,12 +4,12 @@
 //!
 //! Why: the model is linear in the command. A thruster whose thrust is not (another make's
 //! curve, thrust ~ command^1.5, or a T200 whose dead zone nobody configured) is learned at the
-//! amplitude the excitation used. Open loop that is the pulses' (0.8 of full command: 9.6 %
-//! off for eight_vectored_lag80ms_curve under a 2 % bound); under control the hold's and the
-//! dither's, a third of full command, where the same vehicle came out 40 % off under a 4 %
-//! bound and a T200 without its curve 52 % off under 6 % (docs/study.md). The pulses all have
-//! one amplitude and cannot tell; the commands under control take every level, so a bent
-//! command that explains them better says the linear model is only right at one amplitude.
+//! amplitude the excitation used. Open loop that is the pulses' one amplitude (0.8 of full
+//! command: eight_vectored_lag80ms_curve 9.6 % off under a 2 % bound), which cannot tell. Under
+//! control it is the hold's and the dither's, a third of full command: a T200 without its curve
+//! came out 50 % off under a 5 % bound and was swapped in (docs/study.md). The commands under
+//! control take every level, so a bent command that explains them better says the linear model
+//! is right at one amplitude only.
 
 use nalgebra::Vector3;
 
