@@ -80,6 +80,13 @@ impl Machine {
         cmd
     }
 
+    /// The identification's model refused for `text` (the event and the status say it), the
+    /// model in force kept, holding on.
+    fn keep_old_model(&mut self, text: String) {
+        self.events.push(Event::ModelRejected(text.clone()));
+        self.transition(State::Active, &text);
+    }
+
     pub(super) fn solve_under_control(&mut self, decision: StopDecision, result: SolveResult) {
         let key = self.geometry_key();
         let t_ns = self.last_t_ns.unwrap_or(0);
@@ -136,8 +143,7 @@ impl Machine {
                 100.0 * share,
                 100.0 * limit
             );
-            self.events.push(Event::ModelRejected(text.clone()));
-            self.transition(State::Active, &text);
+            self.keep_old_model(text);
             return;
         }
         // The thrust does not follow the command linearly (a curve nobody configured): the
@@ -150,8 +156,7 @@ impl Machine {
                 "{why}: the thrust does not follow the command linearly (thrust ~ command^{:.2} explains the data better, ln likelihood ratio {:.0}, limit {:.0}): configure the thrusters' curve ([supply] linearize for T200s, power_law_exponent for another make): model rejected; old model kept",
                 c.exponent, c.log_likelihood_ratio, cfg.max_curve_evidence
             );
-            self.events.push(Event::ModelRejected(text.clone()));
-            self.transition(State::Active, &text);
+            self.keep_old_model(text);
             return;
         }
         // A suspected change (the change test's or the monitor's) the data could not pin down
@@ -164,8 +169,7 @@ impl Machine {
                 "{why}: the suspected change is not confirmed (bound rot {:.3}, acc {:.3}, above the target): model rejected; old model kept",
                 bound.0, bound.1
             );
-            self.events.push(Event::ModelRejected(text.clone()));
-            self.transition(State::Active, &text);
+            self.keep_old_model(text);
             return;
         }
         match self.try_swap(candidate, ModelSource::Estimated) {
