@@ -11,10 +11,11 @@ use super::analysis::{diagnose, rank_report, RankReport, ThrusterDiagnosis};
 use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
 use super::dynamic::lag_search::{
-    fit_at, fit_at_centred, learn_common_lag, learn_common_lag_centred, LagFit, LagRange,
+    fit_at, fit_at_centred, learn_common_lag_centred, LagFit, LagRange,
 };
 use super::dynamic::prior::DynamicPrior;
 use super::dynamic::thrust_curve::ThrustCurveProbe;
+use super::dynamic::thruster_lags::search_thruster_lags;
 use super::dynamic::{DynamicRun, DynamicTerms, ImuSetting};
 use super::excitation::ExcitationPlan;
 use super::forward::{ForwardLs, ForwardSolution};
@@ -267,7 +268,7 @@ pub struct Estimator {
     lag_inherited: bool,
     /// The lag this run's last applied estimate learned and its sd in ln(lag)
     /// (`set_lag_hint`): progress estimates fit at it instead of searching.
-    lag_hint: Option<(f64, f64)>,
+    lag_hint: Option<(Vec<f64>, f64)>,
     /// Under control, the fit made again with bent commands (`thrust_curve`).
     #[serde(default)]
     thrust_curve: Option<ThrustCurveProbe>,
@@ -420,7 +421,12 @@ impl Estimator {
     pub fn set_lag_hint(&mut self, estimate: &Estimate) {
         if let Some(d) = estimate.dynamics.as_ref() {
             if d.spin_up_learned && d.spin_up_s.is_finite() && d.spin_up_sd_ln.is_finite() {
-                self.lag_hint = Some((d.spin_up_s, d.spin_up_sd_ln));
+                let lags = if d.spin_up_per_thruster_s.is_empty() {
+                    vec![d.spin_up_s]
+                } else {
+                    d.spin_up_per_thruster_s.clone()
+                };
+                self.lag_hint = Some((lags, d.spin_up_sd_ln));
             }
         }
     }
@@ -439,7 +445,8 @@ impl Estimator {
         };
         let fit = self
             .lag_hint
-            .and_then(|(lag_s, sd_ln)| fit_at(run, lag_s, sd_ln));
+            .as_ref()
+            .and_then(|(lags, sd_ln)| fit_at(run, lags, *sd_ln));
         self.dynamic_estimate_with(run, fit, false)
     }
 

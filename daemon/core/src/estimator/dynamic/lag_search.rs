@@ -14,7 +14,7 @@
 //! grid cell. Each evaluation refits the logged samples ([`super::sample_log`]); the search
 //! runs in the solve job, off the control thread.
 
-use nalgebra::Vector3;
+use nalgebra::{DMatrix, Vector3};
 
 use super::DynamicRun;
 
@@ -58,12 +58,36 @@ pub struct LagFit {
     pub sd_ln: f64,
     /// (lag s, score) of every evaluation, in the order made: the profile, for reports.
     pub profile: Vec<(f64, f64)>,
+    /// A lag per thruster ([`super::thruster_lags`]) where the data said the thrusters
+    /// differ: `run` is then the fit at these, and `lag_s` their mean. Empty: one lag for all.
+    #[serde(default)]
+    pub per_thruster: Vec<super::thruster_lags::ThrusterLag>,
+    /// ln likelihood ratio of a lag per thruster over one for all (0 when not searched).
+    #[serde(default)]
+    pub per_thruster_evidence: f64,
+    /// With `per_thruster`: the lags' joint covariance in ln(lag), row-major N x N (from the
+    /// profile's Hessian); empty otherwise.
+    #[serde(default)]
+    pub per_thruster_cov: Vec<f64>,
+    /// With `per_thruster`: the standard deviation in ln(lag) each lag gets beyond the data's
+    /// (`EstimatorConfig::thruster_lag_floor`).
+    #[serde(default)]
+    pub per_thruster_floor_ln: f64,
 }
 
 /// The step in ln(lag) of the curvature and sensitivity differences (10 %).
 pub const STEP: f64 = 0.0953;
 
 impl LagFit {
+    /// The lags of `run`: one per thruster, or the common one alone.
+    pub fn lags(&self) -> Vec<f64> {
+        if self.per_thruster.is_empty() {
+            vec![self.lag_s]
+        } else {
+            self.per_thruster.iter().map(|t| t.lag_s).collect()
+        }
+    }
+
     /// Widen `sol` (the fit at the learned lag) by what the lag's uncertainty does to B (and
     /// to the other coefficients):
     /// dB/dln(lag) from `above_sol` and `below_sol` (the fits at the neighbouring lags),
@@ -71,19 +95,79 @@ impl LagFit {
     /// at a realistic IMU after 4 s the lag is known to +-10-20 %, which moves B by several
     /// per cent, and a bound without it claimed 2 % on a model 7 % off (eight_vectored, lag
     /// 0.2 s).
+    ///
+    /// With a lag per thruster, the lags' joint covariance through each one's sensitivity,
+    /// plus `per_thruster_floor_ln` on each lag alone: what the data's model error leaves in
+    /// them (reported apart, `DynamicTerms::spin_up_floor_rel_err`, since no more data
+    /// removes it).
     pub fn widen(
         &self,
         sol: &mut super::DynamicSolution,
-        above_sol: &super::DynamicSolution,
-        below_sol: &super::DynamicSolution,
+        solve: impl Fn(&DynamicRun) -> super::DynamicSolution,
     ) {
-        let sd = if self.sd_ln.is_finite() {
-            self.sd_ln
-        } else {
-            // Flat: the lag is anywhere in the range; a factor e either way.
-            1.0
-        };
-        let db = (&above_sol.b - &below_sol.b) / (2.0 * STEP) * sd;
+        // The sensitivities dB/dln(lag) (and of the terms) along each lag, and the lags'
+        // covariance in ln: one lag, or one per thruster with their joint covariance (their
+        // profile's Hessian: the lags of thrusters that push alike trade against each other).
+        let flat = |sd_ln: f64| if sd_ln.is_finite() { sd_ln } else { 1.0 };
+        let (directions, cov): (Vec<(&DynamicRun, &DynamicRun)>, DMatrix<f64>) =
+            if self.per_thruster.is_empty() {
+                let sd = flat(self.sd_ln);
+                (
+                    vec![(&self.above, &self.below)],
+                    DMatrix::from_element(1, 1, sd * sd),
+                )
+            } else {
+                let k = self.per_thruster.len();
+                let cov = if self.per_thruster_cov.len() == k * k
+                    && self.per_thruster_cov.iter().all(|v| v.is_finite())
+                {
+                    DMatrix::from_row_slice(k, k, &self.per_thruster_cov)
+                } else {
+                    // Flat somewhere: each lag anywhere in the range, a factor e either way.
+                    DMatrix::from_fn(k, k, |i, j| {
+                        if i == j {
+                            flat(self.per_thruster[i].sd_ln).powi(2)
+                        } else {
+                            0.0
+                        }
+                    })
+                };
+                (
+                    self.per_thruster
+                        .iter()
+                        .map(|t| (&t.above, &t.below))
+                        .collect(),
+                    cov,
+                )
+            };
+        let sens: Vec<(DMatrix<f64>, DMatrix<f64>)> = directions
+            .iter()
+            .map(|(above, below)| {
+                let (a, b) = (solve(above), solve(below));
+                (
+                    (&a.b - &b.b) / (2.0 * STEP),
+                    // The damping, restoring and Coriolis coefficients trade against the lag
+                    // as well (noise-free, 0.1 ms of lag moved AMOUR-5's pitch damping by 5 %).
+                    (&a.terms.coefficients - &b.terms.coefficients) / (2.0 * STEP),
+                )
+            })
+            .collect();
+        let mut var_b = DMatrix::zeros(sol.b.nrows(), sol.b.ncols());
+        let mut var_terms = DMatrix::zeros(sol.terms.std_err.nrows(), sol.terms.std_err.ncols());
+        for (i, (bi, ti)) in sens.iter().enumerate() {
+            for (j, (bj, tj)) in sens.iter().enumerate() {
+                var_b += bi.component_mul(bj) * cov[(i, j)];
+                var_terms += ti.component_mul(tj) * cov[(i, j)];
+            }
+        }
+        let mut var_floor = DMatrix::zeros(sol.b.nrows(), sol.b.ncols());
+        if !self.per_thruster.is_empty() {
+            let f2 = self.per_thruster_floor_ln.powi(2);
+            for (bi, ti) in &sens {
+                var_floor += bi.component_mul(bi) * f2;
+                var_terms += ti.component_mul(ti) * f2;
+            }
+        }
         let n = sol.b.ncols();
         for g in 0..2 {
             let rows = 3 * g..3 * g + 3;
@@ -92,29 +176,29 @@ impl LagFit {
                 .flat_map(|r| (0..n).map(move |i| (r, i)))
                 .map(|(r, i)| sol.b[(r, i)].powi(2))
                 .sum();
-            let mut extra = 0.0;
+            let (mut extra, mut floor) = (0.0, 0.0);
             for r in rows {
                 for i in 0..n {
-                    let e = db[(r, i)];
-                    if e.is_finite() {
-                        sol.std_err[(r, i)] = (sol.std_err[(r, i)].powi(2) + e * e).sqrt();
-                        extra += e * e;
+                    let (e2, f2) = (var_b[(r, i)], var_floor[(r, i)]);
+                    if e2.is_finite() && f2.is_finite() {
+                        sol.std_err[(r, i)] = (sol.std_err[(r, i)].powi(2) + e2 + f2).sqrt();
+                        extra += e2;
+                        floor += f2;
                     }
                 }
             }
             if norm2 > 0.0 && sol.rel_err[g].is_finite() {
-                sol.rel_err[g] = (sol.rel_err[g].powi(2) + extra / norm2).sqrt();
+                sol.rel_err[g] = (sol.rel_err[g].powi(2) + (extra + floor) / norm2).sqrt();
                 sol.terms.spin_up_rel_err[g] = (extra / norm2).sqrt();
+                sol.terms.spin_up_floor_rel_err[g] = (floor / norm2).sqrt();
             }
         }
         sol.terms.spin_up_sd_ln = self.sd_ln;
-        // The damping, restoring and Coriolis coefficients trade against the lag as well
-        // (noise-free, 0.1 ms of lag moved AMOUR-5's pitch damping by 5 %).
-        let dt =
-            (&above_sol.terms.coefficients - &below_sol.terms.coefficients) / (2.0 * STEP) * sd;
-        for (se, e) in sol.terms.std_err.iter_mut().zip(dt.iter()) {
-            if e.is_finite() {
-                *se = (*se * *se + e * e).sqrt();
+        sol.terms.spin_up_per_thruster_s = self.per_thruster.iter().map(|t| t.lag_s).collect();
+        sol.terms.thruster_lag_evidence = self.per_thruster_evidence;
+        for (se, e2) in sol.terms.std_err.iter_mut().zip(var_terms.iter()) {
+            if e2.is_finite() {
+                *se = (*se * *se + e2).sqrt();
             }
         }
     }
@@ -148,27 +232,34 @@ pub fn profile_score_weighted(run: &DynamicRun, weights: &[f64; 6]) -> Option<f6
 /// The fit at a lag already learned (`lag_s`, one standard deviation `sd_ln` in ln(lag)),
 /// without searching: three refits instead of ~22. For progress estimates between the
 /// decisions, which search (see `Estimator::estimate_progress`).
-pub fn fit_at(run: &DynamicRun, lag_s: f64, sd_ln: f64) -> Option<LagFit> {
-    fit_at_centred(run, lag_s, sd_ln, &Vector3::zeros())
+pub fn fit_at(run: &DynamicRun, lags: &[f64], sd_ln: f64) -> Option<LagFit> {
+    fit_at_centred(run, lags, sd_ln, &Vector3::zeros())
 }
 
 /// [`fit_at`] with the terms at the velocity of the centre, the IMU at `imu_m` from it (see
 /// [`DynamicRun::refit_with`]).
+///
+/// `lags`: one for all thrusters, or one each (moved together for the sensitivity: a
+/// progress figure, not the decision's).
 pub fn fit_at_centred(
     run: &DynamicRun,
-    lag_s: f64,
+    lags: &[f64],
     sd_ln: f64,
     imu_m: &Vector3<f64>,
 ) -> Option<LagFit> {
-    let x = lag_s.max(1e-4).ln();
-    let refit = |lag: f64| run.refit_with(&[lag], true, imu_m);
+    let scaled = |k: f64| -> Vec<f64> { lags.iter().map(|l| l.max(1e-4) * k).collect() };
+    let refit = |l: &[f64]| run.refit_with(l, true, imu_m);
     Some(LagFit {
-        lag_s,
-        run: refit(lag_s)?,
-        above: refit((x + STEP).exp())?,
-        below: refit((x - STEP).exp())?,
+        lag_s: lags.iter().sum::<f64>() / lags.len().max(1) as f64,
+        run: refit(lags)?,
+        above: refit(&scaled(STEP.exp()))?,
+        below: refit(&scaled((-STEP).exp()))?,
         sd_ln,
         profile: Vec::new(),
+        per_thruster: Vec::new(),
+        per_thruster_evidence: 0.0,
+        per_thruster_cov: Vec::new(),
+        per_thruster_floor_ln: 0.0,
     })
 }
 
@@ -270,6 +361,10 @@ pub fn learn_common_lag_weighted(
         below,
         sd_ln,
         profile,
+        per_thruster: Vec::new(),
+        per_thruster_evidence: 0.0,
+        per_thruster_cov: Vec::new(),
+        per_thruster_floor_ln: 0.0,
     })
 }
 

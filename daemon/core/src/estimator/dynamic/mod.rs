@@ -20,6 +20,7 @@ pub mod sample_log;
 pub mod segment_basis;
 pub mod segmented_ls;
 pub mod thrust_curve;
+pub mod thruster_lags;
 
 use nalgebra::{DMatrix, Vector3};
 
@@ -67,6 +68,19 @@ pub struct DynamicTerms {
     /// this share apart, since a lag's profile sharpens faster than 1/sqrt(pulses).
     #[serde(default)]
     pub spin_up_rel_err: [f64; 2],
+    /// Each thruster's own lag, s, where the data said they differ
+    /// ([`thruster_lags`]; `spin_up_s` is then their mean). Empty: one lag for all.
+    #[serde(default)]
+    pub spin_up_per_thruster_s: Vec<f64>,
+    /// ln likelihood ratio of a lag per thruster over one for all (0 when not searched).
+    #[serde(default)]
+    pub thruster_lag_evidence: f64,
+    /// With a lag per thruster: what their floor (`EstimatorConfig::thruster_lag_floor`)
+    /// adds to the rotation and acceleration rows' bounds (in quadrature; inside
+    /// `spin_up_rel_err`'s bound but not in it): no more data removes it, so the stop rule
+    /// leaves it out of the bound it waits on.
+    #[serde(default)]
+    pub spin_up_floor_rel_err: [f64; 2],
     /// The IMU's position from the centre the acceleration rows are referred to
     /// ([`imu_position`]), learned or configured; None before [`DynamicRun::refer_to_centre`].
     pub imu_position: Option<ImuPosition>,
@@ -139,6 +153,10 @@ pub struct DynamicRun {
     lag: Vec<f64>,
     lag_prev: Vec<f64>,
     lag_abs: f64,
+    /// Each thruster's |command| through its own lag, when the lags differ (`lag_abs` is then
+    /// their mean; with one lag for all, one filter of the mean is the same and cheaper).
+    #[serde(default)]
+    abs_each: Vec<f64>,
     #[serde(with = "crate::serde_arrays::array")]
     terms: [f64; TERMS],
     #[serde(with = "crate::serde_arrays::array")]
@@ -236,6 +254,7 @@ impl DynamicRun {
             lag: vec![0.0; cols],
             lag_prev: vec![0.0; cols],
             lag_abs: 0.0,
+            abs_each: vec![0.0; n],
             terms: [0.0; TERMS],
             terms_prev: [0.0; TERMS],
             integral: vec![0.0; k],
@@ -483,6 +502,7 @@ impl DynamicRun {
         let mut abs_target = 0.0;
         let mut a_mean = 0.0;
         let n = self.n;
+        let mixed = self.lags.iter().any(|l| *l != self.lags[0]) && self.abs_each.len() == n;
         for i in 0..n {
             let lag_s = self.lags[i];
             let a = if lag_s > 0.0 {
@@ -493,6 +513,9 @@ impl DynamicRun {
             a_mean += a / n.max(1) as f64;
             let v = u.map_or(0.0, |u| u[i]);
             abs_target += v.abs();
+            if mixed {
+                self.abs_each[i] += a * (v.abs() - self.abs_each[i]);
+            }
             if self.split {
                 self.lag[i] += a * (v.max(0.0) - self.lag[i]);
                 self.lag[n + i] += a * (v.min(0.0) - self.lag[n + i]);
@@ -506,8 +529,14 @@ impl DynamicRun {
         }
         // Split, the mean |command| is a sum of the thrust columns: left out (zero).
         if !self.split {
-            // One filter for the mean: with lags that differ, their mean rate (exact when equal).
-            self.lag_abs += a_mean * (abs_target / n.max(1) as f64 - self.lag_abs);
+            if mixed {
+                // Each thruster's own lag: one filter at the mean rate left eight_vectored with
+                // thrusters of two makes 4-5 % off (docs/study.md, "Thrusters of two makes").
+                self.lag_abs = self.abs_each.iter().sum::<f64>() / n.max(1) as f64;
+            } else {
+                // One lag for all: one filter of the mean is the same.
+                self.lag_abs += a_mean * (abs_target / n.max(1) as f64 - self.lag_abs);
+            }
         }
         self.terms_prev = self.terms;
         terms(
@@ -766,6 +795,9 @@ impl DynamicRun {
                 spin_up_learned: self.lags_learned,
                 spin_up_sd_ln: 0.0,
                 spin_up_rel_err: [0.0; 2],
+                spin_up_per_thruster_s: Vec::new(),
+                thruster_lag_evidence: 0.0,
+                spin_up_floor_rel_err: [0.0; 2],
                 thrust_curve: None,
                 imu_position: None,
                 unexplained_rate_radps: 0.0,

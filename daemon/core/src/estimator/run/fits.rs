@@ -25,15 +25,24 @@ impl Estimator {
             .as_ref()
             .and_then(|d| d.imu_position)
             .map_or(0.0, |p| p.rel_err_share);
-        let reducible_acc = (e.rel_err_acc.powi(2) - share.powi(2)).max(0.0).sqrt();
+        let lag_floor = e
+            .dynamics
+            .as_ref()
+            .map_or([0.0; 2], |d| d.spin_up_floor_rel_err);
+        let reducible_rot = (e.rel_err_rot.powi(2) - lag_floor[0].powi(2))
+            .max(0.0)
+            .sqrt();
+        let reducible_acc = (e.rel_err_acc.powi(2) - share.powi(2) - lag_floor[1].powi(2))
+            .max(0.0)
+            .sqrt();
         let lag_share = e.dynamics.as_ref().map_or([0.0; 2], |d| d.spin_up_rel_err);
         if e.excited
-            && e.rel_err_rot <= self.cfg.target_rel_err
+            && reducible_rot <= self.cfg.target_rel_err
             && reducible_acc <= self.cfg.acc_target()
             && !(open_loop
                 && Self::waits_within_reach(e)
                 && self.better_within_reach(&[
-                    (e.rel_err_rot, lag_share[0]),
+                    (reducible_rot, lag_share[0]),
                     (reducible_acc, lag_share[1]),
                 ]))
         {
@@ -197,9 +206,37 @@ impl Estimator {
         // The lag learned from the data when asked (and the data decides), else the configured.
         let learned = self
             .learns_lag()
-            .then(|| learn_common_lag(run, &self.lag_range()))
+            .then(|| self.learn_lags(run, &Vector3::zeros()))
             .flatten();
         self.dynamic_estimate_with(run, learned, true)
+    }
+
+    /// The lag that best explains `run`'s log, the IMU at `imu_m` from the centre: one for
+    /// all thrusters, or one each where the data says they differ
+    /// (`EstimatorConfig::thruster_lag_evidence`).
+    fn learn_lags(&self, run: &DynamicRun, imu_m: &Vector3<f64>) -> Option<LagFit> {
+        let range = self.lag_range();
+        let mut common = learn_common_lag_centred(run, &range, imu_m)?;
+        let Some(search) = search_thruster_lags(
+            run,
+            &common,
+            &range,
+            imu_m,
+            self.cfg.thruster_lag_evidence,
+            self.cfg.thruster_lag_floor,
+        ) else {
+            return Some(common);
+        };
+        Some(match search.fit {
+            Some(mut per_thruster) => {
+                per_thruster.per_thruster_evidence = search.log_likelihood_ratio;
+                per_thruster
+            }
+            None => {
+                common.per_thruster_evidence = search.log_likelihood_ratio;
+                common
+            }
+        })
     }
 
     /// What the configuration says of the IMU's position.
@@ -235,7 +272,7 @@ impl Estimator {
         let solve = |fit: &DynamicRun, lag: &Option<LagFit>| {
             let mut sol = raw_solve(fit);
             if let Some(l) = lag {
-                l.widen(&mut sol, &raw_solve(&l.above), &raw_solve(&l.below));
+                l.widen(&mut sol, raw_solve);
             }
             fit.refer_to_centre(&mut sol, &setting);
             sol
@@ -255,8 +292,8 @@ impl Estimator {
             }
             let imu = p.position_m;
             let again = match &lag {
-                Some(l) if search => learn_common_lag_centred(run, &self.lag_range(), &imu),
-                Some(l) => fit_at_centred(run, l.lag_s, l.sd_ln, &imu),
+                Some(_) if search => self.learn_lags(run, &imu),
+                Some(l) => fit_at_centred(run, &l.lags(), l.sd_ln, &imu),
                 None => None,
             };
             if again.is_some() {

@@ -222,7 +222,8 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// The thrusters' lag learned on vehicles whose lag the daemon is not told (docs/study.md,
 /// "Learning the thruster lag (issue 29)"): learned lag, err_rot / err_acc and the bounds per
 /// vehicle, true lag and seed. Knobs: LAG_NOISE (none|realistic|paper), LAG_VEHICLES,
-/// LAG_TAUS, LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_TOLD (the true lag given), LAG_FORCE (learn
+/// LAG_TAUS, LAG_MIXED (lags a,b,..: thruster i gets the (i mod k)-th, LAG_TAUS then unused),
+/// LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
 /// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_NOISE_S (the rest's length, s), and
@@ -308,7 +309,14 @@ pub(super) fn lag_sweep() {
                         .map(|v| v.parse().unwrap()),
                     ..Ideal::default()
                 };
-                let v = with_lag(name, tau);
+                let mut v = with_lag(name, tau);
+                if let Ok(mixed) = std::env::var("LAG_MIXED") {
+                    // Thrusters of two makes: thruster i gets the (i mod k)-th of these lags.
+                    let lags: Vec<f64> = mixed.split(',').map(|l| l.parse().unwrap()).collect();
+                    for (i, t) in v.thrusters.iter_mut().enumerate() {
+                        t.time_constant_s = lags[i % lags.len()];
+                    }
+                }
                 let tau = true_lag(&v);
                 if let Ok(p) = std::env::var("LAG_PROBE") {
                     use thruster_inprocess::lag_probe::{probe, Replace};
@@ -339,10 +347,12 @@ pub(super) fn lag_sweep() {
                 }
                 let o = estimate_on(v, sensors, seed, cfg, ideal);
                 println!(
-                "{name} tau {tau:.3} seed {seed}: learned {:.4} (sd_ln {:.4}, z {:+.2}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",
+                "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",
                 o.spin_up_s,
+                o.terms.spin_up_per_thruster_s.iter().map(|l| (l * 1e4).round() / 1e4).collect::<Vec<_>>(),
                 o.terms.spin_up_sd_ln,
                 (o.spin_up_s / tau).ln() / o.terms.spin_up_sd_ln,
+                o.terms.thruster_lag_evidence,
                 o.err_rot,
                 o.err_acc,
                 o.bound[0],

@@ -136,7 +136,7 @@ pub fn run(
             let mut sol = match &learned {
                 Some(l) => {
                     let mut s = solve(&l.run);
-                    l.widen(&mut s, &solve(&l.above), &solve(&l.below));
+                    l.widen(&mut s, solve);
                     s
                 }
                 None => solve(&fit),

@@ -1,0 +1,355 @@
+//! A lag per thruster, where the data says the thrusters differ.
+//!
+//! Why: a reconfigurable vehicle gets thrusters of more than one make, and one lag for all is
+//! then wrong for every one of them. AMOUR-5 with its L and R thrusters at 0.05 s and the
+//! others at 0.15 s, noise-free, learned one lag of 0.060 s and a model 0.40 / 0.41 off under
+//! bounds of 0.033 / 0.026; with 0.03 and 0.2 s, 0.55 off (docs/study.md, "Thrusters of two
+//! makes").
+//!
+//! How: from the common lag ([`super::lag_search`]), each thruster's lag in turn is searched
+//! on its own profile likelihood with the others held (coordinate descent: a coarse grid
+//! around the present lag, then golden section), a few sweeps. The per-thruster lags are
+//! kept only when they explain the data better than one lag by `min_evidence` in the log
+//! likelihood ratio (N - 1 more parameters: at a realistic IMU a uniform vehicle's ratio is
+//! small, a mixed one's thousands), so a vehicle of one make keeps the common lag's fit to
+//! the digit. Each lag's uncertainty, from its profile's curvature, widens B's standard
+//! errors and bounds through B's sensitivity to that lag alone.
+
+use nalgebra::{DMatrix, DVector, Vector3};
+
+use super::lag_search::{profile_score, LagFit, LagRange, STEP};
+use super::DynamicRun;
+
+/// Newton steps on all lags together after the sweep, at most. Why both: eight_vectored's
+/// thrusters push alike in pairs, so their lags trade against each other, and one thruster
+/// at a time crawled (eight sweeps left lags of 0.15 s at 0.11 and the model 0.11 off); the
+/// sweep alone starts the Newton steps inside their basin.
+const NEWTON_STEPS: usize = 12;
+
+/// The finite-difference step in ln(lag) of the Newton steps' gradient and Hessian (5 %).
+const H: f64 = 0.05;
+
+/// The largest Newton step in any ln(lag) (a factor 2).
+const MAX_STEP: f64 = 0.693;
+
+/// One thruster's learned lag and the fits with it moved by `exp(STEP)` either way (the
+/// others held): B's sensitivity to it.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct ThrusterLag {
+    pub lag_s: f64,
+    /// One standard deviation of ln(lag), from the profile's curvature along this lag alone
+    /// (infinite when flat).
+    pub sd_ln: f64,
+    pub above: DynamicRun,
+    pub below: DynamicRun,
+}
+
+/// The per-thruster search's outcome, kept or not.
+#[derive(Debug, Clone)]
+pub struct ThrusterLagSearch {
+    /// The lags found, s.
+    pub lags: Vec<f64>,
+    /// ln likelihood ratio of the per-thruster lags over the common one.
+    pub log_likelihood_ratio: f64,
+    /// The fit, kept: `common` with its run replaced and `per_thruster` set.
+    pub fit: Option<LagFit>,
+}
+
+/// Search a lag per thruster from `common` (the common lag's fit of `run`), the terms at the
+/// velocity of the centre with the IMU at `imu_m`. The per-thruster fit is returned in
+/// `fit` when its ln likelihood ratio over the common lag exceeds `min_evidence`. None
+/// without a log or residual degrees of freedom.
+pub fn search_thruster_lags(
+    run: &DynamicRun,
+    common: &LagFit,
+    range: &LagRange,
+    imu_m: &Vector3<f64>,
+    min_evidence: f64,
+    floor_ln: f64,
+) -> Option<ThrusterLagSearch> {
+    let n = run.thrusters();
+    if n < 2 {
+        return None;
+    }
+    let refit = |lags: &[f64]| run.refit_with(lags, true, imu_m);
+    let (lo, hi) = (
+        range.min_s.max(1e-4).ln(),
+        range.max_s.max(range.min_s * 1.01).ln(),
+    );
+    let common_score = profile_score(&common.run)?;
+    // One sweep, each thruster alone on the common search's grid over the whole range (a
+    // factor 4 each way from the common lag left eight_vectored's 0.2 s thrusters beside
+    // 0.03 s ones at 0.16): enough to tell a vehicle of one make (whose evidence stays under
+    // the limit, and which then costs 8 N refits more than the common lag) from one of
+    // several.
+    let mut best = Best {
+        lags: vec![common.lag_s; n],
+        score: common_score,
+        run: common.run.clone(),
+    };
+    grid_sweep(&refit, (lo, hi), range.grid.max(3), &mut best)?;
+    let rows = best.run.samples() as f64;
+    if rows / 2.0 * (common_score - best.score) <= min_evidence {
+        return Some(ThrusterLagSearch {
+            log_likelihood_ratio: rows / 2.0 * (common_score - best.score),
+            lags: best.lags,
+            fit: None,
+        });
+    }
+    // A second sweep from where the first left every lag: thrusters that push alike move in
+    // pairs, and the first of a pair was placed while its partner still had the common lag
+    // (eight_vectored with 0.03 and 0.2 s thrusters, noise-free: two of its 0.2 s thrusters
+    // stayed at 0.11-0.12 and the model 0.15 / 0.27 off).
+    grid_sweep(&refit, (lo, hi), range.grid.max(3), &mut best)?;
+    pair_sweep(&refit, (lo, hi), range.grid.max(3), &mut best)?;
+    let Best {
+        mut lags,
+        score: mut best_score,
+        run: mut best_run,
+    } = best;
+    // Then Newton steps on all of them, the profile's gradient and Hessian in ln(lag) by
+    // finite differences; the last Hessian is the lags' joint information.
+    let clamp = |x: f64| x.clamp(lo, hi);
+    let fit_at = |x: &[f64]| -> Option<DynamicRun> {
+        let l: Vec<f64> = x.iter().map(|v| clamp(*v).exp()).collect();
+        refit(&l)
+    };
+    let mut hessian = DMatrix::zeros(n, n);
+    let mut last = false;
+    for step in 0..=NEWTON_STEPS {
+        let x: Vec<f64> = lags.iter().map(|l| l.ln()).collect();
+        // The score's local quadratic form: each output's residual variance over its value
+        // here, summed (its gradient here is the profile's; its Hessian is the profile's
+        // without the -(v'/v)^2 part, which noise-free, where the residual falls toward zero
+        // at the truth, made the finite-difference Hessian indefinite).
+        let here = variances(&best_run)?;
+        let moved = |d: &[(usize, f64)]| {
+            let mut y = x.clone();
+            for &(i, dx) in d {
+                y[i] += dx;
+            }
+            let v = variances(&fit_at(&y)?)?;
+            Some((0..6).map(|a| v[a] / here[a].max(1e-300)).sum::<f64>())
+        };
+        let centre = 6.0;
+        let mut plus = vec![0.0; n];
+        let mut grad = DVector::zeros(n);
+        for i in 0..n {
+            let (p, m) = (moved(&[(i, H)])?, moved(&[(i, -H)])?);
+            plus[i] = p;
+            grad[i] = (p - m) / (2.0 * H);
+            hessian[(i, i)] = (p + m - 2.0 * centre) / (H * H);
+        }
+        for i in 0..n {
+            for j in 0..i {
+                let pp = moved(&[(i, H), (j, H)])?;
+                let h = (pp - plus[i] - plus[j] + centre) / (H * H);
+                hessian[(i, j)] = h;
+                hessian[(j, i)] = h;
+            }
+        }
+        if step == NEWTON_STEPS || last {
+            break;
+        }
+        let Some(dx) = newton_step(&hessian, &grad) else {
+            break;
+        };
+        // The step's length along its direction: halves while the score does not fall;
+        // doubled while it goes on falling (the local form's curvature overstates the
+        // profile's far from its minimum, and noise-free the full steps crawled).
+        let mut improved = false;
+        let mut moved_at_all = false;
+        let mut scale = 1.0;
+        let largest = dx.amax().max(1e-12);
+        let mut tries = 0;
+        while tries < 8 {
+            tries += 1;
+            let y: Vec<f64> = x
+                .iter()
+                .zip(dx.iter())
+                .map(|(a, d)| a + scale * d)
+                .collect();
+            let fit = fit_at(&y)?;
+            let score = profile_score(&fit)?;
+            if score < best_score {
+                let gain = (best_score - score) * fit.samples() as f64 / 2.0;
+                best_score = score;
+                best_run = fit;
+                lags = y.iter().map(|v| clamp(*v).exp()).collect();
+                improved |= gain >= 0.5;
+                moved_at_all = true;
+                if scale < 1.0 || 2.0 * scale * largest > MAX_STEP {
+                    break;
+                }
+                scale *= 2.0;
+            } else if moved_at_all {
+                break;
+            } else {
+                scale *= 0.5;
+            }
+        }
+        match (improved, moved_at_all) {
+            (_, false) => break,
+            (false, true) => last = true,
+            (true, true) => {}
+        }
+    }
+    let rows = best_run.samples() as f64;
+    let log_likelihood_ratio = rows / 2.0 * (common_score - best_score);
+    // ln L = -(rows / 2) * score, so cov(ln lags) = 2 / rows * Hessian^-1. Where the
+    // finite-difference Hessian is not positive definite (noise-free, the score's valley is
+    // too sharp for a 5 % step) each lag's own curvature over the wider STEP is used alone.
+    let cov = psd_inverse(&hessian).map(|inv| inv * (2.0 / rows.max(1.0)));
+    let fit = if log_likelihood_ratio > min_evidence {
+        let mut per_thruster = Vec::with_capacity(n);
+        for i in 0..n {
+            let x = lags[i].ln();
+            let moved = |dx: f64| {
+                let mut l = lags.clone();
+                l[i] = (x + dx).exp();
+                refit(&l)
+            };
+            let (above, below) = (moved(STEP)?, moved(-STEP)?);
+            let sd_ln = match cov.as_ref() {
+                Some(c) => c[(i, i)].max(0.0).sqrt(),
+                None => {
+                    let (sa, sb) = (profile_score(&above)?, profile_score(&below)?);
+                    let curvature = (sa + sb - 2.0 * best_score) / (STEP * STEP);
+                    if curvature > 0.0 && rows > 0.0 {
+                        (2.0 / (rows * curvature)).sqrt()
+                    } else {
+                        f64::INFINITY
+                    }
+                }
+            };
+            per_thruster.push(ThrusterLag {
+                lag_s: lags[i],
+                sd_ln,
+                above,
+                below,
+            });
+        }
+        Some(LagFit {
+            lag_s: lags.iter().sum::<f64>() / n as f64,
+            run: best_run,
+            per_thruster,
+            per_thruster_cov: cov.map_or(Vec::new(), |c| c.transpose().as_slice().to_vec()),
+            per_thruster_evidence: log_likelihood_ratio,
+            per_thruster_floor_ln: floor_ln,
+            ..common.clone()
+        })
+    } else {
+        None
+    };
+    Some(ThrusterLagSearch {
+        lags,
+        log_likelihood_ratio,
+        fit,
+    })
+}
+
+/// The Newton step -H^-1 g on the profile, with H's eigenvalues floored at a hundredth of its
+/// largest (a flat or curved-down direction moves by the gradient, not to infinity) and every
+/// component clamped to [`MAX_STEP`]. None when H is not finite.
+fn newton_step(hessian: &DMatrix<f64>, grad: &DVector<f64>) -> Option<DVector<f64>> {
+    if !hessian.iter().chain(grad.iter()).all(|v| v.is_finite()) {
+        return None;
+    }
+    let eig = hessian.clone().symmetric_eigen();
+    let top = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    if top <= 0.0 {
+        return None;
+    }
+    let floor = top * 1e-2;
+    let g = eig.eigenvectors.transpose() * grad;
+    let scaled = DVector::from_fn(g.len(), |k, _| -g[k] / eig.eigenvalues[k].max(floor));
+    let mut dx = &eig.eigenvectors * scaled;
+    let largest = dx.amax();
+    if largest > MAX_STEP {
+        dx *= MAX_STEP / largest;
+    }
+    Some(dx)
+}
+
+/// The inverse of the profile's Hessian where it is positive definite; None otherwise (a
+/// direction the data does not fix: the lags are then not kept apart).
+fn psd_inverse(hessian: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    if !hessian.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let eig = hessian.clone().symmetric_eigen();
+    if eig.eigenvalues.iter().any(|v| *v <= 0.0) {
+        return None;
+    }
+    let inv = DMatrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v));
+    Some(&eig.eigenvectors * inv * eig.eigenvectors.transpose())
+}
+
+/// The six outputs' residual variances of `run` (DOF order); None while one has no residual
+/// degrees of freedom.
+fn variances(run: &DynamicRun) -> Option<[f64; 6]> {
+    let (r, a) = (run.rot.residual_variance()?, run.acc.residual_variance()?);
+    Some([r[0], r[1], r[2], a[0], a[1], a[2]])
+}
+
+/// The best lags found so far, their score and fit.
+struct Best {
+    lags: Vec<f64>,
+    score: f64,
+    run: DynamicRun,
+}
+
+/// One coordinate sweep: each thruster's lag in turn on `grid` points over `range` (ln s),
+/// the others held, keeping whatever lowers the score.
+fn grid_sweep(
+    refit: &impl Fn(&[f64]) -> Option<DynamicRun>,
+    (lo, hi): (f64, f64),
+    grid: usize,
+    best: &mut Best,
+) -> Option<()> {
+    let step = (hi - lo) / (grid - 1) as f64;
+    for i in 0..best.lags.len() {
+        for k in 0..grid {
+            let mut trial = best.lags.clone();
+            trial[i] = (lo + step * k as f64).exp();
+            let fit = refit(&trial)?;
+            let score = profile_score(&fit)?;
+            if score < best.score {
+                best.score = score;
+                best.run = fit;
+                best.lags = trial;
+            }
+        }
+    }
+    Some(())
+}
+
+/// Every pair of thrusters moved together to each of `grid` lags over `range` (ln s), the
+/// others held: a pair that pushes alike trades its lags, and neither moves alone
+/// (eight_vectored with 0.15 and 0.05 s thrusters, noise-free: a pair left at 0.16 and 0.17).
+fn pair_sweep(
+    refit: &impl Fn(&[f64]) -> Option<DynamicRun>,
+    (lo, hi): (f64, f64),
+    grid: usize,
+    best: &mut Best,
+) -> Option<()> {
+    let step = (hi - lo) / (grid - 1) as f64;
+    let n = best.lags.len();
+    for i in 0..n {
+        for j in 0..i {
+            for k in 0..grid {
+                let mut trial = best.lags.clone();
+                trial[i] = (lo + step * k as f64).exp();
+                trial[j] = trial[i];
+                let fit = refit(&trial)?;
+                let score = profile_score(&fit)?;
+                if score < best.score {
+                    best.score = score;
+                    best.run = fit;
+                    best.lags = trial;
+                }
+            }
+        }
+    }
+    Some(())
+}
