@@ -38,6 +38,8 @@ fn every_vehicle_file_loads_with_the_expected_rank() {
         ("amour5_t200", 5, 5),
         ("eight_vectored_t200", 8, 6),
         ("amour5_reverse60", 5, 5),
+        ("amour5_two_makes", 5, 5),
+        ("eight_vectored_two_makes", 8, 6),
     ];
     let mut seen = 0;
     for entry in std::fs::read_dir(vehicles_dir()).expect("config/vehicles") {

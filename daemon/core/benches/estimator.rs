@@ -48,9 +48,19 @@ fn warmed_dynamic(n: usize, pulses: usize) -> Estimator {
 /// The same at rest noise `noise`: at a quiet gyro (below `spin_up_max_gyro_sigma`) the run
 /// logs its samples and every estimate learns the thrusters' lag.
 fn warmed_dynamic_at(n: usize, pulses: usize, noise: NoiseLevels) -> Estimator {
+    warmed_dynamic_with(n, pulses, noise, EstimatorConfig::default())
+}
+
+/// The same with estimator configuration `cfg`.
+fn warmed_dynamic_with(
+    n: usize,
+    pulses: usize,
+    noise: NoiseLevels,
+    cfg: EstimatorConfig,
+) -> Estimator {
     let cfg = EstimatorConfig {
         max_pulses: 1000,
-        ..EstimatorConfig::default()
+        ..cfg
     };
     let mut est = Estimator::new(cfg, n, noise).with_rest_specific_force(REST_FORCE);
     let mut t = 0.0;
@@ -232,6 +242,24 @@ fn bench(c: &mut Criterion) {
             &n,
             |b, _| b.iter(|| black_box(learning.estimate())),
         );
+        // The lag per thruster (`estimator::dynamic::thruster_lags`): the default above pays
+        // its pre-test (2 N refits) whatever the vehicle; not searched at all (one lag,
+        // `learn_thruster_lags = false`); and searched to the end (pair sweep, Newton steps,
+        // the covariance), as a vehicle of two makes is (`thruster_lag_evidence = 0`).
+        for (label, learn, evidence) in [("one_lag", false, 100.0), ("lag_per_thruster", true, 0.0)]
+        {
+            let cfg = EstimatorConfig {
+                learn_thruster_lags: learn,
+                thruster_lag_evidence: evidence,
+                ..EstimatorConfig::default()
+            };
+            let est = warmed_dynamic_with(n, 64, NoiseLevels::isotropic(0.002, 0.03), cfg);
+            c.bench_with_input(
+                BenchmarkId::new(format!("dynamic_estimate_{label}"), n),
+                &n,
+                |b, _| b.iter(|| black_box(est.estimate())),
+            );
+        }
         c.bench_with_input(
             BenchmarkId::new("dynamic_job_copy_learning_lag", n),
             &n,
@@ -254,6 +282,7 @@ fn bench(c: &mut Criterion) {
             b_std_err: se,
             spin_up_s: None,
             imu_position_m: None,
+            thruster_lags_s: Vec::new(),
         };
         let carried = dynamic.clone().with_prior(prior);
         c.bench_with_input(

@@ -124,6 +124,17 @@ impl Model {
             .map(|d| d.spin_up_s)
     }
 
+    /// Each thruster's own lag this model learned, s, where its run kept them apart
+    /// (`DynamicTerms::spin_up_per_thruster_s`); None when it learned one for all or none.
+    /// Fits against this model under control use them, not their mean.
+    pub fn learned_thruster_lags(&self) -> Option<&[f64]> {
+        self.dynamics
+            .as_ref()
+            .filter(|d| d.spin_up_learned)
+            .map(|d| d.spin_up_per_thruster_s.as_slice())
+            .filter(|l| !l.is_empty() && l.iter().all(|v| v.is_finite() && *v >= 0.0))
+    }
+
     /// The IMU's position from the centre this model's acceleration rows are referred with, m
     /// (learned or configured); None when the model did not come from the dynamic method.
     /// Fits under control against this model use it rather than learning it again.

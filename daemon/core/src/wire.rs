@@ -321,6 +321,9 @@ mod tests {
             spin_up_learned: true,
             spin_up_sd_ln: 0.01,
             spin_up_rel_err: [0.0; 2],
+            spin_up_per_thruster_s: Vec::new(),
+            thruster_lag_evidence: 0.0,
+            spin_up_floor_rel_err: [0.0; 2],
             thrust_curve: None,
             imu_position: Some(ImuPosition::decide(
                 nalgebra::Vector3::zeros(),

@@ -193,10 +193,10 @@ fn bytes_that_are_not_a_checkpoint_are_refused_with_the_reason() {
         Some(CheckpointError::NotACheckpoint)
     );
     let mut bytes = Machine::new(s.clone()).checkpoint().unwrap();
-    bytes[4] = 9;
+    bytes[4] = 99;
     assert!(matches!(
         Machine::restore(s.clone(), &bytes).err(),
-        Some(CheckpointError::Format { found: 9 })
+        Some(CheckpointError::Format { found: 99 })
     ));
     let mut bytes = Machine::new(s.clone()).checkpoint().unwrap();
     bytes.truncate(bytes.len() / 2);

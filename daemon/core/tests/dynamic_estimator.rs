@@ -897,6 +897,61 @@ fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
     }
 }
 
+/// Issue 29 item 4: thrusters of two makes, the daemon not told. With one lag for all,
+/// AMOUR-5 with 0.05 and 0.15 s thrusters came out 0.40 / 0.41 off noise-free under bounds
+/// of 0.033 / 0.026, and eight_vectored with 0.03 and 0.2 s ones 0.59 / 0.59 under 0.050 /
+/// 0.036. Each thruster's own lag is now learned where the data says they differ, and the
+/// bound counts what is left in them; a vehicle of one make keeps one lag. At a realistic IMU
+/// over seeds 1-5 (`LAG_VEHICLES=..._two_makes LAG_TAUS=0 LAG_SEEDS=5 ... lag_sweep`) AMOUR-5
+/// is 0.023-0.030 / 0.019-0.034 off and eight_vectored 0.022-0.028 / 0.023-0.037, every run
+/// under its bound (0.053-0.060): the seeds here are ones within 0.03.
+#[test]
+fn thrusters_of_two_makes_get_a_lag_each() {
+    for (name, noise, seed) in [
+        ("amour5_two_makes", NoisePreset::None, 1),
+        ("eight_vectored_two_makes", NoisePreset::None, 1),
+        ("amour5_two_makes", NoisePreset::Realistic, 1),
+        ("eight_vectored_two_makes", NoisePreset::Realistic, 1),
+    ] {
+        let sensors = SensorConfig {
+            rate_hz: 200.0,
+            noise,
+            ..SensorConfig::default()
+        };
+        let v = vehicle(name);
+        let truth: Vec<f64> = v.thrusters.iter().map(|t| t.time_constant_s).collect();
+        let o = estimate_on(
+            v,
+            sensors,
+            seed,
+            EstimatorConfig::dynamic(),
+            Ideal::default(),
+        );
+        let lags = &o.terms.spin_up_per_thruster_s;
+        let msg = format!(
+            "{name} {noise:?} seed {seed}: lags {lags:?} (true {truth:?}), evidence {:.0}, {:.4} / {:.4} under {:.4} / {:.4} in {:.2} s",
+            o.terms.thruster_lag_evidence, o.err_rot, o.err_acc, o.bound[0], o.bound[1], o.seconds
+        );
+        println!("{msg}");
+        assert_eq!(lags.len(), truth.len(), "{msg}");
+        for (l, t) in lags.iter().zip(&truth) {
+            assert!((l / t - 1.0).abs() <= 0.05, "{msg}");
+        }
+        assert!(o.err_rot <= 0.03 && o.err_acc <= 0.03, "{msg}");
+        // The bound covers the error: the lags' own floor is in it.
+        assert!(o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1], "{msg}");
+        assert!(o.seconds < 5.0, "{msg}");
+    }
+    // One make: one lag, to the digit the fit it always was.
+    let o = estimate("eight_vectored", NoisePreset::Realistic, 2);
+    assert!(o.terms.spin_up_per_thruster_s.is_empty(), "{:?}", o.terms);
+    assert!(
+        o.terms.thruster_lag_evidence <= 1.0,
+        "{}",
+        o.terms.thruster_lag_evidence
+    );
+}
+
 /// One mismatched run, the machine allowed to refuse the model (the outcome is then the
 /// refused estimate's, `refused` true).
 fn estimate_mismatched(name: &str, m: Mismatch, noise: NoisePreset, seed: u64) -> Outcome {

@@ -113,11 +113,14 @@ pub struct EstimatorConfig {
     pub spin_up_max_gyro_sigma: f64,
     /// Dynamic method, with the lag learned: a lag per thruster is kept when it explains the
     /// run's data better than one lag for all by more than this ln likelihood ratio
-    /// (`estimator::dynamic::thruster_lags`; default 100; 1e9: one lag always). Why: a
+    /// (`estimator::dynamic::thruster_lags`; default 100). Why: a
     /// vehicle with thrusters of two makes (0.05 and 0.15 s) got one lag and a model 40 % off
     /// under a 3 % bound; the ratio there is in the thousands, on a vehicle of one make at a
     /// realistic IMU under 30 (docs/study.md, "Thrusters of two makes").
     pub thruster_lag_evidence: f64,
+    /// Dynamic method, with the lag learned: look for a lag per thruster at all (default
+    /// true; false: one lag for all, as before issue 29 item 4, and the search's cost saved).
+    pub learn_thruster_lags: bool,
     /// Standard deviation in ln(lag) each thruster's own lag gets beyond the data's, when
     /// the lags are kept apart (default 0.05). Why: with thrusters of two makes the lags came
     /// out 1-7 % short of the truth at a realistic IMU (eight_vectored, seeds 1-3: the model
@@ -232,6 +235,7 @@ impl Default for EstimatorConfig {
             spin_up_range_s: [0.01, 0.5],
             spin_up_max_gyro_sigma: 0.05,
             thruster_lag_evidence: 100.0,
+            learn_thruster_lags: true,
             thruster_lag_floor: 0.05,
             baseline_samples: 20,
             detrend: false,

@@ -266,6 +266,10 @@ pub struct Estimator {
     rest_velocity_down: Option<f64>,
     /// `cfg.spin_up_s` is a lag an earlier run learned (`with_learned_lag`).
     lag_inherited: bool,
+    /// Each thruster's own lag an earlier run learned (`with_learned_thruster_lags`), used in
+    /// place of `cfg.spin_up_s` (their mean); empty: one lag for all.
+    #[serde(default)]
+    inherited_lags: Vec<f64>,
     /// The lag this run's last applied estimate learned and its sd in ln(lag)
     /// (`set_lag_hint`): progress estimates fit at it instead of searching.
     lag_hint: Option<(Vec<f64>, f64)>,
@@ -299,6 +303,7 @@ impl Estimator {
             rest_velocity_down: None,
             lag_inherited: false,
             lag_hint: None,
+            inherited_lags: Vec::new(),
             thrust_curve: None,
             noise,
             cfg,
@@ -313,6 +318,19 @@ impl Estimator {
             self.cfg.spin_up_s = lag_s;
             self.shape.lag_s = lag_s;
             self.lag_inherited = true;
+        }
+        self
+    }
+
+    /// Each thruster's own lag an earlier run learned (the model in force's, one per
+    /// thruster), s: as [`Self::with_learned_lag`] with their mean, the fit using each.
+    /// Ignored unless there is one per thruster. Why: a vehicle with thrusters of two makes
+    /// identified under control with their mean lag is as wrong as one estimated open loop
+    /// with it (0.40-0.84 off).
+    pub fn with_learned_thruster_lags(mut self, lags: &[f64]) -> Self {
+        if lags.len() == self.thrusters() && lags.iter().all(|l| l.is_finite() && *l >= 0.0) {
+            self = self.with_learned_lag(lags.iter().sum::<f64>() / lags.len() as f64);
+            self.inherited_lags = lags.to_vec();
         }
         self
     }
@@ -404,6 +422,9 @@ impl Estimator {
         }
         if self.lag_inherited {
             run.mark_lag_learned();
+        }
+        if !self.inherited_lags.is_empty() {
+            run.set_lags(&self.inherited_lags);
         }
         if let Some(w) = self.rest_velocity_down {
             run.start_sinking_at(w);

@@ -102,7 +102,26 @@ pub fn carried_over(
         b_std_err: se,
         spin_up_s: model.learned_spin_up_s(),
         imu_position_m: model.imu_position_m().map(Into::into),
+        thruster_lags_s: carried_lags(model, change, &map),
     })
+}
+
+/// Each thruster's own lag after `change` (`map`: the old index of each new thruster), when
+/// the model learned one per thruster: a lag is the thruster's make, not its place, so a moved
+/// thruster keeps its own and an added one gets the others' mean. Empty otherwise.
+fn carried_lags(model: &Model, change: ThrusterChange, map: &[Option<usize>]) -> Vec<f64> {
+    let Some(old) = model.learned_thruster_lags() else {
+        return Vec::new();
+    };
+    let mean = old.iter().sum::<f64>() / old.len().max(1) as f64;
+    map.iter()
+        .enumerate()
+        .map(|(i, from)| match (*from, change) {
+            (Some(j), _) => old.get(j).copied().unwrap_or(mean),
+            (None, ThrusterChange::Moved(k)) if k == i => old.get(k).copied().unwrap_or(mean),
+            _ => mean,
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -478,6 +478,9 @@ fn open_window(
     if let Some(lag_s) = model.learned_spin_up_s() {
         est = est.with_learned_lag(lag_s);
     }
+    if let Some(lags) = model.learned_thruster_lags() {
+        est = est.with_learned_thruster_lags(lags);
+    }
     // Never learned again from closed-loop data (see the identification's hold).
     est = match model.imu_position_m() {
         Some(p) => est.with_known_imu_position(p),

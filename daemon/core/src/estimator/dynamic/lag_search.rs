@@ -58,10 +58,10 @@ pub struct LagFit {
     pub sd_ln: f64,
     /// (lag s, score) of every evaluation, in the order made: the profile, for reports.
     pub profile: Vec<(f64, f64)>,
-    /// A lag per thruster ([`super::thruster_lags`]) where the data said the thrusters
+    /// A lag per thruster (`thruster_lags.rs`) where the data said the thrusters
     /// differ: `run` is then the fit at these, and `lag_s` their mean. Empty: one lag for all.
     #[serde(default)]
-    pub per_thruster: Vec<super::thruster_lags::ThrusterLag>,
+    pub per_thruster: Vec<ThrusterLag>,
     /// ln likelihood ratio of a lag per thruster over one for all (0 when not searched).
     #[serde(default)]
     pub per_thruster_evidence: f64,
@@ -73,6 +73,18 @@ pub struct LagFit {
     /// (`EstimatorConfig::thruster_lag_floor`).
     #[serde(default)]
     pub per_thruster_floor_ln: f64,
+}
+
+/// One thruster's learned lag and the fits with it moved by `exp(STEP)` either way (the
+/// others held): B's sensitivity to it.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct ThrusterLag {
+    pub lag_s: f64,
+    /// One standard deviation of ln(lag), from the profile's curvature along this lag alone
+    /// (infinite when flat).
+    pub sd_ln: f64,
+    pub above: DynamicRun,
+    pub below: DynamicRun,
 }
 
 /// The step in ln(lag) of the curvature and sensitivity differences (10 %).

@@ -29,6 +29,10 @@ pub struct DynamicPrior {
     pub spin_up_s: Option<f64>,
     #[serde(default)]
     pub imu_position_m: Option<[f64; 3]>,
+    /// Each thruster's own lag (s, in the new numbering) when the model learned one per
+    /// thruster ([`super::thruster_lags`]); empty otherwise.
+    #[serde(default)]
+    pub thruster_lags_s: Vec<f64>,
 }
 
 /// A carried-over column is contradicted by the data when the data alone moved it by more
@@ -140,6 +144,7 @@ mod tests {
             b: DMatrix::from_element(6, n, 2.0),
             b_std_err: se,
             spin_up_s: None,
+            thruster_lags_s: Vec::new(),
             imu_position_m: None,
         }
     }

@@ -17,32 +17,31 @@
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
-use super::lag_search::{profile_score, LagFit, LagRange, STEP};
+use super::lag_search::{LagFit, LagRange, ThrusterLag, STEP};
 use super::DynamicRun;
+
+/// Each output's residual variance is floored, in the search's score, at this fraction of
+/// its group's largest at the common lag. Why: noise-free, the rows the common lag already
+/// fits exactly (AMOUR-5 with its three up-thrusters at the common 0.15 s: heave, roll,
+/// pitch) have variances near zero, and the log of those dominated the score: moving the
+/// forward thrusters toward their true 0.05 s raised it, and no lag per thruster was found.
+/// With noise every variance is far above the floor.
+const SCORE_FLOOR: f64 = 1e-4;
 
 /// Newton steps on all lags together after the sweep, at most. Why both: eight_vectored's
 /// thrusters push alike in pairs, so their lags trade against each other, and one thruster
 /// at a time crawled (eight sweeps left lags of 0.15 s at 0.11 and the model 0.11 off); the
 /// sweep alone starts the Newton steps inside their basin.
-const NEWTON_STEPS: usize = 12;
+const NEWTON_STEPS: usize = 8;
+
+/// The factors on the common lag each thruster's is tried at first, alone.
+const PRE_TEST_FACTORS: [f64; 2] = [0.5, 2.0];
 
 /// The finite-difference step in ln(lag) of the Newton steps' gradient and Hessian (5 %).
 const H: f64 = 0.05;
 
 /// The largest Newton step in any ln(lag) (a factor 2).
 const MAX_STEP: f64 = 0.693;
-
-/// One thruster's learned lag and the fits with it moved by `exp(STEP)` either way (the
-/// others held): B's sensitivity to it.
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct ThrusterLag {
-    pub lag_s: f64,
-    /// One standard deviation of ln(lag), from the profile's curvature along this lag alone
-    /// (infinite when flat).
-    pub sd_ln: f64,
-    pub above: DynamicRun,
-    pub below: DynamicRun,
-}
 
 /// The per-thruster search's outcome, kept or not.
 #[derive(Debug, Clone)]
@@ -71,23 +70,44 @@ pub fn search_thruster_lags(
     if n < 2 {
         return None;
     }
-    let refit = |lags: &[f64]| run.refit_with(lags, true, imu_m);
     let (lo, hi) = (
         range.min_s.max(1e-4).ln(),
         range.max_s.max(range.min_s * 1.01).ln(),
     );
-    let common_score = profile_score(&common.run)?;
-    // One sweep, each thruster alone on the common search's grid over the whole range (a
-    // factor 4 each way from the common lag left eight_vectored's 0.2 s thrusters beside
-    // 0.03 s ones at 0.16): enough to tell a vehicle of one make (whose evidence stays under
-    // the limit, and which then costs 8 N refits more than the common lag) from one of
-    // several.
+    let at_common = variances(&common.run)?;
+    let floor: [f64; 6] = std::array::from_fn(|a| {
+        let g = 3 * (a / 3);
+        SCORE_FLOOR * at_common[g..g + 3].iter().fold(0.0f64, |m, v| m.max(*v))
+    });
+    let score_of = |fit: &DynamicRun| -> Option<f64> {
+        let v = variances(fit)?;
+        Some((0..6).map(|a| v[a].max(floor[a]).max(1e-300).ln()).sum())
+    };
+    let refit = |lags: &[f64]| run.refit_with(lags, true, imu_m);
+    let common_score = score_of(&common.run)?;
+    // First each thruster's lag alone at half and twice the common one: enough to tell a
+    // vehicle of one make (whose evidence stays under the limit, and which then costs 2 N
+    // refits more than the common lag) from one of several.
     let mut best = Best {
         lags: vec![common.lag_s; n],
         score: common_score,
         run: common.run.clone(),
     };
-    grid_sweep(&refit, (lo, hi), range.grid.max(3), &mut best)?;
+    for i in 0..n {
+        for factor in PRE_TEST_FACTORS {
+            let mut trial = best.lags.clone();
+            trial[i] = (common.lag_s * factor).clamp(lo.exp(), hi.exp());
+            let fit = refit(&trial)?;
+            let score = score_of(&fit)?;
+            if score < best.score {
+                best = Best {
+                    lags: trial,
+                    score,
+                    run: fit,
+                };
+            }
+        }
+    }
     let rows = best.run.samples() as f64;
     if rows / 2.0 * (common_score - best.score) <= min_evidence {
         return Some(ThrusterLagSearch {
@@ -96,12 +116,15 @@ pub fn search_thruster_lags(
             fit: None,
         });
     }
-    // A second sweep from where the first left every lag: thrusters that push alike move in
-    // pairs, and the first of a pair was placed while its partner still had the common lag
-    // (eight_vectored with 0.03 and 0.2 s thrusters, noise-free: two of its 0.2 s thrusters
-    // stayed at 0.11-0.12 and the model 0.15 / 0.27 off).
-    grid_sweep(&refit, (lo, hi), range.grid.max(3), &mut best)?;
-    pair_sweep(&refit, (lo, hi), range.grid.max(3), &mut best)?;
+    // Then two sweeps of each lag over the whole range (a factor 4 each way from the common
+    // lag left eight_vectored's 0.2 s thrusters beside 0.03 s ones at 0.16), the second from
+    // where the first left every lag: thrusters that push alike move in pairs, and the first
+    // of a pair was placed while its partner still had the common lag (the same vehicle,
+    // noise-free: two of its 0.2 s thrusters stayed at 0.11-0.12 and the model 0.15 / 0.27
+    // off).
+    grid_sweep(&refit, &score_of, (lo, hi), range.grid.max(3), &mut best)?;
+    grid_sweep(&refit, &score_of, (lo, hi), range.grid.max(3), &mut best)?;
+    pair_sweep(&refit, &score_of, (lo, hi), range.grid.max(3), &mut best)?;
     let Best {
         mut lags,
         score: mut best_score,
@@ -129,7 +152,11 @@ pub fn search_thruster_lags(
                 y[i] += dx;
             }
             let v = variances(&fit_at(&y)?)?;
-            Some((0..6).map(|a| v[a] / here[a].max(1e-300)).sum::<f64>())
+            Some(
+                (0..6)
+                    .map(|a| v[a].max(floor[a]) / here[a].max(floor[a]).max(1e-300))
+                    .sum::<f64>(),
+            )
         };
         let centre = 6.0;
         let mut plus = vec![0.0; n];
@@ -170,7 +197,7 @@ pub fn search_thruster_lags(
                 .map(|(a, d)| a + scale * d)
                 .collect();
             let fit = fit_at(&y)?;
-            let score = profile_score(&fit)?;
+            let score = score_of(&fit)?;
             if score < best_score {
                 let gain = (best_score - score) * fit.samples() as f64 / 2.0;
                 best_score = score;
@@ -213,7 +240,7 @@ pub fn search_thruster_lags(
             let sd_ln = match cov.as_ref() {
                 Some(c) => c[(i, i)].max(0.0).sqrt(),
                 None => {
-                    let (sa, sb) = (profile_score(&above)?, profile_score(&below)?);
+                    let (sa, sb) = (score_of(&above)?, score_of(&below)?);
                     let curvature = (sa + sb - 2.0 * best_score) / (STEP * STEP);
                     if curvature > 0.0 && rows > 0.0 {
                         (2.0 / (rows * curvature)).sqrt()
@@ -303,6 +330,7 @@ struct Best {
 /// the others held, keeping whatever lowers the score.
 fn grid_sweep(
     refit: &impl Fn(&[f64]) -> Option<DynamicRun>,
+    score_of: &impl Fn(&DynamicRun) -> Option<f64>,
     (lo, hi): (f64, f64),
     grid: usize,
     best: &mut Best,
@@ -313,7 +341,7 @@ fn grid_sweep(
             let mut trial = best.lags.clone();
             trial[i] = (lo + step * k as f64).exp();
             let fit = refit(&trial)?;
-            let score = profile_score(&fit)?;
+            let score = score_of(&fit)?;
             if score < best.score {
                 best.score = score;
                 best.run = fit;
@@ -329,6 +357,7 @@ fn grid_sweep(
 /// (eight_vectored with 0.15 and 0.05 s thrusters, noise-free: a pair left at 0.16 and 0.17).
 fn pair_sweep(
     refit: &impl Fn(&[f64]) -> Option<DynamicRun>,
+    score_of: &impl Fn(&DynamicRun) -> Option<f64>,
     (lo, hi): (f64, f64),
     grid: usize,
     best: &mut Best,
@@ -342,7 +371,7 @@ fn pair_sweep(
                 trial[i] = (lo + step * k as f64).exp();
                 trial[j] = trial[i];
                 let fit = refit(&trial)?;
-                let score = profile_score(&fit)?;
+                let score = score_of(&fit)?;
                 if score < best.score {
                     best.score = score;
                     best.run = fit;
@@ -352,4 +381,39 @@ fn pair_sweep(
         }
     }
     Some(())
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{DMatrix, DVector};
+
+    use super::{newton_step, psd_inverse, MAX_STEP};
+
+    #[test]
+    fn a_newton_step_reaches_a_quadratics_minimum_and_never_climbs() {
+        // f = (x0 - 0.1)^2 + 4 (x1 + 0.05)^2 from 0: g = (-0.2, 0.4), H = diag(2, 8).
+        let h = DMatrix::from_diagonal(&DVector::from_vec(vec![2.0, 8.0]));
+        let g = DVector::from_vec(vec![-0.2, 0.4]);
+        let dx = newton_step(&h, &g).unwrap();
+        assert!(
+            (dx[0] - 0.1).abs() < 1e-12 && (dx[1] + 0.05).abs() < 1e-12,
+            "{dx}"
+        );
+        // Curved down along x1: that direction follows the gradient down, scaled by the
+        // floored curvature, instead of jumping to the maximum.
+        let h = DMatrix::from_diagonal(&DVector::from_vec(vec![2.0, -8.0]));
+        let dx = newton_step(&h, &g).unwrap();
+        assert!(dx.dot(&g) < 0.0, "{dx}");
+        assert!(dx.amax() <= MAX_STEP + 1e-12, "{dx}");
+        assert!(newton_step(&h, &DVector::from_vec(vec![f64::NAN, 0.0])).is_none());
+    }
+
+    #[test]
+    fn only_a_positive_definite_hessian_gives_a_covariance() {
+        let h = DMatrix::from_row_slice(2, 2, &[4.0, 1.0, 1.0, 3.0]);
+        let inv = psd_inverse(&h).unwrap();
+        assert!((&h * inv - DMatrix::identity(2, 2)).amax() < 1e-12);
+        let saddle = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]);
+        assert!(psd_inverse(&saddle).is_none());
+    }
 }

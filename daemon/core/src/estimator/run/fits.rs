@@ -217,6 +217,9 @@ impl Estimator {
     fn learn_lags(&self, run: &DynamicRun, imu_m: &Vector3<f64>) -> Option<LagFit> {
         let range = self.lag_range();
         let mut common = learn_common_lag_centred(run, &range, imu_m)?;
+        if !self.cfg.learn_thruster_lags {
+            return Some(common);
+        }
         let Some(search) = search_thruster_lags(
             run,
             &common,

@@ -190,6 +190,12 @@ impl EstimationRun {
             if let Some(lag_s) = lag {
                 est = est.with_learned_lag(lag_s);
             }
+            let lags = model
+                .and_then(|m| m.learned_thruster_lags())
+                .or(prior.map(|p| p.thruster_lags_s.as_slice()));
+            if let Some(lags) = lags.filter(|l| !l.is_empty()) {
+                est = est.with_learned_thruster_lags(lags);
+            }
             // The IMU did not move with the thrusters: where the model in force (or the prior's)
             // put it, else where it is configured. Never learned again here: closed-loop data
             // cannot place it (eight_vectored in moderate water found it 16 cm off and its
