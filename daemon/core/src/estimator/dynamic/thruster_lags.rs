@@ -1,19 +1,18 @@
 //! A lag per thruster, where the data says the thrusters differ.
 //!
 //! Why: a reconfigurable vehicle gets thrusters of more than one make, and one lag for all is
-//! then wrong for every one of them. AMOUR-5 with its L and R thrusters at 0.05 s and the
-//! others at 0.15 s, noise-free, learned one lag of 0.060 s and a model 0.40 / 0.41 off under
-//! bounds of 0.033 / 0.026; with 0.03 and 0.2 s, 0.55 off (docs/study.md, "Thrusters of two
-//! makes").
+//! then wrong for every one of them. AMOUR-5 with its thrusters alternating 0.05 and 0.15 s,
+//! noise-free, learned one lag of 0.060 s and a model 0.40 / 0.41 off under bounds of 0.033 /
+//! 0.026; with 0.03 and 0.2 s, 0.55 off (docs/study.md, "Thrusters of two makes").
 //!
-//! How: from the common lag ([`super::lag_search`]), each thruster's lag in turn is searched
-//! on its own profile likelihood with the others held (coordinate descent: a coarse grid
-//! around the present lag, then golden section), a few sweeps. The per-thruster lags are
+//! How: from the common lag ([`super::lag_search`]), a pre-test tries each thruster's lag
+//! alone at half and twice the common one. The per-thruster lags are searched further and
 //! kept only when they explain the data better than one lag by `min_evidence` in the log
-//! likelihood ratio (N - 1 more parameters: at a realistic IMU a uniform vehicle's ratio is
-//! small, a mixed one's thousands), so a vehicle of one make keeps the common lag's fit to
-//! the digit. Each lag's uncertainty, from its profile's curvature, widens B's standard
-//! errors and bounds through B's sensitivity to that lag alone.
+//! likelihood ratio (N - 1 more parameters: a vehicle of one make gave 0, one of two makes
+//! thousands), so a vehicle of one make keeps the common lag's fit to the digit. The search:
+//! two sweeps of each lag alone over the range's grid, one of every pair moved together,
+//! then Newton steps on all of them. Their joint covariance (the profile's Hessian) and a
+//! floor on each widen B's standard errors and bounds through B's sensitivity to each lag.
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
