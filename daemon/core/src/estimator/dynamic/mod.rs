@@ -155,7 +155,8 @@ pub struct DynamicRun {
     lag_prev: Vec<f64>,
     lag_abs: f64,
     /// Each thruster's |command| through its own lag, when the lags differ (`lag_abs` is then
-    /// their mean; with one lag for all, one filter of the mean is the same and cheaper).
+    /// their mean); empty with one lag for all, where one filter of the mean is the same and
+    /// cheaper. Sized by `set_lags`.
     #[serde(default)]
     abs_each: Vec<f64>,
     #[serde(with = "crate::serde_arrays::array")]
@@ -255,7 +256,7 @@ impl DynamicRun {
             lag: vec![0.0; cols],
             lag_prev: vec![0.0; cols],
             lag_abs: 0.0,
-            abs_each: vec![0.0; n],
+            abs_each: Vec::new(),
             terms: [0.0; TERMS],
             terms_prev: [0.0; TERMS],
             integral: vec![0.0; k],
@@ -444,7 +445,7 @@ impl DynamicRun {
         let mut abs_target = 0.0;
         let mut a_mean = 0.0;
         let n = self.n;
-        let mixed = self.lags.iter().any(|l| *l != self.lags[0]) && self.abs_each.len() == n;
+        let mixed = !self.abs_each.is_empty();
         for i in 0..n {
             let lag_s = self.lags[i];
             let a = if lag_s > 0.0 {

@@ -19,14 +19,17 @@ impl DynamicRun {
         })
     }
 
-    /// Fit with these lags, s, one per thruster (before any sample; ignored unless one per
-    /// thruster).
+    /// Fit with these lags, s: one per thruster, or one for all (before any sample; ignored
+    /// when empty). Thrusters whose lags differ get a mean-|command| filter each.
     pub fn set_lags(&mut self, lags: &[f64]) {
-        if lags.len() == self.n {
-            for (l, v) in self.lags.iter_mut().zip(lags) {
-                *l = v.max(0.0);
-            }
+        let Some(&last) = lags.last() else {
+            return;
+        };
+        for (i, l) in self.lags.iter_mut().enumerate() {
+            *l = lags.get(i).copied().unwrap_or(last).max(0.0);
         }
+        let mixed = self.lags.iter().any(|l| *l != self.lags[0]);
+        self.abs_each = if mixed { vec![0.0; self.n] } else { Vec::new() };
     }
 
     /// The same fit made again from the log with thruster lags `lags` (s, one per thruster, or
@@ -49,9 +52,6 @@ impl DynamicRun {
     ) -> Option<DynamicRun> {
         let log = self.log.as_ref()?;
         let mut run = DynamicRun {
-            lags: (0..self.n)
-                .map(|i| lags.get(i).or(lags.last()).copied().unwrap_or(0.0).max(0.0))
-                .collect(),
             lags_learned: learned,
             log: None,
             floor_when_split: self.floor_when_split,
@@ -64,6 +64,7 @@ impl DynamicRun {
                 DepthAid::default(),
             )
         };
+        run.set_lags(if lags.is_empty() { &[0.0] } else { lags });
         run.nav = self.nav.clone();
         for s in log.iter() {
             let nav = NavState {

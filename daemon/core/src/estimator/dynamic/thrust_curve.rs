@@ -47,18 +47,21 @@ impl ThrustCurveProbe {
     /// log, instruments or navigation of their own: only the profile score is wanted, and
     /// the main fit's navigation is handed in.
     pub fn new(run: &DynamicRun) -> Self {
-        let fresh = || DynamicRun {
-            lags: run.lags.clone(),
-            lags_learned: run.lags_learned,
-            floor_when_split: run.floor_when_split,
-            ..DynamicRun::with_columns(
-                run.n,
-                run.split,
-                0.0,
-                run.segment_s,
-                &Vector3::new(0.0, 0.0, -1.0),
-                DepthAid::default(),
-            )
+        let fresh = || {
+            let mut probe = DynamicRun {
+                lags_learned: run.lags_learned,
+                floor_when_split: run.floor_when_split,
+                ..DynamicRun::with_columns(
+                    run.n,
+                    run.split,
+                    0.0,
+                    run.segment_s,
+                    &Vector3::new(0.0, 0.0, -1.0),
+                    DepthAid::default(),
+                )
+            };
+            probe.set_lags(&run.lags);
+            probe
         };
         Self {
             runs: EXPONENTS.iter().map(|_| fresh()).collect(),

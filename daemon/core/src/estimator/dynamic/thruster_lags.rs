@@ -45,8 +45,6 @@ const MAX_STEP: f64 = 0.693;
 /// The per-thruster search's outcome, kept or not.
 #[derive(Debug, Clone)]
 pub struct ThrusterLagSearch {
-    /// The lags found, s.
-    pub lags: Vec<f64>,
     /// ln likelihood ratio of the per-thruster lags over the common one.
     pub log_likelihood_ratio: f64,
     /// The fit, kept: `common` with its run replaced and `per_thruster` set.
@@ -84,34 +82,27 @@ pub fn search_thruster_lags(
     };
     let refit = |lags: &[f64]| run.refit_with(lags, true, imu_m);
     let common_score = score_of(&common.run)?;
-    // First each thruster's lag alone at half and twice the common one: enough to tell a
-    // vehicle of one make (whose evidence stays under the limit, and which then costs 2 N
-    // refits more than the common lag) from one of several.
     let mut best = Best {
         lags: vec![common.lag_s; n],
         score: common_score,
         run: common.run.clone(),
     };
+    let try_lags = |best: &mut Best, trial: Vec<f64>| best.try_lags(trial, &refit, &score_of);
+    // First each thruster's lag alone at half and twice the common one: enough to tell a
+    // vehicle of one make (whose evidence stays under the limit, and which then costs 2 N
+    // refits more than the common lag) from one of several.
     for i in 0..n {
         for factor in PRE_TEST_FACTORS {
             let mut trial = best.lags.clone();
             trial[i] = (common.lag_s * factor).clamp(lo.exp(), hi.exp());
-            let fit = refit(&trial)?;
-            let score = score_of(&fit)?;
-            if score < best.score {
-                best = Best {
-                    lags: trial,
-                    score,
-                    run: fit,
-                };
-            }
+            try_lags(&mut best, trial)?;
         }
     }
     let rows = best.run.samples() as f64;
-    if rows / 2.0 * (common_score - best.score) <= min_evidence {
+    let log_likelihood_ratio = |best: &Best| rows / 2.0 * (common_score - best.score);
+    if log_likelihood_ratio(&best) <= min_evidence {
         return Some(ThrusterLagSearch {
-            log_likelihood_ratio: rows / 2.0 * (common_score - best.score),
-            lags: best.lags,
+            log_likelihood_ratio: log_likelihood_ratio(&best),
             fit: None,
         });
     }
@@ -120,37 +111,49 @@ pub fn search_thruster_lags(
     // where the first left every lag: thrusters that push alike move in pairs, and the first
     // of a pair was placed while its partner still had the common lag (the same vehicle,
     // noise-free: two of its 0.2 s thrusters stayed at 0.11-0.12 and the model 0.15 / 0.27
-    // off).
-    grid_sweep(&refit, &score_of, (lo, hi), range.grid.max(3), &mut best)?;
-    grid_sweep(&refit, &score_of, (lo, hi), range.grid.max(3), &mut best)?;
-    pair_sweep(&refit, &score_of, (lo, hi), range.grid.max(3), &mut best)?;
-    let Best {
-        mut lags,
-        score: mut best_score,
-        run: mut best_run,
-    } = best;
+    // off). Then every pair moved together to each grid lag, the others held: a pair that
+    // pushes alike trades its lags, and neither moves alone (eight_vectored with 0.15 and
+    // 0.05 s thrusters, noise-free: a pair left at 0.16 and 0.17).
+    let grid = range.grid.max(3);
+    let step = (hi - lo) / (grid - 1) as f64;
+    let grid_lag = |k: usize| (lo + step * k as f64).exp();
+    for _ in 0..2 {
+        for i in 0..n {
+            for k in 0..grid {
+                let mut trial = best.lags.clone();
+                trial[i] = grid_lag(k);
+                try_lags(&mut best, trial)?;
+            }
+        }
+    }
+    for i in 0..n {
+        for j in 0..i {
+            for k in 0..grid {
+                let mut trial = best.lags.clone();
+                trial[i] = grid_lag(k);
+                trial[j] = trial[i];
+                try_lags(&mut best, trial)?;
+            }
+        }
+    }
     // Then Newton steps on all of them, the profile's gradient and Hessian in ln(lag) by
     // finite differences; the last Hessian is the lags' joint information.
-    let clamp = |x: f64| x.clamp(lo, hi);
-    let fit_at = |x: &[f64]| -> Option<DynamicRun> {
-        let l: Vec<f64> = x.iter().map(|v| clamp(*v).exp()).collect();
-        refit(&l)
-    };
+    let lags_at = |x: &[f64]| -> Vec<f64> { x.iter().map(|v| v.clamp(lo, hi).exp()).collect() };
     let mut hessian = DMatrix::zeros(n, n);
     let mut last = false;
     for step in 0..=NEWTON_STEPS {
-        let x: Vec<f64> = lags.iter().map(|l| l.ln()).collect();
+        let x: Vec<f64> = best.lags.iter().map(|l| l.ln()).collect();
         // The score's local quadratic form: each output's residual variance over its value
         // here, summed (its gradient here is the profile's; its Hessian is the profile's
         // without the -(v'/v)^2 part, which noise-free, where the residual falls toward zero
         // at the truth, made the finite-difference Hessian indefinite).
-        let here = variances(&best_run)?;
+        let here = variances(&best.run)?;
         let moved = |d: &[(usize, f64)]| {
             let mut y = x.clone();
             for &(i, dx) in d {
                 y[i] += dx;
             }
-            let v = variances(&fit_at(&y)?)?;
+            let v = variances(&refit(&lags_at(&y))?)?;
             Some(
                 (0..6)
                     .map(|a| v[a].max(floor[a]) / here[a].max(floor[a]).max(1e-300))
@@ -195,13 +198,8 @@ pub fn search_thruster_lags(
                 .zip(dx.iter())
                 .map(|(a, d)| a + scale * d)
                 .collect();
-            let fit = fit_at(&y)?;
-            let score = score_of(&fit)?;
-            if score < best_score {
-                let gain = (best_score - score) * fit.samples() as f64 / 2.0;
-                best_score = score;
-                best_run = fit;
-                lags = y.iter().map(|v| clamp(*v).exp()).collect();
+            let gain = try_lags(&mut best, lags_at(&y))? * rows / 2.0;
+            if gain > 0.0 {
                 improved |= gain >= 0.5;
                 moved_at_all = true;
                 if scale < 1.0 || 2.0 * scale * largest > MAX_STEP {
@@ -220,57 +218,56 @@ pub fn search_thruster_lags(
             (true, true) => {}
         }
     }
-    let rows = best_run.samples() as f64;
-    let log_likelihood_ratio = rows / 2.0 * (common_score - best_score);
+    let Best {
+        lags,
+        score,
+        run: fitted,
+    } = best;
     // ln L = -(rows / 2) * score, so cov(ln lags) = 2 / rows * Hessian^-1. Where the
     // finite-difference Hessian is not positive definite (noise-free, the score's valley is
     // too sharp for a 5 % step) each lag's own curvature over the wider STEP is used alone.
+    // (The search only lowers the score, so the evidence is still above `min_evidence`.)
     let cov = psd_inverse(&hessian).map(|inv| inv * (2.0 / rows.max(1.0)));
-    let fit = if log_likelihood_ratio > min_evidence {
-        let mut per_thruster = Vec::with_capacity(n);
-        for i in 0..n {
-            let x = lags[i].ln();
-            let moved = |dx: f64| {
-                let mut l = lags.clone();
-                l[i] = (x + dx).exp();
-                refit(&l)
-            };
-            let (above, below) = (moved(STEP)?, moved(-STEP)?);
-            let sd_ln = match cov.as_ref() {
-                Some(c) => c[(i, i)].max(0.0).sqrt(),
-                None => {
-                    let (sa, sb) = (score_of(&above)?, score_of(&below)?);
-                    let curvature = (sa + sb - 2.0 * best_score) / (STEP * STEP);
-                    if curvature > 0.0 && rows > 0.0 {
-                        (2.0 / (rows * curvature)).sqrt()
-                    } else {
-                        f64::INFINITY
-                    }
+    let mut per_thruster = Vec::with_capacity(n);
+    for i in 0..n {
+        let x = lags[i].ln();
+        let moved = |dx: f64| {
+            let mut l = lags.clone();
+            l[i] = (x + dx).exp();
+            refit(&l)
+        };
+        let (above, below) = (moved(STEP)?, moved(-STEP)?);
+        let sd_ln = match cov.as_ref() {
+            Some(c) => c[(i, i)].max(0.0).sqrt(),
+            None => {
+                let (sa, sb) = (score_of(&above)?, score_of(&below)?);
+                let curvature = (sa + sb - 2.0 * score) / (STEP * STEP);
+                if curvature > 0.0 && rows > 0.0 {
+                    (2.0 / (rows * curvature)).sqrt()
+                } else {
+                    f64::INFINITY
                 }
-            };
-            per_thruster.push(ThrusterLag {
-                lag_s: lags[i],
-                sd_ln,
-                above,
-                below,
-            });
-        }
-        Some(LagFit {
+            }
+        };
+        per_thruster.push(ThrusterLag {
+            lag_s: lags[i],
+            sd_ln,
+            above,
+            below,
+        });
+    }
+    let log_likelihood_ratio = rows / 2.0 * (common_score - score);
+    Some(ThrusterLagSearch {
+        log_likelihood_ratio,
+        fit: Some(LagFit {
             lag_s: lags.iter().sum::<f64>() / n as f64,
-            run: best_run,
+            run: fitted,
             per_thruster,
             per_thruster_cov: cov.map_or(Vec::new(), |c| c.transpose().as_slice().to_vec()),
             per_thruster_evidence: log_likelihood_ratio,
             per_thruster_floor_ln: floor_ln,
             ..common.clone()
-        })
-    } else {
-        None
-    };
-    Some(ThrusterLagSearch {
-        lags,
-        log_likelihood_ratio,
-        fit,
+        }),
     })
 }
 
@@ -325,61 +322,27 @@ struct Best {
     run: DynamicRun,
 }
 
-/// One coordinate sweep: each thruster's lag in turn on `grid` points over `range` (ln s),
-/// the others held, keeping whatever lowers the score.
-fn grid_sweep(
-    refit: &impl Fn(&[f64]) -> Option<DynamicRun>,
-    score_of: &impl Fn(&DynamicRun) -> Option<f64>,
-    (lo, hi): (f64, f64),
-    grid: usize,
-    best: &mut Best,
-) -> Option<()> {
-    let step = (hi - lo) / (grid - 1) as f64;
-    for i in 0..best.lags.len() {
-        for k in 0..grid {
-            let mut trial = best.lags.clone();
-            trial[i] = (lo + step * k as f64).exp();
-            let fit = refit(&trial)?;
-            let score = score_of(&fit)?;
-            if score < best.score {
-                best.score = score;
-                best.run = fit;
-                best.lags = trial;
-            }
+impl Best {
+    /// Fit at `trial` and keep it if it scores lower: by how much (0 when not kept).
+    fn try_lags(
+        &mut self,
+        trial: Vec<f64>,
+        refit: &impl Fn(&[f64]) -> Option<DynamicRun>,
+        score_of: &impl Fn(&DynamicRun) -> Option<f64>,
+    ) -> Option<f64> {
+        let run = refit(&trial)?;
+        let score = score_of(&run)?;
+        if score >= self.score {
+            return Some(0.0);
         }
+        let gain = self.score - score;
+        *self = Best {
+            lags: trial,
+            score,
+            run,
+        };
+        Some(gain)
     }
-    Some(())
-}
-
-/// Every pair of thrusters moved together to each of `grid` lags over `range` (ln s), the
-/// others held: a pair that pushes alike trades its lags, and neither moves alone
-/// (eight_vectored with 0.15 and 0.05 s thrusters, noise-free: a pair left at 0.16 and 0.17).
-fn pair_sweep(
-    refit: &impl Fn(&[f64]) -> Option<DynamicRun>,
-    score_of: &impl Fn(&DynamicRun) -> Option<f64>,
-    (lo, hi): (f64, f64),
-    grid: usize,
-    best: &mut Best,
-) -> Option<()> {
-    let step = (hi - lo) / (grid - 1) as f64;
-    let n = best.lags.len();
-    for i in 0..n {
-        for j in 0..i {
-            for k in 0..grid {
-                let mut trial = best.lags.clone();
-                trial[i] = (lo + step * k as f64).exp();
-                trial[j] = trial[i];
-                let fit = refit(&trial)?;
-                let score = score_of(&fit)?;
-                if score < best.score {
-                    best.score = score;
-                    best.run = fit;
-                    best.lags = trial;
-                }
-            }
-        }
-    }
-    Some(())
 }
 
 #[cfg(test)]

@@ -230,16 +230,10 @@ impl Estimator {
         ) else {
             return Some(common);
         };
-        Some(match search.fit {
-            Some(mut per_thruster) => {
-                per_thruster.per_thruster_evidence = search.log_likelihood_ratio;
-                per_thruster
-            }
-            None => {
-                common.per_thruster_evidence = search.log_likelihood_ratio;
-                common
-            }
-        })
+        Some(search.fit.unwrap_or_else(|| {
+            common.per_thruster_evidence = search.log_likelihood_ratio;
+            common
+        }))
     }
 
     /// What the configuration says of the IMU's position.
