@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, Vector3};
 use super::analysis::{diagnose, rank_report, RankReport, ThrusterDiagnosis};
 use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
+use super::dynamic::lag_check::check_configured_lag;
 use super::dynamic::lag_search::{
     fit_at, fit_at_centred, learn_common_lag_centred, LagFit, LagRange,
 };
@@ -478,6 +479,17 @@ impl Estimator {
             && self.cfg.learn_spin_up
             && !self.lag_inherited
             && self.noise.sigma_rot() <= self.cfg.spin_up_max_gyro_sigma
+    }
+
+    /// Whether this run checks the configured lag against its data instead of learning it:
+    /// the lag would be learned but for the gyro's noise
+    /// (`EstimatorConfig::check_configured_lag`, [`super::dynamic::lag_check`]).
+    pub fn checks_configured_lag(&self) -> bool {
+        self.cfg.method == Method::Dynamic
+            && self.cfg.learn_spin_up
+            && self.cfg.check_configured_lag
+            && !self.lag_inherited
+            && !self.learns_lag()
     }
 
     /// The at-rest noise per DOF row (gyro, then accelerometer).

@@ -12,6 +12,7 @@
 
 pub mod imu_position;
 pub mod instruments;
+pub mod lag_check;
 pub mod lag_search;
 pub mod prior;
 pub mod refer_to_centre;
@@ -82,6 +83,10 @@ pub struct DynamicTerms {
     /// leaves it out of the bound it waits on.
     #[serde(default)]
     pub spin_up_floor_rel_err: [f64; 2],
+    /// With the lag configured because the gyro is too noisy to learn it: what the data says
+    /// of it ([`lag_check`]); None otherwise. A contradicted lag refuses the model.
+    #[serde(default)]
+    pub lag_check: Option<lag_check::LagCheck>,
     /// The IMU's position from the centre the acceleration rows are referred to
     /// ([`imu_position`]), learned or configured; None before [`DynamicRun::refer_to_centre`].
     pub imu_position: Option<ImuPosition>,
@@ -741,6 +746,7 @@ impl DynamicRun {
                 spin_up_per_thruster_s: Vec::new(),
                 thruster_lag_evidence: 0.0,
                 spin_up_floor_rel_err: [0.0; 2],
+                lag_check: None,
                 thrust_curve: None,
                 imu_position: None,
                 unexplained_rate_radps: 0.0,

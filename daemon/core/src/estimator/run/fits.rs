@@ -208,7 +208,25 @@ impl Estimator {
             .learns_lag()
             .then(|| self.learn_lags(run, &Vector3::zeros()))
             .flatten();
-        self.dynamic_estimate_with(run, learned, true)
+        let mut estimate = self.dynamic_estimate_with(run, learned, true);
+        if self.checks_configured_lag() {
+            if let Some(terms) = estimate.dynamics.as_mut() {
+                let imu = terms
+                    .imu_position
+                    .map_or_else(Vector3::zeros, |p| p.position_m);
+                terms.lag_check = check_configured_lag(
+                    run,
+                    self.cfg.spin_up_s,
+                    &self.lag_range(),
+                    &imu,
+                    self.cfg.lag_check_ratio,
+                    self.cfg
+                        .learn_thruster_lags
+                        .then_some(self.cfg.thruster_lag_evidence),
+                );
+            }
+        }
+        estimate
     }
 
     /// The lag that best explains `run`'s log, the IMU at `imu_m` from the centre: one for

@@ -336,6 +336,20 @@ impl Machine {
             self.transition(self.after_refusal(), &text);
             return;
         }
+        // A lag configured because the gyro is too noisy to learn it, which the data
+        // contradicts: the model is as wrong as the lag (AMOUR-5 at 0.05 s: 95-109 % off) and
+        // its bound does not know it (estimator::dynamic::lag_check).
+        let lag_reason = candidate
+            .dynamics
+            .as_ref()
+            .and_then(|d| d.lag_check)
+            .and_then(|c| c.reason());
+        if let Some(reason) = lag_reason {
+            let text = format!("{reason}: model rejected; old model kept");
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(self.after_refusal(), &text);
+            return;
+        }
         match self.try_swap(candidate, ModelSource::Estimated) {
             Ok(()) => {
                 if let Some(k) = key {

@@ -223,7 +223,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// "Learning the thruster lag (issue 29)"): learned lag, err_rot / err_acc and the bounds per
 /// vehicle, true lag and seed. Knobs: LAG_NOISE (none|realistic|paper), LAG_VEHICLES,
 /// LAG_TAUS, LAG_MIXED (lags a,b,..: thruster i gets the (i mod k)-th, LAG_TAUS then unused),
-/// LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_TOLD (the true lag given), LAG_FORCE (learn
+/// LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
 /// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_NOISE_S (the rest's length, s), and
@@ -273,6 +273,10 @@ pub(super) fn lag_sweep() {
                 if let Ok(p) = std::env::var("LAG_MIN_POWER") {
                     cfg.min_power = p.parse().unwrap();
                 }
+                if std::env::var("LAG_CHECK").is_ok_and(|v| v == "0") {
+                    // The configured lag unchecked at a noisy gyro: the model as before.
+                    cfg.check_configured_lag = false;
+                }
                 if std::env::var("LAG_FORCE").is_ok() {
                     // Learn whatever the gyro noise (the decisive runs at the paper's noise).
                     cfg.spin_up_max_gyro_sigma = f64::INFINITY;
@@ -307,6 +311,9 @@ pub(super) fn lag_sweep() {
                     pulse_s: std::env::var("LAG_PULSE_S")
                         .ok()
                         .map(|v| v.parse().unwrap()),
+                    // A refused model is a result here (the configured lag's check, the
+                    // swell's): printed, not a failed run.
+                    allow_refusal: true,
                     ..Ideal::default()
                 };
                 let mut v = with_lag(name, tau);
@@ -346,8 +353,19 @@ pub(super) fn lag_sweep() {
                     continue;
                 }
                 let o = estimate_on(v, sensors, seed, cfg, ideal);
+                let check = o.terms.lag_check.map_or(String::new(), |c| {
+                    format!(
+                        " [check: learned {:.4}, consistent {:.4}-{:.4}, lnLR {:.1}{}]",
+                        c.learned_s,
+                        c.consistent_s[0],
+                        c.consistent_s[1],
+                        c.per_thruster_evidence,
+                        if c.contradicted() { ", contradicted" } else { "" }
+                    )
+                });
+                let refused = if o.refused { " REFUSED" } else { "" };
                 println!(
-                "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s)",
+                "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s){refused}{check}",
                 o.spin_up_s,
                 o.terms.spin_up_per_thruster_s.iter().map(|l| (l * 1e4).round() / 1e4).collect::<Vec<_>>(),
                 o.terms.spin_up_sd_ln,
