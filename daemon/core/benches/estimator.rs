@@ -227,8 +227,23 @@ fn bench(c: &mut Criterion) {
                 b.iter(|| black_box(Box::new(est.clone())))
             });
         }
-        // A full dynamic estimate after 64 pulses (the default stops at a bound or 80 pulses).
+        // A full dynamic estimate after 64 pulses (the default stops at a bound or 80 pulses),
+        // at the paper's noise, where the lag is not learned.
         let dynamic = warmed_dynamic(n, 64);
+        // What the estimate a run stops with costs more there: the lag searched to check
+        // the configured one (`estimator::dynamic::lag_check`).
+        assert!(dynamic.checks_configured_lag());
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_estimate_checking_lag", n),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    let mut e = dynamic.estimate();
+                    dynamic.check_configured_lag(&mut e);
+                    black_box(e)
+                })
+            },
+        );
         c.bench_with_input(BenchmarkId::new("dynamic_estimate", n), &n, |b, _| {
             b.iter(|| black_box(dynamic.estimate()))
         });

@@ -115,7 +115,7 @@ impl SolveJob {
     /// [`SolveJob::run`] without giving the job up: a worker hands the spent job back to the
     /// thread that made it, to be freed there (see the daemon's `solver.rs`).
     pub fn compute(&self) -> SolveResult {
-        let estimate = if self.progress {
+        let mut estimate = if self.progress {
             self.est.estimate_progress()
         } else {
             self.est.estimate()
@@ -134,6 +134,12 @@ impl SolveJob {
             // A window never stops a run; the refiner judges the estimate itself.
             Work::Window { elapsed_s } => (StopDecision::Continue, elapsed_s),
         };
+        // A run that stops has its configured lag checked against its data where the gyro
+        // was too noisy to learn it: only then, since the check searches the lag (~150 ms
+        // at 64 pulses, N = 8) and decides nothing but the model's refusal.
+        if decision.is_stop() {
+            self.est.check_configured_lag(&mut estimate);
+        }
         // The model is made here too when the run stops: the control thread only checks it.
         let candidate = decision
             .is_stop()

@@ -418,7 +418,9 @@ impl Estimator {
         // The open-loop estimation only: the log keeps one command per pulse, split or not
         // (under control the command changes every sample; there the lag is the model's,
         // `EstimatorConfig::spin_up_s` set from it by the caller).
-        if open_loop && (self.learns_lag() || self.cfg.learn_imu_position) {
+        if open_loop
+            && (self.learns_lag() || self.checks_configured_lag() || self.cfg.learn_imu_position)
+        {
             run = run.with_log(self.cfg.max_pulses + 1);
         }
         if self.lag_inherited {

@@ -208,25 +208,33 @@ impl Estimator {
             .learns_lag()
             .then(|| self.learn_lags(run, &Vector3::zeros()))
             .flatten();
-        let mut estimate = self.dynamic_estimate_with(run, learned, true);
-        if self.checks_configured_lag() {
-            if let Some(terms) = estimate.dynamics.as_mut() {
-                let imu = terms
-                    .imu_position
-                    .map_or_else(Vector3::zeros, |p| p.position_m);
-                terms.lag_check = check_configured_lag(
-                    run,
-                    self.cfg.spin_up_s,
-                    &self.lag_range(),
-                    &imu,
-                    self.cfg.lag_check_ratio,
-                    self.cfg
-                        .learn_thruster_lags
-                        .then_some(self.cfg.thruster_lag_evidence),
-                );
-            }
+        self.dynamic_estimate_with(run, learned, true)
+    }
+
+    /// Where the gyro was too noisy to learn the lag ([`Self::checks_configured_lag`]): what
+    /// this run's data says of the configured one, into `estimate`'s dynamics
+    /// (`DynamicTerms::lag_check`, [`super::dynamic::lag_check`]). Asked only of the
+    /// estimate a run stops with: it searches the lag.
+    pub fn check_configured_lag(&self, estimate: &mut Estimate) {
+        if !self.checks_configured_lag() {
+            return;
         }
-        estimate
+        let (Some(run), Some(terms)) = (self.dynamic.as_ref(), estimate.dynamics.as_mut()) else {
+            return;
+        };
+        let imu = terms
+            .imu_position
+            .map_or_else(Vector3::zeros, |p| p.position_m);
+        terms.lag_check = check_configured_lag(
+            run,
+            self.cfg.spin_up_s,
+            &self.lag_range(),
+            &imu,
+            self.cfg.lag_check_ratio,
+            self.cfg
+                .learn_thruster_lags
+                .then_some(self.cfg.thruster_lag_evidence),
+        );
     }
 
     /// The lag that best explains `run`'s log, the IMU at `imu_m` from the centre: one for

@@ -360,7 +360,11 @@ pub(super) fn lag_sweep() {
                         c.consistent_s[0],
                         c.consistent_s[1],
                         c.per_thruster_evidence,
-                        if c.contradicted() { ", contradicted" } else { "" }
+                        if c.contradicted() {
+                            ", contradicted"
+                        } else {
+                            ""
+                        }
                     )
                 });
                 let refused = if o.refused { " REFUSED" } else { "" };
