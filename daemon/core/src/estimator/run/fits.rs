@@ -231,6 +231,7 @@ impl Estimator {
             &self.lag_range(),
             &imu,
             self.cfg.lag_check_ratio,
+            self.cfg.lag_check_z,
             self.cfg
                 .learn_thruster_lags
                 .then_some(self.cfg.thruster_lag_evidence),

@@ -223,7 +223,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// "Learning the thruster lag (issue 29)"): learned lag, err_rot / err_acc and the bounds per
 /// vehicle, true lag and seed. Knobs: LAG_NOISE (none|realistic|paper), LAG_VEHICLES,
 /// LAG_TAUS, LAG_MIXED (lags a,b,..: thruster i gets the (i mod k)-th, LAG_TAUS then unused),
-/// LAG_SEEDS (1..=N), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
+/// LAG_SEEDS (1..=N), LAG_RATE (the IMU's rate, Hz; 200), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
 /// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_NOISE_S (the rest's length, s), and
@@ -251,7 +251,7 @@ pub(super) fn lag_sweep() {
         for tau in taus.split(',').map(|t| t.parse::<f64>().unwrap()) {
             for seed in seeds.clone() {
                 let mut sensors = SensorConfig {
-                    rate_hz: 200.0,
+                    rate_hz: std::env::var("LAG_RATE").map_or(200.0, |r| r.parse().unwrap()),
                     noise,
                     ..SensorConfig::default()
                 };
@@ -355,8 +355,9 @@ pub(super) fn lag_sweep() {
                 let o = estimate_on(v, sensors, seed, cfg, ideal);
                 let check = o.terms.lag_check.map_or(String::new(), |c| {
                     format!(
-                        " [check: learned {:.4}, consistent {:.4}-{:.4}, lnLR {:.1}{}]",
+                        " [check: learned {:.4} sd_ln {:.4}, consistent {:.4}-{:.4}, lnLR {:.1}{}]",
                         c.learned_s,
+                        c.learned_sd_ln,
                         c.consistent_s[0],
                         c.consistent_s[1],
                         c.per_thruster_evidence,
