@@ -197,3 +197,83 @@ fn t200_thrusters_on_a_sagging_pack_are_learned_at_the_reference_voltage() {
     assert_eq!(v["clean_exit"], true);
     assert_eq!(v["files_left"], 0);
 }
+
+/// Issue 29 through the processes: AMOUR-5 with three thrusters lagging 0.15 s and two 0.05 s
+/// (`amour5_two_makes`), a realistic IMU, the daemon told nothing. The lags differ, so each
+/// thruster's is learned, and the dynamics topic carries them with the evidence (DynamicsMsg
+/// v4). Seed 1 measured: 0.153, 0.151, 0.153, 0.050, 0.050 s (ln LR 2953), the model 0.009 /
+/// 0.025 off under bounds of 0.055 / 0.054 in 4.24 vehicle-s.
+#[test]
+fn thrusters_of_two_makes_are_each_given_their_own_lag() {
+    let v = demo(&[
+        "--noise",
+        "realistic",
+        "--vehicle",
+        "config/vehicles/amour5_two_makes.toml",
+    ]);
+    let lags = |k: &str| -> Vec<f64> {
+        v[k].as_array()
+            .unwrap_or_else(|| panic!("{k}: {v}"))
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (learned, truth) = (
+        lags("spin_up_per_thruster_s"),
+        lags("spin_up_true_per_thruster_s"),
+    );
+    assert_eq!(truth, [0.15, 0.15, 0.15, 0.05, 0.05]);
+    assert_eq!(learned.len(), truth.len(), "{v}");
+    for (i, (l, t)) in learned.iter().zip(&truth).enumerate() {
+        assert!((l - t).abs() <= 0.01, "thruster {i}: {l:.4} s, true {t} s");
+    }
+    assert!(v["dynamics"]["thruster_lag_evidence"].as_f64().unwrap() > 100.0);
+    assert_eq!(v["spin_up_learned"], true);
+    assert!(v["spin_up_consistent_s"].is_null(), "learned, not checked");
+    let (rot, acc) = (
+        v["err_rot"].as_f64().unwrap(),
+        v["err_acc"].as_f64().unwrap(),
+    );
+    assert!(rot <= 0.03 && acc <= 0.04, "errors {rot:.4} / {acc:.4}");
+    assert_eq!(v["clean_exit"], true);
+    assert_eq!(v["files_left"], 0);
+}
+
+/// Issues 29 and 32 through the processes: at the paper's noise the lag is not learned (biased
+/// short there) but the data is searched to check the configured 0.1 s. On AMOUR-5, whose
+/// thrusters lag 0.1 s, the check allows it and says what the data allows (seed 1 measured
+/// 0.083-0.164 s; the model 0.050 / 0.063 off in 7.04 vehicle-s); on AMOUR-5 whose thrusters
+/// lag 0.2 s (`amour5_lag200ms`) the model is refused, naming the range, where unchecked it was
+/// swapped in 0.48 off under a bound of a few percent.
+#[test]
+fn at_the_papers_noise_the_configured_lag_is_checked_against_the_data() {
+    let v = demo(&["--noise", "paper"]);
+    assert_eq!(v["spin_up_learned"], false, "{v}");
+    assert_eq!(v["dynamics"]["spin_up_checked"], true, "{v}");
+    let range: Vec<f64> = v["spin_up_consistent_s"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(
+        range[0] < 0.1 && 0.1 < range[1] && range[1] < 0.3,
+        "the range the data allows: {range:?}"
+    );
+    assert!(v["spin_up_per_thruster_s"].is_null(), "{v}");
+
+    let (ok, v, log) = demo_outcome(&[
+        "--noise",
+        "paper",
+        "--vehicle",
+        "config/vehicles/amour5_lag200ms.toml",
+    ]);
+    assert!(!ok, "a refused model fails the demo\n{log}");
+    let refused = v["refused"].as_str().unwrap_or_else(|| panic!("{log}"));
+    assert!(
+        refused.contains("s by the data, not spin_up_s 0.100") && refused.contains("rejected"),
+        "{refused}"
+    );
+    assert_eq!(v["clean_exit"], true);
+    assert_eq!(v["files_left"], 0);
+}

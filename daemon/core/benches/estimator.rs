@@ -343,5 +343,39 @@ fn change_test(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench, change_test);
+/// One refit of a logged run (the lag search's unit of work: ~22 per common lag, ~550 for a
+/// lag per thruster searched to the end), N = 8 and 16, 64 pulses of 20 samples: in full,
+/// and by a refitter that sums the lag-free terms' products once
+/// (`estimator::dynamic::refit::Refitter`).
+fn refit(c: &mut Criterion) {
+    use thrusterd_core::estimator::dynamic::DynamicRun;
+    use thrusterd_core::navigation::DepthAid;
+    for n in [8usize, 16] {
+        let mut run = DynamicRun::new(n, 0.1, 1.0, &REST_FORCE, DepthAid::default()).with_log(64);
+        let mut t = 0.0;
+        for pulse in 0..64usize {
+            let u: Vec<f64> = (0..n)
+                .map(|i| if (pulse + i) % 3 == 0 { 0.8 } else { -0.3 })
+                .collect();
+            for _ in 0..20 {
+                t += 0.005;
+                let (w, f) = dynamic_sample(t);
+                run.push(t, &w, &f, Some(5.0), Some(&u));
+            }
+        }
+        let imu = Vector3::zeros();
+        let lags = vec![0.08; n];
+        c.bench_with_input(BenchmarkId::new("dynamic_refit", n), &n, |b, _| {
+            b.iter(|| black_box(run.refit_with(&lags, true, &imu)))
+        });
+        let refitter = run.refitter(&imu).expect("logged");
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_refit_terms_summed_once", n),
+            &n,
+            |b, _| b.iter(|| black_box(refitter.refit(&lags))),
+        );
+    }
+}
+
+criterion_group!(benches, bench, change_test, refit);
 criterion_main!(benches);

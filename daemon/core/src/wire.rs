@@ -2,7 +2,7 @@
 
 use nalgebra::UnitQuaternion;
 use thruster_protocol::validate::limits::{
-    MAX_ACCEL_M_S2, MAX_DEPTH_M, MAX_EFFECTIVENESS, MAX_GYRO_RAD_S, MIN_DEPTH_M,
+    MAX_ACCEL_M_S2, MAX_DEPTH_M, MAX_EFFECTIVENESS, MAX_GYRO_RAD_S, MAX_SPIN_UP_S, MIN_DEPTH_M,
 };
 use thruster_protocol::{
     DaemonState, DynamicsMsg, DynamicsRow, ImuSample, ModelMethod, ModelMsg,
@@ -154,7 +154,39 @@ pub fn dynamics_msg(seq: u64, model: &Model) -> Option<DynamicsMsg> {
             .imu_position
             .and_then(|p| p.learned)
             .map_or([f64::NAN; 3], |l| l.sd_m().into()),
+        spin_up_sd_ln: if d.spin_up_learned {
+            d.spin_up_sd_ln
+        } else {
+            f64::NAN
+        },
+        spin_up_per_thruster_s: std::array::from_fn(|i| {
+            d.spin_up_per_thruster_s
+                .get(i)
+                .copied()
+                .filter(|&s| lag_carried(s))
+                .unwrap_or(f64::NAN)
+        }),
+        // 0 is also "not searched" in the model; the wire says which.
+        thruster_lag_evidence: if d.thruster_lag_evidence > 0.0 {
+            d.thruster_lag_evidence
+        } else {
+            d.lag_check
+                .map(|c| c.per_thruster_evidence)
+                .filter(|&e| e > 0.0)
+                .unwrap_or(f64::NAN)
+        },
+        spin_up_checked: u32::from(d.lag_check.is_some()),
+        // An end beyond what the wire carries is one the data does not bound.
+        spin_up_consistent_s: d.lag_check.map_or([f64::NAN; 2], |c| {
+            c.consistent_s
+                .map(|s| if lag_carried(s) { s } else { f64::NAN })
+        }),
     })
+}
+
+/// A lag the protocol carries (else it is written unknown).
+fn lag_carried(s: f64) -> bool {
+    (0.0..=MAX_SPIN_UP_S).contains(&s)
 }
 
 /// A validated reconfiguration event for the machine.
@@ -351,6 +383,47 @@ mod tests {
         // Everything else as learned.
         assert_eq!(d.coefficients[2].to_terms()[9], 0.5);
         assert_eq!(d.std_err[3].to_terms()[11], 0.1);
+        // One lag learned for all: none per thruster, no pre-test, nothing checked.
+        assert_eq!(d.spin_up_sd_ln, 0.01);
+        assert!(d.spin_up_per_thruster_s.iter().all(|s| s.is_nan()));
+        assert!(d.thruster_lag_evidence.is_nan());
+        assert_eq!(d.spin_up_checked, 0);
+        assert!(d.spin_up_consistent_s.iter().all(|s| s.is_nan()));
+
+        // A lag per thruster: each carried, the rest unknown.
+        let terms = m.dynamics.as_mut().unwrap();
+        terms.spin_up_per_thruster_s = vec![0.15, 0.05, 0.1];
+        terms.thruster_lag_evidence = 312.0;
+        let d = dynamics_msg(0, &m).unwrap();
+        d.validate().unwrap();
+        assert_eq!(d.spin_up_per_thruster_s[..3], [0.15, 0.05, 0.1]);
+        assert!(d.spin_up_per_thruster_s[3..].iter().all(|s| s.is_nan()));
+        assert_eq!(d.thruster_lag_evidence, 312.0);
+
+        // The configured lag checked at a noisy gyro: the range the data allows, an end it
+        // does not bound unknown, and the pre-test's evidence from the check.
+        let terms = m.dynamics.as_mut().unwrap();
+        terms.spin_up_per_thruster_s.clear();
+        terms.thruster_lag_evidence = 0.0;
+        terms.spin_up_learned = false;
+        terms.lag_check = Some(crate::estimator::dynamic::lag_check::LagCheck {
+            configured_s: 0.1,
+            learned_s: 0.09,
+            learned_sd_ln: 0.05,
+            consistent_s: [0.078, f64::INFINITY],
+            per_thruster_evidence: 0.8,
+            evidence_limit: 20.0,
+        });
+        let d = dynamics_msg(0, &m).unwrap();
+        d.validate().unwrap();
+        assert!(
+            d.spin_up_sd_ln.is_nan(),
+            "configured: no standard deviation"
+        );
+        assert_eq!(d.spin_up_checked, 1);
+        assert_eq!(d.spin_up_consistent_s[0], 0.078);
+        assert!(d.spin_up_consistent_s[1].is_nan());
+        assert_eq!(d.thruster_lag_evidence, 0.8);
     }
 
     #[test]

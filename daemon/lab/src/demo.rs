@@ -84,6 +84,8 @@ struct Summary {
     /// The simulated thrusters' mean spin-up time constant, s, from the vehicle file (the
     /// daemon is not told it).
     spin_up_true_s: Option<f64>,
+    /// Each of the vehicle file's thrusters' time constant, s (empty when it cannot be read).
+    spin_up_true_per_thruster_s: Vec<f64>,
     /// The simulator's supply voltage when the model was scored, V.
     supply_voltage_v: f64,
     /// The voltage the truth was taken at: the daemon's reference when it referred or
@@ -353,6 +355,7 @@ fn drive(
         estimation_heading_deg: excursion.map(|e| e.max_heading_deg),
         dynamics,
         spin_up_true_s: true_spin_up_s(vehicle),
+        spin_up_true_per_thruster_s: true_spin_ups_s(vehicle),
         supply_voltage_v: published.supply_voltage_v,
         truth_voltage_v,
         linearize: supply.linearize,
@@ -366,9 +369,15 @@ fn drive(
 
 /// The mean time constant of the vehicle file's thrusters, s (None when it cannot be read).
 fn true_spin_up_s(vehicle: &Path) -> Option<f64> {
-    let v = thruster_sim::Vehicle::load(vehicle).ok()?;
-    let n = v.thrusters.len();
-    (n > 0).then(|| v.thrusters.iter().map(|t| t.time_constant_s).sum::<f64>() / n as f64)
+    let lags = true_spin_ups_s(vehicle);
+    (!lags.is_empty()).then(|| lags.iter().sum::<f64>() / lags.len() as f64)
+}
+
+/// Each of the vehicle file's thrusters' time constant, s (empty when it cannot be read).
+fn true_spin_ups_s(vehicle: &Path) -> Vec<f64> {
+    thruster_sim::Vehicle::load(vehicle)
+        .map(|v| v.thrusters.iter().map(|t| t.time_constant_s).collect())
+        .unwrap_or_default()
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -438,6 +447,9 @@ fn report(args: &DemoArgs, s: &Summary) {
             "spin_up_s": s.dynamics.as_ref().map(|d| d.spin_up_s).filter(|v| v.is_finite()),
             "spin_up_learned": s.dynamics.as_ref().map(|d| d.spin_up_learned == 1),
             "spin_up_true_s": s.spin_up_true_s,
+            "spin_up_per_thruster_s": s.dynamics.as_ref().and_then(thrusterctl_operator::dynamics::per_thruster_lags),
+            "spin_up_true_per_thruster_s": s.spin_up_true_per_thruster_s,
+            "spin_up_consistent_s": s.dynamics.as_ref().filter(|d| d.spin_up_checked == 1).map(|d| d.spin_up_consistent_s),
             "imu_position_m": s.dynamics.as_ref().map(|d| d.imu_position_m),
             "imu_learned_m": s.dynamics.as_ref().map(|d| d.imu_learned_m),
             "imu_position_contradicted": s.dynamics.as_ref().map(|d| d.imu_position_contradicted == 1),
@@ -485,6 +497,11 @@ fn report(args: &DemoArgs, s: &Summary) {
         print!("{}", thrusterctl_operator::dynamics::report(d, options));
         if let Some(t) = s.spin_up_true_s.filter(|_| d.spin_up_s.is_finite()) {
             println!("  (the simulated thrusters' true time constant: {t:.3} s)");
+            let true_lags = &s.spin_up_true_per_thruster_s;
+            if true_lags.iter().any(|l| (l - t).abs() > 1e-9) {
+                let each: Vec<String> = true_lags.iter().map(|l| format!("{l:.3}")).collect();
+                println!("  (and per thruster: {} s)", each.join(", "));
+            }
         }
     }
     println!(

@@ -47,7 +47,22 @@ pub fn json(d: &DynamicsMsg) -> Value {
         "imu_position_contradicted": d.imu_position_contradicted == 1,
         "imu_learned_m": d.imu_learned_m.map(num),
         "imu_learned_sd_m": d.imu_learned_sd_m.map(num),
+        "spin_up_sd_ln": num(d.spin_up_sd_ln),
+        "spin_up_per_thruster_s": per_thruster_lags(d),
+        "thruster_lag_evidence": num(d.thruster_lag_evidence),
+        "spin_up_checked": d.spin_up_checked == 1,
+        "spin_up_consistent_s": (d.spin_up_checked == 1).then(|| d.spin_up_consistent_s.map(num)),
     })
+}
+
+/// Each thruster's own lag, where the data said they differ (None: one lag for all).
+pub fn per_thruster_lags(d: &DynamicsMsg) -> Option<Vec<f64>> {
+    let n = d
+        .spin_up_per_thruster_s
+        .iter()
+        .rposition(|s| s.is_finite())?
+        + 1;
+    Some(d.spin_up_per_thruster_s[..n].to_vec())
 }
 
 /// What the report says beside the coefficients.
@@ -131,11 +146,40 @@ pub fn report(d: &DynamicsMsg, options: ReportOptions) -> String {
         } else {
             "configured, not learned"
         };
-        let _ = writeln!(
+        let _ = write!(
             s,
-            "  thruster spin-up time constant {:.3} s ({how})",
+            "  thruster spin-up time constant {:.3} s ({how}",
             d.spin_up_s
         );
+        if d.spin_up_learned == 1 && d.spin_up_sd_ln.is_finite() {
+            let _ = write!(s, ", +- {:.1} %", 100.0 * d.spin_up_sd_ln);
+        }
+        s.push_str(")\n");
+        if let Some(lags) = per_thruster_lags(d) {
+            let each: Vec<String> = lags.iter().map(|l| format!("{l:.3}")).collect();
+            let _ = writeln!(
+                s,
+                "    per thruster, the data saying they differ (ln LR {:.0}): {} s",
+                d.thruster_lag_evidence,
+                each.join(", ")
+            );
+        }
+        if d.spin_up_checked == 1 {
+            let [lo, hi] = d.spin_up_consistent_s;
+            let end = |v: f64| {
+                if v.is_finite() {
+                    format!("{v:.3}")
+                } else {
+                    "unbounded".to_string()
+                }
+            };
+            let _ = writeln!(
+                s,
+                "    checked against the data (too noisy to learn it): consistent with {}-{} s",
+                end(lo),
+                end(hi)
+            );
+        }
     }
     s
 }
@@ -195,7 +239,11 @@ mod tests {
             text.contains("spin-up time constant 0.052 s (learned from the pulses)"),
             "{text}"
         );
+        assert!(!text.contains("per thruster"), "{text}");
+        assert!(!text.contains("checked against"), "{text}");
         let v = json(&d);
+        assert!(v["spin_up_per_thruster_s"].is_null(), "{v}");
+        assert!(v["spin_up_consistent_s"].is_null(), "{v}");
         assert_eq!(
             v["per_row_term_value_and_std_err"]["roll"]["down_y"][0],
             -8.06

@@ -1,7 +1,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
-use super::DOF_COUNT;
+use super::{DOF_COUNT, MAX_THRUSTERS};
 
 /// Number of dynamic-model terms per DOF row.
 pub const DYNAMIC_TERMS: usize = 38;
@@ -113,8 +113,8 @@ impl DynamicsRow {
 /// moved while it was being excited.
 #[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 #[repr(C)]
-#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[type_name("thrusterd.DynamicsMsg.v3")]
+#[derive(ZeroCopySend, Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[type_name("thrusterd.DynamicsMsg.v4")]
 pub struct DynamicsMsg {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -148,6 +148,50 @@ pub struct DynamicsMsg {
     pub imu_learned_m: [f64; 3],
     /// Its one-sigma standard error per axis, m (>= 0; NaN when not learned) (v3).
     pub imu_learned_sd_m: [f64; 3],
+    /// One standard deviation of ln(`spin_up_s`) when learned (>= 0; NaN when configured)
+    /// (v4).
+    pub spin_up_sd_ln: f64,
+    /// Each thruster's own spin-up time constant, s, where the data said their lags differ
+    /// (`spin_up_s` is then their mean); NaN for every thruster when one lag serves all, and
+    /// beyond the model's thruster count (v4).
+    pub spin_up_per_thruster_s: [f64; MAX_THRUSTERS],
+    /// ln likelihood ratio of a lag per thruster over one for all, the pre-test's evidence
+    /// that the thrusters' lags differ (> 0; NaN when not tested, or when a lag per thruster
+    /// explained nothing more) (v4).
+    pub thruster_lag_evidence: f64,
+    /// 1 when the lag was configured because the gyro was too noisy to learn it, and the
+    /// data was searched anyway to check it: `spin_up_consistent_s` is then the range of true
+    /// lags the data allows (v4).
+    pub spin_up_checked: u32,
+    /// The true lags the data allows, s, lower and upper end, when `spin_up_checked`; NaN
+    /// otherwise, and at an end the data does not bound (v4).
+    pub spin_up_consistent_s: [f64; 2],
+}
+
+/// Zeros, but the v4 lag fields unknown: a zero there would read as a lag of 0 s learned.
+impl Default for DynamicsMsg {
+    fn default() -> Self {
+        DynamicsMsg {
+            seq: 0,
+            model_version: 0,
+            t_ns: 0,
+            coefficients: Default::default(),
+            std_err: Default::default(),
+            max_tilt_rad: 0.0,
+            max_heading_change_rad: 0.0,
+            spin_up_s: 0.0,
+            spin_up_learned: 0,
+            imu_position_contradicted: 0,
+            imu_position_m: [0.0; 3],
+            imu_learned_m: [0.0; 3],
+            imu_learned_sd_m: [0.0; 3],
+            spin_up_sd_ln: f64::NAN,
+            spin_up_per_thruster_s: [f64::NAN; MAX_THRUSTERS],
+            thruster_lag_evidence: f64::NAN,
+            spin_up_checked: 0,
+            spin_up_consistent_s: [f64::NAN; 2],
+        }
+    }
 }
 
 #[cfg(test)]

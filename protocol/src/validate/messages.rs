@@ -542,7 +542,13 @@ impl Validate for DynamicsMsg {
             "rad",
         )?;
         if !self.spin_up_s.is_nan() {
-            in_range(Field::new("spin_up_s"), self.spin_up_s, 0.0, 2.0, "s")?;
+            in_range(
+                Field::new("spin_up_s"),
+                self.spin_up_s,
+                0.0,
+                MAX_SPIN_UP_S,
+                "s",
+            )?;
         }
         zero_or_one("spin_up_learned", self.spin_up_learned)?;
         zero_or_one("imu_position_contradicted", self.imu_position_contradicted)?;
@@ -567,6 +573,40 @@ impl Validate for DynamicsMsg {
                     "m",
                 )?;
             }
+        }
+        // ln of a lag: a standard deviation of 10 is a lag unknown to a factor of e^10.
+        in_range_or_unknown(
+            Field::new("spin_up_sd_ln"),
+            self.spin_up_sd_ln,
+            0.0,
+            10.0,
+            "ln s",
+        )?;
+        for (i, x) in self.spin_up_per_thruster_s.iter().enumerate() {
+            in_range_or_unknown(
+                Field::at("spin_up_per_thruster_s", i),
+                *x,
+                0.0,
+                MAX_SPIN_UP_S,
+                "s",
+            )?;
+        }
+        in_range_or_unknown(
+            Field::new("thruster_lag_evidence"),
+            self.thruster_lag_evidence,
+            0.0,
+            f64::MAX,
+            "ln likelihood ratio",
+        )?;
+        zero_or_one("spin_up_checked", self.spin_up_checked)?;
+        for (i, x) in self.spin_up_consistent_s.iter().enumerate() {
+            in_range_or_unknown(
+                Field::at("spin_up_consistent_s", i),
+                *x,
+                0.0,
+                MAX_SPIN_UP_S,
+                "s",
+            )?;
         }
         Ok(())
     }

@@ -62,6 +62,9 @@ pub mod limits {
     pub const MAX_EFFECTIVENESS: f64 = 1e3;
     /// Largest accepted allocation entry, command per rad/s^2 or per m/s^2.
     pub const MAX_ALLOCATION: f64 = 1e6;
+    /// Largest accepted thruster spin-up time constant, s (an ESC and propeller spin up in
+    /// 0.03-0.3 s).
+    pub const MAX_SPIN_UP_S: f64 = 2.0;
     /// Largest plausible supply voltage, V (a 12S pack is ~50 V).
     pub const MAX_SUPPLY_VOLTAGE_V: f64 = 100.0;
     /// Largest plausible supply current magnitude, A (16 T200s at full are ~500 A).

@@ -260,7 +260,8 @@ pub fn fit_at_centred(
     imu_m: &Vector3<f64>,
 ) -> Option<LagFit> {
     let scaled = |k: f64| -> Vec<f64> { lags.iter().map(|l| l.max(1e-4) * k).collect() };
-    let refit = |l: &[f64]| run.refit_with(l, true, imu_m);
+    let refitter = run.refitter(imu_m)?;
+    let refit = |l: &[f64]| refitter.refit(l);
     Some(LagFit {
         lag_s: lags.iter().sum::<f64>() / lags.len().max(1) as f64,
         run: refit(lags)?,
@@ -298,9 +299,9 @@ pub fn learn_common_lag_weighted(
     imu_m: &Vector3<f64>,
     weights: &[f64; 6],
 ) -> Option<LagFit> {
-    run.log()?;
+    let refitter = run.refitter(imu_m)?;
     let profile_score = |r: &DynamicRun| profile_score_weighted(r, weights);
-    let refit = |lag: f64| run.refit_with(&[lag], true, imu_m);
+    let refit = |lag: f64| refitter.refit(&[lag]);
     let (lo, hi) = (
         range.min_s.max(1e-4).ln(),
         range.max_s.max(range.min_s * 1.01).ln(),

@@ -4,6 +4,7 @@
 
 use nalgebra::Vector3;
 
+use super::regressors::TERMS;
 use super::sample_log::Navigated;
 use super::DynamicRun;
 use crate::navigation::{DepthAid, NavState};
@@ -50,6 +51,29 @@ impl DynamicRun {
         learned: bool,
         imu_m: &Vector3<f64>,
     ) -> Option<DynamicRun> {
+        self.replay(lags, learned, imu_m, None)
+    }
+
+    /// A refitter for many refits of this run's log with the IMU at `imu_m`, each cheaper
+    /// than [`Self::refit_with`] and the same to the bit. None without a log.
+    pub fn refitter(&self, imu_m: &Vector3<f64>) -> Option<Refitter<'_>> {
+        Some(Refitter {
+            run: self,
+            imu_m: *imu_m,
+            reference: self.refit_with(self.lags(), true, imu_m)?,
+        })
+    }
+
+    /// The log replayed into a fresh fit with `lags`. With `terms_from`, a fit of the same
+    /// log at the same IMU position, the terms' products with each other are taken from it
+    /// rather than summed again.
+    fn replay(
+        &self,
+        lags: &[f64],
+        learned: bool,
+        imu_m: &Vector3<f64>,
+        terms_from: Option<&DynamicRun>,
+    ) -> Option<DynamicRun> {
         let log = self.log.as_ref()?;
         let mut run = DynamicRun {
             lags_learned: learned,
@@ -65,6 +89,9 @@ impl DynamicRun {
             )
         };
         run.set_lags(if lags.is_empty() { &[0.0] } else { lags });
+        if terms_from.is_some() {
+            run.skip_lag_free_terms();
+        }
         run.nav = self.nav.clone();
         for s in log.iter() {
             let nav = NavState {
@@ -76,6 +103,128 @@ impl DynamicRun {
             };
             run.fit(s.t_s, &s.gyro, &nav, log.command(s.command), None);
         }
+        if let Some(from) = terms_from {
+            if !run.adopt_lag_free_terms(from) {
+                // Not a fit of the same rows: never expected; the full refit is the answer.
+                return self.replay(lags, learned, imu_m, None);
+            }
+        }
         Some(run)
+    }
+
+    /// The terms that do not depend on the lag: all but the last (the mean |command|
+    /// through the lag), after the thrust columns.
+    fn lag_free_terms(&self) -> (usize, usize) {
+        (self.cols, self.cols + TERMS - 1)
+    }
+
+    fn skip_lag_free_terms(&mut self) {
+        let (a, b) = self.lag_free_terms();
+        self.rot.skip_block(a, b);
+        self.acc.skip_block(a, b);
+    }
+
+    fn adopt_lag_free_terms(&mut self, from: &DynamicRun) -> bool {
+        from.cols == self.cols && self.rot.adopt_block(&from.rot) && self.acc.adopt_block(&from.acc)
+    }
+}
+
+/// Many refits of one run's log at one IMU position ([`DynamicRun::refitter`]): the lag
+/// search's. The terms' products with each other do not depend on the lag, so they are summed
+/// once, in a reference refit, and each refit sums only the thrust columns' products (at N = 8
+/// about a third of them).
+#[derive(Debug, Clone)]
+pub struct Refitter<'a> {
+    run: &'a DynamicRun,
+    imu_m: Vector3<f64>,
+    reference: DynamicRun,
+}
+
+impl Refitter<'_> {
+    /// The run's log fitted again with `lags` (one per thruster, or one for all), marked
+    /// learned: what [`DynamicRun::refit_with`] gives, to the bit.
+    pub fn refit(&self, lags: &[f64]) -> Option<DynamicRun> {
+        self.run
+            .replay(lags, true, &self.imu_m, Some(&self.reference))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::super::lag_search::profile_score;
+    use super::*;
+
+    /// Three thrusters stepping at different rates under a synthetic response, 1 s segments,
+    /// 7 s: seven segments, the last left open.
+    fn logged_run() -> DynamicRun {
+        let mut run = DynamicRun::new(
+            3,
+            0.1,
+            1.0,
+            &Vector3::new(0.0, 0.0, -9.80665),
+            DepthAid::default(),
+        )
+        .with_log(64);
+        for k in 0..1450 {
+            let t = k as f64 * 0.005;
+            let step = (t / 0.3) as usize;
+            let u = [
+                if step.is_multiple_of(2) { 0.6 } else { -0.6 },
+                if step % 4 < 2 { 0.4 } else { -0.4 },
+                if step.is_multiple_of(3) { 0.0 } else { 0.8 },
+            ];
+            let gyro = Vector3::new(
+                0.1 * (3.0 * t).sin(),
+                0.05 * (1.7 * t).cos(),
+                0.02 * t.sin(),
+            );
+            let f = Vector3::new(
+                0.2 * (2.0 * t).sin(),
+                0.1 * t.cos(),
+                -9.80665 + 0.05 * (5.0 * t).sin(),
+            );
+            run.push(t, &gyro, &f, Some(5.0), Some(&u));
+        }
+        run
+    }
+
+    /// The refitter's refits are the full refits to the bit: one lag for all and one each,
+    /// the IMU at the centre and off it, B, its errors, the terms and the search's score.
+    #[test]
+    fn a_refitters_refit_is_the_full_refit_to_the_bit() {
+        let run = logged_run();
+        let rest = [0.01; 6];
+        for imu in [Vector3::zeros(), Vector3::new(0.15, 0.05, -0.1)] {
+            let refitter = run.refitter(&imu).unwrap();
+            for lags in [vec![0.1], vec![0.04], vec![0.03, 0.2, 0.1]] {
+                let (full, cheap) = (
+                    run.refit_with(&lags, true, &imu).unwrap(),
+                    refitter.refit(&lags).unwrap(),
+                );
+                assert_eq!(profile_score(&full), profile_score(&cheap), "{lags:?}");
+                let (a, b) = (
+                    full.solve(&rest, 0.0, 0.0, None),
+                    cheap.solve(&rest, 0.0, 0.0, None),
+                );
+                assert_eq!(a.b, b.b, "{lags:?} at {imu:?}");
+                assert_eq!(a.std_err, b.std_err, "{lags:?} at {imu:?}");
+                assert_eq!(a.rel_err, b.rel_err);
+                assert_eq!(a.terms.coefficients, b.terms.coefficients);
+                assert_eq!(cheap.lags(), full.lags());
+            }
+        }
+    }
+
+    /// A refit of another log cannot take the terms from this one's reference: it falls back
+    /// to the full refit.
+    #[test]
+    fn a_reference_of_other_rows_is_not_taken() {
+        let run = logged_run();
+        let reference = run.refit_with(&[0.1], true, &Vector3::zeros()).unwrap();
+        let mut other = DynamicRun::new(3, 0.1, 1.0, &Vector3::z(), DepthAid::default());
+        other.skip_lag_free_terms();
+        assert!(!other.adopt_lag_free_terms(&reference), "no rows yet");
     }
 }

@@ -32,6 +32,15 @@ use crate::estimator::linalg::sym_pinv;
 pub use super::segment_basis::CLUSTERS;
 use super::segment_basis::{Basis, SegmentSums};
 
+/// Rows and columns [a, b) of `from` into `to` (square, the same size), column by column.
+fn copy_block(to: &mut DMatrix<f64>, from: &DMatrix<f64>, a: usize, b: usize) {
+    for j in a..b {
+        to.column_mut(j)
+            .rows_mut(a, b - a)
+            .copy_from(&from.column(j).rows(a, b - a));
+    }
+}
+
 /// The fit: coefficients, the scaled pseudo-inverse of the Gram matrix, residuals.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct SegmentedSolution {
@@ -68,7 +77,7 @@ pub struct SegmentedLs {
     yy: Vector3<f64>,
     rows: u64,
     segments: u64,
-    // The open segment: raw sums (upper triangle of its Gram matrix).
+    // The open segment: raw sums (lower triangle of its Gram matrix).
     seg_n: u64,
     seg_gram: DMatrix<f64>,
     seg_xy: DMatrix<f64>,
@@ -86,6 +95,11 @@ pub struct SegmentedLs {
     /// (`with_ramp`).
     #[serde(default)]
     ramp: Option<RampSums>,
+    /// Columns [a, b) whose products with each other are not accumulated
+    /// ([`Self::skip_block`]): a refit takes them from another fit of the same rows
+    /// ([`Self::adopt_block`]).
+    #[serde(skip)]
+    skip: Option<(usize, usize)>,
 }
 
 /// Sums over the open segment weighted by tau, the row's index in it: what a ramp per
@@ -123,7 +137,50 @@ impl SegmentedLs {
                 .collect(),
             iv: None,
             ramp: None,
+            skip: None,
         }
+    }
+
+    /// Leave the products of columns [a, b) with each other out of the Gram matrices: they
+    /// are to be taken from another fit of the same rows whose columns [a, b) are the same
+    /// ([`Self::adopt_block`]). Why: the lag search refits the same samples some 20-550 times
+    /// with other thrust columns, and the terms' block (37 of the N + 38 columns, ~2/3 of
+    /// the products at N = 8) is the same every time. Call before the first row; without
+    /// instruments.
+    pub fn skip_block(&mut self, a: usize, b: usize) {
+        debug_assert!(self.rows == 0 && self.iv.is_none());
+        self.skip = Some((a.min(self.k), b.min(self.k)));
+    }
+
+    /// Take the skipped block's products from `from`, a fit of the same rows (the same
+    /// segments) in which columns [a, b) were the same. Every product is then what a full
+    /// fit would hold, bit for bit: each was summed over the same rows in the same order.
+    /// False (nothing taken) when `from` is not such a fit.
+    pub fn adopt_block(&mut self, from: &SegmentedLs) -> bool {
+        let Some((a, b)) = self.skip else {
+            return true;
+        };
+        if from.k != self.k
+            || from.skip.is_some()
+            || from.rows != self.rows
+            || from.segments != self.segments
+            || from.seg_n != self.seg_n
+        {
+            return false;
+        }
+        let used = (self.segments.min(CLUSTERS as u64)) as usize;
+        copy_block(&mut self.gram, &from.gram, a, b);
+        copy_block(&mut self.seg_gram, &from.seg_gram, a, b);
+        for slot in 0..used {
+            copy_block(
+                Arc::make_mut(&mut self.cluster_gram[slot]),
+                &from.cluster_gram[slot],
+                a,
+                b,
+            );
+        }
+        self.skip = None;
+        true
     }
 
     /// Each segment gets a ramp besides its intercept (in the row's index within the
@@ -212,23 +269,36 @@ impl SegmentedLs {
         self.rows
     }
 
-    /// One row; `x` has `width()` entries. Only the upper triangle is accumulated.
-    // Index loops: row i and column j of the same Gram matrix, clearer than zipped iterators.
-    #[allow(clippy::needless_range_loop)]
+    /// One row; `x` has `width()` entries. Only the lower triangle of the open segment's Gram
+    /// matrix is accumulated, column by column: a column's rows are contiguous in memory, so
+    /// the products vectorise (summed along the rows of the upper triangle, strided, this was
+    /// 61 % of a lag search's time). Each sum gets the same products in the same order as
+    /// before, so the fit is the same to the bit.
     pub fn add(&mut self, x: &[f64], y: &Vector3<f64>) {
         debug_assert_eq!(x.len(), self.k);
-        for i in 0..self.k {
-            let xi = x[i];
+        let k = self.k;
+        let (a, b) = self.skip.unwrap_or((0, 0));
+        let gram = self.seg_gram.as_mut_slice();
+        for (i, &xi) in x.iter().enumerate() {
             if xi == 0.0 {
                 continue;
             }
-            for j in i..self.k {
-                self.seg_gram[(i, j)] += xi * x[j];
+            // In the skipped block, only the products with the columns after it.
+            let from = if (a..b).contains(&i) { b } else { i };
+            let column = &mut gram[i * k + from..(i + 1) * k];
+            for (g, xj) in column.iter_mut().zip(&x[from..]) {
+                *g += xi * xj;
             }
-            for a in 0..3 {
-                self.seg_xy[(i, a)] += xi * y[a];
+        }
+        let xy = self.seg_xy.as_mut_slice();
+        for (out, column) in xy.chunks_exact_mut(k).enumerate() {
+            let ya = y[out];
+            for (s, xi) in column.iter_mut().zip(x) {
+                *s += xi * ya;
             }
-            self.seg_x[i] += xi;
+        }
+        for (s, xi) in self.seg_x.iter_mut().zip(x) {
+            *s += xi;
         }
         self.seg_yy += y.component_mul(y);
         self.seg_y += y;
@@ -252,7 +322,7 @@ impl SegmentedLs {
         for i in 0..self.k {
             let (si, ri) = (self.seg_x[i], self.ramp_x(i));
             for j in i..self.k {
-                let v = self.seg_gram[(i, j)] - b.explained(si, ri, self.seg_x[j], self.ramp_x(j));
+                let v = self.seg_gram[(j, i)] - b.explained(si, ri, self.seg_x[j], self.ramp_x(j));
                 gram[(i, j)] = v;
                 gram[(j, i)] = v;
             }
@@ -290,8 +360,8 @@ impl SegmentedLs {
         for i in 0..self.k {
             let (si, ri) = (self.seg_x[i], self.ramp_x(i));
             for j in i..self.k {
-                g[(i, j)] -= b.explained(si, ri, self.seg_x[j], self.ramp_x(j));
-                g[(j, i)] = g[(i, j)];
+                g[(j, i)] -= b.explained(si, ri, self.seg_x[j], self.ramp_x(j));
+                g[(i, j)] = g[(j, i)];
             }
             for a in 0..3 {
                 xy[(i, a)] -= b.explained(si, ri, self.seg_y[a], self.ramp_y(a));

@@ -80,7 +80,8 @@ pub fn search_thruster_lags(
         let v = variances(fit)?;
         Some((0..6).map(|a| v[a].max(floor[a]).max(1e-300).ln()).sum())
     };
-    let refit = |lags: &[f64]| run.refit_with(lags, true, imu_m);
+    let refitter = run.refitter(imu_m)?;
+    let refit = |lags: &[f64]| refitter.refit(lags);
     let common_score = score_of(&common.run)?;
     let mut best = Best {
         lags: vec![common.lag_s; n],
