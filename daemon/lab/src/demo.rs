@@ -81,10 +81,8 @@ struct Summary {
     estimation_heading_deg: Option<f64>,
     /// What the dynamic method learned besides B.
     dynamics: Option<DynamicsMsg>,
-    /// The simulated thrusters' mean spin-up time constant, s, from the vehicle file (the
-    /// daemon is not told it).
-    spin_up_true_s: Option<f64>,
-    /// Each of the vehicle file's thrusters' time constant, s (empty when it cannot be read).
+    /// Each simulated thruster's spin-up time constant, s, from the vehicle file (the daemon is
+    /// not told them; empty when it cannot be read).
     spin_up_true_per_thruster_s: Vec<f64>,
     /// The simulator's supply voltage when the model was scored, V.
     supply_voltage_v: f64,
@@ -101,6 +99,14 @@ struct Summary {
     actuated_mask: u64,
     /// The learned and true effectiveness the text prints, for `--json`.
     matrices: serde_json::Value,
+}
+
+impl Summary {
+    /// The simulated thrusters' mean time constant, s (None when the file could not be read).
+    fn spin_up_true_s(&self) -> Option<f64> {
+        let lags = &self.spin_up_true_per_thruster_s;
+        (!lags.is_empty()).then(|| lags.iter().sum::<f64>() / lags.len() as f64)
+    }
 }
 
 /// The learned and true (mean of forward and reverse) effectiveness, 6 x N, rows in `DOFS`
@@ -354,7 +360,6 @@ fn drive(
         estimation_tilt_deg: excursion.map(|e| e.max_tilt_deg),
         estimation_heading_deg: excursion.map(|e| e.max_heading_deg),
         dynamics,
-        spin_up_true_s: true_spin_up_s(vehicle),
         spin_up_true_per_thruster_s: true_spin_ups_s(vehicle),
         supply_voltage_v: published.supply_voltage_v,
         truth_voltage_v,
@@ -365,12 +370,6 @@ fn drive(
         actuated_mask: u64::from(model.actuated),
         matrices: matrices(&model, &truth),
     })
-}
-
-/// The mean time constant of the vehicle file's thrusters, s (None when it cannot be read).
-fn true_spin_up_s(vehicle: &Path) -> Option<f64> {
-    let lags = true_spin_ups_s(vehicle);
-    (!lags.is_empty()).then(|| lags.iter().sum::<f64>() / lags.len() as f64)
 }
 
 /// Each of the vehicle file's thrusters' time constant, s (empty when it cannot be read).
@@ -446,7 +445,7 @@ fn report(args: &DemoArgs, s: &Summary) {
             "dynamics": s.dynamics.as_ref().map(thrusterctl_operator::dynamics::json),
             "spin_up_s": s.dynamics.as_ref().map(|d| d.spin_up_s).filter(|v| v.is_finite()),
             "spin_up_learned": s.dynamics.as_ref().map(|d| d.spin_up_learned == 1),
-            "spin_up_true_s": s.spin_up_true_s,
+            "spin_up_true_s": s.spin_up_true_s(),
             "spin_up_per_thruster_s": s.dynamics.as_ref().and_then(thrusterctl_operator::dynamics::per_thruster_lags),
             "spin_up_true_per_thruster_s": s.spin_up_true_per_thruster_s,
             "spin_up_consistent_s": s.dynamics.as_ref().filter(|d| d.spin_up_checked == 1).map(|d| d.spin_up_consistent_s),
@@ -495,7 +494,7 @@ fn report(args: &DemoArgs, s: &Summary) {
             navigation_excursion: s.estimation_tilt_deg.is_none(),
         };
         print!("{}", thrusterctl_operator::dynamics::report(d, options));
-        if let Some(t) = s.spin_up_true_s.filter(|_| d.spin_up_s.is_finite()) {
+        if let Some(t) = s.spin_up_true_s().filter(|_| d.spin_up_s.is_finite()) {
             println!("  (the simulated thrusters' true time constant: {t:.3} s)");
             let true_lags = &s.spin_up_true_per_thruster_s;
             if true_lags.iter().any(|l| (l - t).abs() > 1e-9) {

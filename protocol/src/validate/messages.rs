@@ -582,15 +582,6 @@ impl Validate for DynamicsMsg {
             10.0,
             "ln s",
         )?;
-        for (i, x) in self.spin_up_per_thruster_s.iter().enumerate() {
-            in_range_or_unknown(
-                Field::at("spin_up_per_thruster_s", i),
-                *x,
-                0.0,
-                MAX_SPIN_UP_S,
-                "s",
-            )?;
-        }
         in_range_or_unknown(
             Field::new("thruster_lag_evidence"),
             self.thruster_lag_evidence,
@@ -599,14 +590,13 @@ impl Validate for DynamicsMsg {
             "ln likelihood ratio",
         )?;
         zero_or_one("spin_up_checked", self.spin_up_checked)?;
-        for (i, x) in self.spin_up_consistent_s.iter().enumerate() {
-            in_range_or_unknown(
-                Field::at("spin_up_consistent_s", i),
-                *x,
-                0.0,
-                MAX_SPIN_UP_S,
-                "s",
-            )?;
+        for (name, lags) in [
+            ("spin_up_per_thruster_s", &self.spin_up_per_thruster_s[..]),
+            ("spin_up_consistent_s", &self.spin_up_consistent_s[..]),
+        ] {
+            for (i, x) in lags.iter().enumerate() {
+                in_range_or_unknown(Field::at(name, i), *x, 0.0, MAX_SPIN_UP_S, "s")?;
+            }
         }
         Ok(())
     }

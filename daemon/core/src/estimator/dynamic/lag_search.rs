@@ -382,15 +382,15 @@ pub fn learn_common_lag_weighted(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use nalgebra::Vector3;
 
     use super::*;
     use crate::navigation::DepthAid;
 
-    /// A run of `n` thrusters fed a synthetic response to commands stepping every 0.3 s.
-    fn logged_run(lag_s: f64) -> DynamicRun {
-        let n = 2;
+    /// A run of `n` (2 or 3) thrusters fed a synthetic response to commands stepping every
+    /// 0.3 s, `samples` at 200 Hz in 1 s segments.
+    pub(in super::super) fn logged_run(n: usize, lag_s: f64, samples: usize) -> DynamicRun {
         let mut run = DynamicRun::new(
             n,
             lag_s,
@@ -399,12 +399,13 @@ mod tests {
             DepthAid::default(),
         )
         .with_log(64);
-        for k in 0..1200 {
+        for k in 0..samples {
             let t = k as f64 * 0.005;
             let step = (t / 0.3) as usize;
             let u = [
                 if step.is_multiple_of(2) { 0.6 } else { -0.6 },
                 if step % 4 < 2 { 0.4 } else { -0.4 },
+                if step.is_multiple_of(3) { 0.0 } else { 0.8 },
             ];
             let gyro = Vector3::new(
                 0.1 * (3.0 * t).sin(),
@@ -416,14 +417,14 @@ mod tests {
                 0.1 * t.cos(),
                 -9.80665 + 0.05 * (5.0 * t).sin(),
             );
-            run.push(t, &gyro, &f, Some(5.0), Some(&u));
+            run.push(t, &gyro, &f, Some(5.0), Some(&u[..n]));
         }
         run
     }
 
     #[test]
     fn a_refit_at_the_same_lag_is_the_same_fit() {
-        let run = logged_run(0.1);
+        let run = logged_run(2, 0.1, 1200);
         let again = run.refit(&[0.1]).unwrap();
         let rest = [0.01; 6];
         let (a, b) = (

@@ -156,38 +156,9 @@ mod tests {
     use super::super::lag_search::profile_score;
     use super::*;
 
-    /// Three thrusters stepping at different rates under a synthetic response, 1 s segments,
-    /// 7 s: seven segments, the last left open.
+    /// Three thrusters, 7.25 s: seven 1 s segments closed, the last left open.
     fn logged_run() -> DynamicRun {
-        let mut run = DynamicRun::new(
-            3,
-            0.1,
-            1.0,
-            &Vector3::new(0.0, 0.0, -9.80665),
-            DepthAid::default(),
-        )
-        .with_log(64);
-        for k in 0..1450 {
-            let t = k as f64 * 0.005;
-            let step = (t / 0.3) as usize;
-            let u = [
-                if step.is_multiple_of(2) { 0.6 } else { -0.6 },
-                if step % 4 < 2 { 0.4 } else { -0.4 },
-                if step.is_multiple_of(3) { 0.0 } else { 0.8 },
-            ];
-            let gyro = Vector3::new(
-                0.1 * (3.0 * t).sin(),
-                0.05 * (1.7 * t).cos(),
-                0.02 * t.sin(),
-            );
-            let f = Vector3::new(
-                0.2 * (2.0 * t).sin(),
-                0.1 * t.cos(),
-                -9.80665 + 0.05 * (5.0 * t).sin(),
-            );
-            run.push(t, &gyro, &f, Some(5.0), Some(&u));
-        }
-        run
+        super::super::lag_search::tests::logged_run(3, 0.1, 1450)
     }
 
     /// The refitter's refits are the full refits to the bit: one lag for all and one each,
