@@ -632,17 +632,28 @@ fn a_thrust_curve_nobody_configured_is_named_and_its_model_refused() {
         let mut run = Run::new("amour5_t200", NoisePreset::Realistic, 1);
         run.with_setup(|s| s.supply.linearize = linearize);
         let mut named = None;
-        let (run, r) = common::rotate_while_holding_on(run, &v, None, |m, t| {
+        // The strongest evidence of any identification in the run: unlinearized, the first is
+        // refused, and the refinement calls a change again every 15-20 s on the model in force
+        // (with the vehicle swinging on it, in a sea to the detectors since 2026-12-01), each
+        // refused with evidence 50-10232.
+        let mut curve: Option<
+            thrusterd_core::estimator::dynamic::thrust_curve::ThrustCurveEvidence,
+        > = None;
+        let (_, r) = common::rotate_while_holding_on(run, &v, None, |m, t| {
             let text = m.status().text;
             if named.is_none() && text.contains("does not follow the command linearly") {
                 named = Some((t, text));
             }
+            let last = m
+                .last_estimate()
+                .and_then(|e| e.dynamics.as_ref())
+                .and_then(|d| d.thrust_curve);
+            if let Some(c) = last {
+                if curve.is_none_or(|k| c.log_likelihood_ratio > k.log_likelihood_ratio) {
+                    curve = Some(c);
+                }
+            }
         });
-        let curve = run
-            .machine
-            .last_estimate()
-            .and_then(|e| e.dynamics.as_ref())
-            .and_then(|d| d.thrust_curve);
         println!("linearize {linearize}: {r:?}, {curve:?}, {named:?}");
         if linearize {
             assert_eq!(r.source, ModelSource::Estimated, "{r:?}");

@@ -474,28 +474,36 @@ fn silent_rotation_of_the_top_thruster_is_detected_and_re_estimated() {
 
 /// A swell is not a moved thruster, for the monitor either (issue 32 item 5). AMOUR-5 learns in
 /// still water at a realistic IMU, then the water comes up (moderate: 0.3 m/s current, 10 N /
-/// 1 Nm at 0.15 Hz) and it flies +-20 deg pitch steps with every detector as shipped and the
-/// change test calibrated (`refinement.change_calibration_s = 120`). Uncalibrated, the monitor
-/// takes the thruster coefficients' wandering with the wave for a change (measured: seed 1
-/// after 33.2 s; 77 of 78 mismatches in 6 vehicle-hours of the soak); calibrated against the
-/// water (`monitor.calibration_s = 120`, off by default), none in 3 minutes, and the rotated
-/// top thruster is still found (by the refinement's windows, 6.4 s) and learned again (0.039).
+/// 1 Nm at 0.15 Hz) and it flies +-20 deg pitch steps with every detector as shipped: the
+/// change test and the monitor calibrated against the water once the sea-state gauge says the
+/// vehicle is in a sea (`calibrate_when = "in_a_sea"`, the default since 2026-12-01).
+/// Uncalibrated (`monitor.calibration_s = 0`), the monitor takes the thruster coefficients'
+/// wandering with the wave for a change (measured: seed 1 after 33.2 s; 77 of 78 mismatches in
+/// 6 vehicle-hours of the soak); as shipped none in 3 minutes, and the rotated top thruster is
+/// still found (by the refinement's windows, 6.4 s) and learned again (0.039).
 /// `cargo test -p thrusterd-core --test machine_sim -- --nocapture swell`.
 #[test]
 fn in_a_swell_the_calibrated_monitor_is_quiet_and_a_rotated_thruster_is_still_found() {
     use thruster_inprocess::holding::pitch_with;
     use thruster_sim::disturbance::WaterPreset;
-    let in_the_swell = |monitor_calibration_s| {
+    let in_the_swell = |monitor_calibration_s: Option<f64>| {
         let mut run = Run::new("amour5", NoisePreset::Realistic, 1);
         run.with_setup(|c| {
-            assert_eq!(c.monitor.calibration_s, 0.0, "the shipped default");
-            c.refinement.change_calibration_s = 120.0;
-            c.monitor.calibration_s = monitor_calibration_s;
+            let when = thrusterd_core::adaptation::calibrate_when::CalibrateWhen::InASea;
+            assert_eq!(c.monitor.calibration_s, 120.0, "the shipped default");
+            assert_eq!(c.monitor.calibrate_when, when, "the shipped default");
+            assert_eq!(
+                c.refinement.change_calibrate_when, when,
+                "the shipped default"
+            );
+            if let Some(s) = monitor_calibration_s {
+                c.monitor.calibration_s = s;
+            }
         });
         run.learn_then_water(WaterPreset::Moderate);
         run
     };
-    let (t, why) = pitch_with(&mut in_the_swell(0.0), 60.0, |_, _| {})
+    let (t, why) = pitch_with(&mut in_the_swell(Some(0.0)), 60.0, |_, _| {})
         .expect("uncalibrated: no false alarm in the swell (the decisive run is gone)");
     println!("uncalibrated: a false alarm after {t:.1} s: {why}");
     assert!(
@@ -503,9 +511,10 @@ fn in_a_swell_the_calibrated_monitor_is_quiet_and_a_rotated_thruster_is_still_fo
         "not the monitor's: {why}"
     );
 
-    let mut run = in_the_swell(120.0);
+    let mut run = in_the_swell(None);
     let quiet = pitch_with(&mut run, 180.0, |_, _| {});
     assert!(quiet.is_none(), "calibrated: false alarm {quiet:?}");
+    assert!(run.machine.in_a_sea(), "the swell not taken for a sea");
     run.rotate_top();
     let (t, why) = pitch_with(&mut run, 30.0, |_, _| {}).expect("rotation not found");
     println!("calibrated: the rotated top thruster found after {t:.1} s: {why}");
@@ -547,9 +556,10 @@ fn the_sea_state_gauge_reads_the_actuated_axes_only() {
 /// and the identification after a silent change instrumented its fit (once 0.158 off under a
 /// bound of 0.052). Now only what follows a step's transient counts (`sea_state`): still
 /// water is not known or calm, moderate water a sea (every vehicle file: still 1.4 deg or not
-/// known, moderate 7.5-12.4, `LH_MINUTES=3 LH_CAL=120 LH_MON_CAL=120 cargo run --release -p
-/// thrusterctl -- study sweep lost_hold_soak`). The calibrations keep moderate water's false
-/// alarms from ending the run early.
+/// known, moderate 7.5-12.4, `LH_MINUTES=3 cargo run --release -p thrusterctl -- study sweep
+/// lost_hold_soak`). So the detectors' calibrations, which apply in a sea, stay off in still
+/// water (where they would only cost) and keep moderate water's false alarms from ending the
+/// run early.
 #[test]
 fn through_pitch_steps_the_sea_state_gauge_reads_the_water_not_the_steps() {
     use thruster_inprocess::holding::pitch_with;
@@ -557,24 +567,31 @@ fn through_pitch_steps_the_sea_state_gauge_reads_the_water_not_the_steps() {
     let limit = MachineSetup::default().identification.min_sea_state_deg;
     for water in [WaterPreset::Still, WaterPreset::Moderate] {
         let mut run = Run::new("amour5", NoisePreset::Realistic, 1);
-        run.with_setup(|c| {
-            c.refinement.change_calibration_s = 120.0;
-            c.monitor.calibration_s = 120.0;
-        });
         run.learn_then_water(water);
-        let alarm = pitch_with(&mut run, 90.0, |_, _| {});
+        let mut seas = 0;
+        let alarm = pitch_with(&mut run, 90.0, |_, r| {
+            seas += usize::from(r.machine.in_a_sea())
+        });
         assert!(alarm.is_none(), "{water:?}: {alarm:?}");
         let sea = run.machine.sea_state_deg();
-        println!("amour5 through the steps, {water:?}: sea state {sea:?} deg");
+        println!(
+            "amour5 through the steps, {water:?}: sea state {sea:?} deg, in a sea on {seas} ticks"
+        );
         match water {
-            WaterPreset::Still => assert!(
-                sea.is_none_or(|d| d < limit / 2.0),
-                "still water read {sea:?} deg"
-            ),
-            _ => assert!(
-                sea.is_some_and(|d| d > 2.0 * limit),
-                "moderate water read {sea:?} deg"
-            ),
+            WaterPreset::Still => {
+                assert!(
+                    sea.is_none_or(|d| d < limit / 2.0),
+                    "still water read {sea:?} deg"
+                );
+                assert_eq!(seas, 0, "still water taken for a sea");
+            }
+            _ => {
+                assert!(
+                    sea.is_some_and(|d| d > 2.0 * limit),
+                    "moderate water read {sea:?} deg"
+                );
+                assert!(run.machine.in_a_sea(), "moderate water not taken for a sea");
+            }
         }
     }
 }

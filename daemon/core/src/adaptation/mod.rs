@@ -13,10 +13,14 @@
 //!   settings, the dither, and what of the old model is carried over (`carry_over`) to the
 //!   new one when only some thrusters changed.
 //!
+//! - [`calibrate_when`]: when the monitor's and the change test's calibrations against the
+//!   water apply (in a sea, as the sea-state gauge reads it, or always).
+//!
 //! The estimator's closed-loop mode (`estimator::run::closed_loop`) and the machine's run
 //! under control (`machine::estimation::closed_loop`) are the two ends this room drives: the
 //! estimator fits whatever command was sent, the machine feeds it and swaps the result in.
 
+pub mod calibrate_when;
 pub mod identification;
 pub mod monitor;
 pub mod refinement;

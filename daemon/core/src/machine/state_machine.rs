@@ -70,6 +70,9 @@ pub struct Machine {
     /// How far the water moved the vehicle while held (`identification::sea_state`).
     #[serde(default)]
     sea_state: crate::adaptation::identification::sea_state::SeaState,
+    /// Whether that gauge says the vehicle is in a sea (the detectors' calibrations apply).
+    #[serde(default)]
+    in_a_sea: crate::adaptation::identification::sea_state::InASea,
     /// The rest the vehicle takes while idle, for an estimation asked for from idle
     /// (`machine.rest_from_idle`).
     idle_rest: IdleRest,
@@ -134,6 +137,7 @@ impl Machine {
             geometry: None,
             run: EstimationRun::new(setup.machine.solve_budget_s),
             sea_state: Default::default(),
+            in_a_sea: Default::default(),
             idle_rest: IdleRest::default(),
             levelling: None,
             resume: Resume::Idle,
@@ -196,6 +200,17 @@ impl Machine {
     /// until known; `identification::sea_state`).
     pub fn sea_state_deg(&self) -> Option<f64> {
         self.sea_state.rms_deg()
+    }
+
+    /// The control the sea-state gauge has counted, s (`sea_state`).
+    pub fn sea_state_counted_s(&self) -> f64 {
+        self.sea_state.measured_s()
+    }
+
+    /// Whether the detectors take the vehicle to be in a sea (`sea_state::InASea`): their
+    /// calibrations against the water apply.
+    pub fn in_a_sea(&self) -> bool {
+        self.in_a_sea.get()
     }
 
     /// The identification under control's dither against the controller's command so far

@@ -30,6 +30,9 @@
 //! identification after a silent change instrumented its fit, which once came out 0.158 off
 //! under a bound of 0.052 (least squares 0.019). With the rule, still water through the steps
 //! is not known or reads 1.4 deg, moderate water 7.5-12.4, rough 13-18 (every vehicle file).
+//!
+//! [`InASea`] turns the reading into the answer the detectors' calibrations go by
+//! (`adaptation::calibrate_when`): a sea once it has read above the threshold for a while.
 
 use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
@@ -158,9 +161,75 @@ impl SeaState {
         self.mean_sq_deg2 += w * (err_deg * err_deg - self.mean_sq_deg2);
     }
 
+    /// How much control has been counted, s (telemetry, the sweeps' traces).
+    pub fn measured_s(&self) -> f64 {
+        self.measured_s
+    }
+
     /// The RMS attitude error while held, deg; None until `MIN_MEASURED_S` of it.
     pub fn rms_deg(&self) -> Option<f64> {
-        (self.measured_s >= MIN_MEASURED_S).then(|| self.mean_sq_deg2.max(0.0).sqrt())
+        self.rms_deg_after(MIN_MEASURED_S)
+    }
+
+    /// The same, None until `counted_s` of it.
+    pub fn rms_deg_after(&self, counted_s: f64) -> Option<f64> {
+        (self.measured_s >= counted_s).then(|| self.mean_sq_deg2.max(0.0).sqrt())
+    }
+}
+
+/// The gauge must read above the threshold this long before the vehicle is taken to be in a
+/// sea, s. Why: a thruster that moves in still water makes the held vehicle swing too, and
+/// entering a sea restarts the detectors' calibrations (30-50 s without a verdict); the change
+/// test and the monitor find such a change within 3-8 s of it, while the uncalibrated
+/// detectors' first false alarms in a swell came 18-34 s after the water came up.
+pub const SEA_CONFIRM_S: f64 = 5.0;
+
+/// For that answer the gauge is read once this much control is counted, s (its own reading
+/// waits for `MIN_MEASURED_S`). Why: through +-20 deg pitch steps every 4 s only a step's
+/// settled tail counts, in moderate water about 1 s in 10 (AMOUR-5: 1.3 s by 20 s, 4.7 s by
+/// 70 s) and in still water nothing at all, while the uncalibrated detectors' false alarms
+/// there came after 30-34 s.
+pub const SEA_MIN_COUNTED_S: f64 = 1.0;
+
+/// A sea is left when the gauge reads under this share of the threshold (hysteresis: a swell
+/// reads 5.5-30 deg held or through steps, still water under 1.5 deg or nothing).
+pub const SEA_LEAVE_SHARE: f64 = 0.5;
+
+/// Whether the water moves the held vehicle, from the gauge: in a sea once it has read above
+/// the threshold for `SEA_CONFIRM_S`, out of it once it reads under `SEA_LEAVE_SHARE` of the
+/// threshold; an unknown reading keeps the last answer. Pure: readings and times in.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct InASea {
+    in_sea: bool,
+    /// Since when the gauge has read above the threshold, ns.
+    above_since_ns: Option<u64>,
+}
+
+impl InASea {
+    /// One control tick at `t_ns` with the gauge reading `rms_deg` against `threshold_deg`
+    /// (`identification.min_sea_state_deg`). Returns whether the vehicle is in a sea now.
+    pub fn update(&mut self, t_ns: u64, rms_deg: Option<f64>, threshold_deg: f64) -> bool {
+        match rms_deg {
+            Some(d) if d > threshold_deg => {
+                let since = *self.above_since_ns.get_or_insert(t_ns);
+                if t_ns.saturating_sub(since) as f64 * 1e-9 >= SEA_CONFIRM_S {
+                    self.in_sea = true;
+                }
+            }
+            Some(d) => {
+                self.above_since_ns = None;
+                if d < SEA_LEAVE_SHARE * threshold_deg {
+                    self.in_sea = false;
+                }
+            }
+            None => {}
+        }
+        self.in_sea
+    }
+
+    /// The last answer.
+    pub fn get(&self) -> bool {
+        self.in_sea
     }
 }
 
@@ -275,5 +344,27 @@ mod tests {
         // One that begins more than a minute after the last counted tick starts over.
         s.push(200_000_000_000, 200_000_000_000, DT, &level, 1.0);
         assert_eq!(s.rms_deg(), None);
+    }
+
+    #[test]
+    fn a_sea_is_entered_after_the_confirmation_and_left_below_half_the_threshold() {
+        let mut f = InASea::default();
+        let ns = |s: f64| (s * 1e9) as u64;
+        // Unknown: not in a sea.
+        assert!(!f.update(0, None, 3.0));
+        // Above the threshold, but not for long enough; a dip below it starts over.
+        assert!(!f.update(ns(1.0), Some(4.0), 3.0));
+        assert!(!f.update(ns(1.0 + SEA_CONFIRM_S - 0.1), Some(4.0), 3.0));
+        assert!(!f.update(ns(9.5), Some(2.9), 3.0));
+        assert!(!f.update(ns(10.0), Some(4.0), 3.0));
+        assert!(!f.update(ns(10.0 + SEA_CONFIRM_S - 0.01), Some(4.0), 3.0));
+        assert!(f.update(ns(10.0 + SEA_CONFIRM_S), Some(4.0), 3.0));
+        // Between half the threshold and it, or unknown: still in a sea.
+        assert!(f.update(ns(30.0), Some(2.0), 3.0));
+        assert!(f.update(ns(31.0), None, 3.0));
+        assert!(f.get());
+        // Under half of it: out at once.
+        assert!(!f.update(ns(32.0), Some(1.4), 3.0));
+        assert!(!f.get());
     }
 }

@@ -42,6 +42,8 @@ use thruster_driver_kit::Range;
 
 use thruster_protocol::MAX_THRUSTERS;
 
+use super::calibrate_when::CalibrateWhen;
+
 /// Nuisance regressors per axis: linear and quadratic damping, gravity direction (3) and a
 /// constant acceleration.
 const NUISANCE: usize = 6;
@@ -108,18 +110,22 @@ pub struct MonitorConfig {
     /// mispredicts ~20 % of closed-loop motion, since the controller moves the commands faster
     /// than the propellers follow.
     pub lag_s: f64,
-    /// Calibration against the water, s (default 0 = off; 120 for open water with waves): the
-    /// forgetting time constant over which batches of settled control are compared with the
-    /// reference, and the test's variance is scaled by how far an unchanged vehicle's
-    /// statistic runs above its white-noise expectation (`calibration.rs`). With it the
+    /// Calibration against the water, s (default 120; 0 = off): the forgetting time constant
+    /// over which batches of settled control are compared with the reference, and the test's
+    /// variance is scaled by how far an unchanged vehicle's statistic runs above its
+    /// white-noise expectation (`calibration.rs`). While it applies (`calibrate_when`) the
     /// monitor judges only after the reference and 4 batches (the factor in use leaves the
     /// latest out). Measured (docs/study.md, issue 32 item 5): AMOUR-5 and every vehicle file
     /// in moderate and rough water at a realistic IMU, 12 vehicle-hours, the monitor's
     /// re-estimations 285 -> 0; in a swell a moved thruster is then left to the refinement's
     /// windows (the calibrated monitor alone found none within 60 s).
     pub calibration_s: f64,
-    /// ... on batches this long, s (default 10, the reference's length).
+    /// ... on batches this long, s (default 10, the reference's length) ...
     pub calibration_batch_s: f64,
+    /// ... when: "in_a_sea" (the default: while the sea-state gauge says the water moves the
+    /// held vehicle; uncalibrated otherwise, as before 2026-12-01) or "always".
+    #[serde(default)]
+    pub calibrate_when: CalibrateWhen,
 }
 
 impl Default for MonitorConfig {
@@ -137,8 +143,9 @@ impl Default for MonitorConfig {
             min_share: 0.05,
             confirm_s: 1.0,
             lag_s: 0.1,
-            calibration_s: 0.0,
+            calibration_s: 120.0,
             calibration_batch_s: 10.0,
+            calibrate_when: CalibrateWhen::InASea,
         }
     }
 }
@@ -324,6 +331,9 @@ pub struct ModelMonitor {
     /// How far an unchanged vehicle's statistic runs in this water (`calibration_s` > 0).
     #[serde(default)]
     calibration: calibration::Calibration,
+    /// The vehicle is in a sea (`set_in_a_sea`).
+    #[serde(default)]
+    in_a_sea: bool,
     failing_s: f64,
 }
 
@@ -344,6 +354,7 @@ impl ModelMonitor {
             reference: Box::default(),
             recent: Box::default(),
             calibration: calibration::Calibration::default(),
+            in_a_sea: false,
             failing_s: 0.0,
         }
     }
@@ -354,6 +365,24 @@ impl ModelMonitor {
 
     pub fn action(&self) -> MismatchAction {
         self.cfg.action
+    }
+
+    /// Whether the water moves the held vehicle (`sea_state::InASea`), every control tick. A
+    /// calibration that applies only in a sea starts afresh on entering one: what it measured
+    /// before (nothing, as it gathers only while it applies) is not this water.
+    pub fn set_in_a_sea(&mut self, in_a_sea: bool) {
+        let was = self.calibrating();
+        self.in_a_sea = in_a_sea;
+        if self.calibrating() && !was {
+            self.calibration.reset();
+        }
+    }
+
+    /// Whether the calibration against the water applies now.
+    fn calibrating(&self) -> bool {
+        self.cfg
+            .calibrate_when
+            .applies(self.cfg.calibration_s, self.in_a_sea)
     }
 
     /// Forget everything (new model, new thruster count, control restarted). No allocation:
@@ -469,7 +498,7 @@ impl ModelMonitor {
         let k = 2 * n;
         let p = k + NUISANCE;
         let in_reference = self.reference.seconds < self.cfg.reference_s;
-        let calibrating = !in_reference && self.cfg.calibration_s > 0.0;
+        let calibrating = !in_reference && self.calibrating();
         let (stretch, forget) = if in_reference {
             (&mut *self.reference, 1.0)
         } else {
@@ -529,7 +558,7 @@ impl ModelMonitor {
         let k = 2 * n;
         let c = chow(&self.reference, &self.recent, axis, k, k + NUISANCE)?;
         // The residual variance as this water makes it (1 uncalibrated or in white noise).
-        let s2 = if self.cfg.calibration_s > 0.0 {
+        let s2 = if self.calibrating() {
             c.s2 * self.calibration.inflation(axis)
         } else {
             c.s2
@@ -692,13 +721,24 @@ mod tests {
         .0
     }
 
-    /// [`run`] with a monitor configuration; `thrusters` is (model, before, after, change_s).
-    /// Also the largest calibration factor at the end.
+    /// [`run_in`], the vehicle in a sea (`set_in_a_sea`) from `sea_from_s` on.
     fn run_in(
         cfg: MonitorConfig,
         thrusters: ([f64; 2], [f64; 2], [f64; 2], f64),
         noise: f64,
         seed: u64,
+    ) -> (Vec<f64>, f64) {
+        run_at_sea(cfg, thrusters, noise, seed, f64::INFINITY)
+    }
+
+    /// [`run`] with a monitor configuration; `thrusters` is (model, before, after, change_s).
+    /// Also the largest calibration factor at the end.
+    fn run_at_sea(
+        cfg: MonitorConfig,
+        thrusters: ([f64; 2], [f64; 2], [f64; 2], f64),
+        noise: f64,
+        seed: u64,
+        sea_from_s: f64,
     ) -> (Vec<f64>, f64) {
         let (model, before, after, change_s) = thrusters;
         let mut mon = ModelMonitor::new(cfg, 2);
@@ -737,6 +777,7 @@ mod tests {
             w += (k[0] * thrust[0] + k[1] * thrust[1] - 1.5 * w) * dt;
             t += dt;
             let meas = Vector3::new(0.0, 0.0, w + noise * gauss());
+            mon.set_in_a_sea(t >= sea_from_s);
             if let Some(m) = mon.observe(dt, 0.0, &meas, &Vector3::z(), &b, &next) {
                 fired.push(t);
                 assert_eq!(m.axis, 2);
@@ -781,6 +822,7 @@ mod tests {
     fn calibrated_in_still_water_the_factor_stays_near_one_and_a_change_is_found() {
         let calibrated = MonitorConfig {
             calibration_s: 120.0,
+            calibrate_when: CalibrateWhen::Always,
             ..MonitorConfig::default()
         };
         let k = [20.0, -10.0];
@@ -797,6 +839,33 @@ mod tests {
             assert_eq!(fired.first(), uncalibrated.first(), "seed {seed}");
             let first = fired.first().copied().expect("no detection");
             assert!(first > 60.0 && first < 66.0, "seed {seed}: at {first} s");
+        }
+    }
+
+    /// As shipped (`calibrate_when = "in_a_sea"`), out of a sea the monitor is the uncalibrated
+    /// one to the verdict; in a sea it calibrates from the moment it entered it and judges only
+    /// once it has the reference and 4 batches (here 30 s in a sea + 40 s: a change at 60 s is
+    /// found after 70 s, where uncalibrated it is found at once).
+    #[test]
+    fn calibrated_only_in_a_sea_and_afresh_from_entering_it() {
+        let shipped = MonitorConfig::default();
+        assert_eq!(shipped.calibrate_when, CalibrateWhen::InASea);
+        assert!(shipped.calibration_s > 0.0);
+        let uncalibrated = MonitorConfig {
+            calibration_s: 0.0,
+            ..MonitorConfig::default()
+        };
+        let k = [20.0, -10.0];
+        let changed = (k, k, [20.0, 6.0], 60.0);
+        for seed in 1..4 {
+            let (still, _) = run_in(shipped.clone(), changed, 0.02, seed);
+            let (off, _) = run_in(uncalibrated.clone(), changed, 0.02, seed);
+            assert_eq!(still, off, "seed {seed}");
+            let first = off.first().copied().expect("no detection");
+            assert!(first > 60.0 && first < 66.0, "seed {seed}: at {first} s");
+            let (sea, _) = run_at_sea(shipped.clone(), changed, 0.02, seed, 30.0);
+            let first = sea.first().copied().expect("no detection in a sea");
+            assert!((70.0..76.0).contains(&first), "seed {seed}: at {first} s");
         }
     }
 

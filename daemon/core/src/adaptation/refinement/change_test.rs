@@ -50,6 +50,7 @@ use crate::estimator::dynamic::regressors::{terms, TERMS};
 use crate::model::Model;
 
 use super::calibration::{Calibration, Snapshot};
+use crate::adaptation::calibrate_when::CalibrateWhen;
 
 /// The change test's settings (documented on `RefinementConfig`'s `change_*` keys).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -77,6 +78,9 @@ pub struct ChangeSettings {
     pub calibration_s: f64,
     #[serde(default)]
     pub batch_s: f64,
+    /// When the calibration applies ([`CalibrateWhen`]).
+    #[serde(default)]
+    pub calibrate_when: CalibrateWhen,
 }
 
 /// The test's largest statistic at one sample.
@@ -153,6 +157,9 @@ pub struct ChangeTest {
     /// The thrusters of the model judged against.
     #[serde(default)]
     thrusters: usize,
+    /// The vehicle is in a sea (`set_in_a_sea`).
+    #[serde(default)]
+    in_a_sea: bool,
     lag: [f64; MAX_THRUSTERS],
     lag_abs: f64,
     #[serde(with = "crate::serde_arrays::array")]
@@ -186,6 +193,7 @@ impl ChangeTest {
             calibration: Calibration::default(),
             observer_started_ns: 0,
             thrusters: 0,
+            in_a_sea: false,
             lag: [0.0; MAX_THRUSTERS],
             lag_abs: 0.0,
             terms: [0.0; TERMS],
@@ -210,6 +218,28 @@ impl ChangeTest {
         self.seen = 0;
         self.last_stat = None;
         self.calibration.reset();
+    }
+
+    /// Whether the water moves the held vehicle (`sea_state::InASea`), every control tick. A
+    /// calibration that applies only in a sea starts afresh on entering one, and the
+    /// candidates judged uncalibrated until then are dropped (their variance is not this
+    /// water's; new ones wait for the calibration's batches).
+    pub fn set_in_a_sea(&mut self, in_a_sea: bool) {
+        let was = self.calibrating();
+        self.in_a_sea = in_a_sea;
+        if self.calibrating() && !was {
+            self.calibration.reset();
+            for c in self.candidates.iter_mut() {
+                c.live = false;
+            }
+        }
+    }
+
+    /// Whether the calibration against the water applies now.
+    fn calibrating(&self) -> bool {
+        self.s
+            .calibrate_when
+            .applies(self.s.calibration_s, self.in_a_sea)
     }
 
     /// The thrusters' spin-up time constant of the model's fit, s.
@@ -327,7 +357,7 @@ impl ChangeTest {
         // window, 5 s with a realistic IMU, and each update restarts the candidates' warm-up),
         // on the rows held, once the observer has run `warmup_s`.
         let observing = (t_ns - self.observer_started_ns) as f64 * 1e-9 >= self.s.warmup_s;
-        if self.s.calibration_s > 0.0 && observing {
+        if self.calibrating() && observing {
             let keep = (-self.s.batch_s / self.s.calibration_s).exp();
             let var = std::array::from_fn(|j| 1.0 / inv[j]);
             self.calibration.add(
@@ -343,7 +373,7 @@ impl ChangeTest {
         if warm && settled.iter().any(|&r| r) {
             if t_ns >= self.next_candidate_ns {
                 // Calibrated, a row is judged only once its calibration has batches.
-                let calibration = if self.s.calibration_s > 0.0 {
+                let calibration = if self.calibrating() {
                     self.calibration.snapshot(n)
                 } else {
                     Snapshot::NONE
@@ -648,6 +678,7 @@ mod tests {
             min_age_s: 1.0,
             calibration_s: 0.0,
             batch_s: 2.0,
+            calibrate_when: CalibrateWhen::Always,
         }
     }
 
@@ -656,6 +687,19 @@ mod tests {
     /// changes at `change_s` (it gains a yaw moment). `held(t)`: the axes held at time t.
     /// Returns the first detection.
     fn simulate(
+        change_s: f64,
+        noise: f64,
+        seconds: f64,
+        held: impl Fn(f64) -> [bool; 3],
+    ) -> Option<(f64, ChangeStat)> {
+        simulate_at_sea(settings(), f64::INFINITY, change_s, noise, seconds, held)
+    }
+
+    /// [`simulate`] with the test's settings `s`, the vehicle in a sea (`set_in_a_sea`) from
+    /// `sea_from_s` on.
+    fn simulate_at_sea(
+        s: ChangeSettings,
+        sea_from_s: f64,
         change_s: f64,
         noise: f64,
         seconds: f64,
@@ -674,7 +718,7 @@ mod tests {
         let model = Model::nominal(b.clone(), None);
         let mut moved = b.clone();
         moved[(2, 1)] = 7.0; // thruster 2 now also yaws: 70 % of its column
-        let mut test = ChangeTest::new(settings());
+        let mut test = ChangeTest::new(s);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let mut rate = Vector3::zeros();
         let dt = 0.005;
@@ -697,6 +741,7 @@ mod tests {
                     if rng.random::<bool>() { 0.2 } else { -0.2 },
                 ];
             }
+            test.set_in_a_sea(t >= sea_from_s);
             let found = test.observe(
                 (t * 1e9) as u64,
                 &noisy,
@@ -722,6 +767,31 @@ mod tests {
         // Measured 21.4 s (chi2 grows about 30 per second here).
         assert!(t > 20.0 && t < 24.0, "found at {t:.2} s: {f:?}");
         assert!(f.share > 0.3, "{f:?}");
+    }
+
+    /// Calibrated in a sea only (the shipped `calibrate_when`): out of a sea the test is the
+    /// uncalibrated one to the sample; entering a sea drops the candidates judged uncalibrated
+    /// and waits for the calibration's batches (3 of 2 s here) before it judges again.
+    #[test]
+    fn calibrated_only_in_a_sea_and_afresh_from_entering_it() {
+        let all = |_| [true; 3];
+        let in_a_sea = ChangeSettings {
+            calibration_s: 120.0,
+            calibrate_when: CalibrateWhen::InASea,
+            ..settings()
+        };
+        let still = simulate_at_sea(in_a_sea, f64::INFINITY, 20.0, 0.25, 60.0, all);
+        let off = simulate(20.0, 0.25, 60.0, all);
+        assert_eq!(still, off);
+        let (t_off, _) = off.expect("change not found");
+        // In a sea from 10 s: calibrated (3 batches by 16 s), the change is still found, named.
+        let (t, f) = simulate_at_sea(in_a_sea, 10.0, 20.0, 0.25, 60.0, all)
+            .expect("change not found in a sea");
+        assert_eq!(f.thruster, 1, "{f:?}");
+        assert!(t >= t_off, "found at {t:.2} s (out of a sea {t_off:.2} s)");
+        // Entering the sea just before the change: nothing is judged until 19.5 + 3 x 2 s.
+        let late = simulate_at_sea(in_a_sea, 19.5, 20.0, 0.25, 60.0, all);
+        assert!(late.is_none_or(|(t, _)| t >= 25.5), "{late:?}");
     }
 
     #[test]

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use thruster_driver_kit::Range;
 
 use super::change_test::ChangeSettings;
+use crate::adaptation::calibrate_when::CalibrateWhen;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -151,8 +152,8 @@ pub struct RefinementConfig {
     /// 48-92 % after the new model was in; at the paper's noise the rotated thruster is found
     /// on candidates 3-5 s old.
     pub change_min_age_s: f64,
-    /// The change test calibrated against the water (default 0: off; 120 recommended in open
-    /// water, with waves): every thruster's
+    /// The change test calibrated against the water (default 120; 0: off; applied as
+    /// `change_calibrate_when` says, by default only in a sea): every thruster's
     /// apparent move is fitted on consecutive `change_batch_s` batches of the rows held, and
     /// their mean square over this recent past (forgetting time constant, s), against what
     /// the innovation's variance alone gives, is the factor on a candidate's variance. Why: in
@@ -162,8 +163,9 @@ pub struct RefinementConfig {
     /// within 10 minutes at every noise preset, and rough water at the paper's noise on 6 of
     /// 10; calibrated, none from the change test (`change_test_soak`, docs/study.md). In still
     /// water the soak's detection times are unchanged (paper's noise through pitch steps
-    /// 4.2-4.5 s). The costs, why it is off by default: in a swell at the paper's noise a
-    /// moved thruster is no longer found within 60 s; and in still water with a realistic IMU
+    /// 4.2-4.5 s). Its costs: in a swell at the paper's noise a moved thruster is no longer
+    /// found within 60 s (the windows find it in moderate water at a realistic IMU); and, why
+    /// it applies only in a sea by default, in still water with a realistic IMU
     /// the model's own few-percent errors under manoeuvres inflate the factor too, so in
     /// `machine_sim`'s silent rotation the change test (5.8 s, thruster named, its column
     /// learned anew and the others carried over: 0.016-0.030 off) gave way to the monitor
@@ -174,6 +176,11 @@ pub struct RefinementConfig {
     /// batches the 10 s candidates alarmed in moderate water after 115 s, and 2 s batches over
     /// 30 s cost the realistic IMU's change-test detection in still water, 3.9 s -> 7.0 s).
     pub change_batch_s: f64,
+    /// ... when: "in_a_sea" (the default: while the sea-state gauge says the water moves the
+    /// held vehicle, `identification.min_sea_state_deg`; uncalibrated otherwise, as before
+    /// 2026-12-01) or "always".
+    #[serde(default)]
+    pub change_calibrate_when: CalibrateWhen,
 }
 
 impl Default for RefinementConfig {
@@ -208,8 +215,9 @@ impl Default for RefinementConfig {
             change_model_floor: 0.0,
             change_term_z: 4.0,
             change_min_age_s: 2.0,
-            change_calibration_s: 0.0,
+            change_calibration_s: 120.0,
             change_batch_s: 10.0,
+            change_calibrate_when: CalibrateWhen::InASea,
         }
     }
 }
@@ -361,6 +369,7 @@ impl RefinementConfig {
             min_age_s: self.change_min_age_s,
             calibration_s: self.change_calibration_s,
             batch_s: self.change_batch_s,
+            calibrate_when: self.change_calibrate_when,
         }
     }
 }

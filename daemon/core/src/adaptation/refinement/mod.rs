@@ -236,6 +236,12 @@ impl Refiner {
         }
     }
 
+    /// Whether the water moves the held vehicle (`sea_state::InASea`), for the change test's
+    /// calibration, every control tick.
+    pub fn set_in_a_sea(&mut self, in_a_sea: bool) {
+        self.change.set_in_a_sea(in_a_sea);
+    }
+
     /// A measured body velocity (a DVL, m/s) for the window under way's navigation.
     pub fn velocity_fix(&mut self, measured: &Vector3<f64>) {
         if let Some(w) = self.window.as_mut() {

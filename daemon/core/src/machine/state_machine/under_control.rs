@@ -250,6 +250,14 @@ impl Machine {
             &target.attitude,
             actuated_error_deg(&attitude, &target.attitude, model.actuated),
         );
+        let in_a_sea = self.in_a_sea.update(
+            s.t_ns,
+            self.sea_state
+                .rms_deg_after(crate::adaptation::identification::sea_state::SEA_MIN_COUNTED_S),
+            self.setup.identification.min_sea_state_deg,
+        );
+        self.refiner.set_in_a_sea(in_a_sea);
+        self.monitor.set_in_a_sea(in_a_sea);
         let verdict = self.refiner.observe(
             &Tick {
                 t_ns: s.t_ns,

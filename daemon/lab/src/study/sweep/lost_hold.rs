@@ -17,7 +17,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// the machine controlled (the watch's quantity, from the truth rather than the filter) and
 /// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
 /// LH_CAL, LH_MON_CAL (s): `refinement.change_calibration_s` and `monitor.calibration_s` (the
-/// calibrations against the water; default the shipped 0, off).
+/// calibrations against the water; default the shipped 120, 0 = off); LH_CAL_WHEN (in_a_sea |
+/// always): when both apply (default the shipped "in_a_sea").
 /// LH_LEVEL=1: hold level at the starting heading instead of the pitch steps. The last column
 /// is the sea-state gauge at the end (`identification/sea_state.rs`, deg RMS; NaN: not known).
 /// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
@@ -50,6 +51,7 @@ pub(super) fn lost_hold_soak() {
         std::env::var("LH_CAL").ok().map(|v| v.parse().unwrap());
     let monitor_calibration_s: Option<f64> =
         std::env::var("LH_MON_CAL").ok().map(|v| v.parse().unwrap());
+    let calibrate_when = super::calibrate_when_from_env("LH_CAL_WHEN");
     let flight = if level {
         "held level"
     } else {
@@ -67,8 +69,12 @@ pub(super) fn lost_hold_soak() {
                 let mut run = Run::new(name, noise, seed);
                 // One setup (each `with_setup` starts from the shipped one).
                 let knobs = [limit, change_calibration_s, monitor_calibration_s];
-                if knobs.iter().any(Option::is_some) {
+                if knobs.iter().any(Option::is_some) || calibrate_when.is_some() {
                     run.with_setup(|c| {
+                        if let Some(w) = calibrate_when {
+                            c.refinement.change_calibrate_when = w;
+                            c.monitor.calibrate_when = w;
+                        }
                         if let Some(deg) = limit {
                             c.machine.lost_hold_deg = deg;
                         }
@@ -124,7 +130,12 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
             last_b = b.cloned();
         }
         if trace && ((t * 200.0).round() as u64).is_multiple_of(2000) {
-            println!("    {t:6.1} s sea state {:?}", run.machine.sea_state_deg());
+            println!(
+                "    {t:6.1} s sea state {:?} ({:.1} s counted), in a sea {}",
+                run.machine.sea_state_deg(),
+                run.machine.sea_state_counted_s(),
+                run.machine.in_a_sea()
+            );
         }
         if trace {
             let text = run.machine.status().text;

@@ -207,6 +207,20 @@ fn water_from_env(key: &str) -> Option<thruster_sim::disturbance::WaterPreset> {
     )
 }
 
+/// When the detectors' calibrations apply, named by the environment variable `key`
+/// ("in_a_sea" or "always"; unset: None, the shipped setting), for the sweeps of issue 32
+/// item 5.
+fn calibrate_when_from_env(
+    key: &str,
+) -> Option<thrusterd_core::adaptation::calibrate_when::CalibrateWhen> {
+    use thrusterd_core::adaptation::calibrate_when::CalibrateWhen;
+    match std::env::var(key).ok()?.as_str() {
+        "in_a_sea" => Some(CalibrateWhen::InASea),
+        "always" => Some(CalibrateWhen::Always),
+        other => panic!("{key}: {other} is not in_a_sea or always"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,11 +10,14 @@ use thruster_inprocess::holding::*;
 use thruster_inprocess::{Run, VEHICLES};
 
 /// [`shipped_change_test`] with the measuring runs' overrides from the environment (the
-/// ignored measuring tools only).
+/// ignored measuring tools only; CT_CAL_WHEN in_a_sea | always for `change_calibrate_when`).
 fn with_change_test() -> RefinementConfig {
     let mut c = shipped_change_test();
     if let Ok(v) = std::env::var("CT_UPDATE") {
         c.update = v == "1";
+    }
+    if let Some(w) = super::calibrate_when_from_env("CT_CAL_WHEN") {
+        c.change_calibrate_when = w;
     }
     // Overrides for the measuring runs: (variable, the setting it replaces).
     for (key, field) in [

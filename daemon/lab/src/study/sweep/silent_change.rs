@@ -14,7 +14,8 @@ use thrusterd_core::machine::State;
 /// +-20 deg pitch steps for SC_MINUTES (default 5; a mismatch here is a false alarm and ends
 /// the run), then its top thruster is rotated 45 deg and it flies on up to 60 s. SC_NOISE
 /// (none|realistic|paper, default realistic), SC_SEEDS (default 1-6), SC_CAL and SC_MON_CAL
-/// (s): `refinement.change_calibration_s` and `monitor.calibration_s` (default the shipped 0);
+/// (s): `refinement.change_calibration_s` and `monitor.calibration_s` (default the shipped 120,
+/// 0 = off), SC_CAL_WHEN (in_a_sea | always, default the shipped in_a_sea) when both apply;
 /// SC_MONITOR_ONLY=1: the refinement (its windows and change test) off, the monitor alone;
 /// SC_NO_INSTRUMENT=1: `identification.instrument = "never"`. Each detection line ends with the
 /// sea state the machine had measured before the change and when it was found (deg RMS, None:
@@ -45,16 +46,26 @@ pub(super) fn silent_change_in_water() {
             .map(|v| v.parse().unwrap_or_else(|_| panic!("{key}: {v}")))
     };
     let (change_cal, monitor_cal) = (knob("SC_CAL"), knob("SC_MON_CAL"));
+    let calibrate_when = super::calibrate_when_from_env("SC_CAL_WHEN");
     let monitor_only = std::env::var("SC_MONITOR_ONLY").is_ok_and(|v| v == "1");
     let never_instrument = std::env::var("SC_NO_INSTRUMENT").is_ok_and(|v| v == "1");
     println!(
-        "{vehicle}, {noise:?}, {minutes} min unchanged, change test calibration {change_cal:?}, monitor calibration {monitor_cal:?}"
+        "{vehicle}, {noise:?}, {minutes} min unchanged, change test calibration {change_cal:?}, monitor calibration {monitor_cal:?}, applied {calibrate_when:?}"
     );
     for water in &waters {
         for &seed in &seeds {
             let mut run = Run::new(&vehicle, noise, seed);
-            if change_cal.is_some() || monitor_cal.is_some() || monitor_only || never_instrument {
+            if change_cal.is_some()
+                || monitor_cal.is_some()
+                || calibrate_when.is_some()
+                || monitor_only
+                || never_instrument
+            {
                 run.with_setup(|c| {
+                    if let Some(w) = calibrate_when {
+                        c.refinement.change_calibrate_when = w;
+                        c.monitor.calibrate_when = w;
+                    }
                     c.refinement.enabled = !monitor_only;
                     if never_instrument {
                         c.identification.instrument =
