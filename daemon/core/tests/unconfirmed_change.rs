@@ -69,7 +69,11 @@ fn pitch_steps_in_a_swell(at_limit: AtLimit, seconds: f64) -> Outcome {
 #[test]
 fn a_change_the_identification_cannot_confirm_in_a_swell_keeps_the_model_in_force() {
     // Measured: keep_old 1 refusal, 2 swaps (the worst 0.072 off), no hold lost; swap 3
-    // swaps, the worst 0.300 off (under a bound of 0.088), and the hold lost at 93.8 s.
+    // swaps, the worst 0.300 off (under a bound of 0.088), and the hold lost at 93.8 s. Since
+    // the paper noise's dither may reach full command (`dither_max` 1.0, 2026-12-01): keep_old
+    // 1 refusal, 2 swaps (0.060); swap 3 swaps, the worst 0.227 off, the hold kept in these
+    // 100 s (the soaks' 12 vehicle-hours at the paper's noise lost none either way).
+    // What is decisive is the model far off the truth put in force.
     let kept = pitch_steps_in_a_swell(AtLimit::KeepOld, 100.0);
     let swapped = pitch_steps_in_a_swell(AtLimit::Swap, 100.0);
     eprintln!(
@@ -100,5 +104,4 @@ fn a_change_the_identification_cannot_confirm_in_a_swell_keeps_the_model_in_forc
         "swapping at the limit gave nothing worse than {:.3}",
         swapped.worst_err_rot
     );
-    assert!(swapped.lost >= 1, "swapping at the limit kept the hold");
 }
