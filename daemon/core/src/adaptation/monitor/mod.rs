@@ -721,7 +721,7 @@ mod tests {
         .0
     }
 
-    /// [`run_in`], the vehicle in a sea (`set_in_a_sea`) from `sea_from_s` on.
+    /// [`run_at_sea`], never in a sea.
     fn run_in(
         cfg: MonitorConfig,
         thrusters: ([f64; 2], [f64; 2], [f64; 2], f64),
@@ -731,8 +731,9 @@ mod tests {
         run_at_sea(cfg, thrusters, noise, seed, f64::INFINITY)
     }
 
-    /// [`run`] with a monitor configuration; `thrusters` is (model, before, after, change_s).
-    /// Also the largest calibration factor at the end.
+    /// [`run`] with a monitor configuration; `thrusters` is (model, before, after, change_s);
+    /// the vehicle in a sea (`set_in_a_sea`) from `sea_from_s` on. Also the largest
+    /// calibration factor at the end.
     fn run_at_sea(
         cfg: MonitorConfig,
         thrusters: ([f64; 2], [f64; 2], [f64; 2], f64),
