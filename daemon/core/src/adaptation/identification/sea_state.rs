@@ -96,6 +96,9 @@ pub struct SeaState {
     /// The error low-passed, deg.
     #[serde(default)]
     smooth_deg: f64,
+    /// The smoothing starts over at the next finite error (after [`SeaState::manoeuvre_ended`]).
+    #[serde(default)]
+    smooth_restart: bool,
 }
 
 impl SeaState {
@@ -131,9 +134,11 @@ impl SeaState {
             self.moved_ns = t_ns;
             self.reached = false;
             self.least_deg = f64::INFINITY;
-            if err_deg.is_finite() {
-                self.smooth_deg = err_deg;
-            }
+            self.smooth_restart = true;
+        }
+        if self.smooth_restart && err_deg.is_finite() {
+            self.smooth_deg = err_deg;
+            self.smooth_restart = false;
         }
         // When the step's own transient is over (see `STEP_REACHED_DEG`).
         if err_deg.is_finite() && dt_s > 0.0 {
@@ -159,6 +164,17 @@ impl SeaState {
             .max(dt_s / SEA_STATE_TAU_S)
             .min(1.0);
         self.mean_sq_deg2 += w * (err_deg * err_deg - self.mean_sq_deg2);
+    }
+
+    /// The machine's own manoeuvre within the hold (an identification's dither) ended at
+    /// `t_ns`: ticks count again once the vehicle has settled from it, as after a setpoint
+    /// step (`STEP_SETTLE_S`, then the smoothed error within `STEP_REACHED_DEG` or growing
+    /// back). The hold is unbroken, so neither what was measured nor `SETTLE_S` starts over.
+    pub fn manoeuvre_ended(&mut self, t_ns: u64) {
+        self.moved_ns = t_ns.max(1);
+        self.reached = false;
+        self.least_deg = f64::INFINITY;
+        self.smooth_restart = true;
     }
 
     /// How much control has been counted, s (telemetry, the sweeps' traces).
@@ -344,6 +360,48 @@ mod tests {
         // One that begins more than a minute after the last counted tick starts over.
         s.push(200_000_000_000, 200_000_000_000, DT, &level, 1.0);
         assert_eq!(s.rms_deg(), None);
+    }
+
+    /// An identification under control within the hold: the gauge waits for the vehicle to
+    /// settle from its dither, as after a step, but neither forgets what it measured nor waits
+    /// `SETTLE_S` again (the hold did not restart: the caller's control start is unchanged).
+    #[test]
+    fn after_the_machines_own_manoeuvre_the_gauge_waits_for_the_settling_only() {
+        let mut s = SeaState::default();
+        run(&mut s, 0.0, 11.0, 0, 8.0);
+        let counted = s.measured_s();
+        assert!((s.rms_deg().unwrap() - 8.0).abs() < 1e-9);
+        // The dither ends at 20 s (nothing pushed during it), the vehicle 12 deg off, back
+        // within a degree a second later.
+        s.manoeuvre_ended(20_000_000_000);
+        run(&mut s, 20.0, 1.0, 0, 12.0);
+        run(&mut s, 21.0, STEP_SETTLE_S - 1.1, 0, 1.0);
+        assert_eq!(
+            s.measured_s(),
+            counted,
+            "counted while settling from the dither"
+        );
+        // Settled (within STEP_REACHED_DEG) after STEP_SETTLE_S: counted at once.
+        run(&mut s, 20.0 + STEP_SETTLE_S, 1.0, 0, 1.0);
+        assert!(
+            (s.measured_s() - counted - 1.0).abs() < 2.0 * DT,
+            "{} s counted after the settling, {counted} before",
+            s.measured_s()
+        );
+        // Not settled but the water pushing it off again (grown back by STEP_REBOUND_DEG
+        // from its least): counted too.
+        s.manoeuvre_ended(30_000_000_000);
+        run(&mut s, 30.0, STEP_SETTLE_S, 0, 6.0);
+        let before = s.measured_s();
+        run(
+            &mut s,
+            30.0 + STEP_SETTLE_S,
+            2.0,
+            0,
+            6.0 + STEP_REBOUND_DEG + 1.0,
+        );
+        assert!(s.measured_s() > before + 1.0, "{}", s.measured_s());
+        assert!(s.rms_deg().unwrap() > 5.0);
     }
 
     #[test]

@@ -245,7 +245,7 @@ impl Machine {
         // whole angle, above `identification.min_sea_state_deg`).
         self.sea_state.push(
             s.t_ns,
-            self.phase_start_ns,
+            self.hold_start_ns,
             dt,
             &target.attitude,
             actuated_error_deg(&attitude, &target.attitude, model.actuated),
@@ -341,6 +341,7 @@ impl Machine {
         self.events
             .push(Event::HoldLost(format!("hold lost: {off}: {cause}")));
         self.phase_start_ns = t_ns;
+        self.hold_start_ns = t_ns;
         let estimate = self.monitor.action() == MismatchAction::Estimate;
         if self.hold_lost_once || !estimate {
             let (what, why) = if self.hold_lost_once {
