@@ -247,7 +247,22 @@ impl InASea {
     pub fn get(&self) -> bool {
         self.in_sea
     }
+
+    /// Taken to be in a sea on other evidence than the gauge: a detector's alarm that the
+    /// identification it started did not confirm, while the gauge could not read the water
+    /// (the caller's judgement). Left as before: once the gauge reads under
+    /// `SEA_LEAVE_SHARE` of the threshold.
+    pub fn assume(&mut self) {
+        self.in_sea = true;
+    }
 }
+
+/// An identification the detectors started found no change when, on each row group, its
+/// model differs from the one in force by at most this many times its own error bound. A
+/// moved thruster changes its column by far more (45 deg: 0.77 of the column, about 0.3 of
+/// AMOUR-5's whole B, against bounds of 0.04-0.06); a swell's false alarms at the paper's
+/// noise left 0.4-1.4 of the bound (every vehicle file, moderate water, the soak's traces).
+pub const UNCONFIRMED_BOUNDS: f64 = 1.5;
 
 #[cfg(test)]
 mod tests {
@@ -424,5 +439,11 @@ mod tests {
         // Under half of it: out at once.
         assert!(!f.update(ns(32.0), Some(1.4), 3.0));
         assert!(!f.get());
+        // Assumed on other evidence: in a sea while the gauge cannot read or reads above half
+        // the threshold, out once it reads under half.
+        f.assume();
+        assert!(f.update(ns(40.0), None, 3.0));
+        assert!(f.update(ns(41.0), Some(2.0), 3.0));
+        assert!(!f.update(ns(42.0), Some(1.0), 3.0));
     }
 }

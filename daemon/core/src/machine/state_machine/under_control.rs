@@ -80,6 +80,22 @@ impl Machine {
         cmd
     }
 
+    /// A detector's alarm that its identification did not confirm (refused at the limit, or a
+    /// model within its bounds of the one in force) is taken for the water moving the vehicle,
+    /// unless the sea-state gauge reads calm: the detectors' calibrations then apply
+    /// (`calibrate_when = "in_a_sea"`). Why: at the paper's noise a swell's first false alarms
+    /// come before the gauge can read it through pitch steps, and each one re-estimated
+    /// (docs/study.md, issue 32 item 5). A calm gauge leaves it as it was: the alarm was
+    /// something else, and in still water the calibrations only cost.
+    fn alarm_not_confirmed(&mut self) {
+        let gauge = self
+            .sea_state
+            .rms_deg_after(crate::adaptation::identification::sea_state::SEA_MIN_COUNTED_S);
+        if gauge.is_none_or(|d| d > self.setup.identification.min_sea_state_deg) {
+            self.in_a_sea.assume();
+        }
+    }
+
     /// The identification's model refused for `text` (the event and the status say it), the
     /// model in force kept, holding on.
     fn keep_old_model(&mut self, text: String) {
@@ -165,6 +181,7 @@ impl Machine {
         let at_limit = !matches!(decision, StopDecision::Converged { .. });
         if at_limit && self.identifying_unannounced && cfg.at_limit_unannounced == AtLimit::KeepOld
         {
+            self.alarm_not_confirmed();
             let text = format!(
                 "{why}: the suspected change is not confirmed (bound rot {:.3}, acc {:.3}, above the target): model rejected; old model kept",
                 bound.0, bound.1
@@ -172,14 +189,30 @@ impl Machine {
             self.keep_old_model(text);
             return;
         }
+        let found_nothing = self.identifying_unannounced
+            && self.models.current().is_some_and(|old| {
+                within_bounds(
+                    &candidate.effectiveness,
+                    &old.effectiveness,
+                    [bound.0, bound.1],
+                )
+            });
+        if found_nothing {
+            self.alarm_not_confirmed();
+        }
         match self.try_swap(candidate, ModelSource::Estimated) {
             Ok(()) => {
                 if let Some(k) = key {
                     self.models.remember_current(k);
                 }
+                let water = if found_nothing && self.in_a_sea.get() {
+                    "; no change found: taken for the water"
+                } else {
+                    ""
+                };
                 self.transition(
                     State::Active,
-                    &format!("{why}: new model, holding attitude"),
+                    &format!("{why}: new model, holding attitude{water}"),
                 );
             }
             Err(e) => self.transition(
@@ -401,5 +434,67 @@ impl Machine {
                 self.text = format!("holding attitude; {why}");
             }
         }
+    }
+}
+
+/// Whether `new` differs from `old` on each row group (rotation rows 0-2, acceleration rows
+/// 3-5) by at most `UNCONFIRMED_BOUNDS` times that group's error bound (relative Frobenius,
+/// as the bounds are). Differently shaped models (a thruster added or removed) differ.
+fn within_bounds(
+    new: &nalgebra::DMatrix<f64>,
+    old: &nalgebra::DMatrix<f64>,
+    bound: [f64; 2],
+) -> bool {
+    use crate::adaptation::identification::sea_state::UNCONFIRMED_BOUNDS;
+    if new.shape() != old.shape() || new.nrows() != 6 {
+        return false;
+    }
+    (0..2).all(|g| {
+        let (mut diff2, mut norm2) = (0.0, 0.0);
+        for r in 3 * g..3 * g + 3 {
+            for c in 0..new.ncols() {
+                diff2 += (new[(r, c)] - old[(r, c)]).powi(2);
+                norm2 += old[(r, c)].powi(2);
+            }
+        }
+        norm2 > 0.0
+            && bound[g].is_finite()
+            && diff2.sqrt() <= UNCONFIRMED_BOUNDS * bound[g] * norm2.sqrt()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::within_bounds;
+    use nalgebra::DMatrix;
+
+    /// AMOUR-5-like: five columns of unit size.
+    fn b() -> DMatrix<f64> {
+        DMatrix::from_fn(6, 5, |r, c| if (r + c) % 3 == 0 { 1.0 } else { 0.2 })
+    }
+
+    #[test]
+    fn a_model_within_its_bounds_of_the_old_found_nothing_a_moved_column_did() {
+        let old = b();
+        let norm_rot = old.rows(0, 3).norm();
+        // Rotation rows moved by 1.4x a 4 % bound, the acceleration rows not at all: nothing.
+        let mut new = old.clone();
+        new[(0, 0)] += 1.4 * 0.04 * norm_rot;
+        assert!(within_bounds(&new, &old, [0.04, 0.06]));
+        // 1.6x: found.
+        let mut new = old.clone();
+        new[(0, 0)] += 1.6 * 0.04 * norm_rot;
+        assert!(!within_bounds(&new, &old, [0.04, 0.06]));
+        // A thruster's column turned 45 deg in the rotation rows: far beyond.
+        let mut new = old.clone();
+        let (a, c) = (old[(0, 2)], old[(1, 2)]);
+        let (s, k) = std::f64::consts::FRAC_PI_4.sin_cos();
+        new[(0, 2)] = k * a - s * c;
+        new[(1, 2)] = s * a + k * c;
+        assert!(!within_bounds(&new, &old, [0.06, 0.06]));
+        // Another shape (a thruster added), or a bound not known: not "the same".
+        let wider = DMatrix::from_fn(6, 6, |r, c| if c < 5 { old[(r, c)] } else { 0.1 });
+        assert!(!within_bounds(&wider, &old, [0.06, 0.06]));
+        assert!(!within_bounds(&old, &old, [f64::NAN, 0.06]));
     }
 }
