@@ -191,6 +191,12 @@ impl SeaState {
     pub fn rms_deg_after(&self, counted_s: f64) -> Option<f64> {
         (self.measured_s >= counted_s).then(|| self.mean_sq_deg2.max(0.0).sqrt())
     }
+
+    /// The reading whether the vehicle is in a sea goes by ([`InASea`]): known after
+    /// `SEA_MIN_COUNTED_S`.
+    pub fn sea_reading_deg(&self) -> Option<f64> {
+        self.rms_deg_after(SEA_MIN_COUNTED_S)
+    }
 }
 
 /// The gauge must read above the threshold this long before the vehicle is taken to be in a

@@ -87,13 +87,13 @@ impl Machine {
     /// come before the gauge can read it through pitch steps, and each one re-estimated
     /// (docs/study.md, issue 32 item 5). A calm gauge leaves it as it was: the alarm was
     /// something else, and in still water the calibrations only cost.
-    fn alarm_not_confirmed(&mut self) {
-        let gauge = self
-            .sea_state
-            .rms_deg_after(crate::adaptation::identification::sea_state::SEA_MIN_COUNTED_S);
+    /// Returns whether the vehicle is now taken to be in a sea.
+    fn alarm_not_confirmed(&mut self) -> bool {
+        let gauge = self.sea_state.sea_reading_deg();
         if gauge.is_none_or(|d| d > self.setup.identification.min_sea_state_deg) {
             self.in_a_sea.assume();
         }
+        self.in_a_sea.get()
     }
 
     /// The identification's model refused for `text` (the event and the status say it), the
@@ -197,19 +197,16 @@ impl Machine {
                     [bound.0, bound.1],
                 )
             });
-        if found_nothing {
-            self.alarm_not_confirmed();
-        }
+        let water = if found_nothing && self.alarm_not_confirmed() {
+            "; no change found: taken for the water"
+        } else {
+            ""
+        };
         match self.try_swap(candidate, ModelSource::Estimated) {
             Ok(()) => {
                 if let Some(k) = key {
                     self.models.remember_current(k);
                 }
-                let water = if found_nothing && self.in_a_sea.get() {
-                    "; no change found: taken for the water"
-                } else {
-                    ""
-                };
                 self.transition(
                     State::Active,
                     &format!("{why}: new model, holding attitude{water}"),
@@ -285,8 +282,7 @@ impl Machine {
         );
         let in_a_sea = self.in_a_sea.update(
             s.t_ns,
-            self.sea_state
-                .rms_deg_after(crate::adaptation::identification::sea_state::SEA_MIN_COUNTED_S),
+            self.sea_state.sea_reading_deg(),
             self.setup.identification.min_sea_state_deg,
         );
         self.refiner.set_in_a_sea(in_a_sea);
@@ -446,20 +442,15 @@ fn within_bounds(
     bound: [f64; 2],
 ) -> bool {
     use crate::adaptation::identification::sea_state::UNCONFIRMED_BOUNDS;
+    use crate::estimator::linalg::rel_frobenius_err;
     if new.shape() != old.shape() || new.nrows() != 6 {
         return false;
     }
     (0..2).all(|g| {
-        let (mut diff2, mut norm2) = (0.0, 0.0);
-        for r in 3 * g..3 * g + 3 {
-            for c in 0..new.ncols() {
-                diff2 += (new[(r, c)] - old[(r, c)]).powi(2);
-                norm2 += old[(r, c)].powi(2);
-            }
-        }
-        norm2 > 0.0
-            && bound[g].is_finite()
-            && diff2.sqrt() <= UNCONFIRMED_BOUNDS * bound[g] * norm2.sqrt()
+        let rows = |b: &nalgebra::DMatrix<f64>| b.rows(3 * g, 3).into_owned();
+        // A NaN bound (none) or an infinite error (the old group all zero, the new not)
+        // compares false.
+        rel_frobenius_err(&rows(new), &rows(old)) <= UNCONFIRMED_BOUNDS * bound[g]
     })
 }
 
