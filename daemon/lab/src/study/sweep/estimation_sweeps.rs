@@ -226,7 +226,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// LAG_SEEDS (1..=N), LAG_RATE (the IMU's rate, Hz; 200), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
-/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_NOISE_S (the rest's length, s), and
+/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
 /// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
@@ -383,6 +383,16 @@ pub(super) fn lag_sweep() {
                 o.seconds,
                 t0.elapsed().as_secs_f64()
             );
+                if std::env::var_os("LAG_BOUND_PARTS").is_some() {
+                    println!(
+                        "    bound parts: lag {:?} lag floor {:?} IMU position {:?}",
+                        o.terms.spin_up_rel_err,
+                        o.terms.spin_up_floor_rel_err,
+                        o.terms
+                            .imu_position
+                            .map(|p| (p.rel_err_share, p.position_m))
+                    );
+                }
             }
         }
     }

@@ -31,6 +31,9 @@ struct Bounds {
     curve: Option<(f64, f64)>,
     /// `ID_TRACE`: the machine's state and status text as they change.
     trace: Option<(thrusterd_core::machine::State, String)>,
+    /// `ID_STEPS`: every fresh estimate of the run (s after the announcement, its
+    /// effectiveness, its bounds rot / acc), judged against the truth after the run.
+    steps: Vec<(f64, nalgebra::DMatrix<f64>, f64, f64)>,
 }
 
 impl Bounds {
@@ -69,6 +72,11 @@ impl Bounds {
             return;
         }
         self.fresh = true;
+        if std::env::var_os("ID_STEPS").is_some() && self.last != (r, a) {
+            if let Some(e) = m.last_estimate() {
+                self.steps.push((t, e.effectiveness.clone(), r, a));
+            }
+        }
         self.last = (r, a);
         self.unexplained = m
             .last_estimate()
@@ -85,6 +93,44 @@ impl Bounds {
         if a <= target && self.t_acc.is_none() {
             self.t_acc = Some(t);
         }
+    }
+}
+
+/// `ID_STEPS`: each estimate of the identification against the truth and against the estimate
+/// before it (relative Frobenius change per row group): what a stop rule that waits for the
+/// estimate to settle would see.
+fn print_steps(steps: &[(f64, nalgebra::DMatrix<f64>, f64, f64)], truth: &nalgebra::DMatrix<f64>) {
+    use thruster_inprocess::rel_err;
+    let mut prev: Option<&nalgebra::DMatrix<f64>> = None;
+    for (t, b, br, ba) in steps {
+        let change = |rows: usize| {
+            prev.map_or(f64::NAN, |p| {
+                (b.rows(rows, 3) - p.rows(rows, 3)).norm() / b.rows(rows, 3).norm()
+            })
+        };
+        println!(
+            "    step {t:6.2} s err {:.3} / {:.3} bound {br:.3} / {ba:.3} change {:.3} / {:.3}",
+            rel_err(b, truth, 0),
+            rel_err(b, truth, 3),
+            change(0),
+            change(3)
+        );
+        if std::env::var_os("ID_STEPS_COLUMNS").is_some() {
+            let cols: Vec<String> = (0..b.ncols())
+                .map(|i| {
+                    let d = |r: usize| {
+                        (b.view((r, i), (3, 1)) - truth.view((r, i), (3, 1))).norm()
+                            / truth.rows(r, 3).norm()
+                    };
+                    format!("{:.3}/{:.3}", d(0), d(3))
+                })
+                .collect();
+            println!(
+                "      each column's error (of its rows' norm): {}",
+                cols.join(" ")
+            );
+        }
+        prev = Some(b);
     }
 }
 
@@ -189,9 +235,12 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// ID_MAX_S, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1), ID_IV (0 never, 1 in a sea, 2 always: the thrust columns by
 /// instrumental variables), ID_MIN_SHARE, ID_WATER (still|current|moderate|rough: the
 /// water comes up after the first model, 20 s before the announcement), ID_WAVE_PART
-/// (force|torque: that part of the swell alone), ID_TRACE (print the machine's state and status as they change), ID_SEGMENT
+/// (force|torque: that part of the swell alone), ID_TRACE (print the machine's state and status as they change), ID_STEPS (every estimate of
+/// the identification against the truth and the one before it; ID_STEPS_COLUMNS each column's
+/// error too), ID_SEGMENT
 /// (`estimator.segment_s`, one value), ID_LINEARIZE (0/1: `[supply] linearize`, one value; default as
-/// the operator configures the vehicle, `Run`), ID_DEADBAND (`machine.deadband`, one value: a
+/// the operator configures the vehicle, `Run`), ID_SPLIT (0/1: `estimator.split_thrust` for the
+/// first model, one value), ID_DEADBAND (`machine.deadband`, one value: a
 /// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
@@ -313,7 +362,9 @@ pub(super) fn sweep_identification() {
                 let segment_s = env_list("ID_SEGMENT", &[]);
                 let linearize: Vec<f64> = env_list("ID_LINEARIZE", &[]);
                 let deadband: Vec<f64> = env_list("ID_DEADBAND", &[]);
+                let split: Vec<f64> = env_list("ID_SPLIT", &[]);
                 if *cfg != d
+                    || !split.is_empty()
                     || !segment_s.is_empty()
                     || !linearize.is_empty()
                     || !deadband.is_empty()
@@ -329,12 +380,16 @@ pub(super) fn sweep_identification() {
                         if let Some(v) = deadband.first() {
                             s.machine.deadband = *v;
                         }
+                        if let Some(v) = split.first() {
+                            s.estimator.split_thrust = *v > 0.0;
+                        }
                     });
                 }
-                let (_, r) =
+                let (run, r) =
                     rotate_while_holding_on(run, &vehicle(&vehicle_name), water.clone(), |m, s| {
                         b.observe(m, s, target)
                     });
+                print_steps(&b.steps, &run.truth());
                 let row = [
                     r.took_s,
                     r.err_rot,
