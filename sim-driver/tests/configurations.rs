@@ -40,6 +40,7 @@ fn every_vehicle_file_loads_with_the_expected_rank() {
         ("amour5_reverse60", 5, 5),
         ("amour5_two_makes", 5, 5),
         ("eight_vectored_two_makes", 8, 6),
+        ("eight_vectored_lag100_120ms", 8, 6),
     ];
     let mut seen = 0;
     for entry in std::fs::read_dir(vehicles_dir()).expect("config/vehicles") {

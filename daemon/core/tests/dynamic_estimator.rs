@@ -1225,7 +1225,8 @@ fn at_the_papers_noise_a_lag_the_data_contradicts_refuses_the_model() {
         );
     }
     // Thrusters of two makes, one lag configured for all: measured ln likelihood ratio of a
-    // lag per thruster 205 (seeds 1-3: 138-205 on AMOUR-5, 394-487 on eight_vectored).
+    // lag per thruster 205 (seeds 1-3: 138-205 on AMOUR-5, 394-487 on eight_vectored; with the
+    // pre-test's Newton step 158-233 and 712-775).
     let o = estimate_on(
         vehicle("amour5_two_makes"),
         paper,

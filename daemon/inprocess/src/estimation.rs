@@ -41,6 +41,8 @@ pub struct Outcome {
     /// Learned B minus the symmetric truth, its honest and its i.i.d. standard errors.
     pub b_err: DMatrix<f64>,
     pub b_se: DMatrix<f64>,
+    /// The symmetric truth B is scored against (the mean of forward and reverse).
+    pub truth: DMatrix<f64>,
     /// The rank the estimate found and how many DOFs it actuates.
     pub rank: usize,
     pub actuated: usize,
@@ -277,6 +279,7 @@ pub fn estimate_observed(
         terms: est.dynamics.clone().expect("dynamic terms"),
         b_err: &est.effectiveness - &truth,
         b_se: est.std_err.clone(),
+        truth: truth.clone(),
         refused: machine.model().is_none(),
         rank: est.rank.rank,
         actuated: est.rank.actuated.count(),

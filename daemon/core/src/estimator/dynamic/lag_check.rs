@@ -15,8 +15,9 @@
 //! that range is the 1 kHz runs' scatter, not a bias). A configured lag outside them is
 //! contradicted by the data. So
 //! is one lag for all when a lag per thruster explains the data better by more than
-//! `estimator.thruster_lag_evidence` (the pre-test of [`super::thruster_lags`]: 0-1.2 on
-//! vehicles of one make at the paper's noise, 54-1037 on the two-make files). A
+//! `estimator.thruster_lag_evidence` (the pre-test of [`super::thruster_lags`], its single
+//! moves and Newton step: up to 25 on vehicles of one make at the paper's noise, 158-775 on
+//! the two-make files; lags a fifth apart, 3-52, are not caught). A
 //! contradicted model is refused with the reason (the machine's `solve`); a lag consistent
 //! with the data leaves the model exactly as before.
 //!

@@ -226,7 +226,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// LAG_SEEDS (1..=N), LAG_RATE (the IMU's rate, Hz; 200), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
-/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NOISE_S (the rest's length, s), and
+/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
 /// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
@@ -236,6 +236,10 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// navigation's errors), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
 /// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
 /// `response` module).
+fn cfg_reverse_ratio() -> f64 {
+    std::env::var("LAG_REVERSE_RATIO").map_or(0.78, |r| r.parse().unwrap())
+}
+
 pub(super) fn lag_sweep() {
     let noise = match std::env::var("LAG_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -295,6 +299,21 @@ pub(super) fn lag_sweep() {
                 }
                 if std::env::var("LAG_SPLIT").is_ok() {
                     cfg.split_thrust = true;
+                }
+                if let Ok(x) = std::env::var("LAG_EXCITATION") {
+                    use thrusterd_core::estimator::Excitation;
+                    cfg.excitation = match x.as_str() {
+                        "round_robin" => Excitation::RoundRobin,
+                        "pairs" => Excitation::Pairs,
+                        "orthogonal" => Excitation::Orthogonal,
+                        _ => Excitation::DoubletPairs,
+                    };
+                }
+                if let Ok(r) = std::env::var("LAG_REVERSE_RATIO") {
+                    cfg.reverse_ratio = r.parse().unwrap();
+                }
+                if std::env::var("LAG_NO_IMU").is_ok() {
+                    cfg.learn_imu_position = false;
                 }
                 if std::env::var("LAG_TOLD").is_ok() {
                     // The decisive comparison: the true lag given, nothing learned.
@@ -383,6 +402,55 @@ pub(super) fn lag_sweep() {
                 o.seconds,
                 t0.elapsed().as_secs_f64()
             );
+                if std::env::var_os("LAG_UNMIX").is_some() {
+                    // The one column's gain unmixed from the thrusters' shared asymmetry.
+                    let b = &o.b_err + &o.truth;
+                    let n = b.ncols() as f64;
+                    let a = cfg_reverse_ratio();
+                    let q = (a - 1.0) / (a + 1.0);
+                    let last = o.terms.coefficients.ncols() - 1;
+                    let (mut num, mut den) = (0.0, 0.0);
+                    for r in 0..6 {
+                        let g: f64 = b.row(r).sum();
+                        let m = o.terms.coefficients[(r, last)];
+                        let w = 1.0 / b.rows(3 * (r / 3), 3).norm_squared();
+                        num += w * m * g;
+                        den += w * g * g;
+                    }
+                    let k = num / den;
+                    let se_m = |r: usize| o.terms.std_err[(r, last)];
+                    let se_k = (0..6)
+                        .map(|r| {
+                            let g: f64 = b.row(r).sum();
+                            let w = 1.0 / b.rows(3 * (r / 3), 3).norm_squared();
+                            (w * g * se_m(r)).powi(2)
+                        })
+                        .sum::<f64>()
+                        .sqrt()
+                        / den;
+                    println!("    k {k:.4} se {se_k:.4} R {:.3}", den.sqrt());
+                    let mut c = b.clone();
+                    for r in 0..6 {
+                        let m = o.terms.coefficients[(r, last)];
+                        for i in 0..b.ncols() {
+                            c[(r, i)] = (b[(r, i)] + q * m / n) / (1.0 + q * k);
+                        }
+                    }
+                    let e = |c: &nalgebra::DMatrix<f64>, r: usize| {
+                        (c.rows(r, 3) - o.truth.rows(r, 3)).norm() / o.truth.rows(r, 3).norm()
+                    };
+                    println!(
+                    "    unmixed: k {k:.4} (m rows {:?}) err {:.4} / {:.4} (as fitted {:.4} / {:.4})",
+                    (0..6).map(|r| (o.terms.coefficients[(r, last)] * 1e3).round() / 1e3).collect::<Vec<_>>(),
+                    e(&c, 0),
+                    e(&c, 3),
+                    e(&b, 0),
+                    e(&b, 3)
+                );
+                }
+                if std::env::var_os("LAG_TILT").is_some() {
+                    println!("    largest tilt {:.1} deg", o.max_tilt_deg);
+                }
                 if std::env::var_os("LAG_BOUND_PARTS").is_some() {
                     println!(
                         "    bound parts: lag {:?} lag floor {:?} IMU position {:?}",
