@@ -15,6 +15,8 @@
 //! two sweeps of each lag alone over the range's grid, one of every pair moved together,
 //! then Newton steps on all of them. Their joint covariance (the profile's Hessian) and a
 //! floor on each widen B's standard errors and bounds through B's sensitivity to each lag.
+//! Lags found alike (within `MIN_SPREAD`) are not kept, but their fit's difference from the
+//! common lag's is in the bound.
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
@@ -57,6 +59,8 @@ pub struct ThrusterLagSearch {
     pub log_likelihood_ratio: f64,
     /// The fit, kept: `common` with its run replaced and `per_thruster` set.
     pub fit: Option<LagFit>,
+    /// The per-thruster fit found but not kept (its lags alike): what the bound counts.
+    pub unkept: Option<DynamicRun>,
 }
 
 /// Search a lag per thruster from `common` (the common lag's fit of `run`), the terms at the
@@ -196,6 +200,7 @@ pub fn search_thruster_lags(
         return Some(ThrusterLagSearch {
             log_likelihood_ratio: log_likelihood_ratio(&best),
             fit: None,
+            unkept: None,
         });
     }
     // Then two sweeps of each lag over the whole range (a factor 4 each way from the common
@@ -302,6 +307,7 @@ pub fn search_thruster_lags(
         return Some(ThrusterLagSearch {
             log_likelihood_ratio,
             fit: None,
+            unkept: Some(fitted),
         });
     }
     Some(ThrusterLagSearch {
@@ -315,6 +321,7 @@ pub fn search_thruster_lags(
             per_thruster_floor_ln: floor_ln,
             ..common.clone()
         }),
+        unkept: None,
     })
 }
 

@@ -259,6 +259,7 @@ impl Estimator {
         };
         Some(search.fit.unwrap_or_else(|| {
             common.per_thruster_evidence = search.log_likelihood_ratio;
+            common.unkept_per_thruster = search.unkept.map(Box::new);
             common
         }))
     }
