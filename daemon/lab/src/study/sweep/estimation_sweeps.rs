@@ -236,10 +236,6 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// navigation's errors), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
 /// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
 /// `response` module).
-fn cfg_reverse_ratio() -> f64 {
-    std::env::var("LAG_REVERSE_RATIO").map_or(0.78, |r| r.parse().unwrap())
-}
-
 pub(super) fn lag_sweep() {
     let noise = match std::env::var("LAG_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -371,6 +367,7 @@ pub(super) fn lag_sweep() {
                     );
                     continue;
                 }
+                let reverse_ratio = cfg.reverse_ratio;
                 let o = estimate_on(v, sensors, seed, cfg, ideal);
                 let check = o.terms.lag_check.map_or(String::new(), |c| {
                     format!(
@@ -403,50 +400,7 @@ pub(super) fn lag_sweep() {
                 t0.elapsed().as_secs_f64()
             );
                 if std::env::var_os("LAG_UNMIX").is_some() {
-                    // The one column's gain unmixed from the thrusters' shared asymmetry.
-                    let b = &o.b_err + &o.truth;
-                    let n = b.ncols() as f64;
-                    let a = cfg_reverse_ratio();
-                    let q = (a - 1.0) / (a + 1.0);
-                    let last = o.terms.coefficients.ncols() - 1;
-                    let (mut num, mut den) = (0.0, 0.0);
-                    for r in 0..6 {
-                        let g: f64 = b.row(r).sum();
-                        let m = o.terms.coefficients[(r, last)];
-                        let w = 1.0 / b.rows(3 * (r / 3), 3).norm_squared();
-                        num += w * m * g;
-                        den += w * g * g;
-                    }
-                    let k = num / den;
-                    let se_m = |r: usize| o.terms.std_err[(r, last)];
-                    let se_k = (0..6)
-                        .map(|r| {
-                            let g: f64 = b.row(r).sum();
-                            let w = 1.0 / b.rows(3 * (r / 3), 3).norm_squared();
-                            (w * g * se_m(r)).powi(2)
-                        })
-                        .sum::<f64>()
-                        .sqrt()
-                        / den;
-                    println!("    k {k:.4} se {se_k:.4} R {:.3}", den.sqrt());
-                    let mut c = b.clone();
-                    for r in 0..6 {
-                        let m = o.terms.coefficients[(r, last)];
-                        for i in 0..b.ncols() {
-                            c[(r, i)] = (b[(r, i)] + q * m / n) / (1.0 + q * k);
-                        }
-                    }
-                    let e = |c: &nalgebra::DMatrix<f64>, r: usize| {
-                        (c.rows(r, 3) - o.truth.rows(r, 3)).norm() / o.truth.rows(r, 3).norm()
-                    };
-                    println!(
-                    "    unmixed: k {k:.4} (m rows {:?}) err {:.4} / {:.4} (as fitted {:.4} / {:.4})",
-                    (0..6).map(|r| (o.terms.coefficients[(r, last)] * 1e3).round() / 1e3).collect::<Vec<_>>(),
-                    e(&c, 0),
-                    e(&c, 3),
-                    e(&b, 0),
-                    e(&b, 3)
-                );
+                    print_unmixed(&o, reverse_ratio);
                 }
                 if std::env::var_os("LAG_TILT").is_some() {
                     println!("    largest tilt {:.1} deg", o.max_tilt_deg);
@@ -687,4 +641,55 @@ pub(super) fn mismatch_sweep() {
     for line in summary {
         println!("{line}");
     }
+}
+
+/// `LAG_UNMIX`: the one column's gains unmixed from a forward/reverse asymmetry k shared by
+/// the thrusters (docs/study.md, "Where the one column's 1.5-3 % comes from"), the pulses'
+/// forward level `reverse_ratio` times the reverse one: per row the mean-|command| term's
+/// coefficient m is k times the row's sum of gains G, and each gain b is
+/// (g (1 + q k) - q m / N) with q = (a - 1) / (a + 1). k by least squares over the rows,
+/// each weighted by its group's norm; R (the weighted norm of the G) near 0 means k is not
+/// there to find.
+fn print_unmixed(o: &thruster_inprocess::estimation::Outcome, reverse_ratio: f64) {
+    let b = &o.b_err + &o.truth;
+    let n = b.ncols() as f64;
+    let q = (reverse_ratio - 1.0) / (reverse_ratio + 1.0);
+    let last = o.terms.coefficients.ncols() - 1;
+    // Per row: G, its weight, m and m's standard error.
+    let rows: Vec<(f64, f64, f64, f64)> = (0..6)
+        .map(|r| {
+            (
+                b.row(r).sum(),
+                1.0 / b.rows(3 * (r / 3), 3).norm_squared(),
+                o.terms.coefficients[(r, last)],
+                o.terms.std_err[(r, last)],
+            )
+        })
+        .collect();
+    let den: f64 = rows.iter().map(|(g, w, _, _)| w * g * g).sum();
+    let k = rows.iter().map(|(g, w, m, _)| w * m * g).sum::<f64>() / den;
+    let se_k = rows
+        .iter()
+        .map(|(g, w, _, se)| (w * g * se).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / den;
+    let mut c = b.clone();
+    for (r, (_, _, m, _)) in rows.iter().enumerate() {
+        for i in 0..b.ncols() {
+            c[(r, i)] = (b[(r, i)] + q * m / n) / (1.0 + q * k);
+        }
+    }
+    let e = |c: &nalgebra::DMatrix<f64>, r: usize| thruster_inprocess::rel_err(c, &o.truth, r);
+    println!("    k {k:.4} se {se_k:.4} R {:.3}", den.sqrt());
+    println!(
+        "    unmixed: k {k:.4} (m rows {:?}) err {:.4} / {:.4} (as fitted {:.4} / {:.4})",
+        rows.iter()
+            .map(|(_, _, m, _)| (m * 1e3).round() / 1e3)
+            .collect::<Vec<_>>(),
+        e(&c, 0),
+        e(&c, 3),
+        e(&b, 0),
+        e(&b, 3)
+    );
 }

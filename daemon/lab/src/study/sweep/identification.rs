@@ -103,11 +103,7 @@ fn print_steps(steps: &[(f64, nalgebra::DMatrix<f64>, f64, f64)], truth: &nalgeb
     use thruster_inprocess::rel_err;
     let mut prev: Option<&nalgebra::DMatrix<f64>> = None;
     for (t, b, br, ba) in steps {
-        let change = |rows: usize| {
-            prev.map_or(f64::NAN, |p| {
-                (b.rows(rows, 3) - p.rows(rows, 3)).norm() / b.rows(rows, 3).norm()
-            })
-        };
+        let change = |rows: usize| prev.map_or(f64::NAN, |p| rel_err(b, p, rows));
         println!(
             "    step {t:6.2} s err {:.3} / {:.3} bound {br:.3} / {ba:.3} change {:.3} / {:.3}",
             rel_err(b, truth, 0),
