@@ -358,6 +358,7 @@ mod tests {
             spin_up_floor_rel_err: [0.0; 2],
             lag_check: None,
             thrust_curve: None,
+            thrust_asymmetry: 0.0,
             imu_position: Some(ImuPosition::decide(
                 nalgebra::Vector3::zeros(),
                 Learned {

@@ -6,6 +6,7 @@ use nalgebra::UnitQuaternion;
 use thruster_sim::NoisePreset;
 use thrusterd_core::adaptation::monitor::MismatchAction;
 use thrusterd_core::adaptation::refinement::RefinementConfig;
+use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::{Event, Machine, MachineSetup, State};
 
 use crate::run::Run;
@@ -42,6 +43,22 @@ pub fn holding_on_prior(
     refinement: RefinementConfig,
     term_prior_sd: Option<f64>,
 ) -> Run {
+    holding_on_learned_with(vehicle, noise, seed, refinement, &|e| {
+        if let Some(v) = term_prior_sd {
+            e.term_prior_sd = v;
+        }
+    })
+}
+
+/// [`holding_on`] with the estimator's settings changed by `estimator` before the model is
+/// learned (`shaped_thrust`'s tests).
+pub fn holding_on_learned_with(
+    vehicle: &str,
+    noise: NoisePreset,
+    seed: u64,
+    refinement: RefinementConfig,
+    estimator: &dyn Fn(&mut EstimatorConfig),
+) -> Run {
     let mut run = Run::new(vehicle, noise, seed);
     let mut setup = MachineSetup {
         thrusters: run.sim.thruster_count(),
@@ -49,9 +66,7 @@ pub fn holding_on_prior(
         ..MachineSetup::default()
     };
     setup.machine.deadband = 0.05;
-    if let Some(v) = term_prior_sd {
-        setup.estimator.term_prior_sd = v;
-    }
+    estimator(&mut setup.estimator);
     // The monitor's own test never fires (infinite threshold); its action still decides what
     // a mismatch does: re-estimate.
     setup.monitor.action = MismatchAction::Estimate;

@@ -412,6 +412,8 @@ impl Estimator {
             } else {
                 run
             }
+        } else if open_loop && self.cfg.shaped_thrust {
+            DynamicRun::new(n, lag, segment, &rest, aid).with_asymmetry(self.cfg.reverse_ratio)
         } else {
             DynamicRun::new(n, lag, segment, &rest, aid)
         };

@@ -47,6 +47,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thruster_protocol::MAX_THRUSTERS;
 
 use crate::estimator::dynamic::regressors::{terms, TERMS};
+use crate::estimator::dynamic::DynamicTerms;
 use crate::model::Model;
 
 use super::calibration::{Calibration, Snapshot};
@@ -275,6 +276,10 @@ impl ChangeTest {
         held: [bool; 3],
     ) -> Option<ChangeStat> {
         let n = sent.len().min(model.thrusters()).min(MAX_THRUSTERS);
+        // B multiplies the commands' thrust shape, not the bare commands (see
+        // `DynamicTerms::thrust_asymmetry`): without it a learned model's prediction misses
+        // each thruster's forward surplus.
+        let k = model.dynamics.as_ref().map_or(0.0, |d| d.thrust_asymmetry);
         let finite = rate.iter().all(|v| v.is_finite()) && sent[..n].iter().all(|v| v.is_finite());
         if !finite || n == 0 {
             return None;
@@ -309,7 +314,9 @@ impl ChangeTest {
             self.rate = *rate;
             self.observer_started_ns = t_ns;
             self.signature = [0.0; MAX_THRUSTERS];
-            self.lag[..n].copy_from_slice(&sent[..n]);
+            for (l, u) in self.lag.iter_mut().zip(&sent[..n]) {
+                *l = DynamicTerms::thrust_shape(k, *u);
+            }
             self.lag_abs = sent[..n].iter().map(|v| v.abs()).sum::<f64>() / n as f64;
             self.mean = [0.0; 3];
             self.var = [0.0; 3];
@@ -517,7 +524,7 @@ impl ChangeTest {
         };
         let mut abs = 0.0;
         for (l, u) in self.lag.iter_mut().zip(&sent[..n]) {
-            *l += a * (u - *l);
+            *l += a * (DynamicTerms::thrust_shape(k, *u) - *l);
             abs += u.abs();
         }
         self.lag_abs += a * (abs / n as f64 - self.lag_abs);

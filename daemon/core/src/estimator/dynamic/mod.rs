@@ -104,6 +104,20 @@ pub struct DynamicTerms {
     /// linear model ([`thrust_curve`]); None open loop.
     #[serde(default)]
     pub thrust_curve: Option<thrust_curve::ThrustCurveEvidence>,
+    /// The forward/reverse asymmetry k = (f - r) / (f + r) B's columns assume: a thruster's
+    /// thrust is its column times u (1 + k) forward and u (1 - k) reverse, so B is the mean
+    /// of the forward and reverse gains ([`DynamicRun::with_asymmetry`]). 0: thrust taken as
+    /// proportional to the command, as B's split fits and older models have it. Whoever
+    /// predicts motion from B and the commands shapes the commands with it.
+    #[serde(default)]
+    pub thrust_asymmetry: f64,
+}
+
+impl DynamicTerms {
+    /// Command `u`'s thrust shape under [`Self::thrust_asymmetry`] `k`: what B multiplies.
+    pub fn thrust_shape(k: f64, u: f64) -> f64 {
+        u + k * u.abs()
+    }
 }
 
 impl DynamicTerms {
@@ -150,6 +164,12 @@ pub struct DynamicRun {
     /// closed-loop identification's split drops it.
     #[serde(default)]
     floor_when_split: bool,
+    /// The thrusters' forward/reverse asymmetry k = (f - r) / (f + r) the one thrust column
+    /// assumes (`with_asymmetry`; 0: thrust proportional to the command both ways). The
+    /// column's regressor is then the command's thrust shape, u (1 + k) forward and u (1 - k)
+    /// reverse, so its gain is the mean of the forward and reverse gains. Ignored when split.
+    #[serde(default)]
+    asymmetry: f64,
     /// Each thruster's spin-up time constant, s (the split columns i and n + i share one).
     lags: Vec<f64>,
     /// Whether `lags` were learned ([`lag_search`]) rather than configured.
@@ -254,6 +274,7 @@ impl DynamicRun {
             split,
             cols,
             floor_when_split: false,
+            asymmetry: 0.0,
             lags: vec![lag_s.max(0.0); n],
             lags_learned: false,
             segment_s: segment_s.max(1e-3),
@@ -308,6 +329,25 @@ impl DynamicRun {
     /// Whether the thrust columns are fitted by instrumental variables.
     pub fn instrumented(&self) -> bool {
         self.iv.is_some()
+    }
+
+    /// The one thrust column fitted to the thrust shape of thrusters whose forward and reverse
+    /// gains are f and r, given as their ratio `reverse_ratio` = r / f (see `asymmetry`).
+    ///
+    /// Why: the open-loop pulses' forward level is `reverse_ratio` times the reverse one (so
+    /// the impulses balance), and a column fitted to the bare command then mixes each
+    /// thruster's asymmetry into its gain: the gain came out (f + r) / 2 x (1 + k q), q =
+    /// (a - 1) / (a + 1), 1.5 % low on T200-like thrusters and 3 % on ones with 60 % reverse
+    /// (docs/study.md, "Where the one column's 1.5-3 % comes from"). Ratios outside (0, 1]
+    /// are taken as 1.
+    pub fn with_asymmetry(mut self, reverse_ratio: f64) -> Self {
+        let a = if reverse_ratio > 0.0 && reverse_ratio <= 1.0 {
+            reverse_ratio
+        } else {
+            1.0
+        };
+        self.asymmetry = (1.0 - a) / (1.0 + a);
+        self
     }
 
     /// Split, B's bound keeps the model-error floor (see `floor_when_split`).
@@ -468,7 +508,8 @@ impl DynamicRun {
                 self.lag[i] += a * (v.max(0.0) - self.lag[i]);
                 self.lag[n + i] += a * (v.min(0.0) - self.lag[n + i]);
             } else {
-                self.lag[i] += a * (v - self.lag[i]);
+                let shaped = DynamicTerms::thrust_shape(self.asymmetry, v);
+                self.lag[i] += a * (shaped - self.lag[i]);
             }
             if let Some(iv) = self.iv.as_mut() {
                 let w = z.map_or(0.0, |z| z[i]);
@@ -751,6 +792,7 @@ impl DynamicRun {
                 imu_position: None,
                 unexplained_rate_radps: 0.0,
                 instrumented: [rot_ls.instrumented(), acc_ls.instrumented()],
+                thrust_asymmetry: if self.split { 0.0 } else { self.asymmetry },
             },
             split: self.split.then_some((split_b, split_se)),
         }

@@ -79,6 +79,7 @@ impl DynamicRun {
             lags_learned: learned,
             log: None,
             floor_when_split: self.floor_when_split,
+            asymmetry: self.asymmetry,
             ..Self::with_columns(
                 self.n,
                 self.split,

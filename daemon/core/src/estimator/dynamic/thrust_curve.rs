@@ -51,6 +51,7 @@ impl ThrustCurveProbe {
             let mut probe = DynamicRun {
                 lags_learned: run.lags_learned,
                 floor_when_split: run.floor_when_split,
+                asymmetry: run.asymmetry,
                 ..DynamicRun::with_columns(
                     run.n,
                     run.split,

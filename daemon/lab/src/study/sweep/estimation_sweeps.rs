@@ -226,7 +226,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// LAG_SEEDS (1..=N), LAG_RATE (the IMU's rate, Hz; 200), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
-/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
+/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_SHAPED (`shaped_thrust`), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
 /// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
@@ -295,6 +295,9 @@ pub(super) fn lag_sweep() {
                 }
                 if std::env::var("LAG_SPLIT").is_ok() {
                     cfg.split_thrust = true;
+                }
+                if std::env::var("LAG_SHAPED").is_ok() {
+                    cfg.shaped_thrust = true;
                 }
                 if let Ok(x) = std::env::var("LAG_EXCITATION") {
                     use thrusterd_core::estimator::Excitation;
