@@ -14,7 +14,7 @@
 mod desaturation;
 mod pseudo_inverse;
 
-pub use desaturation::desaturate;
+pub use desaturation::{desaturate, desaturate_within};
 pub use pseudo_inverse::pseudo_inverse;
 
 use nalgebra::DMatrix;

@@ -226,7 +226,8 @@ pub struct EstimatorConfig {
     /// Dynamic method, open loop, one column: fit each thruster's gain to the thrust its
     /// command makes under `reverse_ratio` (u (1 + k) forward, u (1 - k) reverse, k = (1 -
     /// r) / (1 + r)) rather than to the bare command, so B is the mean of the forward and
-    /// reverse gains; the model carries k, and the change test predicts with it. Default
+    /// reverse gains; the model carries k, the change test predicts with it and the
+    /// controller commands through it (a forward command 1 / (1 + k) of the bare one). Default
     /// false. Why: the pulses' forward level is `reverse_ratio` times the reverse one, which
     /// mixes each thruster's asymmetry into its one gain, 1.5 % low on T200-like thrusters
     /// (docs/study.md, "The thrust's shape in the one column": noise-free 0.016 -> 0.002 on

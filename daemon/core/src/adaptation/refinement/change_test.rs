@@ -279,7 +279,7 @@ impl ChangeTest {
         // B multiplies the commands' thrust shape, not the bare commands (see
         // `DynamicTerms::thrust_asymmetry`): without it a learned model's prediction misses
         // each thruster's forward surplus.
-        let k = model.dynamics.as_ref().map_or(0.0, |d| d.thrust_asymmetry);
+        let k = model.dynamics.as_ref().map_or(0.0, DynamicTerms::asymmetry);
         let finite = rate.iter().all(|v| v.is_finite()) && sent[..n].iter().all(|v| v.is_finite());
         if !finite || n == 0 {
             return None;

@@ -118,6 +118,28 @@ impl DynamicTerms {
     pub fn thrust_shape(k: f64, u: f64) -> f64 {
         u + k * u.abs()
     }
+
+    /// The command whose thrust shape under `k` is `v` (the inverse of [`Self::thrust_shape`]
+    /// for k in [0, 1)).
+    pub fn command_for_shape(k: f64, v: f64) -> f64 {
+        if v > 0.0 {
+            v / (1.0 + k)
+        } else {
+            v / (1.0 - k)
+        }
+    }
+
+    /// [`Self::thrust_asymmetry`] when usable, else 0: finite and in [0, 0.9] (a reverse
+    /// ratio of at least 0.05; what `DynamicRun::with_asymmetry` makes). A checkpoint or a
+    /// hand-edited value outside it is not divided by.
+    pub fn asymmetry(&self) -> f64 {
+        let k = self.thrust_asymmetry;
+        if k.is_finite() && (0.0..=0.9).contains(&k) {
+            k
+        } else {
+            0.0
+        }
+    }
 }
 
 impl DynamicTerms {
