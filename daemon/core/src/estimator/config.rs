@@ -232,8 +232,8 @@ pub struct EstimatorConfig {
     /// mixes each thruster's asymmetry into its one gain, 1.5 % low on T200-like thrusters
     /// (docs/study.md, "The thrust's shape in the one column": noise-free 0.016 -> 0.002 on
     /// AMOUR-5). Off by default because what comes after the estimation is not yet held
-    /// to it: the refinement moves the exact model to its own ~1 % and four_up's change test
-    /// raises false alarms with it (same section).
+    /// to it: the refinement moves the exact model to its own ~1 %, and the closed-loop and
+    /// water tests measured on bare models move (same section).
     pub shaped_thrust: bool,
     /// Dynamic method: how far, m, the centre of mass may sit from the point
     /// `imu_position_m` is measured from (default 0.03): a gap within it is the drawings'

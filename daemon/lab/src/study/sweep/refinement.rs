@@ -239,7 +239,8 @@ pub(super) fn refinement_in_water() {
 /// The change test (`with_change_test`) on every vehicle file: `CT_MINUTES` (default 5) of pitch
 /// steps (+-20 deg every 4 s) then as long holding level, unchanged, at each noise of
 /// `CT_NOISES` (default none,realistic,paper), seeds `CT_SEEDS` (default 1; CT_VEHICLES a
-/// subset, CT_CHANGE_TEST=0 the windows alone, CT_TRACE=1 how much of the flight the test
+/// subset, CT_CHANGE_TEST=0 the windows alone, CT_SHAPED=1 the model learned with
+/// `estimator.shaped_thrust`, CT_TRACE=1 how much of the flight the test
 /// judged and the seconds before an alarm); prints every
 /// mismatch reported (a false alarm) and fails on any. A measuring tool: `cargo run --release -p thrusterctl -- study sweep change_test_on_every_vehicle`.
 pub(super) fn change_test_on_every_vehicle() {
@@ -266,7 +267,11 @@ pub(super) fn change_test_on_every_vehicle() {
                     change_test: std::env::var("CT_CHANGE_TEST").map_or(true, |v| v != "0"),
                     ..with_change_test()
                 };
-                let mut run = holding_on(&vehicle, preset, seed, cfg);
+                // CT_SHAPED=1: the model learned with `estimator.shaped_thrust`.
+                let shaped = std::env::var("CT_SHAPED").is_ok_and(|v| v == "1");
+                let mut run = holding_on_learned_with(&vehicle, preset, seed, cfg, &|e| {
+                    e.shaped_thrust = shaped;
+                });
                 let (pitch, level) = flight(&mut run, minutes * 60.0);
                 println!("{vehicle} {noise} seed {seed}: pitch steps {pitch:?}, level {level:?}");
                 if pitch.is_some() || level.is_some() {
