@@ -113,6 +113,10 @@ pub struct DynamicTerms {
     pub thrust_asymmetry: f64,
 }
 
+/// The largest forward/reverse asymmetry a model's columns may assume: a reverse ratio of
+/// 0.053 (`estimator.reverse_ratio` allows any in (0, 1]); the controller divides by 1 - k.
+pub const MAX_THRUST_ASYMMETRY: f64 = 0.9;
+
 impl DynamicTerms {
     /// Command `u`'s thrust shape under [`Self::thrust_asymmetry`] `k`: what B multiplies.
     pub fn thrust_shape(k: f64, u: f64) -> f64 {
@@ -129,20 +133,17 @@ impl DynamicTerms {
         }
     }
 
-    /// [`Self::thrust_asymmetry`] when usable, else 0: finite and in [0, 0.9] (a reverse
-    /// ratio of at least 0.05; what `DynamicRun::with_asymmetry` makes). A checkpoint or a
-    /// hand-edited value outside it is not divided by.
+    /// [`Self::thrust_asymmetry`] when usable, else 0: finite and in [0,
+    /// [`MAX_THRUST_ASYMMETRY`]] (what `DynamicRun::with_asymmetry` makes). A checkpoint's
+    /// value outside it is not divided by.
     pub fn asymmetry(&self) -> f64 {
         let k = self.thrust_asymmetry;
-        if k.is_finite() && (0.0..=0.9).contains(&k) {
+        if k.is_finite() && (0.0..=MAX_THRUST_ASYMMETRY).contains(&k) {
             k
         } else {
             0.0
         }
     }
-}
-
-impl DynamicTerms {
     /// Coefficient and standard error of term `name` on DOF row `row`.
     pub fn get(&self, row: usize, name: &str) -> Option<(f64, f64)> {
         let j = regressors::TERM_NAMES.iter().position(|n| *n == name)?;
@@ -361,14 +362,14 @@ impl DynamicRun {
     /// thruster's asymmetry into its gain: the gain came out (f + r) / 2 x (1 + k q), q =
     /// (a - 1) / (a + 1), 1.5 % low on T200-like thrusters and 3 % on ones with 60 % reverse
     /// (docs/study.md, "Where the one column's 1.5-3 % comes from"). Ratios outside (0, 1]
-    /// are taken as 1.
+    /// are taken as 1; k is at most [`MAX_THRUST_ASYMMETRY`].
     pub fn with_asymmetry(mut self, reverse_ratio: f64) -> Self {
         let a = if reverse_ratio > 0.0 && reverse_ratio <= 1.0 {
             reverse_ratio
         } else {
             1.0
         };
-        self.asymmetry = (1.0 - a) / (1.0 + a);
+        self.asymmetry = ((1.0 - a) / (1.0 + a)).min(MAX_THRUST_ASYMMETRY);
         self
     }
 

@@ -157,6 +157,29 @@ mod tests {
     use super::super::lag_search::profile_score;
     use super::*;
 
+    /// The asymmetry from a reverse ratio, kept within what the model's users divide by, and
+    /// carried through a refit from the log (the lag search's and the IMU check's fits).
+    #[test]
+    fn the_thrust_asymmetry_is_bounded_and_refits_keep_it() {
+        let new = |r: f64| {
+            DynamicRun::new(3, 0.1, 1.0, &Vector3::z(), DepthAid::default()).with_asymmetry(r)
+        };
+        assert!((new(0.78).asymmetry - 0.22 / 1.78).abs() < 1e-15);
+        assert_eq!(new(0.01).asymmetry, super::super::MAX_THRUST_ASYMMETRY);
+        assert_eq!(new(1.5).asymmetry, 0.0);
+        assert_eq!(new(f64::NAN).asymmetry, 0.0);
+        let run = logged_run().with_asymmetry(0.6);
+        let refit = run.refit(&[0.12]).expect("a log");
+        assert_eq!(refit.asymmetry, 0.25);
+        assert_eq!(
+            refit
+                .solve(&[1e-3; 6], 0.0, 0.0, None)
+                .terms
+                .thrust_asymmetry,
+            0.25
+        );
+    }
+
     /// Three thrusters, 7.25 s: seven 1 s segments closed, the last left open.
     fn logged_run() -> DynamicRun {
         super::super::lag_search::tests::logged_run(3, 0.1, 1450)
