@@ -412,10 +412,13 @@ impl Estimator {
             } else {
                 run
             }
-        } else if open_loop && self.cfg.shaped_thrust {
-            DynamicRun::new(n, lag, segment, &rest, aid).with_asymmetry(self.cfg.reverse_ratio)
         } else {
-            DynamicRun::new(n, lag, segment, &rest, aid)
+            let run = DynamicRun::new(n, lag, segment, &rest, aid);
+            if open_loop && self.cfg.shaped_thrust {
+                run.with_asymmetry(self.cfg.reverse_ratio)
+            } else {
+                run
+            }
         };
         // The open-loop estimation only: the log keeps one command per pulse, split or not
         // (under control the command changes every sample; there the lag is the model's,
