@@ -6,7 +6,8 @@
 
 mod common;
 use common::{
-    env_list, rotate_while_holding_in, rotate_while_holding_with, vehicle, Reestimation, Run,
+    env_list, rotate_while_holding_in, rotate_while_holding_on, rotate_while_holding_with, vehicle,
+    Reestimation, Run,
 };
 use thruster_sim::NoisePreset;
 use thrusterd_core::adaptation::identification::IdentificationConfig;
@@ -98,22 +99,23 @@ fn a_change_announced_for_the_wrong_thruster_is_not_pinned_on_the_old_column() {
 
 /// Without some dither on the thrusters the prior covers, their commands are the controller's
 /// reaction to the motion alone, confounded with the damping and restoring terms: noise-free
-/// the fit then ended 0.034 / 0.048 off the truth after 9 s (0.005 / 0.016 after 5 s with 0.1
-/// of the amplitude; re-measured 2026-11-30 with the geometry announced from the centre of
-/// mass: before, 0.016 / 0.095 and 0.004 / 0.010).
+/// the fit then ended 0.037 / 0.025 off the truth after 9 s, against 0.003 / 0.008 after 5 s
+/// with 0.1 of the amplitude (re-measured 2026-12-01 with the fit's lags started where the
+/// thrusters are; before, 0.034 / 0.048 and 0.005 / 0.016).
 #[test]
 fn noise_free_the_thrusters_the_prior_covers_keep_some_dither() {
     let none = IdentificationConfig {
         focus_others: 0.0,
         ..IdentificationConfig::default()
     };
-    let (_, r) = rotate_while_holding_with(NoisePreset::None, 1, Some(none), |_, _| {});
-    assert!(
-        r.err_acc > 0.04 && r.err_rot > 0.02,
-        "no dither on the others: {r:?}"
-    );
+    let (_, without) = rotate_while_holding_with(NoisePreset::None, 1, Some(none), |_, _| {});
     let (_, r) = rotate_while_holding(NoisePreset::None, 1);
+    println!("no dither on the others: {without:?}\nthe default: {r:?}");
     assert!(r.err_rot < 0.01 && r.err_acc < 0.02, "{r:?}");
+    assert!(
+        without.err_rot > 0.02 && without.err_rot > 4.0 * r.err_rot,
+        "no dither on the others: {without:?}"
+    );
 }
 
 /// The identification is a state of its own, thrusters driven throughout (never neutral),
@@ -279,19 +281,18 @@ fn coverage(run: &Run, r: &Reestimation) -> (f64, f64) {
 
 /// In rough water (current 0.5 m/s, a 0.15 Hz swell of 20 N and 2 Nm) AMOUR-5 cannot be held
 /// within the identification's attitude budget: the dither fades out and the commands are
-/// mostly the controller answering the swell (dither share 0.11, the held vehicle's sea state
-/// 16.5 deg RMS). Without the share check (seeds 1-5, the geometry announced from the centre
-/// of mass, re-measured 2026-11-30):
-/// - by least squares (`instrument = never`) at a realistic IMU the fit takes that answer for
-///   thrust: 4 of 5 models 0.41-0.64 / 0.56-0.81 off the truth under bounds of 0.09-0.14 /
-///   0.15-0.24 (noise-free it is refused for confidence, bound 0.31);
-/// - with the dither as the thrust's instrument (the default in a sea) noise-free it is 0.024
-///   / 0.024 within its bound, but at a realistic IMU 0.10-0.14 / 0.04-0.12 under bounds of
-///   0.04-0.09 (up to 2.9x: the terms, their own instruments, still take the swell);
+/// mostly the controller answering the swell (dither share 0.11-0.19, the held vehicle's sea
+/// state 16.5 deg RMS). Without the share check (seeds 1-5, re-measured 2026-12-01 with the
+/// fit's lags started where the thrusters are, `estimator::dynamic::spin_state`):
+/// - noise-free, by least squares (`instrument = never`) 0.079 / 0.034 under a bound of
+///   0.039 / 0.027 (2.0x), instrumented 0.037 / 0.014 under 0.024 / 0.051 (1.5x);
+/// - at a realistic IMU least squares is within its bound (at most 1.14x; before the lags
+///   started spun up it was 4 of 5 models 0.41-0.64 off under bounds of 0.09-0.14), the
+///   instrumented fit swaps in seed 5 at 0.073 / 0.064 under 0.039 / 0.083 (1.9x);
 ///
 /// so the share check stays: the model is refused with the reason (once in the 120 s), the
 /// nominal model of the announced geometry stays and the machine keeps holding.
-/// docs/study.md, "Under control in moving water".
+/// docs/study.md, "Under control in moving water" and "The under-control fit's floor".
 #[test]
 fn in_rough_water_the_model_the_controller_made_is_refused_and_holding_goes_on() {
     use thruster_sim::disturbance::WaterPreset;
@@ -320,107 +321,76 @@ fn in_rough_water_the_model_the_controller_made_is_refused_and_holding_goes_on()
             }),
         "{refusals:?}"
     );
-    // The decisive runs, without the check: by least squares (realistic IMU) the model is far
-    // outside its own bound; instrumented, noise-free, within it or refused.
+    // The decisive run, without the check: noise-free, by least squares, the fit takes the
+    // controller's answer to the swell for thrust and swaps in a model twice outside its
+    // own bound (measured 0.079 / 0.034 under 0.039 / 0.027).
     let unchecked = IdentificationConfig {
         min_dither_share: 0.0,
+        instrument: Instrument::Never,
         ..IdentificationConfig::default()
     };
-    let least_squares = IdentificationConfig {
-        instrument: Instrument::Never,
-        ..unchecked.clone()
-    };
-    let (run, r) = rotate_while_holding_in(
-        NoisePreset::Realistic,
-        1,
-        Some(least_squares),
-        rough(),
-        |_, _| {},
-    );
-    assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
-    assert!(r.err_rot > 0.3 && r.err_acc > 0.3, "{r:?}");
-    let (rot, acc) = coverage(&run, &r);
-    assert!(
-        rot > 2.0 && acc > 2.0,
-        "{r:?}: error / bound {rot:.2} / {acc:.2}"
-    );
-    // Instrumented and unchecked, nothing confidently wrong gets in either: measured, its
-    // acceleration bound says 53 % (the IMU position's share: the rotation rows' terms are
-    // loose) and the model is refused for confidence.
     let (run, r) =
         rotate_while_holding_in(NoisePreset::None, 1, Some(unchecked), rough(), |_, _| {});
-    if r.source == ModelSource::Estimated {
-        let (rot, acc) = coverage(&run, &r);
-        assert!(
-            rot <= 1.5 && acc <= 1.5,
-            "{r:?}: error / bound {rot:.2} / {acc:.2}"
-        );
-    } else {
-        assert!(
-            run.machine
-                .status()
-                .text
-                .contains("model confidence too low"),
-            "{}",
-            run.machine.status().text
-        );
-    }
+    assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
+    let (rot, acc) = coverage(&run, &r);
+    assert!(
+        rot.max(acc) > 1.5,
+        "{r:?}: error / bound {rot:.2} / {acc:.2}"
+    );
 }
 
-/// In moderate water (current 0.3 m/s, a 0.15 Hz swell of 10 N / 1 Nm) AMOUR-5 holds within
-/// its budget, the dither is 84-89 % of the commands, and the least-squares fit still takes the
-/// controller's answer to the swell for thrust. With the dither as the thrust's instrument
-/// (the default when the held vehicle swung more than 3 deg RMS) the model comes much closer.
-/// Error / bound, the geometry announced from the centre of mass as a driver does (re-measured
-/// 2026-11-30): noise-free 2.79 by least squares, 1.69 instrumented (0.027 / 0.018: issue 32's
-/// 1.5 is not met noise-free); at a realistic IMU, seed 5, 2.08 and 0.54, and over seeds 1-10
-/// instrumented at most 1.28 in 5-6 s. docs/study.md, "Under control in moving water".
+/// In moderate water (current 0.3 m/s, a 0.15 Hz swell of 10 N / 1 Nm) the vehicle holds within
+/// its budget and the dither is 84-89 % of the commands. With the dither as the thrust's
+/// instrument (the default when the held vehicle swung more than 3 deg RMS) the model is
+/// within issue 32's 1.5x of its bound. Error / bound, seeds 1-5 (re-measured 2026-12-01, the
+/// fit's lags started where the thrusters are, `estimator::dynamic::spin_state`; before, with
+/// the lags from rest: AMOUR-5 1.69 noise-free, eight_vectored 2.03): AMOUR-5 noise-free 1.25
+/// (0.015 / 0.014), realistic at most 1.00; eight_vectored noise-free 0.81. By least squares
+/// AMOUR-5 is within its bound too now (noise-free 1.15: most of its old 2.8x was the lags
+/// started from rest), but eight_vectored noise-free is not (0.048 / 0.033, 2.29x): the
+/// instrument stays. docs/study.md, "The under-control fit's floor".
 #[test]
 fn in_moderate_water_the_instrumented_identification_stays_within_its_bound() {
     use thruster_sim::disturbance::WaterPreset;
     use thrusterd_core::adaptation::identification::Instrument;
     let moderate = || Some(WaterPreset::Moderate.disturbance());
-    let least_squares = IdentificationConfig {
-        instrument: Instrument::Never,
-        ..IdentificationConfig::default()
-    };
-    for (noise, seed, limit) in [
-        (NoisePreset::None, 1, 1.8),
-        (NoisePreset::Realistic, 5, 1.5),
-    ] {
+    for (noise, seed) in [(NoisePreset::None, 1), (NoisePreset::Realistic, 5)] {
         let (run, r) = rotate_while_holding_in(noise, seed, None, moderate(), |_, _| {});
         assert_eq!(r.source, ModelSource::Estimated, "{noise:?} {seed}: {r:?}");
-        assert!(
-            run.machine
-                .status()
-                .text
-                .contains("the dither as the thrust's instrument"),
-            "{}",
-            run.machine.status().text
-        );
+        // (Where the instrument and least squares agree, least squares is kept and the status
+        // does not name the instrument: AMOUR-5 here, since the lags start spun up.)
+        println!("{noise:?} {seed}: {r:?}: {}", run.machine.status().text);
         let (rot, acc) = coverage(&run, &r);
         assert!(
-            rot <= limit && acc <= limit,
+            rot <= 1.5 && acc <= 1.5,
             "{noise:?} {seed}: {r:?}: error / bound {rot:.2} / {acc:.2}"
         );
         assert!(
             r.err_rot < 0.03 && r.err_acc < 0.03,
             "{noise:?} {seed}: {r:?}"
         );
-        assert!(r.took_s <= 8.0, "{noise:?} {seed}: {r:?}");
-        let (run, r) = rotate_while_holding_in(
-            noise,
-            seed,
-            Some(least_squares.clone()),
-            moderate(),
-            |_, _| {},
-        );
-        let (rot, acc) = coverage(&run, &r);
-        assert!(
-            rot.max(acc) > 1.8,
-            "least squares {noise:?} {seed}: {r:?}: error / bound {rot:.2} / {acc:.2}"
-        );
+        assert!(r.took_s <= 6.0, "{noise:?} {seed}: {r:?}");
     }
+    // eight_vectored noise-free: instrumented within its bound, by least squares outside.
+    let v = vehicle("eight_vectored");
+    let least_squares = IdentificationConfig {
+        instrument: Instrument::Never,
+        ..IdentificationConfig::default()
+    };
+    let mut coverages = Vec::new();
+    for identification in [IdentificationConfig::default(), least_squares] {
+        let mut run = Run::new("eight_vectored", NoisePreset::None, 1);
+        run.with_identification(identification);
+        let (run, r) = rotate_while_holding_on(run, &v, moderate(), |_, _| {});
+        assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
+        let (rot, acc) = coverage(&run, &r);
+        println!("eight_vectored: {r:?}: error / bound {rot:.2} / {acc:.2}");
+        coverages.push(rot.max(acc));
+    }
+    assert!(
+        coverages[0] <= 1.5 && coverages[1] > 1.8,
+        "instrumented, least squares: {coverages:?}"
+    );
 }
 
 /// After an announced change the model in force is the new geometry's nominal one, which

@@ -36,6 +36,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thruster_protocol::MAX_THRUSTERS;
 
 use crate::adaptation::identification::Dither;
+use crate::estimator::dynamic::spin_state::{lags_for_fit, SpinState};
 use crate::estimator::response::GRAVITY;
 use crate::estimator::{Estimate, Estimator};
 use crate::estimator::{EstimatorConfig, Method, NoiseLevels};
@@ -137,6 +138,10 @@ pub struct Refiner {
     exceeded: [bool; MAX_THRUSTERS],
     /// The per-sample change test (built even when off: it allocates only here).
     change: ChangeTest,
+    /// The commands sent through the windows' lags: where a window's lags start (a window
+    /// started from rest was 1-2 % off noise-free; `estimator::dynamic::spin_state`).
+    #[serde(default)]
+    spin: SpinState,
     /// A window's fit (~1 ms) is a job, not a control tick's work (`crate::solve`); its result
     /// is judged at the first tick at or after its due time.
     solver: Solver,
@@ -173,6 +178,7 @@ impl Refiner {
             refined: None,
             exceeded: [false; MAX_THRUSTERS],
             solver: Solver::new(0.0, REFINEMENT),
+            spin: SpinState::default(),
         }
     }
 
@@ -249,6 +255,12 @@ impl Refiner {
         }
     }
 
+    /// The commands sent through the windows' lags, as of the last tick (an identification
+    /// under control starts its own from it).
+    pub fn spin_state(&self) -> &SpinState {
+        &self.spin
+    }
+
     /// The last window's verdict, if any.
     pub fn last(&self) -> Option<&WindowVerdict> {
         self.last.as_ref()
@@ -273,6 +285,30 @@ impl Refiner {
         if !self.cfg.enabled || est_cfg.method != Method::Dynamic {
             return None;
         }
+        // The thrusters' state through the lags the windows fit with, up to now; a window
+        // opening now starts from it.
+        let n = command.len().min(model.thrusters()).min(MAX_THRUSTERS);
+        let lags = lags_for_fit(
+            n,
+            est_cfg.spin_up_s,
+            model.learned_spin_up_s(),
+            model.learned_thruster_lags(),
+        );
+        self.spin.advance_to(tick.t_ns as f64 * 1e-9, &lags[..n]);
+        let verdict = self.observe_sent(tick, model, levels, est_cfg, command);
+        self.spin.hold(&command[..n]);
+        verdict
+    }
+
+    /// [`Refiner::observe`] but for the thrusters' state: the windows, then the change test.
+    fn observe_sent(
+        &mut self,
+        tick: &Tick,
+        model: &Model,
+        levels: Option<NoiseLevels>,
+        est_cfg: &EstimatorConfig,
+        command: &mut [f64],
+    ) -> Option<WindowVerdict> {
         let verdict = self.observe_window(tick, model, levels, est_cfg, command);
         if !self.cfg.change_test || verdict.is_some_and(|v| v.changed) {
             return verdict;
@@ -358,7 +394,7 @@ impl Refiner {
                 if settled_s < SETTLE_S {
                     return None;
                 }
-                self.window = Some(open_window(tick, n, levels, est_cfg, model));
+                self.window = Some(open_window(tick, n, levels, est_cfg, model, &self.spin));
                 let w = self.window.as_mut()?;
                 w.sent[..n].copy_from_slice(&command[..n]);
                 return None;
@@ -468,6 +504,7 @@ fn open_window(
     levels: Option<NoiseLevels>,
     est_cfg: &EstimatorConfig,
     model: &Model,
+    spin: &SpinState,
 ) -> Window {
     // The specific force a vehicle at rest in this attitude would read: the navigation starts
     // from the attitude filter's attitude instead of a rest.
@@ -493,6 +530,8 @@ fn open_window(
         None => est.with_configured_imu_position(),
     };
     est.begin_closed_loop();
+    // The thrusters are running: the lags start where the commands sent have them.
+    est.start_spun_up(spin);
     Window {
         est,
         start_ns: tick.t_ns,

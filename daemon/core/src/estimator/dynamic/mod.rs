@@ -21,6 +21,7 @@ pub mod regressors;
 pub mod sample_log;
 pub mod segment_basis;
 pub mod segmented_ls;
+pub mod spin_state;
 pub mod thrust_curve;
 pub mod thrust_shape;
 pub mod thruster_lags;
@@ -191,6 +192,10 @@ pub struct DynamicRun {
     slope_prev: Option<([f64; TERMS], f64)>,
     direct: Vec<f64>,
     last_t_s: Option<f64>,
+    /// The time the lags were started spun up at (`spin_state`; None: from rest): the first
+    /// sample runs them on from there.
+    #[serde(default)]
+    spun_up_at_s: Option<f64>,
     segment_start_s: f64,
     rot: SegmentedLs,
     acc: SegmentedLs,
@@ -285,6 +290,7 @@ impl DynamicRun {
             slope_prev: None,
             direct: vec![0.0; k],
             last_t_s: None,
+            spun_up_at_s: None,
             segment_start_s: 0.0,
             rot: SegmentedLs::new(k),
             acc: SegmentedLs::new(k),
@@ -460,6 +466,11 @@ impl DynamicRun {
         z: Option<&[f64]>,
     ) {
         let dt = self.last_t_s.map(|t0| (t_s - t0).min(0.1)).unwrap_or(0.0);
+        // The lags run from the last sample, or from where they were started spun up.
+        let lag_dt = match (self.last_t_s, self.spun_up_at_s) {
+            (None, Some(t0)) => (t_s - t0).clamp(0.0, 0.1),
+            _ => dt,
+        };
         self.lag_prev.copy_from_slice(&self.lag);
         if let Some(iv) = self.iv.as_mut() {
             iv.lag_prev.copy_from_slice(&iv.lag);
@@ -471,7 +482,7 @@ impl DynamicRun {
         for i in 0..n {
             let lag_s = self.lags[i];
             let a = if lag_s > 0.0 {
-                1.0 - (-dt / lag_s).exp()
+                1.0 - (-lag_dt / lag_s).exp()
             } else {
                 1.0
             };

@@ -5,6 +5,7 @@ use nalgebra::Vector3;
 
 use super::{Estimate, Estimator, StopDecision};
 use crate::estimator::config::Method;
+use crate::estimator::dynamic::spin_state::SpinState;
 use crate::estimator::dynamic::thrust_curve::ThrustCurveProbe;
 
 impl Estimator {
@@ -22,6 +23,16 @@ impl Estimator {
         self.dynamic = Some(self.dynamic_run(true, false));
         self.thrust_curve = None;
         true
+    }
+
+    /// Start the fit's thrust lags from the thrusters' state under control, tracked from the
+    /// commands sent (`dynamic::spin_state`), instead of from rest. After `begin_closed_loop`,
+    /// before the first sample; the state's lags must be this fit's
+    /// (`spin_state::lags_for_fit`).
+    pub fn start_spun_up(&mut self, state: &SpinState) {
+        if let Some(run) = self.dynamic.as_mut() {
+            run.start_spun_up(state);
+        }
     }
 
     /// [`Self::begin_closed_loop`] with the thrust columns fitted by instrumental variables:

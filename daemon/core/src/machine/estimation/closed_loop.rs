@@ -8,6 +8,7 @@ use thruster_protocol::MAX_THRUSTERS;
 
 use super::{EstimationRun, Motion};
 use crate::adaptation::identification::{Dither, IdentificationConfig};
+use crate::estimator::dynamic::spin_state::{lags_for_fit, SpinState};
 use crate::estimator::Method;
 use crate::machine::config::MachineSetup;
 use crate::model::Model;
@@ -39,6 +40,10 @@ pub(in crate::machine) struct ClosedLoop {
     /// (`IdentificationConfig::instrument`).
     #[serde(default)]
     instrumented: bool,
+    /// The commands sent through the fit's lags (`estimator::dynamic::spin_state`): the
+    /// thrusters are running when the fit starts, and its lags start where they are.
+    #[serde(default)]
+    spin: SpinState,
 }
 
 /// The dither against the controller's own command over an identification: how much of the
@@ -113,6 +118,7 @@ impl EstimationRun {
         t_ns: u64,
         cfg: &IdentificationConfig,
         n: usize,
+        spin: SpinState,
     ) {
         self.restart();
         self.closed = Some(ClosedLoop {
@@ -126,6 +132,7 @@ impl EstimationRun {
             amplitude: cfg.dither,
             excitation: Excitation::default(),
             instrumented: false,
+            spin,
         });
     }
 
@@ -161,16 +168,31 @@ impl EstimationRun {
         n: usize,
         command: &mut [f64],
     ) -> ClosedStep {
+        // The lag the model in force learned, if it did (its own run learned it open loop),
+        // or the learned model a carried-over prior came from (after an announced change
+        // the model in force is the new geometry's nominal one).
+        let prior = self.prior.as_ref();
+        let lag = model
+            .and_then(|m| m.learned_spin_up_s())
+            .or(prior.and_then(|p| p.spin_up_s));
+        let lags = model
+            .and_then(|m| m.learned_thruster_lags())
+            .or(prior.map(|p| p.thruster_lags_s.as_slice()))
+            .filter(|l| !l.is_empty());
+        let k = command.len().min(MAX_THRUSTERS);
+        let fit_lags = lags_for_fit(k, setup.estimator.spin_up_s, lag, lags);
         let Some(c) = self.closed.as_mut() else {
             return ClosedStep::Holding;
         };
         let t_s = t_ns as f64 * 1e-9;
+        c.spin.advance_to(t_s, &fit_lags[..k]);
         let Some(excite_from) = c.excite_from_ns else {
             // Holding: the rest (starting attitude and vertical velocity) and the noise.
             self.noise.push(&m.gyro.into(), &m.accel.into());
             let held_s = t_ns.saturating_sub(c.start_ns) as f64 * 1e-9;
             self.rest.push_held(m, held_s);
             c.sent[..command.len()].copy_from_slice(command);
+            c.spin.hold(command);
             if held_s < setup.machine.noise_s || self.noise.samples() < super::MIN_REST_SAMPLES {
                 return ClosedStep::Holding;
             }
@@ -180,20 +202,10 @@ impl EstimationRun {
             let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
             c.amplitude = setup.identification.amplitude(levels.sigma_rot());
             let mut est = self.new_estimator(setup.estimator.clone(), n, levels, model);
-            // The lag the model in force learned, if it did (its own run learned it open loop),
-            // or the learned model a carried-over prior came from (after an announced change
-            // the model in force is the new geometry's nominal one).
-            let prior = self.prior.as_ref();
-            let lag = model
-                .and_then(|m| m.learned_spin_up_s())
-                .or(prior.and_then(|p| p.spin_up_s));
             if let Some(lag_s) = lag {
                 est = est.with_learned_lag(lag_s);
             }
-            let lags = model
-                .and_then(|m| m.learned_thruster_lags())
-                .or(prior.map(|p| p.thruster_lags_s.as_slice()));
-            if let Some(lags) = lags.filter(|l| !l.is_empty()) {
+            if let Some(lags) = lags {
                 est = est.with_learned_thruster_lags(lags);
             }
             // The IMU did not move with the thrusters: where the model in force (or the prior's)
@@ -216,6 +228,9 @@ impl EstimationRun {
                 est.begin_instrumented_closed_loop();
             } else {
                 est.begin_closed_loop();
+            }
+            if let Some(c) = self.closed.as_ref() {
+                est.start_spun_up(&c.spin);
             }
             if ident.max_curve_evidence > 0.0 {
                 est.probe_thrust_curve();
@@ -244,6 +259,7 @@ impl EstimationRun {
             .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
         c.excitation.push(&control[..k], command);
         c.sent[..k].copy_from_slice(command);
+        c.spin.hold(command);
         if instrumented {
             c.dither
                 .instruments(setup.estimator.reverse_ratio, &mut c.sent_dither[..k]);

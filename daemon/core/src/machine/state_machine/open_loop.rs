@@ -46,8 +46,11 @@ impl Machine {
             && EstimationRun::closed_loop_possible(&self.setup)
         {
             self.levelling = None;
+            // The thrusters' state the refinement tracked while holding: the fit's lags
+            // start from it even when the hold before the dither is short.
+            let spin = self.refiner.spin_state().clone();
             self.run
-                .begin_closed_loop(t_ns, &self.setup.identification, self.n);
+                .begin_closed_loop(t_ns, &self.setup.identification, self.n, spin);
             self.run.carry(prior, &self.setup.identification);
             self.transition(
                 State::Identify,

@@ -16,6 +16,7 @@ mod refinement;
 mod refinement_update;
 mod silent_change;
 mod time_to_model;
+mod window_floor;
 
 #[derive(Args, Debug)]
 pub struct SweepArgs {
@@ -168,6 +169,12 @@ pub const SWEEPS: &[Sweep] = &[
         knobs: "SC_*",
         about: "every detector as shipped, in moving water: false alarms, then a rotated thruster",
         run: silent_change::silent_change_in_water,
+    },
+    Sweep {
+        name: "window_floor",
+        knobs: "WF_*",
+        about: "the under-control fit against the truth, noise-free, thrusters made ideal one way at a time",
+        run: window_floor::window_floor,
     },
 ];
 

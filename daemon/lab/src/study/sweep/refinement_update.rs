@@ -76,8 +76,8 @@ pub(super) fn update_sweep() {
 /// The measuring tool behind the settings (prints, asserts nothing; run with `--ignored
 /// --nocapture`): `RU_VEHICLES` (comma-separated) narrows the list, `RU_DITHER`, `RU_DRIFT`,
 /// `RU_FLOOR`, `RU_INFLATE`, `RU_SCALE` set the refinement's dither, drift per sqrt(s),
-/// window floor, inflation threshold and window standard-error scale; `RU_WINDOWS` prints
-/// each window's bound.
+/// window floor, inflation threshold and window standard-error scale; `RU_SHAPED` turns
+/// `estimator.shaped_thrust` on; `RU_WINDOWS` prints each window's bound.
 pub(super) fn every_vehicle_sweep_with_settings_from_the_environment() {
     let num = |k: &str| {
         std::env::var(k).ok().map(|v| {
@@ -101,6 +101,9 @@ pub(super) fn every_vehicle_sweep_with_settings_from_the_environment() {
         }
         if let Some(v) = num("RU_SCALE") {
             r.window_se_scale = v;
+        }
+        if std::env::var_os("RU_SHAPED").is_some() {
+            setup.estimator.shaped_thrust = true;
         }
     };
     let only = std::env::var("RU_VEHICLES").ok();
