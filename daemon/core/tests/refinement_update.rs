@@ -46,9 +46,10 @@ fn a_thruster_losing_30_percent_in_a_minute_is_followed_without_a_re_estimation(
 
 /// On an unchanged vehicle the updates may not make the model worse: with a realistic IMU the
 /// rotation rows end no worse than they started. Measured (`cargo test -p thrusterd-core
-/// --test refinement_update -- --nocapture an_unchanged`): rotation 0.016 -> 0.008 and
-/// 0.010 -> 0.007 after 180 s, 35 updates, acceleration rows 0.016-0.017; bounds at 1.5x the
-/// worst seed: 0.012 rotation, 0.025 acceleration. At the paper's noise no
+/// --test refinement_update -- --nocapture an_unchanged`): rotation 0.016 -> 0.003 and
+/// 0.012 -> 0.004 after 180 s, 35 updates, acceleration rows 0.013 (2026-12-01, the windows'
+/// lags started spun up; before, 0.016 -> 0.008 and 0.012 -> 0.007, acceleration 0.015-0.017);
+/// bounds at 1.5x the worst seed: 0.006 rotation, 0.02 acceleration. At the paper's noise no
 /// window is confident enough to update it (windows end at their 0.15 bound, above
 /// `update_rel_err`), so the model stays as learned.
 #[test]
@@ -60,7 +61,7 @@ fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
         assert_eq!(r.mismatches, 0, "seed {seed}: {r:?}");
         assert!(r.refinements >= 20, "seed {seed}: {r:?}");
         assert!(
-            r.err_rot <= 0.012 && r.err_acc <= 0.025,
+            r.err_rot <= 0.006 && r.err_acc <= 0.02,
             "seed {seed}: {r:?}"
         );
         assert!(r.err_rot <= r.err_rot_start, "seed {seed}: worse: {r:?}");
@@ -85,9 +86,12 @@ fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
 }
 
 /// Noise-free, every vehicle file, 60 s of pitch steps with the default updates: the model
-/// stays near the truth. Measured (`cargo test -p thrusterd-core --test refinement_update --
-/// --nocapture every_vehicle_noise_free`): 0.006-0.016 rotation, 0.003-0.016 acceleration,
-/// from 0.013-0.016 at the start; bound 0.025 (1.5x the worst, 0.016). The first fusion, which weighed windows by their own
+/// goes to the truth. Measured (`cargo test -p thrusterd-core --test refinement_update --
+/// --nocapture every_vehicle_noise_free`): from 0.013-0.016 at the start to 0.002-0.003
+/// rotation, 0.003-0.005 acceleration (four_up: 0.014 / 0.005, its open yaw, below); bounds
+/// at about 1.5x the worst: 0.005 / 0.008, four_up 0.021. Before the windows' lags started
+/// spun up (2026-12-01) it was 0.006-0.017 / 0.003-0.017: the windows' own floor. The first
+/// fusion, which weighed windows by their own
 /// standard errors and let entries drift 0.01 per sqrt(s), took eight_vectored from 0.015 to
 /// 0.066 here (docs/experiments.md). `--nocapture` prints each vehicle. No environment
 /// variable changes this test: the sweeps with other settings are
@@ -96,7 +100,8 @@ fn an_unchanged_vehicle_keeps_its_model_within_bounds() {
 #[test]
 fn every_vehicle_noise_free_sweep() {
     for (name, r, what) in every_vehicle(None, &|_| {}) {
-        assert!(r.err_rot <= 0.025 && r.err_acc <= 0.025, "{what}");
+        let rot = if name == "four_up" { 0.021 } else { 0.005 };
+        assert!(r.err_rot <= rot && r.err_acc <= 0.008, "{what}");
         // four_up: 2 refinements since the window fits became solve jobs due 20 ms after
         // their decision point (11 before). The cause, found since: no thruster of four_up
         // turns it in yaw, the yaw drifts (22 deg in 60 s at the 20 ms budget, 11 deg at 0),
