@@ -19,7 +19,8 @@ use thrusterd_core::estimator::{Estimator, EstimatorConfig, NoiseLevels};
 /// open-loop estimation fits the thrust's shape (`estimator.shaped_thrust`), `WF_NOISE`
 /// (none|realistic|paper, default none), `WF_SEED` (default 1), `WF_DVL=1` the fit is given
 /// the true body velocity at every sample (a perfect DVL: the decisive run for the
-/// navigation's share), `WF_TRUE_THRUST=1` the simulator's thrust at every sample in place of
+/// navigation's share), `WF_DVL_START=1` the true velocity at the window's start only,
+/// `WF_TRUE_THRUST=1` the simulator's thrust at every sample in place of
 /// the commands and their lag (the decisive run for the thrust's share), `WF_COLD=1` each
 /// window's lags start from rest (as before `SpinState`), `WF_OPEN=a` pseudo-random commands
 /// within +-a in place of the controller's, `WF_DITHER` the refinement's dither, `WF_RATE` the
@@ -151,6 +152,9 @@ fn fly(
     let mut sent = vec![0.0; n];
     let mut step = 0;
     let true_thrust = std::env::var_os("WF_TRUE_THRUST").is_some();
+    // The true velocity at the window's first samples only (its start; the decisive run for a
+    // window that starts from a known velocity).
+    let dvl_start = std::env::var_os("WF_DVL_START").is_some();
     // Each window's lags start from rest, as before the spin state (the counterfactual).
     let cold = std::env::var_os("WF_COLD").is_some();
     let mut spin = SpinState::default();
@@ -174,7 +178,8 @@ fn fly(
         let gyro = Vector3::from(input.gyro);
         let accel = Vector3::from(input.accel);
         match fit.as_mut() {
-            Some((est, _)) => {
+            Some((est, t0)) => {
+                let t0 = *t0;
                 if true_thrust {
                     // The thrust itself, in command units, at this sample: no lag to model.
                     let f = run.sim.thrusts_n();
@@ -184,7 +189,7 @@ fn fly(
                         *s = sign * f[i] / t.forward_max_n;
                     }
                 }
-                if dvl {
+                if dvl || (dvl_start && t_s - t0 < 0.02) {
                     est.push_velocity_fix(&run.sim.linear_velocity());
                 }
                 est.push_commanded_sample(t_s, &gyro, &accel, input.depth, &sent, None);
