@@ -343,6 +343,28 @@ fn change_test(c: &mut Criterion) {
     }
 }
 
+/// The refiner's and the identification's per-tick cost of knowing the thrusters' state: one
+/// advance of the commands sent through the fit's lags, and the hold of the next command
+/// (`estimator::dynamic::spin_state`), N = 8 and 16.
+fn spin_state(c: &mut Criterion) {
+    use thrusterd_core::estimator::dynamic::spin_state::{lags_for_fit, SpinState};
+    for n in [8usize, 16] {
+        let lags = lags_for_fit(n, 0.1, None, None);
+        let mut state = SpinState::default();
+        let mut t = 0.0;
+        let mut k = 0u64;
+        c.bench_with_input(BenchmarkId::new("spin_state_tick", n), &n, |b, _| {
+            b.iter(|| {
+                t += 0.005;
+                k += 1;
+                state.advance_to(black_box(t), &lags[..n]);
+                let u = if k % 2 == 0 { 0.4 } else { -0.3 };
+                state.hold(black_box(&[u; 16][..n]));
+            })
+        });
+    }
+}
+
 /// One refit of a logged run (the lag search's unit of work: ~22 per common lag, ~550 for a
 /// lag per thruster searched to the end), N = 8 and 16, 64 pulses of 20 samples: in full,
 /// and by a refitter that sums the lag-free terms' products once
@@ -377,5 +399,5 @@ fn refit(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench, change_test, refit);
+criterion_group!(benches, bench, change_test, refit, spin_state);
 criterion_main!(benches);
