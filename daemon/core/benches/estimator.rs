@@ -358,7 +358,7 @@ fn spin_state(c: &mut Criterion) {
                 t += 0.005;
                 k += 1;
                 state.advance_to(black_box(t), &lags[..n]);
-                let u = if k % 2 == 0 { 0.4 } else { -0.3 };
+                let u = if k.is_multiple_of(2) { 0.4 } else { -0.3 };
                 state.hold(black_box(&[u; 16][..n]));
             })
         });
