@@ -34,8 +34,8 @@ pub struct SpinState {
 
 impl SpinState {
     /// Runs the lags to `t_s` on the command held since the last call; `lags` are the
-    /// thrusters' time constants, s (one per thruster). A step back in time, or a gap over
-    /// 0.1 s (the fit's own largest step), moves nothing but the time.
+    /// thrusters' time constants, s (one per thruster). A gap counts as at most 0.1 s, as in
+    /// the fit itself; a step back in time moves nothing.
     pub fn advance_to(&mut self, t_s: f64, lags: &[f64]) {
         if let Some(t0) = self.at_s {
             let dt = (t_s - t0).min(0.1);
@@ -58,8 +58,8 @@ impl SpinState {
         }
     }
 
-    /// The command sent from now on (model units; a non-finite one holds as 0, as the
-    /// machine sends it).
+    /// The command sent from now on (model units), as the thrusters get it: within [-1, 1],
+    /// a non-finite one as 0 (the machine's last line of defence).
     pub fn hold(&mut self, sent: &[f64]) {
         let n = sent.len().min(MAX_THRUSTERS);
         for (h, u) in self.held[..n].iter_mut().zip(sent) {
