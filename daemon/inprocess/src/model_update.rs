@@ -70,14 +70,7 @@ pub fn fly_with(
     let mut windows = Vec::new();
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
-        if t >= 5.0 * step as f64 {
-            let p: f64 = [10.0, -10.0][step % 2];
-            run.machine.on_setpoint(
-                UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw),
-                Some(depth),
-            );
-            step += 1;
-        }
+        pitch_step(run, t, &mut step, yaw, depth);
         let due: Vec<_> = scenario.due((t * 1e9) as u64).to_vec();
         for e in due {
             run.sim.apply(&e.action).unwrap();
@@ -115,6 +108,19 @@ pub fn fly_with(
         refinements: m.refinements,
         mismatches,
         windows,
+    }
+}
+
+/// The refinement tests' manoeuvre, `t` s into it: a new pitch setpoint of +10 or -10 deg
+/// (alternating, heading `yaw`, depth `depth`) every 5 s; `step` counts the setpoints given.
+pub fn pitch_step(run: &mut Run, t: f64, step: &mut usize, yaw: f64, depth: f64) {
+    if t >= 5.0 * *step as f64 {
+        let p: f64 = [10.0, -10.0][*step % 2];
+        run.machine.on_setpoint(
+            UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw),
+            Some(depth),
+        );
+        *step += 1;
     }
 }
 

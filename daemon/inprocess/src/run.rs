@@ -57,11 +57,20 @@ pub struct Run {
 /// the processes: under control its model learned the small-signal gain of the raw curve
 /// (42 % under the truth).
 fn operator_setup(v: &Vehicle, setup: &mut MachineSetup) {
+    setup.machine.deadband = operator_deadband(v);
     if v.all_t200() {
-        setup.machine.deadband = 0.0;
         setup.supply.linearize = true;
+    }
+}
+
+/// The dead band the machine jumps for vehicle `v` as its operator configures it
+/// ([`operator_setup`]): 0.05 for power-law thrusters, none for T200s (their driver passes
+/// the command through their table's dead zone).
+pub fn operator_deadband(v: &Vehicle) -> f64 {
+    if v.all_t200() {
+        0.0
     } else {
-        setup.machine.deadband = 0.05;
+        0.05
     }
 }
 

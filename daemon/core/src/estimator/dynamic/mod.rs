@@ -35,6 +35,7 @@ use self::prior::{DynamicPrior, PriorEntry};
 use self::regressors::{terms, TERMS};
 use self::sample_log::{Navigated, SampleLog};
 use self::segmented_ls::{SegmentedLs, SegmentedSolution};
+use self::spin_state::{lag_step, MAX_LAG_STEP_S};
 use crate::navigation::{DepthAid, NavState, Navigator};
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
@@ -465,10 +466,13 @@ impl DynamicRun {
         u: Option<&[f64]>,
         z: Option<&[f64]>,
     ) {
-        let dt = self.last_t_s.map(|t0| (t_s - t0).min(0.1)).unwrap_or(0.0);
+        let dt = self
+            .last_t_s
+            .map(|t0| (t_s - t0).min(MAX_LAG_STEP_S))
+            .unwrap_or(0.0);
         // The lags run from the last sample, or from where they were started spun up.
         let lag_dt = match (self.last_t_s, self.spun_up_at_s) {
-            (None, Some(t0)) => (t_s - t0).clamp(0.0, 0.1),
+            (None, Some(t0)) => (t_s - t0).clamp(0.0, MAX_LAG_STEP_S),
             _ => dt,
         };
         self.lag_prev.copy_from_slice(&self.lag);
@@ -481,11 +485,7 @@ impl DynamicRun {
         let mixed = !self.abs_each.is_empty();
         for i in 0..n {
             let lag_s = self.lags[i];
-            let a = if lag_s > 0.0 {
-                1.0 - (-lag_dt / lag_s).exp()
-            } else {
-                1.0
-            };
+            let a = lag_step(lag_dt, lag_s);
             a_mean += a / n.max(1) as f64;
             let v = u.map_or(0.0, |u| u[i]);
             abs_target += v.abs();

@@ -38,15 +38,11 @@ impl SpinState {
     /// the fit itself; a step back in time moves nothing.
     pub fn advance_to(&mut self, t_s: f64, lags: &[f64]) {
         if let Some(t0) = self.at_s {
-            let dt = (t_s - t0).min(0.1);
+            let dt = (t_s - t0).min(MAX_LAG_STEP_S);
             if dt > 0.0 {
                 let n = lags.len().min(MAX_THRUSTERS);
                 for (i, &lag_s) in lags[..n].iter().enumerate() {
-                    let a = if lag_s > 0.0 {
-                        1.0 - (-dt / lag_s).exp()
-                    } else {
-                        1.0
-                    };
+                    let a = lag_step(dt, lag_s);
                     let u = self.held[i];
                     self.forward[i] += a * (u.max(0.0) - self.forward[i]);
                     self.reverse[i] += a * (u.min(0.0) - self.reverse[i]);
@@ -75,6 +71,20 @@ impl SpinState {
     /// The time the state is at, s (None before the first advance).
     pub fn at_s(&self) -> Option<f64> {
         self.at_s
+    }
+}
+
+/// The longest step a lag is run over at once, s: a longer gap between samples counts as this.
+pub(crate) const MAX_LAG_STEP_S: f64 = 0.1;
+
+/// The share of the way to its target a first-order lag of `lag_s` covers in `dt` (exact for
+/// a command held over the step; 1 without a lag). The fit and [`SpinState`] both step with
+/// it, so a fit started spun up holds the lag states of one that ran all along.
+pub(crate) fn lag_step(dt: f64, lag_s: f64) -> f64 {
+    if lag_s > 0.0 {
+        1.0 - (-dt / lag_s).exp()
+    } else {
+        1.0
     }
 }
 

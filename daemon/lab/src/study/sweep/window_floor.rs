@@ -5,8 +5,9 @@
 //! simulator's thrusters can be made ideal one property at a time, so the run names which of
 //! them the fit's ~1 % floor comes from (issue 29: the refinement dragging an exact model).
 
-use nalgebra::{UnitQuaternion, Vector3};
-use thruster_inprocess::run::{rel_err, vehicle, Run};
+use nalgebra::Vector3;
+use thruster_inprocess::model_update::pitch_step;
+use thruster_inprocess::run::{operator_deadband, rel_err, vehicle, Run};
 use thruster_sim::NoisePreset;
 use thrusterd_core::estimator::dynamic::spin_state::SpinState;
 use thrusterd_core::estimator::response::GRAVITY;
@@ -119,7 +120,7 @@ fn fly(
         // The model stays as learned: the windows are judged against the truth, not folded in.
         s.refinement.update = false;
     });
-    let deadband = run_deadband(&run);
+    let deadband = operator_deadband(run.sim.vehicle());
     run.run_for(1.0);
     run.estimate();
     run.machine.take_events();
@@ -164,14 +165,7 @@ fn fly(
         .map(|v| v.parse().expect("WF_OPEN"));
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
-        if t >= 5.0 * step as f64 {
-            let p: f64 = [10.0, -10.0][step % 2];
-            run.machine.on_setpoint(
-                UnitQuaternion::from_euler_angles(0.0, p.to_radians(), yaw),
-                Some(depth),
-            );
-            step += 1;
-        }
+        pitch_step(&mut run, t, &mut step, yaw, depth);
         let input = run.next_input();
         let t_s = input.t_ns as f64 * 1e-9;
         spin.advance_to(t_s, &lags);
@@ -264,13 +258,4 @@ fn fly(
         }
     }
     (model_err, windows)
-}
-
-/// The dead band the machine jumps for this vehicle (as `Run` configures it).
-fn run_deadband(run: &Run) -> f64 {
-    if run.sim.vehicle().all_t200() {
-        0.0
-    } else {
-        0.05
-    }
 }
