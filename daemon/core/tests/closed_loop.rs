@@ -436,59 +436,8 @@ fn after_an_announced_change_a_fast_thrusters_lag_is_kept() {
     assert!(r.err_rot < 0.03 && r.err_acc < 0.03, "{r:?}");
 }
 
-/// The other side of the refusal above: a vehicle that tumbles in still water on the nominal
-/// model of its announced geometry leaves no room for dither either, but nothing is known to
-/// have moved it while it was held (announced 3 s after its first model, still levelling), so
-/// the fit on the controller's fight is swapped in, and it is the model the vehicle needs.
-/// The tumble: `aligned`, its first thruster turned 45 deg and announced with its left-handed
-/// L declared right-handed (a mistake in the declaration: the harness made it for every
-/// `aligned` announcement until 2026-11-30, which is how this case was found). Measured,
-/// noise-free: the dither faded out (share 0.003), 0.076 / 0.033 off the truth after 8 s (the
-/// nominal model is 0.99 off). Refusing on the share alone kept the nominal model and the
-/// vehicle tumbling. Announced after 20 s of holding instead: sea state 0.72 deg RMS, share
-/// 0.60, 0.018 / 0.013 after 5 s.
-#[test]
-fn in_still_water_a_tumbling_vehicle_keeps_the_model_its_fight_made() {
-    use nalgebra::Vector3;
-    use thrusterd_core::machine::ThrusterChange;
-    let v = vehicle("aligned");
-    let mut run = Run::with_vehicle(v.clone(), NoisePreset::None, 1, 200.0);
-    run.run_for(1.0);
-    run.estimate();
-    // The change comes 3 s after the first model, the vehicle still levelling: the sea state
-    // is not known yet (5 s settling, then 5 s measured), and nothing is refused for it.
-    run.run_for(3.0);
-    assert_eq!(run.machine.sea_state_deg(), None);
-    let d = Vector3::from(v.thrusters[0].direction);
-    let across = if d.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let axis = d.cross(&across).normalize();
-    // What is declared: L pushing along its direction.
-    let mut declared = v.clone();
-    let l = declared.thrusters.iter().position(|t| t.reversed).unwrap();
-    declared.thrusters[l].reversed = false;
-    let mut share = None;
-    let r = run.announced_turn(
-        &declared,
-        0,
-        axis.into(),
-        45.0,
-        ThrusterChange::Moved(0),
-        |m, _| {
-            if let Some(x) = m.identification_excitation() {
-                share = Some(x.dither_share());
-            }
-        },
-    );
-    let share = share.expect("an identification ran");
-    println!("share {share:.3}: {r:?}");
-    assert!(share < 0.5, "the dither was faded out: share {share}");
-    assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
-    assert!(r.err_rot < 0.15 && r.err_acc < 0.1, "{r:?}");
-}
+// The other side of the refusal above, a vehicle tumbling in still water on a model that
+// cannot hold it: tests/fight_confirmation.rs.
 
 /// A silent change, found by the refinement while the vehicle flies +-20 deg pitch steps with a
 /// realistic IMU: the verdict names the thruster, so the re-estimation keeps the others'

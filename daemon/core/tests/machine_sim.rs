@@ -771,6 +771,7 @@ fn with_a_declared_geometry_the_pulses_are_as_strong_as_the_noise_needs() {
             supply_report_ns: None,
             next_report_ns: 0,
             truth_voltage_v: None,
+            perfect_dvl: false,
         };
         run.run_for(1.0);
         run.machine.on_request(Request::Estimate).unwrap();

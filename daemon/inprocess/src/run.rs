@@ -46,6 +46,10 @@ pub struct Run {
     /// linearizes its commands through the T200's table (a model learned that way describes
     /// the thrusters there, `model_truth` in the lab); None: the battery's present voltage.
     pub truth_voltage_v: Option<f64>,
+    /// The simulator's true body velocity handed to the machine at every sample, as a
+    /// perfect DVL would (the decisive run for the navigation's share of an error). Set by
+    /// measuring sweeps only (`ID_DVL` there).
+    pub perfect_dvl: bool,
 }
 
 /// The machine as the vehicle's operator configures it, with no driver between it and the
@@ -119,6 +123,7 @@ impl Run {
             last_mode: Mode::Neutral,
             max_abs_cmd: 0.0,
             latency_us: None,
+            perfect_dvl: false,
             supply_report_ns: None,
             next_report_ns: 0,
             truth_voltage_v: None,
@@ -158,6 +163,9 @@ impl Run {
                 self.machine.on_supply(Some(b.voltage_v()));
                 self.next_report_ns = input.t_ns + every;
             }
+        }
+        if self.perfect_dvl {
+            self.machine.on_dvl(self.sim.linear_velocity().into());
         }
         let cmd = self.machine.on_imu(&input);
         assert_eq!(cmd.count, self.sim.thruster_count());
@@ -362,7 +370,12 @@ impl Run {
             k += 1;
             observe(&self.machine, self.sim.time_s() - start);
             let m = &self.machine;
-            if m.state() == State::Active && m.model().is_some_and(|m| m.version > before + 1) {
+            // A fight's model waiting for its confirmation is not the end
+            // (`identification::fight`).
+            if m.state() == State::Active
+                && !m.confirmation_pending()
+                && m.model().is_some_and(|m| m.version > before + 1)
+            {
                 break;
             }
         }

@@ -125,6 +125,11 @@ impl EstimationRun {
         self.prior = prior;
     }
 
+    /// The prior the run under way keeps (`carry`).
+    pub(super) fn prior(&self) -> Option<&DynamicPrior> {
+        self.prior.as_ref()
+    }
+
     /// The estimator for this run, with the nominal model of a declared geometry (to check
     /// directions against) and the carried-over prior.
     fn new_estimator(

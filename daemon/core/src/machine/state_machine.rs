@@ -17,6 +17,7 @@ use super::types::{
     SetpointInput, State, StatusSnapshot, NO_IMU_YET,
 };
 use crate::adaptation::identification::carry_over::{carried_over, ThrusterChange};
+use crate::adaptation::identification::fight::PendingConfirmation;
 use crate::adaptation::monitor::{MismatchAction, ModelMonitor};
 use crate::adaptation::refinement::{Refiner, Tick, WindowVerdict};
 use crate::attitude::AttitudeFilter;
@@ -122,6 +123,19 @@ pub struct Machine {
     /// limit its model is refused (`identification.at_limit_unannounced`).
     #[serde(default)]
     identifying_unannounced: bool,
+    /// The identification under way confirms a model fitted on the controller's fight (a
+    /// vehicle the model in force could not hold, in still water: `fight_confirmation`): its
+    /// own result is swapped in whatever its share, and no second confirmation follows.
+    #[serde(default)]
+    confirming_fight: bool,
+    /// A fight's model in force, its confirmation waiting for the vehicle to be held; cleared
+    /// by any state but Active.
+    #[serde(default)]
+    pending_confirmation: Option<PendingConfirmation>,
+    /// Whether the fight whose confirmation waits was an unannounced change's (the
+    /// confirmation is judged as its fight was).
+    #[serde(default)]
+    confirming_unannounced: bool,
 }
 
 /// What status says while idle with samples coming and nothing asked.
@@ -163,6 +177,9 @@ impl Machine {
             hold_lost_once: false,
             settling: None,
             identifying_unannounced: false,
+            confirming_fight: false,
+            pending_confirmation: None,
+            confirming_unannounced: false,
             setup,
         };
         m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);
@@ -223,6 +240,12 @@ impl Machine {
 
     /// The identification under control's dither against the controller's command so far
     /// (None outside one).
+    /// A fight's model is in force and its confirmation waits for the vehicle to be held
+    /// (`adaptation::identification::fight`).
+    pub fn confirmation_pending(&self) -> bool {
+        self.pending_confirmation.is_some()
+    }
+
     pub fn identification_excitation(&self) -> Option<crate::machine::Excitation> {
         self.run.excitation()
     }
@@ -617,6 +640,11 @@ impl Machine {
         }
         if to != State::MeasureNoise {
             self.levelling = None;
+        }
+        if to != State::Active {
+            // Any other state ends the fight's model's wait: a new estimation, a lost hold,
+            // an operator's idle or stop.
+            self.pending_confirmation = None;
         }
         // Leaving Idle ends the wait for the vehicle to settle (so do an operator's idle,
         // stop or abort and a reconfiguration: `on_request`, `on_reconfig`; an estimate or

@@ -16,6 +16,7 @@
 //! machine calls it with the vehicle time.
 
 pub mod carry_over;
+pub mod fight;
 pub mod sea_state;
 
 use serde::{Deserialize, Serialize};

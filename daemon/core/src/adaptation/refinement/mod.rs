@@ -261,6 +261,13 @@ impl Refiner {
         &self.spin
     }
 
+    /// The thrusters' state as tracked elsewhere while the refiner did not see the ticks (an
+    /// identification under control): the next window, or the identification that starts
+    /// from it, starts where the thrusters are.
+    pub fn adopt_spin_state(&mut self, spin: SpinState) {
+        self.spin = spin;
+    }
+
     /// The last window's verdict, if any.
     pub fn last(&self) -> Option<&WindowVerdict> {
         self.last.as_ref()

@@ -141,6 +141,11 @@ impl EstimationRun {
         self.closed.as_ref().map(|c| c.excitation)
     }
 
+    /// The commands sent through the fit's lags so far (None open loop).
+    pub(in crate::machine) fn spin_state(&self) -> Option<&SpinState> {
+        self.closed.as_ref().map(|c| &c.spin)
+    }
+
     /// Seconds of dither so far (0 while holding or open loop).
     pub(in crate::machine) fn excited_s(&self, t_ns: u64) -> f64 {
         self.closed

@@ -53,10 +53,19 @@ impl Machine {
         model: Model,
         source: ModelSource,
     ) -> Result<(), crate::model::SwapRejection> {
-        match self
-            .models
-            .swap(model, source, self.n, self.setup.machine.max_swap_rel_err)
-        {
+        let limit = self.setup.machine.max_swap_rel_err;
+        self.try_swap_within(model, source, limit)
+    }
+
+    /// `try_swap` with the confidence gate at `max_rel_err` instead of
+    /// `machine.max_swap_rel_err` (a fight's model: `solve_under_control`).
+    pub(super) fn try_swap_within(
+        &mut self,
+        model: Model,
+        source: ModelSource,
+        max_rel_err: f64,
+    ) -> Result<(), crate::model::SwapRejection> {
+        match self.models.swap(model, source, self.n, max_rel_err) {
             Ok(installed) => {
                 self.monitor.reset(self.n);
                 self.refiner.reset();

@@ -3,6 +3,7 @@
 
 // The machine's fields and helpers are the parent's: these are its methods, by job.
 use super::*;
+use crate::adaptation::identification::fight::{self, PendingConfirmation};
 use crate::adaptation::identification::AtLimit;
 
 impl Machine {
@@ -120,9 +121,17 @@ impl Machine {
             .dynamics
             .as_ref()
             .and_then(|d| d.thrust_curve);
-        let Some((candidate, _)) = self.run.conclude(result) else {
+        // The thrusters' state the identification tracked: the refinement (and a
+        // confirmation starting now) go on from it.
+        let spin = self.run.spin_state().cloned();
+        let prior = self.run.prior().cloned();
+        let Some((mut candidate, _)) = self.run.conclude(result) else {
             return;
         };
+        if let Some(spin) = spin {
+            self.refiner.adopt_spin_state(spin);
+        }
+        let confirming = std::mem::take(&mut self.confirming_fight);
         let mut why = match decision {
             StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
                 "identified under control in {seconds:.1} s (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
@@ -202,16 +211,70 @@ impl Machine {
         } else {
             ""
         };
-        match self.try_swap(candidate, ModelSource::Estimated) {
+        // Still water and little dither: the fit is the controller's fight against a model
+        // that could not hold the vehicle (`identification::fight`). Its bound is widened to
+        // what the dither alone supports, and a second identification starts once the new
+        // model has held the vehicle (`confirm_when_held`). A confirmation that is a fight again (the fight's
+        // model does not hold it either), or a fight's model refused, lets go: thrusters
+        // neutral and an estimation from rest, which needs no model.
+        let fight = low_share.map(|share| (share, fight::bound_scale(share)));
+        if let Some((share, scale)) = fight {
+            let fought = format!(
+                "the dither was {:.0} % of the commands' variation (limit {:.0} %) in still water: the fit is the controller's fight",
+                100.0 * share,
+                100.0 * limit
+            );
+            if confirming {
+                self.events.push(Event::ModelRejected(format!(
+                    "{why}: {fought} again, on the model the first fight made"
+                )));
+                self.let_go_and_estimate(
+                    t_ns,
+                    format!("{fought} twice"),
+                    "no model fitted under control holds it",
+                );
+                return;
+            }
+            candidate.rel_err_rot *= scale;
+            candidate.rel_err_acc *= scale;
+            candidate.std_err *= scale;
+        }
+        let (bound_rot, bound_acc) = (candidate.rel_err_rot, candidate.rel_err_acc);
+        // The confidence gate judges a fight's fit by its own bound: the model in force
+        // could not hold the vehicle, and the fight's model holds it through the
+        // confirmation whatever its widened bound (amour5_top45: 0.36 reported against a
+        // 0.25 gate at a realistic IMU; refused, the vehicle tumbled to the hold watch and was
+        // re-estimated from rest, 23 s; swapped, the confirmation's model came at 12-14 s,
+        // docs/study.md, "A model fitted on the controller's fight").
+        let gate = self.setup.machine.max_swap_rel_err * fight.map_or(1.0, |(_, k)| k);
+        match self.try_swap_within(candidate, ModelSource::Estimated, gate) {
             Ok(()) => {
-                if let Some(k) = key {
+                // A fight's model is not kept for its geometry: the confirmation's is.
+                if let (Some(k), None) = (key, fight) {
                     self.models.remember_current(k);
                 }
+                let Some((share, _)) = fight else {
+                    self.transition(
+                        State::Active,
+                        &format!("{why}: new model, holding attitude{water}"),
+                    );
+                    return;
+                };
                 self.transition(
                     State::Active,
-                    &format!("{why}: new model, holding attitude{water}"),
+                    &format!(
+                        "{why}: new model, holding attitude, confirming once held; the dither was {:.0} % of the commands' variation: the controller's fight, bound widened to rot {bound_rot:.3}, acc {bound_acc:.3}",
+                        100.0 * share
+                    ),
                 );
+                self.pending_confirmation = Some(PendingConfirmation::new(prior));
+                self.confirming_unannounced = self.identifying_unannounced;
             }
+            Err(e) if fight.is_some() => self.let_go_and_estimate(
+                t_ns,
+                format!("{why}: the fight's model was refused ({e})"),
+                "the model in force does not hold it",
+            ),
             Err(e) => self.transition(
                 State::Active,
                 &format!("{why}: model rejected ({e}); old model kept"),
@@ -319,6 +382,9 @@ impl Machine {
             self.on_hold_lost(s.t_ns, lost);
             return Command::neutral(self.n);
         }
+        if self.confirm_when_held(s.t_ns, &attitude, &target.attitude) {
+            return cmd;
+        }
         if let Some(m) = mismatch {
             self.on_mismatch(s.t_ns, m.to_string(), ThrusterChange::Unknown);
         } else if let Some(v) = verdict.filter(|v| v.changed) {
@@ -327,6 +393,38 @@ impl Machine {
             self.install_refined(fused.model);
         }
         cmd
+    }
+
+    /// A fight's model in force (`identification::fight`): once it has held the vehicle
+    /// within the identification's attitude budget, its confirmation starts. Returns whether
+    /// it started.
+    fn confirm_when_held(
+        &mut self,
+        t_ns: u64,
+        attitude: &UnitQuaternion<f64>,
+        target: &UnitQuaternion<f64>,
+    ) -> bool {
+        let Some(actuated) = self.models.current().map(|m| m.actuated) else {
+            return false;
+        };
+        let budget = self.setup.identification.attitude_budget_deg;
+        let err_deg = actuated_error_deg(attitude, target, actuated);
+        let Some(pending) = self.pending_confirmation.as_mut() else {
+            return false;
+        };
+        if !pending.held(t_ns, err_deg, budget) {
+            return false;
+        }
+        let prior = pending.prior.take();
+        let unannounced = self.confirming_unannounced;
+        self.start_estimation_with(
+            t_ns,
+            "confirming a model fitted on the controller's fight",
+            prior,
+        );
+        self.identifying_unannounced = unannounced;
+        self.confirming_fight = self.state == State::Identify;
+        true
     }
 
     /// This control sample's error on the axes the model actuates, into the hold watch.
@@ -355,18 +453,25 @@ impl Machine {
     /// Lost again before an operator's estimate or hold, or a reconfiguration, or with the
     /// monitor told not to re-estimate on its own: neutral, idle.
     fn on_hold_lost(&mut self, t_ns: u64, lost: HoldLost) {
+        let off = format!(
+            "{:.0} deg off the setpoint on average over {:.0} s, machine.lost_hold_deg {:.0}",
+            lost.err_deg, lost.for_s, self.setup.machine.lost_hold_deg
+        );
+        self.let_go_and_estimate(
+            t_ns,
+            off,
+            "the model in force does not hold it (a thruster declared reversed, \
+             misplaced or turned?)",
+        );
+    }
+
+    /// The vehicle is not held, as `off` measured and for `cause`: see `on_hold_lost`.
+    fn let_go_and_estimate(&mut self, t_ns: u64, off: String, cause: &str) {
         self.run.stop();
         self.controller.reset();
         self.hold_watch.reset();
-        let m = &self.setup.machine;
         // The status text is cut at the protocol's 128 bytes: what the daemon does comes
         // first, why after; the journal's event has it all.
-        let off = format!(
-            "{:.0} deg off the setpoint on average over {:.0} s, machine.lost_hold_deg {:.0}",
-            lost.err_deg, lost.for_s, m.lost_hold_deg
-        );
-        let cause = "the model in force does not hold it (a thruster declared reversed, \
-                     misplaced or turned?)";
         self.events
             .push(Event::HoldLost(format!("hold lost: {off}: {cause}")));
         self.phase_start_ns = t_ns;

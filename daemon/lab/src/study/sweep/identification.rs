@@ -237,7 +237,9 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// (`estimator.segment_s`, one value), ID_LINEARIZE (0/1: `[supply] linearize`, one value; default as
 /// the operator configures the vehicle, `Run`), ID_SPLIT (0/1: `estimator.split_thrust` for the
 /// first model, one value), ID_DEADBAND (`machine.deadband`, one value: a
-/// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
+/// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_MAX_SWAP
+/// (`machine.max_swap_rel_err`, one value), ID_DVL (the true velocity handed to the machine at
+/// every sample, a perfect DVL), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
 /// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
@@ -355,12 +357,15 @@ pub(super) fn sweep_identification() {
                 let vehicle_name =
                     std::env::var("ID_VEHICLE").unwrap_or_else(|_| "amour5".to_string());
                 let mut run = Run::new(&vehicle_name, noise, seed);
+                run.perfect_dvl = std::env::var_os("ID_DVL").is_some();
                 let segment_s = env_list("ID_SEGMENT", &[]);
                 let linearize: Vec<f64> = env_list("ID_LINEARIZE", &[]);
                 let deadband: Vec<f64> = env_list("ID_DEADBAND", &[]);
                 let split: Vec<f64> = env_list("ID_SPLIT", &[]);
+                let max_swap: Vec<f64> = env_list("ID_MAX_SWAP", &[]);
                 if *cfg != d
                     || !split.is_empty()
+                    || !max_swap.is_empty()
                     || !segment_s.is_empty()
                     || !linearize.is_empty()
                     || !deadband.is_empty()
@@ -378,6 +383,9 @@ pub(super) fn sweep_identification() {
                         }
                         if let Some(v) = split.first() {
                             s.estimator.split_thrust = *v > 0.0;
+                        }
+                        if let Some(v) = max_swap.first() {
+                            s.machine.max_swap_rel_err = *v;
                         }
                     });
                 }
