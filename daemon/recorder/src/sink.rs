@@ -329,10 +329,13 @@ impl McapSink {
 }
 
 /// An error of the MCAP writer on `path`: an I/O error (a full disk) as [`RecordError::Io`],
-/// which names the file and the OS error; anything else as [`RecordError::Mcap`].
+/// which names the file and the OS error; anything else as [`RecordError::Mcap`]. The writer
+/// reports a failed write of a record's bytes as a parse error wrapping the I/O error
+/// (`McapError::Parse(binrw::Error::Io)`, "Record parse failed: No space left on device"):
+/// found when a disk filled while a file was being finished; it is the same full disk.
 fn mcap_error(path: &Path) -> impl FnOnce(McapError) -> RecordError + '_ {
     move |error| match error {
-        McapError::Io(source) => RecordError::Io {
+        McapError::Io(source) | McapError::Parse(binrw::Error::Io(source)) => RecordError::Io {
             path: path.to_path_buf(),
             source,
         },
@@ -376,6 +379,25 @@ mod tests {
             source = s.source();
         }
         text
+    }
+
+    #[test]
+    fn a_full_disk_inside_a_record_write_is_the_same_io_error() {
+        let path = Path::new("/rec/session-0003.mcap");
+        let full = || std::io::Error::from_raw_os_error(28);
+        for error in [
+            McapError::Io(full()),
+            McapError::Parse(binrw::Error::Io(full())),
+        ] {
+            let e = mcap_error(path)(error);
+            assert_eq!(
+                chain(&e),
+                "cannot write /rec/session-0003.mcap: No space left on device (os error 28)"
+            );
+        }
+        // Anything else stays the writer's own error.
+        let e = mcap_error(path)(McapError::ConflictingSchemas("s".into()));
+        assert!(matches!(e, RecordError::Mcap { .. }), "{e:?}");
     }
 
     #[test]
