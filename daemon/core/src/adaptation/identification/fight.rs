@@ -1,5 +1,5 @@
 //! A model fitted on the controller's fight: what its error bound is worth, and why it is
-//! confirmed at once.
+//! confirmed once the vehicle is held.
 //!
 //! Under control the dither is the only part of the commands that does not answer the
 //! vehicle's own motion. When the model in force cannot hold the vehicle (a thruster turned
