@@ -59,7 +59,8 @@ pub enum Command {
         max_wait_s: f64,
     },
     /// Abort the estimation that runs: back to Idle, thrusters neutral (an identification
-    /// under control goes back to holding with the model in force). Refused when none runs.
+    /// under control goes back to holding with the model in force; a confirmation waiting for
+    /// the hold is cancelled, the model in force kept). Refused when none runs.
     Abort,
     /// Control the vehicle with the current model (hold the setpoint).
     Hold,

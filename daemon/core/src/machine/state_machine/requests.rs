@@ -41,6 +41,14 @@ impl Machine {
                         .into();
                     return Ok("aborted".into());
                 }
+                if self.pending_confirmation.take().is_some() {
+                    // A fight's model in force, its confirmation waiting for the hold: that
+                    // is what the operator aborts; the model stays, its bound widened.
+                    self.text = "confirmation of the fight's model aborted: holding attitude \
+                                 with it"
+                        .into();
+                    return Ok("aborted; holding attitude".into());
+                }
                 if !self.state.is_estimating() {
                     return Err(Refused(format!(
                         "nothing to abort (state {})",
