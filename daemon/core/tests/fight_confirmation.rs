@@ -219,32 +219,13 @@ fn a_tumble_on_a_misdeclared_thruster_is_held_by_the_fights_model_and_confirmed(
 /// was refused there ("nothing to abort": no estimation had started yet).
 #[test]
 fn an_abort_while_the_confirmation_waits_keeps_the_fights_model_and_starts_nothing() {
-    use thrusterd_core::machine::{Reconfig, Request, State};
+    use thrusterd_core::machine::{Request, State};
     let v = vehicle("amour5_top45");
     let mut run = Run::new("amour5_top45", NoisePreset::None, 1);
     run.run_for(1.0);
     run.estimate();
     run.run_for(3.0);
-    let axis = [1.0, 0.0, 0.0];
-    run.sim
-        .apply(&thruster_sim::Action::Rotate {
-            thruster: v.thrusters[0].name.clone(),
-            axis,
-            angle_deg: 45.0,
-        })
-        .unwrap();
-    let mut moved = common::geometry(&v);
-    let turn = nalgebra::UnitQuaternion::from_axis_angle(
-        &nalgebra::Unit::new_normalize(nalgebra::Vector3::from(axis)),
-        45f64.to_radians(),
-    );
-    moved.directions[0] = (turn * nalgebra::Vector3::from(moved.directions[0])).into();
-    run.machine.on_reconfig(Reconfig {
-        count: v.thrusters.len(),
-        geometry: Some(moved),
-        change: ThrusterChange::Moved(0),
-        what: "top thruster turned".into(),
-    });
+    run.announce_turn(&v, 0, [1.0, 0.0, 0.0], 45.0, ThrusterChange::Moved(0));
     let start = run.sim.time_s();
     while !run.machine.confirmation_pending() {
         assert!(run.sim.time_s() - start < 30.0, "no fight's model in 30 s");

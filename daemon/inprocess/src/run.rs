@@ -321,17 +321,17 @@ impl Run {
         self.announced_turn(v, 0, [1.0, 0.0, 0.0], 45.0, change, observe)
     }
 
-    /// Thruster `index` of `v` turned by `angle_deg` about `axis` (body frame) and announced
-    /// as `change` with the new geometry, the machine holding level: as [`Self::announced_rotation`].
-    pub fn announced_turn(
+    /// Turns thruster `index` of `v` by `angle_deg` about `axis` in the simulator and
+    /// announces the turned geometry to the machine as `change` (what `announced_turn` then
+    /// watches; a test that acts on the machine mid-way starts here).
+    pub fn announce_turn(
         &mut self,
         v: &Vehicle,
         index: usize,
         axis: [f64; 3],
         angle_deg: f64,
         change: thrusterd_core::machine::ThrusterChange,
-        mut observe: impl FnMut(&Machine, f64),
-    ) -> Reestimation {
+    ) {
         use nalgebra::{Unit, UnitQuaternion, Vector3};
         self.sim
             .apply(&thruster_sim::Action::Rotate {
@@ -346,13 +346,28 @@ impl Run {
             angle_deg.to_radians(),
         );
         moved.directions[index] = (r * Vector3::from(moved.directions[index])).into();
-        let before = self.machine.model().map_or(0, |m| m.version);
         self.machine.on_reconfig(thrusterd_core::machine::Reconfig {
             count: v.thrusters.len(),
             geometry: Some(moved),
             change,
             what: "top thruster rotated".into(),
         });
+    }
+
+    /// Thruster `index` of `v` turned by `angle_deg` about `axis` (body frame) and announced
+    /// as `change` with the new geometry, the machine holding level: as [`Self::announced_rotation`].
+    pub fn announced_turn(
+        &mut self,
+        v: &Vehicle,
+        index: usize,
+        axis: [f64; 3],
+        angle_deg: f64,
+        change: thrusterd_core::machine::ThrusterChange,
+        mut observe: impl FnMut(&Machine, f64),
+    ) -> Reestimation {
+        use nalgebra::{UnitQuaternion, Vector3};
+        let before = self.machine.model().map_or(0, |m| m.version);
+        self.announce_turn(v, index, axis, angle_deg, change);
         let heading = self.sim.roll_pitch_yaw()[2];
         let level = UnitQuaternion::from_euler_angles(0.0, 0.0, heading);
         let start = self.sim.time_s();

@@ -124,18 +124,14 @@ pub struct Machine {
     #[serde(default)]
     identifying_unannounced: bool,
     /// The identification under way confirms a model fitted on the controller's fight (a
-    /// vehicle the model in force could not hold, in still water: `fight_confirmation`): its
-    /// own result is swapped in whatever its share, and no second confirmation follows.
+    /// vehicle the model in force could not hold, in still water: `identification::fight`):
+    /// if it is a fight again, the daemon lets go and estimates from rest.
     #[serde(default)]
     confirming_fight: bool,
     /// A fight's model in force, its confirmation waiting for the vehicle to be held; cleared
     /// by any state but Active.
     #[serde(default)]
     pending_confirmation: Option<PendingConfirmation>,
-    /// Whether the fight whose confirmation waits was an unannounced change's (the
-    /// confirmation is judged as its fight was).
-    #[serde(default)]
-    confirming_unannounced: bool,
 }
 
 /// What status says while idle with samples coming and nothing asked.
@@ -179,7 +175,6 @@ impl Machine {
             identifying_unannounced: false,
             confirming_fight: false,
             pending_confirmation: None,
-            confirming_unannounced: false,
             setup,
         };
         m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);

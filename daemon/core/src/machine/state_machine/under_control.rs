@@ -214,9 +214,9 @@ impl Machine {
         // Still water and little dither: the fit is the controller's fight against a model
         // that could not hold the vehicle (`identification::fight`). Its bound is widened to
         // what the dither alone supports, and a second identification starts once the new
-        // model has held the vehicle (`confirm_when_held`). A confirmation that is a fight again (the fight's
-        // model does not hold it either), or a fight's model refused, lets go: thrusters
-        // neutral and an estimation from rest, which needs no model.
+        // model has held the vehicle (`confirm_when_held`). A confirmation that is a fight
+        // again (the fight's model does not hold it either), or a fight's model refused, lets
+        // go: thrusters neutral and an estimation from rest, which needs no model.
         let fight = low_share.map(|share| (share, fight::bound_scale(share)));
         if let Some((share, scale)) = fight {
             let fought = format!(
@@ -268,7 +268,6 @@ impl Machine {
                     ),
                 );
                 self.pending_confirmation = Some(PendingConfirmation::new(prior));
-                self.confirming_unannounced = self.identifying_unannounced;
             }
             Err(e) if fight.is_some() => self.let_go_and_estimate(
                 t_ns,
@@ -404,19 +403,20 @@ impl Machine {
         attitude: &UnitQuaternion<f64>,
         target: &UnitQuaternion<f64>,
     ) -> bool {
-        let Some(actuated) = self.models.current().map(|m| m.actuated) else {
+        let (Some(pending), Some(model)) =
+            (self.pending_confirmation.as_mut(), self.models.current())
+        else {
             return false;
         };
         let budget = self.setup.identification.attitude_budget_deg;
-        let err_deg = actuated_error_deg(attitude, target, actuated);
-        let Some(pending) = self.pending_confirmation.as_mut() else {
-            return false;
-        };
+        let err_deg = actuated_error_deg(attitude, target, model.actuated);
         if !pending.held(t_ns, err_deg, budget) {
             return false;
         }
         let prior = pending.prior.take();
-        let unannounced = self.confirming_unannounced;
+        // The fight's: nothing starts an estimation while the confirmation waits (any start
+        // leaves Active, which ends the wait), so it is still the fight's run's.
+        let unannounced = self.identifying_unannounced;
         self.start_estimation_with(
             t_ns,
             "confirming a model fitted on the controller's fight",
