@@ -16,7 +16,7 @@
 
 use std::collections::VecDeque;
 
-use crate::estimator::{Estimate, Estimator, StopDecision};
+use crate::estimator::{Estimate, Estimator, Settle, StopDecision};
 use crate::model::Model;
 
 /// Who runs the machine's solve jobs.
@@ -59,6 +59,8 @@ enum Work {
         elapsed_s: f64,
         min_s: f64,
         max_s: f64,
+        /// The wait for a settled estimate (`IdentificationConfig::settle_rule`).
+        settle: Settle,
     },
     /// A refinement window's fit, `elapsed_s` into the window: the estimate only.
     Window { elapsed_s: f64 },
@@ -126,9 +128,10 @@ impl SolveJob {
                 elapsed_s,
                 min_s,
                 max_s,
+                settle,
             } => (
                 self.est
-                    .closed_loop_decision(&estimate, elapsed_s, min_s, max_s),
+                    .closed_loop_decision(&estimate, elapsed_s, [min_s, max_s], settle),
                 elapsed_s,
             ),
             // A window never stops a run; the refiner judges the estimate itself.
@@ -277,13 +280,14 @@ impl Solver {
         &mut self,
         est: &Estimator,
         t_ns: u64,
-        (elapsed_s, min_s, max_s): (f64, f64, f64),
+        (elapsed_s, min_s, max_s, settle): (f64, f64, f64, Settle),
         geometry_key: Option<u64>,
     ) {
         let work = Work::Interval {
             elapsed_s,
             min_s,
             max_s,
+            settle,
         };
         self.submit(est, t_ns, Purpose::Interval, work, geometry_key);
     }

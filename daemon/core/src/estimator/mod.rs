@@ -29,4 +29,4 @@ pub use dof::{Dof, DofMask};
 pub use excitation::{Excitation, ExcitationPlan};
 pub use noise::{NoiseLevels, NoiseMeter};
 pub use response::PulseShape;
-pub use run::{Estimate, Estimator, PulseSummary, StopDecision};
+pub use run::{Estimate, Estimator, PulseSummary, Settle, StopDecision};

@@ -28,6 +28,7 @@ use crate::allocation::pseudo_inverse;
 use crate::navigation::DepthAid;
 
 mod closed_loop;
+pub use closed_loop::Settle;
 mod fits;
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
@@ -277,6 +278,11 @@ pub struct Estimator {
     /// Under control, the fit made again with bent commands (`thrust_curve`).
     #[serde(default)]
     thrust_curve: Option<ThrustCurveProbe>,
+    /// Under control, the effectiveness of the last decision interval's estimate that did
+    /// not stop the run (`remember_interval`): the next decision asks whether the estimate
+    /// has settled since (`closed_loop_decision`).
+    #[serde(default)]
+    last_interval: Option<DMatrix<f64>>,
 }
 
 impl Estimator {
@@ -306,6 +312,7 @@ impl Estimator {
             lag_hint: None,
             inherited_lags: Vec::new(),
             thrust_curve: None,
+            last_interval: None,
             noise,
             cfg,
         }

@@ -11,7 +11,7 @@ use crate::estimator::dynamic::prior::DynamicPrior;
 use crate::estimator::power::pulse_power;
 use crate::estimator::response::GRAVITY;
 use crate::estimator::{
-    Estimate, Estimator, EstimatorConfig, Method, NoiseLevels, NoiseMeter, StopDecision,
+    Estimate, Estimator, EstimatorConfig, Method, NoiseLevels, NoiseMeter, Settle, StopDecision,
 };
 use crate::model::{Model, ModelSource};
 use crate::navigation::rest_drift::RestDrift;
@@ -233,8 +233,18 @@ impl EstimationRun {
             return false;
         };
         let cfg = &setup.identification;
+        // A fight (the dither under its share) has its own confirmation: waiting for it to
+        // settle would only prolong the fight (`IdentificationConfig::settle`).
+        let fighting = self
+            .excitation()
+            .is_some_and(|x| x.dither_share() < cfg.min_dither_share);
+        let settle = if fighting {
+            Settle::OFF
+        } else {
+            cfg.settle_rule()
+        };
         self.solver
-            .submit_interval(est, t_ns, (elapsed_s, cfg.min_s, cfg.max_s), key);
+            .submit_interval(est, t_ns, (elapsed_s, cfg.min_s, cfg.max_s, settle), key);
         true
     }
 
@@ -243,6 +253,14 @@ impl EstimationRun {
     pub(super) fn hint_lag(&mut self, estimate: &Estimate) {
         if let Some(est) = self.est.as_mut() {
             est.set_lag_hint(estimate);
+        }
+    }
+
+    /// A decision interval's estimate that did not stop the run: the next decision judges
+    /// whether the estimate has settled against it (`IdentificationConfig::settle`).
+    pub(super) fn remember_interval(&mut self, estimate: &Estimate) {
+        if let Some(est) = self.est.as_mut() {
+            est.remember_interval(estimate);
         }
     }
 

@@ -228,7 +228,7 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// overridden from the environment, every combination of the lists given, one row per seed and
 /// the mean. Knobs (comma lists; unset: the default): ID_NOISE (none|realistic|paper, default
 /// paper), ID_SEEDS (default 1-5), ID_HOLD_S, ID_DITHER, ID_DITHER_MAX, ID_BUDGET, ID_MIN_S,
-/// ID_MAX_S, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1), ID_IV (0 never, 1 in a sea, 2 always: the thrust columns by
+/// ID_MAX_S, ID_SETTLE, ID_SETTLE_FLOOR, ID_SETTLE_WAIT, ID_FOCUS, ID_FOCUS_OTHERS, ID_SE_SCALE, ID_CARRY (0/1), ID_IV (0 never, 1 in a sea, 2 always: the thrust columns by
 /// instrumental variables), ID_MIN_SHARE, ID_WATER (still|current|moderate|rough: the
 /// water comes up after the first model, 20 s before the announcement), ID_WAVE_PART
 /// (force|torque: that part of the swell alone), ID_TRACE (print the machine's state and status as they change), ID_STEPS (every estimate of
@@ -239,7 +239,7 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// first model, one value), ID_DEADBAND (`machine.deadband`, one value: a
 /// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_MAX_SWAP
 /// (`machine.max_swap_rel_err`, one value), ID_DVL (the true velocity handed to the machine at
-/// every sample, a perfect DVL), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
+/// every sample, a perfect DVL), ID_SYM (thrusters as strong in reverse as forward, the daemon told), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
 /// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
@@ -270,6 +270,11 @@ pub(super) fn sweep_identification() {
     };
     vary("ID_MAX_S", d.max_s, |c, v| c.max_s = v);
     vary("ID_MIN_S", d.min_s, |c, v| c.min_s = v);
+    vary("ID_SETTLE", d.settle, |c, v| c.settle = v);
+    vary("ID_SETTLE_FLOOR", d.settle_floor, |c, v| c.settle_floor = v);
+    vary("ID_SETTLE_WAIT", d.settle_wait_s, |c, v| {
+        c.settle_wait_s = v
+    });
     vary("ID_BUDGET", d.attitude_budget_deg, |c, v| {
         c.attitude_budget_deg = v
     });
@@ -320,7 +325,7 @@ pub(super) fn sweep_identification() {
         };
         for cfg in &cfgs {
             println!(
-                "== noise {name} hold_s {} dither {} dither_max {} budget {} min_s {} max_s {} \
+                "== noise {name} hold_s {} dither {} dither_max {} budget {} min_s {} max_s {} settle {} {} {} \
                  carry_over {} se_scale {} focus {} others {} instrument {:?} min_share {} \
                  (stop target {target})",
                 cfg.hold_s,
@@ -329,6 +334,9 @@ pub(super) fn sweep_identification() {
                 cfg.attitude_budget_deg,
                 cfg.min_s,
                 cfg.max_s,
+                cfg.settle,
+                cfg.settle_floor,
+                cfg.settle_wait_s,
                 cfg.carry_over,
                 cfg.carry_over_se_scale,
                 cfg.focus_gain,
@@ -356,7 +364,20 @@ pub(super) fn sweep_identification() {
                 // The defaults: the machine exactly as Run builds it.
                 let vehicle_name =
                     std::env::var("ID_VEHICLE").unwrap_or_else(|_| "amour5".to_string());
-                let mut run = Run::new(&vehicle_name, noise, seed);
+                // ID_SYM: thrusters as strong in reverse as forward, and the daemon told so
+                // (a decisive run for what the forward/reverse asymmetry costs).
+                let sym = std::env::var_os("ID_SYM").is_some();
+                let mut run = if sym {
+                    let mut v = vehicle(&vehicle_name);
+                    v.thrusters
+                        .iter_mut()
+                        .for_each(|t| t.reverse_max_n = t.forward_max_n);
+                    let mut run = Run::with_vehicle(v, noise, seed, 200.0);
+                    run.with_setup(|s| s.estimator.reverse_ratio = 1.0);
+                    run
+                } else {
+                    Run::new(&vehicle_name, noise, seed)
+                };
                 run.perfect_dvl = std::env::var_os("ID_DVL").is_some();
                 let segment_s = env_list("ID_SEGMENT", &[]);
                 let linearize: Vec<f64> = env_list("ID_LINEARIZE", &[]);
