@@ -232,18 +232,19 @@ fn spread(rows: &[[f64; 3]], k: usize) -> String {
 /// The identification under control after an announced change, the daemon's defaults, at
 /// each IMU noise (see the module doc).
 fn under_control(seeds: u64, filter: &str) {
+    const BEFORE_2026_12_02: &str = "[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\n";
     // (name, the daemon's configuration, IMU)
     const ROWS: &[(&str, &str, &str)] = &[
         ("defaults", "", "realistic"),
         (
-            "before 2026-12-02: min_s 4, no wait to settle",
-            "[identification]\nmin_s = 4.0\nsettle = 0.0\n",
+            "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise",
+            BEFORE_2026_12_02,
             "realistic",
         ),
         ("defaults", "", "paper"),
         (
-            "before 2026-12-02: min_s 4, no wait to settle",
-            "[identification]\nmin_s = 4.0\nsettle = 0.0\n",
+            "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise",
+            BEFORE_2026_12_02,
             "paper",
         ),
     ];

@@ -206,6 +206,13 @@ impl EstimationRun {
             c.next_decision_ns = t_ns + (setup.estimator.segment_s * 1e9) as u64;
             let levels = *self.levels.get_or_insert_with(|| self.noise.levels());
             c.amplitude = setup.identification.amplitude(levels.sigma_rot());
+            // The focus `carry` set follows the amplitude now the noise is known
+            // (`IdentificationConfig::focus_at`).
+            let ident = &setup.identification;
+            if let Some(p) = self.prior.as_ref().filter(|_| ident.focus_gain > 0.0) {
+                let (gain, others) = ident.focus_at(c.amplitude);
+                c.dither.focus(&p.unknown_thrusters(), gain, others);
+            }
             let mut est = self.new_estimator(setup.estimator.clone(), n, levels, model);
             if let Some(lag_s) = lag {
                 est = est.with_learned_lag(lag_s);
