@@ -298,6 +298,7 @@ fn bench(c: &mut Criterion) {
             spin_up_s: None,
             imu_position_m: None,
             thruster_lags_s: Vec::new(),
+            lag_rel_err: [0.0; 2],
         };
         let carried = dynamic.clone().with_prior(prior);
         c.bench_with_input(

@@ -283,6 +283,10 @@ pub struct Estimator {
     /// has settled since (`closed_loop_decision`).
     #[serde(default)]
     last_interval: Option<DMatrix<f64>>,
+    /// The relative error the lags inherited from an earlier model carry into B
+    /// (`with_inherited_lag_error`), rotation and acceleration rows.
+    #[serde(default)]
+    inherited_lag_rel_err: [f64; 2],
 }
 
 impl Estimator {
@@ -313,9 +317,20 @@ impl Estimator {
             inherited_lags: Vec::new(),
             thrust_curve: None,
             last_interval: None,
+            inherited_lag_rel_err: [0.0; 2],
             noise,
             cfg,
         }
+    }
+
+    /// The relative error of B that the lags given by `with_learned_lag` /
+    /// `with_learned_thruster_lags` carry (`Model::lag_rel_err`): the fits that do not learn
+    /// the lag again add it to their bound as a floor, which the stop rule does not wait on.
+    pub fn with_inherited_lag_error(mut self, rel_err: [f64; 2]) -> Self {
+        if rel_err.iter().all(|e| e.is_finite() && *e >= 0.0) {
+            self.inherited_lag_rel_err = rel_err;
+        }
+        self
     }
 
     /// The thrusters' lag an earlier run learned (the model in force's), s: used in place of

@@ -103,6 +103,7 @@ pub fn carried_over(
         spin_up_s: model.learned_spin_up_s(),
         imu_position_m: model.imu_position_m().map(Into::into),
         thruster_lags_s: carried_lags(model, change, &map),
+        lag_rel_err: model.lag_rel_err(),
     })
 }
 

@@ -33,6 +33,10 @@ pub struct DynamicPrior {
     /// thruster ([`super::thruster_lags`]); empty otherwise.
     #[serde(default)]
     pub thruster_lags_s: Vec<f64>,
+    /// The relative error those lags put into B, rotation and acceleration rows
+    /// ([`crate::model::Model::lag_rel_err`]): a fit that keeps them keeps it too.
+    #[serde(default)]
+    pub lag_rel_err: [f64; 2],
 }
 
 /// A carried-over column is contradicted by the data when the data alone moved it by more
@@ -145,6 +149,7 @@ mod tests {
             b_std_err: se,
             spin_up_s: None,
             thruster_lags_s: Vec::new(),
+            lag_rel_err: [0.0; 2],
             imu_position_m: None,
         }
     }

@@ -131,16 +131,18 @@ impl Estimator {
     }
 
     /// Whether `estimate` moved from the last interval's by at most `settle.factor` times its
-    /// bound, or `settle.floor`, in both row groups. Without a last estimate (or another shape)
+    /// reducible bound, or `settle.floor`, in both row groups. Without a last estimate (or another shape)
     /// it has not settled: nothing says it has.
     fn settled(&self, estimate: &Estimate, settle: Settle) -> bool {
         let Some(last) = self.last_interval.as_ref() else {
             return false;
         };
         let change = row_group_change(&estimate.effectiveness, last);
+        // The part of the bound more data reduces: a floor (the inherited lags') says nothing
+        // of how much the estimate may still move.
         within_settle(
             change,
-            [estimate.rel_err_rot, estimate.rel_err_acc],
+            super::fits::reducible_bounds(estimate),
             settle.factor,
             settle.floor,
         )

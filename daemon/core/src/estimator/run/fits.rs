@@ -20,21 +20,7 @@ impl Estimator {
     /// `open_loop`: the pulsed estimation's own decision, where a bound within reach may be
     /// waited for ([`Self::waits_within_reach`]); not the identification under control.
     pub(super) fn bound_decision(&self, e: &Estimate, open_loop: bool) -> StopDecision {
-        let share = e
-            .dynamics
-            .as_ref()
-            .and_then(|d| d.imu_position)
-            .map_or(0.0, |p| p.rel_err_share);
-        let lag_floor = e
-            .dynamics
-            .as_ref()
-            .map_or([0.0; 2], |d| d.spin_up_floor_rel_err);
-        let reducible_rot = (e.rel_err_rot.powi(2) - lag_floor[0].powi(2))
-            .max(0.0)
-            .sqrt();
-        let reducible_acc = (e.rel_err_acc.powi(2) - share.powi(2) - lag_floor[1].powi(2))
-            .max(0.0)
-            .sqrt();
+        let [reducible_rot, reducible_acc] = reducible_bounds(e);
         let lag_share = e.dynamics.as_ref().map_or([0.0; 2], |d| d.spin_up_rel_err);
         if e.excited
             && reducible_rot <= self.cfg.target_rel_err
@@ -331,6 +317,9 @@ impl Estimator {
                 sol = solve(&fit, &lag);
             }
         }
+        if lag.is_none() {
+            add_inherited_lag_error(&mut sol, self.inherited_lag_rel_err);
+        }
         sol.terms.unexplained_rate_radps = unexplained(&sol.sigma, &self.noise.gyro_white_sigma);
         sol.terms.thrust_curve = self.thrust_curve.as_ref().and_then(|c| c.evidence());
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
@@ -439,6 +428,63 @@ fn projected_bound(b: f64, lag: f64, floor: f64, ratio: f64) -> f64 {
     let lag2 = lag.min(b).powi(2);
     let statistical2 = (b * b - floor2 - lag2).max(0.0);
     (floor2 + statistical2 * ratio + lag2 * ratio * ratio).sqrt()
+}
+
+/// `e`'s error bounds (rotation, acceleration rows) without what no more data removes: the
+/// lag's floor and the IMU position's share.
+pub(super) fn reducible_bounds(e: &Estimate) -> [f64; 2] {
+    let share = e
+        .dynamics
+        .as_ref()
+        .and_then(|d| d.imu_position)
+        .map_or(0.0, |p| p.rel_err_share);
+    let lag_floor = e
+        .dynamics
+        .as_ref()
+        .map_or([0.0; 2], |d| d.spin_up_floor_rel_err);
+    [
+        (e.rel_err_rot.powi(2) - lag_floor[0].powi(2))
+            .max(0.0)
+            .sqrt(),
+        (e.rel_err_acc.powi(2) - share.powi(2) - lag_floor[1].powi(2))
+            .max(0.0)
+            .sqrt(),
+    ]
+}
+
+/// Lags inherited, not learned again, keep the error they put into B (`rel_err`, per row
+/// group): added to each entry's standard error spread evenly over the group (as the lag
+/// search widens its own), to the bound, and to the lag's floor, which the stop rule leaves
+/// out of what more data reduces.
+fn add_inherited_lag_error(
+    sol: &mut crate::estimator::dynamic::DynamicSolution,
+    rel_err: [f64; 2],
+) {
+    let n = sol.b.ncols();
+    if n == 0 {
+        return;
+    }
+    for (g, e) in rel_err.into_iter().enumerate() {
+        if !(e.is_finite() && e > 0.0) {
+            continue;
+        }
+        let rows = 3 * g..3 * g + 3;
+        let norm2: f64 = rows
+            .clone()
+            .flat_map(|r| (0..n).map(move |i| (r, i)))
+            .map(|(r, i)| sol.b[(r, i)].powi(2))
+            .sum();
+        let per_entry = e * e * norm2 / (3 * n) as f64;
+        for r in rows {
+            for i in 0..n {
+                let se = &mut sol.std_err[(r, i)];
+                *se = (*se * *se + per_entry).sqrt();
+            }
+        }
+        sol.rel_err[g] = sol.rel_err[g].hypot(e);
+        let floor = &mut sol.terms.spin_up_floor_rel_err[g];
+        *floor = floor.hypot(e);
+    }
 }
 
 #[cfg(test)]

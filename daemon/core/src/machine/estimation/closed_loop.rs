@@ -220,6 +220,12 @@ impl EstimationRun {
             if let Some(lags) = lags {
                 est = est.with_learned_thruster_lags(lags);
             }
+            // What those lags put into B comes with them, from where they came.
+            let lag_rel_err = match model.filter(|m| m.learned_spin_up_s().is_some()) {
+                Some(m) => m.lag_rel_err(),
+                None => prior.map_or([0.0; 2], |p| p.lag_rel_err),
+            };
+            est = est.with_inherited_lag_error(lag_rel_err);
             // The IMU did not move with the thrusters: where the model in force (or the prior's)
             // put it, else where it is configured. Never learned again here: closed-loop data
             // cannot place it (eight_vectored in moderate water found it 16 cm off and its

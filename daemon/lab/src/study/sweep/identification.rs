@@ -239,7 +239,7 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// first model, one value), ID_DEADBAND (`machine.deadband`, one value: a
 /// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_MAX_SWAP
 /// (`machine.max_swap_rel_err`, one value), ID_DVL (the true velocity handed to the machine at
-/// every sample, a perfect DVL), ID_SYM (thrusters as strong in reverse as forward, the daemon told), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
+/// every sample, a perfect DVL), ID_SYM (thrusters as strong in reverse as forward, the daemon told), ID_FLOOR_PROBE (print the first model's bound, lag floor and lags, from a run of its own), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
 /// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
@@ -415,6 +415,21 @@ pub(super) fn sweep_identification() {
                             s.machine.max_swap_rel_err = *v;
                         }
                     });
+                }
+                if std::env::var_os("ID_FLOOR_PROBE").is_some() {
+                    let mut probe = Run::new(&vehicle_name, noise, seed);
+                    probe.run_for(1.0);
+                    probe.estimate();
+                    let m = probe.machine.model().unwrap();
+                    let d = m.dynamics.as_ref();
+                    eprintln!(
+                        "PROBE first model: bound {:.4} / {:.4} floor {:?} lag {:?} per-thruster {:?}",
+                        m.rel_err_rot,
+                        m.rel_err_acc,
+                        d.map(|d| d.spin_up_floor_rel_err),
+                        d.map(|d| d.spin_up_s),
+                        d.map(|d| d.spin_up_per_thruster_s.clone())
+                    );
                 }
                 let (run, r) =
                     rotate_while_holding_on(run, &vehicle(&vehicle_name), water.clone(), |m, s| {
