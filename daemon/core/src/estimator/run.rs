@@ -323,16 +323,6 @@ impl Estimator {
         }
     }
 
-    /// The relative error of B that the lags given by `with_learned_lag` /
-    /// `with_learned_thruster_lags` carry (`Model::lag_rel_err`): the fits that do not learn
-    /// the lag again add it to their bound as a floor, which the stop rule does not wait on.
-    pub fn with_inherited_lag_error(mut self, rel_err: [f64; 2]) -> Self {
-        if rel_err.iter().all(|e| e.is_finite() && *e >= 0.0) {
-            self.inherited_lag_rel_err = rel_err;
-        }
-        self
-    }
-
     /// The thrusters' lag an earlier run learned (the model in force's), s: used in place of
     /// `spin_up_s` and reported as learned. For runs that cannot learn it themselves (under
     /// control, see `dynamic_run`).

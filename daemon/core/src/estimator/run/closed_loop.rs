@@ -94,6 +94,16 @@ impl Estimator {
         self.pulses += 1;
     }
 
+    /// The relative error of B that the lags given by `with_learned_lag` /
+    /// `with_learned_thruster_lags` carry (`Model::lag_rel_err`): the fits that do not learn
+    /// the lag again add it to their bound as a floor, which the stop rule does not wait on.
+    pub fn with_inherited_lag_error(mut self, rel_err: [f64; 2]) -> Self {
+        if rel_err.iter().all(|e| e.is_finite() && *e >= 0.0) {
+            self.inherited_lag_rel_err = rel_err;
+        }
+        self
+    }
+
     /// The estimate of a decision interval that did not stop the run, for the next
     /// decision's settling check. The machine calls it when it applies the result, at a
     /// sample fixed in vehicle time, so a replay remembers the same one. Copied in place once
