@@ -141,8 +141,8 @@ impl Estimator {
     }
 
     /// Whether `estimate` moved from the last interval's by at most `settle.factor` times its
-    /// reducible bound, or `settle.floor`, in both row groups. Without a last estimate (or another shape)
-    /// it has not settled: nothing says it has.
+    /// reducible bound, or `settle.floor`, in both row groups. Without a last estimate (or one
+    /// of another shape) it has not settled: nothing says it has.
     fn settled(&self, estimate: &Estimate, settle: Settle) -> bool {
         let Some(last) = self.last_interval.as_ref() else {
             return false;
@@ -165,8 +165,11 @@ impl Estimator {
 /// otherwise the run goes on for at most `wait_s` more, and stops on its bound after that.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Settle {
+    /// Times the reducible bound (0: no wait).
     pub factor: f64,
+    /// The move always allowed, relative.
     pub floor: f64,
+    /// How long after `min_s` the wait lasts at most, s.
     pub wait_s: f64,
 }
 
