@@ -21,8 +21,8 @@
 
 use std::time::{Duration, Instant};
 
-use system_tests::vehicle_clock::STEPPED_DAEMON;
-use system_tests::{model_error, state, Operator, World};
+use system_tests::vehicle_clock::{VehicleClock, STEPPED_DAEMON};
+use system_tests::{model_error, state, Operator, Proc, World};
 use thruster_protocol::{DaemonState, ModelMsg, ModelSource, RequestKind, StatusMsg, TruthMsg};
 
 /// How long the daemon idles before the request, vehicle-s: the rest while idle is ready
@@ -127,34 +127,8 @@ fn main() {
         let mut rows = Vec::new();
         for seed in 1..=seeds {
             let world = World::new("ttm");
-            let cfg = world.path("thrusterd.toml");
-            std::fs::write(&cfg, setting.toml).unwrap();
-            let op = Operator::new(&world);
-            // Low-latency mode: in lockstep every sample waits for its answer.
-            let mut daemon = world.daemon(
-                &[
-                    &["--config", cfg.to_str().unwrap(), "--spin-us", "500"],
-                    // However long a solve takes on a loaded machine, the sample it is due
-                    // at waits for it: the vehicle-time figures are the same on any machine.
-                    &STEPPED_DAEMON[..],
-                ]
-                .concat(),
-            );
-            let seed_s = seed.to_string();
-            // Stepped: the simulator waits for every answer however long a loaded machine
-            // takes (a free-running lockstep simulator gives up after its 2 s timeout and
-            // goes on without the answer).
-            let (mut sim, mut clock) = world.stepped_sim(
-                "amour5",
-                &[
-                    "--noise",
-                    setting.noise,
-                    "--seed",
-                    &seed_s,
-                    "--duration",
-                    "100000",
-                ],
-            );
+            let (op, mut daemon, mut sim, mut clock) =
+                start(&world, setting.toml, setting.noise, seed, &[]);
             clock.run_to(IDLE_BEFORE_REQUEST_S);
             let wall = Instant::now();
             // Sent while the simulator is held: the estimation starts at the next sample.
@@ -186,22 +160,8 @@ fn main() {
             sim.stop();
             daemon.stop();
         }
-        let col = |k: usize| {
-            let v: Vec<f64> = rows.iter().map(|r| r[k]).collect();
-            let mean = v.iter().sum::<f64>() / v.len() as f64;
-            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>()
-                / (v.len().max(2) - 1) as f64)
-                .sqrt();
-            let lo = v.iter().cloned().fold(f64::INFINITY, f64::min);
-            let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-            format!("{mean:.2} ± {sd:.2} [{lo:.2}-{hi:.2}]")
-        };
-        let errs = |k: usize| {
-            let v: Vec<f64> = rows.iter().map(|r| r[k]).collect();
-            let mean = v.iter().sum::<f64>() / v.len() as f64;
-            let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-            format!("{mean:.4} (worst {hi:.4})")
-        };
+        let col = |k: usize| spread(&column(&rows, k));
+        let errs = |k: usize| mean_worst(&column(&rows, k));
         println!(
             "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             setting.name,
@@ -218,15 +178,63 @@ fn main() {
     under_control(seeds, &filter);
 }
 
-/// Mean ± sd [min-max] of column `k`.
-fn spread(rows: &[[f64; 3]], k: usize) -> String {
-    let v: Vec<f64> = rows.iter().map(|r| r[k]).collect();
+/// Column `k` of per-seed rows.
+fn column<const N: usize>(rows: &[[f64; N]], k: usize) -> Vec<f64> {
+    rows.iter().map(|r| r[k]).collect()
+}
+
+/// Mean ± sd [min-max].
+fn spread(v: &[f64]) -> String {
     let mean = v.iter().sum::<f64>() / v.len() as f64;
     let sd =
         (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len().max(2) - 1) as f64).sqrt();
     let lo = v.iter().cloned().fold(f64::INFINITY, f64::min);
     let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
     format!("{mean:.2} ± {sd:.2} [{lo:.2}-{hi:.2}]")
+}
+
+/// Mean (worst).
+fn mean_worst(v: &[f64]) -> String {
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    format!("{mean:.4} (worst {hi:.4})")
+}
+
+/// The daemon with configuration `toml` and a stepped AMOUR-5 simulator at IMU `noise` and
+/// `seed` (`sim_args` besides), in `world`.
+fn start(
+    world: &World,
+    toml: &str,
+    noise: &str,
+    seed: u64,
+    sim_args: &[&str],
+) -> (Operator, Proc, Proc, VehicleClock) {
+    let cfg = world.path("thrusterd.toml");
+    std::fs::write(&cfg, toml).unwrap();
+    let op = Operator::new(world);
+    // Low-latency mode: in lockstep every sample waits for its answer.
+    let daemon = world.daemon(
+        &[
+            &["--config", cfg.to_str().unwrap(), "--spin-us", "500"],
+            // However long a solve takes on a loaded machine, the sample it is due
+            // at waits for it: the vehicle-time figures are the same on any machine.
+            &STEPPED_DAEMON[..],
+        ]
+        .concat(),
+    );
+    let seed_s = seed.to_string();
+    // Stepped: the simulator waits for every answer however long a loaded machine
+    // takes (a free-running lockstep simulator gives up after its 2 s timeout and
+    // goes on without the answer).
+    let (sim, clock) = world.stepped_sim(
+        "amour5",
+        &[
+            &["--noise", noise, "--seed", &seed_s, "--duration", "100000"],
+            sim_args,
+        ]
+        .concat(),
+    );
+    (op, daemon, sim, clock)
 }
 
 /// The identification under control after an announced change, the daemon's defaults, at
@@ -263,35 +271,18 @@ fn under_control(seeds: u64, filter: &str) {
         let mut rows = Vec::new();
         for seed in 1..=seeds {
             let world = World::new("ttmuc");
-            let cfg = world.path("thrusterd.toml");
-            std::fs::write(&cfg, toml).unwrap();
             let scenario = world.path("top45.toml");
             std::fs::write(
                 &scenario,
                 format!("[[event]]\nt_s = {CHANGE_AT_S}\nannounce = true\naction = {{ kind = \"rotate\", thruster = \"T\", axis = [1, 0, 0], angle_deg = 45 }}\n"),
             )
             .unwrap();
-            let op = Operator::new(&world);
-            let mut daemon = world.daemon(
-                &[
-                    &["--config", cfg.to_str().unwrap(), "--spin-us", "500"],
-                    &STEPPED_DAEMON[..],
-                ]
-                .concat(),
-            );
-            let seed_s = seed.to_string();
-            let (mut sim, mut clock) = world.stepped_sim(
-                "amour5",
-                &[
-                    "--noise",
-                    noise,
-                    "--seed",
-                    &seed_s,
-                    "--duration",
-                    "100000",
-                    "--scenario",
-                    scenario.to_str().unwrap(),
-                ],
+            let (op, mut daemon, mut sim, mut clock) = start(
+                &world,
+                toml,
+                noise,
+                seed,
+                &["--scenario", scenario.to_str().unwrap()],
             );
             clock.run_to(IDLE_BEFORE_REQUEST_S);
             let reply = op.request(RequestKind::Estimate);
@@ -334,17 +325,11 @@ fn under_control(seeds: u64, filter: &str) {
             sim.stop();
             daemon.stop();
         }
-        let errs = |k: usize| {
-            let v: Vec<f64> = rows.iter().map(|r| r[k]).collect();
-            let mean = v.iter().sum::<f64>() / v.len() as f64;
-            let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-            format!("{mean:.4} (worst {hi:.4})")
-        };
         println!(
             "| {name} | {noise} | {} | {} | {} |",
-            spread(&rows, 0),
-            errs(1),
-            errs(2)
+            spread(&column(&rows, 0)),
+            mean_worst(&column(&rows, 1)),
+            mean_worst(&column(&rows, 2))
         );
     }
 }

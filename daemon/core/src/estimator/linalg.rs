@@ -146,6 +146,21 @@ pub fn rel_frobenius_err(estimate: &DMatrix<f64>, truth: &DMatrix<f64>) -> f64 {
     (estimate - truth).norm() / denom
 }
 
+/// [`rel_frobenius_err`] of each row group of two 6 x N models (rotation rows 0-2,
+/// acceleration rows 3-5), as the error bounds are stated. Infinite for differently shaped
+/// matrices (a thruster added or removed) or a group that was zero and is not.
+pub fn rel_frobenius_err_per_row_group(estimate: &DMatrix<f64>, truth: &DMatrix<f64>) -> [f64; 2] {
+    if estimate.shape() != truth.shape() || estimate.nrows() != 6 {
+        return [f64::INFINITY; 2];
+    }
+    [0, 3].map(|r| {
+        rel_frobenius_err(
+            &estimate.rows(r, 3).into_owned(),
+            &truth.rows(r, 3).into_owned(),
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,12 +1,13 @@
 //! The estimator under control: the dynamic method fed with whatever command was sent (the
 //! controller's plus a dither), instead of its own pulses. See `crate::adaptation::identification`.
 
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::Vector3;
 
 use super::{Estimate, Estimator, StopDecision};
 use crate::estimator::config::Method;
 use crate::estimator::dynamic::spin_state::SpinState;
 use crate::estimator::dynamic::thrust_curve::ThrustCurveProbe;
+use crate::estimator::linalg::rel_frobenius_err_per_row_group as row_group_change;
 
 impl Estimator {
     /// Start the dynamic fit now, for samples whose command the caller gives
@@ -189,29 +190,6 @@ fn within_settle(change: [f64; 2], bound: [f64; 2], settle: f64, floor: f64) -> 
         .iter()
         .zip(bound)
         .all(|(c, b)| *c <= (settle * b).max(floor))
-}
-
-/// How far `new` moved from `old` in each row group (rotation rows 0-2, acceleration rows
-/// 3-5): the Frobenius norm of the difference relative to `old`'s, as the error bounds are.
-/// Infinite for differently shaped matrices or a zero group (nothing to be relative to).
-fn row_group_change(new: &DMatrix<f64>, old: &DMatrix<f64>) -> [f64; 2] {
-    if new.shape() != old.shape() || new.nrows() != 6 {
-        return [f64::INFINITY; 2];
-    }
-    [0, 3].map(|r| {
-        let (mut diff, mut norm) = (0.0_f64, 0.0_f64);
-        for i in r..r + 3 {
-            for j in 0..new.ncols() {
-                diff += (new[(i, j)] - old[(i, j)]).powi(2);
-                norm += old[(i, j)].powi(2);
-            }
-        }
-        if norm > 0.0 {
-            (diff / norm).sqrt()
-        } else {
-            f64::INFINITY
-        }
-    })
 }
 
 #[cfg(test)]

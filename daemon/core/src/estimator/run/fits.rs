@@ -468,19 +468,10 @@ fn add_inherited_lag_error(
         if !(e.is_finite() && e > 0.0) {
             continue;
         }
-        let rows = 3 * g..3 * g + 3;
-        let norm2: f64 = rows
-            .clone()
-            .flat_map(|r| (0..n).map(move |i| (r, i)))
-            .map(|(r, i)| sol.b[(r, i)].powi(2))
-            .sum();
-        let per_entry = e * e * norm2 / (3 * n) as f64;
-        for r in rows {
-            for i in 0..n {
-                let se = &mut sol.std_err[(r, i)];
-                *se = (*se * *se + per_entry).sqrt();
-            }
-        }
+        let per_entry = e * e * sol.b.rows(3 * g, 3).norm_squared() / (3 * n) as f64;
+        sol.std_err
+            .rows_mut(3 * g, 3)
+            .apply(|se| *se = (*se * *se + per_entry).sqrt());
         sol.rel_err[g] = sol.rel_err[g].hypot(e);
         let floor = &mut sol.terms.spin_up_floor_rel_err[g];
         *floor = floor.hypot(e);

@@ -547,16 +547,13 @@ fn within_bounds(
     bound: [f64; 2],
 ) -> bool {
     use crate::adaptation::identification::sea_state::UNCONFIRMED_BOUNDS;
-    use crate::estimator::linalg::rel_frobenius_err;
-    if new.shape() != old.shape() || new.nrows() != 6 {
-        return false;
-    }
-    (0..2).all(|g| {
-        let rows = |b: &nalgebra::DMatrix<f64>| b.rows(3 * g, 3).into_owned();
-        // A NaN bound (none) or an infinite error (the old group all zero, the new not)
-        // compares false.
-        rel_frobenius_err(&rows(new), &rows(old)) <= UNCONFIRMED_BOUNDS * bound[g]
-    })
+    use crate::estimator::linalg::rel_frobenius_err_per_row_group;
+    // A NaN bound (none) or an infinite error (another shape, or the old group all zero and
+    // the new not) compares false.
+    rel_frobenius_err_per_row_group(new, old)
+        .iter()
+        .zip(bound)
+        .all(|(e, b)| *e <= UNCONFIRMED_BOUNDS * b)
 }
 
 #[cfg(test)]
