@@ -240,21 +240,19 @@ fn start(
 /// The identification under control after an announced change, the daemon's defaults, at
 /// each IMU noise (see the module doc).
 fn under_control(seeds: u64, filter: &str) {
-    const BEFORE_2026_12_02: &str = "[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\n";
+    const BEFORE_2026_12_02: &str = "[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\nlead_in_s = 1.0\n";
+    const HOLD_1_S: &str = "[identification]\nlead_in_s = 1.0\n";
+    const BEFORE: &str =
+        "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise, 1 s hold";
+    const HOLD: &str = "1 s hold before the dither (lead_in_s = 1, the morning of 2026-12-02)";
     // (name, the daemon's configuration, IMU)
     const ROWS: &[(&str, &str, &str)] = &[
         ("defaults", "", "realistic"),
-        (
-            "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise",
-            BEFORE_2026_12_02,
-            "realistic",
-        ),
+        (HOLD, HOLD_1_S, "realistic"),
+        (BEFORE, BEFORE_2026_12_02, "realistic"),
         ("defaults", "", "paper"),
-        (
-            "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise",
-            BEFORE_2026_12_02,
-            "paper",
-        ),
+        (HOLD, HOLD_1_S, "paper"),
+        (BEFORE, BEFORE_2026_12_02, "paper"),
     ];
     let rows_wanted: Vec<_> = ROWS
         .iter()

@@ -24,17 +24,19 @@ fn turned(seed: u64, noisy_focus: Option<(f64, f64)>) -> Reestimation {
     r
 }
 
-/// Seeds 1 and 2: 9.0 s each with the noisy focus (0.054 / 0.064, 0.035 / 0.072 off; 7.3-7.4
-/// deg of largest tilt), 12.0 and 13.0 s with the quiet one (0.050 / 0.059, 0.033 / 0.074).
+/// Seeds 1 and 2 (since the 0.5 s lead-in, `identification.lead_in_s`): 10.5 and 8.5 s with
+/// the noisy focus (0.046 / 0.049, 0.038 / 0.076 off; 7.3 deg of largest tilt), 11.5 and 9.5
+/// s with the quiet one; seeds 3-4 9.5 / 9.5 s against 10.5 / 11.5 s. (With the 1 s hold:
+/// 9.0 s each against 12.0 and 13.0 s.)
 #[test]
 fn at_the_papers_noise_the_stronger_focus_identifies_sooner_within_the_budget() {
     for seed in [1, 2] {
         let focused = turned(seed, None);
         let quiet = turned(seed, Some((1.7, 0.1)));
-        assert!(focused.took_s < 10.0, "seed {seed}: {focused:?}");
+        assert!(focused.took_s < 11.0, "seed {seed}: {focused:?}");
         assert!(
-            quiet.took_s > 11.0,
-            "seed {seed}, the decisive run: {quiet:?}"
+            quiet.took_s > focused.took_s + 0.9,
+            "seed {seed}, the decisive run: {quiet:?} against {focused:?}"
         );
         assert!(
             focused.err_rot < 0.07 && focused.err_acc < 0.09,

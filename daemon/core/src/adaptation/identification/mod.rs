@@ -54,6 +54,17 @@ pub struct IdentificationConfig {
     /// shorter the pair, the less of it passes the control loop as tilt; 0.1 s doubled the
     /// tilt for the same model quality).
     pub hold_s: f64,
+    /// The hold without dither before the dither starts, s, when an earlier run has measured
+    /// the noise (default 0.5; otherwise the hold lasts `machine.noise_s` and measures it).
+    /// It lets the controller take up the model the change brought, and the navigation starts
+    /// from the hold's mean specific force. 1 s until 2026-12-02: the vehicle turns and
+    /// accelerates while held on the new geometry's nominal model, so a longer hold's mean
+    /// was further from the tilt the dither starts from (eight_vectored noise-free 1.4 deg off
+    /// the truth, its acceleration rows 0.029 off; 0.010 with 0.5 s), and it cost a second of
+    /// every identification. Shorter was worse at a realistic IMU: with no hold the
+    /// acceleration rows came out 0.027 against 0.017 (AMOUR-5, seeds 1-10; docs/study.md,
+    /// "Half a second of hold").
+    pub lead_in_s: f64,
     /// Attitude error budget, deg (default 10): the dither fades out linearly between half
     /// the budget and the budget, so the controller always has the authority to come back.
     pub attitude_budget_deg: f64,
@@ -215,6 +226,7 @@ impl Default for IdentificationConfig {
             dither_noise_ref_rad_s: 0.02,
             dither_max: 1.0,
             hold_s: 0.05,
+            lead_in_s: 0.5,
             attitude_budget_deg: 10.0,
             min_s: 3.0,
             max_s: 20.0,
@@ -248,7 +260,7 @@ impl IdentificationConfig {
     }
 
     /// (key, value, allowed range) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 19] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 20] {
         [
             (
                 "identification.focus_gain_noisy",
@@ -326,6 +338,11 @@ impl IdentificationConfig {
                 Range::closed(self.dither, 1.0),
             ),
             ("identification.hold_s", self.hold_s, Range::above(0.0)),
+            (
+                "identification.lead_in_s",
+                self.lead_in_s,
+                Range::closed(0.0, 60.0),
+            ),
             (
                 "identification.attitude_budget_deg",
                 self.attitude_budget_deg,

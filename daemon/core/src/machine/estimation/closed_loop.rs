@@ -1,6 +1,6 @@
 //! The estimation run under control (state Identify): first a short hold without dither, for
 //! the navigation's starting attitude (the mean specific force) and, when no noise levels are
-//! known yet, the noise; then the dither on top of the controller's command, the estimator fed
+//! known yet, the noise (`machine.noise_s`; else `identification.lead_in_s`); then the dither on top of the controller's command, the estimator fed
 //! with the total command, and a stop decision every `estimator.segment_s`.
 
 use nalgebra::Vector3;
@@ -198,7 +198,18 @@ impl EstimationRun {
             self.rest.push_held(m, held_s);
             c.sent[..command.len()].copy_from_slice(command);
             c.spin.hold(command);
-            if held_s < setup.machine.noise_s || self.noise.samples() < super::MIN_REST_SAMPLES {
+            // The noise measured once is kept: then the hold is only the lead-in
+            // (`IdentificationConfig::lead_in_s`), as long as the controller holds the vehicle
+            // within the dither's full amplitude by then (half the attitude budget); one it
+            // does not hold yet is held for `machine.noise_s`, as before the lead-in.
+            let ident = &setup.identification;
+            let taken_up = err_deg <= 0.5 * ident.attitude_budget_deg;
+            let hold_s = if self.levels.is_some() && taken_up {
+                ident.lead_in_s.min(setup.machine.noise_s)
+            } else {
+                setup.machine.noise_s
+            };
+            if held_s < hold_s || self.noise.samples() < super::MIN_REST_SAMPLES {
                 return ClosedStep::Holding;
             }
             c.gyro_bias = *gyro_bias;
