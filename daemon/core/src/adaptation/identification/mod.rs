@@ -88,7 +88,8 @@ pub struct IdentificationConfig {
     /// How long after `min_s` an unsettled estimate is waited for, s (default 1); after that
     /// the bound alone decides. Longer waits did not pay: an estimate drifting with the
     /// navigation's velocity (eight_vectored noise-free, the acceleration rows 0.029 off at
-    /// 5 s, 0.034 at 7 s; with a perfect DVL 0.007-0.019) only drifts further.
+    /// 5 s, 0.034 at 7 s; with a perfect DVL 0.007-0.019; the cause was the 1 s hold's
+    /// starting tilt, `lead_in_s`) only drifts further.
     pub settle_wait_s: f64,
     /// The move always allowed, relative (default 0.01; see `settle`). Noise-free the bounds are 0.1-0.2 %
     /// while a steady estimate still moves 0.2-0.5 % a second (AMOUR-5); 1 % is half the
