@@ -55,7 +55,10 @@ pub struct IdentificationConfig {
     /// tilt for the same model quality).
     pub hold_s: f64,
     /// The hold without dither before the dither starts, s, when an earlier run has measured
-    /// the noise (default 0.5; otherwise the hold lasts `machine.noise_s` and measures it).
+    /// the noise (default 0.5; otherwise the hold lasts `machine.noise_s` and measures it). A
+    /// vehicle not held within half `attitude_budget_deg` when it ends is held for
+    /// `machine.noise_s` (or this, if longer): a nominal model that cannot hold the vehicle
+    /// (amour5_top45) had its fight cut short by the hold watch with the lead-in alone.
     /// It lets the controller take up the model the change brought, and the navigation starts
     /// from the hold's mean specific force. 1 s until 2026-12-02: the vehicle turns and
     /// accelerates while held on the new geometry's nominal model, so a longer hold's mean

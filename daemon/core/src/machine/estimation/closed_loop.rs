@@ -201,13 +201,14 @@ impl EstimationRun {
             // The noise measured once is kept: then the hold is only the lead-in
             // (`IdentificationConfig::lead_in_s`), as long as the controller holds the vehicle
             // within the dither's full amplitude by then (half the attitude budget); one it
-            // does not hold yet is held for `machine.noise_s`, as before the lead-in.
+            // does not hold yet is held for `machine.noise_s` (or the lead-in, if longer), as
+            // before the lead-in.
             let ident = &setup.identification;
             let taken_up = err_deg <= 0.5 * ident.attitude_budget_deg;
-            let hold_s = if self.levels.is_some() && taken_up {
-                ident.lead_in_s.min(setup.machine.noise_s)
-            } else {
-                setup.machine.noise_s
+            let hold_s = match (self.levels.is_some(), taken_up) {
+                (true, true) => ident.lead_in_s,
+                (true, false) => ident.lead_in_s.max(setup.machine.noise_s),
+                (false, _) => setup.machine.noise_s,
             };
             if held_s < hold_s || self.noise.samples() < super::MIN_REST_SAMPLES {
                 return ClosedStep::Holding;
