@@ -55,10 +55,7 @@ pub struct IdentificationConfig {
     /// tilt for the same model quality).
     pub hold_s: f64,
     /// The hold without dither before the dither starts, s, when an earlier run has measured
-    /// the noise (default 0.5; otherwise the hold lasts `machine.noise_s` and measures it). A
-    /// vehicle not held within half `attitude_budget_deg` when it ends is held for
-    /// `machine.noise_s` (or this, if longer): a nominal model that cannot hold the vehicle
-    /// (amour5_top45) had its fight cut short by the hold watch with the lead-in alone.
+    /// the noise (default 0.5; otherwise the hold lasts `machine.noise_s` and measures it).
     /// It lets the controller take up the model the change brought, and the navigation starts
     /// from the hold's mean specific force. 1 s until 2026-12-02: the vehicle turns and
     /// accelerates while held on the new geometry's nominal model, so a longer hold's mean
@@ -66,7 +63,10 @@ pub struct IdentificationConfig {
     /// the truth, its acceleration rows 0.029 off; 0.010 with 0.5 s), and it cost a second of
     /// every identification. Shorter was worse at a realistic IMU: with no hold the
     /// acceleration rows came out 0.027 against 0.017 (AMOUR-5, seeds 1-10; docs/study.md,
-    /// "Half a second of hold").
+    /// "Half a second of hold"). A vehicle not held within half `attitude_budget_deg` when the
+    /// lead-in ends is held for `machine.noise_s` (or this, if longer): a nominal model that
+    /// cannot hold the vehicle (amour5_top45) had its fight cut short by the hold watch with
+    /// the lead-in alone.
     pub lead_in_s: f64,
     /// Attitude error budget, deg (default 10): the dither fades out linearly between half
     /// the budget and the budget, so the controller always has the authority to come back.
