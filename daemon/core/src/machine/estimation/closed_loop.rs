@@ -1,8 +1,8 @@
-//! The estimation run under control (state Identify): first a short hold without dither, for
-//! the navigation's starting attitude (the mean specific force) and, when no noise levels are
-//! known yet, the noise (`machine.noise_s`; else `identification.lead_in_s`); then the dither
-//! on top of the controller's command, the estimator fed with the total command, and a stop
-//! decision every `estimator.segment_s`.
+//! The estimation run under control (state Identify): first a hold without dither, for the
+//! navigation's starting attitude (the mean specific force) and, when no noise levels are known
+//! yet, the noise: `machine.noise_s` to measure the noise, else the shorter
+//! `identification.lead_in_s`; then the dither on top of the controller's command, the
+//! estimator fed with the total command, and a stop decision every `estimator.segment_s`.
 
 use nalgebra::Vector3;
 use thruster_protocol::MAX_THRUSTERS;
