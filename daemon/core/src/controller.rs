@@ -296,6 +296,7 @@ mod tests {
             lag_check: None,
             thrust_curve: None,
             thrust_asymmetry: k,
+            prior_disagreement: [0.0; 2],
             imu_position: None,
             unexplained_rate_radps: 0.0,
             instrumented: [false; 2],

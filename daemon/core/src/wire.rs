@@ -359,6 +359,7 @@ mod tests {
             lag_check: None,
             thrust_curve: None,
             thrust_asymmetry: 0.0,
+            prior_disagreement: [0.0; 2],
             imu_position: Some(ImuPosition::decide(
                 nalgebra::Vector3::zeros(),
                 Learned {

@@ -337,8 +337,11 @@ fn in_rough_water_the_model_the_controller_made_is_refused_and_holding_goes_on()
         "{refusals:?}"
     );
     // The decisive run, without the check: noise-free, by least squares, the fit takes the
-    // controller's answer to the swell for thrust and swaps in a model twice outside its
-    // own bound (measured 0.079 / 0.034 under 0.039 / 0.027).
+    // controller's answer to the swell for thrust and swaps in a model 0.076 / 0.034 off.
+    // Until 2026-12-02 that was twice outside its own bound (0.079 / 0.034 under 0.039 /
+    // 0.027); the data now moves the kept columns beyond their errors and the bound is
+    // widened to cover it (0.42 / 0.64 of it, `carry_over::disagreement_scale`), but the
+    // model is still 4x what the check keeps out.
     let unchecked = IdentificationConfig {
         min_dither_share: 0.0,
         instrument: Instrument::Never,
@@ -349,7 +352,7 @@ fn in_rough_water_the_model_the_controller_made_is_refused_and_holding_goes_on()
     assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
     let (rot, acc) = coverage(&run, &r);
     assert!(
-        rot.max(acc) > 1.5,
+        r.err_rot > 0.05 && rot.max(acc) <= 1.5,
         "{r:?}: error / bound {rot:.2} / {acc:.2}"
     );
 }
@@ -363,7 +366,11 @@ fn in_rough_water_the_model_the_controller_made_is_refused_and_holding_goes_on()
 /// (0.015 / 0.014), realistic at most 1.00; eight_vectored noise-free 0.81. By least squares
 /// AMOUR-5 is within its bound too now (noise-free 1.15: most of its old 2.8x was the lags
 /// started from rest), but eight_vectored noise-free is not (0.048 / 0.033, 2.29x): the
-/// instrument stays. docs/study.md, "The under-control fit's floor".
+/// instrument stays. docs/study.md, "The under-control fit's floor". Since 2026-12-02 a fit
+/// that moved the kept columns beyond their errors is reported widened
+/// (`carry_over::disagreement_scale`): AMOUR-5 noise-free (2.7 per entry) 0.015 / 0.018
+/// under 0.017 / 0.023, and eight_vectored by least squares within 1.34x of its widened
+/// bound, but still 0.049 off against the instrument's 0.017: the instrument stays for that.
 #[test]
 fn in_moderate_water_the_instrumented_identification_stays_within_its_bound() {
     use thruster_sim::disturbance::WaterPreset;
@@ -386,13 +393,14 @@ fn in_moderate_water_the_instrumented_identification_stays_within_its_bound() {
         );
         assert!(r.took_s <= 6.0, "{noise:?} {seed}: {r:?}");
     }
-    // eight_vectored noise-free: instrumented within its bound, by least squares outside.
+    // eight_vectored noise-free: instrumented within its bound; by least squares within its
+    // widened bound, but three times as far off.
     let v = vehicle("eight_vectored");
     let least_squares = IdentificationConfig {
         instrument: Instrument::Never,
         ..IdentificationConfig::default()
     };
-    let mut coverages = Vec::new();
+    let (mut coverages, mut errors) = (Vec::new(), Vec::new());
     for identification in [IdentificationConfig::default(), least_squares] {
         let mut run = Run::new("eight_vectored", NoisePreset::None, 1);
         run.with_identification(identification);
@@ -401,10 +409,15 @@ fn in_moderate_water_the_instrumented_identification_stays_within_its_bound() {
         let (rot, acc) = coverage(&run, &r);
         println!("eight_vectored: {r:?}: error / bound {rot:.2} / {acc:.2}");
         coverages.push(rot.max(acc));
+        errors.push(r.err_rot);
     }
     assert!(
-        coverages[0] <= 1.5 && coverages[1] > 1.8,
+        coverages[0] <= 1.5 && coverages[1] <= 1.5,
         "instrumented, least squares: {coverages:?}"
+    );
+    assert!(
+        errors[1] > 2.0 * errors[0],
+        "instrumented, least squares: {errors:?}"
     );
 }
 

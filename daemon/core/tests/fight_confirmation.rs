@@ -177,11 +177,16 @@ fn at_the_papers_noise_a_fight_twice_or_a_refused_fight_lets_go() {
 /// rotation bound** (since the 0.5 s lead-in, `identification.lead_in_s`: the fight's share
 /// 0.086, its model at 0.65 / 0.48 of the widened bound, confirmed at 15.4 s 0.051 / 0.015
 /// off, 3.6x a rotation bound of 0.014; a 1 s hold for the confirmation alone gave the same).
-/// The error is in two columns the prior kept (LB's pitch 21 % off), pulled
-/// by what is left of the fight while the vehicle yaws back from 180 deg; decisive runs:
-/// dithering every thruster alike instead of focusing on the changed one, 0.012 / 0.004, still
-/// 2.1x (and at a realistic IMU on amour5_top45 worse, up to 1.67x, so not taken); starting
-/// 3 s later, or only within half the attitude budget, no better; a perfect DVL, no better.
+/// The error is in columns the prior kept (LB's pitch 16.9 against 14.1, L's 0.7 against
+/// 2.2), pulled by what is left of the fight while the vehicle yaws back from 180 deg;
+/// decisive runs: dithering every thruster alike instead of focusing on the changed one,
+/// 0.012 / 0.004, still 2.1x (and at a realistic IMU on amour5_top45 worse, up to 1.67x, so
+/// not taken); starting 3 s later, or only within half the attitude budget, no better; a
+/// perfect DVL, no better. What tells: the fit moved the kept pitch gains 9.8 of their
+/// standard errors squared per entry (LB's 13.9 +- 0.34 to 16.9), which data and a prior that
+/// agree never do. Since 2026-12-02 the bound is widened by that (`carry_over::
+/// disagreement_scale`, sqrt(9.8)): 0.014 -> 0.044, and the confirmed model is 1.15x / 0.99x of
+/// it.
 #[test]
 fn a_tumble_on_a_misdeclared_thruster_is_held_by_the_fights_model_and_confirmed() {
     use nalgebra::Vector3;
@@ -220,7 +225,7 @@ fn a_tumble_on_a_misdeclared_thruster_is_held_by_the_fights_model_and_confirmed(
         swaps[0]
     );
     assert_eq!(swaps.len(), 2, "the fight's model, then the confirmation's");
-    let limits = [1.5, 4.0];
+    let limits = [1.5, 1.5];
     for (s, limit) in swaps.iter().zip(limits) {
         let (rot, acc) = coverage(&run, s);
         println!("  share {:.3}: {rot:.2} / {acc:.2} of the bound", s.share);

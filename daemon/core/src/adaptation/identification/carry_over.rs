@@ -107,6 +107,50 @@ pub fn carried_over(
     })
 }
 
+/// The factor a fit's bound in one row group is widened by when it strayed from the prior it
+/// was given by `disagreement` per entry (`DynamicTerms::prior_disagreement`):
+/// `sqrt(max(1, disagreement))`, the Birge ratio. Why: a fit between data and a prior that
+/// agree sits within their errors (below 1 per entry); above it one of them is wrong beyond
+/// its stated error, a bias no more data removes, and the fit's variances, which assume both
+/// right, are too small by about that ratio. Measured on `aligned` after a misdeclared screw
+/// (docs/study.md, "The kept columns and the data disagree"): what the fight left in the
+/// confirmation's data pulled LB's kept pitch gain from 13.9 +- 0.34 to 16.9 (the truth 14.1),
+/// 9.8 per entry, and the model was 3.6x its bound. Non-finite reads as no widening beyond
+/// [`MAX_DISAGREEMENT_SCALE`].
+pub fn disagreement_scale(disagreement: f64) -> f64 {
+    if disagreement.is_nan() {
+        return 1.0;
+    }
+    disagreement.max(1.0).sqrt().min(MAX_DISAGREEMENT_SCALE)
+}
+
+/// `model`'s bounds and standard errors widened per row group (rotation rows 0-2,
+/// acceleration rows 3-5) by [`disagreement_scale`] of its fit's `disagreement` with the
+/// prior; the larger of the two factors and what the status says of it, None when nothing
+/// was widened.
+pub fn widen_for_disagreement(model: &mut Model, disagreement: [f64; 2]) -> Option<(f64, String)> {
+    let scale = disagreement.map(disagreement_scale);
+    if scale.iter().all(|k| *k <= 1.0) {
+        return None;
+    }
+    model.rel_err_rot *= scale[0];
+    model.rel_err_acc *= scale[1];
+    for (g, k) in scale.iter().enumerate() {
+        let rows = (3 * g).min(model.std_err.nrows());
+        let count = 3.min(model.std_err.nrows() - rows);
+        model.std_err.rows_mut(rows, count).scale_mut(*k);
+    }
+    let text = format!(
+        "; the kept columns moved {:.1} / {:.1} sd^2 per entry: bound widened to rot {:.3}, acc {:.3}",
+        disagreement[0], disagreement[1], model.rel_err_rot, model.rel_err_acc
+    );
+    Some((scale[0].max(scale[1]), text))
+}
+
+/// The most `disagreement_scale` widens a bound (a fit 30x off its prior's errors per entry is
+/// refused by any gate long before).
+pub const MAX_DISAGREEMENT_SCALE: f64 = 30.0;
+
 /// Each thruster's own lag after `change` (`map`: the old index of each new thruster), when
 /// the model learned one per thruster: a lag is the thruster's make, not its place, so a moved
 /// thruster keeps its own and an added one gets the others' mean. Empty otherwise.
@@ -168,6 +212,15 @@ mod tests {
         assert_eq!(p.b[(2, 1)], 21.0);
         assert_eq!(p.b_std_err[(2, 1)], 1.0);
         assert_eq!(p.b[(5, 3)], 53.0);
+    }
+
+    #[test]
+    fn a_fit_within_its_priors_errors_keeps_its_bound_and_one_beyond_them_is_widened() {
+        assert_eq!(disagreement_scale(0.0), 1.0);
+        assert_eq!(disagreement_scale(0.9), 1.0);
+        assert!((disagreement_scale(9.0) - 3.0).abs() < 1e-12);
+        assert_eq!(disagreement_scale(f64::NAN), 1.0);
+        assert_eq!(disagreement_scale(f64::INFINITY), MAX_DISAGREEMENT_SCALE);
     }
 
     #[test]

@@ -116,6 +116,12 @@ pub struct DynamicTerms {
     /// predicts motion from B and the commands shapes the commands with it.
     #[serde(default)]
     pub thrust_asymmetry: f64,
+    /// Per row group (rotation, acceleration): how far the fit strayed from the prior it was
+    /// given, the mean over the prior's entries of ((fitted - prior) / prior's standard
+    /// error)^2 ([`prior::disagreement`]); 0 without a prior. Above 1 the data and the prior
+    /// disagree beyond their errors, and the fit's bound is too small by about its square root.
+    #[serde(default)]
+    pub prior_disagreement: [f64; 2],
 }
 
 impl DynamicTerms {
@@ -688,6 +694,15 @@ impl DynamicRun {
         } else {
             base
         };
+        // How far the fit strayed from the prior, per entry (`prior::disagreement`): 0 without
+        // one. The fit's variances assume both right; whoever reports this fit's bound widens
+        // it by this (the stop rule does not: more data does not remove a bias).
+        let prior_disagreement: [f64; 2] = std::array::from_fn(|g| {
+            prior
+                .as_ref()
+                .and_then(|p| prior::disagreement(p, &sols[g].theta, g, self.split))
+                .unwrap_or(0.0)
+        });
         let mut b = DMatrix::zeros(6, n);
         let mut std_err = DMatrix::zeros(6, n);
         let mut split_b = DMatrix::zeros(6, c);
@@ -781,6 +796,7 @@ impl DynamicRun {
                 unexplained_rate_radps: 0.0,
                 instrumented: [rot_ls.instrumented(), acc_ls.instrumented()],
                 thrust_asymmetry: if self.split { 0.0 } else { self.asymmetry },
+                prior_disagreement,
             },
             split: self.split.then_some((split_b, split_se)),
         }

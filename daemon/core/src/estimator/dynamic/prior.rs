@@ -47,6 +47,41 @@ pub const CONTRADICTION_SHARE: f64 = 0.25;
 /// ... and significantly: chi-square of the move over three rotation rows (about 4.7 sigma).
 pub const CONTRADICTION_CHI2: f64 = 30.0;
 
+/// How far a fit that weighed the data against this prior strayed from it, per entry: the
+/// mean over the prior's entries of DOF rows `3 g .. 3 g + 3` (`g` 0: rotation, 1:
+/// acceleration) of ((fitted - prior) / prior's standard error)^2, with `theta` the fit's
+/// coefficients (one column per output of the group). None without entries in the group.
+///
+/// Why: where the data and the prior agree this is below 1 (the fit sits between them and
+/// nearer the better known), so a mean above 1 says that one of them is wrong beyond its
+/// stated error, and the fit's variances, which assume both right, are too small by about
+/// that factor (the Birge ratio). On `aligned` after a misdeclared screw, what the fight left
+/// in the confirmation's data pulled LB's carried-over pitch gain from 13.9 +- 0.34 to 16.9
+/// (the truth 14.1): 9.8 per entry, and the model 3.6x its bound.
+pub fn disagreement(
+    prior: &DynamicPrior,
+    theta: &DMatrix<f64>,
+    group: usize,
+    split: bool,
+) -> Option<f64> {
+    let (mut chi2, mut k) = (0.0, 0usize);
+    for a in 0..3 {
+        for e in prior.entries(3 * group + a, split) {
+            let fitted: f64 = e
+                .weights
+                .iter()
+                .map(|&(j, w)| if w == 0.0 { 0.0 } else { w * theta[(j, a)] })
+                .sum();
+            let z2 = ((fitted - e.value) / e.std_err).powi(2);
+            if z2.is_finite() {
+                chi2 += z2;
+                k += 1;
+            }
+        }
+    }
+    (k > 0).then(|| chi2 / k as f64)
+}
+
 /// One prior on a linear combination `sum w_i theta_i` of one output's coefficients.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PriorEntry {
@@ -152,6 +187,31 @@ mod tests {
             lag_rel_err: [0.0; 2],
             imu_position_m: None,
         }
+    }
+
+    #[test]
+    fn a_fit_on_its_prior_disagrees_by_nothing_and_one_two_errors_off_by_four() {
+        let p = prior(3);
+        // theta: one column per output of the group, the thrust columns first.
+        let on = DMatrix::from_element(5, 3, 2.0);
+        assert_eq!(disagreement(&p, &on, 0, false), Some(0.0));
+        // Every kept entry (thrusters 0 and 2; 1 is unknown) two standard errors off.
+        let mut off = on.clone();
+        off.row_mut(0).fill(2.2);
+        off.row_mut(2).fill(1.8);
+        off.row_mut(1).fill(-100.0);
+        let d = disagreement(&p, &off, 1, false).unwrap();
+        assert!((d - 4.0).abs() < 1e-9, "{d}");
+        // Split, the prior is on the mean of forward (i) and reverse (n + i).
+        let mut split = DMatrix::from_element(8, 3, 2.0);
+        split.row_mut(0).fill(2.4);
+        split.row_mut(3).fill(2.0);
+        let d = disagreement(&p, &split, 0, true).unwrap();
+        assert!((d - 2.0).abs() < 1e-9, "{d}");
+        // No entries in the group: nothing to say.
+        let mut none = p.clone();
+        none.b_std_err.fill(f64::INFINITY);
+        assert_eq!(disagreement(&none, &on, 0, false), None);
     }
 
     #[test]

@@ -301,7 +301,7 @@ impl Machine {
         let t = self.last_t_ns.unwrap_or(self.phase_start_ns);
         self.next_phase(State::Solve, t, "concluding the estimation".into());
         let key = self.geometry_key();
-        let Some((candidate, pulses)) = self.run.conclude(result) else {
+        let Some((mut candidate, pulses)) = self.run.conclude(result) else {
             self.transition(State::Idle, "internal: a stopping solve made no model");
             return;
         };
@@ -354,7 +354,12 @@ impl Machine {
             self.transition(self.after_refusal(), &text);
             return;
         }
-        match self.try_swap(candidate, ModelSource::Estimated) {
+        // A prior carried over from the model in force that the data moved beyond its errors
+        // (`widen_for_disagreement`).
+        let (gate_scale, widened) = self.widen_for_disagreement(&mut candidate);
+        let why = why + widened.as_deref().unwrap_or("");
+        let gate = self.setup.machine.max_swap_rel_err * gate_scale;
+        match self.try_swap_within(candidate, ModelSource::Estimated, gate) {
             Ok(()) => {
                 if let Some(k) = key {
                     self.models.remember_current(k);

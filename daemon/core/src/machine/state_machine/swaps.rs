@@ -3,6 +3,7 @@
 
 // The machine's fields and helpers are the parent's: these are its methods, by job.
 use super::*;
+use crate::adaptation::identification::carry_over;
 
 impl Machine {
     /// Install a model from a file (at start, or an operator's load request): its
@@ -55,6 +56,27 @@ impl Machine {
     ) -> Result<(), crate::model::SwapRejection> {
         let limit = self.setup.machine.max_swap_rel_err;
         self.try_swap_within(model, source, limit)
+    }
+
+    /// `candidate`'s bound widened for how far its fit strayed from the prior it kept
+    /// (`carry_over::widen_for_disagreement`). Returns the factor the confidence gate is to be
+    /// scaled by, and what the status says when anything was widened. The gate judges the
+    /// widened bound against a learned model in force, and the fit's own against a nominal
+    /// one, which is a guess with no bound: on `aligned` with a screw declared the wrong way
+    /// round, refusing a fit 0.15 (widened 0.40) for it kept a model 0.99 off and the vehicle
+    /// 27 deg off level (docs/study.md, "The kept columns and the data disagree").
+    pub(super) fn widen_for_disagreement(&self, candidate: &mut Model) -> (f64, Option<String>) {
+        let disagreement = candidate
+            .dynamics
+            .as_ref()
+            .map_or([0.0; 2], |d| d.prior_disagreement);
+        match carry_over::widen_for_disagreement(candidate, disagreement) {
+            None => (1.0, None),
+            Some((scale, text)) => {
+                let guess_in_force = self.models.current().is_some_and(|m| !m.estimated);
+                (if guess_in_force { scale } else { 1.0 }, Some(text))
+            }
+        }
     }
 
     /// `try_swap` with the confidence gate at `max_rel_err` instead of

@@ -246,7 +246,19 @@ impl Machine {
         // 0.25 gate at a realistic IMU; refused, the vehicle tumbled to the hold watch and was
         // re-estimated from rest, 23 s; swapped, the confirmation's model came at 12-14 s,
         // docs/study.md, "A model fitted on the controller's fight").
-        let gate = self.setup.machine.max_swap_rel_err * fight.map_or(1.0, |(_, k)| k);
+        let mut gate_scale = fight.map_or(1.0, |(_, k)| k);
+        // Otherwise: the data pulled the fit away from the columns the change left alone,
+        // beyond both their errors, and its bound is widened by as much
+        // (`widen_for_disagreement`). A fight's bound is widened by its share instead: its
+        // data is the fight, and it is confirmed once held.
+        if fight.is_none() {
+            let (scale, text) = self.widen_for_disagreement(&mut candidate);
+            gate_scale = scale;
+            if let Some(text) = text {
+                why.push_str(&text);
+            }
+        }
+        let gate = self.setup.machine.max_swap_rel_err * gate_scale;
         match self.try_swap_within(candidate, ModelSource::Estimated, gate) {
             Ok(()) => {
                 // A fight's model is not kept for its geometry: the confirmation's is.
