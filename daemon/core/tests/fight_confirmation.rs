@@ -167,6 +167,40 @@ fn at_the_papers_noise_a_fight_twice_or_a_refused_fight_lets_go() {
     }
 }
 
+/// `aligned` learned, then its first thruster turned 45 deg and announced with its left-handed
+/// L declared right-handed, 3 s after its first model (before the sea-state gauge has read
+/// anything): every estimated model swapped in after the announcement.
+fn misdeclared_screw(noise: NoisePreset, seed: u64) -> (Run, Reestimation, Vec<Swapped>) {
+    use nalgebra::Vector3;
+    let v = vehicle("aligned");
+    let mut run = Run::with_vehicle(v.clone(), noise, seed, 200.0);
+    run.run_for(1.0);
+    run.estimate();
+    run.run_for(3.0);
+    assert_eq!(run.machine.sea_state_deg(), None);
+    let d = Vector3::from(v.thrusters[0].direction);
+    let across = if d.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let axis = d.cross(&across).normalize();
+    let mut declared = v.clone();
+    let l = declared.thrusters.iter().position(|t| t.reversed).unwrap();
+    declared.thrusters[l].reversed = false;
+    swaps_through(run, |mut run, observe| {
+        let r = run.announced_turn(
+            &declared,
+            0,
+            axis.into(),
+            45.0,
+            ThrusterChange::Moved(0),
+            observe,
+        );
+        (run, r)
+    })
+}
+
 /// The tumble on `aligned`: its first thruster turned 45 deg and announced with its
 /// left-handed L declared right-handed (a mistake in the declaration), 3 s after its first
 /// model, before the sea-state gauge has read anything. The dither fades out (share 0.003) and
@@ -189,34 +223,7 @@ fn at_the_papers_noise_a_fight_twice_or_a_refused_fight_lets_go() {
 /// it.
 #[test]
 fn a_tumble_on_a_misdeclared_thruster_is_held_by_the_fights_model_and_confirmed() {
-    use nalgebra::Vector3;
-    let v = vehicle("aligned");
-    let mut run = Run::with_vehicle(v.clone(), NoisePreset::None, 1, 200.0);
-    run.run_for(1.0);
-    run.estimate();
-    run.run_for(3.0);
-    assert_eq!(run.machine.sea_state_deg(), None);
-    let d = Vector3::from(v.thrusters[0].direction);
-    let across = if d.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let axis = d.cross(&across).normalize();
-    let mut declared = v.clone();
-    let l = declared.thrusters.iter().position(|t| t.reversed).unwrap();
-    declared.thrusters[l].reversed = false;
-    let (run, r, swaps) = swaps_through(run, |mut run, observe| {
-        let r = run.announced_turn(
-            &declared,
-            0,
-            axis.into(),
-            45.0,
-            ThrusterChange::Moved(0),
-            observe,
-        );
-        (run, r)
-    });
+    let (run, r, swaps) = misdeclared_screw(NoisePreset::None, 1);
     println!("{r:?}\n{swaps:#?}");
     assert!(!swaps.is_empty(), "{r:?}");
     assert!(
@@ -225,11 +232,10 @@ fn a_tumble_on_a_misdeclared_thruster_is_held_by_the_fights_model_and_confirmed(
         swaps[0]
     );
     assert_eq!(swaps.len(), 2, "the fight's model, then the confirmation's");
-    let limits = [1.5, 1.5];
-    for (s, limit) in swaps.iter().zip(limits) {
+    for s in &swaps {
         let (rot, acc) = coverage(&run, s);
         println!("  share {:.3}: {rot:.2} / {acc:.2} of the bound", s.share);
-        assert!(rot <= limit && acc <= limit, "{s:?}");
+        assert!(rot <= 1.5 && acc <= 1.5, "{s:?}");
     }
     assert_eq!(r.source, ModelSource::Estimated, "{r:?}");
     assert!(r.err_rot < 0.06 && r.err_acc < 0.02, "{r:?}");
@@ -273,4 +279,27 @@ fn an_abort_while_the_confirmation_waits_keeps_the_fights_model_and_starts_nothi
     assert_eq!(run.machine.model().unwrap().source, ModelSource::Estimated);
     // And with nothing waiting, an abort is refused as before.
     assert!(run.machine.on_request(Request::Abort).is_err());
+}
+
+/// The same misdeclared screw at a realistic IMU, seeds 1-5 (measured 2026-12-02): only seed 1
+/// tumbles into a fight (share 0.38, its model 0.53 / 0.79 of its widened bound, confirmed
+/// 0.010 / 0.015 off at 14.3 s); the others are identified under control in 3.5 s, 0.011-0.027
+/// / 0.013-0.053 off, at most 1.26x / 1.32x their bounds (seeds 2 and 5). The bound is never
+/// widened for the kept columns here: the data and the prior agree within their errors.
+#[test]
+fn at_a_realistic_imu_every_model_after_a_misdeclared_screw_is_within_its_bound() {
+    for seed in 1..=5 {
+        let (run, r, swaps) = misdeclared_screw(NoisePreset::Realistic, seed);
+        assert!(!swaps.is_empty(), "seed {seed}: {r:?}");
+        for s in &swaps {
+            let (rot, acc) = coverage(&run, s);
+            println!(
+                "seed {seed}: share {:.2}: {rot:.2} / {acc:.2} of the bound",
+                s.share
+            );
+            assert!(rot <= 1.5 && acc <= 1.5, "seed {seed}: {s:?}");
+        }
+        assert_eq!(r.source, ModelSource::Estimated, "seed {seed}: {r:?}");
+        assert!(r.err_rot < 0.04 && r.err_acc < 0.07, "seed {seed}: {r:?}");
+    }
 }

@@ -447,15 +447,23 @@ pub(super) fn sweep_identification() {
                     b.last.0,
                     b.last.1,
                 ];
+                // The bound the daemon reports with the model in force (a fight's or a fit that
+                // strayed from its prior widened), beside the identification's own above.
+                let reported = run
+                    .machine
+                    .model()
+                    .map_or((f64::NAN, f64::NAN), |m| (m.rel_err_rot, m.rel_err_acc));
                 println!(
-                    "{}{:?} unexplained {:.4} rad/s dither share {:.2} sea {:.1} deg curve {}",
+                    "{}{:?} unexplained {:.4} rad/s dither share {:.2} sea {:.1} deg curve {} model bound {:.3} / {:.3}",
                     line(&seed.to_string(), &row, b.t_rot, b.t_acc),
                     r.source,
                     b.unexplained,
                     b.dither_share,
                     b.sea_deg,
                     b.curve
-                        .map_or("-".to_string(), |(p, lr)| format!("p {p:.2} lnLR {lr:.1}"))
+                        .map_or("-".to_string(), |(p, lr)| format!("p {p:.2} lnLR {lr:.1}")),
+                    reported.0,
+                    reported.1
                 );
                 for (s, v) in sum.iter_mut().zip(row) {
                     *s += v;
