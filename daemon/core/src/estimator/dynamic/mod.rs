@@ -694,15 +694,6 @@ impl DynamicRun {
         } else {
             base
         };
-        // How far the fit strayed from the prior, per entry (`prior::disagreement`): 0 without
-        // one. The fit's variances assume both right; whoever reports this fit's bound widens
-        // it by this (the stop rule does not: more data does not remove a bias).
-        let prior_disagreement: [f64; 2] = std::array::from_fn(|g| {
-            prior
-                .as_ref()
-                .and_then(|p| prior::disagreement(p, &sols[g].theta, g, self.split))
-                .unwrap_or(0.0)
-        });
         let mut b = DMatrix::zeros(6, n);
         let mut std_err = DMatrix::zeros(6, n);
         let mut split_b = DMatrix::zeros(6, c);
@@ -796,7 +787,13 @@ impl DynamicRun {
                 unexplained_rate_radps: 0.0,
                 instrumented: [rot_ls.instrumented(), acc_ls.instrumented()],
                 thrust_asymmetry: if self.split { 0.0 } else { self.asymmetry },
-                prior_disagreement,
+                // Reported, not applied: whoever reports the bound widens it by this (the
+                // stop rule does not: more data does not remove a bias).
+                prior_disagreement: prior::disagreement(
+                    prior.as_ref(),
+                    [&sols[0].theta, &sols[1].theta],
+                    self.split,
+                ),
             },
             split: self.split.then_some((split_b, split_se)),
         }

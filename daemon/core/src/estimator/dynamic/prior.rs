@@ -47,6 +47,21 @@ pub const CONTRADICTION_SHARE: f64 = 0.25;
 /// ... and significantly: chi-square of the move over three rotation rows (about 4.7 sigma).
 pub const CONTRADICTION_CHI2: f64 = 30.0;
 
+/// How far a fit that weighed the data against `prior` strayed from it, per row group
+/// (rotation, acceleration; `thetas` the fit's coefficients of each, one column per output):
+/// [`group_disagreement`], 0 without a prior or without entries in the group.
+pub fn disagreement(
+    prior: Option<&DynamicPrior>,
+    thetas: [&DMatrix<f64>; 2],
+    split: bool,
+) -> [f64; 2] {
+    std::array::from_fn(|g| {
+        prior
+            .and_then(|p| group_disagreement(p, thetas[g], g, split))
+            .unwrap_or(0.0)
+    })
+}
+
 /// How far a fit that weighed the data against this prior strayed from it, per entry: the
 /// mean over the prior's entries of DOF rows `3 g .. 3 g + 3` (`g` 0: rotation, 1:
 /// acceleration) of ((fitted - prior) / prior's standard error)^2, with `theta` the fit's
@@ -58,7 +73,7 @@ pub const CONTRADICTION_CHI2: f64 = 30.0;
 /// that factor (the Birge ratio). On `aligned` after a misdeclared screw, what the fight left
 /// in the confirmation's data pulled LB's carried-over pitch gain from 13.9 +- 0.34 to 16.9
 /// (the truth 14.1): 9.8 per entry, and the model 3.6x its bound.
-pub fn disagreement(
+fn group_disagreement(
     prior: &DynamicPrior,
     theta: &DMatrix<f64>,
     group: usize,
@@ -194,24 +209,27 @@ mod tests {
         let p = prior(3);
         // theta: one column per output of the group, the thrust columns first.
         let on = DMatrix::from_element(5, 3, 2.0);
-        assert_eq!(disagreement(&p, &on, 0, false), Some(0.0));
+        assert_eq!(group_disagreement(&p, &on, 0, false), Some(0.0));
         // Every kept entry (thrusters 0 and 2; 1 is unknown) two standard errors off.
         let mut off = on.clone();
         off.row_mut(0).fill(2.2);
         off.row_mut(2).fill(1.8);
         off.row_mut(1).fill(-100.0);
-        let d = disagreement(&p, &off, 1, false).unwrap();
+        let d = group_disagreement(&p, &off, 1, false).unwrap();
         assert!((d - 4.0).abs() < 1e-9, "{d}");
         // Split, the prior is on the mean of forward (i) and reverse (n + i).
         let mut split = DMatrix::from_element(8, 3, 2.0);
         split.row_mut(0).fill(2.4);
         split.row_mut(3).fill(2.0);
-        let d = disagreement(&p, &split, 0, true).unwrap();
+        let d = group_disagreement(&p, &split, 0, true).unwrap();
         assert!((d - 2.0).abs() < 1e-9, "{d}");
         // No entries in the group: nothing to say.
         let mut none = p.clone();
         none.b_std_err.fill(f64::INFINITY);
-        assert_eq!(disagreement(&none, &on, 0, false), None);
+        assert_eq!(group_disagreement(&none, &on, 0, false), None);
+        // Both groups at once; no prior, nothing.
+        assert_eq!(disagreement(Some(&p), [&on, &off], false)[0], 0.0);
+        assert_eq!(disagreement(None, [&off, &off], false), [0.0; 2]);
     }
 
     #[test]

@@ -298,9 +298,17 @@ impl EstimationRun {
         if t_ns < c.next_decision_ns || self.solver.waiting_for(Purpose::Interval) {
             return ClosedStep::Exciting;
         }
-        c.next_decision_ns += (setup.estimator.segment_s * 1e9) as u64;
-        est.end_interval();
         let elapsed_s = t_ns.saturating_sub(excite_from) as f64 * 1e-9;
+        // Every segment while the stop may wait for a settled estimate (it compares with the
+        // decision before), then every `late_decision_s`.
+        let ident = &setup.identification;
+        let every_s = if elapsed_s + 1e-9 >= ident.min_s + ident.settle_wait_s {
+            ident.late_decision_s.min(setup.estimator.segment_s)
+        } else {
+            setup.estimator.segment_s
+        };
+        c.next_decision_ns += (every_s * 1e9) as u64;
+        est.end_interval();
         ClosedStep::Decide { elapsed_s }
     }
 }

@@ -227,7 +227,7 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// A measuring tool, not a check: the announced rotation with the identification section
 /// overridden from the environment, every combination of the lists given, one row per seed and
 /// the mean. Knobs (comma lists; unset: the default): ID_NOISE (none|realistic|paper, default
-/// paper), ID_SEEDS (default 1-5), ID_HOLD_S, ID_LEAD_IN, ID_DITHER, ID_DITHER_MAX, ID_BUDGET, ID_MIN_S,
+/// paper), ID_SEEDS (default 1-5), ID_HOLD_S, ID_LEAD_IN, ID_LATE_DECISION, ID_DITHER, ID_DITHER_MAX, ID_BUDGET, ID_MIN_S,
 /// ID_MAX_S, ID_SETTLE, ID_SETTLE_FLOOR, ID_SETTLE_WAIT, ID_FOCUS, ID_FOCUS_OTHERS, ID_FOCUS_NOISY, ID_FOCUS_OTHERS_NOISY, ID_SE_SCALE, ID_CARRY (0/1), ID_IV (0 never, 1 in a sea, 2 always: the thrust columns by
 /// instrumental variables), ID_MIN_SHARE, ID_WATER (still|current|moderate|rough: the
 /// water comes up after the first model, 20 s before the announcement), ID_WAVE_PART
@@ -282,6 +282,9 @@ pub(super) fn sweep_identification() {
     vary("ID_DITHER_MAX", d.dither_max, |c, v| c.dither_max = v);
     vary("ID_HOLD_S", d.hold_s, |c, v| c.hold_s = v);
     vary("ID_LEAD_IN", d.lead_in_s, |c, v| c.lead_in_s = v);
+    vary("ID_LATE_DECISION", d.late_decision_s, |c, v| {
+        c.late_decision_s = v
+    });
     vary("ID_FOCUS", d.focus_gain, |c, v| c.focus_gain = v);
     vary("ID_FOCUS_OTHERS", d.focus_others, |c, v| c.focus_others = v);
     vary("ID_FOCUS_NOISY", d.focus_gain_noisy, |c, v| {
