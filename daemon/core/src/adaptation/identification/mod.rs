@@ -99,8 +99,10 @@ pub struct IdentificationConfig {
     /// 1: every segment, as before the key). Why: a run decided once a segment stops up to a
     /// segment after its bound is met. Measured (AMOUR-5 / six_dof / eight_vectored, the
     /// paper's noise, seeds 1-10, in process): 0.1 s takes 9.00 / 9.40 / 13.30 s to 8.64 /
-    /// 8.97 / 12.90 s with the same errors, but it moves the fights' models and six core tests'
-    /// figures (docs/study.md, "Deciding the stop more often"), so it is not the default yet.
+    /// 8.97 / 12.90 s with the same errors, but in a swell at the paper's noise it swaps in
+    /// models a noisy bound let stop early, and four core tests' figures move (docs/study.md,
+    /// "Deciding the stop more often"), so it is not the default yet. A fight (the dither
+    /// under `min_dither_share`) keeps one decision a segment.
     pub late_decision_s: f64,
     /// The move always allowed, relative (default 0.01; see `settle`). Noise-free the bounds are 0.1-0.2 %
     /// while a steady estimate still moves 0.2-0.5 % a second (AMOUR-5); 1 % is half the

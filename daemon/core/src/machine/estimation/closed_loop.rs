@@ -300,9 +300,11 @@ impl EstimationRun {
         }
         let elapsed_s = t_ns.saturating_sub(excite_from) as f64 * 1e-9;
         // Every segment while the stop may wait for a settled estimate (it compares with the
-        // decision before), then every `late_decision_s`.
+        // decision before), then every `late_decision_s`; a fight (the dither under its share)
+        // keeps the segments: stopped sooner, its model was out of its widened bound.
         let ident = &setup.identification;
-        let every_s = if elapsed_s + 1e-9 >= ident.min_s + ident.settle_wait_s {
+        let late = elapsed_s + 1e-9 >= ident.min_s + ident.settle_wait_s;
+        let every_s = if late && c.excitation.dither_share() >= ident.min_dither_share {
             ident.late_decision_s.min(setup.estimator.segment_s)
         } else {
             setup.estimator.segment_s
