@@ -245,12 +245,15 @@ fn under_control(seeds: u64, filter: &str) {
     const BEFORE: &str =
         "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise, 1 s hold";
     const HOLD: &str = "1 s hold before the dither (lead_in_s = 1, the morning of 2026-12-02)";
+    const LATE_0_1: &str = "[identification]\nlate_decision_s = 0.1\n";
+    const LATE: &str = "the stop decided every 0.1 s after the settle wait (late_decision_s = 0.1, not the default)";
     // (name, the daemon's configuration, IMU)
     const ROWS: &[(&str, &str, &str)] = &[
         ("defaults", "", "realistic"),
         (HOLD, HOLD_1_S, "realistic"),
         (BEFORE, BEFORE_2026_12_02, "realistic"),
         ("defaults", "", "paper"),
+        (LATE, LATE_0_1, "paper"),
         (HOLD, HOLD_1_S, "paper"),
         (BEFORE, BEFORE_2026_12_02, "paper"),
     ];
