@@ -113,6 +113,19 @@ impl Model {
         self.effectiveness.ncols()
     }
 
+    /// The reported bounds and B's standard errors widened by `scale` per row group (rotation
+    /// rows 0-2, acceleration rows 3-5): what the fit's own statistics did not see (a fight,
+    /// a prior the data moved beyond its errors).
+    pub fn widen(&mut self, scale: [f64; 2]) {
+        self.rel_err_rot *= scale[0];
+        self.rel_err_acc *= scale[1];
+        for (g, k) in scale.iter().enumerate() {
+            let rows = (3 * g).min(self.std_err.nrows());
+            let count = 3.min(self.std_err.nrows() - rows);
+            self.std_err.rows_mut(rows, count).scale_mut(*k);
+        }
+    }
+
     /// The thrusters' spin-up time constant this model's estimation learned, s; None when it
     /// was configured or the model did not come from the dynamic method. Whatever fits
     /// against this model (the refinement's windows and change test, identification under
@@ -400,6 +413,18 @@ pub fn geometry_key(positions: &[[f64; 3]], directions: &[[f64; 3]]) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn widening_scales_each_row_groups_bound_and_standard_errors() {
+        let mut m = Model::nominal(DMatrix::from_element(6, 2, 1.0), None);
+        m.std_err = DMatrix::from_element(6, 2, 0.1);
+        m.rel_err_rot = 0.02;
+        m.rel_err_acc = 0.03;
+        m.widen([2.0, 3.0]);
+        assert!((m.rel_err_rot - 0.04).abs() < 1e-12 && (m.rel_err_acc - 0.09).abs() < 1e-12);
+        assert!(m.std_err.rows(0, 3).iter().all(|s| (s - 0.2).abs() < 1e-12));
+        assert!(m.std_err.rows(3, 3).iter().all(|s| (s - 0.3).abs() < 1e-12));
+    }
 
     #[test]
     fn nominal_of_aligned_thrusters_leaves_roll_sway_heave_out() {

@@ -133,13 +133,7 @@ pub fn widen_for_disagreement(model: &mut Model, disagreement: [f64; 2]) -> Opti
     if scale.iter().all(|k| *k <= 1.0) {
         return None;
     }
-    model.rel_err_rot *= scale[0];
-    model.rel_err_acc *= scale[1];
-    for (g, k) in scale.iter().enumerate() {
-        let rows = (3 * g).min(model.std_err.nrows());
-        let count = 3.min(model.std_err.nrows() - rows);
-        model.std_err.rows_mut(rows, count).scale_mut(*k);
-    }
+    model.widen(scale);
     let text = format!(
         "; the kept columns moved {:.1} / {:.1} sd^2 per entry: bound widened to rot {:.3}, acc {:.3}",
         disagreement[0], disagreement[1], model.rel_err_rot, model.rel_err_acc

@@ -235,9 +235,7 @@ impl Machine {
                 );
                 return;
             }
-            candidate.rel_err_rot *= scale;
-            candidate.rel_err_acc *= scale;
-            candidate.std_err *= scale;
+            candidate.widen([scale; 2]);
         }
         let (bound_rot, bound_acc) = (candidate.rel_err_rot, candidate.rel_err_acc);
         // The confidence gate judges a fight's fit by its own bound: the model in force
@@ -246,18 +244,18 @@ impl Machine {
         // 0.25 gate at a realistic IMU; refused, the vehicle tumbled to the hold watch and was
         // re-estimated from rest, 23 s; swapped, the confirmation's model came at 12-14 s,
         // docs/study.md, "A model fitted on the controller's fight").
-        let mut gate_scale = fight.map_or(1.0, |(_, k)| k);
         // Otherwise: the data pulled the fit away from the columns the change left alone,
         // beyond both their errors, and its bound is widened by as much
         // (`widen_for_disagreement`). A fight's bound is widened by its share instead: its
         // data is the fight, and it is confirmed once held.
-        if fight.is_none() {
-            let (scale, text) = self.widen_for_disagreement(&mut candidate);
-            gate_scale = scale;
-            if let Some(text) = text {
-                why.push_str(&text);
+        let gate_scale = match fight {
+            Some((_, k)) => k,
+            None => {
+                let (scale, text) = self.widen_for_disagreement(&mut candidate);
+                why.push_str(text.as_deref().unwrap_or(""));
+                scale
             }
-        }
+        };
         let gate = self.setup.machine.max_swap_rel_err * gate_scale;
         match self.try_swap_within(candidate, ModelSource::Estimated, gate) {
             Ok(()) => {
