@@ -240,20 +240,24 @@ fn start(
 /// The identification under control after an announced change, the daemon's defaults, at
 /// each IMU noise (see the module doc).
 fn under_control(seeds: u64, filter: &str) {
-    const BEFORE_2026_12_02: &str = "[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\nlead_in_s = 1.0\n";
-    const HOLD_1_S: &str = "[identification]\nlead_in_s = 1.0\n";
+    // The rows that mean before a change carry the key it moved, so they still mean before.
+    const BEFORE_2026_12_02: &str = "[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
+    const HOLD_1_S: &str = "[identification]\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
     const BEFORE: &str =
-        "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise, 1 s hold";
-    const HOLD: &str = "1 s hold before the dither (lead_in_s = 1, the morning of 2026-12-02)";
-    const LATE_0_1: &str = "[identification]\nlate_decision_s = 0.1\n";
-    const LATE: &str = "the stop decided every 0.1 s after the settle wait (late_decision_s = 0.1, not the default)";
+        "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise, 1 s hold, a decision a segment";
+    const HOLD: &str =
+        "1 s hold before the dither (lead_in_s = 1, the morning of 2026-12-02), a decision a segment";
+    const ONCE_A_SEGMENT: &str = "[identification]\nlate_decision_s = 1.0\n";
+    const SEGMENT: &str =
+        "the stop decided once a segment (late_decision_s = 1, the default until 2026-12-02)";
     // (name, the daemon's configuration, IMU)
     const ROWS: &[(&str, &str, &str)] = &[
         ("defaults", "", "realistic"),
+        (SEGMENT, ONCE_A_SEGMENT, "realistic"),
         (HOLD, HOLD_1_S, "realistic"),
         (BEFORE, BEFORE_2026_12_02, "realistic"),
         ("defaults", "", "paper"),
-        (LATE, LATE_0_1, "paper"),
+        (SEGMENT, ONCE_A_SEGMENT, "paper"),
         (HOLD, HOLD_1_S, "paper"),
         (BEFORE, BEFORE_2026_12_02, "paper"),
     ];

@@ -221,10 +221,16 @@ fn from_scratch_a_burst_then_identification_under_control() {
 /// fitted apart (the open-loop doublets drive every thruster at the same +-p, which makes the
 /// |command| column common to all thrusters and the split unidentifiable): a thruster weak in
 /// reverse is diagnosed. AMOUR-5's LB gives 20 N in reverse instead of the T200's 40.2 N
-/// (ratio 0.39 of its 51.5 N forward, the others 0.78). Measured reverse/forward ratios, seed
-/// 1 (`cargo test -p thrusterd-core --test closed_loop -- --nocapture weak_in_reverse`):
-/// noise-free [0.811, 0.367, 0.809, 0.800, 0.795]; realistic IMU [0.822, 0.395, 0.789, 0.736,
-/// 0.781]; at most 0.045 from the truth, held to 0.07 (1.5x; was 0.08).
+/// (ratio 0.39 of its 51.5 N forward, the others 0.78). Measured reverse/forward ratios
+/// (`cargo test -p thrusterd-core --test closed_loop -- --nocapture weak_in_reverse`), seed 1,
+/// with the stop decided once a segment: noise-free [0.811, 0.367, 0.809, 0.800, 0.795];
+/// realistic IMU [0.822, 0.395, 0.789, 0.736, 0.781]. Since it is decided every 0.1 s after
+/// the settle wait (`identification.late_decision_s`), the runs end 0.6-0.9 s sooner:
+/// noise-free [0.775, 0.384, 0.781, 0.756, 0.772], realistic [0.774, 0.420, 0.768, 0.695,
+/// 0.777] (standard errors 0.012-0.020). LB's ratio is within 0.032 of the truth on seeds
+/// 1-5; the others' worst error 0.086 (seed 1's thruster 3, 4.3 standard errors: the ratio's
+/// error is not covered by its standard error; noise-free the same thruster is 0.025 off at
+/// 5), so LB is held to 0.07 and the others to 0.12, well apart from LB's 0.39.
 #[test]
 fn under_control_a_thruster_weak_in_reverse_is_diagnosed() {
     use thrusterd_core::machine::Request;
@@ -244,12 +250,21 @@ fn under_control_a_thruster_weak_in_reverse_is_diagnosed() {
             .iter()
             .map(|d| d.reverse_gain_ratio.expect("a split fit"))
             .collect();
-        println!("{noise:?}: reverse/forward gain {ratios:.3?}");
+        let ses: Vec<f64> = e
+            .thruster
+            .iter()
+            .map(|d| d.reverse_gain_ratio_se.expect("a split fit"))
+            .collect();
+        println!("{noise:?}: reverse/forward gain {ratios:.3?} se {ses:.3?}");
         let t200 = 40.2 / 51.5;
         for (i, r) in ratios.iter().enumerate() {
-            let want = if i == 1 { 20.0 / 51.5 } else { t200 };
+            let (want, within) = if i == 1 {
+                (20.0 / 51.5, 0.07)
+            } else {
+                (t200, 0.12)
+            };
             assert!(
-                (r - want).abs() < 0.07,
+                (r - want).abs() < within,
                 "{noise:?}: thruster {i}: {r:.3}, truth {want:.3}"
             );
         }

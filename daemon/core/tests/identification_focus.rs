@@ -24,24 +24,35 @@ fn turned(seed: u64, noisy_focus: Option<(f64, f64)>) -> Reestimation {
     r
 }
 
-/// Seeds 1 and 2 (since the 0.5 s lead-in, `identification.lead_in_s`): 10.5 and 8.5 s with
-/// the noisy focus (0.046 / 0.049, 0.038 / 0.076 off; 7.3 deg of largest tilt), 11.5 and 9.5
-/// s with the quiet one; seeds 3-4 9.5 / 9.5 s against 10.5 / 11.5 s. (With the 1 s hold:
-/// 9.0 s each against 12.0 and 13.0 s.)
+/// With the stop decided once a segment, seeds 1 and 2 (since the 0.5 s lead-in,
+/// `identification.lead_in_s`) took 10.5 and 8.5 s with the noisy focus, 11.5 and 9.5 s with
+/// the quiet one: 1 s each, of which part was the decisions' quantization. Since the stop is
+/// decided every `identification.late_decision_s` (0.1 s) after the settle wait, seeds 1-6:
+/// focused 9.62 / 8.42 / 9.52 / 9.12 / 8.32 / 9.22 s, quiet 11.22 / 8.72 / 9.72 / 9.72 / 9.32 /
+/// 11.52 s: sooner on every seed, by 0.2-2.3 s, 1.0 s on the mean.
 #[test]
 fn at_the_papers_noise_the_stronger_focus_identifies_sooner_within_the_budget() {
-    for seed in [1, 2] {
+    let mut gained = 0.0;
+    let seeds = 1..=6;
+    let n = seeds.clone().count() as f64;
+    for seed in seeds {
         let focused = turned(seed, None);
         let quiet = turned(seed, Some((1.7, 0.1)));
         assert!(focused.took_s < 11.0, "seed {seed}: {focused:?}");
         assert!(
-            quiet.took_s > focused.took_s + 0.9,
+            quiet.took_s > focused.took_s + 0.1,
             "seed {seed}, the decisive run: {quiet:?} against {focused:?}"
         );
+        gained += quiet.took_s - focused.took_s;
         assert!(
             focused.err_rot < 0.07 && focused.err_acc < 0.09,
             "seed {seed}: {focused:?}"
         );
         assert!(focused.max_tilt_deg < 10.0, "seed {seed}: {focused:?}");
     }
+    assert!(
+        gained / n > 0.7,
+        "the focus gained {:.2} s a seed on the mean",
+        gained / n
+    );
 }

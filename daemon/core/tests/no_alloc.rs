@@ -127,26 +127,55 @@ fn answering_a_sample_does_not_allocate() {
 }
 
 /// With the defaults (background refinement while controlling, identification under control):
-/// only the once-per-second decisions (`estimator.segment_s`: the tick that hands out the
-/// solve job, and the tick its result is applied at, `machine.solve_budget_s` later) and a
-/// window's or run's start allocate; every other tick allocates nothing.
+/// only the decisions (`estimator.segment_s`, and every `identification.late_decision_s` once
+/// the settle wait is over: the tick that hands out the solve job, and the tick its result is
+/// applied at, `machine.solve_budget_s` later) and a window's or run's start allocate; every
+/// other tick allocates nothing.
 /// The same with the thrust columns instrumented (`identification.instrument = "always"`:
 /// the instruments' sums, a ramp per segment, a least-squares twin).
 #[test]
 fn under_control_only_the_decisions_allocate() {
     use thrusterd_core::adaptation::identification::Instrument;
     for instrument in [Instrument::InASea, Instrument::Always] {
-        under_control_with(instrument);
+        // One decision a segment: a count that says so.
+        let once_a_segment = under_control_with(instrument, 1.0);
+        assert!(
+            once_a_segment.len() <= 10,
+            "identifying ({instrument:?}, a decision a segment): {} of 1000 ticks allocated",
+            once_a_segment.len()
+        );
+        // The default, late decisions every 0.1 s (20 ticks): measured 18 ticks of 1000. Any
+        // four allocating ticks span at least 20 ticks, so no more than a decision's hand-out
+        // and its result (and a run's start) allocate in any 0.1 s: the per-sample path, which
+        // would allocate on every tick, does not.
+        let default = under_control_with(
+            instrument,
+            MachineSetup::default().identification.late_decision_s,
+        );
+        assert!(
+            default.windows(4).all(|w| w[3] - w[0] >= 20),
+            "identifying ({instrument:?}, the default cadence): allocating ticks {default:?}"
+        );
+        assert!(
+            default.len() > once_a_segment.len() && default.len() <= 30,
+            "identifying ({instrument:?}, the default cadence): {} of 1000 ticks allocated",
+            default.len()
+        );
     }
 }
 
-fn under_control_with(instrument: thrusterd_core::adaptation::identification::Instrument) {
+/// The ticks, of 1000 (5 s) identifying after 10 s of control, that allocated.
+fn under_control_with(
+    instrument: thrusterd_core::adaptation::identification::Instrument,
+    late_decision_s: f64,
+) -> Vec<u64> {
     let mut setup = MachineSetup {
         thrusters: 4,
         geometry: Some(four_thrusters()),
         ..MachineSetup::default()
     };
     setup.identification.instrument = instrument;
+    setup.identification.late_decision_s = late_decision_s;
     let mut m = Machine::new(setup);
     let mut k = 0;
     count(&mut m, &mut k, 10);
@@ -161,13 +190,9 @@ fn under_control_with(instrument: thrusterd_core::adaptation::identification::In
     );
     m.on_request(Request::Estimate).unwrap();
     assert_eq!(m.state(), State::Identify);
-    let identify = allocating_ticks(&mut m, &mut k, 1000);
-    // 5 s: the start, at most four decisions and their results (the status text says how
-    // long the dither has run).
-    assert!(
-        identify <= 10,
-        "identifying ({instrument:?}): {identify} of 1000 ticks allocated"
-    );
+    // 5 s: the start, the decisions and their results (the status text says how long the
+    // dither has run).
+    (0..1000).filter(|_| count(&mut m, &mut k, 1) > 0).collect()
 }
 
 /// The refinement's per-sample change test (`refinement.change_test`, on by default) adds no

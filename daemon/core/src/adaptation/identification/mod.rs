@@ -96,12 +96,13 @@ pub struct IdentificationConfig {
     pub settle_wait_s: f64,
     /// Once the wait for a settled estimate is over (`min_s` + `settle_wait_s` of dither), the
     /// stop is decided every this many seconds, at most every `estimator.segment_s` (default
-    /// 1: every segment, as before the key). Why: a run decided once a segment stops up to a
+    /// 0.1; 1 until 2026-12-02: every segment). Why: a run decided once a segment stops up to a
     /// segment after its bound is met. Measured (AMOUR-5 / six_dof / eight_vectored, the
-    /// paper's noise, seeds 1-10, in process): 0.1 s takes 9.00 / 9.40 / 13.30 s to 8.64 /
-    /// 8.97 / 12.90 s with the same errors, but in a swell at the paper's noise it swaps in
-    /// models a noisy bound let stop early, and four core tests' figures move (docs/study.md,
-    /// "Deciding the stop more often"), so it is not the default yet. A fight (the dither
+    /// paper's noise, seeds 1-10, in process): 9.00 / 9.40 / 13.30 s with 1 s, 8.64 / 8.97 /
+    /// 12.90 s with 0.1 s, the same errors; through the processes 10.22 -> 9.66 s. The cost:
+    /// more looks at a noisy bound stop on a lucky one, so with the detectors uncalibrated in
+    /// a swell at the paper's noise more false alarms' models go in (5, the worst 0.090 off,
+    /// against 2, 0.060; docs/study.md, "Deciding the stop more often"). A fight (the dither
     /// under `min_dither_share`) keeps one decision a segment.
     pub late_decision_s: f64,
     /// The move always allowed, relative (default 0.01; see `settle`). Noise-free the bounds are 0.1-0.2 %
@@ -247,7 +248,7 @@ impl Default for IdentificationConfig {
             settle: 1.0,
             settle_floor: 0.01,
             settle_wait_s: 1.0,
-            late_decision_s: 1.0,
+            late_decision_s: 0.1,
             burst_rel_err: 0.0,
             carry_over: true,
             carry_over_se_scale: 1.0,
