@@ -96,6 +96,10 @@ pub struct Ideal {
     pub wave_part: Option<&'static str>,
     /// Every wave's force and moment times this (a sweep's LA_WAVE_SCALE; default 1).
     pub wave_scale: Option<f64>,
+    /// Every wave's phase at the simulator's start, rad (a sweep's LA_WAVE_PHASE; default
+    /// the preset's 0). Why: the presets' swell starts at the same phase on every seed, so
+    /// seeds vary only the sensors' noise, never where the swell is when the pulses begin.
+    pub wave_phase_rad: Option<f64>,
     /// The noise measurement's length, s (a sweep's LAG_NOISE_S; default the shipped one).
     pub noise_s: Option<f64>,
     /// One excitation pulse's length, s (default the shipped `machine.pulse_s`).
@@ -182,6 +186,11 @@ pub fn estimate_observed(
             vary_ned_n: [-0.3 * pull, 0.0, 0.0],
             period_s: 20.0,
         });
+    }
+    if let Some(phase) = ideal.wave_phase_rad {
+        for w in disturbance.waves.iter_mut() {
+            w.phase_rad = phase;
+        }
     }
     if let Some(k) = ideal.wave_scale {
         for w in disturbance.waves.iter_mut() {

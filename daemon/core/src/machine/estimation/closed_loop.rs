@@ -157,8 +157,9 @@ impl EstimationRun {
 
     /// One sample under control. `command` holds the controller's command (model units) for
     /// `n` thrusters and gets the dither added, faded by the attitude error `err_deg`; `m.gyro`
-    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now, `sea_deg` the
-    /// sea state before the identification (`sea_state`; None: not known). A decision
+    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now, `in_a_sea`
+    /// whether the fit is to be instrumented if it starts now (`Instrument::applies` on the
+    /// sea state before the identification). A decision
     /// interval that ends while the last one's solve is still out waits for it (the next
     /// sample asks again): decisions are made in order, one at a time.
     #[allow(clippy::too_many_arguments)]
@@ -170,7 +171,7 @@ impl EstimationRun {
         err_deg: f64,
         setup: &MachineSetup,
         model: Option<&Model>,
-        sea_deg: Option<f64>,
+        in_a_sea: bool,
         n: usize,
         command: &mut [f64],
     ) -> ClosedStep {
@@ -250,8 +251,7 @@ impl EstimationRun {
                 Some(p) => est.with_known_imu_position(p),
                 None => est.with_configured_imu_position(),
             };
-            let ident = &setup.identification;
-            let instrumented = ident.instrument.applies(sea_deg, ident.min_sea_state_deg);
+            let instrumented = in_a_sea;
             if let Some(c) = self.closed.as_mut() {
                 c.instrumented = instrumented;
             }

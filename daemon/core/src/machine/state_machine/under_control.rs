@@ -52,6 +52,12 @@ impl Machine {
         // The filter's attitude, which `measured` gave the controller.
         let m = self.motion(s, gyro, accel);
         let err_deg = attitude.angle_to(&target.attitude).to_degrees();
+        let ident = &self.setup.identification;
+        let instrument = ident.instrument.applies(
+            self.sea_state.rms_deg(),
+            ident.min_sea_state_deg,
+            self.in_a_sea.get(),
+        );
         let step = self.run.closed_loop_sample(
             s.t_ns,
             &m,
@@ -59,7 +65,7 @@ impl Machine {
             err_deg,
             &self.setup,
             Some(model),
-            self.sea_state.rms_deg(),
+            instrument,
             self.n,
             &mut cmd.thrust[..n],
         );

@@ -431,7 +431,8 @@ pub(super) fn lag_sweep() {
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
 /// `--tether`), LA_REACH (`reach_rel_err`), LA_WAVE_SCALE (every wave's force and moment
-/// times this).
+/// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
+/// each seed draws, `wave_phase`).
 pub(super) fn imu_and_water_sweep() {
     let noise = match std::env::var("LA_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -518,6 +519,9 @@ pub(super) fn imu_and_water_sweep() {
                 wave_scale: std::env::var("LA_WAVE_SCALE")
                     .ok()
                     .map(|v| v.parse().unwrap()),
+                wave_phase_rad: std::env::var("LA_WAVE_PHASE")
+                    .ok()
+                    .map(|v| super::wave_phase("LA_WAVE_PHASE", &v, seed)),
                 tether_n: std::env::var("LA_TETHER").ok().map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()

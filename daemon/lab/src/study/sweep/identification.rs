@@ -231,7 +231,8 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// ID_MAX_S, ID_SETTLE, ID_SETTLE_FLOOR, ID_SETTLE_WAIT, ID_FOCUS, ID_FOCUS_OTHERS, ID_FOCUS_NOISY, ID_FOCUS_OTHERS_NOISY, ID_SE_SCALE, ID_CARRY (0/1), ID_IV (0 never, 1 in a sea, 2 always: the thrust columns by
 /// instrumental variables), ID_MIN_SHARE, ID_WATER (still|current|moderate|rough: the
 /// water comes up after the first model, 20 s before the announcement), ID_WAVE_PART
-/// (force|torque: that part of the swell alone), ID_TRACE (print the machine's state and status as they change), ID_STEPS (every estimate of
+/// (force|torque: that part of the swell alone), ID_WAVE_PHASE (the swell's phase at the
+/// start: rad, or `seed` for a phase each seed draws), ID_TRACE (print the machine's state and status as they change), ID_STEPS (every estimate of
 /// the identification against the truth and the one before it; ID_STEPS_COLUMNS each column's
 /// error too), ID_SEGMENT
 /// (`estimator.segment_s`, one value), ID_LINEARIZE (0/1: `[supply] linearize`, one value; default as
@@ -436,8 +437,13 @@ pub(super) fn sweep_identification() {
                         d.map(|d| d.spin_up_per_thruster_s.clone())
                     );
                 }
+                let mut water = water.clone();
+                if let (Some(d), Ok(knob)) = (water.as_mut(), std::env::var("ID_WAVE_PHASE")) {
+                    let phase = super::wave_phase("ID_WAVE_PHASE", &knob, seed);
+                    d.waves.iter_mut().for_each(|w| w.phase_rad = phase);
+                }
                 let (run, r) =
-                    rotate_while_holding_on(run, &vehicle(&vehicle_name), water.clone(), |m, s| {
+                    rotate_while_holding_on(run, &vehicle(&vehicle_name), water, |m, s| {
                         b.observe(m, s, target)
                     });
                 print_steps(&b.steps, &run.truth());
