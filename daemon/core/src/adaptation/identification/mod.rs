@@ -164,8 +164,8 @@ pub struct IdentificationConfig {
     /// to the water is not taken for thrust: `never`, `in_a_sea` (default: when the water
     /// moved the held vehicle by more than `min_sea_state_deg` before the identification, or,
     /// while the gauge has no reading, when the machine takes the vehicle to be in a sea:
-    /// `Instrument::applies`) or `always`. Measured (announced 45 deg turn of the first thruster, seeds 1-10): in
-    /// moderate water AMOUR-5's error / bound is 2.1 / 2.7 (noise-free / realistic IMU) by
+    /// `Instrument::applies`) or `always`. Measured (announced 45 deg turn of the first
+    /// thruster, seeds 1-10): in moderate water AMOUR-5's error / bound is 2.1 / 2.7 (noise-free / realistic IMU) by
     /// least squares and 1.33 / 1.24 instrumented. The instrumented fit is taken per row group
     /// only where it and least squares disagree (`dynamic::instruments::choose`). Why not
     /// always: in still water noise-free any difference is significant, and eight_vectored then

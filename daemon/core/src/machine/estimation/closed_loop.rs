@@ -157,7 +157,7 @@ impl EstimationRun {
 
     /// One sample under control. `command` holds the controller's command (model units) for
     /// `n` thrusters and gets the dither added, faded by the attitude error `err_deg`; `m.gyro`
-    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now, `in_a_sea`
+    /// is the raw rate, `gyro_bias` the attitude filter's bias estimate now, `instrument`
     /// whether the fit is to be instrumented if it starts now (`Instrument::applies` on the
     /// sea state before the identification). A decision
     /// interval that ends while the last one's solve is still out waits for it (the next
@@ -171,7 +171,7 @@ impl EstimationRun {
         err_deg: f64,
         setup: &MachineSetup,
         model: Option<&Model>,
-        in_a_sea: bool,
+        instrument: bool,
         n: usize,
         command: &mut [f64],
     ) -> ClosedStep {
@@ -251,7 +251,7 @@ impl EstimationRun {
                 Some(p) => est.with_known_imu_position(p),
                 None => est.with_configured_imu_position(),
             };
-            let instrumented = in_a_sea;
+            let instrumented = instrument;
             if let Some(c) = self.closed.as_mut() {
                 c.instrumented = instrumented;
             }
