@@ -6,8 +6,8 @@
 
 mod common;
 use common::{
-    env_list, rotate_while_holding_in, rotate_while_holding_on, rotate_while_holding_with, vehicle,
-    Reestimation, Run,
+    env_list, rotate_while_holding_in, rotate_while_holding_on, rotate_while_holding_with,
+    swell_phase, vehicle, Reestimation, Run,
 };
 use thruster_sim::NoisePreset;
 use thrusterd_core::adaptation::identification::IdentificationConfig;
@@ -451,9 +451,7 @@ fn a_swell_taken_for_the_water_instruments_the_next_identification() {
     use thrusterd_core::adaptation::identification::Instrument;
     let water = || {
         let mut d = WaterPreset::Moderate.disturbance();
-        let golden = (5f64.sqrt() - 1.0) / 2.0;
-        let phase = std::f64::consts::TAU * (4.0 * golden).fract();
-        d.waves.iter_mut().for_each(|w| w.phase_rad = phase);
+        swell_phase::set(&mut d, swell_phase::of_seed(4));
         Some(d)
     };
     let mut errors = Vec::new();

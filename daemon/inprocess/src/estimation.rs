@@ -188,9 +188,7 @@ pub fn estimate_observed(
         });
     }
     if let Some(phase) = ideal.wave_phase_rad {
-        for w in disturbance.waves.iter_mut() {
-            w.phase_rad = phase;
-        }
+        crate::swell_phase::set(&mut disturbance, phase);
     }
     if let Some(k) = ideal.wave_scale {
         for w in disturbance.waves.iter_mut() {

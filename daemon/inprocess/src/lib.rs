@@ -12,11 +12,13 @@
 //! - [`lag_probe`]: the thruster lag learned again from one estimation's log with inputs
 //!   replaced by the simulator's truth (issue 29's bias at the paper's gyro noise).
 //! - [`model_update`]: the refinement's updates followed while a thruster degrades.
+//! - [`swell_phase`]: where the swell is when a run begins, varied by seed.
 
 pub mod estimation;
 pub mod holding;
 pub mod lag_probe;
 pub mod model_update;
 pub mod run;
+pub mod swell_phase;
 
 pub use run::*;

@@ -251,11 +251,10 @@ impl EstimationRun {
                 Some(p) => est.with_known_imu_position(p),
                 None => est.with_configured_imu_position(),
             };
-            let instrumented = instrument;
             if let Some(c) = self.closed.as_mut() {
-                c.instrumented = instrumented;
+                c.instrumented = instrument;
             }
-            if instrumented {
+            if instrument {
                 est.begin_instrumented_closed_loop();
             } else {
                 est.begin_closed_loop();

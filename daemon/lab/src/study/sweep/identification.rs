@@ -6,7 +6,7 @@ use thrusterd_core::adaptation::identification::IdentificationConfig;
 use thrusterd_core::estimator::EstimatorConfig;
 use thrusterd_core::machine::Machine;
 
-use thruster_inprocess::{env_list, rotate_while_holding_on, vehicle, Run, VEHICLES};
+use thruster_inprocess::{env_list, rotate_while_holding_on, swell_phase, vehicle, Run, VEHICLES};
 
 /// The bounds of the estimates made during one re-estimation (every `estimator.segment_s`).
 #[derive(Debug, Default)]
@@ -439,8 +439,7 @@ pub(super) fn sweep_identification() {
                 }
                 let mut water = water.clone();
                 if let (Some(d), Ok(knob)) = (water.as_mut(), std::env::var("ID_WAVE_PHASE")) {
-                    let phase = super::wave_phase("ID_WAVE_PHASE", &knob, seed);
-                    d.waves.iter_mut().for_each(|w| w.phase_rad = phase);
+                    swell_phase::set(d, super::wave_phase("ID_WAVE_PHASE", &knob, seed));
                 }
                 let (run, r) =
                     rotate_while_holding_on(run, &vehicle(&vehicle_name), water, |m, s| {

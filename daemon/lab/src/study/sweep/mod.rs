@@ -204,14 +204,10 @@ pub fn run(args: SweepArgs) -> Result<()> {
 }
 
 /// A wave phase, rad, from the sweep's knob `key` set to `knob`: a number, or `seed` for the
-/// seed's own phase, 2 pi frac(seed x 0.618...) (the golden ratio's sequence: any ten seeds
-/// spread over the circle, none twice). Why: the water presets' swell starts at the same phase
-/// on every seed, so over seeds only the sensors' noise varies, never where the swell is when
-/// the estimation begins.
+/// seed's own phase (`thruster_inprocess::swell_phase::of_seed`).
 fn wave_phase(key: &str, knob: &str, seed: u64) -> f64 {
     if knob == "seed" {
-        let golden = (5f64.sqrt() - 1.0) / 2.0;
-        std::f64::consts::TAU * (seed as f64 * golden).fract()
+        thruster_inprocess::swell_phase::of_seed(seed)
     } else {
         knob.parse()
             .unwrap_or_else(|_| panic!("{key}: {knob} is neither a phase in rad nor seed"))
@@ -267,19 +263,11 @@ mod tests {
     }
 
     #[test]
-    fn ten_seeds_put_the_swell_at_ten_phases_spread_over_the_cycle() {
-        let mut phases: Vec<f64> = (1..=10).map(|s| wave_phase("K", "seed", s)).collect();
-        phases.sort_by(f64::total_cmp);
-        assert!(phases
-            .iter()
-            .all(|p| (0.0..std::f64::consts::TAU).contains(p)));
-        // The widest gap between neighbours on the circle, the wrap-around included.
-        let widest = phases
-            .windows(2)
-            .map(|w| w[1] - w[0])
-            .chain([phases[0] + std::f64::consts::TAU - phases[9]])
-            .fold(0.0, f64::max);
-        assert!(widest < 1.0, "a gap of {widest} rad");
+    fn a_wave_phase_knob_is_a_phase_or_the_seeds_own() {
+        assert_eq!(
+            wave_phase("K", "seed", 4),
+            thruster_inprocess::swell_phase::of_seed(4)
+        );
         assert_eq!(wave_phase("K", "1.5", 7), 1.5);
         let e = std::panic::catch_unwind(|| wave_phase("ID_WAVE_PHASE", "half", 1)).unwrap_err();
         let e = e.downcast_ref::<String>().unwrap();
