@@ -368,6 +368,11 @@ impl DaemonConfig {
                 Range::above(0.0),
             ),
             (
+                "machine.max_lag_gap_over_bound".into(),
+                m.max_lag_gap_over_bound,
+                Range::at_least(0.0),
+            ),
+            (
                 "machine.deadband".into(),
                 m.deadband,
                 Range::from_below(0.0, 0.5),

@@ -355,6 +355,7 @@ mod tests {
             spin_up_rel_err: [0.0; 2],
             spin_up_per_thruster_s: Vec::new(),
             thruster_lag_evidence: 0.0,
+            spin_up_groups: None,
             spin_up_floor_rel_err: [0.0; 2],
             lag_check: None,
             thrust_curve: None,

@@ -8,7 +8,7 @@ use thruster_sim::sim::SimOptions;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::dynamic::DynamicTerms;
 use thrusterd_core::estimator::{EstimatorConfig, Method};
-use thrusterd_core::machine::{Machine, MachineSetup, Request, State};
+use thrusterd_core::machine::{Event, Machine, MachineSetup, Request, State};
 
 pub use crate::run::vehicle;
 
@@ -50,6 +50,8 @@ pub struct Outcome {
     pub refused: bool,
     /// The noise the fit used per DOF row (the larger of the rest's and the residuals').
     pub sigma: [f64; 6],
+    /// Why the machine refused the model, when it did.
+    pub rejection: Option<String>,
 }
 
 pub fn tick(machine: &mut Machine, sim: &mut Simulator) {
@@ -112,6 +114,8 @@ pub struct Ideal {
     /// A tether pulling this many newtons aft at the stern, varying 30 % over 20 s (the lab's
     /// `--tether`), from the simulator's start.
     pub tether_n: Option<f64>,
+    /// The machine's `max_lag_gap_over_bound` (default the shipped one; 0: the check off).
+    pub max_lag_gap_over_bound: Option<f64>,
 }
 
 /// How long the machine idles, reading the IMU, before the estimation is asked for, s: so the
@@ -237,6 +241,9 @@ pub fn estimate_observed(
     if let Some(v) = ideal.rest_from_idle {
         setup.machine.rest_from_idle = v;
     }
+    if let Some(v) = ideal.max_lag_gap_over_bound {
+        setup.machine.max_lag_gap_over_bound = v;
+    }
     let mut machine = Machine::new(setup);
     while sim.time_s() < ideal.idle_s.unwrap_or(IDLE_BEFORE_REQUEST_S) {
         tick(&mut machine, &mut sim);
@@ -268,6 +275,14 @@ pub fn estimate_observed(
                 .map(|d| d.unexplained_rate_radps)
         );
     }
+    let rejection = machine
+        .take_events()
+        .into_iter()
+        .rev()
+        .find_map(|e| match e {
+            Event::ModelRejected(why) => Some(why),
+            _ => None,
+        });
     let (f, r) = sim.truth();
     let truth = (f + r) * 0.5;
     let est = machine.last_estimate().unwrap();
@@ -288,6 +303,7 @@ pub fn estimate_observed(
         b_se: est.std_err.clone(),
         truth: truth.clone(),
         refused: machine.model().is_none(),
+        rejection,
         rank: est.rank.rank,
         actuated: est.rank.actuated.count(),
         sigma: est.sigma,

@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, Vector3};
 use super::analysis::{diagnose, rank_report, RankReport, ThrusterDiagnosis};
 use super::config::{EstimatorConfig, Method};
 use super::dof::DofMask;
+use super::dynamic::lag_agreement;
 use super::dynamic::lag_check::check_configured_lag;
 use super::dynamic::lag_search::{
     fit_at, fit_at_centred, learn_common_lag_centred, LagFit, LagRange,

@@ -78,6 +78,10 @@ pub struct LagFit {
     /// its B from this one's is counted in the bound as a floor (see `widen`).
     #[serde(default)]
     pub unkept_per_thruster: Option<Box<DynamicRun>>,
+    /// Where the rotation and the acceleration rows alone put the lag
+    /// ([`super::lag_agreement`], judged on the common lag's fit); None where not judged.
+    #[serde(default)]
+    pub groups: Option<super::lag_agreement::LagAgreement>,
 }
 
 /// One thruster's learned lag and the fits with it moved by `exp(STEP)` either way (the
@@ -220,6 +224,7 @@ impl LagFit {
             }
         }
         sol.terms.spin_up_sd_ln = self.sd_ln;
+        sol.terms.spin_up_groups = self.groups;
         sol.terms.spin_up_per_thruster_s = self.per_thruster.iter().map(|t| t.lag_s).collect();
         sol.terms.thruster_lag_evidence = self.per_thruster_evidence;
         for (se, e2) in sol.terms.std_err.iter_mut().zip(var_terms.iter()) {
@@ -288,6 +293,7 @@ pub fn fit_at_centred(
         per_thruster_cov: Vec::new(),
         per_thruster_floor_ln: 0.0,
         unkept_per_thruster: None,
+        groups: None,
     })
 }
 
@@ -394,6 +400,7 @@ pub fn learn_common_lag_weighted(
         per_thruster_cov: Vec::new(),
         per_thruster_floor_ln: 0.0,
         unkept_per_thruster: None,
+        groups: None,
     })
 }
 

@@ -12,6 +12,7 @@
 
 pub mod imu_position;
 pub mod instruments;
+pub mod lag_agreement;
 pub mod lag_check;
 pub mod lag_search;
 pub mod prior;
@@ -25,6 +26,7 @@ pub mod spin_state;
 pub mod thrust_curve;
 pub mod thrust_shape;
 pub mod thruster_lags;
+mod variance;
 
 pub use thrust_shape::MAX_THRUST_ASYMMETRY;
 
@@ -38,12 +40,7 @@ use self::segmented_ls::{SegmentedLs, SegmentedSolution};
 use self::spin_state::{lag_step, MAX_LAG_STEP_S};
 use crate::navigation::{DepthAid, NavState, Navigator};
 
-/// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
-const MIN_RESIDUAL_DOF: u64 = 10;
-
-/// The cluster-robust covariance is used once it rests on this many segments: with S clusters
-/// it has S - 1 degrees of freedom, and with one it is zero.
-const MIN_CLUSTERS: usize = 3;
+use self::variance::{combination_var, group_sigma};
 
 /// What the dynamic fit learned besides B: the coefficients of every term, per DOF row.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -82,6 +79,10 @@ pub struct DynamicTerms {
     /// ln likelihood ratio of a lag per thruster over one for all (0 when not searched).
     #[serde(default)]
     pub thruster_lag_evidence: f64,
+    /// Where the rotation rows alone and the acceleration rows alone put the learned lag
+    /// ([`lag_agreement`]); None when the lag was configured or a group's profile is flat.
+    #[serde(default)]
+    pub spin_up_groups: Option<lag_agreement::LagAgreement>,
     /// With a lag per thruster: what their floor (`EstimatorConfig::thruster_lag_floor`)
     /// adds to the rotation and acceleration rows' bounds (in quadrature; inside
     /// `spin_up_rel_err`'s bound but not in it): no more data removes it, so the stop rule
@@ -780,6 +781,7 @@ impl DynamicRun {
                 spin_up_rel_err: [0.0; 2],
                 spin_up_per_thruster_s: Vec::new(),
                 thruster_lag_evidence: 0.0,
+                spin_up_groups: None,
                 spin_up_floor_rel_err: [0.0; 2],
                 lag_check: None,
                 thrust_curve: None,
@@ -857,42 +859,5 @@ impl DynamicRun {
             }
         }
         prior.without_contradicted(&b, &var)
-    }
-}
-
-/// The variance of sum_i w_i theta_i on output `a`: (i.i.d. Gram diagonal, honest variance,
-/// i.i.d. variance). The honest one is the larger of the i.i.d. and the cluster-robust
-/// variance once enough segments back the latter: the robust one alone is noisy with few
-/// clusters, and never the smaller of the two in expectation when residuals are positively
-/// autocorrelated.
-fn combination_var(
-    sol: &SegmentedSolution,
-    sigma: f64,
-    a: usize,
-    w: &[(usize, f64)],
-) -> (f64, f64, f64) {
-    let (mut d, mut robust) = (0.0, 0.0);
-    for &(i, wi) in w {
-        for &(j, wj) in w {
-            d += wi * wj * sol.inverse(a)[(i, j)];
-            robust += wi * wj * sol.robust_cov[a][(i, j)];
-        }
-    }
-    let ols = sigma * sigma * d.max(0.0);
-    let honest = if sol.clusters >= MIN_CLUSTERS {
-        ols.max(robust)
-    } else {
-        ols
-    };
-    (d, honest, ols)
-}
-
-/// Noise per axis: the at-rest level, or the residual level when larger and well determined.
-fn group_sigma(sol: &SegmentedSolution, rest: &[f64]) -> [f64; 3] {
-    match sol.residual_var {
-        Some(var) if sol.residual_dof >= MIN_RESIDUAL_DOF => {
-            std::array::from_fn(|a| rest[a].max(var[a].sqrt()))
-        }
-        _ => std::array::from_fn(|a| rest[a]),
     }
 }

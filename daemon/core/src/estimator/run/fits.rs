@@ -4,14 +4,6 @@
 // The estimator's fields and helpers are the parent's: these are its methods, by job.
 use super::*;
 
-/// The rotation left unexplained (`DynamicTerms::unexplained_rate_radps`) below which the
-/// water counts as still for the wait on a bound within reach, rad/s: exactly 0 in still
-/// water at every noise (AMOUR-5, eight_vectored, seeds 1-3, realistic and paper; the level is
-/// clamped at 0 below twice the gyro's white noise), 0.0016-0.03 in a 0.3 m/s current met 3-4
-/// s before the request (eight_vectored at 4 s: 0.0016-0.0018, and waiting there took seed
-/// 1 from 0.023 to 0.037 off).
-const STILL_WATER_UNEXPLAINED_RADPS: f64 = 0.0005;
-
 impl Estimator {
     /// Converged once both error bounds reached the target (every thruster excited).
     /// The acceleration rows' bound leaves out what no more data removes (the IMU position's
@@ -48,7 +40,7 @@ impl Estimator {
     /// data removes; eight_vectored waited and found its IMU 1 cm short).
     fn waits_within_reach(e: &Estimate) -> bool {
         e.dynamics.as_ref().is_some_and(|d| {
-            d.unexplained_rate_radps <= STILL_WATER_UNEXPLAINED_RADPS
+            d.unexplained_rate_radps <= crate::estimator::STILL_WATER_UNEXPLAINED_RADPS
                 && !d.imu_position.is_some_and(|p| p.contradicted)
         })
     }
@@ -230,6 +222,12 @@ impl Estimator {
     fn learn_lags(&self, run: &DynamicRun, imu_m: &Vector3<f64>) -> Option<LagFit> {
         let range = self.lag_range();
         let mut common = learn_common_lag_centred(run, &range, imu_m)?;
+        let groups = lag_agreement::agreement(&common);
+        common.groups = groups;
+        let judged = |mut fit: LagFit| {
+            fit.groups = groups;
+            fit
+        };
         if !self.cfg.learn_thruster_lags {
             return Some(common);
         }
@@ -243,11 +241,11 @@ impl Estimator {
         ) else {
             return Some(common);
         };
-        Some(search.fit.unwrap_or_else(|| {
+        Some(judged(search.fit.unwrap_or_else(|| {
             common.per_thruster_evidence = search.log_likelihood_ratio;
             common.unkept_per_thruster = search.unkept.map(Box::new);
             common
-        }))
+        })))
     }
 
     /// What the configuration says of the IMU's position.

@@ -340,6 +340,33 @@ impl Machine {
             self.transition(self.after_refusal(), &text);
             return;
         }
+        // In moving water, a lag the two row groups each alone put far apart (a swell's
+        // moment and force pull it differently): the lag is off by about that gap, the model
+        // with it, and its bound does not know it (estimator::dynamic::lag_agreement). Not
+        // in still water, where the groups of vehicles with slow or mixed lags are up to 7 sd
+        // apart on good models.
+        let gap_limit = self.setup.machine.max_lag_gap_over_bound;
+        let gap = candidate.dynamics.as_ref().map_or(0.0, |d| {
+            crate::estimator::dynamic::lag_agreement::gap_over_bound(
+                d,
+                [candidate.rel_err_rot, candidate.rel_err_acc],
+            )
+        });
+        if gap_limit > 0.0
+            && unexplained > crate::estimator::STILL_WATER_UNEXPLAINED_RADPS
+            && gap > gap_limit
+        {
+            let groups = candidate.dynamics.as_ref().and_then(|d| d.spin_up_groups);
+            let (apart, z) = groups.map_or((0.0, 0.0), |g| (g.gap_ln() * 100.0, g.z));
+            // Within the status's 128 bytes, "model rejected" included (the operator's tools
+            // look for it).
+            let text = format!(
+                "row groups put the lag {apart:.0} % apart ({z:.1} sd), {gap:.1}x B's bound (limit {gap_limit:.1}; water?): model rejected; old model kept"
+            );
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(self.after_refusal(), &text);
+            return;
+        }
         // A lag configured because the gyro is too noisy to learn it, which the data
         // contradicts: the model is as wrong as the lag (AMOUR-5 at 0.05 s: 95-109 % off) and
         // its bound does not know it (estimator::dynamic::lag_check).

@@ -432,7 +432,10 @@ pub(super) fn lag_sweep() {
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
 /// `--tether`), LA_REACH (`reach_rel_err`), LA_WAVE_SCALE (every wave's force and moment
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
-/// each seed draws, `wave_phase`).
+/// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
+/// the simulator's), LA_ONE_LAG (no lag per thruster), LA_LAG_GAP (the machine's
+/// `max_lag_gap_over_bound`; 0: the row groups' check off). Each flight prints the rest's
+/// noise, the unexplained rotation and where the row groups put the lag ("The lag in a swell").
 pub(super) fn imu_and_water_sweep() {
     let noise = match std::env::var("LA_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -485,6 +488,13 @@ pub(super) fn imu_and_water_sweep() {
             if let Ok(v) = std::env::var("LA_LEARN") {
                 cfg.learn_imu_position = v != "0";
             }
+            if std::env::var("LA_ONE_LAG").is_ok() {
+                cfg.learn_thruster_lags = false;
+            }
+            if std::env::var("LA_LAG_KNOWN").is_ok() {
+                // The decisive run for the lag: configured to the simulator's, not learned.
+                cfg.learn_spin_up = false;
+            }
             if let Ok(v) = std::env::var("LA_SEG") {
                 cfg.segment_s = v.parse().unwrap();
             }
@@ -523,6 +533,9 @@ pub(super) fn imu_and_water_sweep() {
                     .ok()
                     .map(|v| super::wave_phase("LA_WAVE_PHASE", &v, seed)),
                 tether_n: std::env::var("LA_TETHER").ok().map(|v| v.parse().unwrap()),
+                max_lag_gap_over_bound: std::env::var("LA_LAG_GAP")
+                    .ok()
+                    .map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
             };
@@ -531,10 +544,21 @@ pub(super) fn imu_and_water_sweep() {
             let l = p.learned.unwrap();
             let sd = l.sd_m();
             println!(
-                "  sigma {:?} unexplained {:.4} rad/s",
+                "  sigma {:?} unexplained {:.4} rad/s lag sd_ln {:.4} rel_err {:.4}/{:.4} groups {:?} gap {:.4} z {:.2}",
                 o.sigma.map(|v| (v * 1e4).round() / 1e4),
-                o.terms.unexplained_rate_radps
+                o.terms.unexplained_rate_radps,
+                o.terms.spin_up_sd_ln,
+                o.terms.spin_up_rel_err[0],
+                o.terms.spin_up_rel_err[1],
+                o.terms
+                    .spin_up_groups
+                    .map(|g| (g.offset_ln.map(|v| (v * 1e4).round() / 1e4), g.sd_ln.map(|v| (v * 1e4).round() / 1e4))),
+                o.terms.spin_up_groups.map_or(0.0, |g| g.gap_ln()),
+                o.terms.spin_up_groups.map_or(0.0, |g| g.z)
             );
+            if let Some(why) = &o.rejection {
+                println!("  rejected: {why}");
+            }
             println!(
                 "{name} seed {seed}: tilt {:.0} refused {} lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} (share {:.4}) in {:.2} s; used [{:.4} {:.4} {:.4}] learned [{:.4} {:.4} {:.4}] sd [{:.4} {:.4} {:.4}] contradicted {}",
                 o.max_tilt_deg, o.refused, o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], p.rel_err_share, o.seconds, p.position_m[0], p.position_m[1], p.position_m[2], l.position_m[0], l.position_m[1], l.position_m[2], sd[0], sd[1], sd[2], p.contradicted
