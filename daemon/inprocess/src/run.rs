@@ -460,8 +460,12 @@ pub fn rotate_while_holding_in(
     rotate_while_holding_on(run, &v, water, observe)
 }
 
+/// How long [`rotate_while_holding_on`] waits for the vehicle to hold again before the
+/// announced change, vehicle s: an identification under control takes up to its 20 s limit.
+const MAX_WAIT_FOR_HOLD_S: f64 = 30.0;
+
 /// [`rotate_while_holding_in`] on a `run` already made (its machine set up as wanted) of
-/// vehicle `v`.
+/// vehicle `v`. In moving water, the change is announced once the vehicle holds.
 pub fn rotate_while_holding_on(
     mut run: Run,
     v: &Vehicle,
@@ -474,6 +478,15 @@ pub fn rotate_while_holding_on(
     if let Some(water) = water {
         run.sim.set_disturbance(water).unwrap();
         run.run_for(20.0);
+        // In moving water the change test can take the swell for a moved thruster, and that
+        // identification may still run when the change is due (four_up at one swell phase,
+        // AMOUR-5 seed 7 deciding once a segment): the change is announced once the vehicle
+        // holds again, so that it is a change made to a holding vehicle.
+        let mut waited = 0.0;
+        while run.machine.state() != State::Active && waited < MAX_WAIT_FOR_HOLD_S {
+            run.run_for(0.5);
+            waited += 0.5;
+        }
     }
     assert_eq!(run.machine.state(), State::Active);
     let r = run.announced_rotation_observed(v, observe);
