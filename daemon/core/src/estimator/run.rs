@@ -13,7 +13,7 @@ use super::dof::DofMask;
 use super::dynamic::lag_agreement;
 use super::dynamic::lag_check::check_configured_lag;
 use super::dynamic::lag_search::{
-    fit_at, fit_at_centred, learn_common_lag_centred, LagFit, LagRange,
+    fit_at, fit_at_centred, learn_common_lag_centred, LagFit, LagRange, STEP,
 };
 use super::dynamic::prior::DynamicPrior;
 use super::dynamic::thrust_curve::ThrustCurveProbe;

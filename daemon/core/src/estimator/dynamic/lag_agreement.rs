@@ -16,7 +16,6 @@
 //! and a step either side (a parabola through each group's three scores), so the check costs
 //! no refit.
 
-use super::lag_search::{LagFit, STEP};
 use super::DynamicRun;
 
 /// Where each row group alone puts the lag, relative to the joint one.
@@ -72,25 +71,32 @@ fn group_scores(run: &DynamicRun) -> Option<[f64; 2]> {
     Some([score(&run.rot)?, score(&run.acc)?])
 }
 
-/// The two groups' lags beside the joint one, for a lag fit with one lag for all (`fit`'s
-/// `above` and `below` are the joint fits a `STEP` either side): each group's parabola
-/// through its three scores, its vertex as an offset in ln(lag) and its standard deviation
-/// from its curvature. None where either group's profile is not curved upwards there.
-pub fn agreement(fit: &LagFit) -> Option<LagAgreement> {
-    let rows = fit.run.samples() as f64;
+/// The two groups' lags beside the joint one: `at` is the fit at the learned common lag,
+/// `above` and `below` the fits at it times and divided by exp(`step`) (what
+/// [`super::lag_search`] keeps as `LagFit::run`, `above`, `below`). Each group's parabola
+/// through its three scores gives its vertex as an offset in ln(lag) and its standard
+/// deviation from its curvature. None where either group's profile is not curved upwards
+/// there.
+pub fn agreement(
+    at: &DynamicRun,
+    above: &DynamicRun,
+    below: &DynamicRun,
+    step: f64,
+) -> Option<LagAgreement> {
+    let rows = at.samples() as f64;
     let (s0, sa, sb) = (
-        group_scores(&fit.run)?,
-        group_scores(&fit.above)?,
-        group_scores(&fit.below)?,
+        group_scores(at)?,
+        group_scores(above)?,
+        group_scores(below)?,
     );
     let mut offset_ln = [0.0; 2];
     let mut sd_ln = [0.0; 2];
     for g in 0..2 {
-        let curvature = (sa[g] + sb[g] - 2.0 * s0[g]) / (STEP * STEP);
+        let curvature = (sa[g] + sb[g] - 2.0 * s0[g]) / (step * step);
         if !(curvature > 0.0 && rows > 0.0) {
             return None;
         }
-        offset_ln[g] = -(sa[g] - sb[g]) / (2.0 * STEP) / curvature;
+        offset_ln[g] = -(sa[g] - sb[g]) / (2.0 * step) / curvature;
         sd_ln[g] = (2.0 / (rows * curvature)).sqrt();
     }
     let z = (offset_ln[0] - offset_ln[1]).abs() / sd_ln[0].hypot(sd_ln[1]);

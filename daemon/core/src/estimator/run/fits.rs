@@ -222,7 +222,7 @@ impl Estimator {
     fn learn_lags(&self, run: &DynamicRun, imu_m: &Vector3<f64>) -> Option<LagFit> {
         let range = self.lag_range();
         let mut common = learn_common_lag_centred(run, &range, imu_m)?;
-        let groups = lag_agreement::agreement(&common);
+        let groups = lag_agreement::agreement(&common.run, &common.above, &common.below, STEP);
         common.groups = groups;
         let judged = |mut fit: LagFit| {
             fit.groups = groups;
