@@ -24,12 +24,12 @@ pub mod response;
 pub mod run;
 
 /// The rotation left unexplained (`DynamicTerms::unexplained_rate_radps`) below which the
-/// water counts as still (for the wait on a bound within reach, and for the machine's check
-/// of the lag's row groups), rad/s: exactly 0 in still
-/// water at every noise (AMOUR-5, eight_vectored, seeds 1-3, realistic and paper; the level is
-/// clamped at 0 below twice the gyro's white noise), 0.0016-0.03 in a 0.3 m/s current met 3-4
-/// s before the request (eight_vectored at 4 s: 0.0016-0.0018, and waiting there took seed
-/// 1 from 0.023 to 0.037 off).
+/// water counts as still (for the stop rule's wait on a bound within reach, and for the
+/// machine's check of the lag's row groups), rad/s: exactly 0 in still water at every noise
+/// (AMOUR-5, eight_vectored, seeds 1-3, realistic and paper; the level is clamped at 0 below
+/// twice the gyro's white noise), 0.0016-0.03 in a 0.3 m/s current met 3-4 s before the
+/// request (eight_vectored at 4 s: 0.0016-0.0018, and waiting there took seed 1 from 0.023
+/// to 0.037 off).
 pub const STILL_WATER_UNEXPLAINED_RADPS: f64 = 0.0005;
 
 pub use analysis::{RankReport, ThrusterDiagnosis};
