@@ -23,6 +23,20 @@ fn demo_outcome(args: &[&str]) -> (bool, Value, String) {
     (out.status.success(), v, log)
 }
 
+/// The demo with `args` ends in the daemon refusing its model: the demo fails with a JSON
+/// whose `refused` says "model rejected" and each of `says`, both processes gone cleanly.
+fn refused_demo(args: &[&str], says: &[&str]) -> Value {
+    let (ok, v, log) = demo_outcome(args);
+    assert!(!ok, "a refused model fails the demo\n{log}");
+    let refused = v["refused"].as_str().unwrap_or_else(|| panic!("{log}"));
+    for part in says.iter().chain(&["model rejected"]) {
+        assert!(refused.contains(part), "{part:?} not in {refused:?}");
+    }
+    assert_eq!(v["clean_exit"], true);
+    assert_eq!(v["files_left"], 0);
+    v
+}
+
 /// Realistic IMU (seed 1): over seeds 1-10 the model is 0.006-0.019 / 0.011-0.017 off the
 /// truth after 4.24 vehicle-s (32 pulses) on every seed (docs/experiments.md#over-ten-seeds-
 /// issue-27); bounds at 1.5x the worst seed. The vehicle stays within 30 deg of level while it
@@ -78,14 +92,8 @@ fn an_imu_off_the_centre_is_found_refused_and_then_used_from_the_drawings() {
         "--imu-position",
         "0.15,0.05,-0.10",
     ];
-    let (ok, v, log) = demo_outcome(&base);
-    assert!(!ok, "a refused model fails the demo\n{log}");
-    let refused = v["refused"].as_str().unwrap_or_else(|| panic!("{log}"));
-    assert!(refused.contains("IMU found at (0.1"), "{refused}");
-    assert!(refused.contains("model rejected"), "{refused}");
+    let v = refused_demo(&base, &["IMU found at (0.1"]);
     assert_eq!(v["vehicle_as_is"]["imu_position_true_m"][0], 0.15, "{v}");
-    assert_eq!(v["clean_exit"], true);
-    assert_eq!(v["files_left"], 0);
 
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("thrusterd.toml");
@@ -152,16 +160,11 @@ fn thrusters_weak_in_reverse_the_daemon_was_not_told_about() {
 /// test's, 0.097-0.158 over two runs against the limit of 0.05).
 #[test]
 fn a_model_the_water_made_is_refused() {
-    let (ok, v, log) = demo_outcome(&["--noise", "realistic", "--water", "rough"]);
-    assert!(!ok, "a refused model fails the demo\n{log}");
-    let refused = v["refused"].as_str().unwrap_or_else(|| panic!("{log}"));
-    assert!(
-        refused.contains("rad/s of rotation unexplained") && refused.contains("model rejected"),
-        "{refused}"
+    let v = refused_demo(
+        &["--noise", "realistic", "--water", "rough"],
+        &["rad/s of rotation unexplained"],
     );
     assert_eq!(v["vehicle_as_is"]["water"], "rough", "{v}");
-    assert_eq!(v["clean_exit"], true);
-    assert_eq!(v["files_left"], 0);
 }
 
 /// Issue 32 through the processes, a swell the unexplained rotation lets through: the
@@ -176,46 +179,30 @@ fn a_model_the_water_made_is_refused() {
 fn a_model_whose_row_groups_pull_the_lag_apart_in_a_swell_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let water = dir.path().join("moderate_at_seed_1.toml");
+    // The simulator's own preset, its swell started at seed 1's phase.
+    let mut moderate = thruster_sim::disturbance::WaterPreset::Moderate.disturbance();
     let phase = std::f64::consts::TAU * (0.5 * (5f64.sqrt() - 1.0)).fract();
-    let (f, t) = (10.0 / 2f64.sqrt(), 1.0 / 2f64.sqrt());
-    std::fs::write(
-        &water,
-        format!(
-            "[disturbance]\ncurrent_ned_mps = [0.3, 0.0, 0.0]\n\n[[disturbance.wave]]\n\
-             frequency_hz = 0.15\nphase_rad = {phase:?}\nforce_ned_n = [{f:?}, 0.0, {f:?}]\n\
-             torque_body_nm = [{t:?}, {t:?}, 0.0]\n"
-        ),
-    )
-    .unwrap();
-    let (ok, v, log) = demo_outcome(&[
+    moderate.waves.iter_mut().for_each(|w| w.phase_rad = phase);
+    let mut file = toml::Table::new();
+    file.insert(
+        "disturbance".into(),
+        toml::Value::try_from(&moderate).unwrap(),
+    );
+    std::fs::write(&water, toml::to_string(&file).unwrap()).unwrap();
+    let flight = [
         "--noise",
         "realistic",
         "--seed",
         "1",
         "--water-file",
         water.to_str().unwrap(),
-    ]);
-    assert!(!ok, "a refused model fails the demo\n{log}");
-    let refused = v["refused"].as_str().unwrap_or_else(|| panic!("{log}"));
-    assert!(
-        refused.contains("row groups put the lag") && refused.contains("model rejected"),
-        "{refused}"
-    );
-    assert_eq!(v["clean_exit"], true);
-    assert_eq!(v["files_left"], 0);
+    ];
+    refused_demo(&flight, &["row groups put the lag"]);
     // The same flight with the check off swaps in a model outside its bound.
     let off = dir.path().join("check_off.toml");
     std::fs::write(&off, "[machine]\nmax_lag_gap_over_bound = 0.0\n").unwrap();
-    let (ok, v, log) = demo_outcome(&[
-        "--noise",
-        "realistic",
-        "--seed",
-        "1",
-        "--water-file",
-        water.to_str().unwrap(),
-        "--daemon-config",
-        off.to_str().unwrap(),
-    ]);
+    let (ok, v, log) =
+        demo_outcome(&[&flight[..], &["--daemon-config", off.to_str().unwrap()]].concat());
     let f = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k}: {log}"));
     assert!(
         ok && (f("err_rot") / f("bound_rot")).max(f("err_acc") / f("bound_acc")) > 1.2,
@@ -321,18 +308,13 @@ fn at_the_papers_noise_the_configured_lag_is_checked_against_the_data() {
     );
     assert!(v["spin_up_per_thruster_s"].is_null(), "{v}");
 
-    let (ok, v, log) = demo_outcome(&[
-        "--noise",
-        "paper",
-        "--vehicle",
-        "config/vehicles/amour5_lag200ms.toml",
-    ]);
-    assert!(!ok, "a refused model fails the demo\n{log}");
-    let refused = v["refused"].as_str().unwrap_or_else(|| panic!("{log}"));
-    assert!(
-        refused.contains("s by the data, not spin_up_s 0.100") && refused.contains("rejected"),
-        "{refused}"
+    refused_demo(
+        &[
+            "--noise",
+            "paper",
+            "--vehicle",
+            "config/vehicles/amour5_lag200ms.toml",
+        ],
+        &["s by the data, not spin_up_s 0.100"],
     );
-    assert_eq!(v["clean_exit"], true);
-    assert_eq!(v["files_left"], 0);
 }

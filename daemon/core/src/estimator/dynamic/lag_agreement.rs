@@ -60,15 +60,10 @@ impl LagAgreement {
 /// Each row group's profile score alone (the sum over its outputs of ln(residual
 /// variance), as [`super::lag_search::profile_score`] sums all six).
 fn group_scores(run: &DynamicRun) -> Option<[f64; 2]> {
-    let score = |ls: &super::segmented_ls::SegmentedLs| -> Option<f64> {
-        Some(
-            ls.residual_variance()?
-                .iter()
-                .map(|v| v.max(1e-300).ln())
-                .sum(),
-        )
-    };
-    Some([score(&run.rot)?, score(&run.acc)?])
+    Some([
+        run.rot.ln_residual_variance()?.iter().sum(),
+        run.acc.ln_residual_variance()?.iter().sum(),
+    ])
 }
 
 /// The two groups' lags beside the joint one: `at` is the fit at the learned common lag,

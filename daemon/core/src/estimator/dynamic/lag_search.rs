@@ -249,12 +249,11 @@ pub const ALL_OUTPUTS: [f64; 6] = [1.0; 6];
 pub fn profile_score_weighted(run: &DynamicRun, weights: &[f64; 6]) -> Option<f64> {
     let mut score = 0.0;
     for (g, ls) in [&run.rot, &run.acc].into_iter().enumerate() {
-        let var = ls.residual_variance()?;
-        // A noise-free fit can leave an exactly zero residual: floored, not -inf.
-        score += var
+        score += ls
+            .ln_residual_variance()?
             .iter()
             .zip(&weights[3 * g..3 * g + 3])
-            .map(|(v, w)| w * v.max(1e-300).ln())
+            .map(|(v, w)| w * v)
             .sum::<f64>();
     }
     Some(score)

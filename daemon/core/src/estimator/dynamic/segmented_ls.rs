@@ -483,6 +483,12 @@ impl SegmentedLs {
         }))
     }
 
+    /// ln of [`Self::residual_variance`] per output, as the lag's profile scores it: a
+    /// noise-free fit can leave an exactly zero residual, floored at 1e-300, not -inf.
+    pub fn ln_residual_variance(&self) -> Option<[f64; 3]> {
+        Some(self.residual_variance()?.map(|v| v.max(1e-300).ln()))
+    }
+
     /// The fit over every row so far (the open segment counted as if closed now).
     pub fn solve(&self) -> SegmentedSolution {
         if let Some(iv) = &self.iv {

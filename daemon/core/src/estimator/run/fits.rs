@@ -222,30 +222,32 @@ impl Estimator {
     fn learn_lags(&self, run: &DynamicRun, imu_m: &Vector3<f64>) -> Option<LagFit> {
         let range = self.lag_range();
         let mut common = learn_common_lag_centred(run, &range, imu_m)?;
+        // Judged on the common lag's fits, whichever fit is returned.
         let groups = lag_agreement::agreement(&common.run, &common.above, &common.below, STEP);
-        common.groups = groups;
-        let judged = |mut fit: LagFit| {
-            fit.groups = groups;
-            fit
+        let search = self
+            .cfg
+            .learn_thruster_lags
+            .then(|| {
+                search_thruster_lags(
+                    run,
+                    &common,
+                    &range,
+                    imu_m,
+                    self.cfg.thruster_lag_evidence,
+                    self.cfg.thruster_lag_floor,
+                )
+            })
+            .flatten();
+        let mut fit = match search {
+            Some(search) => search.fit.unwrap_or_else(|| {
+                common.per_thruster_evidence = search.log_likelihood_ratio;
+                common.unkept_per_thruster = search.unkept.map(Box::new);
+                common
+            }),
+            None => common,
         };
-        if !self.cfg.learn_thruster_lags {
-            return Some(common);
-        }
-        let Some(search) = search_thruster_lags(
-            run,
-            &common,
-            &range,
-            imu_m,
-            self.cfg.thruster_lag_evidence,
-            self.cfg.thruster_lag_floor,
-        ) else {
-            return Some(common);
-        };
-        Some(judged(search.fit.unwrap_or_else(|| {
-            common.per_thruster_evidence = search.log_likelihood_ratio;
-            common.unkept_per_thruster = search.unkept.map(Box::new);
-            common
-        })))
+        fit.groups = groups;
+        Some(fit)
     }
 
     /// What the configuration says of the IMU's position.
