@@ -1019,6 +1019,72 @@ fn thruster_lags_a_fifth_apart_are_found() {
     assert!(o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1], "{msg}");
 }
 
+/// Issue 29 item 4: the per-thruster lags' search ends at a lower floor. The score floors each
+/// output's residual variance at 1e-4 of its group's largest at the common lag (else,
+/// noise-free, the rows the common lag already fits held the search); at the lags found that
+/// floor also flattened the outputs they explain best, and the others' misfit placed them.
+/// Noise-free, before the second search at 1e-8: amour5_two_makes 0.027 / 0.019 off;
+/// eight_vectored with thrusters alternating 0.15 and 0.05 s 0.021 / 0.023; shaped,
+/// eight_vectored_two_makes' 0.2 s lags 0.2043-0.2064 s and its model 0.022 / 0.039 off. After:
+/// 0.019 / 0.014, 0.015 / 0.015, and 0.1989-0.1995 s with 0.015 / 0.024 (what the true lags
+/// give: the rest is the model's; docs/study.md, "The two makes' lags searched again").
+#[test]
+fn the_thruster_lags_are_searched_again_below_the_floor() {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::None,
+        ..SensorConfig::default()
+    };
+    let shaped = EstimatorConfig {
+        shaped_thrust: true,
+        ..EstimatorConfig::dynamic()
+    };
+    let mut fast_slow = vehicle("eight_vectored");
+    for (i, t) in fast_slow.thrusters.iter_mut().enumerate() {
+        t.time_constant_s = if i % 2 == 0 { 0.15 } else { 0.05 };
+    }
+    for (name, v, cfg, lag_within, err_rot, err_acc) in [
+        (
+            "amour5_two_makes",
+            vehicle("amour5_two_makes"),
+            EstimatorConfig::dynamic(),
+            0.01,
+            0.02,
+            0.02,
+        ),
+        (
+            "eight_vectored 0.15 / 0.05 s",
+            fast_slow,
+            EstimatorConfig::dynamic(),
+            0.01,
+            0.02,
+            0.02,
+        ),
+        (
+            "eight_vectored_two_makes, shaped",
+            vehicle("eight_vectored_two_makes"),
+            shaped,
+            0.01,
+            0.02,
+            0.03,
+        ),
+    ] {
+        let truth: Vec<f64> = v.thrusters.iter().map(|t| t.time_constant_s).collect();
+        let o = estimate_on(v, sensors.clone(), 1, cfg, Ideal::default());
+        let lags = &o.terms.spin_up_per_thruster_s;
+        let msg = format!(
+            "{name}: lags {lags:?} (true {truth:?}), {:.4} / {:.4} under {:.4} / {:.4}",
+            o.err_rot, o.err_acc, o.bound[0], o.bound[1]
+        );
+        println!("{msg}");
+        assert_eq!(lags.len(), truth.len(), "{msg}");
+        for (l, t) in lags.iter().zip(&truth) {
+            assert!((l / t - 1.0).abs() <= lag_within, "{msg}");
+        }
+        assert!(o.err_rot <= err_rot && o.err_acc <= err_acc, "{msg}");
+    }
+}
+
 /// One mismatched run, the machine allowed to refuse the model (the outcome is then the
 /// refused estimate's, `refused` true).
 fn estimate_mismatched(name: &str, m: Mismatch, noise: NoisePreset, seed: u64) -> Outcome {
