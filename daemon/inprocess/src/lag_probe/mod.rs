@@ -7,7 +7,7 @@
 
 use std::collections::HashMap;
 
-use nalgebra::Vector3;
+use nalgebra::{DMatrix, Vector3};
 use thruster_sim::{SensorConfig, Vehicle};
 use thrusterd_core::estimator::dynamic::lag_search::{learn_common_lag_weighted, LagRange};
 use thrusterd_core::estimator::dynamic::sample_log::Navigated;
@@ -152,7 +152,11 @@ pub fn probe(
     let mut truth: HashMap<u64, Truth> = HashMap::new();
     let mut last: Option<DynamicRun> = None;
     let mut pulses = usize::MAX;
+    // The simulator's symmetric truth at the last sample (LAG_PROBE_FIT's reference).
+    let mut truth_b: Option<DMatrix<f64>> = None;
     let outcome = estimate_observed(v, sensors, seed, cfg, ideal, &mut |machine, sim| {
+        let (f, r) = sim.truth();
+        truth_b = Some((f + r) * 0.5);
         let down = sim.attitude().inverse_transform_vector(&Vector3::z());
         let ideal = sim.ideal_sample();
         truth.insert(
@@ -199,6 +203,14 @@ pub fn probe(
         .map(|(name, r)| {
             let mut rng = Normal(0x9e37_79b9_7f4a_7c15 ^ seed);
             let mapped = run.with_log_mapped(|s| replaced(s, r, &truth, gravity, &mut rng));
+            let mapped = mapped.map(|m| shifted_commands(m, env_i64("LAG_PROBE_SHIFT")));
+            if let (Some(m), Some(truth_b), true) = (
+                mapped.as_ref(),
+                truth_b.as_ref(),
+                std::env::var_os("LAG_PROBE_FIT").is_some(),
+            ) {
+                print_fit(name, m, &outcome, truth_b);
+            }
             let lag = mapped
                 .and_then(|m| {
                     learn_common_lag_weighted(&m, &LagRange::default(), &Vector3::zeros(), weights)
@@ -208,6 +220,54 @@ pub fn probe(
         })
         .collect();
     (outcome, lags)
+}
+
+/// LAG_PROBE_SHIFT's run: each sample of `run`'s log under the command `shift` samples later
+/// (negative: earlier), the ends held. Why: tells a command paired with the wrong sample
+/// (a fit better shifted) from one paired right.
+fn shifted_commands(run: DynamicRun, shift: i64) -> DynamicRun {
+    if shift == 0 {
+        return run;
+    }
+    let commands: Vec<u32> = run
+        .log()
+        .map(|l| l.iter().map(|s| s.command).collect())
+        .unwrap_or_default();
+    let last = commands.len() as i64 - 1;
+    let mut k = 0i64;
+    run.with_log_mapped(|s| {
+        let mut out = *s;
+        out.command = commands[(k + shift).clamp(0, last.max(0)) as usize];
+        k += 1;
+        out
+    })
+    .unwrap_or(run.clone())
+}
+
+/// LAG_PROBE_FIT: the variant's log fitted at the lags the estimation learned, its err_rot /
+/// err_acc against the simulator's symmetric truth. Why: the variants' lags say where the
+/// profile moves; this says whether the model does, with every input true.
+fn print_fit(name: &str, run: &DynamicRun, outcome: &Outcome, truth_b: &DMatrix<f64>) {
+    let lags = if outcome.terms.spin_up_per_thruster_s.is_empty() {
+        vec![outcome.spin_up_s]
+    } else {
+        outcome.terms.spin_up_per_thruster_s.clone()
+    };
+    let Some(fit) = run.refit(&lags) else {
+        return;
+    };
+    let b = fit.solve(&[1e-3; 6], 0.0, 0.0, None).b;
+    let err = |rows: usize| {
+        (b.rows(rows, 3) - truth_b.rows(rows, 3)).norm() / truth_b.rows(rows, 3).norm()
+    };
+    println!("  fit {name}: err_rot {:.4} err_acc {:.4}", err(0), err(3));
+}
+
+fn env_i64(key: &str) -> i64 {
+    std::env::var(key)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0)
 }
 
 /// Sample `s` with the inputs `r` names replaced by the truth at its time.
