@@ -437,24 +437,29 @@ fn in_moderate_water_the_instrumented_identification_stays_within_its_bound() {
 }
 
 /// The swell at another phase (the presets start it at 0 on every seed): AMOUR-5 at the
-/// paper's noise, the water coming up 20 s before the announced change with the swell at
-/// 2.47 rad (seed 4's phase in `study sweep sweep_identification`'s `ID_WAVE_PHASE=seed`). The
-/// change test takes the water for a moved thruster 4.5 s after it comes up, and that
-/// identification finds no change ("taken for the water"); it leaves the sea-state gauge 2.6 s
-/// of counted control, short of a reading, so the announced change's fit was made by least
+/// paper's noise, the water coming up 20 s before the announced change. Found at the swell's
+/// phase 2.47 rad and noise seed 4 (seed 4's phase in `study sweep sweep_identification`'s
+/// `ID_WAVE_PHASE=seed`): the change test takes the water for a moved thruster 4.5 s after it
+/// comes up, and that identification finds no change ("taken for the water"); it leaves the
+/// sea-state gauge short of a reading, so the announced change's fit was made by least
 /// squares to its 20 s limit: 0.222 off under a bound of 0.049, swapped in. Since 2026-12-02
 /// the machine's own verdict instruments it while the gauge cannot read (`Instrument::
-/// applies`): 0.053 / 0.043 under 0.052 / 0.063.
+/// applies`): 0.053 / 0.043 under 0.052 / 0.063. Since 2026-12-03 (the open-loop fit's lags
+/// started at the first pulse, so the first model and every flight after it differ) that
+/// phase and seed give the same fit either way (0.067); over the phases of seeds 1-12 and
+/// noise seeds 1-6 the case (gauge unread, taken for the water, the two fits apart) recurs at
+/// phase 2 / noise 5 (here: 0.063 at 1.00x its bound instrumented, 0.100 at 1.74x by least
+/// squares) and phase 11 / noise 3 (0.067 at 1.65x, 0.224 at 4.89x).
 #[test]
 fn a_swell_taken_for_the_water_instruments_the_next_identification() {
     use thruster_sim::disturbance::WaterPreset;
     use thrusterd_core::adaptation::identification::Instrument;
     let water = || {
         let mut d = WaterPreset::Moderate.disturbance();
-        swell_phase::set(&mut d, swell_phase::of_seed(4));
+        swell_phase::set(&mut d, swell_phase::of_seed(2));
         Some(d)
     };
-    let mut errors = Vec::new();
+    let (mut errors, mut coverages) = (Vec::new(), Vec::new());
     for instrument in [Instrument::InASea, Instrument::Never] {
         let identification = IdentificationConfig {
             instrument,
@@ -462,7 +467,7 @@ fn a_swell_taken_for_the_water_instruments_the_next_identification() {
         };
         let (run, r) = rotate_while_holding_in(
             NoisePreset::Paper,
-            4,
+            5,
             Some(identification),
             water(),
             |_, _| {},
@@ -475,16 +480,17 @@ fn a_swell_taken_for_the_water_instruments_the_next_identification() {
                 run.machine.sea_state_deg().is_none() && run.machine.in_a_sea(),
                 "the case needs the gauge without a reading and the alarm taken for the water"
             );
-            assert!(
-                rot.max(acc) <= 1.5,
-                "{r:?}: error / bound {rot:.2} / {acc:.2}"
-            );
         }
         errors.push(r.err_rot);
+        coverages.push(rot.max(acc));
     }
-    // The decisive run: by least squares, as before, far off.
+    // The decisive run: by least squares, over its bound beyond the standard, and worse.
     assert!(
-        errors[0] < 0.07 && errors[1] > 0.15,
+        coverages[0] <= 1.5 && coverages[1] > 1.5,
+        "instrumented, least squares: error / bound {coverages:?}"
+    );
+    assert!(
+        errors[0] < 0.07 && errors[1] > 1.4 * errors[0],
         "instrumented, least squares: {errors:?}"
     );
 }

@@ -908,14 +908,70 @@ fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
 /// bound counts what is left in them; a vehicle of one make keeps one lag. At a realistic IMU
 /// over seeds 1-5 (`LAG_VEHICLES=..._two_makes LAG_TAUS=0 LAG_SEEDS=5 ... lag_sweep`) AMOUR-5
 /// is 0.023-0.030 / 0.019-0.034 off and eight_vectored 0.022-0.028 / 0.023-0.037, every run
-/// under its bound (0.053-0.060): the seeds here are ones within 0.03.
+/// under its bound (0.053-0.060): the seeds here are ones within 0.03. Since the open-loop
+/// fit's lags start at the first pulse (2026-12-03) eight_vectored_two_makes noise-free is
+/// 0.028 / 0.040 under 0.059 / 0.053 (0.018 / 0.022 before: the one bare column's asymmetry
+/// bias and the first sample's error partly cancelled; with symmetric thrusters 0.004 /
+/// 0.003), and shaped (`shaped_thrust`) both files are within 0.005 (docs/study.md, "The
+/// first sample's lag"). At a realistic IMU, seeds 1-10, bare eight_vectored_two_makes is now
+/// 0.018-0.060 / 0.038-0.055 under bounds of 0.057-0.071 / 0.053-0.058, shaped 0.003-0.011 /
+/// 0.017-0.030.
 #[test]
 fn thrusters_of_two_makes_get_a_lag_each() {
-    for (name, noise, seed) in [
-        ("amour5_two_makes", NoisePreset::None, 1),
-        ("eight_vectored_two_makes", NoisePreset::None, 1),
-        ("amour5_two_makes", NoisePreset::Realistic, 1),
-        ("eight_vectored_two_makes", NoisePreset::Realistic, 1),
+    let shaped = EstimatorConfig {
+        shaped_thrust: true,
+        ..EstimatorConfig::dynamic()
+    };
+    for (name, noise, seed, cfg, limit) in [
+        (
+            "amour5_two_makes",
+            NoisePreset::None,
+            1,
+            EstimatorConfig::dynamic(),
+            [0.03, 0.03],
+        ),
+        (
+            "eight_vectored_two_makes",
+            NoisePreset::None,
+            1,
+            EstimatorConfig::dynamic(),
+            [0.03, 0.045],
+        ),
+        (
+            "amour5_two_makes",
+            NoisePreset::None,
+            1,
+            shaped.clone(),
+            [0.005, 0.005],
+        ),
+        (
+            "eight_vectored_two_makes",
+            NoisePreset::None,
+            1,
+            shaped.clone(),
+            [0.005, 0.005],
+        ),
+        (
+            "amour5_two_makes",
+            NoisePreset::Realistic,
+            1,
+            EstimatorConfig::dynamic(),
+            [0.03, 0.03],
+        ),
+        (
+            "eight_vectored_two_makes",
+            NoisePreset::Realistic,
+            1,
+            EstimatorConfig::dynamic(),
+            [0.03, 0.045],
+        ),
+        (
+            "eight_vectored_two_makes",
+            NoisePreset::Realistic,
+            1,
+            shaped.clone(),
+            [0.03, 0.03],
+        ),
     ] {
         let sensors = SensorConfig {
             rate_hz: 200.0,
@@ -924,16 +980,11 @@ fn thrusters_of_two_makes_get_a_lag_each() {
         };
         let v = vehicle(name);
         let truth: Vec<f64> = v.thrusters.iter().map(|t| t.time_constant_s).collect();
-        let o = estimate_on(
-            v,
-            sensors,
-            seed,
-            EstimatorConfig::dynamic(),
-            Ideal::default(),
-        );
+        let shaped = cfg.shaped_thrust;
+        let o = estimate_on(v, sensors, seed, cfg, Ideal::default());
         let lags = &o.terms.spin_up_per_thruster_s;
         let msg = format!(
-            "{name} {noise:?} seed {seed}: lags {lags:?} (true {truth:?}), evidence {:.0}, {:.4} / {:.4} under {:.4} / {:.4} in {:.2} s",
+            "{name} {noise:?} seed {seed} shaped {shaped}: lags {lags:?} (true {truth:?}), evidence {:.0}, {:.4} / {:.4} under {:.4} / {:.4} in {:.2} s",
             o.terms.thruster_lag_evidence, o.err_rot, o.err_acc, o.bound[0], o.bound[1], o.seconds
         );
         println!("{msg}");
@@ -941,7 +992,7 @@ fn thrusters_of_two_makes_get_a_lag_each() {
         for (l, t) in lags.iter().zip(&truth) {
             assert!((l / t - 1.0).abs() <= 0.05, "{msg}");
         }
-        assert!(o.err_rot <= 0.03 && o.err_acc <= 0.03, "{msg}");
+        assert!(o.err_rot <= limit[0] && o.err_acc <= limit[1], "{msg}");
         // The bound covers the error: the lags' own floor is in it.
         assert!(o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1], "{msg}");
         assert!(o.seconds < 5.0, "{msg}");
@@ -1027,7 +1078,10 @@ fn thruster_lags_a_fifth_apart_are_found() {
 /// eight_vectored with thrusters alternating 0.15 and 0.05 s 0.021 / 0.023; shaped,
 /// eight_vectored_two_makes' 0.2 s lags 0.2043-0.2064 s and its model 0.022 / 0.039 off. After:
 /// 0.019 / 0.014, 0.015 / 0.015, and 0.1989-0.1995 s with 0.015 / 0.024 (what the true lags
-/// give: the rest is the model's; docs/study.md, "The two makes' lags searched again").
+/// gave: the rest was the first sample's lag, fixed the same day). With that fix: 0.018 /
+/// 0.015, 0.018 / 0.016, 0.2004-0.2012 s and 0.004 / 0.003; without the second search
+/// amour5_two_makes' lags still come out 0.145-0.149 s (docs/study.md, "The two makes' lags
+/// searched again", "The first sample's lag").
 #[test]
 fn the_thruster_lags_are_searched_again_below_the_floor() {
     let sensors = SensorConfig {

@@ -221,7 +221,8 @@ fn a_wrongly_declared_thruster_is_caught_and_the_vehicle_learned_from_rest() {
         "the hold was never lost: the watch is not exercised"
     );
     // Without the watch, and without the fight's rule (below): with the 1 s hold before the
-    // dither of before 2026-12-02 (`lead_in_s = 1`), seed 2 is held 69 deg off on the nominal
+    // dither of before 2026-12-02 (`lead_in_s = 1`), seed 6 is held 26 deg off (seed 2 69 deg
+    // before 2026-12-03) on the nominal
     // model, for good. With the 0.5 s lead-in no seed of 1-10 is held far off: each is
     // identified under control and held (measured: seed 8 6.4 deg over the last 10 s, the
     // others within 1.5 deg).
@@ -233,9 +234,12 @@ fn a_wrongly_declared_thruster_is_caught_and_the_vehicle_learned_from_rest() {
             o.last_err_deg
         );
     }
-    let o = wrongly_declared_unwatched(2, 0.0, 1.0);
+    // Seed 2 until 2026-12-03; since the open-loop fit's lags start at the first pulse (not
+    // its first sample) the flights differ: of seeds 1-12, 1, 6, 7, 9 and 12 are held 26-45
+    // deg off this way (before: 1, 2, 6, 7 and 9).
+    let o = wrongly_declared_unwatched(6, 0.0, 1.0);
     println!(
-        "off, 1 s hold, seed 2: end {:?} {:?}, tilt over the last 10 s {:.1} deg, model {:.3} / {:.3}",
+        "off, 1 s hold, seed 6: end {:?} {:?}, tilt over the last 10 s {:.1} deg, model {:.3} / {:.3}",
         o.state, o.source, o.last_err_deg, o.err_rot, o.err_acc
     );
     assert_eq!(o.lost_events, 0);
@@ -246,9 +250,12 @@ fn a_wrongly_declared_thruster_is_caught_and_the_vehicle_learned_from_rest() {
     // identification's fit was the controller's fight twice, and the daemon let go and
     // learned the vehicle from rest on its own (measured: 1.3 deg over the last 10 s, 0.006 /
     // 0.009 off).
-    let o = wrongly_declared_unwatched(2, IdentificationConfig::default().min_dither_share, 1.0);
+    // It is a backstop, not the watch: of those five it saves seeds 6 and 12, and seeds 1, 7
+    // and 9 stay 27-45 deg off on the nominal model (before 2026-12-03 it saved 1, 2 and 6,
+    // and not 7 and 9; docs/reliability.md).
+    let o = wrongly_declared_unwatched(6, IdentificationConfig::default().min_dither_share, 1.0);
     println!(
-        "fight's rule only, 1 s hold, seed 2: end {:?} {:?}, tilt over the last 10 s {:.1} deg, model \
+        "fight's rule only, 1 s hold, seed 6: end {:?} {:?}, tilt over the last 10 s {:.1} deg, model \
          {:.3} / {:.3}",
         o.state, o.source, o.last_err_deg, o.err_rot, o.err_acc
     );

@@ -631,7 +631,10 @@ impl Estimator {
             })
             .collect();
         if self.cfg.method == Method::Dynamic && self.dynamic.is_none() {
-            self.dynamic = Some(self.dynamic_run(self.cfg.split_thrust, true));
+            let mut run = self.dynamic_run(self.cfg.split_thrust, true);
+            // The thrusters leave rest now, a sample period before the run's first sample.
+            run.start_from_rest_at(t0_s);
+            self.dynamic = Some(run);
         }
         let split = split_regressor(&u);
         for (m, v) in self.max_command.iter_mut().zip(&u) {

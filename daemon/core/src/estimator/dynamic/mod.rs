@@ -204,6 +204,11 @@ pub struct DynamicRun {
     /// sample runs them on from there.
     #[serde(default)]
     spun_up_at_s: Option<f64>,
+    /// The time the thrusters left rest, the first command applied (open loop: the first
+    /// pulse's start; None: the first sample's time): the first sample runs the lags on from
+    /// there, and a refit from the log does the same.
+    #[serde(default)]
+    at_rest_until_s: Option<f64>,
     segment_start_s: f64,
     rot: SegmentedLs,
     acc: SegmentedLs,
@@ -299,6 +304,7 @@ impl DynamicRun {
             direct: vec![0.0; k],
             last_t_s: None,
             spun_up_at_s: None,
+            at_rest_until_s: None,
             segment_start_s: 0.0,
             rot: SegmentedLs::new(k),
             acc: SegmentedLs::new(k),
@@ -478,7 +484,7 @@ impl DynamicRun {
             .map(|t0| (t_s - t0).min(MAX_LAG_STEP_S))
             .unwrap_or(0.0);
         // The lags run from the last sample, or from where they were started spun up.
-        let lag_dt = match (self.last_t_s, self.spun_up_at_s) {
+        let lag_dt = match (self.last_t_s, self.spun_up_at_s.or(self.at_rest_until_s)) {
             (None, Some(t0)) => (t_s - t0).clamp(0.0, MAX_LAG_STEP_S),
             _ => dt,
         };

@@ -80,6 +80,7 @@ impl DynamicRun {
             log: None,
             floor_when_split: self.floor_when_split,
             asymmetry: self.asymmetry,
+            at_rest_until_s: self.at_rest_until_s,
             ..Self::with_columns(
                 self.n,
                 self.split,

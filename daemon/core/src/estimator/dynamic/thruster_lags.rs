@@ -295,10 +295,14 @@ pub fn search_thruster_lags(
     let mut hessian = newton(&mut best)?;
     // Where the floor holds an output's variance at the lags found (noise-free: an output
     // those lags explain to within the floor), the rows it flattens no longer pull, and the
-    // others' misfit placed the lags: once more with the floor lowered, from there.
+    // others' misfit placed the lags: once more with the floor lowered, from there. Only
+    // for lags found apart: lags found alike are one make and not kept, and searched finer
+    // they only follow the misfit further, which their difference then adds to the bound
+    // (amour5 split, noise-free: the acceleration rows' lag-floor part 0.095 -> 0.25, and
+    // the model refused).
     let coarse = floor.get();
     let at_best = variances(&best.run)?;
-    if (0..6).any(|a| at_best[a] < FINE_TRIGGER * coarse[a]) {
+    if spread_apart(&best.lags) && (0..6).any(|a| at_best[a] < FINE_TRIGGER * coarse[a]) {
         floor.set(floor_at(FINE_SCORE_FLOOR));
         step_h.set(FINE_H);
         best.score = score_of(&best.run)?;
@@ -348,10 +352,7 @@ pub fn search_thruster_lags(
     // is evidence beyond the limit, and the lags then take it up without differing (AMOUR-5's
     // thrusters at 0.03 s: all 0.030, evidence 359; with its gains fitted split, its acceleration
     // rows 0.13 off).
-    let (shortest, longest) = lags
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(a, b), l| (a.min(*l), b.max(*l)));
-    if longest < shortest * (1.0 + MIN_SPREAD) {
+    if !spread_apart(&lags) {
         return Some(ThrusterLagSearch {
             log_likelihood_ratio,
             fit: None,
@@ -371,6 +372,15 @@ pub fn search_thruster_lags(
         }),
         unkept: None,
     })
+}
+
+/// Whether the longest of `lags` is at least [`MIN_SPREAD`] longer than the shortest: lags
+/// of more than one make.
+fn spread_apart(lags: &[f64]) -> bool {
+    let (shortest, longest) = lags
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), l| (a.min(*l), b.max(*l)));
+    longest >= shortest * (1.0 + MIN_SPREAD)
 }
 
 /// The Newton step -H^-1 g on the profile, with H's eigenvalues floored at a hundredth of its
