@@ -39,9 +39,10 @@ const SCORE_FLOOR: f64 = 1e-4;
 /// them: eight_vectored_two_makes (0.03 / 0.2 s), noise-free, shaped, came out with its
 /// 0.2 s lags at 0.2043-0.2064 s and its acceleration rows 0.039 off, and the truth scored
 /// 20 worse than them at 1e-4 but 1397 better at 1e-8; searched again from there at 1e-8
-/// they come out at 0.1989-0.1995 s and the model 0.015 / 0.024 off, what the true lags give
-/// (the rest is the model's, not the search's). Searched at 1e-8 from the start, the lags
-/// stuck at 0.177 (docs/study.md, "Thrusters of two makes").
+/// they come out at 0.1989-0.1995 s and the model 0.015 / 0.024 off, what the true lags gave
+/// (that rest was the first sample's lag, since fixed: 0.2004-0.2012 s, 0.004 / 0.003).
+/// Searched at 1e-8 from the start, the lags stuck at 0.177 (docs/study.md, "The two makes'
+/// lags searched again below the floor").
 const FINE_SCORE_FLOOR: f64 = 1e-8;
 
 /// See [`FINE_SCORE_FLOOR`]. At a realistic IMU it still fires where one lag for two makes
