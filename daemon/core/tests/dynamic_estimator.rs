@@ -57,6 +57,15 @@ fn realistic_imu_amour5_is_accurate_and_quick() {
     }
 }
 
+/// The dynamic method with each gain fitted to its command's thrust shape
+/// (`estimator.shaped_thrust`).
+fn shaped_dynamic() -> EstimatorConfig {
+    EstimatorConfig {
+        shaped_thrust: true,
+        ..EstimatorConfig::dynamic()
+    }
+}
+
 /// Checks AMOUR-5's rotation-row rate damping and roll/pitch restoring coefficients against
 /// the simulator's, within `damping` and `restoring` of the true values (relative).
 fn assert_coefficients(o: &Outcome, damping: f64, restoring_tol: f64) {
@@ -918,10 +927,7 @@ fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
 /// 0.017-0.030.
 #[test]
 fn thrusters_of_two_makes_get_a_lag_each() {
-    let shaped = EstimatorConfig {
-        shaped_thrust: true,
-        ..EstimatorConfig::dynamic()
-    };
+    let shaped = shaped_dynamic();
     for (name, noise, seed, cfg, limit) in [
         (
             "amour5_two_makes",
@@ -1089,10 +1095,7 @@ fn the_thruster_lags_are_searched_again_below_the_floor() {
         noise: NoisePreset::None,
         ..SensorConfig::default()
     };
-    let shaped = EstimatorConfig {
-        shaped_thrust: true,
-        ..EstimatorConfig::dynamic()
-    };
+    let shaped = shaped_dynamic();
     let mut fast_slow = vehicle("eight_vectored");
     for (i, t) in fast_slow.thrusters.iter_mut().enumerate() {
         t.time_constant_s = if i % 2 == 0 { 0.15 } else { 0.05 };
@@ -1444,10 +1447,7 @@ fn a_column_fitted_to_the_commands_thrust_shape_is_the_mean_gain() {
         noise: NoisePreset::None,
         ..SensorConfig::default()
     };
-    let shaped = EstimatorConfig {
-        shaped_thrust: true,
-        ..EstimatorConfig::dynamic()
-    };
+    let shaped = shaped_dynamic();
     let k = (1.0 - 0.78) / (1.0 + 0.78);
     for (name, limit) in [
         ("amour5", 0.005),

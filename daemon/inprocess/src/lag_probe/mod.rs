@@ -11,6 +11,7 @@ use nalgebra::{DMatrix, Vector3};
 use thruster_sim::{SensorConfig, Vehicle};
 use thrusterd_core::estimator::dynamic::lag_search::{learn_common_lag_weighted, LagRange};
 use thrusterd_core::estimator::dynamic::sample_log::Navigated;
+use thrusterd_core::estimator::dynamic::spin_state::lags_for_fit;
 use thrusterd_core::estimator::dynamic::DynamicRun;
 use thrusterd_core::estimator::EstimatorConfig;
 
@@ -203,7 +204,7 @@ pub fn probe(
         .map(|(name, r)| {
             let mut rng = Normal(0x9e37_79b9_7f4a_7c15 ^ seed);
             let mapped = run.with_log_mapped(|s| replaced(s, r, &truth, gravity, &mut rng));
-            let mapped = mapped.map(|m| shifted_commands(m, env_i64("LAG_PROBE_SHIFT")));
+            let mapped = mapped.map(|m| shifted_commands(m, env_or("LAG_PROBE_SHIFT", 0)));
             if let (Some(m), Some(truth_b), true) = (
                 mapped.as_ref(),
                 truth_b.as_ref(),
@@ -241,19 +242,17 @@ fn shifted_commands(run: DynamicRun, shift: i64) -> DynamicRun {
         k += 1;
         out
     })
-    .unwrap_or(run.clone())
+    .unwrap_or(run)
 }
 
 /// LAG_PROBE_FIT: the variant's log fitted at the lags the estimation learned, its err_rot /
 /// err_acc against the simulator's symmetric truth. Why: the variants' lags say where the
 /// profile moves; this says whether the model does, with every input true.
 fn print_fit(name: &str, run: &DynamicRun, outcome: &Outcome, truth_b: &DMatrix<f64>) {
-    let lags = if outcome.terms.spin_up_per_thruster_s.is_empty() {
-        vec![outcome.spin_up_s]
-    } else {
-        outcome.terms.spin_up_per_thruster_s.clone()
-    };
-    let Some(fit) = run.refit(&lags) else {
+    let n = run.thrusters();
+    let per_thruster = &outcome.terms.spin_up_per_thruster_s;
+    let lags = lags_for_fit(n, outcome.spin_up_s, None, Some(per_thruster));
+    let Some(fit) = run.refit(&lags[..n]) else {
         return;
     };
     let b = fit.solve(&[1e-3; 6], 0.0, 0.0, None).b;
@@ -263,11 +262,12 @@ fn print_fit(name: &str, run: &DynamicRun, outcome: &Outcome, truth_b: &DMatrix<
     println!("  fit {name}: err_rot {:.4} err_acc {:.4}", err(0), err(3));
 }
 
-fn env_i64(key: &str) -> i64 {
+/// The environment's `key` parsed, or `default` when unset or unparsable.
+fn env_or<T: std::str::FromStr>(key: &str, default: T) -> T {
     std::env::var(key)
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(0)
+        .unwrap_or(default)
 }
 
 /// Sample `s` with the inputs `r` names replaced by the truth at its time.
@@ -288,10 +288,7 @@ fn replaced(
     if r.rate {
         // LAG_PROBE_RNOISE: white noise of that many rad/s on the true rate (the terms' noise
         // without the target's).
-        let sd: f64 = std::env::var("LAG_PROBE_RNOISE")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(0.0);
+        let sd: f64 = env_or("LAG_PROBE_RNOISE", 0.0);
         out.rate = t.rate + Vector3::from_fn(|_, _| sd * rng.sample());
     }
     if r.velocity {

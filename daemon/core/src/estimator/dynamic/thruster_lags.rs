@@ -115,14 +115,17 @@ pub fn search_thruster_lags(
             fraction * at_common[g..g + 3].iter().fold(0.0f64, |m, v| m.max(*v))
         })
     };
-    // Lowered once the search has converged at SCORE_FLOOR (`FINE_SCORE_FLOOR`).
-    let floor = Cell::new(floor_at(SCORE_FLOOR));
-    let step_h = Cell::new(H);
+    // The score's floor and the Newton steps' finite-difference step: coarse, then fine
+    // once the search has converged (`FINE_SCORE_FLOOR`).
+    let stage = Cell::new(Stage {
+        floor: floor_at(SCORE_FLOOR),
+        h: H,
+    });
     let score_with = |fit: &DynamicRun, floor: &[f64; 6]| -> Option<f64> {
         let v = variances(fit)?;
         Some((0..6).map(|a| v[a].max(floor[a]).max(1e-300).ln()).sum())
     };
-    let score_of = |fit: &DynamicRun| score_with(fit, &floor.get());
+    let score_of = |fit: &DynamicRun| score_with(fit, &stage.get().floor);
     let refitter = run.refitter(imu_m)?;
     let refit = |lags: &[f64]| refitter.refit(lags);
     let common_score = score_of(&common.run)?;
@@ -140,10 +143,9 @@ pub fn search_thruster_lags(
     // where the residual falls toward zero at the truth, made the finite-difference Hessian
     // indefinite).
     let local_form = |best: &Best| -> Option<(DVector<f64>, DMatrix<f64>)> {
-        let h = step_h.get();
+        let Stage { floor, h } = stage.get();
         let x: Vec<f64> = best.lags.iter().map(|l| l.ln()).collect();
         let here = variances(&best.run)?;
-        let floor = floor.get();
         let moved = |d: &[(usize, f64)]| {
             let mut y = x.clone();
             for &(i, dx) in d {
@@ -301,11 +303,13 @@ pub fn search_thruster_lags(
     // they only follow the misfit further, which their difference then adds to the bound
     // (amour5 split, noise-free: the acceleration rows' lag-floor part 0.095 -> 0.25, and
     // the model refused).
-    let coarse = floor.get();
+    let coarse = stage.get().floor;
     let at_best = variances(&best.run)?;
     if spread_apart(&best.lags) && (0..6).any(|a| at_best[a] < FINE_TRIGGER * coarse[a]) {
-        floor.set(floor_at(FINE_SCORE_FLOOR));
-        step_h.set(FINE_H);
+        stage.set(Stage {
+            floor: floor_at(FINE_SCORE_FLOOR),
+            h: FINE_H,
+        });
         best.score = score_of(&best.run)?;
         hessian = newton(&mut best)?;
     }
@@ -373,6 +377,14 @@ pub fn search_thruster_lags(
         }),
         unkept: None,
     })
+}
+
+/// What the per-thruster search scores and steps with: each output's variance floor and the
+/// finite-difference step in ln(lag).
+#[derive(Debug, Clone, Copy)]
+struct Stage {
+    floor: [f64; 6],
+    h: f64,
 }
 
 /// Whether the longest of `lags` is at least [`MIN_SPREAD`] longer than the shortest: lags
