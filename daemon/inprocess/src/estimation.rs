@@ -116,6 +116,10 @@ pub struct Ideal {
     pub tether_n: Option<f64>,
     /// The machine's `max_lag_gap_over_bound` (default the shipped one; 0: the check off).
     pub max_lag_gap_over_bound: Option<f64>,
+    /// `identification.burst_rel_err` (default the shipped 0: off): the open-loop run stops
+    /// at this bound, its model goes in and the estimation goes on under control; the
+    /// outcome is then the identification's.
+    pub burst_rel_err: Option<f64>,
 }
 
 /// How long the machine idles, reading the IMU, before the estimation is asked for, s: so the
@@ -243,6 +247,9 @@ pub fn estimate_observed(
     }
     if let Some(v) = ideal.max_lag_gap_over_bound {
         setup.machine.max_lag_gap_over_bound = v;
+    }
+    if let Some(v) = ideal.burst_rel_err {
+        setup.identification.burst_rel_err = v;
     }
     let mut machine = Machine::new(setup);
     while sim.time_s() < ideal.idle_s.unwrap_or(IDLE_BEFORE_REQUEST_S) {

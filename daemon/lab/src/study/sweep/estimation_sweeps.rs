@@ -432,7 +432,9 @@ pub(super) fn lag_sweep() {
 /// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s), LA_IDLE_S (idle before
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
-/// `--tether`), LA_REACH (`reach_rel_err`), LA_WAVE_SCALE (every wave's force and moment
+/// `--tether`), LA_REACH (`reach_rel_err`), LA_MIN_CYCLES (`min_cycles`), LA_TARGET
+/// (`target_rel_err`), LA_BURST
+/// (`identification.burst_rel_err`: the open-loop model refined under control), LA_WAVE_SCALE (every wave's force and moment
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
 /// the simulator's), LA_ONE_LAG (no lag per thruster), LA_LAG_GAP (the machine's
@@ -506,6 +508,12 @@ pub(super) fn imu_and_water_sweep() {
             if let Ok(r) = std::env::var("LA_REACH") {
                 cfg.reach_rel_err = r.parse().unwrap();
             }
+            if let Ok(t) = std::env::var("LA_TARGET") {
+                cfg.target_rel_err = t.parse().unwrap();
+            }
+            if let Ok(c) = std::env::var("LA_MIN_CYCLES") {
+                cfg.min_cycles = c.parse().unwrap();
+            }
             if std::env::var("LA_TOLD").is_ok() {
                 cfg.imu_position_m = [arm[0], arm[1], arm[2]];
             }
@@ -539,11 +547,18 @@ pub(super) fn imu_and_water_sweep() {
                     .ok()
                     .map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
+                burst_rel_err: std::env::var("LA_BURST").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
             };
             let o = estimate_ideal(name, sensors, seed, cfg, ideal);
-            let p = o.terms.imu_position.unwrap();
-            let l = p.learned.unwrap();
+            let Some((p, l)) = o.terms.imu_position.and_then(|p| Some((p, p.learned?))) else {
+                // An identification under control (LA_BURST) does not place the IMU.
+                println!(
+                    "{name} seed {seed}: tilt {:.0} refused {} lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} in {:.2} s (under control)",
+                    o.max_tilt_deg, o.refused, o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], o.seconds
+                );
+                continue;
+            };
             let sd = l.sd_m();
             println!(
                 "  sigma {:?} unexplained {:.4} rad/s lag sd_ln {:.4} rel_err {:.4}/{:.4} groups {:?} gap {:.4} z {:.2}",
