@@ -251,7 +251,14 @@ fn shifted_commands(run: DynamicRun, shift: i64) -> DynamicRun {
 fn print_fit(name: &str, run: &DynamicRun, outcome: &Outcome, truth_b: &DMatrix<f64>) {
     let n = run.thrusters();
     let per_thruster = &outcome.terms.spin_up_per_thruster_s;
-    let lags = lags_for_fit(n, outcome.spin_up_s, None, Some(per_thruster));
+    let mut lags = lags_for_fit(n, outcome.spin_up_s, None, Some(per_thruster));
+    // LAG_PROBE_LAGS (s, comma-separated, one per thruster): fitted at these instead (the
+    // simulator's, to tell the lags' error from the fit's).
+    if let Ok(given) = std::env::var("LAG_PROBE_LAGS") {
+        for (l, v) in lags.iter_mut().zip(given.split(',')) {
+            *l = v.parse().expect("LAG_PROBE_LAGS: seconds");
+        }
+    }
     let Some(fit) = run.refit(&lags[..n]) else {
         return;
     };
