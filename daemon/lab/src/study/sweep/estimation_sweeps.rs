@@ -2,7 +2,7 @@
 //! tests/dynamic_estimator.rs: each prints a table, knobs from environment variables.
 
 use thruster_sim::disturbance::WaterPreset;
-use thruster_sim::{NoisePreset, SensorConfig};
+use thruster_sim::{ImuNoise, NoisePreset, SensorConfig};
 use thrusterd_core::estimator::EstimatorConfig;
 
 use thruster_inprocess::estimation::*;
@@ -224,7 +224,8 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// vehicle, true lag and seed. Knobs: LAG_NOISE (none|realistic|paper), LAG_VEHICLES,
 /// LAG_TAUS, LAG_MIXED (lags a,b,..: thruster i gets the (i mod k)-th, LAG_TAUS then unused),
 /// LAG_SEEDS (1..=N), LAG_RATE (the IMU's rate, Hz; 200), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
-/// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
+/// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_NOISE_ONLY (gyro|accel|white|bias:
+/// that part of the preset alone, `noise_only`), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
 /// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_SHAPED (`shaped_thrust`), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
@@ -257,6 +258,9 @@ pub(super) fn lag_sweep() {
                     noise,
                     ..SensorConfig::default()
                 };
+                if let Ok(part) = std::env::var("LAG_NOISE_ONLY") {
+                    sensors.custom_noise = Some(noise_only(noise, &part, "LAG_NOISE_ONLY"));
+                }
                 if let Ok(g) = std::env::var("LAG_GYRO_ONLY") {
                     let mut n = NoisePreset::Paper.params();
                     n.gyro_std_radps = 0.0;
@@ -425,6 +429,35 @@ pub(super) fn lag_sweep() {
     }
 }
 
+/// One part of `noise`'s preset alone (a sweep's LA_NOISE_ONLY / LAG_NOISE_ONLY, named by
+/// `key`): "gyro" / "accel", that sensor's white noise and bias; "white", no biases; "bias",
+/// the biases only. Why: tells which part of a noise moves a figure.
+fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
+    let mut n = noise.params();
+    let (gyro, accel, white, bias) = match part {
+        "gyro" => (true, false, true, true),
+        "accel" => (false, true, true, true),
+        "white" => (true, true, true, false),
+        "bias" => (true, true, false, true),
+        other => panic!("{key}: {other} is not gyro, accel, white or bias"),
+    };
+    if !gyro || !white {
+        n.gyro_std_radps = 0.0;
+    }
+    if !gyro || !bias {
+        n.gyro_bias_walk = 0.0;
+        n.gyro_bias_init_std = 0.0;
+    }
+    if !accel || !white {
+        n.accel_std_mps2 = 0.0;
+    }
+    if !accel || !bias {
+        n.accel_bias_walk = 0.0;
+        n.accel_bias_init_std = 0.0;
+    }
+    n
+}
+
 /// The IMU off the centre and the water, over seeds (docs/study.md, "The IMU off the centre"):
 /// LA_VEHICLES, LA_SEEDS, LA_NOISE (none|realistic|paper), LA_ARM (x,y,z m), LA_TOLD (the
 /// daemon is told LA_ARM), LA_TOLD_AT (x,y,z m: the daemon is told this position instead), LA_TOL (tolerance, m), LA_WATER (current|moderate|rough),
@@ -462,31 +495,7 @@ pub(super) fn imu_and_water_sweep() {
                 ..SensorConfig::default()
             };
             if let Ok(part) = std::env::var("LA_NOISE_ONLY") {
-                // One part of the preset's noise alone: which one matters. "gyro" / "accel":
-                // that sensor's white noise and bias; "white": no biases; "bias": biases only.
-                let mut n = noise.params();
-                let (gyro, accel, white, bias) = match part.as_str() {
-                    "gyro" => (true, false, true, true),
-                    "accel" => (false, true, true, true),
-                    "white" => (true, true, true, false),
-                    "bias" => (true, true, false, true),
-                    other => panic!("LA_NOISE_ONLY: {other} is not gyro, accel, white or bias"),
-                };
-                if !gyro || !white {
-                    n.gyro_std_radps = 0.0;
-                }
-                if !gyro || !bias {
-                    n.gyro_bias_walk = 0.0;
-                    n.gyro_bias_init_std = 0.0;
-                }
-                if !accel || !white {
-                    n.accel_std_mps2 = 0.0;
-                }
-                if !accel || !bias {
-                    n.accel_bias_walk = 0.0;
-                    n.accel_bias_init_std = 0.0;
-                }
-                sensors.custom_noise = Some(n);
+                sensors.custom_noise = Some(noise_only(noise, &part, "LA_NOISE_ONLY"));
             }
             let mut cfg = EstimatorConfig::dynamic();
             if let Ok(v) = std::env::var("LA_LEARN") {
