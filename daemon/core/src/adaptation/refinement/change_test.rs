@@ -82,6 +82,11 @@ pub struct ChangeSettings {
     /// When the calibration applies ([`CalibrateWhen`]).
     #[serde(default)]
     pub calibrate_when: CalibrateWhen,
+    /// The joint fit's named thruster must lead every other thruster's joint chi-square by
+    /// this much; by less, the test names nobody yet and waits for more evidence (0: the
+    /// largest is named).
+    #[serde(default)]
+    pub name_margin: f64,
 }
 
 /// The test's largest statistic at one sample.
@@ -486,13 +491,14 @@ impl ChangeTest {
             if let (Some(f), Some(ci)) = (found.as_mut(), found_in) {
                 let rows = self.candidates[ci].rows.iter().filter(|&&r| r).count();
                 match attribute(&self.candidates[ci], n, &inv, &col_norm, &nameable) {
-                    Some((thruster, chi2, share))
-                        if (self.s.min_share..=MAX_JOINT_SHARE).contains(&share)
-                            && chi2 >= JOINT_CHI2_99[rows] =>
+                    Some(a)
+                        if (self.s.min_share..=MAX_JOINT_SHARE).contains(&a.share)
+                            && a.chi2 >= JOINT_CHI2_99[rows]
+                            && a.lead >= self.s.name_margin =>
                     {
-                        f.thruster = thruster;
-                        f.chi2 = chi2;
-                        f.share = share;
+                        f.thruster = a.thruster;
+                        f.chi2 = a.chi2;
+                        f.share = a.share;
                     }
                     Some(_) => found = None,
                     None => {}
@@ -618,7 +624,7 @@ fn attribute(
     inv_var: &[f64; 3],
     col_norm: &[f64; MAX_THRUSTERS],
     nameable: &[bool; MAX_THRUSTERS],
-) -> Option<(usize, f64, f64)> {
+) -> Option<Attribution> {
     use nalgebra::SMatrix;
     if n == 0 || c.count < 3.0 {
         return None;
@@ -643,7 +649,8 @@ fn attribute(
     }
     let ginv = g.cholesky()?.inverse();
     // Every thruster's move is fitted; only a nameable one is named.
-    let mut best: Option<(usize, f64, f64)> = None;
+    let mut best: Option<Attribution> = None;
+    let mut chi2_of = [0.0; MAX_THRUSTERS];
     for i in 0..n {
         if !nameable[i] || ginv[(i, i)] <= 0.0 {
             continue;
@@ -658,11 +665,36 @@ fn attribute(
             chi2 += d * d * inv_var[j] / (ginv[(i, i)] * c.calibration.inflation[i][j]);
             d2 += d * d;
         }
-        if best.is_none_or(|b| chi2 > b.1) {
-            best = Some((i, chi2, d2.sqrt() / col_norm[i]));
+        chi2_of[i] = chi2;
+        if best.is_none_or(|b| chi2 > b.chi2) {
+            best = Some(Attribution {
+                thruster: i,
+                chi2,
+                share: d2.sqrt() / col_norm[i],
+                lead: 0.0,
+            });
         }
     }
-    best
+    best.map(|b| {
+        let runner_up = (0..n)
+            .filter(|&i| i != b.thruster)
+            .map(|i| chi2_of[i])
+            .fold(0.0, f64::max);
+        Attribution {
+            lead: b.chi2 - runner_up,
+            ..b
+        }
+    })
+}
+
+/// The joint fit's named thruster: its move's chi-square and share of its column, and its
+/// lead over the next thruster's chi-square.
+#[derive(Debug, Clone, Copy)]
+struct Attribution {
+    thruster: usize,
+    chi2: f64,
+    share: f64,
+    lead: f64,
 }
 
 #[cfg(test)]
@@ -686,7 +718,66 @@ mod tests {
             calibration_s: 0.0,
             batch_s: 2.0,
             calibrate_when: CalibrateWhen::Always,
+            name_margin: 0.0,
         }
+    }
+
+    /// The joint fit's lead: thruster 0's move explains the innovation a little better than
+    /// thruster 1's (signatures uncorrelated, unit variance: chi-square 25 against 24.01), so
+    /// thruster 0 is named with a lead of 0.99; a nameless thruster never leads.
+    #[test]
+    fn the_named_thruster_leads_by_the_next_ones_chi_square() {
+        let mut c = Candidate {
+            live: true,
+            rows: [true, false, false],
+            count: 100.0,
+            ..Candidate::EMPTY
+        };
+        c.sum_cross[0][0] = 1.0;
+        c.sum_cross[1][1] = 1.0;
+        c.sum_phi_e[0][0] = 5.0;
+        c.sum_phi_e[1][0] = 4.9;
+        let cols = [1.0; MAX_THRUSTERS];
+        let a = attribute(&c, 2, &[1.0; 3], &cols, &[true; MAX_THRUSTERS]).unwrap();
+        assert_eq!(a.thruster, 0);
+        assert!((a.chi2 - 25.0).abs() < 1e-6, "{a:?}");
+        assert!((a.lead - 0.99).abs() < 1e-6, "{a:?}");
+        // Thruster 0 not nameable: thruster 1 is named, with no one behind it.
+        let mut nameable = [true; MAX_THRUSTERS];
+        nameable[0] = false;
+        let a = attribute(&c, 2, &[1.0; 3], &cols, &nameable).unwrap();
+        assert_eq!(a.thruster, 1);
+        assert!((a.lead - a.chi2).abs() < 1e-9, "{a:?}");
+    }
+
+    /// A lead below `name_margin` names nobody: the change the default settings find is not
+    /// reported while the margin is out of reach, and is, later, at a margin the evidence
+    /// passes.
+    #[test]
+    fn a_change_whose_thruster_does_not_lead_by_the_margin_waits() {
+        let all = |_| [true; 3];
+        let (t0, f0) = simulate(20.0, 0.25, 60.0, all).expect("found without a margin");
+        assert_eq!(f0.thruster, 1);
+        let unreachable = ChangeSettings {
+            name_margin: 1e9,
+            ..settings()
+        };
+        assert_eq!(
+            simulate_at_sea(unreachable, f64::INFINITY, 20.0, 0.25, 60.0, all),
+            None
+        );
+        let some = ChangeSettings {
+            name_margin: 50.0,
+            ..settings()
+        };
+        let (t, f) = simulate_at_sea(some, f64::INFINITY, 20.0, 0.25, 60.0, all)
+            .expect("found at a margin of 50");
+        assert_eq!(f.thruster, 1);
+        println!("found at {t0:.3} s without a margin, {t:.3} s at 50");
+        assert!(
+            t > t0,
+            "{t} not after {t0}: the lead at the first find passed 50"
+        );
     }
 
     /// A pure-B model of a vehicle with a little damping, driven by a random binary command
