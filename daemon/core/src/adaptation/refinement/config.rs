@@ -152,7 +152,7 @@ pub struct RefinementConfig {
     /// 48-92 % after the new model was in; at the paper's noise the rotated thruster is found
     /// on candidates 3-5 s old.
     pub change_min_age_s: f64,
-    /// The thruster named must lead the others by this much (default 0: the largest is
+    /// The thruster named must lead the others by this much (default 20; 0: the largest is
     /// named): every thruster's move is fitted jointly, and the named one's chi-square must
     /// pass the next one's by this; by less the test names nobody yet and waits for more
     /// evidence. Why: holding AMOUR-5 level at the paper's noise with its top thruster rotated
@@ -160,8 +160,9 @@ pub struct RefinementConfig {
     /// fitted to the thrust's shape (`estimator.shaped_thrust`), each time by a lead of 0.1-7;
     /// the re-estimation then carries the moved thruster's old column over. Margin 9.21: 11 and
     /// 26 wrong; 13.8: 7 and 14; 20: 2 and 1, found after 4.65 s and 4.36 s on average
-    /// instead of 4.22 s and 3.42 s (docs/study.md, "The change test's name"). Not yet the
-    /// default: at 20 two swell tests' flights (`tests/unconfirmed_change.rs`) change.
+    /// instead of 4.22 s and 3.42 s (docs/study.md, "The change test's name"). In a swell
+    /// the uncalibrated test's false alarms come later and stronger at 20
+    /// (`tests/unconfirmed_change.rs`).
     pub change_name_margin: f64,
     /// The change test calibrated against the water (default 120; 0: off; applied as
     /// `change_calibrate_when` says, by default only in a sea): every thruster's
@@ -226,7 +227,7 @@ impl Default for RefinementConfig {
             change_model_floor: 0.0,
             change_term_z: 4.0,
             change_min_age_s: 2.0,
-            change_name_margin: 0.0,
+            change_name_margin: 20.0,
             change_calibration_s: 120.0,
             change_batch_s: 10.0,
             change_calibrate_when: CalibrateWhen::InASea,

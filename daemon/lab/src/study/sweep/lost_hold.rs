@@ -18,7 +18,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// the time not in Active. LH_DEG (default the shipped `machine.lost_hold_deg`): the limit.
 /// LH_CAL, LH_MON_CAL (s): `refinement.change_calibration_s` and `monitor.calibration_s` (the
 /// calibrations against the water; default the shipped 120, 0 = off); LH_CAL_WHEN (in_a_sea |
-/// always): when both apply (default the shipped "in_a_sea").
+/// always): when both apply (default the shipped "in_a_sea"). LH_NAME_MARGIN:
+/// `refinement.change_name_margin` (default the shipped 20).
 /// LH_LEVEL=1: hold level at the starting heading instead of the pitch steps. The last column
 /// is the sea-state gauge at the end (`identification/sea_state.rs`, deg RMS; NaN: not known).
 /// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
@@ -52,12 +53,15 @@ pub(super) fn lost_hold_soak() {
     let monitor_calibration_s: Option<f64> =
         std::env::var("LH_MON_CAL").ok().map(|v| v.parse().unwrap());
     let calibrate_when = super::calibrate_when_from_env("LH_CAL_WHEN");
+    let name_margin: Option<f64> = std::env::var("LH_NAME_MARGIN")
+        .ok()
+        .map(|v| v.parse().unwrap());
     let flight = if level {
         "held level"
     } else {
         "of +-20 deg pitch steps every 4 s"
     };
-    println!("{noise:?}, {minutes} min {flight}, limit {limit:?}");
+    println!("{noise:?}, {minutes} min {flight}, limit {limit:?}, name margin {name_margin:?}");
     println!(
         "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12} {:>9}",
         "vehicle", "water", "seed", "lost", "mismatches", "max 10s mean", "not Active s", "sea deg"
@@ -68,7 +72,12 @@ pub(super) fn lost_hold_soak() {
             for &seed in &seeds {
                 let mut run = Run::new(name, noise, seed);
                 // One setup (each `with_setup` starts from the shipped one).
-                let knobs = [limit, change_calibration_s, monitor_calibration_s];
+                let knobs = [
+                    limit,
+                    change_calibration_s,
+                    monitor_calibration_s,
+                    name_margin,
+                ];
                 if knobs.iter().any(Option::is_some) || calibrate_when.is_some() {
                     run.with_setup(|c| {
                         if let Some(w) = calibrate_when {
@@ -83,6 +92,9 @@ pub(super) fn lost_hold_soak() {
                         }
                         if let Some(s) = monitor_calibration_s {
                             c.monitor.calibration_s = s;
+                        }
+                        if let Some(m) = name_margin {
+                            c.refinement.change_name_margin = m;
                         }
                     });
                 }

@@ -17,7 +17,8 @@ use thrusterd_core::machine::State;
 /// (s): `refinement.change_calibration_s` and `monitor.calibration_s` (default the shipped 120,
 /// 0 = off), SC_CAL_WHEN (in_a_sea | always, default the shipped in_a_sea) when both apply;
 /// SC_MONITOR_ONLY=1: the refinement (its windows and change test) off, the monitor alone;
-/// SC_NO_INSTRUMENT=1: `identification.instrument = "never"`. Each detection line ends with the
+/// SC_NO_INSTRUMENT=1: `identification.instrument = "never"`; SC_NAME_MARGIN:
+/// `refinement.change_name_margin` (default the shipped 20). Each detection line ends with the
 /// sea state the machine had measured before the change and when it was found (deg RMS, None:
 /// not known).
 /// Per run: the false alarm (time, reason), the detection time and reason, the time to the
@@ -46,11 +47,12 @@ pub(super) fn silent_change_in_water() {
             .map(|v| v.parse().unwrap_or_else(|_| panic!("{key}: {v}")))
     };
     let (change_cal, monitor_cal) = (knob("SC_CAL"), knob("SC_MON_CAL"));
+    let name_margin = knob("SC_NAME_MARGIN");
     let calibrate_when = super::calibrate_when_from_env("SC_CAL_WHEN");
     let monitor_only = std::env::var("SC_MONITOR_ONLY").is_ok_and(|v| v == "1");
     let never_instrument = std::env::var("SC_NO_INSTRUMENT").is_ok_and(|v| v == "1");
     println!(
-        "{vehicle}, {noise:?}, {minutes} min unchanged, change test calibration {change_cal:?}, monitor calibration {monitor_cal:?}, applied {calibrate_when:?}"
+        "{vehicle}, {noise:?}, {minutes} min unchanged, change test calibration {change_cal:?}, monitor calibration {monitor_cal:?}, applied {calibrate_when:?}, name margin {name_margin:?}"
     );
     for water in &waters {
         for &seed in &seeds {
@@ -60,6 +62,7 @@ pub(super) fn silent_change_in_water() {
                 || calibrate_when.is_some()
                 || monitor_only
                 || never_instrument
+                || name_margin.is_some()
             {
                 run.with_setup(|c| {
                     if let Some(w) = calibrate_when {
@@ -76,6 +79,9 @@ pub(super) fn silent_change_in_water() {
                     }
                     if let Some(s) = monitor_cal {
                         c.monitor.calibration_s = s;
+                    }
+                    if let Some(m) = name_margin {
+                        c.refinement.change_name_margin = m;
                     }
                 });
             }
