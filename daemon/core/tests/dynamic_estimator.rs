@@ -66,6 +66,15 @@ fn shaped_dynamic() -> EstimatorConfig {
     }
 }
 
+/// The one column fitted to the bare command (`shaped_thrust` off): the arm the shape is
+/// compared with, whatever the default.
+fn bare_dynamic() -> EstimatorConfig {
+    EstimatorConfig {
+        shaped_thrust: false,
+        ..EstimatorConfig::dynamic()
+    }
+}
+
 /// Checks AMOUR-5's rotation-row rate damping and roll/pitch restoring coefficients against
 /// the simulator's, within `damping` and `restoring` of the true values (relative).
 fn assert_coefficients(o: &Outcome, damping: f64, restoring_tol: f64) {
@@ -631,7 +640,13 @@ fn an_imu_off_the_centre_is_found_refused_and_then_used_when_configured() {
 /// `rest_from_idle`) 1.7-3.0 %; seed 1, asserted here, 2.4 / 2.9 / 3.0 %. err_rot over
 /// seeds 1-5: 0.009-0.021 (seed 4 0.0207), and with the navigation's implicit transport term
 /// (2026-11-29) 0.008-0.022 (seed 1 0.0201, seed 4 0.0215; err_acc 1.7-3.1 %), so issue 32's
-/// 0.02 is missed on one or two seeds of five and the assertion allows 0.022.
+/// 0.02 is missed on one or two seeds of five and the assertion allows 0.022. With the one
+/// column fitted to the thrust's shape (the default since 2026-12-03), seeds 1-10
+/// (`LA_SHAPED=1|0 LA_TOLD=1 LA_ARM=0.15,0.05,-0.10 LA_VEHICLES=eight_vectored
+/// LA_NOISE=realistic LA_SEEDS=10 ... imu_and_water_sweep`): 0.011 / 0.031 on the mean (worst
+/// 0.020 / 0.041) against 0.012 / 0.027 (0.022 / 0.036) bare, every one within its bound
+/// (0.90x; bare 0.95x). The acceleration rows pay 13 % on the mean here; seed 1 0.0100 /
+/// 0.0338, asserted within 0.036.
 #[test]
 fn with_a_realistic_imu_a_configured_offset_imu_gives_the_centres_model() {
     let arm = [0.15, 0.05, -0.10];
@@ -645,7 +660,7 @@ fn with_a_realistic_imu_a_configured_offset_imu_gives_the_centres_model() {
     told.imu_position_m = arm;
     let o = estimate_with("eight_vectored", sensors, 1, told);
     assert!(
-        o.err_rot <= 0.022 && o.err_acc <= 0.033,
+        o.err_rot <= 0.022 && o.err_acc <= 0.036,
         "err_rot {:.4} err_acc {:.4}",
         o.err_rot,
         o.err_acc
@@ -777,7 +792,11 @@ fn assert_within_its_bound(o: &Outcome, what: &str) {
 /// (`LA_WATER=current LA_IDLE_S=0.05 LA_ARM=0,0,0 ... imu_and_water_sweep`), err_rot / err_acc:
 /// noise-free 0.0119 / 0.0655 in 4.22 s -> 0.0136 / 0.0221 in 5.22 s; realistic seeds 1-5
 /// 0.018-0.040 / 0.064-0.075 -> 0.008-0.032 / 0.023-0.042 under bounds 0.026 / 0.034-0.038.
-/// A rest in still water does not wait (4.22 s, unchanged).
+/// A rest in still water does not wait (4.22 s, unchanged). With the one column fitted to the
+/// thrust's shape (the default since 2026-12-03), realistic seeds 1-10 (`LA_SHAPED=1|0 LA_SEEDS=10
+/// LA_VEHICLES=eight_vectored LA_NOISE=realistic ...`): err_rot 0.010 on the mean (0.005-0.018)
+/// against 0.020 (0.008-0.032) bare, err_acc 0.033 on the mean either way, 0.022-0.049 against
+/// 0.023-0.042 (seed 1 0.049, at 1.30x its bound; bare's worst 1.22x): the limit 0.05.
 #[test]
 fn a_rest_that_saw_the_current_push_the_vehicle_starts_over() {
     let run = |noise: NoisePreset, seed: u64, water: WaterPreset| {
@@ -801,7 +820,7 @@ fn a_rest_that_saw_the_current_push_the_vehicle_starts_over() {
             o.err_rot, o.err_acc, o.bound, o.seconds
         );
         assert!(
-            !o.refused && o.err_acc <= 0.045,
+            !o.refused && o.err_acc <= 0.05,
             "seed {seed}: err_acc {:.4}",
             o.err_acc
         );
@@ -875,7 +894,13 @@ fn a_bound_within_reach_is_waited_for() {
 /// as 1/sqrt(pulses) with the rest, that bound missed `reach_rel_err` and these seeds stopped
 /// there: seed 4 at 3.23 s 0.044 / 0.047 off, seed 6 at 3.62 s 0.055 / 0.081 (under bounds of
 /// 0.052 / 0.059 and 0.039 / 0.048). The lag's profile sharpens within a few pulses (to 1-1.5
-/// % by 44), so projected as 1/pulses it is waited for.
+/// % by 44), so projected as 1/pulses it is waited for. With the one column fitted to the
+/// thrust's shape (the default since 2026-12-03) seed 4 stops at 4.43 s with its lag 0.2053 s
+/// and its acceleration rows 0.037 off under a bound of 0.029 (1.26x; bare 0.02 and within
+/// its bound): one of the two runs of issue 29's realistic lag table (seeds 1-5) still over
+/// 0.03 (`LAG_SHAPED=1|0 LAG_NOISE=realistic LAG_SEEDS=10 ... lag_sweep`: over 0.03 in 4 of
+/// 120 runs against 9 bare, all on eight_vectored at 0.15-0.2 s; docs/study.md). Asserted:
+/// the wait, the bound, and the error within 0.03 or, past it, within 1.5x the bound.
 #[test]
 fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
     let sensors = SensorConfig {
@@ -906,7 +931,10 @@ fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
         assert!(o.seconds > 4.0 && o.seconds < 6.0, "{msg}");
         assert!(o.bound[0] <= 0.03 && o.bound[1] <= 0.03, "{msg}");
         assert!(o.terms.spin_up_sd_ln < 0.02, "{msg}");
-        assert!(o.err_rot <= 0.03 && o.err_acc <= 0.03, "{msg}");
+        for (err, bound) in [(o.err_rot, o.bound[0]), (o.err_acc, o.bound[1])] {
+            assert!(err <= 0.03 || err <= 1.5 * bound, "{msg}");
+        }
+        assert!(o.err_rot <= 0.03 && o.err_acc <= 0.04, "{msg}");
     }
 }
 
@@ -1165,8 +1193,16 @@ fn estimate_mismatched(name: &str, m: Mismatch, noise: NoisePreset, seed: u64) -
 /// Issue 31: thrusters whose reverse ratio or dead band is not what the daemon assumes
 /// (0.78, 0.05 compensated), the daemon not told; noise-free, seed 1, AMOUR-5 and
 /// eight_vectored. Limits are 1.5x the measured figure (`mismatch_sweep`; docs/study.md,
-/// "Vehicles the estimator was not told about"). Measured err_rot / err_acc and the larger of
-/// error / bound (the daemon's own rel_err_rot / rel_err_acc), AMOUR-5 | eight_vectored:
+/// "Vehicles the estimator was not told about"). Since the one column is fitted to the thrust's
+/// shape by default (`estimator.shaped_thrust`, 2026-12-03), measured err_rot / err_acc and
+/// error / bound, AMOUR-5 | eight_vectored: reverse 0.6 0.0161 / 0.0120, 0.80x | 0.0145 /
+/// 0.0148, 0.73x (covered now; the tilt still 63 deg on AMOUR-5); reverse 0.95 0.0127 /
+/// 0.0090, 0.63x | 0.0139 / 0.0135, 0.70x (a configured ratio 0.78 that is wrong costs what the
+/// shape gains elsewhere, and stays within 0.02); dead band 0 0.0063 / 0.0069, 0.34x | 0.0087 /
+/// 0.0083, 0.43x; dead band 0.1 0.0086 / 0.0089, 0.44x | 0.0063 / 0.0067, 0.33x. Every case
+/// within 0.02 and its bound. On the bare command, as measured before (err_rot / err_acc and
+/// the larger of error / bound, the daemon's own rel_err_rot / rel_err_acc), AMOUR-5 |
+/// eight_vectored:
 /// - reverse 0.6: 0.030 / 0.022, 1.50x | 0.029 / 0.030, 1.47x. The bound (0.020) does NOT
 ///   cover the error: the one symmetric column per thruster takes a 0.6 asymmetry the floor
 ///   (`model_error_floor`, set for 0.78) does not count. The model is not refused. AMOUR-5
@@ -1180,14 +1216,14 @@ fn estimate_mismatched(name: &str, m: Mismatch, noise: NoisePreset, seed: u64) -
 fn noise_free_reverse_ratio_and_dead_band_the_daemon_was_not_told() {
     // (case index in MISMATCHES, vehicle, measured err_rot, err_acc, error / bound)
     let measured = [
-        (1, "amour5", 0.0301, 0.0217, 1.50),
-        (1, "eight_vectored", 0.0290, 0.0295, 1.47),
-        (2, "amour5", 0.0026, 0.0044, 0.22),
-        (2, "eight_vectored", 0.0012, 0.0019, 0.09),
-        (3, "amour5", 0.0089, 0.0064, 0.45),
-        (3, "eight_vectored", 0.0063, 0.0069, 0.34),
-        (4, "amour5", 0.0234, 0.0199, 1.17),
-        (4, "eight_vectored", 0.0210, 0.0215, 1.07),
+        (1, "amour5", 0.0161, 0.0120, 0.80),
+        (1, "eight_vectored", 0.0145, 0.0148, 0.73),
+        (2, "amour5", 0.0127, 0.0090, 0.63),
+        (2, "eight_vectored", 0.0139, 0.0135, 0.70),
+        (3, "amour5", 0.0063, 0.0069, 0.34),
+        (3, "eight_vectored", 0.0087, 0.0083, 0.43),
+        (4, "amour5", 0.0086, 0.0089, 0.44),
+        (4, "eight_vectored", 0.0063, 0.0067, 0.33),
     ];
     for (case, name, rot, acc, ratio) in measured {
         let (what, m) = MISMATCHES[case];
@@ -1222,7 +1258,13 @@ fn noise_free_reverse_ratio_and_dead_band_the_daemon_was_not_told() {
 
 /// The same and the lag cases at a realistic IMU, seeds 1-5. Limits are 1.5x the worst of
 /// those seeds (`MM_NOISE=realistic MM_SEEDS=5 ... mismatch_sweep`), err_rot / err_acc and
-/// error / bound, AMOUR-5 | eight_vectored: matched 0.025 / 0.022, 1.20x | 0.024 / 0.034,
+/// error / bound, AMOUR-5 | eight_vectored, with the one column fitted to the thrust's shape
+/// (the default since 2026-12-03): matched 0.008 / 0.015, 0.65x | 0.010 / 0.029, 1.06x;
+/// reverse 0.6 0.019 / 0.022, 0.93x | 0.025 / 0.029, 1.09x (covered now); reverse 0.95 0.019 /
+/// 0.021, 0.96x | 0.019 / 0.037, 1.35x (worse: the configured ratio is wrong); dead band 0
+/// 0.016 / 0.018, 0.76x | 0.015 / 0.034, 1.22x; dead band 0.1 0.014 / 0.016, 0.71x | 0.015 /
+/// 0.027, 0.95x; lag 0.05 s 0.004 / 0.010, 0.46x | 0.004 / 0.012, 0.54x; lag 0.15 s 0.009 /
+/// 0.022, 0.77x | 0.007 / 0.022, 0.83x. On the bare command, as measured before: matched 0.025 / 0.022, 1.20x | 0.024 / 0.034,
 /// 1.19x; reverse 0.6 0.040 / 0.031, 1.91x | 0.040 / 0.049, 1.77x (the bound never covers
 /// it: 0 of 5 seeds on either vehicle); reverse 0.95 0.008 / 0.015, 0.66x | 0.017 / 0.027,
 /// 0.97x; dead band 0 0.018 / 0.016, 0.87x | 0.017 / 0.029, 1.00x; dead band 0.1 0.028 /
@@ -1232,18 +1274,18 @@ fn noise_free_reverse_ratio_and_dead_band_the_daemon_was_not_told() {
 fn with_a_realistic_imu_thrusters_the_daemon_was_not_told_about() {
     // (case index in MISMATCHES, vehicle, worst err_rot, err_acc, error / bound of seeds 1-5)
     let measured = [
-        (1, "amour5", 0.0400, 0.0307, 1.91),
-        (1, "eight_vectored", 0.0400, 0.0490, 1.77),
-        (2, "amour5", 0.0081, 0.0152, 0.66),
-        (2, "eight_vectored", 0.0165, 0.0269, 0.97),
-        (3, "amour5", 0.0180, 0.0164, 0.87),
-        (3, "eight_vectored", 0.0171, 0.0285, 1.00),
-        (4, "amour5", 0.0279, 0.0259, 1.35),
-        (4, "eight_vectored", 0.0317, 0.0414, 1.44),
-        (5, "amour5", 0.0181, 0.0190, 0.92),
-        (5, "eight_vectored", 0.0175, 0.0258, 1.15),
-        (6, "amour5", 0.0211, 0.0206, 0.92),
-        (6, "eight_vectored", 0.0313, 0.0438, 1.21),
+        (1, "amour5", 0.0194, 0.0217, 0.93),
+        (1, "eight_vectored", 0.0245, 0.0291, 1.09),
+        (2, "amour5", 0.0194, 0.0210, 0.96),
+        (2, "eight_vectored", 0.0188, 0.0371, 1.35),
+        (3, "amour5", 0.0156, 0.0178, 0.76),
+        (3, "eight_vectored", 0.0147, 0.0339, 1.22),
+        (4, "amour5", 0.0139, 0.0161, 0.71),
+        (4, "eight_vectored", 0.0153, 0.0266, 0.95),
+        (5, "amour5", 0.0036, 0.0095, 0.46),
+        (5, "eight_vectored", 0.0040, 0.0118, 0.54),
+        (6, "amour5", 0.0089, 0.0221, 0.77),
+        (6, "eight_vectored", 0.0069, 0.0222, 0.83),
     ];
     for (case, name, rot, acc, ratio) in measured {
         let (what, m) = MISMATCHES[case];
@@ -1405,7 +1447,7 @@ fn forward_and_reverse_gains_fitted_apart_take_the_asymmetry_out_of_b() {
         ..EstimatorConfig::dynamic()
     };
     for name in ["amour5_reverse60", "amour5"] {
-        let one = estimate_with(name, sensors.clone(), 1, EstimatorConfig::dynamic());
+        let one = estimate_with(name, sensors.clone(), 1, bare_dynamic());
         let two = estimate_with(name, sensors.clone(), 1, split.clone());
         println!(
             "{name}: one column {:.4} / {:.4}, split {:.4} / {:.4} (bound {:.4} / {:.4}), lag {:.4} learned {}",
@@ -1455,7 +1497,7 @@ fn a_column_fitted_to_the_commands_thrust_shape_is_the_mean_gain() {
         ("six_dof", 0.005),
         ("amour5_reverse60", 0.02),
     ] {
-        let bare = estimate_with(name, sensors.clone(), 1, EstimatorConfig::dynamic());
+        let bare = estimate_with(name, sensors.clone(), 1, bare_dynamic());
         let o = estimate_with(name, sensors.clone(), 1, shaped.clone());
         println!(
             "{name}: bare {:.4} / {:.4}, shaped {:.4} / {:.4} under {:.4} / {:.4}, lag {:.4}",

@@ -8,7 +8,7 @@
 //! are what these seeds gave.
 
 mod common;
-use common::{rel_err, rotate_while_holding_on, vehicle, Reestimation, Run};
+use common::{bare_first_model, rel_err, rotate_while_holding_on, vehicle, Reestimation, Run};
 use nalgebra::DMatrix;
 use thruster_sim::NoisePreset;
 use thrusterd_core::machine::{Event, ThrusterChange};
@@ -58,9 +58,15 @@ fn swaps_through(
 
 /// AMOUR-5 with its top thruster at 45 deg, the first thruster turned 45 deg more and
 /// announced while held: the nominal model of the new geometry lets it tumble to 95 deg.
+/// The first model fitted to the bare command, as these flights were found (with the shape,
+/// realistic seed 2 takes the let-go branch seed 1 takes bare: the model from rest at 43.9 s,
+/// 0.010 / 0.010 off; at the paper's noise seed 2's confirmation is no fight and nothing lets
+/// go).
 fn top45(noise: NoisePreset, seed: u64) -> (Run, Reestimation, Vec<Swapped>) {
     let v = vehicle("amour5_top45");
-    swaps_through(Run::new("amour5_top45", noise, seed), |run, observe| {
+    let mut run = Run::new("amour5_top45", noise, seed);
+    run.with_setup(bare_first_model);
+    swaps_through(run, |run, observe| {
         rotate_while_holding_on(run, &v, None, observe)
     })
 }
@@ -145,9 +151,12 @@ fn at_the_papers_noise_a_fight_twice_or_a_refused_fight_lets_go() {
     ] {
         let v = vehicle("amour5_top45");
         let mut run = Run::new("amour5_top45", NoisePreset::Paper, seed);
-        if let Some(gate) = gate {
-            run.with_setup(|s| s.machine.max_swap_rel_err = gate);
-        }
+        run.with_setup(|s| {
+            bare_first_model(s);
+            if let Some(gate) = gate {
+                s.machine.max_swap_rel_err = gate;
+            }
+        });
         let (mut run, r, swaps) = swaps_through(run, |run, observe| {
             rotate_while_holding_on(run, &v, None, observe)
         });
@@ -174,6 +183,8 @@ fn misdeclared_screw(noise: NoisePreset, seed: u64) -> (Run, Reestimation, Vec<S
     use nalgebra::Vector3;
     let v = vehicle("aligned");
     let mut run = Run::with_vehicle(v.clone(), noise, seed, 200.0);
+    // As found (with the shape the dither is not faded out in the tumble).
+    run.with_setup(bare_first_model);
     run.run_for(1.0);
     run.estimate();
     run.run_for(3.0);

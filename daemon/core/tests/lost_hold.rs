@@ -77,6 +77,9 @@ fn wrongly_declared_set(
     let v = vehicle("aligned");
     let mut run = Run::new("aligned", NoisePreset::Realistic, seed);
     run.with_setup(|s: &mut MachineSetup| {
+        // As found: with the first model fitted to the thrust's shape no seed of 1-5 loses
+        // the hold (each is identified under control), and the watch is not exercised.
+        common::bare_first_model(s);
         s.machine.lost_hold_s = lost_hold_s;
         s.identification.min_dither_share = min_dither_share;
         s.identification.lead_in_s = lead_in_s;

@@ -70,21 +70,31 @@ fn at_1_khz_and_the_papers_noise_an_unchanged_vehicle_raises_no_alarm_in_three_m
 /// The per-sample change test (`refinement::change_test`, on by default) through the
 /// machine, noise-free: quiet while nothing changes (a minute, with the refinement's model
 /// updates installed meanwhile), and the rotated top thruster found within seconds.
+///
+/// Where the rotation falls in the refinement's 5 s windows decides who finds it: a window
+/// that ends after it with its move still under `min_change` folds the move in, and the new
+/// model version restarts the test's warm-up (5 s), so the next window finds it. Rotated
+/// after 60-64 s of quiet, measured: 3.28 (change test), 5.32 (window), 6.30, 5.30, 4.30 s
+/// (change test), naming thruster 1 every time; with the first model fitted to the thrust's
+/// shape the window after the 60 s rotation folds its move in and finds it at 6.32 s, the
+/// others the same. One thruster at a time the test named thruster 2, LB, which takes up the
+/// new roll moment in closed loop (the joint fit names 1).
 #[test]
 fn noise_free_the_change_test_is_quiet_then_finds_a_rotated_thruster_within_seconds() {
-    let mut run = holding_with(NoisePreset::None, 1, shipped_change_test());
-    let quiet = level_until_mismatch(&mut run, 60.0);
-    assert!(quiet.is_none(), "false alarm {quiet:?}");
-    run.rotate_top();
-    let (t, why) = level_until_mismatch(&mut run, 10.0).expect("rotation not found");
-    println!("found after {t:.2} s: {why}");
-    // Measured 3.78 s, naming thruster 1 (the joint fit; one thruster at a time it named
-    // thruster 2, LB, which takes up the new roll moment in closed loop): a candidate is judged
-    // once it is `change_min_age_s` (2 s) old; at 1 s it was found after 2.53 s.
-    assert!(t < 4.5, "{t:.2} s: {why}");
-    assert!(why.contains("thruster 1"), "{why}");
-    assert!(why.contains("change test"), "{why}");
-    assert_eq!(run.machine.state(), State::Identify);
+    let mut by_the_test = 0;
+    for quiet_s in [60.0, 61.0, 62.0, 63.0, 64.0] {
+        let mut run = holding_with(NoisePreset::None, 1, shipped_change_test());
+        let quiet = level_until_mismatch(&mut run, quiet_s);
+        assert!(quiet.is_none(), "false alarm {quiet:?}");
+        run.rotate_top();
+        let (t, why) = level_until_mismatch(&mut run, 10.0).expect("rotation not found");
+        println!("rotated after {quiet_s} s, found after {t:.2} s: {why}");
+        assert!(t < 6.5, "{t:.2} s: {why}");
+        assert!(why.contains("thruster 1"), "{why}");
+        by_the_test += usize::from(why.contains("change test"));
+        assert_eq!(run.machine.state(), State::Identify);
+    }
+    assert!(by_the_test >= 3, "the change test found {by_the_test} of 5");
 }
 
 /// The two false alarms the change test raised over every vehicle file (seeds 1-6, 10 minutes

@@ -290,7 +290,7 @@ impl Default for EstimatorConfig {
             imu_position_m: [0.0; 3],
             learn_imu_position: true,
             split_thrust: false,
-            shaped_thrust: false,
+            shaped_thrust: true,
             imu_position_tolerance_m: 0.03,
         }
     }

@@ -3,3 +3,13 @@
 #![allow(unused_imports)]
 
 pub use thruster_inprocess::*;
+
+/// The open-loop fit's one column on the bare command (`estimator.shaped_thrust` off), for
+/// the flights found and measured with it: a tumble's branch, a swell's false alarm and an
+/// identification at its limit follow from the first model, and a model fitted to the
+/// thrust's shape (0.1-0.2 % off noise-free instead of 1.5 %) flies them differently
+/// (docs/study.md, "The shape on by default, test by test"). Each use says what the shape
+/// makes of its flight.
+pub fn bare_first_model(s: &mut thrusterd_core::machine::MachineSetup) {
+    s.estimator.shaped_thrust = false;
+}

@@ -227,7 +227,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset alone, `noise_only`), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
-/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_SHAPED (`shaped_thrust`), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
+/// (`reach_rel_err`), LAG_PULSES, LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_SHAPED (1|0: `shaped_thrust` on or off; set to anything else: on), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
 /// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
@@ -302,8 +302,8 @@ pub(super) fn lag_sweep() {
                 if std::env::var("LAG_SPLIT").is_ok() {
                     cfg.split_thrust = true;
                 }
-                if std::env::var("LAG_SHAPED").is_ok() {
-                    cfg.shaped_thrust = true;
+                if let Ok(v) = std::env::var("LAG_SHAPED") {
+                    cfg.shaped_thrust = v != "0";
                 }
                 if let Ok(x) = std::env::var("LAG_EXCITATION") {
                     use thrusterd_core::estimator::Excitation;
@@ -470,7 +470,7 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// (`identification.burst_rel_err`: the open-loop model refined under control), LA_WAVE_SCALE (every wave's force and moment
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
-/// the simulator's), LA_ONE_LAG (no lag per thruster), LA_LAG_GAP (the machine's
+/// the simulator's), LA_ONE_LAG (no lag per thruster), LA_SHAPED (1|0: `shaped_thrust` on or off), LA_LAG_GAP (the machine's
 /// `max_lag_gap_over_bound`; 0: the row groups' check off). Each flight prints the rest's
 /// noise, the unexplained rotation and where the row groups put the lag ("The lag in a swell").
 pub(super) fn imu_and_water_sweep() {
@@ -498,6 +498,9 @@ pub(super) fn imu_and_water_sweep() {
                 sensors.custom_noise = Some(noise_only(noise, &part, "LA_NOISE_ONLY"));
             }
             let mut cfg = EstimatorConfig::dynamic();
+            if let Ok(v) = std::env::var("LA_SHAPED") {
+                cfg.shaped_thrust = v != "0";
+            }
             if let Ok(v) = std::env::var("LA_LEARN") {
                 cfg.learn_imu_position = v != "0";
             }
