@@ -228,12 +228,14 @@ pub struct EstimatorConfig {
     /// r) / (1 + r)) rather than to the bare command, so B is the mean of the forward and
     /// reverse gains; the model carries k, the change test predicts with it and the
     /// controller commands through it (a forward command 1 / (1 + k) of the bare one). Default
-    /// false. Why: the pulses' forward level is `reverse_ratio` times the reverse one, which
-    /// mixes each thruster's asymmetry into its one gain, 1.5 % low on T200-like thrusters
-    /// (docs/study.md, "The thrust's shape in the one column": noise-free 0.016 -> 0.002 on
-    /// AMOUR-5). Off by default because what comes after the estimation is not yet held
-    /// to it: the refinement moves the exact model to its own ~1 %, and the closed-loop and
-    /// water tests measured on bare models move (same section).
+    /// true (since 2026-12-03). Why: the pulses' forward level is `reverse_ratio` times the
+    /// reverse one, which mixes each thruster's asymmetry into its one gain, 1.5 % low on
+    /// T200-like thrusters (docs/study.md, "The thrust's shape in the one column": noise-free
+    /// 0.016 -> 0.002 on AMOUR-5). Issue 29's lag table at a realistic IMU, seeds 1-10: 4 of
+    /// 120 runs over 0.03 against 9 bare; every untold reverse ratio and dead band within 0.02
+    /// noise-free (bare: 0.030 at a ratio of 0.6). The cost: a ratio the daemon is told wrong
+    /// the other way (0.95) 0.013 instead of 0.003, and eight_vectored's acceleration rows
+    /// with an offset IMU 13 % worse on the mean (docs/study.md, "The shape on by default").
     pub shaped_thrust: bool,
     /// Dynamic method: how far, m, the centre of mass may sit from the point
     /// `imu_position_m` is measured from (default 0.03): a gap within it is the drawings'

@@ -10,6 +10,7 @@ pub use thruster_inprocess::*;
 /// thrust's shape (0.1-0.2 % off noise-free instead of 1.5 %) flies them differently
 /// (docs/study.md, "The shape on by default, test by test"). Each use says what the shape
 /// makes of its flight.
+#[allow(dead_code)] // each test binary compiles this module; some fly only shipped models
 pub fn bare_first_model(s: &mut thrusterd_core::machine::MachineSetup) {
     s.estimator.shaped_thrust = false;
 }
