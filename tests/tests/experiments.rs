@@ -16,9 +16,16 @@ use serde_json::Value;
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn experiment(name: &str) -> Value {
+    experiment_with(name, &[])
+}
+
+/// [`experiment`] with more arguments (`--seed S`).
+fn experiment_with(name: &str, more: &[&str]) -> Value {
     // A failed experiment poisons the lock; the others still run.
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let out = system_tests::cli::lab(&["experiment", name, "--json"]);
+    let mut args = vec!["experiment", name, "--json"];
+    args.extend_from_slice(more);
+    let out = system_tests::cli::lab(&args);
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -83,26 +90,45 @@ fn manual_vs_learned_the_learned_model_holds_attitude_as_well_as_the_manual_one(
     );
 }
 
+/// The paper: more than 2x smaller yaw error with the learned model. Measured over seeds 1-10
+/// at the paper's noise with the bare one column: manual/learned 0.84-2.22 (mean 1.47; below 1
+/// on seeds 2 and 7), and with the simulator's true model (the "oracle" run) 0.86-1.77 (mean
+/// 1.35): this setup shows about 1.4x at this noise even with a perfect model. With the column
+/// fitted to the thrust's shape (the default since 2026-12-03): manual/learned 0.70-2.46 (mean
+/// 1.42; below 1 on seeds 2 and 7 again), manual/oracle 0.87-1.77 (mean 1.35), manual
+/// 1.58-3.71 deg, the learned model 0.027-0.054 off. One seed is a draw from that spread (seed
+/// 1 went from 1.17 to 1.04 with the shape), so seeds 1-5 are flown and their mean asserted
+/// (measured 1.25; the oracle's 1.26).
 #[test]
 fn misaligned_the_relearned_model_does_not_yaw_more_than_the_manual_one() {
-    let v = experiment("misaligned");
-    let h = &v["headline"];
-    let (m, l) = (
-        f(h, &["manual_yaw_err_mean_deg"]),
-        f(h, &["learned_yaw_err_mean_deg"]),
+    let (mut over_learned, mut over_oracle) = (0.0, 0.0);
+    let seeds = ["1", "2", "3", "4", "5"];
+    for seed in seeds {
+        let v = experiment_with("misaligned", &["--seed", seed]);
+        let h = &v["headline"];
+        let (m, l) = (
+            f(h, &["manual_yaw_err_mean_deg"]),
+            f(h, &["learned_yaw_err_mean_deg"]),
+        );
+        let o = f(h, &["oracle_yaw_err_mean_deg"]);
+        println!("seed {seed}: manual {m:.2} deg, learned {l:.2}, true model {o:.2}");
+        over_learned += m / l;
+        over_oracle += m / o;
+        assert!(m < 5.6, "seed {seed}: manual {m}");
+        assert!(f(&v, &["runs", "manual", "model", "rel_err_rot_vs_truth"]) > 0.3);
+        // The re-learned model: 0.026-0.062 off the truth over seeds 1-10.
+        assert!(f(h, &["learned_model_err_rot"]) < 0.095, "seed {seed}: {h}");
+    }
+    let n = seeds.len() as f64;
+    let (over_learned, over_oracle) = (over_learned / n, over_oracle / n);
+    assert!(
+        over_learned > 1.12,
+        "manual / learned {over_learned:.2} on the mean"
     );
-    // The paper: more than 2x smaller with the learned model. Measured over seeds 1-10 at the
-    // paper's noise: manual/learned 0.84-2.22 (mean 1.47; below 1 on seeds 2 and 7), and with
-    // the simulator's true model (the "oracle" run) 0.86-1.77 (mean 1.35): this setup shows
-    // about 1.4x at this noise even with a perfect model. Seed 1, asserted here: manual/learned
-    // 1.17, manual/oracle 1.32, manual 1.58-3.71 deg over the seeds.
-    assert!(l < 0.9 * m, "learned {l} deg vs manual {m} deg");
-    let o = f(h, &["oracle_yaw_err_mean_deg"]);
-    assert!(o < 0.85 * m, "true model {o} deg vs manual {m} deg");
-    assert!(m < 5.6, "manual {m}");
-    assert!(f(&v, &["runs", "manual", "model", "rel_err_rot_vs_truth"]) > 0.3);
-    // The re-learned model: 0.026-0.062 off the truth over seeds 1-10.
-    assert!(f(h, &["learned_model_err_rot"]) < 0.095, "{h}");
+    assert!(
+        over_oracle > 1.12,
+        "manual / true model {over_oracle:.2} on the mean"
+    );
 }
 
 #[test]
