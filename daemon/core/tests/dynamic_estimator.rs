@@ -66,15 +66,6 @@ fn shaped_dynamic() -> EstimatorConfig {
     }
 }
 
-/// The one column fitted to the bare command (`shaped_thrust` off): the arm the shape is
-/// compared with, whatever the default.
-fn bare_dynamic() -> EstimatorConfig {
-    EstimatorConfig {
-        shaped_thrust: false,
-        ..EstimatorConfig::dynamic()
-    }
-}
-
 /// Checks AMOUR-5's rotation-row rate damping and roll/pitch restoring coefficients against
 /// the simulator's, within `damping` and `restoring` of the true values (relative).
 fn assert_coefficients(o: &Outcome, damping: f64, restoring_tol: f64) {

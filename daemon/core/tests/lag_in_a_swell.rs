@@ -7,7 +7,7 @@
 //! bound the machine refuses the model (`machine.max_lag_gap_over_bound`). Each case is
 //! asserted with the check off as well: the same flight swaps in the confident wrong model.
 
-use thruster_inprocess::estimation::{estimate_ideal, Ideal, Outcome};
+use thruster_inprocess::estimation::{bare_dynamic, estimate_ideal, Ideal, Outcome};
 use thruster_inprocess::swell_phase;
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::{NoisePreset, SensorConfig};
@@ -17,16 +17,9 @@ use thrusterd_core::estimator::EstimatorConfig;
 /// `wave_scale`) came up at the swell phase of `seed`, the check at `gap_limit` (None: the
 /// shipped 1.5).
 fn flight(noise: NoisePreset, seed: u64, wave_scale: f64, gap_limit: Option<f64>) -> Outcome {
-    flight_with(noise, seed, wave_scale, gap_limit, as_found())
-}
-
-/// The one column on the bare command (`shaped_thrust` off), as these swells were found: a
-/// model fitted to the thrust's shape flies them differently (below).
-fn as_found() -> EstimatorConfig {
-    EstimatorConfig {
-        shaped_thrust: false,
-        ..EstimatorConfig::dynamic()
-    }
+    // As these swells were found: a model fitted to the thrust's shape flies them differently
+    // (below).
+    flight_with(noise, seed, wave_scale, gap_limit, bare_dynamic())
 }
 
 fn flight_with(

@@ -28,6 +28,21 @@ struct Outcome {
     lost: usize,
 }
 
+/// The limit's rule at work (`keep_old`): an identification reached its limit and was refused,
+/// the hold was kept, and no model far off the truth went in.
+fn assert_the_model_in_force_was_kept(kept: &Outcome) {
+    assert!(kept.unconfirmed >= 1, "no identification reached its limit");
+    assert_eq!(
+        kept.lost, 0,
+        "the hold was lost with the model in force kept"
+    );
+    assert!(
+        kept.worst_err_rot < 0.15,
+        "a model {:.3} off was swapped in",
+        kept.worst_err_rot
+    );
+}
+
 /// The flight as the case was found: the change test's name margin 0 (the largest joint
 /// chi-square named) and the first model on the bare command (`estimator.shaped_thrust` off).
 /// The shipped margin 20 (since 2026-12-03) waits for a clearer name, and the swell's alarms
@@ -133,16 +148,7 @@ fn a_change_the_identification_cannot_confirm_in_a_swell_keeps_the_model_in_forc
         swapped.worst_err_rot,
         swapped.lost
     );
-    assert!(kept.unconfirmed >= 1, "no identification reached its limit");
-    assert_eq!(
-        kept.lost, 0,
-        "the hold was lost with the model in force kept"
-    );
-    assert!(
-        kept.worst_err_rot < 0.15,
-        "a model {:.3} off was swapped in",
-        kept.worst_err_rot
-    );
+    assert_the_model_in_force_was_kept(&kept);
     // The decisive comparison: swapped at the limit, the same flight puts a model far off the
     // truth in force and loses the hold.
     assert_eq!(swapped.unconfirmed, 0);
@@ -240,16 +246,7 @@ fn at_the_shipped_name_margin_the_swells_alarms_reach_the_limit_and_the_model_is
         as_shipped.worst_err_rot,
         as_shipped.lost
     );
-    assert!(kept.unconfirmed >= 1, "no identification reached its limit");
-    assert_eq!(
-        kept.lost, 0,
-        "the hold was lost with the model in force kept"
-    );
-    assert!(
-        kept.worst_err_rot < 0.15,
-        "a model {:.3} off was swapped in",
-        kept.worst_err_rot
-    );
+    assert_the_model_in_force_was_kept(&kept);
     assert!(
         swapped.worst_err_rot > 0.2,
         "swapping at the limit gave nothing worse than {:.3}",

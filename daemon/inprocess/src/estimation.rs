@@ -130,6 +130,16 @@ pub struct Ideal {
 /// 16.9 to 20.3 % off (with the rest from 1 to 3 s: 17.1 %).
 pub const IDLE_BEFORE_REQUEST_S: f64 = 3.0;
 
+/// The dynamic method with its one column fitted to the bare command (`shaped_thrust` off, the
+/// default until 2026-12-03): the arm the thrust's shape is compared with, and the fit the
+/// flights found before it were measured on.
+pub fn bare_dynamic() -> EstimatorConfig {
+    EstimatorConfig {
+        shaped_thrust: false,
+        ..EstimatorConfig::dynamic()
+    }
+}
+
 pub fn estimate_with(
     name: &str,
     sensors: SensorConfig,
