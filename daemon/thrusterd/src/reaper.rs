@@ -58,6 +58,10 @@ impl Drop for Reaper {
 
 fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
     let mut next = Instant::now() + every;
+    // What the last search could not judge, said once when it changes rather than every
+    // 2 s: a node in an undefined state (one killed while it was being created or removed)
+    // or a failed listing keeps its files, and the log is where anyone would look for why.
+    let mut last_unjudged: Option<String> = None;
     while !stop.load(Ordering::SeqCst) {
         if Instant::now() < next {
             std::thread::sleep(STOP_POLL.min(next.saturating_duration_since(Instant::now())));
@@ -66,6 +70,19 @@ fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
         next = Instant::now() + every;
         let census = cleanup_dead_nodes(ipc);
         debug!(?census, "dead-node search");
+        let unjudged = match &census {
+            Ok(c) if c.unknown > 0 => Some(format!("{} nodes in an undefined state", c.unknown)),
+            Ok(_) => None,
+            Err(e) => Some(format!("the search failed: {e}")),
+        };
+        if unjudged != last_unjudged {
+            match &unjudged {
+                Some(what) => info!("dead-node search: {what}; their files stay"),
+                None if last_unjudged.is_some() => info!("dead-node search: every node judged"),
+                None => {}
+            }
+            last_unjudged = unjudged;
+        }
         match census {
             Ok(NodeCensus {
                 dead_cleaned: 0,
@@ -76,7 +93,7 @@ fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
                 warn!(?census, "dead nodes whose files could not be removed")
             }
             Ok(census) => info!(?census, "removed the files of dead nodes"),
-            Err(e) => debug!("dead-node search failed: {e}"),
+            Err(_) => {}
         }
     }
 }
