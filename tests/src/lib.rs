@@ -13,7 +13,8 @@ use thruster_protocol::services::{
     ControlClient, Inbox, IpcConfig, IpcNode, NamespaceGuard, TopicMessage,
 };
 use thruster_protocol::{
-    ControlRequest, ControlResponse, DaemonState, ModelMsg, RequestKind, StatusMsg, TruthMsg,
+    ControlRequest, ControlResponse, DaemonState, DynamicsMsg, ModelMsg, RequestKind, StatusMsg,
+    TruthMsg,
 };
 
 pub mod cli;
@@ -320,6 +321,7 @@ pub struct Operator {
     pub status: Inbox<StatusMsg>,
     pub model: Inbox<ModelMsg>,
     pub truth: Inbox<TruthMsg>,
+    pub dynamics: Inbox<DynamicsMsg>,
 }
 
 impl Operator {
@@ -329,6 +331,7 @@ impl Operator {
             status: Inbox::create(world.node(), world.ipc()).unwrap(),
             model: Inbox::create(world.node(), world.ipc()).unwrap(),
             truth: Inbox::create(world.node(), world.ipc()).unwrap(),
+            dynamics: Inbox::create(world.node(), world.ipc()).unwrap(),
         }
     }
 
@@ -365,6 +368,15 @@ impl Operator {
         pred: impl Fn(&ModelMsg) -> bool,
     ) -> Option<ModelMsg> {
         wait_for(&self.model, timeout, pred)
+    }
+
+    /// First dynamic terms message satisfying `pred`, waiting up to `timeout`.
+    pub fn wait_dynamics(
+        &self,
+        timeout: Duration,
+        pred: impl Fn(&DynamicsMsg) -> bool,
+    ) -> Option<DynamicsMsg> {
+        wait_for(&self.dynamics, timeout, pred)
     }
 
     /// Latest truth (the simulator publishes it with history 1).

@@ -61,6 +61,10 @@ fn estimation_from_request_to_swapped_model_and_restart_loads_it() {
         "errors rot {e_rot:.3} acc {e_acc:.3}"
     );
 
+    let learned_terms = op
+        .wait_dynamics(LONG, |d| d.model_version == active.model_version)
+        .expect("the learned model's dynamic terms published");
+
     // SIGTERM: neutral, final status, model saved, exit 0.
     let status = daemon.stop();
     assert!(
@@ -77,6 +81,32 @@ fn estimation_from_request_to_swapped_model_and_restart_loads_it() {
         .wait_model(LONG, |m| m.source() == Ok(ModelSource::Loaded))
         .unwrap_or_else(|| panic!("saved model not loaded\n{}", daemon2.log_text()));
     assert_eq!(loaded.effectiveness, model.effectiveness);
+    // And with it what it was learned with (file format 2): the lag, the damping, the IMU's
+    // position. A file with B only was refined and change-tested with the configured lag
+    // (core tests/restart_keeps_the_lag.rs).
+    let loaded_terms = op
+        .wait_dynamics(LONG, |d| d.model_version == loaded.version)
+        .unwrap_or_else(|| {
+            panic!(
+                "no dynamic terms for the loaded model\n{}",
+                daemon2.log_text()
+            )
+        });
+    // To the bit (NaN marks what was not carried, and NaN != NaN).
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(loaded_terms.spin_up_s, learned_terms.spin_up_s);
+    assert_eq!(loaded_terms.spin_up_learned, learned_terms.spin_up_learned);
+    for r in 0..6 {
+        assert_eq!(
+            bits(&loaded_terms.coefficients[r].to_terms()),
+            bits(&learned_terms.coefficients[r].to_terms()),
+            "row {r}"
+        );
+    }
+    assert_eq!(
+        bits(&loaded_terms.imu_position_m),
+        bits(&learned_terms.imu_position_m)
+    );
     assert!(daemon2.stop().success());
     assert!(sim.stop().success());
     drop(op);

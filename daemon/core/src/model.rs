@@ -53,9 +53,10 @@ pub struct Model {
     pub pulses: usize,
     /// The file it was last loaded from, when it came from one.
     pub loaded_from: Option<String>,
-    /// The dynamic method's other coefficients (damping, restoring, Coriolis) and the
-    /// excursion while it was learned; None for other methods and for models from a file
-    /// (the state directory keeps B only).
+    /// The dynamic method's other coefficients (damping, restoring, Coriolis), the learned
+    /// lags, thrust shape and IMU position, and the excursion while it was learned; None for
+    /// other methods (and for files of daemons before format version 2). The model file
+    /// keeps them (`model_file`), checked on loading (`stored_terms`).
     pub dynamics: Option<DynamicTerms>,
     /// Times the continuous refinement has updated it since it was estimated (0: as solved).
     /// `made_t_ns` is then the last update's time.

@@ -5,13 +5,15 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
+use crate::estimator::dynamic::{stored_terms, DynamicTerms};
 use crate::estimator::{DofMask, Method};
 use crate::model::{Model, ModelSource};
 
 /// Identifies our files; a different value is someone else's file.
 pub const FORMAT: &str = "thrusterd-model";
 /// Version of the layout below; files from a newer daemon are refused, not guessed at.
-pub const FORMAT_VERSION: u32 = 1;
+/// 2 added `dynamics` (version 1 files, without it, are read as before).
+pub const FORMAT_VERSION: u32 = 2;
 
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
@@ -57,6 +59,13 @@ struct ModelFile {
     /// Times the continuous refinement updated it (absent in older files: 0).
     #[serde(default)]
     refinements: u32,
+    /// The dynamic method's other terms: the learned lags, the thrust's shape, the IMU's
+    /// position, damping and restoring. Without them a loaded model is flown, refined and
+    /// change-tested with the configured lag and no shape (see `stored_terms` for what that
+    /// did). Absent in version 1 files, in other methods' models, and when a value was not
+    /// finite (JSON cannot hold it).
+    #[serde(default)]
+    dynamics: Option<DynamicTerms>,
 }
 
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -96,9 +105,47 @@ pub fn to_json(model: &Model) -> String {
         estimated: Some(model.estimated),
         pulses: model.pulses,
         refinements: model.refinements,
+        dynamics: model
+            .dynamics
+            .as_ref()
+            .map(with_finite_errors)
+            .filter(|d| storable(d, model.thrusters())),
     };
     // Plain data with string keys: serialisation cannot fail.
     serde_json::to_string_pretty(&file).unwrap_or_default()
+}
+
+/// `terms` with every non-finite standard error (a term the run never excited has an infinite
+/// one) as `f64::MAX`: "nothing known" in a number JSON can hold; [`with_unknown_errors`]
+/// turns it back on loading.
+fn with_finite_errors(terms: &DynamicTerms) -> DynamicTerms {
+    let mut t = terms.clone();
+    for m in [&mut t.std_err, &mut t.ols_std_err, &mut t.b_ols_std_err] {
+        m.iter_mut()
+            .filter(|v| !v.is_finite())
+            .for_each(|v| *v = f64::MAX);
+    }
+    t
+}
+
+/// The inverse of [`with_finite_errors`]: `f64::MAX` standard errors infinite again.
+fn with_unknown_errors(mut t: DynamicTerms) -> DynamicTerms {
+    for m in [&mut t.std_err, &mut t.ols_std_err, &mut t.b_ols_std_err] {
+        m.iter_mut()
+            .filter(|v| **v == f64::MAX)
+            .for_each(|v| *v = f64::INFINITY);
+    }
+    t
+}
+
+/// Whether `terms` come back from the file as they are: a non-finite value would be written
+/// as null and make the whole file unreadable, and terms out of bounds would be refused on
+/// loading; either way the model is better saved without them.
+fn storable(terms: &DynamicTerms, thrusters: usize) -> bool {
+    stored_terms::check(terms, thrusters).is_ok()
+        && serde_json::to_value(terms)
+            .and_then(serde_json::from_value::<DynamicTerms>)
+            .is_ok_and(|back| back == *terms)
 }
 
 fn matrix(name: &str, rows: &[Vec<f64>], r: usize, c: usize) -> Result<DMatrix<f64>, String> {
@@ -159,6 +206,9 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
             .ok_or_else(|| corrupt(format!("unknown DOF \"{name}\" in actuated")))?;
         actuated.0[dof.index()] = true;
     }
+    if let Some(d) = &f.dynamics {
+        stored_terms::check(d, n).map_err(|e| corrupt(e.to_string()))?;
+    }
     Ok(Model {
         version: f.version,
         source: f.source,
@@ -174,7 +224,7 @@ pub fn from_json(text: &str, origin: &str) -> Result<Model, StoreError> {
         estimated: f.estimated.unwrap_or(f.source != ModelSource::Nominal),
         pulses: f.pulses,
         loaded_from: Some(origin.to_string()),
-        dynamics: None,
+        dynamics: f.dynamics.map(with_unknown_errors),
         refinements: f.refinements,
     })
 }
@@ -210,6 +260,118 @@ mod tests {
         assert_eq!(back.loaded_from.as_deref(), Some("m.json"));
     }
 
+    /// Terms as a learned model has them: lags, the shape, the IMU's position, a term the
+    /// run never excited (infinite standard error).
+    fn terms(n: usize) -> DynamicTerms {
+        use crate::estimator::dynamic::imu_position::ImuPosition;
+        use crate::estimator::dynamic::regressors::TERMS;
+        let mut std_err = DMatrix::from_fn(6, TERMS, |r, c| 0.01 + (r * TERMS + c) as f64 * 1e-4);
+        std_err[(4, 20)] = f64::INFINITY;
+        DynamicTerms {
+            coefficients: DMatrix::from_fn(6, TERMS, |r, c| (r as f64 - 2.5) * 0.3 + c as f64),
+            std_err: std_err.clone(),
+            ols_std_err: std_err,
+            b_ols_std_err: DMatrix::from_element(6, n, 0.002),
+            max_tilt_rad: 0.3,
+            max_heading_change_rad: 0.2,
+            spin_up_s: 0.19,
+            spin_up_learned: true,
+            spin_up_sd_ln: 0.01,
+            spin_up_rel_err: [0.004, 0.006],
+            spin_up_per_thruster_s: vec![0.1, 0.12, 0.11],
+            thruster_lag_evidence: 3.5,
+            spin_up_groups: None,
+            spin_up_floor_rel_err: [0.0; 2],
+            lag_check: None,
+            thrust_curve: None,
+            thrust_asymmetry: 0.22 / 1.78,
+            prior_disagreement: [0.5, 0.7],
+            imu_position: Some(ImuPosition {
+                position_m: nalgebra::Vector3::new(0.15, 0.05, -0.1),
+                cov: nalgebra::Matrix3::identity() * 1e-6,
+                learned: None,
+                contradicted: false,
+                rel_err_share: 0.0,
+            }),
+            unexplained_rate_radps: 0.001,
+            instrumented: [true, false],
+        }
+    }
+
+    /// Without the terms a loaded model flew with the configured lag and no thrust shape
+    /// (`stored_terms`): every one comes back, the never-excited term's infinite error too.
+    #[test]
+    fn the_dynamic_terms_come_back_exactly() {
+        let mut m = model();
+        m.dynamics = Some(terms(3));
+        let text = to_json(&m);
+        assert!(text.contains("\"format_version\": 2"), "{text}");
+        let back = from_json(&text, "m.json").unwrap();
+        assert_eq!(back.dynamics, m.dynamics);
+        assert_eq!(back.learned_spin_up_s(), Some(0.19));
+        assert_eq!(back.learned_thruster_lags(), Some(&[0.1, 0.12, 0.11][..]));
+        assert_eq!(back.dynamics.unwrap().std_err[(4, 20)], f64::INFINITY);
+    }
+
+    /// A version 1 file (no terms) loads as before; terms the daemon could not write back
+    /// (a NaN) are left out rather than making the whole file unreadable.
+    #[test]
+    fn older_files_load_and_unwritable_terms_are_left_out() {
+        let mut m = model();
+        m.dynamics = Some(terms(3));
+        let v1: serde_json::Value = {
+            let mut v: serde_json::Value = serde_json::from_str(&to_json(&m)).unwrap();
+            let o = v.as_object_mut().unwrap();
+            o.remove("dynamics");
+            o.insert("format_version".into(), 1.into());
+            v
+        };
+        let back = from_json(&v1.to_string(), "old.json").unwrap();
+        assert_eq!(back.dynamics, None);
+        assert_eq!(back.effectiveness, m.effectiveness);
+        m.dynamics.as_mut().unwrap().coefficients[(0, 0)] = f64::NAN;
+        let back = from_json(&to_json(&m), "m.json").unwrap();
+        assert_eq!(back.dynamics, None);
+        assert_eq!(back.effectiveness, m.effectiveness);
+    }
+
+    /// Terms from a file pass the bounds the estimator's own keep, and a refusal names the key
+    /// and the range.
+    #[test]
+    fn out_of_bounds_terms_are_refused_naming_the_key() {
+        let mut m = model();
+        m.dynamics = Some(terms(3));
+        let text = to_json(&m);
+        for (from, to, key) in [
+            (
+                "\"spin_up_s\": 0.19",
+                "\"spin_up_s\": 7.0",
+                "dynamics.spin_up_s: 7 is not in [0, 2]",
+            ),
+            (
+                "\"thrust_asymmetry\": 0.12359550561797752",
+                "\"thrust_asymmetry\": 0.95",
+                "dynamics.thrust_asymmetry: 0.95 is not in [0, 0.9]",
+            ),
+            (
+                "\"thruster_lag_evidence\": 3.5",
+                "\"thruster_lag_evidence\": null",
+                "expected f64",
+            ),
+        ] {
+            assert!(text.contains(from), "{from} not in {text}");
+            let e = from_json(&text.replace(from, to), "m.json").unwrap_err();
+            assert!(
+                matches!(e, StoreError::Corrupt { .. }) && e.to_string().contains(key),
+                "{to}: {e}"
+            );
+        }
+        let mut lags = m.clone();
+        lags.dynamics.as_mut().unwrap().spin_up_per_thruster_s = vec![0.1, 0.1];
+        // Written without them (they would not load), never as a file that fails.
+        assert_eq!(from_json(&to_json(&lags), "m.json").unwrap().dynamics, None);
+    }
+
     #[test]
     fn corrupt_truncated_and_future_files_are_refused_with_reasons() {
         let text = to_json(&model());
@@ -219,7 +381,7 @@ mod tests {
             "{e}"
         );
         let e = from_json(
-            &text.replace("\"format_version\": 1", "\"format_version\": 9"),
+            &text.replace("\"format_version\": 2", "\"format_version\": 9"),
             "m.json",
         )
         .unwrap_err();
@@ -228,7 +390,7 @@ mod tests {
             "{e}"
         );
         let e = from_json(
-            &text.replace("\"format_version\": 1", "\"format_version\": 4294967297"),
+            &text.replace("\"format_version\": 2", "\"format_version\": 4294967297"),
             "m.json",
         )
         .unwrap_err();

@@ -23,6 +23,7 @@ pub mod sample_log;
 pub mod segment_basis;
 pub mod segmented_ls;
 pub mod spin_state;
+pub mod stored_terms;
 pub mod thrust_curve;
 pub mod thrust_shape;
 pub mod thruster_lags;
