@@ -337,7 +337,7 @@ fn bad_reconfig_events_setpoints_and_requests_are_counted_and_refused() {
     let future = world.path("future.json");
     std::fs::write(
         &future,
-        real.replacen("\"format_version\": 2", "\"format_version\": 7", 1),
+        real.replacen("\"format_version\": 1", "\"format_version\": 7", 1),
     )
     .unwrap();
     {
@@ -618,7 +618,7 @@ fn bad_saved_models_are_refused_at_start_counted_and_the_daemon_serves() {
         ("corrupt byte", corrupt, "not a thrusterd model file"),
         (
             "future version",
-            real.replacen("\"format_version\": 2", "\"format_version\": 3", 1)
+            real.replacen("\"format_version\": 1", "\"format_version\": 3", 1)
                 .into_bytes(),
             "format version 3 is newer than this daemon's 2",
         ),

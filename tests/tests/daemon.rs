@@ -107,6 +107,20 @@ fn estimation_from_request_to_swapped_model_and_restart_loads_it() {
         bits(&loaded_terms.imu_position_m),
         bits(&learned_terms.imu_position_m)
     );
+    // And the operator's `model` prints them for the loaded model.
+    let out = system_tests::cli::ctl(&world, &["model", "--json"]);
+    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "model --json: {e}: {}",
+            system_tests::cli::text(&out.stderr)
+        )
+    });
+    assert_eq!(m["source"], "Loaded", "{m}");
+    assert_eq!(
+        m["dynamics"]["spin_up_s"].as_f64(),
+        Some(learned_terms.spin_up_s),
+        "{m}"
+    );
     assert!(daemon2.stop().success());
     assert!(sim.stop().success());
     drop(op);

@@ -193,11 +193,12 @@ fn model(daemon: &Daemon, json: bool) -> Result<()> {
     // A model the dynamic method learned (in force as estimated, or back from the cache) has
     // its coefficients on their own topic, published with it; a late joiner gets them at the
     // daemon's next connection update (every status round), so wait as long as for the model.
-    // A model from a file has none: the state directory keeps B only.
+    // A model from a file has them since the file's format 2 (a version 1 file, B only, has
+    // none: then this waits out the timeout once and prints B).
     let has_dynamics = model.method() == Ok(ModelMethod::Dynamic)
         && matches!(
             model.source(),
-            Ok(ModelSource::Estimated) | Ok(ModelSource::Cache)
+            Ok(ModelSource::Estimated) | Ok(ModelSource::Cache) | Ok(ModelSource::Loaded)
         );
     let mut dynamics = None;
     if has_dynamics {
