@@ -472,11 +472,22 @@ fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
     if !left.is_empty() {
         // What the daemon's reaper should have seen, asked once more by the test itself,
         // for the next person reading a red run (this failed once in CI, never here).
-        let census = thruster_protocol::services::cleanup_dead_nodes(world.ipc());
+        // On a thread with a deadline: if the daemon's reaper is stuck removing the dead
+        // node (one hypothesis: the client was killed mid-update of a service's shared
+        // state), this search would be stuck the same way, and the test must fail, not hang.
+        let ipc = world.ipc().clone();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(thruster_protocol::services::cleanup_dead_nodes(&ipc));
+        });
+        let census = match rx.recv_timeout(Duration::from_secs(5)) {
+            Ok(c) => format!("{c:?}"),
+            Err(_) => "did not return within 5 s (stuck like the reaper?)".to_string(),
+        };
         let still = left_after(&theirs, &files());
         panic!(
             "the killed client's files stayed: {left:?}\n\
-             the test's own dead-node search: {census:?}, then {} of them left\n\
+             the test's own dead-node search: {census}, then {} of them left\n\
              daemon log:\n{}",
             still.len(),
             daemon.log_text()

@@ -46,12 +46,32 @@ impl Reaper {
     }
 }
 
+/// How long a stopping daemon waits for the reaper's search in progress before leaving it
+/// behind.
+const JOIN_WITHIN: Duration = Duration::from_secs(2);
+
 impl Drop for Reaper {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(t) = self.thread.take() {
-            // At most one search plus one poll: bounded.
-            let _ = t.join();
+            // A search is a listing and a lock probe per node, normally milliseconds. But it
+            // removes a dead node's entries from shared service state that the dead process
+            // may have been changing when it was killed, so it is not waited for without
+            // end: a shutdown must not hang on it (systemd would kill the daemon instead of
+            // its clean stop). Left behind, the thread ends with the process.
+            let deadline = Instant::now() + JOIN_WITHIN;
+            while !t.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(STOP_POLL.min(Duration::from_millis(10)));
+            }
+            if t.is_finished() {
+                let _ = t.join();
+            } else {
+                warn!(
+                    "the dead-node reaper did not stop within {} s (a search stuck on a dead \
+                     node's files?); leaving it",
+                    JOIN_WITHIN.as_secs()
+                );
+            }
         }
     }
 }
