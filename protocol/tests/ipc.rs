@@ -511,7 +511,8 @@ fn dead_process_resources_are_cleaned_up() {
             alive: 0,
             dead_cleaned: 1,
             dead_failed: 0,
-            unknown: 0
+            unknown: 0,
+            unfinished_removed: 0,
         }
     );
     assert_only_iceoryx_residue(&ipc);

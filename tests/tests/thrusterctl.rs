@@ -511,3 +511,89 @@ fn left_after(
 ) -> Vec<std::path::PathBuf> {
     theirs.iter().filter(|p| now.contains(p)).cloned().collect()
 }
+
+/// Clients killed with -9 while they join the namespace (2-9 ms after their start, inside
+/// iceoryx2's node creation): measured on 24 such kills, 9 left files the reaper never
+/// removed. A node whose liveness guard was never finished (or never begun) was listed as
+/// not existing, forever; a dead node without its details file was "cleaned" with iceoryx2's
+/// global configuration, another root, so the reaper said "removed" every 2 s and nothing
+/// went. Now the unfinished ones go after `UNFINISHED_AFTER` (10 s), and what iceoryx2 cannot
+/// remove (a node killed while it joined a service: its tag left, the removal failing with
+/// InternalError) is said to stay, not reported removed. Asserted: after 16 s every node these
+/// clients left is of that last kind, and if any is, the daemon's log says so.
+#[test]
+fn clients_killed_while_joining_leave_only_what_the_daemon_reports() {
+    let mut world = World::new("ctljoin");
+    world.node = None;
+    let mut daemon = world.daemon(&[]);
+    let mut sim = world.sim("amour5", &["--lockstep", "--noise", "none"]);
+    wait_status(&world, "samples", |v| {
+        v["samples"].as_u64().unwrap_or(0) > 0
+    });
+    let files = || thruster_protocol::services::namespace_files(world.ipc()).unwrap();
+    let before = files();
+    for delay_ms in 2..10u64 {
+        let mut client = Proc::spawn(
+            "thrusterctl",
+            &["--namespace", &world.namespace(), "watch"],
+            world.dir.path(),
+        );
+        std::thread::sleep(Duration::from_millis(delay_ms));
+        client.signal("KILL");
+        client
+            .wait_timeout(Duration::from_secs(10))
+            .expect("the killed client reaped");
+    }
+    let nodes_dir = world.ipc().root_dir().join("nodes");
+    // The clients' nodes still on disk: (id, whether its folder holds a service or port tag).
+    let left_nodes = || -> Vec<(String, bool)> {
+        let mut ids: Vec<String> = files()
+            .into_iter()
+            .filter(|p| !before.contains(p) && p.parent() == Some(nodes_dir.as_path()))
+            .filter_map(|p| {
+                let name = p.file_name()?.to_str()?.to_string();
+                let id = name.rsplit('_').next()?.split('.').next()?.to_string();
+                id.bytes().all(|b| b.is_ascii_digit()).then_some(id)
+            })
+            .collect();
+        ids.sort();
+        ids.dedup();
+        ids.into_iter()
+            .map(|id| {
+                let tagged = std::fs::read_dir(nodes_dir.join(&id)).is_ok_and(|d| {
+                    d.flatten().any(|e| {
+                        let n = e.file_name();
+                        let n = n.to_string_lossy();
+                        n.ends_with(".service_tag") || n.ends_with(".port_tag")
+                    })
+                });
+                (id, tagged)
+            })
+            .collect()
+    };
+    let deadline = Instant::now() + Duration::from_secs(16);
+    while left_nodes().iter().any(|(_, tagged)| !tagged) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    // One more search after the last removal, for the log to say what stays.
+    std::thread::sleep(Duration::from_secs(3));
+    let left = left_nodes();
+    eprintln!("clients' nodes left after the searches: {left:?}");
+    assert!(
+        left.iter().all(|(_, tagged)| *tagged),
+        "unfinished nodes stayed: {left:?}\n{}",
+        daemon.log_text()
+    );
+    if !left.is_empty() {
+        assert!(
+            daemon
+                .log_text()
+                .contains("dead nodes whose files could not be removed"),
+            "{} nodes stayed and the daemon did not say so:\n{}",
+            left.len(),
+            daemon.log_text()
+        );
+    }
+    assert!(sim.stop().success(), "{}", sim.log_text());
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+}

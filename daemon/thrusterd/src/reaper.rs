@@ -82,6 +82,7 @@ fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
     // 2 s: a node in an undefined state (one killed while it was being created or removed)
     // or a failed listing keeps its files, and the log is where anyone would look for why.
     let mut last_unjudged: Option<String> = None;
+    let mut last_failed = 0;
     while !stop.load(Ordering::SeqCst) {
         if Instant::now() < next {
             std::thread::sleep(STOP_POLL.min(next.saturating_duration_since(Instant::now())));
@@ -103,17 +104,27 @@ fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
             }
             last_unjudged = unjudged;
         }
+        let failed = census.as_ref().map_or(last_failed, |c| c.dead_failed);
         match census {
             Ok(NodeCensus {
                 dead_cleaned: 0,
                 dead_failed: 0,
+                unfinished_removed: 0,
                 ..
             }) => {}
             Ok(census) if census.dead_failed > 0 => {
-                warn!(?census, "dead nodes whose files could not be removed")
+                // Said when the count changes, not every 2 s: iceoryx2 fails the same way on
+                // every search for a client killed while it joined a service
+                // (`services::unfinished`), and the files stay until the next purge.
+                if census.dead_failed != last_failed {
+                    warn!(?census, "dead nodes whose files could not be removed")
+                } else {
+                    debug!(?census, "dead nodes whose files could not be removed")
+                }
             }
             Ok(census) => info!(?census, "removed the files of dead nodes"),
             Err(_) => {}
         }
+        last_failed = failed;
     }
 }

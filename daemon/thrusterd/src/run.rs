@@ -243,6 +243,11 @@ impl Daemon {
             None => IpcConfig::new(&cfg.ipc.namespace),
         }
         .with_context(|| format!("ipc.namespace {:?}", cfg.ipc.namespace))?;
+        // Before any iceoryx2 call: its cleanup of a dead node it cannot read falls back to the
+        // global configuration, which must be this namespace's (`services::unfinished`).
+        if !ipc.install_as_global() {
+            warn!("iceoryx2's global configuration is not this namespace's: a dead node without its details file will not be cleaned up");
+        }
         let setup = cfg.machine_setup();
         let loader = Loader::new(setup.estimator.clone());
         let mut machine = Machine::new(setup);

@@ -35,6 +35,9 @@ pub struct NodeCensus {
     pub dead_failed: usize,
     /// Nodes we may not inspect (other user) or in an undefined state.
     pub unknown: usize,
+    /// Nodes left unfinished by a process killed while iceoryx2 created them, whose files
+    /// were removed ([`super::remove_unfinished_nodes`]).
+    pub unfinished_removed: usize,
 }
 
 /// Outcome of [`purge_namespace`].
@@ -68,6 +71,7 @@ pub fn cleanup_dead_nodes(ipc: &IpcConfig) -> Result<NodeCensus, IpcError> {
         CallbackProgression::Continue
     })
     .map_err(ice("list nodes", ipc.namespace()))?;
+    census.unfinished_removed = super::remove_unfinished_nodes(ipc, super::UNFINISHED_AFTER);
     for view in dead {
         match view.try_remove_stale_resources() {
             Ok(()) | Err(NodeCleanupFailure::ResourcesAlreadyCleanedUp) => census.dead_cleaned += 1,

@@ -26,6 +26,7 @@ mod error;
 mod ports;
 mod retry;
 mod topics;
+mod unfinished;
 
 pub use access::{adopt_root_group, check_access, owns_root, root_group};
 pub use cleanup::{
@@ -39,6 +40,7 @@ pub use ports::{create_waitset, open_event, open_topic, Inbox, Port, Reader};
 pub use topics::{
     Topic, TopicMessage, TopicQos, EVENT_SUFFIX, MAX_NODES, MAX_PUBLISHERS, MAX_SUBSCRIBERS,
 };
+pub use unfinished::{remove_unfinished_nodes, UNFINISHED_AFTER};
 
 /// The iceoryx2 service variant used everywhere: inter-process, ports not `Send`.
 pub type Ipc = iceoryx2::service::ipc::Service;
