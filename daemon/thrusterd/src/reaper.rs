@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use thruster_protocol::services::{cleanup_dead_nodes, IpcConfig, NodeCensus};
+use thruster_protocol::services::{cleanup_dead_nodes, IpcConfig, IpcError, NodeCensus};
 use tracing::{debug, info, warn};
 
 /// How often the namespace is searched for dead nodes: a killed client's files are gone
@@ -76,6 +76,61 @@ impl Drop for Reaper {
     }
 }
 
+/// How long a search may take before the reaper says it is stuck. A search is a listing and
+/// a lock probe per node, milliseconds; iceoryx2's removal of a dead node's entries from the
+/// services it was joining is what could wait (never seen here; in CI twice a killed
+/// client's files stayed with no word from the reaper).
+pub const SEARCH_STUCK_AFTER: Duration = Duration::from_secs(4);
+
+/// One search, on a thread of its own, watched: if it has not returned within
+/// [`SEARCH_STUCK_AFTER`] the reaper says so (once) and goes on waiting for it, so a stuck
+/// iceoryx2 call is in the log instead of a silent reaper. None when asked to stop first
+/// (the search thread is then left to end with the process).
+fn search_watched(ipc: &IpcConfig, stop: &AtomicBool) -> Option<Result<NodeCensus, IpcError>> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let ipc = ipc.clone();
+    let spawned = std::thread::Builder::new()
+        .name("reaper-search".into())
+        .spawn(move || {
+            let _ = tx.send(cleanup_dead_nodes(&ipc));
+        });
+    if let Err(e) = spawned {
+        warn!("dead-node search not started: {e}");
+        return Some(Ok(NodeCensus::default()));
+    }
+    let started = Instant::now();
+    let mut said = false;
+    loop {
+        match rx.recv_timeout(STOP_POLL) {
+            Ok(census) => {
+                if said {
+                    info!(
+                        "the dead-node search returned after {:.1} s",
+                        started.elapsed().as_secs_f64()
+                    );
+                }
+                return Some(census);
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                warn!("the dead-node search ended without an answer (a panic in iceoryx2?)");
+                return Some(Ok(NodeCensus::default()));
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+        }
+        if stop.load(Ordering::SeqCst) {
+            return None;
+        }
+        if !said && started.elapsed() >= SEARCH_STUCK_AFTER {
+            warn!(
+                "the dead-node search has not returned in {} s: iceoryx2 is stuck removing a \
+                 dead node's files, which stay until it returns",
+                SEARCH_STUCK_AFTER.as_secs()
+            );
+            said = true;
+        }
+    }
+}
+
 fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
     let mut next = Instant::now() + every;
     // What the last search could not judge, said once when it changes rather than every
@@ -89,7 +144,9 @@ fn reap_until(ipc: &IpcConfig, every: Duration, stop: &AtomicBool) {
             continue;
         }
         next = Instant::now() + every;
-        let census = cleanup_dead_nodes(ipc);
+        let Some(census) = search_watched(ipc, stop) else {
+            return;
+        };
         debug!(?census, "dead-node search");
         let unjudged = match &census {
             Ok(c) if c.unknown > 0 => Some(format!("{} nodes in an undefined state", c.unknown)),
