@@ -415,15 +415,7 @@ fn a_clean_stop_of_every_process_leaves_nothing_of_the_namespace() {
 /// do it. Before the reaper they stayed until the daemon's next start.
 #[test]
 fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
-    let mut world = World::new("ctlkill");
-    // No node of the test's own: only the daemon (and the simulator, which never searches)
-    // may remove the dead client's files.
-    world.node = None;
-    let mut daemon = world.daemon(&[]);
-    let mut sim = world.sim("amour5", &["--lockstep", "--noise", "none"]);
-    wait_status(&world, "samples", |v| {
-        v["samples"].as_u64().unwrap_or(0) > 0
-    });
+    let (world, mut daemon, mut sim) = reaper_world("ctlkill");
     let files = || thruster_protocol::services::namespace_files(world.ipc()).unwrap();
     let before = files();
 
@@ -516,6 +508,19 @@ fn a_client_killed_mid_call_leaves_nothing_after_the_daemons_next_search() {
     assert!(daemon.stop().success(), "{}", daemon.log_text());
 }
 
+/// A daemon and a lockstep simulator serving, and no node of the test's own: only the daemon
+/// (the simulator never searches) may remove dead clients' files.
+fn reaper_world(prefix: &str) -> (World, Proc, Proc) {
+    let mut world = World::new(prefix);
+    world.node = None;
+    let daemon = world.daemon(&[]);
+    let sim = world.sim("amour5", &["--lockstep", "--noise", "none"]);
+    wait_status(&world, "samples", |v| {
+        v["samples"].as_u64().unwrap_or(0) > 0
+    });
+    (world, daemon, sim)
+}
+
 /// The files of `theirs` still among `now`.
 fn left_after(
     theirs: &[std::path::PathBuf],
@@ -535,13 +540,7 @@ fn left_after(
 /// clients left is of that last kind, and if any is, the daemon's log says so.
 #[test]
 fn clients_killed_while_joining_leave_only_what_the_daemon_reports() {
-    let mut world = World::new("ctljoin");
-    world.node = None;
-    let mut daemon = world.daemon(&[]);
-    let mut sim = world.sim("amour5", &["--lockstep", "--noise", "none"]);
-    wait_status(&world, "samples", |v| {
-        v["samples"].as_u64().unwrap_or(0) > 0
-    });
+    let (world, mut daemon, mut sim) = reaper_world("ctljoin");
     let files = || thruster_protocol::services::namespace_files(world.ipc()).unwrap();
     let before = files();
     for delay_ms in 2..10u64 {

@@ -115,27 +115,24 @@ pub fn to_json(model: &Model) -> String {
     serde_json::to_string_pretty(&file).unwrap_or_default()
 }
 
-/// `terms` with every non-finite standard error (a term the run never excited has an infinite
-/// one) as `f64::MAX`: "nothing known" in a number JSON can hold; [`with_unknown_errors`]
-/// turns it back on loading.
-fn with_finite_errors(terms: &DynamicTerms) -> DynamicTerms {
-    let mut t = terms.clone();
+/// `terms` with `f` applied to every standard error (of the terms, and B's least-squares ones).
+fn map_std_errors(mut t: DynamicTerms, f: impl Fn(f64) -> f64) -> DynamicTerms {
     for m in [&mut t.std_err, &mut t.ols_std_err, &mut t.b_ols_std_err] {
-        m.iter_mut()
-            .filter(|v| !v.is_finite())
-            .for_each(|v| *v = f64::MAX);
+        m.iter_mut().for_each(|v| *v = f(*v));
     }
     t
 }
 
+/// `terms` with every non-finite standard error (a term the run never excited has an infinite
+/// one) as `f64::MAX`: "nothing known" in a number JSON can hold; [`with_unknown_errors`]
+/// turns it back on loading.
+fn with_finite_errors(terms: &DynamicTerms) -> DynamicTerms {
+    map_std_errors(terms.clone(), |v| if v.is_finite() { v } else { f64::MAX })
+}
+
 /// The inverse of [`with_finite_errors`]: `f64::MAX` standard errors infinite again.
-fn with_unknown_errors(mut t: DynamicTerms) -> DynamicTerms {
-    for m in [&mut t.std_err, &mut t.ols_std_err, &mut t.b_ols_std_err] {
-        m.iter_mut()
-            .filter(|v| **v == f64::MAX)
-            .for_each(|v| *v = f64::INFINITY);
-    }
-    t
+fn with_unknown_errors(t: DynamicTerms) -> DynamicTerms {
+    map_std_errors(t, |v| if v == f64::MAX { f64::INFINITY } else { v })
 }
 
 /// Whether `terms` come back from the file as they are: a non-finite value would be written

@@ -46,32 +46,14 @@ impl Reaper {
     }
 }
 
-/// How long a stopping daemon waits for the reaper's search in progress before leaving it
-/// behind.
-const JOIN_WITHIN: Duration = Duration::from_secs(2);
-
 impl Drop for Reaper {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(t) = self.thread.take() {
-            // A search is a listing and a lock probe per node, normally milliseconds. But it
-            // removes a dead node's entries from shared service state that the dead process
-            // may have been changing when it was killed, so it is not waited for without
-            // end: a shutdown must not hang on it (systemd would kill the daemon instead of
-            // its clean stop). Left behind, the thread ends with the process.
-            let deadline = Instant::now() + JOIN_WITHIN;
-            while !t.is_finished() && Instant::now() < deadline {
-                std::thread::sleep(STOP_POLL.min(Duration::from_millis(10)));
-            }
-            if t.is_finished() {
-                let _ = t.join();
-            } else {
-                warn!(
-                    "the dead-node reaper did not stop within {} s (a search stuck on a dead \
-                     node's files?); leaving it",
-                    JOIN_WITHIN.as_secs()
-                );
-            }
+            // Bounded: the reaper thread looks at the stop flag every `STOP_POLL`, also while a
+            // search runs (`search_watched` leaves a stuck one behind), so a search stuck on a
+            // dead node's shared state cannot hang a clean stop.
+            let _ = t.join();
         }
     }
 }
@@ -80,7 +62,7 @@ impl Drop for Reaper {
 /// a lock probe per node, milliseconds; iceoryx2's removal of a dead node's entries from the
 /// services it was joining is what could wait (never seen here; in CI twice a killed
 /// client's files stayed with no word from the reaper).
-pub const SEARCH_STUCK_AFTER: Duration = Duration::from_secs(4);
+const SEARCH_STUCK_AFTER: Duration = Duration::from_secs(4);
 
 /// One search, on a thread of its own, watched: if it has not returned within
 /// [`SEARCH_STUCK_AFTER`] the reaper says so (once) and goes on waiting for it, so a stuck

@@ -1,21 +1,23 @@
 //! Nodes whose process was killed while iceoryx2 was still creating them, and the global
 //! configuration iceoryx2 falls back to when it cleans up a node it cannot read.
 //!
-//! Found by killing `thrusterctl watch` 2-9 ms after its start, 24 times (a probe test; the
-//! shipped test is `tests/tests/thrusterctl.rs`, `a_client_killed_while_joining_...`): 9 left
-//! files the daemon's reaper never removed, in two states.
-//! - **Unfinished**: killed before or inside iceoryx2's liveness guard (`ProcessGuard::create`): its three
-//!   files still have their initial permissions (owner write only) and an empty context, so
-//!   iceoryx2 takes the node for one that is starting, forever, and lists it as not existing.
-//!   [`remove_unfinished_nodes`] removes such a node once its files are older than a starting
-//!   node could be and no process holds its lock, and a folder of details with no guard at all
-//!   (killed before the guard) likewise. Neither has a service or port yet (the guard comes
-//!   before them), so their files are all there is.
+//! Found by killing `thrusterctl watch` 2-9 ms after its start, 24 times (a probe; the shipped
+//! test is `tests/tests/thrusterctl.rs`,
+//! `clients_killed_while_joining_leave_only_what_the_daemon_reports`): 9 left files the
+//! daemon's reaper never removed, in two kinds of state.
+//! - **Unfinished**: killed before or inside iceoryx2's liveness guard
+//!   (`ProcessGuard::create`): its three files still have their initial permissions (owner
+//!   write only) and an empty context, so iceoryx2 takes the node for one that is starting,
+//!   forever, and lists it as not existing. [`remove_unfinished_nodes`] removes such a node
+//!   once its files are older than a starting node could be and no process holds its lock,
+//!   and a folder of details with no guard at all (killed before the guard) likewise. Neither
+//!   has a service or port yet (the guard comes before them), so their files are all there is.
 //! - **Without details**: a dead node whose details file is gone, its service and port tags
 //!   left. iceoryx2 then cleans it with its *global* configuration (another root and prefix),
 //!   finds nothing there, and says it was already cleaned: the reaper reported "removed" every
 //!   2 s, and the files stayed. [`IpcConfig::install_as_global`] makes the global
-//!   configuration this namespace's, so that fallback looks in the right place.
+//!   configuration this namespace's, so that fallback looks in the right place (where
+//!   iceoryx2 then fails on a node killed while it joined a service, and says so).
 
 use std::fs;
 use std::os::unix::ffi::OsStrExt;
