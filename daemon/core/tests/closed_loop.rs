@@ -723,3 +723,49 @@ fn a_thrust_curve_nobody_configured_is_named_and_its_model_refused() {
         }
     }
 }
+
+/// eight_vectored_lag80ms_curve (thrust ~ command^1.5, the daemon not told), learned open loop
+/// at the pulses' amplitude, then 150 s of +-20 deg pitch steps at a realistic IMU. The
+/// refinement calls a change 7 s in, the identification names the curve and is refused; the
+/// mismatches after it are counted in the status, not identified again. Before
+/// (`curve_named`), the refinement called a change again 7 s after every refusal: six
+/// identifications in 3 minutes, each refused for the same curve, the dither never ending.
+#[test]
+fn a_curve_named_is_not_identified_again_on_every_mismatch() {
+    use thruster_inprocess::holding::PitchSteps;
+    use thrusterd_core::machine::Event;
+    let mut run = Run::new("eight_vectored_lag80ms_curve", NoisePreset::Realistic, 1);
+    run.learn_then_water(thruster_sim::disturbance::WaterPreset::Still);
+    let mut plan = PitchSteps::new(&run);
+    let start = run.sim.time_s();
+    let (mut identifications, mut refusals, mut mismatch_events) = (0, 0, 0);
+    let mut was_identifying = false;
+    let mut last_text = String::new();
+    while run.sim.time_s() - start < 150.0 {
+        let t = run.sim.time_s() - start;
+        plan.at(&mut run, t);
+        run.tick();
+        let identifying = run.machine.state() == State::Identify;
+        identifications += usize::from(identifying && !was_identifying);
+        was_identifying = identifying;
+        for e in run.machine.take_events() {
+            match e {
+                Event::ModelRejected(why) if why.contains("not follow the command linearly") => {
+                    assert!(why.contains("command^1.50"), "{why}");
+                    refusals += 1;
+                }
+                Event::MismatchDetected(_) => mismatch_events += 1,
+                _ => {}
+            }
+        }
+        last_text = run.machine.status().text;
+    }
+    println!("{identifications} identifications, {refusals} curve refusals, {mismatch_events} mismatch events; {last_text}");
+    assert_eq!((identifications, refusals), (1, 1), "{last_text}");
+    // The first mismatch (the one identified) and the first after the curve was named.
+    assert!(mismatch_events <= 2, "{mismatch_events}");
+    assert!(
+        last_text.contains("not re-identified") && last_text.contains("command^1.50"),
+        "{last_text}"
+    );
+}

@@ -30,6 +30,7 @@ use crate::model::{nominal_effectiveness, Model, ModelSource, PreparedModel};
 use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 use crate::supply::Supply;
 
+mod curve_named;
 mod open_loop;
 mod requests;
 mod swaps;
@@ -132,6 +133,11 @@ pub struct Machine {
     /// by any state but Active.
     #[serde(default)]
     pending_confirmation: Option<PendingConfirmation>,
+    /// A thrust curve an identification named (its model refused), until the next model or
+    /// estimation: the detectors' mismatches are then reported, not re-identified
+    /// (`curve_named`).
+    #[serde(default)]
+    curve_named: Option<curve_named::CurveNamed>,
 }
 
 /// What status says while idle with samples coming and nothing asked.
@@ -175,6 +181,7 @@ impl Machine {
             identifying_unannounced: false,
             confirming_fight: false,
             pending_confirmation: None,
+            curve_named: None,
             setup,
         };
         m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);

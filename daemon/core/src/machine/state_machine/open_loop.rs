@@ -37,6 +37,9 @@ impl Machine {
         };
         let why = &format!("{why}{kept}");
         self.identifying_unannounced = false;
+        // A new estimation judges the thrusters afresh (a curve configured since, or another
+        // vehicle): a curve it names is remembered again.
+        self.curve_named = None;
         self.last_t_ns = self.last_t_ns.or(Some(t_ns));
         // Controlling with a model: identify under control (see `crate::adaptation::identification`).
         let controlling =

@@ -89,6 +89,8 @@ impl Machine {
     ) -> Result<(), crate::model::SwapRejection> {
         match self.models.swap(model, source, self.n, max_rel_err) {
             Ok(installed) => {
+                // The detectors judge the new model afresh.
+                self.curve_named = None;
                 self.monitor.reset(self.n);
                 self.refiner.reset();
                 self.hold_watch.reset();

@@ -2,6 +2,7 @@
 //! identification under control after a change, and what a mismatch starts.
 
 // The machine's fields and helpers are the parent's: these are its methods, by job.
+use super::curve_named::CurveNamed;
 use super::*;
 use crate::adaptation::identification::fight::{self, PendingConfirmation};
 use crate::adaptation::identification::AtLimit;
@@ -188,6 +189,11 @@ impl Machine {
                 c.exponent, c.log_likelihood_ratio, cfg.max_curve_evidence
             );
             self.keep_old_model(text);
+            self.curve_named = Some(CurveNamed::new(
+                c.exponent,
+                c.log_likelihood_ratio,
+                t_ns as f64 * 1e-9,
+            ));
             return;
         }
         // A suspected change (the change test's or the monitor's) the data could not pin down
@@ -538,9 +544,20 @@ impl Machine {
     /// thrusters doing something else than the model says.
     pub(super) fn on_mismatch(&mut self, t_ns: u64, why: String, change: ThrusterChange) {
         self.refiner.reset();
-        self.events.push(Event::MismatchDetected(why.clone()));
+        // With a curve named, the journal hears of the first mismatch after it; the status
+        // counts the rest (one every 7-8 s while the curve is not configured).
+        if self.curve_named.is_none_or(|c| c.mismatches == 0) {
+            self.events.push(Event::MismatchDetected(why.clone()));
+        }
         self.monitor.reset(self.n);
         match self.monitor.action() {
+            // The curve an identification named explains it: identified again, it would be
+            // refused again (`curve_named`).
+            MismatchAction::Estimate if self.curve_named.is_some() => {
+                if let Some(c) = self.curve_named.as_mut() {
+                    self.text = c.mismatch(&why);
+                }
+            }
             MismatchAction::Estimate => {
                 let prior = self.carry_over(change, self.n);
                 self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior);
