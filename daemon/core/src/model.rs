@@ -76,7 +76,7 @@ pub enum SwapRejection {
     NoDof,
     #[error("model confidence too low: relative error bound {rel_err:.3} > {limit:.3}")]
     LowConfidence { rel_err: f64, limit: f64 },
-    #[error("thrusters were never excited in both directions")]
+    #[error("thrusters were never excited in both directions, or not apart from each other")]
     NotExcited,
     /// Beyond the protocol's physical bounds: no thruster of a small vehicle does that, so
     /// the model comes from a units mistake, a corrupt file or a failed estimate.
@@ -277,6 +277,11 @@ impl Model {
         }
         out_of_bounds("effectiveness", &self.effectiveness, MAX_EFFECTIVENESS)?;
         out_of_bounds("allocation", &self.allocation, MAX_ALLOCATION)?;
+        // Before the standard errors' bound: an infinite bound (columns the data cannot
+        // separate, their errors infinite too) is a model never excited, not a units mistake.
+        if self.rel_err_rot.is_infinite() || self.rel_err_acc.is_infinite() {
+            return Err(SwapRejection::NotExcited);
+        }
         let known_err = self.std_err.map(|v| if v.is_nan() { 0.0 } else { v });
         if known_err.iter().any(|v| *v < 0.0) {
             return Err(SwapRejection::NonFinite("std_err (negative)"));

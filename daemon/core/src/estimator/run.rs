@@ -288,6 +288,9 @@ pub struct Estimator {
     /// (`with_inherited_lag_error`), rotation and acceleration rows.
     #[serde(default)]
     inherited_lag_rel_err: [f64; 2],
+    /// Fed the commands sent under control (`begin_closed_loop`), not its own plan's pulses.
+    #[serde(default)]
+    under_control: bool,
 }
 
 impl Estimator {
@@ -319,6 +322,7 @@ impl Estimator {
             thrust_curve: None,
             last_interval: None,
             inherited_lag_rel_err: [0.0; 2],
+            under_control: false,
             noise,
             cfg,
         }

@@ -21,6 +21,7 @@ impl Estimator {
             return false;
         }
         self.pulse = None;
+        self.under_control = true;
         self.dynamic = Some(self.dynamic_run(true, false));
         self.thrust_curve = None;
         true

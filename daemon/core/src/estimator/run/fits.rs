@@ -67,6 +67,17 @@ impl Estimator {
         })
     }
 
+    /// The thrusters whose columns this open-loop run's pulses cannot yet tell apart: none
+    /// under control (the controller's commands and the dither are not the plan's), with a
+    /// prior (its columns may separate them), or once the pulses span every thruster (a whole
+    /// cycle, before which the stop rule does not stop unless `max_pulses` cuts the plan).
+    pub(super) fn confounded(&self) -> Vec<usize> {
+        if self.under_control || self.prior.is_some() || self.cfg.method != Method::Dynamic {
+            return Vec::new();
+        }
+        self.plan.confounded(self.pulses)
+    }
+
     /// Noise standard deviation per axis of a group: the at-rest level, or the residual level
     /// when that is larger and well determined (in the water, pulses stir up more than rest).
     pub(super) fn group_sigma(&self, g: usize, sol: &ForwardSolution) -> [f64; 3] {
@@ -332,20 +343,33 @@ impl Estimator {
             self.nominal.as_ref(),
             &self.cfg,
         );
+        // Columns the pulses so far cannot tell apart (`ExcitationPlan::confounded`): their
+        // errors are unbounded, whatever the fit's pseudo-inverse says.
+        let mut std_err = sol.std_err;
+        let mut rel_err = sol.rel_err;
+        let mut excited = sol.excited;
+        let confounded = self.confounded();
+        if !confounded.is_empty() {
+            for &i in &confounded {
+                std_err.column_mut(i).fill(f64::INFINITY);
+            }
+            rel_err = [f64::INFINITY; 2];
+            excited = false;
+        }
         Estimate {
             method: Method::Dynamic,
             thrusters: n,
             pulses: self.pulses,
             samples: self.samples,
             effectiveness: sol.b,
-            std_err: sol.std_err,
+            std_err,
             allocation: alloc,
-            rel_err_rot: sol.rel_err[ROT],
-            rel_err_acc: sol.rel_err[ACC],
+            rel_err_rot: rel_err[ROT],
+            rel_err_acc: rel_err[ACC],
             sigma: sol.sigma,
             rank,
             thruster,
-            excited: sol.excited,
+            excited,
             dynamics: Some(sol.terms),
         }
     }
