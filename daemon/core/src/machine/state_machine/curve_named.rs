@@ -32,15 +32,32 @@ impl CurveNamed {
         }
     }
 
-    /// A detector's mismatch `why`, counted; the status text that says why it is not
-    /// re-identified.
-    pub fn mismatch(&mut self, why: &str) -> String {
+    /// A detector's mismatch `why`, counted, and what is said of it.
+    pub fn mismatch(&mut self, why: &str) -> Said {
         self.mismatches += 1;
-        format!(
-            "holding attitude; {why}: not re-identified ({} since): the thrust curve named at {:.1} s (thrust ~ command^{:.2}, ln likelihood ratio {:.0}) explains it: configure the thrusters' curve",
-            self.mismatches, self.at_s, self.exponent, self.log_likelihood_ratio
-        )
+        // The status holds 128 bytes: what the daemon does and why come first, the
+        // detector's own words after.
+        let status = format!(
+            "holding attitude; mismatch {} since the thrust curve (~command^{:.2}) was named, not re-identified: configure the curve; {why}",
+            self.mismatches, self.exponent
+        );
+        let journal = (self.mismatches == 1).then(|| {
+            format!(
+                "{why}: not re-identified: the thrust curve named at {:.1} s (thrust ~ command^{:.2}, ln likelihood ratio {:.0}) explains it; configure the thrusters' curve ([supply] linearize for T200s, power_law_exponent for another make); later mismatches are counted in the status",
+                self.at_s, self.exponent, self.log_likelihood_ratio
+            )
+        });
+        Said { status, journal }
     }
+}
+
+/// What a mismatch after the curve was named says.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Said {
+    /// The status text.
+    pub status: String,
+    /// The journal's event, for the first mismatch only.
+    pub journal: Option<String>,
 }
 
 #[cfg(test)]
@@ -48,17 +65,25 @@ mod tests {
     use super::CurveNamed;
 
     #[test]
-    fn each_mismatch_is_counted_and_said_to_be_the_curve() {
+    fn the_first_mismatch_goes_to_the_journal_and_the_status_counts_them_all() {
         let mut c = CurveNamed::new(1.5, 7992.0, 28.1);
         let first = c.mismatch("model mismatch on thruster 5");
         let second = c.mismatch("model mismatch on thruster 7");
         assert_eq!(c.mismatches, 2);
+        let journal = first.journal.expect("the first is journalled");
         assert!(
-            first.contains("thruster 5: not re-identified (1 since)")
-                && first
+            journal.starts_with("model mismatch on thruster 5: not re-identified")
+                && journal
                     .contains("named at 28.1 s (thrust ~ command^1.50, ln likelihood ratio 7992)"),
-            "{first}"
+            "{journal}"
         );
-        assert!(second.contains("(2 since)"), "{second}");
+        assert_eq!(second.journal, None);
+        // The protocol's status keeps 128 bytes: the count, the curve and the advice fit.
+        let head: String = second.status.chars().take(128).collect();
+        assert!(
+            head.contains("mismatch 2 since the thrust curve (~command^1.50)")
+                && head.contains("configure the curve"),
+            "{head}"
+        );
     }
 }

@@ -544,29 +544,28 @@ impl Machine {
     /// thrusters doing something else than the model says.
     pub(super) fn on_mismatch(&mut self, t_ns: u64, why: String, change: ThrusterChange) {
         self.refiner.reset();
-        // With a curve named, the journal hears of the first mismatch after it; the status
-        // counts the rest (one every 7-8 s while the curve is not configured).
-        if self.curve_named.is_none_or(|c| c.mismatches == 0) {
-            self.events.push(Event::MismatchDetected(why.clone()));
-        }
         self.monitor.reset(self.n);
-        match self.monitor.action() {
-            // The curve an identification named explains it: identified again, it would be
-            // refused again (`curve_named`).
-            MismatchAction::Estimate if self.curve_named.is_some() => {
-                if let Some(c) = self.curve_named.as_mut() {
-                    self.text = c.mismatch(&why);
-                }
+        // The curve an identification named explains it: identified again, it would be
+        // refused again (`curve_named`). The journal hears of the first mismatch after it,
+        // saying why; the status counts the rest (one every 7-8 s while the curve is not
+        // configured).
+        let estimate = self.monitor.action() == MismatchAction::Estimate;
+        if let Some(c) = self.curve_named.as_mut().filter(|_| estimate) {
+            let said = c.mismatch(&why);
+            if let Some(journal) = said.journal {
+                self.events.push(Event::MismatchDetected(journal));
             }
-            MismatchAction::Estimate => {
-                let prior = self.carry_over(change, self.n);
-                self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior);
-                // Set after the start, which clears it for every other cause.
-                self.identifying_unannounced = true;
-            }
-            MismatchAction::Report | MismatchAction::Off => {
-                self.text = format!("holding attitude; {why}");
-            }
+            self.text = said.status;
+            return;
+        }
+        self.events.push(Event::MismatchDetected(why.clone()));
+        if estimate {
+            let prior = self.carry_over(change, self.n);
+            self.start_estimation_with(t_ns, &format!("{why}: re-estimating"), prior);
+            // Set after the start, which clears it for every other cause.
+            self.identifying_unannounced = true;
+        } else {
+            self.text = format!("holding attitude; {why}");
         }
     }
 }
