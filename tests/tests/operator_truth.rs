@@ -461,6 +461,22 @@ fn a_saved_model_keeps_its_version_and_a_crash_in_fault_is_told_as_such() {
     let out = ctl(&world, &["idle"]);
     let said = expect_ok(&out, "idle in Fault");
     assert!(said.contains("idle after the fault clears"), "{said}");
+    // The marker is written off the loop after the answer (a slow disk must not stall it):
+    // the crash is meant to come after the idle is on disk. Killed at once, a loaded machine
+    // (the whole workspace's tests at once on 2 cores) read the marker from before the idle
+    // and resumed control.
+    let marker = world.path("state").join("resume");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !std::fs::read_to_string(&marker)
+        .is_ok_and(|t| t.contains("resume=idle") && t.contains("state=fault"))
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the marker never said idle in Fault: {:?}",
+            std::fs::read_to_string(&marker)
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
     kill9(&mut daemon);
     let mut daemon = world.daemon(&[]);
     let deadline = Instant::now() + Duration::from_secs(20);
