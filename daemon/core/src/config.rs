@@ -206,7 +206,8 @@ impl DaemonConfig {
 
     /// What `run` refuses beyond the values themselves, so `check-config` catches it too:
     /// a namespace and ipc root iceoryx2 cannot use (too long a socket path), a state
-    /// directory that is not a directory. `text` is the file's, to locate the key.
+    /// directory that is not a directory, a pulse limit too short for the thruster count
+    /// (which `--thrusters` may change after the file is read). `text` is the file's, to locate the key.
     pub fn check_runnable(&self, text: &str, origin: &str) -> Result<(), ConfigError> {
         let root = self
             .ipc
@@ -231,16 +232,20 @@ impl DaemonConfig {
                 format!("{} is not a directory", dir.display()),
             ));
         }
+        // With the command line applied: `--thrusters` sets the count the plan is for.
+        self.check_pulse_limit()
+            .map_err(|why| LoadError::value(origin, text, "estimator.max_pulses", why))?;
         Ok(())
     }
 
-    /// The dynamic method's pulse limit against its excitation for `n` thrusters: a limit
+    /// The dynamic method's pulse limit against its excitation for the thrusters in force: a limit
     /// that ends before the pulses can tell every thruster apart leaves a model the machine
     /// always refuses (`ExcitationPlan::confounded`; eight_vectored at 16 pulses was 0.71 off
     /// under a 0.02 bound before the machine refused it).
-    fn check_pulse_limit(&self, n: usize) -> Result<(), String> {
+    fn check_pulse_limit(&self) -> Result<(), String> {
         use crate::estimator::{ExcitationPlan, Method};
         let e = &self.estimator;
+        let n = self.thruster_count();
         if e.method != Method::Dynamic {
             return Ok(());
         }
@@ -300,8 +305,6 @@ impl DaemonConfig {
                 &n,
             ));
         }
-        self.check_pulse_limit(n)
-            .map_err(|why| LoadError::value(origin, text, "estimator.max_pulses", why))?;
         for (i, t) in self.vehicle.thruster.iter().enumerate() {
             for (j, &v) in t.position_m.iter().enumerate() {
                 if !v.is_finite() {
@@ -643,22 +646,6 @@ mod tests {
         let e =
             DaemonConfig::from_toml_str("[machine]\npulse_s = \"long\"\n", "d.toml").unwrap_err();
         assert!(e.to_string().starts_with("d.toml:2:"), "{e}");
-        let e = DaemonConfig::from_toml_str(
-            "[estimator]\nmax_pulses = 16\n[vehicle]\nthrusters = 8\n",
-            "d.toml",
-        )
-        .unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "d.toml:2:14: estimator.max_pulses: 16 is below the 29 pulses the doublet_pairs \
-             excitation needs to tell 8 thrusters apart"
-        );
-        // Five thrusters: five Hadamard rows (20 pulses) tell them apart.
-        DaemonConfig::from_toml_str(
-            "[estimator]\nmax_pulses = 20\n[vehicle]\nthrusters = 5\n",
-            "d.toml",
-        )
-        .unwrap();
         let e = DaemonConfig::from_toml_str("[vehicle]\nthrusters = 17\n", "d.toml").unwrap_err();
         assert_eq!(
             e.to_string(),
@@ -691,6 +678,22 @@ mod tests {
             "{e}"
         );
         DaemonConfig::default().check_runnable("", "d").unwrap();
+        // A pulse limit short of what tells the thrusters apart, for the count in force.
+        let text = "[estimator]\nmax_pulses = 16\n[vehicle]\nthrusters = 8\n";
+        let mut cfg = DaemonConfig::from_toml_str(text, "d.toml").unwrap();
+        let e = cfg.check_runnable(text, "d.toml").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "d.toml:2:14: estimator.max_pulses: 16 is below the 29 pulses the doublet_pairs \
+             excitation needs to tell 8 thrusters apart"
+        );
+        // Five thrusters (`--thrusters 5`): five Hadamard rows (20 pulses) tell them apart;
+        // 16 pulses, four rows, do not.
+        cfg.vehicle.thrusters = 5;
+        let e = cfg.check_runnable(text, "d.toml").unwrap_err().to_string();
+        assert!(e.contains("below the 17 pulses"), "{e}");
+        cfg.estimator.max_pulses = 20;
+        cfg.check_runnable(text, "d.toml").unwrap();
     }
 
     #[test]
