@@ -618,9 +618,9 @@ fn bad_saved_models_are_refused_at_start_counted_and_the_daemon_serves() {
         ("corrupt byte", corrupt, "not a thrusterd model file"),
         (
             "future version",
-            real.replacen("\"format_version\": 1", "\"format_version\": 3", 1)
+            real.replacen("\"format_version\": 1", "\"format_version\": 4", 1)
                 .into_bytes(),
-            "format version 3 is newer than this daemon's 2",
+            "format version 4 is newer than this daemon's 3",
         ),
         (
             "not UTF-8",

@@ -173,7 +173,7 @@ fn bench(c: &mut Criterion) {
                     est.begin_closed_loop();
                 }
                 if probe {
-                    est.probe_thrust_curve();
+                    est.probe_thrust_curve(thrusterd_core::estimator::dynamic::thrust_curve::WIDE);
                 }
                 est
             };

@@ -296,6 +296,7 @@ mod tests {
             spin_up_floor_rel_err: [0.0; 2],
             lag_check: None,
             thrust_curve: None,
+            command_exponent: None,
             thrust_asymmetry: k,
             prior_disagreement: [0.0; 2],
             imu_position: None,

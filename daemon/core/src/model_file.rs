@@ -12,8 +12,10 @@ use crate::model::{Model, ModelSource};
 /// Identifies our files; a different value is someone else's file.
 pub const FORMAT: &str = "thrusterd-model";
 /// Version of the layout below; files from a newer daemon are refused, not guessed at.
-/// 2 added `dynamics` (version 1 files, without it, are read as before).
-pub const FORMAT_VERSION: u32 = 2;
+/// 2 added `dynamics` (version 1 files, without it, are read as before); 3 added
+/// `dynamics.command_exponent` (a learned thrust curve the model's B is per unit of: a daemon
+/// before it would fly such a model on the commands unbent, so it must refuse the file).
+pub const FORMAT_VERSION: u32 = 3;
 
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
@@ -80,9 +82,24 @@ fn finite(v: f64) -> Option<f64> {
 
 /// Serialise a model to the file's JSON text.
 pub fn to_json(model: &Model) -> String {
+    let dynamics = model
+        .dynamics
+        .as_ref()
+        .map(with_finite_errors)
+        .filter(|d| storable(d, model.thrusters()));
+    // The lowest version that holds what the file says: a model without a learned curve
+    // stays readable by the daemons before it.
+    let format_version = if dynamics
+        .as_ref()
+        .is_some_and(|d| d.command_exponent.is_some())
+    {
+        FORMAT_VERSION
+    } else {
+        2
+    };
     let file = ModelFile {
         format: FORMAT.into(),
-        format_version: FORMAT_VERSION,
+        format_version,
         thrusters: model.thrusters(),
         version: model.version,
         source: model.source,
@@ -105,11 +122,7 @@ pub fn to_json(model: &Model) -> String {
         estimated: Some(model.estimated),
         pulses: model.pulses,
         refinements: model.refinements,
-        dynamics: model
-            .dynamics
-            .as_ref()
-            .map(with_finite_errors)
-            .filter(|d| storable(d, model.thrusters())),
+        dynamics,
     };
     // Plain data with string keys: serialisation cannot fail.
     serde_json::to_string_pretty(&file).unwrap_or_default()
@@ -281,6 +294,7 @@ mod tests {
             spin_up_floor_rel_err: [0.0; 2],
             lag_check: None,
             thrust_curve: None,
+            command_exponent: Some(1.5),
             thrust_asymmetry: 0.22 / 1.78,
             prior_disagreement: [0.5, 0.7],
             imu_position: Some(ImuPosition {
@@ -302,7 +316,11 @@ mod tests {
         let mut m = model();
         m.dynamics = Some(terms(3));
         let text = to_json(&m);
-        assert!(text.contains("\"format_version\": 2"), "{text}");
+        // With a learned curve, the version that has it; without, the one before.
+        assert!(text.contains("\"format_version\": 3"), "{text}");
+        let mut unbent = m.clone();
+        unbent.dynamics.as_mut().unwrap().command_exponent = None;
+        assert!(to_json(&unbent).contains("\"format_version\": 2"));
         let back = from_json(&text, "m.json").unwrap();
         assert_eq!(back.dynamics, m.dynamics);
         assert_eq!(back.learned_spin_up_s(), Some(0.19));
@@ -349,6 +367,11 @@ mod tests {
                 "\"thrust_asymmetry\": 0.12359550561797752",
                 "\"thrust_asymmetry\": 0.95",
                 "dynamics.thrust_asymmetry: 0.95 is not in [0, 0.9]",
+            ),
+            (
+                "\"command_exponent\": 1.5",
+                "\"command_exponent\": 4.0",
+                "dynamics.command_exponent: 4 is not in [0.5, 3]",
             ),
             (
                 "\"thruster_lag_evidence\": 3.5",

@@ -675,7 +675,12 @@ fn a_thrust_curve_nobody_configured_is_named_and_its_model_refused() {
     let v = vehicle("amour5_t200");
     for linearize in [false, true] {
         let mut run = Run::new("amour5_t200", NoisePreset::Realistic, 1);
-        run.with_setup(|s| s.supply.linearize = linearize);
+        // Refused, not learned: what `identification.learn_thrust_curve = false` keeps (the
+        // curve learned: `an_untold_thrust_curve_is_learned_under_control`).
+        run.with_setup(|s| {
+            s.supply.linearize = linearize;
+            s.identification.learn_thrust_curve = false;
+        });
         let mut named = None;
         // The strongest evidence of any identification in the run: unlinearized, the first is
         // refused, and the refinement calls a change again every 15-20 s on the model in force
@@ -730,11 +735,15 @@ fn a_thrust_curve_nobody_configured_is_named_and_its_model_refused() {
 /// mismatches after it are counted in the status, not identified again. Before
 /// (`curve_named`), the refinement called a change again 7 s after every refusal: six
 /// identifications in 3 minutes, each refused for the same curve, the dither never ending.
+///
+/// With `identification.learn_thrust_curve = false`: learned, the curve is not named again
+/// (`an_untold_thrust_curve_is_learned_under_control`).
 #[test]
 fn a_curve_named_is_not_identified_again_on_every_mismatch() {
     use thruster_inprocess::holding::PitchSteps;
     use thrusterd_core::machine::Event;
     let mut run = Run::new("eight_vectored_lag80ms_curve", NoisePreset::Realistic, 1);
+    run.with_setup(|s| s.identification.learn_thrust_curve = false);
     run.learn_then_water(thruster_sim::disturbance::WaterPreset::Still);
     let mut plan = PitchSteps::new(&run);
     let start = run.sim.time_s();
@@ -768,4 +777,82 @@ fn a_curve_named_is_not_identified_again_on_every_mismatch() {
         last_text.contains("since the thrust curve (~command^1.50) was named, not re-identified"),
         "{last_text}"
     );
+}
+
+/// Thrusters whose thrust is not linear in the command, and a daemon not told: the
+/// identification under control names the curve, learns it (commands out through it), holds
+/// on it and identifies again; the model swapped in carries the exponent and its bound covers
+/// the exponent's error. eight_vectored_lag80ms_curve (thrust ~ command^1.5) and the same
+/// vehicle with ^1.3 (between the probe's exponents), noise-free and at a realistic IMU,
+/// +-20 deg pitch steps. Before: the identification was refused and the open-loop model,
+/// 8-9 % off under a 2 % bound, stayed in force for good. The in-process machine jumps the
+/// dead band itself (`machine.deadband`): before the dead band was jumped after the curve,
+/// the exact ^1.5 was learned as 1.25 and its model was 20 % off.
+#[test]
+fn an_untold_thrust_curve_is_learned_under_control() {
+    use thruster_inprocess::holding::PitchSteps;
+    use thruster_inprocess::run::vehicle as vehicle_file;
+    use thrusterd_core::machine::Event;
+    for (exponent, noise) in [
+        (1.5, NoisePreset::None),
+        (1.5, NoisePreset::Realistic),
+        (1.3, NoisePreset::None),
+    ] {
+        let mut v = vehicle_file("eight_vectored_lag80ms_curve");
+        for t in v.thrusters.iter_mut() {
+            t.exponent = exponent;
+        }
+        let mut run = Run::with_vehicle(v, noise, 1, 200.0);
+        run.learn_then_water(thruster_sim::disturbance::WaterPreset::Still);
+        let first = run.machine.model().expect("the open-loop model").clone();
+        let truth = run.truth();
+        let first_err = common::rel_err(&first.effectiveness, &truth, 0);
+        let mut plan = PitchSteps::new(&run);
+        let start = run.sim.time_s();
+        let (mut learned, mut swapped) = (0, None);
+        while run.sim.time_s() - start < 60.0 && swapped.is_none() {
+            let t = run.sim.time_s() - start;
+            plan.at(&mut run, t);
+            run.tick();
+            for e in run.machine.take_events() {
+                match e {
+                    Event::ModelRejected(why) if why.contains("learned; commands go out") => {
+                        learned += 1
+                    }
+                    Event::ModelSwapped(m) if m.refinements == 0 && m.version > first.version => {
+                        swapped = Some(*m)
+                    }
+                    _ => {}
+                }
+            }
+        }
+        let m = swapped.expect("a model identified on the learned curve");
+        let p = m
+            .dynamics
+            .as_ref()
+            .and_then(|d| d.command_exponent)
+            .expect("the model carries the curve");
+        let (err_rot, err_acc) = (
+            common::rel_err(&m.effectiveness, &truth, 0),
+            common::rel_err(&m.effectiveness, &truth, 3),
+        );
+        println!(
+            "^{exponent} {noise:?}: {learned} learned, p {p:.3}; open loop {first_err:.4}; now {err_rot:.4} / {err_acc:.4} under {:.3} / {:.3}",
+            m.rel_err_rot, m.rel_err_acc
+        );
+        assert!((1..=3).contains(&learned), "{learned}");
+        assert!((p / exponent - 1.0).abs() < 0.06, "{p}");
+        // Better than the open-loop model at every amplitude, and the bound covers it.
+        assert!(
+            err_rot < 0.05 && err_rot < 0.6 * first_err,
+            "{err_rot} vs {first_err}"
+        );
+        assert!(err_acc < 0.08, "{err_acc}");
+        assert!(
+            err_rot <= m.rel_err_rot && err_acc <= m.rel_err_acc,
+            "{err_rot} / {err_acc} under {} / {}",
+            m.rel_err_rot,
+            m.rel_err_acc
+        );
+    }
 }

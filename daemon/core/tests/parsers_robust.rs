@@ -267,8 +267,8 @@ fn future_version_and_foreign_files_are_refused_with_the_reason() {
     for (from, to, expect) in [
         (
             "\"format_version\": 1",
-            "\"format_version\": 3",
-            "format version 3 is newer",
+            "\"format_version\": 4",
+            "format version 4 is newer",
         ),
         (
             "\"format_version\": 1",

@@ -13,8 +13,8 @@ use super::estimation::{ClosedStep, EstimationRun, IdleRest, Motion, PulseStep, 
 use super::hold_watch::{actuated_error_deg, HoldLost, HoldWatch, Settling, HELD_CLEARS_S};
 use super::models::ModelSlot;
 use super::types::{
-    finish, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused, Request,
-    SetpointInput, State, StatusSnapshot, NO_IMU_YET,
+    finish, jump_deadband, Command, DepthInput, Event, Geometry, ImuInput, Mode, Reconfig, Refused,
+    Request, SetpointInput, State, StatusSnapshot, NO_IMU_YET,
 };
 use crate::adaptation::identification::carry_over::{carried_over, ThrusterChange};
 use crate::adaptation::identification::fight::PendingConfirmation;
@@ -30,6 +30,7 @@ use crate::model::{nominal_effectiveness, Model, ModelSource, PreparedModel};
 use crate::solve::{owner_of, Purpose, SolveJob, SolveResult, SolverMode};
 use crate::supply::Supply;
 
+mod curve_learned;
 mod curve_named;
 mod open_loop;
 mod requests;
@@ -138,6 +139,15 @@ pub struct Machine {
     /// (`curve_named`).
     #[serde(default)]
     curve_named: Option<curve_named::CurveNamed>,
+    /// Thrust curves learned since the last model swap (`under_control`: an identification
+    /// that names a curve learns it and identifies again, at most `MAX_CURVE_LEARNS` times
+    /// in a row before it is refused and `curve_named`).
+    #[serde(default)]
+    curve_learns: u8,
+    /// A curve just learned, the identification on it waiting for the vehicle to be held
+    /// (`curve_learned`); cleared by any state but Active.
+    #[serde(default)]
+    curve_pending: Option<curve_learned::CurvePending>,
 }
 
 /// What status says while idle with samples coming and nothing asked.
@@ -182,6 +192,8 @@ impl Machine {
             confirming_fight: false,
             pending_confirmation: None,
             curve_named: None,
+            curve_learns: 0,
+            curve_pending: None,
             setup,
         };
         m.refiner.set_solve_budget(m.setup.machine.solve_budget_s);
@@ -404,11 +416,17 @@ impl Machine {
     /// The answer to one IMU sample. Always a command: neutral unless estimating or controlling.
     /// Everything the machine computes is referred to the reference supply voltage (what the
     /// estimator learns, what the refinement compares); the command is carried to the present
-    /// voltage on its way out, finite and in [-1, 1] whatever happened.
+    /// voltage on its way out, finite and in [-1, 1] whatever happened. In the order the
+    /// thruster has them: through a power-law curve (learned or configured), which starts
+    /// at the dead band's edge, then over the dead band (`machine.deadband`), then through
+    /// the T200's table, which holds its own (`supply`).
     pub fn on_imu(&mut self, s: &ImuInput) -> Command {
         let mut cmd = self.respond(s);
         let n = cmd.count.min(cmd.thrust.len());
-        self.supply.to_present(&mut cmd.thrust[..n]);
+        let thrust = &mut cmd.thrust[..n];
+        self.supply.through_curve(thrust);
+        jump_deadband(thrust, self.setup.machine.deadband);
+        self.supply.to_present(thrust);
         cmd
     }
 
@@ -647,6 +665,7 @@ impl Machine {
             // Any other state ends the fight's model's wait: a new estimation, a lost hold,
             // an operator's idle or stop.
             self.pending_confirmation = None;
+            self.end_curve_wait();
         }
         // Leaving Idle ends the wait for the vehicle to settle (so do an operator's idle,
         // stop or abort and a reconfiguration: `on_request`, `on_reconfig`; an estimate or

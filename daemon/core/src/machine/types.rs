@@ -190,16 +190,31 @@ pub struct StatusSnapshot {
     pub supply: thruster_protocol::SupplyCompensation,
 }
 
-/// Last line of defence: nothing non-finite or out of range leaves the machine; then the
-/// deadband compensation (which maps [-1, 1] onto itself).
-pub(super) fn finish(cmd: &mut Command, deadband: f64) {
+/// Last line of defence: nothing non-finite or out of range leaves the machine, and nothing
+/// beyond the command's count.
+pub(super) fn finish(cmd: &mut Command) {
+    for (i, v) in cmd.thrust.iter_mut().enumerate() {
+        *v = if i < cmd.count && v.is_finite() {
+            v.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+    }
+}
+
+/// The deadband compensation (which maps [-1, 1] onto itself): a command u != 0 goes out as
+/// sign(u) (deadband + (1 - deadband) |u|). Last, after the supply's curve
+/// (`Machine::on_imu`): the dead band is the actuator's, before the thrust curve that
+/// starts at its edge (thruster-sim's e = (|u| - deadband) / (1 - deadband), thrust ~ e^p).
+/// Jumped before the curve was inverted, a learned ^1.5 curve came out 1.25.
+pub(super) fn jump_deadband(thrust: &mut [f64], deadband: f64) {
     let db = if deadband.is_finite() {
         deadband.clamp(0.0, 0.5)
     } else {
         0.0
     };
-    for (i, v) in cmd.thrust.iter_mut().enumerate() {
-        let u = if i < cmd.count && v.is_finite() {
+    for v in thrust.iter_mut() {
+        let u = if v.is_finite() {
             v.clamp(-1.0, 1.0)
         } else {
             0.0

@@ -112,6 +112,17 @@ impl SupplyConfig {
     };
 }
 
+/// Every command finite and in [-1, 1] (0 for a non-finite one).
+fn sanitize(commands: &mut [f64]) {
+    for u in commands.iter_mut() {
+        *u = if u.is_finite() {
+            u.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+    }
+}
+
 /// The supply as the machine knows it, and the referral of commands.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Supply {
@@ -128,6 +139,10 @@ pub struct Supply {
     /// The current the last commands sent draw by the table, A: what a reading that comes
     /// before the next sample was taken under.
     draw_a: f64,
+    /// A thrust curve the data named and the daemon learned (thrust ~ command^p; see
+    /// [`Supply::set_learned_exponent`]); None: none learned.
+    #[serde(default)]
+    learned_exponent: Option<f64>,
 }
 
 impl Supply {
@@ -146,7 +161,26 @@ impl Supply {
             voltage_v: None,
             sag: Sag::default(),
             draw_a: 0.0,
+            learned_exponent: None,
         }
+    }
+
+    /// The thrust curve learned from the data, p in thrust ~ command^p, that commands now go
+    /// through before everything else: a referred command c goes on as sign(c) |c|^(1/p), so
+    /// the thrust is linear in c again. It is the model in force's (`DynamicTerms::
+    /// command_exponent`: a model's B is per unit of the commands it was learned with), or
+    /// the one an identification under control is learning with. Why: an untold curve
+    /// (another make's thrust ~ command^1.5) made a linear model right at one amplitude only;
+    /// the identification under control names it (`estimator::dynamic::thrust_curve`).
+    /// None, or an exponent within 1 % of 1, or outside [0.5, 3]: none.
+    pub fn set_learned_exponent(&mut self, exponent: Option<f64>) {
+        self.learned_exponent =
+            exponent.filter(|p| p.is_finite() && (0.5..=3.0).contains(p) && (p - 1.0).abs() > 0.01);
+    }
+
+    /// The thrust curve learned, when one is in use.
+    pub fn learned_exponent(&self) -> Option<f64> {
+        self.learned_exponent
     }
 
     /// The exponent commands are linearized through, for another make's power-law curve.
@@ -227,21 +261,33 @@ impl Supply {
         }
     }
 
+    /// Commands through the thrust curves that act beyond the dead band, in place: a learned
+    /// one (`set_learned_exponent`), then another make's configured power law. Before the
+    /// machine jumps the dead band (`machine.deadband`): such a curve starts at the dead
+    /// band's edge (thruster-sim's e = (|u| - deadband) / (1 - deadband), thrust ~ e^p), so
+    /// its inverse comes first; jumped first, a learned ^1.5 came out 1.25 and its model 20 %
+    /// off. The T200's table, which holds its dead zone, comes after (`to_present`). Every
+    /// command ends finite and in [-1, 1].
+    pub fn through_curve(&self, commands: &mut [f64]) {
+        sanitize(commands);
+        for q in [self.learned_exponent, self.power_law()]
+            .into_iter()
+            .flatten()
+        {
+            for u in commands.iter_mut() {
+                *u = (u.signum() * u.abs().powf(1.0 / q)).clamp(-1.0, 1.0);
+            }
+        }
+    }
+
     /// Carries commands referred to the reference voltage to the present one, in place: the
     /// voltage the pack will give under these commands when its sag is known (`sag`), else
-    /// the last reading. Whatever happens every command ends finite and in [-1, 1].
+    /// the last reading. After `through_curve` and the dead band's jump. Whatever happens
+    /// every command ends finite and in [-1, 1].
     pub fn to_present(&mut self, commands: &mut [f64]) {
-        for u in commands.iter_mut() {
-            *u = if u.is_finite() {
-                u.clamp(-1.0, 1.0)
-            } else {
-                0.0
-            };
-        }
-        if let Some(p) = self.power_law() {
-            for u in commands.iter_mut() {
-                *u = (u.signum() * u.abs().powf(1.0 / p)).clamp(-1.0, 1.0);
-            }
+        sanitize(commands);
+        if self.power_law().is_some() {
+            // Taken through in `through_curve`; no voltage table for it.
             return;
         }
         let Some(read) = self.out_voltage() else {
@@ -354,12 +400,17 @@ impl Supply {
     /// The command referred to the reference voltage that `u` (sent at the present voltage)
     /// amounts to: the inverse of [`Supply::to_present`] where the output did not saturate.
     pub fn referred(&self, u: f64) -> f64 {
-        if let Some(p) = self.power_law() {
-            return u.signum() * u.abs().powf(p);
-        }
-        match self.out_voltage() {
-            Some(v) => self.referred_at(v, u),
-            None => u,
+        let c = if let Some(p) = self.power_law() {
+            u.signum() * u.abs().powf(p)
+        } else {
+            match self.out_voltage() {
+                Some(v) => self.referred_at(v, u),
+                None => u,
+            }
+        };
+        match self.learned_exponent {
+            Some(q) => c.signum() * c.abs().powf(q),
+            None => c,
         }
     }
 
@@ -416,6 +467,46 @@ mod tests {
     }
 
     #[test]
+    fn a_learned_curve_goes_first_and_comes_back_through_referred() {
+        let mut s = Supply::new(SupplyConfig {
+            compensation: CompensationModel::None,
+            ..SupplyConfig::default()
+        });
+        s.set_learned_exponent(Some(1.5));
+        assert_eq!(s.learned_exponent(), Some(1.5));
+        let mut u = [0.125, -0.512, 1.0, 0.0, f64::NAN];
+        s.through_curve(&mut u);
+        let through = u;
+        s.to_present(&mut u);
+        assert_eq!(u, through, "no table, no reading: nothing more");
+        // 0.125^(2/3) = 0.25, 0.512^(2/3) = 0.64.
+        for (got, want) in u.iter().zip([0.25, -0.64, 1.0, 0.0, 0.0]) {
+            assert!((got - want).abs() < 1e-12, "{u:?}");
+        }
+        assert!((s.referred(0.25) - 0.125).abs() < 1e-12);
+        assert!((s.referred(-0.64) + 0.512).abs() < 1e-12);
+        // Linear within 1 %, or outside the configuration's range: none.
+        for p in [Some(1.005), Some(0.3), Some(f64::NAN), None] {
+            s.set_learned_exponent(p);
+            assert_eq!(s.learned_exponent(), None, "{p:?}");
+        }
+        // On top of a configured power law: each undoes its own.
+        let mut both = Supply::new(SupplyConfig {
+            compensation: CompensationModel::None,
+            linearize: true,
+            power_law_exponent: Some(2.0),
+            ..SupplyConfig::default()
+        });
+        both.set_learned_exponent(Some(0.5));
+        let mut u = [0.36];
+        both.through_curve(&mut u);
+        both.to_present(&mut u);
+        // 0.36^(1/0.5) = 0.1296, then ^(1/2) = 0.36.
+        assert!((u[0] - 0.36).abs() < 1e-12, "{u:?}");
+        assert!((both.referred(u[0]) - 0.36).abs() < 1e-12);
+    }
+
+    #[test]
     fn at_a_lower_voltage_the_thrust_of_the_reference_is_kept() {
         let mut s = Supply::new(SupplyConfig::default());
         s.on_voltage(Some(13.0));
@@ -467,6 +558,7 @@ mod tests {
             s.on_voltage(reading);
             let asked = [0.02, 0.3, 0.8, 1.0, -0.02, -0.5, 0.0, f64::NAN, 3.0];
             let mut u = asked;
+            s.through_curve(&mut u);
             s.to_present(&mut u);
             for (c, out) in asked.iter().zip(u) {
                 let c = if c.is_finite() {

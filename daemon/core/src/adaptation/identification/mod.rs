@@ -199,6 +199,14 @@ pub struct IdentificationConfig {
     /// 236-328 at a realistic IMU (1295 noise-free), but 15-32 at the paper's noise
     /// (docs/study.md).
     pub max_curve_evidence: f64,
+    /// Above `max_curve_evidence`, learn the curve instead of refusing at once: commands go
+    /// out through thrust ~ command^p with p fitted between the probe's exponents, and the
+    /// identification starts again on them (twice at most before refusing, as without).
+    /// The model swapped in carries p (`dynamics.command_exponent` in its file) and the
+    /// commands follow the model in force. Default true; false: refused, the operator
+    /// configures the curve (`[supply]`). Measured in docs/study.md ("A thrust curve
+    /// learned").
+    pub learn_thrust_curve: bool,
 }
 
 /// What an identification at its limit does with its model
@@ -274,6 +282,7 @@ impl Default for IdentificationConfig {
             instrument: Instrument::InASea,
             at_limit_unannounced: AtLimit::KeepOld,
             max_curve_evidence: 50.0,
+            learn_thrust_curve: true,
         }
     }
 }

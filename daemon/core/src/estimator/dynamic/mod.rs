@@ -124,6 +124,13 @@ pub struct DynamicTerms {
     /// disagree beyond their errors, and the fit's bound is too small by about its square root.
     #[serde(default)]
     pub prior_disagreement: [f64; 2],
+    /// The thrust curve the commands went out through when the model was learned (thrust ~
+    /// command^p, learned under control: `supply::Supply::set_learned_exponent`), so B is per
+    /// unit of the linearized command; None: the commands as the machine computed them.
+    /// The machine puts it in force with the model, from a file too. Set by the machine,
+    /// not the fit.
+    #[serde(default)]
+    pub command_exponent: Option<f64>,
 }
 
 impl DynamicTerms {
@@ -792,6 +799,7 @@ impl DynamicRun {
                 spin_up_floor_rel_err: [0.0; 2],
                 lag_check: None,
                 thrust_curve: None,
+                command_exponent: None,
                 imu_position: None,
                 unexplained_rate_radps: 0.0,
                 instrumented: [rot_ls.instrumented(), acc_ls.instrumented()],

@@ -111,6 +111,11 @@ pub fn check(terms: &DynamicTerms, thrusters: usize) -> Result<(), TermsOutOfBou
         non_negative("imu_position.rel_err_share", &[p.rel_err_share])?;
     }
     non_negative("unexplained_rate_radps", &[terms.unexplained_rate_radps])?;
+    if let Some(p) = terms.command_exponent {
+        // The range `supply.power_law_exponent` takes (`thrust_curve::FITTED_RANGE`).
+        let (lo, hi) = super::thrust_curve::FITTED_RANGE;
+        within("command_exponent", p, lo, hi)?;
+    }
     within(
         "thrust_asymmetry",
         terms.thrust_asymmetry,

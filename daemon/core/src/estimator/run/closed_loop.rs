@@ -53,8 +53,11 @@ impl Estimator {
     /// `DynamicTerms::thrust_curve`). After `begin_closed_loop`; false, nothing started,
     /// before. Three more fits per sample: for the identification, not every refinement
     /// window.
-    pub fn probe_thrust_curve(&mut self) -> bool {
-        self.thrust_curve = self.dynamic.as_ref().map(ThrustCurveProbe::new);
+    pub fn probe_thrust_curve(&mut self, ratio: f64) -> bool {
+        self.thrust_curve = self
+            .dynamic
+            .as_ref()
+            .map(|run| ThrustCurveProbe::new(run, ratio));
         self.thrust_curve.is_some()
     }
 

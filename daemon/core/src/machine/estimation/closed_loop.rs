@@ -10,6 +10,7 @@ use thruster_protocol::MAX_THRUSTERS;
 use super::{EstimationRun, Motion};
 use crate::adaptation::identification::{Dither, IdentificationConfig};
 use crate::estimator::dynamic::spin_state::{lags_for_fit, SpinState};
+use crate::estimator::dynamic::thrust_curve;
 use crate::estimator::Method;
 use crate::machine::config::MachineSetup;
 use crate::model::Model;
@@ -45,6 +46,14 @@ pub(in crate::machine) struct ClosedLoop {
     /// thrusters are running when the fit starts, and its lags start where they are.
     #[serde(default)]
     spin: SpinState,
+    /// The ratio of the thrust-curve probe's exponents (`thrust_curve::WIDE`, or `NARROW`
+    /// when the commands already go through a learned curve).
+    #[serde(default = "wide_curve")]
+    curve_ratio: f64,
+}
+
+fn wide_curve() -> f64 {
+    thrust_curve::WIDE
 }
 
 /// The dither against the controller's own command over an identification: how much of the
@@ -120,6 +129,7 @@ impl EstimationRun {
         cfg: &IdentificationConfig,
         n: usize,
         spin: SpinState,
+        curve_learned: bool,
     ) {
         self.restart();
         self.closed = Some(ClosedLoop {
@@ -134,6 +144,11 @@ impl EstimationRun {
             excitation: Excitation::default(),
             instrumented: false,
             spin,
+            curve_ratio: if curve_learned {
+                thrust_curve::NARROW
+            } else {
+                thrust_curve::WIDE
+            },
         });
     }
 
@@ -261,9 +276,9 @@ impl EstimationRun {
             }
             if let Some(c) = self.closed.as_ref() {
                 est.start_spun_up(&c.spin);
-            }
-            if ident.max_curve_evidence > 0.0 {
-                est.probe_thrust_curve();
+                if ident.max_curve_evidence > 0.0 {
+                    est.probe_thrust_curve(c.curve_ratio);
+                }
             }
             self.est = Some(est);
             return ClosedStep::Holding;

@@ -52,8 +52,14 @@ impl Machine {
             // The thrusters' state the refinement tracked while holding: the fit's lags
             // start from it even when the hold before the dither is short.
             let spin = self.refiner.spin_state().clone();
-            self.run
-                .begin_closed_loop(t_ns, &self.setup.identification, self.n, spin);
+            let curve_learned = self.supply.learned_exponent().is_some();
+            self.run.begin_closed_loop(
+                t_ns,
+                &self.setup.identification,
+                self.n,
+                spin,
+                curve_learned,
+            );
             self.run.carry(prior, &self.setup.identification);
             self.transition(
                 State::Identify,
@@ -138,7 +144,7 @@ impl Machine {
         self.last_desired = self
             .controller
             .update(&meas, &target, model, dt, &mut cmd.thrust[..n]);
-        finish(&mut cmd, self.setup.machine.deadband);
+        finish(&mut cmd);
         cmd
     }
 
@@ -165,7 +171,7 @@ impl Machine {
             let announce = first.then_some(news.as_str());
             self.enter(State::Pulse, Some(t_ns), format!("pulse {k}"), announce);
         }
-        finish(&mut cmd, self.setup.machine.deadband);
+        finish(&mut cmd);
         cmd
     }
 
@@ -191,7 +197,7 @@ impl Machine {
                 self.transition(State::Idle, "internal: pulse without an estimator");
             }
             PulseStep::Pulsing => {
-                finish(&mut cmd, self.setup.machine.deadband);
+                finish(&mut cmd);
                 return cmd;
             }
             PulseStep::Ended {
@@ -308,6 +314,7 @@ impl Machine {
             self.transition(State::Idle, "internal: a stopping solve made no model");
             return;
         };
+        self.stamp_curve(&mut candidate);
         let why = match decision {
             StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
                 "converged after {pulses} pulses (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"

@@ -41,6 +41,15 @@ impl Machine {
                         .into();
                     return Ok("aborted".into());
                 }
+                if self.end_curve_wait() {
+                    // A curve just learned, the identification on it waiting for the hold:
+                    // that is what the operator aborts; the model in force stays, with its
+                    // own curve.
+                    self.text = "identification on the learned thrust curve aborted: holding \
+                                 attitude with the model in force"
+                        .into();
+                    return Ok("aborted; holding attitude".into());
+                }
                 if self.pending_confirmation.take().is_some() {
                     // A fight's model in force, its confirmation waiting for the hold: that
                     // is what the operator aborts; the model stays, its bound widened.

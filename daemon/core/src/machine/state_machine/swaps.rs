@@ -91,6 +91,8 @@ impl Machine {
             Ok(installed) => {
                 // The detectors judge the new model afresh.
                 self.curve_named = None;
+                self.curve_learns = 0;
+                self.follow_model_curve();
                 self.monitor.reset(self.n);
                 self.refiner.reset();
                 self.hold_watch.reset();
@@ -99,8 +101,30 @@ impl Machine {
             }
             Err(e) => {
                 self.events.push(Event::ModelRejected(e.to_string()));
+                self.follow_model_curve();
                 Err(e)
             }
+        }
+    }
+
+    /// The commands go out through the thrust curve the model in force was learned with
+    /// (`supply::Supply::set_learned_exponent`): its B is per unit of those commands. After
+    /// every swap, and after a refusal (an identification that learned a curve, refused,
+    /// leaves the model in force and its curve).
+    pub(super) fn follow_model_curve(&mut self) {
+        let exponent = self
+            .models
+            .current()
+            .and_then(|m| m.dynamics.as_ref())
+            .and_then(|d| d.command_exponent);
+        self.supply.set_learned_exponent(exponent);
+    }
+
+    /// A model this daemon's estimation just made is per unit of the commands as they went
+    /// out: it carries the thrust curve they went through.
+    pub(super) fn stamp_curve(&self, candidate: &mut Model) {
+        if let Some(d) = candidate.dynamics.as_mut() {
+            d.command_exponent = self.supply.learned_exponent();
         }
     }
 
@@ -118,6 +142,10 @@ impl Machine {
     /// The monitor and the refiner keep going: the model moved by a window's worth of drift,
     /// not to a new vehicle.
     pub(super) fn install_refined(&mut self, model: Model) {
+        // A curve just learned: the refined model is per unit of the commands before it.
+        if self.curve_pending.is_some() {
+            return;
+        }
         match self.models.swap(
             model,
             ModelSource::Estimated,
@@ -125,6 +153,7 @@ impl Machine {
             self.setup.machine.max_swap_rel_err,
         ) {
             Ok(installed) => {
+                self.follow_model_curve();
                 if let Some(k) = installed.geometry_key {
                     self.models.remember_current(k);
                 }

@@ -70,7 +70,7 @@ impl Machine {
             self.n,
             &mut cmd.thrust[..n],
         );
-        finish(&mut cmd, self.setup.machine.deadband);
+        finish(&mut cmd);
         if let Some(lost) = self.watch_hold(s.t_ns, &attitude, &target.attitude) {
             self.on_hold_lost(s.t_ns, lost);
             return Command::neutral(self.n);
@@ -108,6 +108,7 @@ impl Machine {
     /// model in force kept, holding on.
     fn keep_old_model(&mut self, text: String) {
         self.events.push(Event::ModelRejected(text.clone()));
+        self.follow_model_curve();
         self.transition(State::Active, &text);
     }
 
@@ -135,6 +136,7 @@ impl Machine {
         let Some((mut candidate, _)) = self.run.conclude(result) else {
             return;
         };
+        self.stamp_curve(&mut candidate);
         if let Some(spin) = spin {
             self.refiner.adopt_spin_state(spin);
         }
@@ -180,25 +182,37 @@ impl Machine {
         }
         // The thrust does not follow the command linearly (a curve nobody configured): the
         // linear model holds only at the hold's amplitude (a T200 without its curve: 50 % off
-        // under a 5 % bound; `identification.max_curve_evidence`).
-        if let Some(c) = curve.filter(|c| {
-            cfg.max_curve_evidence > 0.0 && c.log_likelihood_ratio > cfg.max_curve_evidence
-        }) {
+        // under a 5 % bound; `identification.max_curve_evidence`). Learned, and identified
+        // again on it (`learn_curve`), or refused.
+        let curve_limit = cfg.max_curve_evidence;
+        // The probe bent the commands as they went out: through the curve in use.
+        let in_use = self.supply.learned_exponent();
+        let strong = curve.filter(|c| curve_limit > 0.0 && c.log_likelihood_ratio > curve_limit);
+        if let Some(c) = strong {
+            if self.learn_curve(&why, c) {
+                return;
+            }
+            let exponent = in_use.unwrap_or(1.0) * c.exponent;
             let text = format!(
-                "{why}: the thrust does not follow the command linearly (thrust ~ command^{:.2} explains the data better, ln likelihood ratio {:.0}, limit {:.0}): configure the thrusters' curve ([supply] linearize for T200s, power_law_exponent for another make): model rejected; old model kept",
-                c.exponent, c.log_likelihood_ratio, cfg.max_curve_evidence
+                "{why}: the thrust does not follow the command linearly (thrust ~ command^{exponent:.2} explains the data better, ln likelihood ratio {:.0}, limit {:.0}): configure the thrusters' curve ([supply] linearize for T200s, power_law_exponent for another make): model rejected; old model kept",
+                c.log_likelihood_ratio, curve_limit
             );
             self.keep_old_model(text);
             self.curve_named = Some(CurveNamed::new(
-                c.exponent,
+                exponent,
                 c.log_likelihood_ratio,
                 t_ns as f64 * 1e-9,
             ));
             return;
         }
+        // On a learned curve, the exponent's own error is in the model's (`curve_learned`).
+        if let Some(scale) = self.learned_curve_scale(&candidate) {
+            candidate.widen(scale);
+        }
         // A suspected change (the change test's or the monitor's) the data could not pin down
         // within the limit is not confirmed: the model in force stays (see
         // `IdentificationConfig::at_limit_unannounced`).
+        let cfg = &self.setup.identification;
         let at_limit = !matches!(decision, StopDecision::Converged { .. });
         if at_limit && self.identifying_unannounced && cfg.at_limit_unannounced == AtLimit::KeepOld
         {
@@ -398,12 +412,15 @@ impl Machine {
             &model.effectiveness,
             &cmd.thrust[..n],
         );
-        finish(&mut cmd, self.setup.machine.deadband);
+        finish(&mut cmd);
         if let Some(lost) = self.watch_hold(s.t_ns, &attitude, &target.attitude) {
             self.on_hold_lost(s.t_ns, lost);
             return Command::neutral(self.n);
         }
         if self.confirm_when_held(s.t_ns, &attitude, &target.attitude) {
+            return cmd;
+        }
+        if self.identify_when_curve_held(s.t_ns, &attitude, &target.attitude) {
             return cmd;
         }
         if let Some(m) = mismatch {
@@ -545,6 +562,11 @@ impl Machine {
     pub(super) fn on_mismatch(&mut self, t_ns: u64, why: String, change: ThrusterChange) {
         self.refiner.reset();
         self.monitor.reset(self.n);
+        // A curve just learned: the model in force is per unit of the commands before it,
+        // and the identification on the new ones starts once the vehicle is held.
+        if self.curve_pending.is_some() {
+            return;
+        }
         // The curve an identification named explains it: identified again, it would be
         // refused again (`curve_named`). The journal hears of the first mismatch after it,
         // saying why; the status counts the rest (one every 7-8 s while the curve is not
