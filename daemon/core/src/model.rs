@@ -331,7 +331,12 @@ impl Model {
                 1 => ", refined once under control".to_string(),
                 k => format!(", refined {k} times under control"),
             };
-            format!("estimated{at}{pulses}{refined}")
+            // A curve learned: the model is per unit of the commands through it.
+            let curve = match self.dynamics.as_ref().and_then(|d| d.command_exponent) {
+                Some(p) => format!(", on the thrust curve ~command^{p:.2} learned"),
+                None => String::new(),
+            };
+            format!("estimated{at}{pulses}{refined}{curve}")
         } else {
             "nominal, from the declared geometry".to_string()
         };

@@ -675,12 +675,9 @@ fn a_thrust_curve_nobody_configured_is_named_and_its_model_refused() {
     let v = vehicle("amour5_t200");
     for linearize in [false, true] {
         let mut run = Run::new("amour5_t200", NoisePreset::Realistic, 1);
-        // Refused, not learned: what `identification.learn_thrust_curve = false` keeps (the
-        // curve learned: `an_untold_thrust_curve_is_learned_under_control`).
-        run.with_setup(|s| {
-            s.supply.linearize = linearize;
-            s.identification.learn_thrust_curve = false;
-        });
+        // Refused, not learned, with learning on: the commands go through the T200's table
+        // (its battery's reading), whose own curve no power law fits (`curve_learned`).
+        run.with_setup(|s| s.supply.linearize = linearize);
         let mut named = None;
         // The strongest evidence of any identification in the run: unlinearized, the first is
         // refused, and the refinement calls a change again every 15-20 s on the model in force
@@ -854,5 +851,15 @@ fn an_untold_thrust_curve_is_learned_under_control() {
             m.rel_err_rot,
             m.rel_err_acc
         );
+        assert_eq!(run.machine.learned_thrust_exponent(), Some(p));
+        // The model file keeps the curve, and a daemon that loads it (a restart) sends the
+        // commands through it.
+        let text = thrusterd_core::model_file::to_json(&m);
+        assert!(text.contains("\"format_version\": 3"), "{text}");
+        let back = thrusterd_core::model_file::from_json(&text, "m.json").unwrap();
+        let mut restarted = Run::new("eight_vectored_lag80ms_curve", noise, 2);
+        assert_eq!(restarted.machine.learned_thrust_exponent(), None);
+        restarted.machine.load_model(back).unwrap();
+        assert_eq!(restarted.machine.learned_thrust_exponent(), Some(p));
     }
 }

@@ -99,6 +99,9 @@ struct Summary {
     actuated_mask: u64,
     /// The learned and true effectiveness the text prints, for `--json`.
     matrices: serde_json::Value,
+    /// The model in force when the hold ended, when it is not the estimation's (the
+    /// refinement's update, or an identification under control: a thrust curve learned).
+    after_hold: Option<serde_json::Value>,
 }
 
 impl Summary {
@@ -341,6 +344,7 @@ fn drive(
         (Some(a), Some(b)) => Some(0.5 * (a + b)),
         _ => None,
     };
+    let after_hold = model_after_hold(session, &model, &published, vehicle, supply)?;
     Ok(Summary {
         vehicle: vehicle.display().to_string(),
         vehicle_seconds,
@@ -369,7 +373,52 @@ fn drive(
         leftovers: 0,
         actuated_mask: u64::from(model.actuated),
         matrices: matrices(&model, &truth),
+        after_hold,
     })
+}
+
+/// The model in force after the hold, scored against the truth, when it is another than
+/// `first`: its version, errors and bounds, and the thrust curve it was learned on (from the
+/// daemon's model file: `dynamics.command_exponent`, null when none was learned).
+fn model_after_hold(
+    session: &mut Session,
+    first: &ModelMsg,
+    before: &TruthMsg,
+    vehicle: &Path,
+    supply: &thrusterd_core::supply::SupplyConfig,
+) -> Result<Option<serde_json::Value>> {
+    let model = session.model()?;
+    if model.version == first.version {
+        return Ok(None);
+    }
+    let published = latest(session.truth_inbox())?.unwrap_or(*before);
+    let truth = truth_for_model(vehicle, supply, &published)?;
+    // The daemon writes its model file off the control loop after the swap: the one of this
+    // version, within a second.
+    let file = session.state_dir().join("model.json");
+    let start = Instant::now();
+    let exponent = loop {
+        let stored = std::fs::read_to_string(&file)
+            .ok()
+            .and_then(|text| thrusterd_core::model_file::from_json(&text, "model.json").ok())
+            .filter(|m| m.version == model.version);
+        match stored {
+            Some(m) => break m.dynamics.and_then(|d| d.command_exponent),
+            None if start.elapsed() > Duration::from_secs(1) => break None,
+            None => {
+                session.tick()?;
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+    };
+    Ok(Some(serde_json::json!({
+        "version": model.version,
+        "err_rot": truth.relative_error(&model, 0),
+        "err_acc": truth.relative_error(&model, 3),
+        "bound_rot": model.rel_err_rot,
+        "bound_acc": model.rel_err_acc,
+        "thrust_exponent_learned": exponent,
+    })))
 }
 
 /// Each of the vehicle file's thrusters' time constant, s (empty when it cannot be read).
@@ -457,6 +506,7 @@ fn report(args: &DemoArgs, s: &Summary) {
             "linearize": s.linearize,
             "vehicle_as_is": s.as_is,
             "effectiveness": s.matrices,
+            "model_after_hold": s.after_hold,
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,
         });

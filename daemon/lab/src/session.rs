@@ -299,6 +299,11 @@ pub struct Session {
 }
 
 impl Session {
+    /// The daemon's state directory (its model file, checkpoint and journal).
+    pub fn state_dir(&self) -> PathBuf {
+        self._tmp.path.join("state")
+    }
+
     /// Start both processes. The daemon is told the thruster count (and whatever the config
     /// says), never the simulator's geometry.
     pub fn start(bins: &Binaries, spec: &SessionSpec) -> Result<Session> {

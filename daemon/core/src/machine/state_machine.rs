@@ -254,6 +254,12 @@ impl Machine {
 
     /// The identification under control's dither against the controller's command so far
     /// (None outside one).
+    /// The thrust curve the commands go out through, learned under control (thrust ~
+    /// command^p; `curve_learned`), when one is.
+    pub fn learned_thrust_exponent(&self) -> Option<f64> {
+        self.supply.learned_exponent()
+    }
+
     /// A fight's model is in force and its confirmation waits for the vehicle to be held
     /// (`adaptation::identification::fight`).
     pub fn confirmation_pending(&self) -> bool {

@@ -178,6 +178,15 @@ impl Supply {
             exponent.filter(|p| p.is_finite() && (0.5..=3.0).contains(p) && (p - 1.0).abs() > 0.01);
     }
 
+    /// Whether the commands go out through the T200's table with its curve kept (a reading,
+    /// `compensation = "t200"`, not `linearize`): the daemon then takes the thrusters for
+    /// T200s, whose curve and dead zone the table holds and `linearize` steps over.
+    pub fn through_t200_curve(&self) -> bool {
+        self.power_law().is_none()
+            && !self.config.linearize
+            && self.state() == SupplyCompensation::Active
+    }
+
     /// The thrust curve learned, when one is in use.
     pub fn learned_exponent(&self) -> Option<f64> {
         self.learned_exponent

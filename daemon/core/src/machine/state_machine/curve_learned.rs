@@ -52,13 +52,19 @@ impl Machine {
     /// force until the vehicle is held, then identifying again from no prior (every column
     /// carried would be per unit of the commands before). The new model carries the curve;
     /// refused, or the wait ended, the model in force's comes back (`follow_model_curve`).
-    /// Returns false, nothing done, when learning is off, the curve learned is outside
-    /// what a thruster has, or `MAX_CURVE_LEARNS` were learned since the last swap.
+    /// Returns false, nothing done, when learning is off, the commands go through the T200's
+    /// table (`Supply::through_t200_curve`), the curve learned is outside what a thruster
+    /// has, or `MAX_CURVE_LEARNS` were learned since the last swap.
     pub(super) fn learn_curve(&mut self, why: &str, c: ThrustCurveEvidence) -> bool {
         let in_use = self.supply.learned_exponent().unwrap_or(1.0);
         let learned = in_use * c.fitted_exponent;
         let (lo, hi) = FITTED_RANGE;
+        // Commands through the T200's table: the curve named is the T200's own (its dead
+        // zone, its shape), which no power law fits; `linearize` is the answer, and the
+        // refusal says so (a power law learned on amour5_t200 left its model 0.12 off under
+        // a 0.06 bound).
         if !self.setup.identification.learn_thrust_curve
+            || self.supply.through_t200_curve()
             || self.curve_learns >= MAX_CURVE_LEARNS
             || !(lo..=hi).contains(&learned)
         {

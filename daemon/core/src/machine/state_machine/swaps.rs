@@ -110,14 +110,14 @@ impl Machine {
     /// The commands go out through the thrust curve the model in force was learned with
     /// (`supply::Supply::set_learned_exponent`): its B is per unit of those commands. After
     /// every swap, and after a refusal (an identification that learned a curve, refused,
-    /// leaves the model in force and its curve).
+    /// leaves the model in force and its curve). A model without dynamic terms (a nominal
+    /// one, from the declared geometry after an announced change, or the paper's method)
+    /// says nothing of the thrusters' curve and leaves the one in use: a nominal B is the
+    /// declared thrust per unit command, linear, which is what a learned curve gives.
     pub(super) fn follow_model_curve(&mut self) {
-        let exponent = self
-            .models
-            .current()
-            .and_then(|m| m.dynamics.as_ref())
-            .and_then(|d| d.command_exponent);
-        self.supply.set_learned_exponent(exponent);
+        if let Some(d) = self.models.current().and_then(|m| m.dynamics.as_ref()) {
+            self.supply.set_learned_exponent(d.command_exponent);
+        }
     }
 
     /// A model this daemon's estimation just made is per unit of the commands as they went

@@ -63,9 +63,20 @@ pub(super) fn lost_hold_soak() {
     };
     println!("{noise:?}, {minutes} min {flight}, limit {limit:?}, name margin {name_margin:?}");
     println!(
-        "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12} {:>9}",
-        "vehicle", "water", "seed", "lost", "mismatches", "max 10s mean", "not Active s", "sea deg"
+        "{:>15} {:>9} {:>5} {:>5} {:>10} {:>13} {:>12} {:>9} {:>13}",
+        "vehicle",
+        "water",
+        "seed",
+        "lost",
+        "mismatches",
+        "max 10s mean",
+        "not Active s",
+        "sea deg",
+        "last 60s mean"
     );
+    // LH_NO_LEARN: a curve the identification names is refused, not learned (the decisive
+    // run for `identification.learn_thrust_curve`).
+    let no_learn = std::env::var_os("LH_NO_LEARN").is_some();
     let mut total_lost = 0;
     for name in &vehicles {
         for water in &waters {
@@ -78,8 +89,9 @@ pub(super) fn lost_hold_soak() {
                     monitor_calibration_s,
                     name_margin,
                 ];
-                if knobs.iter().any(Option::is_some) || calibrate_when.is_some() {
+                if knobs.iter().any(Option::is_some) || calibrate_when.is_some() || no_learn {
                     run.with_setup(|c| {
+                        c.identification.learn_thrust_curve = !no_learn;
                         if let Some(w) = calibrate_when {
                             c.refinement.change_calibrate_when = w;
                             c.monitor.calibrate_when = w;
@@ -99,11 +111,11 @@ pub(super) fn lost_hold_soak() {
                     });
                 }
                 run.learn_then_water(*water);
-                let (lost, mismatches, worst, away) = fly(&mut run, minutes * 60.0, level);
+                let (lost, mismatches, worst, away, tail) = fly(&mut run, minutes * 60.0, level);
                 let sea = run.machine.sea_state_deg().unwrap_or(f64::NAN);
                 total_lost += lost;
                 println!(
-                    "{name:>15} {:>9} {seed:>5} {lost:>5} {mismatches:>10} {worst:>13.1} {away:>12.1} {sea:>9.1}",
+                    "{name:>15} {:>9} {seed:>5} {lost:>5} {mismatches:>10} {worst:>13.1} {away:>12.1} {sea:>9.1} {tail:>13.1}",
                     format!("{water:?}").to_lowercase()
                 );
             }
@@ -114,8 +126,9 @@ pub(super) fn lost_hold_soak() {
 
 /// Pitch steps (or, `level`, a level hold at the starting heading) for `seconds`: (hold-lost
 /// events, mismatches, largest 10 s mean angle to the setpoint while controlling (deg), vehicle
-/// time outside Active (s)).
-fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
+/// time outside Active (s), the mean angle over the last 60 s of control (deg): what the
+/// vehicle flies on once its model has settled).
+fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64) {
     let mut plan = PitchSteps::new(run);
     let level_at =
         nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, run.sim.roll_pitch_yaw()[2]);
@@ -127,6 +140,8 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
     let (mut lost, mut mismatches, mut away) = (0, 0, 0.0);
     // 10 s of 1 s block means of the angle to the setpoint.
     let (mut blocks, mut sum, mut k, mut worst) = (Vec::<f64>::new(), 0.0, 0u32, 0.0f64);
+    // Every 1 s block mean while controlling, for the last minute's.
+    let mut every = Vec::<f64>::new();
     let dt = 1.0 / 200.0;
     let trace = std::env::var_os("LH_TRACE").is_some();
     let why_each = std::env::var_os("LH_WHY").is_some();
@@ -190,6 +205,7 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
             k += 1;
             if k >= 200 {
                 blocks.push(sum / f64::from(k));
+                every.push(sum / f64::from(k));
                 (sum, k) = (0.0, 0);
                 if blocks.len() > 10 {
                     blocks.remove(0);
@@ -203,7 +219,9 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64) {
             (blocks, sum, k) = (Vec::new(), 0.0, 0);
         }
     }
-    (lost, mismatches, worst, away)
+    let last = &every[every.len().saturating_sub(60)..];
+    let tail = last.iter().sum::<f64>() / last.len().max(1) as f64;
+    (lost, mismatches, worst, away, tail)
 }
 
 /// LH_TRACE: a model swap, the new and the old model against the truth, the new one's own
