@@ -387,10 +387,10 @@ fn model_after_hold(
     vehicle: &Path,
     supply: &thrusterd_core::supply::SupplyConfig,
 ) -> Result<Option<serde_json::Value>> {
-    let model = session.model()?;
-    if model.version == first.version {
+    // Not blocking: without a swap since the first there is nothing new to read.
+    let Some(model) = latest(session.model_inbox())?.filter(|m| m.version != first.version) else {
         return Ok(None);
-    }
+    };
     let published = latest(session.truth_inbox())?.unwrap_or(*before);
     let truth = truth_for_model(vehicle, supply, &published)?;
     // The daemon writes its model file off the control loop after the swap: the one of this

@@ -147,10 +147,35 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
     let why_each = std::env::var_os("LH_WHY").is_some();
     let mut last = String::new();
     let mut last_b = run.machine.model().map(|m| m.effectiveness.clone());
+    // LH_DRIFT: how far the refinement carries the model from the last estimated one, as the
+    // common scale of the columns per row group over the estimate's own bound (the largest).
+    let drift = std::env::var_os("LH_DRIFT").is_some();
+    let mut estimated: Option<(DMatrix<f64>, [f64; 2])> = None;
+    let mut worst_drift = [0.0f64; 2];
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
         let sp = if level { level_at } else { plan.at(run, t) };
         run.tick();
+        if drift {
+            if let Some(m) = run.machine.model() {
+                if m.refinements == 0 {
+                    if estimated
+                        .as_ref()
+                        .is_none_or(|(b, _)| *b != m.effectiveness)
+                    {
+                        estimated = Some((m.effectiveness.clone(), [m.rel_err_rot, m.rel_err_acc]));
+                    }
+                } else if let Some((b0, bound)) = &estimated {
+                    for (g, w) in worst_drift.iter_mut().enumerate() {
+                        let rows = 3 * g..3 * g + 3;
+                        let r = b0.rows(rows.start, 3);
+                        let n = m.effectiveness.rows(rows.start, 3);
+                        let scale = n.dot(&r) / r.dot(&r) - 1.0;
+                        *w = w.max(scale.abs() / bound[g]);
+                    }
+                }
+            }
+        }
         let b = run.machine.model().map(|m| &m.effectiveness);
         if trace && b != last_b.as_ref() {
             trace_swap(run, t, last_b.as_ref(), b);
@@ -218,6 +243,12 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
             away += dt;
             (blocks, sum, k) = (Vec::new(), 0.0, 0);
         }
+    }
+    if drift {
+        println!(
+            "    refinement's common scale drift over the estimate's bound, largest: rot {:.2}, acc {:.2}",
+            worst_drift[0], worst_drift[1]
+        );
     }
     let last = &every[every.len().saturating_sub(60)..];
     let tail = last.iter().sum::<f64>() / last.len().max(1) as f64;
