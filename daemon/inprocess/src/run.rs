@@ -64,6 +64,12 @@ fn operator_setup(v: &Vehicle, setup: &mut MachineSetup) {
     setup.machine.deadband = operator_deadband(v);
     if v.all_t200() {
         setup.supply.linearize = true;
+    } else {
+        // Another make's (or of two makes): no T200 table for them. Without a battery (no
+        // vehicle file but the T200 ones has one) nothing is referred either way; what it
+        // changes is that a thrust curve an identification names is learned
+        // (`identification.learn_thrust_curve`), not taken for a T200's.
+        setup.supply.compensation = thrusterd_core::supply::CompensationModel::None;
     }
 }
 

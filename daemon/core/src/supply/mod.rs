@@ -178,13 +178,13 @@ impl Supply {
             exponent.filter(|p| p.is_finite() && (0.5..=3.0).contains(p) && (p - 1.0).abs() > 0.01);
     }
 
-    /// Whether the commands go out through the T200's table with its curve kept (a reading,
-    /// `compensation = "t200"`, not `linearize`): the daemon then takes the thrusters for
-    /// T200s, whose curve and dead zone the table holds and `linearize` steps over.
-    pub fn through_t200_curve(&self) -> bool {
+    /// Whether the daemon takes the thrusters for T200s with their curve kept
+    /// (`compensation = "t200"`, the default, without `linearize`): their curve and dead zone
+    /// are the T200's table's, which `linearize` steps over, with a reading or without one.
+    pub fn takes_t200_curve(&self) -> bool {
         self.power_law().is_none()
             && !self.config.linearize
-            && self.state() == SupplyCompensation::Active
+            && self.config.compensation == CompensationModel::T200
     }
 
     /// The thrust curve learned, when one is in use.

@@ -204,8 +204,9 @@ pub struct IdentificationConfig {
     /// identification starts again on them (twice at most before refusing, as without).
     /// The model swapped in carries p (`dynamics.command_exponent` in its file) and the
     /// commands follow the model in force. Default true; false: refused, the operator
-    /// configures the curve (`[supply]`). Never where the commands go through the T200's
-    /// table with its curve kept (`supply::Supply::through_t200_curve`): `linearize` is the
+    /// configures the curve (`[supply]`). Only for thrusters not taken for T200s with their
+    /// curve kept (`supply::Supply::takes_t200_curve`: `compensation = "none"`, another
+    /// make's, or `linearize`): a T200's curve is its table's, and `linearize` is the
     /// answer there. Measured in docs/study.md ("A thrust curve learned").
     pub learn_thrust_curve: bool,
 }

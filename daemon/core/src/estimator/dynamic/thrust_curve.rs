@@ -32,6 +32,14 @@ pub const NARROW: f64 = 1.1;
 /// best of the three until the curve is half a step (in ln p) from it.
 pub const NARROW_HALF_STEP: f64 = 0.048_808_848_170_151_55; // sqrt(1.1) - 1
 
+/// B's relative error from a learned curve's exponent, at most: a linear fit on thrust ~
+/// |u|^(1 + d) has the gain at |u| = 1 times (1 + d E[ln |u|]), the hold's commands are about
+/// a third of full command (|ln 0.3| = 1.2), and d is within [`NARROW_HALF_STEP`]. Measured
+/// (noise-free): an exponent 2.8 % low gave B 3.6-3.9 % off, 1.3 % low 1.5-2.0 %. A floor of
+/// every bound on such a model: no window of the refinement removes it, as no data at the
+/// hold's amplitude tells the exponent (`refinement::fusion`).
+pub const LEARNED_CURVE_REL_ERR: f64 = 1.2 * NARROW_HALF_STEP;
+
 /// The exponents a fitted one is kept within: the configuration's `power_law_exponent` range
 /// (thrust from the square root to the cube of the command).
 pub const FITTED_RANGE: (f64, f64) = (0.5, 3.0);

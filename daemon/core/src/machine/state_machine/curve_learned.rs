@@ -18,7 +18,7 @@
 use super::*;
 use crate::adaptation::identification::fight::PendingConfirmation;
 use crate::estimator::dynamic::thrust_curve::{
-    ThrustCurveEvidence, FITTED_RANGE, NARROW_HALF_STEP,
+    ThrustCurveEvidence, FITTED_RANGE, LEARNED_CURVE_REL_ERR,
 };
 
 /// Thrust curves learned in a row (no model swapped in between) before a named curve is
@@ -26,12 +26,6 @@ use crate::estimator::dynamic::thrust_curve::{
 /// the narrow grid's names and takes what is left beyond half its step (once or twice:
 /// `thrust_curve`'s tests); a fourth would mean the data do not settle on one.
 pub(super) const MAX_CURVE_LEARNS: u8 = 3;
-
-/// B's relative error per relative error of a learned curve's exponent: a linear fit on
-/// thrust ~ |u|^(1 + d) has the gain at |u| = 1 times (1 + d E[ln |u|]), and the hold's
-/// commands are about a third of full command (|ln 0.3| = 1.2). Measured (noise-free): an
-/// exponent 2.8 % low gave B 3.6-3.9 % off, 1.3 % low 1.5-2.0 %.
-const GAIN_PER_EXPONENT: f64 = 1.2;
 
 /// The identification waiting for the vehicle to be held on a curve just learned.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -52,19 +46,19 @@ impl Machine {
     /// force until the vehicle is held, then identifying again from no prior (every column
     /// carried would be per unit of the commands before). The new model carries the curve;
     /// refused, or the wait ended, the model in force's comes back (`follow_model_curve`).
-    /// Returns false, nothing done, when learning is off, the commands go through the T200's
-    /// table (`Supply::through_t200_curve`), the curve learned is outside what a thruster
-    /// has, or `MAX_CURVE_LEARNS` were learned since the last swap.
+    /// Returns false, nothing done, when learning is off, the thrusters are taken for T200s
+    /// with their curve kept (`Supply::takes_t200_curve`), the curve learned is outside what
+    /// a thruster has, or `MAX_CURVE_LEARNS` were learned since the last swap.
     pub(super) fn learn_curve(&mut self, why: &str, c: ThrustCurveEvidence) -> bool {
         let in_use = self.supply.learned_exponent().unwrap_or(1.0);
         let learned = in_use * c.fitted_exponent;
         let (lo, hi) = FITTED_RANGE;
-        // Commands through the T200's table: the curve named is the T200's own (its dead
-        // zone, its shape), which no power law fits; `linearize` is the answer, and the
-        // refusal says so (a power law learned on amour5_t200 left its model 0.12 off under
-        // a 0.06 bound).
+        // Thrusters taken for T200s with their curve kept: the curve named is the T200's own
+        // (its dead zone, its shape), which no power law fits; `linearize` is the answer, and
+        // the refusal says so (a power law learned on amour5_t200 left its model 0.12 off
+        // under a 0.06 bound). Another make's thrusters are `compensation = "none"`.
         if !self.setup.identification.learn_thrust_curve
-            || self.supply.through_t200_curve()
+            || self.supply.takes_t200_curve()
             || self.curve_learns >= MAX_CURVE_LEARNS
             || !(lo..=hi).contains(&learned)
         {
@@ -129,12 +123,12 @@ impl Machine {
     }
 
     /// The factors a model identified on a learned curve has its bound widened by: the
-    /// curve's exponent is an estimate, known to within what the narrow grid leaves unnamed
-    /// (`thrust_curve::NARROW_HALF_STEP`), which is B's error too by `GAIN_PER_EXPONENT`,
-    /// added in quadrature to each row group's bound. None without a learned curve.
+    /// curve's exponent is an estimate, known to within what the narrow grid leaves unnamed,
+    /// which is B's error too (`thrust_curve::LEARNED_CURVE_REL_ERR`), added in quadrature
+    /// to each row group's bound. None without a learned curve.
     pub(super) fn learned_curve_scale(&self, candidate: &Model) -> Option<[f64; 2]> {
         self.supply.learned_exponent()?;
-        let extra = GAIN_PER_EXPONENT * NARROW_HALF_STEP;
+        let extra = LEARNED_CURVE_REL_ERR;
         let scale = |bound: f64| {
             if bound > 0.0 && bound.is_finite() {
                 bound.hypot(extra) / bound
