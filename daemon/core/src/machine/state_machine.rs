@@ -139,7 +139,7 @@ pub struct Machine {
     /// (`curve_named`).
     #[serde(default)]
     curve_named: Option<curve_named::CurveNamed>,
-    /// Thrust curves learned since the last model swap (`under_control`: an identification
+    /// Thrust curves learned since the last model swap (`curve_learned`: an identification
     /// that names a curve learns it and identifies again, at most `MAX_CURVE_LEARNS` times
     /// in a row before it is refused and `curve_named`).
     #[serde(default)]
@@ -252,8 +252,6 @@ impl Machine {
         self.in_a_sea.get()
     }
 
-    /// The identification under control's dither against the controller's command so far
-    /// (None outside one).
     /// The thrust curve the commands go out through, learned under control (thrust ~
     /// command^p; `curve_learned`), when one is.
     pub fn learned_thrust_exponent(&self) -> Option<f64> {
@@ -266,6 +264,8 @@ impl Machine {
         self.pending_confirmation.is_some()
     }
 
+    /// The identification under control's dither against the controller's command so far
+    /// (None outside one).
     pub fn identification_excitation(&self) -> Option<crate::machine::Excitation> {
         self.run.excitation()
     }

@@ -201,7 +201,8 @@ pub struct IdentificationConfig {
     pub max_curve_evidence: f64,
     /// Above `max_curve_evidence`, learn the curve instead of refusing at once: commands go
     /// out through thrust ~ command^p with p fitted between the probe's exponents, and the
-    /// identification starts again on them (twice at most before refusing, as without).
+    /// identification starts again on them (three curves in a row at most, then refused as
+    /// without).
     /// The model swapped in carries p (`dynamics.command_exponent` in its file) and the
     /// commands follow the model in force. Default true; false: refused, the operator
     /// configures the curve (`[supply]`). Only for thrusters not taken for T200s with their

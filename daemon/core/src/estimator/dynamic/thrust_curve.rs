@@ -17,11 +17,8 @@ use super::lag_search::profile_score;
 use super::DynamicRun;
 use crate::navigation::{DepthAid, NavState};
 
-/// The exponents the commands are bent by; index 1 is the linear model.
-pub const EXPONENTS: [f64; 3] = [2.0 / 3.0, 1.0, 1.5];
-
-/// The ratio of the probe's exponents ([`EXPONENTS`]) on commands as the machine computes
-/// them: a curve nobody configured could be anything.
+/// The ratio r of the probe's exponents 1/r, 1, r (index 1 the linear model) on commands as
+/// the machine computes them: 2/3, 1, 3/2, for a curve nobody configured could be anything.
 pub const WIDE: f64 = 1.5;
 /// The ratio on commands already through a learned curve (`supply`): what is left is a few
 /// percent of the exponent, which the wide grid's parabola cannot place. What is left within
@@ -103,7 +100,7 @@ fn fitted_exponent(runs: &[DynamicRun], exponents: &[f64; 3], best: usize) -> f6
         .clamp(FITTED_RANGE.0, FITTED_RANGE.1)
 }
 
-/// The fit made again with each of [`EXPONENTS`], fed the main fit's navigation.
+/// The fit made again with each of the probe's three exponents, fed the main fit's navigation.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ThrustCurveProbe {
     runs: Vec<DynamicRun>,
@@ -157,7 +154,7 @@ impl ThrustCurveProbe {
             probe
         };
         Self {
-            runs: EXPONENTS.iter().map(|_| fresh()).collect(),
+            runs: (0..3).map(|_| fresh()).collect(),
             exponents: [1.0 / ratio, 1.0, ratio],
             bent: vec![0.0; run.n],
         }

@@ -31,8 +31,6 @@ pub(super) const MAX_CURVE_LEARNS: u8 = 3;
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub(super) struct CurvePending {
     hold: PendingConfirmation,
-    /// The curve learned, thrust ~ command^p.
-    exponent: f64,
     /// The identification it ends was a detector's (`identifying_unannounced`): so is the
     /// next.
     unannounced: bool,
@@ -83,7 +81,6 @@ impl Machine {
         // After the transition, which ends any wait but Active's.
         self.curve_pending = Some(CurvePending {
             hold: PendingConfirmation::new(None),
-            exponent: learned,
             unannounced,
         });
         true
@@ -110,12 +107,11 @@ impl Machine {
         let Some(pending) = self.curve_pending.take() else {
             return false;
         };
+        // The curve the commands go through now (the one learned, or a loaded model's).
+        let p = self.supply.learned_exponent().unwrap_or(1.0);
         self.start_estimation_with(
             t_ns,
-            &format!(
-                "thrust ~ command^{:.2} learned and the vehicle held on it",
-                pending.exponent
-            ),
+            &format!("thrust ~ command^{p:.2} learned and the vehicle held on it"),
             None,
         );
         self.identifying_unannounced = pending.unannounced;
