@@ -3,6 +3,7 @@
 
 mod checkpoints;
 mod config_file;
+mod imu_wakeups;
 mod journal;
 mod loader;
 mod reaper;

@@ -209,6 +209,8 @@ struct Daemon {
     pending_hold: bool,
     resume_marker: Option<crate::resume_marker::ResumeMarker>,
     stale_reported: bool,
+    /// IMU samples read on wake-ups their notification did not cause (`imu_wakeups.rs`).
+    imu_wakeups: crate::imu_wakeups::ImuWakeups,
     /// The driver's own reports on its outputs (count, rejections, armed, link).
     driver: DriverWatch,
     /// The verdict the machine was last given on the driver's outputs.
@@ -303,6 +305,7 @@ impl Daemon {
             pending_hold: false,
             resume_marker: None,
             stale_reported: false,
+            imu_wakeups: Default::default(),
             driver: DriverWatch::new(),
             driver_verdict: OutputVerdict::Usable,
             supply_v: None,

@@ -4,6 +4,8 @@
 
 // The daemon's fields, ports and imports are the parent's: these are its methods, by job.
 use super::*;
+use crate::imu_wakeups::Wakeup;
+use iceoryx2::prelude::FileDescriptorBased;
 
 /// Everything the daemon serves on, created in `open_ports`. Fields drop in this order, the
 /// reverse of their creation: the control server, which tells a live daemon from a crashed
@@ -247,11 +249,28 @@ impl Daemon {
         // notification was lost (a driver that notified before this listener was
         // connected, at start) would otherwise sit unread while a lockstep driver waits
         // for its answer forever. An empty inbox costs one check.
-        let mut got = false;
-        while let Some(sample) = imu_in.recv()? {
-            self.on_sample(&sample, side, out)?;
-            got = true;
+        let mut read = self.answer_inbox(imu_in, side, out)?;
+        match self.imu_wakeups.after(woken.imu, read) {
+            Wakeup::Fine => {}
+            Wakeup::Rearm => read += self.rearm_imu(imu_in, side, out)?,
+            Wakeup::Stopped => {
+                read += self.rearm_imu(imu_in, side, out)?;
+                let why = format!(
+                    "IMU samples are being read without their notifications ({} wake-ups in a \
+                     row): answered only when something else wakes this loop; the listener was \
+                     re-armed. {}",
+                    crate::imu_wakeups::STOPPED_AFTER,
+                    listener_report(imu_in.listener())
+                );
+                warn!("{why}");
+            }
+            Wakeup::Resumed { unnotified } => info!(
+                unnotified,
+                total = self.imu_wakeups.unnotified_total,
+                "IMU notifications wake this loop again"
+            ),
         }
+        let got = read > 0;
         // What came without a sample (a setpoint while a real-time driver is quiet). In
         // lockstep it is read now but applied with the next sample (`on_sample`): the
         // simulator publishes its events just before a sample, and applying one here or
@@ -303,6 +322,41 @@ impl Daemon {
             self.stale_reported = true;
         }
         Ok(())
+    }
+
+    /// Answers every sample in the IMU inbox; how many there were.
+    fn answer_inbox(
+        &mut self,
+        imu_in: &Inbox<ImuSample>,
+        side: &SideInputs,
+        out: &Outputs,
+    ) -> Result<usize> {
+        let mut read = 0;
+        while let Some(sample) = imu_in.recv()? {
+            self.on_sample(&sample, side, out)?;
+            read += 1;
+        }
+        Ok(read)
+    }
+
+    /// Drains the IMU listener's pending events (re-arming it) and answers what came since:
+    /// a lockstep driver sends its next sample as soon as it has our answer, and a drain after
+    /// that sample would swallow its notification, so the inbox is read again after each drain
+    /// until a drain finds it empty.
+    fn rearm_imu(
+        &mut self,
+        imu_in: &Inbox<ImuSample>,
+        side: &SideInputs,
+        out: &Outputs,
+    ) -> Result<usize> {
+        let mut read = 0;
+        loop {
+            imu_in.drain_events()?;
+            match self.answer_inbox(imu_in, side, out)? {
+                0 => return Ok(read),
+                n => read += n,
+            }
+        }
     }
 
     /// Serves operator requests on every round, not only after a notification: a request
@@ -422,4 +476,31 @@ impl Daemon {
             }
         }
     }
+}
+
+/// The IMU listener's socket as the kernel has it: its descriptor, what the descriptor points
+/// at, and that socket's line of /proc/net/unix (references, state, bound path). Said when the
+/// notifications stop, so a log tells a closed or replaced socket from a live one nobody
+/// writes to.
+fn listener_report(
+    listener: &iceoryx2::port::listener::Listener<thruster_protocol::services::Ipc>,
+) -> String {
+    // SAFETY: the number is only formatted into /proc paths, never read, written or closed.
+    let fd = unsafe { listener.file_descriptor().native_handle() };
+    let target = std::fs::read_link(format!("/proc/self/fd/{fd}"))
+        .map_or_else(|e| format!("unreadable ({e})"), |t| t.display().to_string());
+    let line = target
+        .strip_prefix("socket:[")
+        .and_then(|s| s.strip_suffix(']'))
+        .and_then(|inode| {
+            std::fs::read_to_string("/proc/net/unix")
+                .ok()
+                .and_then(|t| {
+                    t.lines()
+                        .find(|l| l.split_whitespace().nth(6) == Some(inode))
+                        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+                })
+        })
+        .unwrap_or_else(|| "not in /proc/net/unix".into());
+    format!("listener fd {fd} -> {target} [{line}]")
 }

@@ -19,6 +19,7 @@
 mod clients;
 mod polls;
 mod probe;
+mod stall;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -39,6 +40,7 @@ use thruster_protocol::{DriverStatusMsg, StatusMsg};
 use clients::{end_recording, end_watch, Recording, Watch, MIN_LIFE};
 use polls::{ctl_quiet, estimate, Inflight, Pollers};
 use probe::{census, file_names, load1, proc_figures};
+use stall::StallWatch;
 
 #[derive(Parser)]
 #[command(
@@ -353,6 +355,8 @@ fn run(args: &Args) -> Result<ExitCode> {
     let mut last_model = status.as_ref().map_or(0, |s| s.model_version);
     let mut died = None;
     let mut interrupted = false;
+    let mut stall_watch = StallWatch::new(status.as_ref().map_or(0, |s| s.vehicle_time_ns));
+    let mut stalled = None;
     tally.estimates += 1;
     if !estimate(&ns)? {
         tally.estimates_refused += 1;
@@ -374,6 +378,15 @@ fn run(args: &Args) -> Result<ExitCode> {
         refresh(&mut status, &mut driver)?;
         let s = status.unwrap();
         let now = s.vehicle_time_ns;
+        if let Some(why) = stall_watch.check(now) {
+            let held = stall::describe(&[("thrusterd", daemon.pid()), ("thruster-sim", sim.pid())]);
+            eprintln!("{why}\n{held}");
+            if let Some(dir) = &args.out {
+                let _ = std::fs::write(dir.join("stall.txt"), format!("{why}\n{held}"));
+            }
+            stalled = Some(why);
+            break;
+        }
         if s.model_version != last_model {
             last_model = s.model_version;
             swaps += 1;
@@ -600,6 +613,7 @@ fn run(args: &Args) -> Result<ExitCode> {
     if let Some(who) = died {
         failures.push(format!("{who} died during the run"));
     }
+    failures.extend(stalled);
     if uncounted_total.is_some_and(|n| n > 0) {
         failures.push(format!(
             "{} IMU samples published but neither accepted nor rejected by the daemon",
