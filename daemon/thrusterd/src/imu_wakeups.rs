@@ -13,6 +13,9 @@
 /// Wake-ups in a row with samples but without an IMU notification before the loop says the
 /// notifications have stopped.
 pub const STOPPED_AFTER: u32 = 3;
+/// Wake-ups in a row after which re-arming has not brought them back and the listener is
+/// replaced (once per stop): about a second of vehicle time at the 100 ms wake-ups.
+pub const RENEW_AFTER: u32 = 10;
 
 /// What the loop should do after a wake-up.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -26,6 +29,9 @@ pub enum Wakeup {
     /// As `Rearm`, and the notifications have now been missing `STOPPED_AFTER` wake-ups in a
     /// row: say so (once per stop).
     Stopped,
+    /// Re-arming did not bring them back for `RENEW_AFTER` wake-ups: replace the listener, so
+    /// that the drivers' notifiers connect to a new one (once per stop).
+    Renew,
     /// Notifications wake the loop again after a stop: say so, with how many samples were read
     /// without one.
     Resumed { unnotified: u64 },
@@ -68,6 +74,9 @@ impl ImuWakeups {
             self.stopped = true;
             self.since_stop = samples as u64;
             return Wakeup::Stopped;
+        }
+        if self.in_a_row == RENEW_AFTER {
+            return Wakeup::Renew;
         }
         Wakeup::Rearm
     }
@@ -113,5 +122,21 @@ mod tests {
         assert_eq!(w.after(true, 1), Wakeup::Resumed { unnotified: 11 });
         assert_eq!(w.after(true, 1), Wakeup::Fine);
         assert_eq!(w.unnotified_total, 8);
+    }
+
+    #[test]
+    fn a_stop_that_re_arming_does_not_end_renews_the_listener_once() {
+        let mut w = ImuWakeups::default();
+        let got: Vec<Wakeup> = (0..2 * RENEW_AFTER).map(|_| w.after(false, 1)).collect();
+        let at = |v: Wakeup| got.iter().position(|g| *g == v).map(|i| i + 1);
+        assert_eq!(at(Wakeup::Stopped), Some(STOPPED_AFTER as usize));
+        assert_eq!(at(Wakeup::Renew), Some(RENEW_AFTER as usize));
+        assert_eq!(got.iter().filter(|g| **g == Wakeup::Renew).count(), 1);
+        assert_eq!(
+            w.after(true, 1),
+            Wakeup::Resumed {
+                unnotified: u64::from(2 * RENEW_AFTER - STOPPED_AFTER + 1)
+            }
+        );
     }
 }

@@ -250,6 +250,19 @@ impl<T: TopicMessage> Inbox<T> {
         &self.listener
     }
 
+    /// Replaces the listener with a new one on the same event service and returns the old
+    /// one (detach it from any wait set first). Every notifier connects to the new listener
+    /// on its next notification, as to any listener that joins: a notifier whose connection
+    /// to the old one was lost (iceoryx2 drops a connection whose send failed and re-creates
+    /// connections only when the service's listeners change) is reached again this way.
+    pub fn replace_listener(&mut self, node: &IpcNode) -> Result<Listener<Ipc>, IpcError> {
+        let listener = open_event(node, &self.reader.service)?
+            .listener_builder()
+            .create()
+            .map_err(ice("create listener", &self.reader.service))?;
+        Ok(std::mem::replace(&mut self.listener, listener))
+    }
+
     /// The subscriber, for zero-copy reads of large messages.
     pub fn subscriber(&self) -> &Subscriber<Ipc, T, ()> {
         &self.reader.subscriber

@@ -40,15 +40,54 @@ struct StatusClock {
 impl Daemon {
     pub(super) fn serve_node(&mut self) -> Result<()> {
         let node = self.ipc.create_node("thrusterd")?;
-        let ports = self.open_ports(&node)?;
+        let mut ports = self.open_ports(&node)?;
+        let mut clock = StatusClock {
+            period: Duration::from_millis(self.cfg.runtime.status_period_ms.max(1)),
+            last: Instant::now(),
+        };
+        let mut systemd = self.start_serving(&ports.out);
+        let mut imu_socket = socket_of(ports.imu_in.listener());
+        while self.serve_until_renewal(&ports, &mut clock, &mut systemd)? {
+            // The wait set and its guards are gone: the IMU listener may be replaced.
+            let old = ports.imu_in.replace_listener(&node)?;
+            let now = socket_of(&old);
+            if now == imu_socket {
+                drop(old);
+            } else {
+                // Its descriptor no longer refers to the socket it was created with (closed,
+                // and the number reused): dropping it would close whatever has that number now.
+                error!(
+                    was = imu_socket,
+                    now, "the IMU listener's descriptor no longer refers to its socket: left open"
+                );
+                std::mem::forget(old);
+            }
+            imu_socket = socket_of(ports.imu_in.listener());
+            info!(
+                socket = imu_socket,
+                "IMU listener replaced: the drivers' notifiers connect to the new one"
+            );
+        }
+        self.shut_down(&ports.out, &mut systemd);
+        Ok(())
+    }
+
+    /// Serves rounds (spin for samples, wait, take what woke it, serve requests, keep status)
+    /// until stopped (false) or until the IMU listener is to be replaced (true, at the end of
+    /// a round: the wait set holds the listener, so it is rebuilt around the new one).
+    fn serve_until_renewal(
+        &mut self,
+        ports: &Ports,
+        clock: &mut StatusClock,
+        systemd: &mut thruster_driver_kit::Systemd,
+    ) -> Result<bool> {
         let Ports {
             control,
             imu_in,
             side,
             out,
             config_out,
-        } = &ports;
-
+        } = ports;
         let waitset = create_waitset()?;
         let imu_timeout = Duration::from_millis(self.cfg.runtime.imu_timeout_ms);
         let imu_guard = waitset.attach_deadline(imu_in.listener(), imu_timeout)?;
@@ -57,12 +96,7 @@ impl Daemon {
         let driver_guard = waitset.attach_notification(side.driver.listener())?;
         let control_guard = waitset.attach_notification(control.listener())?;
         let spin = Duration::from_micros(self.cfg.runtime.spin_us);
-        let mut clock = StatusClock {
-            period: Duration::from_millis(self.cfg.runtime.status_period_ms.max(1)),
-            last: Instant::now(),
-        };
 
-        let mut systemd = self.start_serving(out);
         let mut wait_errors = 0u32;
         while !self.shutdown.load(Ordering::SeqCst) {
             if !spin.is_zero() {
@@ -97,7 +131,7 @@ impl Daemon {
                 continue;
             }
             wait_errors = 0;
-            self.take_woken(&woken, imu_in, side, out, imu_timeout)?;
+            let renew = self.take_woken(&woken, imu_in, side, out, imu_timeout)?;
             if woken.control {
                 control.drain_events()?;
             }
@@ -107,10 +141,12 @@ impl Daemon {
             let changed = self.handle_events(&out.model);
             self.poll_saves();
             systemd.tick();
-            self.keep_status(changed, &mut clock, &mut systemd, out, config_out);
+            self.keep_status(changed, clock, systemd, out, config_out);
+            if renew {
+                return Ok(true);
+            }
         }
-        self.shut_down(out, &mut systemd);
-        Ok(())
+        Ok(false)
     }
 
     /// Creates every port. The control server first: it is what tells a live daemon on this
@@ -231,7 +267,7 @@ impl Daemon {
         side: &SideInputs,
         out: &Outputs,
         imu_timeout: Duration,
-    ) -> Result<()> {
+    ) -> Result<bool> {
         if woken.imu {
             imu_in.drain_events()?;
         }
@@ -250,9 +286,20 @@ impl Daemon {
         // connected, at start) would otherwise sit unread while a lockstep driver waits
         // for its answer forever. An empty inbox costs one check.
         let mut read = self.answer_inbox(imu_in, side, out)?;
+        let mut renew = false;
         match self.imu_wakeups.after(woken.imu, read) {
             Wakeup::Fine => {}
             Wakeup::Rearm => read += self.rearm_imu(imu_in, side, out)?,
+            Wakeup::Renew => {
+                read += self.rearm_imu(imu_in, side, out)?;
+                warn!(
+                    "IMU notifications still missing after {} wake-ups; re-arming did not bring \
+                     them back: replacing the listener. {}",
+                    crate::imu_wakeups::RENEW_AFTER,
+                    listener_report(imu_in.listener())
+                );
+                renew = true;
+            }
             Wakeup::Stopped => {
                 read += self.rearm_imu(imu_in, side, out)?;
                 let why = format!(
@@ -321,7 +368,7 @@ impl Daemon {
             self.send_thrust(&out.thrust, &cmd);
             self.stale_reported = true;
         }
-        Ok(())
+        Ok(renew)
     }
 
     /// Answers every sample in the IMU inbox; how many there were.
@@ -485,10 +532,9 @@ impl Daemon {
 fn listener_report(
     listener: &iceoryx2::port::listener::Listener<thruster_protocol::services::Ipc>,
 ) -> String {
-    // SAFETY: the number is only formatted into /proc paths, never read, written or closed.
+    // SAFETY: the number is only formatted, never read, written or closed.
     let fd = unsafe { listener.file_descriptor().native_handle() };
-    let target = std::fs::read_link(format!("/proc/self/fd/{fd}"))
-        .map_or_else(|e| format!("unreadable ({e})"), |t| t.display().to_string());
+    let target = socket_of(listener);
     let line = target
         .strip_prefix("socket:[")
         .and_then(|s| s.strip_suffix(']'))
@@ -503,4 +549,15 @@ fn listener_report(
         })
         .unwrap_or_else(|| "not in /proc/net/unix".into());
     format!("listener fd {fd} -> {target} [{line}]")
+}
+
+/// What the listener's descriptor points at now ("socket:[inode]"), to tell its socket from a
+/// descriptor closed and reused.
+fn socket_of(
+    listener: &iceoryx2::port::listener::Listener<thruster_protocol::services::Ipc>,
+) -> String {
+    // SAFETY: the number is only formatted into a /proc path, never read, written or closed.
+    let fd = unsafe { listener.file_descriptor().native_handle() };
+    std::fs::read_link(format!("/proc/self/fd/{fd}"))
+        .map_or_else(|e| format!("unreadable ({e})"), |t| t.display().to_string())
 }
