@@ -479,7 +479,10 @@ impl Daemon {
     /// A stop: thrusters neutral first, then the last model saved (waited for, bounded), the
     /// resume marker removed (a clean stop begins idle next time), status says stopped.
     fn shut_down(&mut self, out: &Outputs, systemd: &mut thruster_driver_kit::Systemd) {
-        info!("shutting down: thrusters neutral");
+        info!(
+            imu_unnotified_wakeups = self.imu_wakeups.unnotified_total,
+            "shutting down: thrusters neutral"
+        );
         systemd.stopping();
         let neutral = Command::neutral(self.machine.thrusters());
         self.send_thrust(&out.thrust, &neutral);

@@ -432,29 +432,32 @@ impl<
     ) -> Result<u64, ListenerWaitError> {
         let mgmt = self.storage.get();
 
+        // thrusterd patch (lost wake-up): every pending wake-up is read out of the buffer
+        // *before* the state goes back to idle, never after. Upstream set the state idle first
+        // and emptied the buffer second: a notifier that ran its whole `notify` in between
+        // (idle -> pending, its wake-up written, pending -> notified) had its wake-up read and
+        // discarded here while its "notified" stayed, so every later notifier skipped its
+        // write and the listener was never woken again (seen: a lockstep daemon answering
+        // only on its 100 ms time-outs for minutes; state 2 and an empty socket in the dump;
+        // the interleaving found by a search of the protocol's states, docs/reliability.md).
+        // Emptied first, any wake-up read here was written before the state goes idle, and a
+        // notifier that skipped its write (it saw "notified") did so before that too, after
+        // activating its event, which the drain below then takes.
         let mut drain = || -> Result<u64, ListenerWaitError> {
             fail!(from self, when self.waiter.empty_buffer(),
                 "{msg} since the wait buffer could not be emptied.");
+            mgmt.notification_state
+                .store(NOTIFICATION_STATE_IDLE, Ordering::SeqCst);
             Ok(self.storage.get().event.drain(&mut callback))
         };
 
-        if mgmt
-            .notification_state
-            .compare_exchange(
-                NOTIFICATION_STATE_NOTIFIED,
-                NOTIFICATION_STATE_IDLE,
-                Ordering::SeqCst,
-                Ordering::SeqCst,
-            )
-            .is_ok()
-        {
+        // Only a listener leaves "notified": seen here, it stays until the store above.
+        if mgmt.notification_state.load(Ordering::SeqCst) == NOTIFICATION_STATE_NOTIFIED {
             return drain();
         }
 
         fail!(from self, when wait_call(),
             "{msg} since the underlying wait call failed.");
-        mgmt.notification_state
-            .store(NOTIFICATION_STATE_IDLE, Ordering::SeqCst);
         drain()
     }
 }

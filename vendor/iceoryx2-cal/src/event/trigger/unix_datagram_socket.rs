@@ -233,7 +233,10 @@ impl<E: EventState, Storage: DynamicStorage<State<E, ()>>> WaiterInterface<E, ()
         loop {
             let mut buffer = [0u8; RECEIVE_BUFFER_SIZE as usize];
             match self.receiver.try_receive(&mut buffer) {
-                Ok(RECEIVE_BUFFER_SIZE) => continue,
+                // thrusterd patch (lost wake-up, see `common.rs`): a datagram socket returns one
+                // wake-up (1 byte) per read, so upstream's "a full buffer means more" read one
+                // and left the rest; every one is read now (0: none left).
+                Ok(n) if n > 0 => continue,
                 Ok(_)
                 | Err(UnixDatagramReceiveError::NotConnected)
                 | Err(UnixDatagramReceiveError::ConnectionReset) => return Ok(()),
