@@ -6,7 +6,9 @@
 //! the 100 ms deadline). Twice a lockstep run crawled at 11 samples/s for minutes with both
 //! processes waiting and nothing in either log (docs/reliability.md, "The same stall on
 //! glibc"): the simulator's notifications had stopped waking the daemon. In real time the
-//! same would put control at 10 Hz. One sample read without its notification is normal (it
+//! same would put control at 10 Hz. The cause, found later, was a lost wake-up in iceoryx2's
+//! event drain (patched in vendor/iceoryx2-cal; docs/reliability.md, "The stall found"); this
+//! watch stays as the second line. One sample read without its notification is normal (it
 //! came between another input's wake-up and the read, and its notification wakes the next
 //! wait); several in a row are not.
 
