@@ -130,10 +130,31 @@ fn the_emergency_stop_is_neutral_from_the_next_sample_in_pulse_active_and_identi
         .unwrap_or_else(|| panic!("no pulse\n{}", daemon.log_text()));
     stop_from(&op, &watch, DaemonState::Pulse);
 
-    // Active: estimate to the end, then the daemon holds with the new model.
-    assert!(op.request(RequestKind::Estimate).is_ok());
-    op.wait_status(LONG, |s| state(s) == DaemonState::Active)
-        .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+    // Active: estimate to the end, then the daemon holds with the new model. In real time on
+    // a loaded machine the daemon may refuse an estimate's model (a late solve, a doubtful
+    // lag: "model rejected, old one kept", seen once in CI) and go back to idle; that is its
+    // job, not this test's subject, so the estimate is asked again, at most three times.
+    let mut tries = 0;
+    let active = loop {
+        tries += 1;
+        assert!(op.request(RequestKind::Estimate).is_ok());
+        op.wait_status(LONG, |s| state(s) != DaemonState::Idle)
+            .unwrap_or_else(|| panic!("not estimating\n{}", daemon.log_text()));
+        let ended = op
+            .wait_status(LONG, |s| {
+                matches!(state(s), DaemonState::Active | DaemonState::Idle)
+            })
+            .unwrap_or_else(|| panic!("no model\n{}", daemon.log_text()));
+        if state(&ended) == DaemonState::Active || tries == 3 {
+            break ended;
+        }
+    };
+    assert_eq!(
+        state(&active),
+        DaemonState::Active,
+        "no model in {tries} estimates\n{}",
+        daemon.log_text()
+    );
     std::thread::sleep(Duration::from_millis(500));
     op.wait_status(LONG, |s| state(s) == DaemonState::Active)
         .expect("still holding");
