@@ -246,6 +246,11 @@ pub fn estimate_observed(
     assert_eq!(setup.estimator.method, Method::Dynamic);
     // No driver in between: the daemon compensates the T200 deadband itself.
     setup.machine.deadband = ideal.deadband.unwrap_or(0.05);
+    // Another make's thrusters as their operator configures them (`run::operator_setup`): a
+    // curve the estimate names is learned, not taken for a T200's.
+    if !sim.vehicle().all_t200() {
+        setup.supply.compensation = thrusterd_core::supply::CompensationModel::None;
+    }
     if let Some(v) = ideal.noise_s {
         setup.machine.noise_s = v;
     }

@@ -83,6 +83,26 @@ impl ExcitationPlan {
         &self.cycle[k % self.cycle.len()]
     }
 
+    /// The level (1 or `second`) at which every thruster fires on pulse `pulse`: doublet
+    /// pairs fire each row's second doublet (-r, +r) at `second`, every other plan and pulse
+    /// at 1. Why the same pattern at two levels, and not some thrusters low in some rows:
+    /// with as many rows as thrusters (eight_vectored) any change of one row's response is
+    /// a mix of the thrusters' columns, so a curve moves B's columns around and leaves the
+    /// fit's residual where it was (measured: the score did not move between thrust ~
+    /// command^0.3 and ^3); one pattern at two levels has no such mix. The Gram matrix stays
+    /// diagonal (each row weighted 1 + second^2). The cost: a row's four pulses leave the
+    /// body (1 - second) of one doublet's angle away from where it started.
+    pub fn level(&self, pulse: usize, second: f64) -> f64 {
+        if self.kind != Excitation::DoubletPairs {
+            return 1.0;
+        }
+        if pulse % 4 >= 2 {
+            second
+        } else {
+            1.0
+        }
+    }
+
     /// The thrusters whose columns the first `pulses` patterns cannot tell apart from the
     /// others': those a combination of thrusters that no pattern so far has told apart
     /// involves (the patterns' null space). Empty once the patterns span every thruster (a
@@ -268,6 +288,39 @@ mod tests {
         }
         let sum: f64 = (0..p.cycle_len()).map(|k| p.pattern(k)[4]).sum();
         assert_eq!(sum, 0.0, "forward and reverse pulses balanced");
+    }
+
+    /// With a second level the cycle's Gram matrix stays diagonal (every row weighted 1 +
+    /// second^2), and every thruster fires in both directions at both levels: the curve is
+    /// seen within each direction, apart from the reverse ratio.
+    #[test]
+    fn the_second_level_keeps_the_design_orthogonal_and_fires_both_levels_both_ways() {
+        for n in [3, 5, 6, 8] {
+            let plan = ExcitationPlan::new(Excitation::DoubletPairs, n);
+            let h = n.next_power_of_two().max(2) as f64;
+            let mut g = vec![vec![0.0; n]; n];
+            let mut seen = vec![std::collections::BTreeSet::new(); n];
+            for k in 0..plan.cycle_len() {
+                let level = plan.level(k, 0.6);
+                let u: Vec<f64> = plan.pattern(k).iter().map(|s| s * level).collect();
+                for ((row, seen), ui) in g.iter_mut().zip(seen.iter_mut()).zip(&u) {
+                    seen.insert(((ui * 10.0).round()) as i64);
+                    for (gij, uj) in row.iter_mut().zip(&u) {
+                        *gij += ui * uj;
+                    }
+                }
+            }
+            assert_diag(&g, 2.0 * h * (1.0 + 0.36));
+            for s in &seen {
+                let want: std::collections::BTreeSet<i64> = [-10, -6, 6, 10].into();
+                assert_eq!(*s, want, "n = {n}");
+            }
+        }
+        // One level: every pulse at 1; the other plans never take the second.
+        let plan = ExcitationPlan::new(Excitation::DoubletPairs, 5);
+        assert!((0..32).all(|k| plan.level(k, 1.0) == 1.0));
+        let orth = ExcitationPlan::new(Excitation::Orthogonal, 5);
+        assert!((0..32).all(|k| orth.level(k, 0.6) == 1.0));
     }
 
     #[test]

@@ -626,10 +626,16 @@ impl Estimator {
         } else {
             1.0
         };
+        // The dynamic method's second level (`second_amplitude`, `ExcitationPlan::level`).
+        let level = if self.cfg.method == Method::Dynamic {
+            self.plan.level(self.pulses, self.cfg.second_amplitude)
+        } else {
+            1.0
+        };
         let u: Vec<f64> = pattern
             .iter()
             .map(|s| {
-                let v = s * self.power;
+                let v = s * self.power * level;
                 let v = if v > 0.0 { v * forward_scale } else { v };
                 v.clamp(-1.0, 1.0)
             })

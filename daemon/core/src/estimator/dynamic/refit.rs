@@ -20,6 +20,28 @@ impl DynamicRun {
         })
     }
 
+    /// This run with its log's commands bent to the power `p` (None without a log;
+    /// `top_kept`: see [`SampleLog::with_commands_bent`]), not refitted: refit it to fit
+    /// thrust ~ command^p ([`super::thrust_curve::from_log`]).
+    pub fn with_commands_bent(&self, p: f64, top_kept: bool) -> Option<DynamicRun> {
+        let log = self.log.as_ref()?.with_commands_bent(p, top_kept);
+        Some(DynamicRun {
+            log: Some(log),
+            ..self.clone()
+        })
+    }
+
+    /// This run fitted again from its log with the commands bent plainly to `p` (thrust ~
+    /// command^p), at its own lags, the bent log kept: a run whose B is per unit of the
+    /// commands through that curve, which the lag search and the IMU's refits can refit
+    /// again. None without a log.
+    pub fn bent(&self, p: f64) -> Option<DynamicRun> {
+        let with = self.with_commands_bent(p, false)?;
+        let mut run = with.replay(self.lags(), self.lags_learned, &Vector3::zeros(), None)?;
+        run.log = with.log;
+        Some(run)
+    }
+
     /// Fit with these lags, s: one per thruster, or one for all (before any sample; ignored
     /// when empty). Thrusters whose lags differ get a mean-|command| filter each.
     pub fn set_lags(&mut self, lags: &[f64]) {

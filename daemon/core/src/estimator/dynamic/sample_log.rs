@@ -133,6 +133,41 @@ impl SampleLog {
         out
     }
 
+    /// A copy whose commands are bent to the power `p`, the samples the same: a refit of it
+    /// fits thrust ~ command^p ([`super::thrust_curve`]). Each thruster's value u goes to
+    /// sign(u) m (|u| / m)^p, m the largest |u| the log holds for that thruster in that
+    /// direction: the bend leaves the top level of each direction where it is, so the fit's
+    /// forward-to-reverse ratio does not move with p. Why: the pulses' forward level is
+    /// `reverse_ratio` times the reverse one, so a plain bend (m = 1) changes that ratio
+    /// with p, and a reverse ratio the daemon was told wrong then chose the exponent
+    /// (eight_vectored_lag80ms_curve, thrust ~ command^1.5 and 0.58 in reverse where 0.78
+    /// was assumed, came out 2/3).
+    /// `top_kept` false: the plain bend (m = 1), what a model carrying the curve is per unit
+    /// of (`DynamicTerms::command_exponent`).
+    pub fn with_commands_bent(&self, p: f64, top_kept: bool) -> SampleLog {
+        let n = self.n.max(1);
+        let mut top = vec![[1.0f64; 2]; n];
+        if top_kept {
+            top = vec![[0.0f64; 2]; n];
+            for u in self.commands.chunks(n) {
+                for (t, v) in top.iter_mut().zip(u) {
+                    let d = usize::from(*v < 0.0);
+                    t[d] = t[d].max(v.abs());
+                }
+            }
+        }
+        let mut out = self.mapped(|s| *s);
+        for u in out.commands.chunks_mut(n) {
+            for (t, v) in top.iter().zip(u.iter_mut()) {
+                let m = t[usize::from(*v < 0.0)];
+                if m > 0.0 {
+                    *v = v.signum() * m * (v.abs() / m).powf(p);
+                }
+            }
+        }
+        out
+    }
+
     /// Every sample, in order.
     pub fn iter(&self) -> impl Iterator<Item = &Navigated> {
         self.sealed

@@ -314,6 +314,24 @@ impl Machine {
             self.transition(State::Idle, "internal: a stopping solve made no model");
             return;
         };
+        // A curve the estimate learned from its own two levels (`estimator.second_amplitude`):
+        // refused where the identification's would be (`learn_curve`): learning off, or the
+        // thrusters taken for T200s with their curve kept, whose curve is the table's.
+        let own_curve = candidate
+            .dynamics
+            .as_ref()
+            .and_then(|d| d.command_exponent.zip(d.thrust_curve));
+        if let Some((p, c)) = own_curve {
+            if !self.setup.identification.learn_thrust_curve || self.supply.takes_t200_curve() {
+                let text = format!(
+                    "the thrust does not follow the command linearly (thrust ~ command^{p:.2}, ln likelihood ratio {:.0}): model rejected; old model kept; configure the curve ([supply] linearize for T200s, power_law_exponent for another make)",
+                    c.log_likelihood_ratio
+                );
+                self.events.push(Event::ModelRejected(text.clone()));
+                self.transition(self.after_refusal(), &text);
+                return;
+            }
+        }
         self.stamp_curve(&mut candidate);
         let why = match decision {
             StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(

@@ -121,10 +121,15 @@ impl Machine {
     }
 
     /// A model this daemon's estimation just made is per unit of the commands as they went
-    /// out: it carries the thrust curve they went through.
+    /// out: it carries the thrust curve they went through, composed with one the estimate
+    /// learned from its own data (the open loop's two levels, `Estimator::
+    /// with_learned_curve`: relative to the commands as they went out, so q p).
     pub(super) fn stamp_curve(&self, candidate: &mut Model) {
         if let Some(d) = candidate.dynamics.as_mut() {
-            d.command_exponent = self.supply.learned_exponent();
+            d.command_exponent = match (self.supply.learned_exponent(), d.command_exponent) {
+                (Some(q), Some(p)) => Some(q * p),
+                (q, p) => q.or(p),
+            };
         }
     }
 
