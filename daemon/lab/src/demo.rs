@@ -102,6 +102,9 @@ struct Summary {
     /// The model in force when the hold ended, when it is not the estimation's (the
     /// refinement's update, or an identification under control: a thrust curve learned).
     after_hold: Option<serde_json::Value>,
+    /// The thrust curve the estimation's model carries (thrust ~ command^p), from the model
+    /// file: learned from the open loop's two levels, or a curve in use composed in.
+    thrust_exponent: Option<f64>,
 }
 
 impl Summary {
@@ -265,6 +268,8 @@ fn drive(
     let model = session.model()?;
     let excursion = session.last_excursion().filter(|e| e.samples > 0);
     let dynamics = session.dynamics(model.version)?;
+    // The curve the estimate learned (`estimator.second_amplitude`), from the model file.
+    let (thrust_exponent, _) = stored_curve(session, model.version)?;
     let published = latest(session.truth_inbox())?.unwrap_or(truth);
     // Scored at the voltage the model describes: the daemon's reference when it referred or
     // linearized its commands (`model_truth`).
@@ -374,6 +379,7 @@ fn drive(
         actuated_mask: u64::from(model.actuated),
         matrices: matrices(&model, &truth),
         after_hold,
+        thrust_exponent,
     })
 }
 
@@ -393,24 +399,7 @@ fn model_after_hold(
     };
     let published = latest(session.truth_inbox())?.unwrap_or(*before);
     let truth = truth_for_model(vehicle, supply, &published)?;
-    // The daemon writes its model file off the control loop after the swap: the one of this
-    // version, within a second.
-    let file = session.state_dir().join("model.json");
-    let start = Instant::now();
-    let exponent = loop {
-        let stored = std::fs::read_to_string(&file)
-            .ok()
-            .and_then(|text| thrusterd_core::model_file::from_json(&text, "model.json").ok())
-            .filter(|m| m.version == model.version);
-        match stored {
-            Some(m) => break m.dynamics.and_then(|d| d.command_exponent),
-            None if start.elapsed() > Duration::from_secs(1) => break None,
-            None => {
-                session.tick()?;
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        }
-    };
+    let (exponent, file_version) = stored_curve(session, model.version)?;
     Ok(Some(serde_json::json!({
         "version": model.version,
         "err_rot": truth.relative_error(&model, 0),
@@ -418,7 +407,36 @@ fn model_after_hold(
         "bound_rot": model.rel_err_rot,
         "bound_acc": model.rel_err_acc,
         "thrust_exponent_learned": exponent,
+        "thrust_exponent_file_version": file_version,
     })))
+}
+
+/// The thrust curve (`dynamics.command_exponent`) of the daemon's model file once it holds
+/// model `version` or a later one, and that file's version; after a second without one, the
+/// file as it is (its version says which model it holds; (None, None) without a file). Why
+/// not the model's own version only: the daemon writes its model file off the control loop,
+/// a refinement's at most every `REFINED_SAVE_EVERY_NS` of vehicle time, so a refined
+/// model's version may never be written (a hold that swapped 8 saved 1, 2 and 6), and the
+/// demo reported no curve where the model carried ^1.5. A refinement keeps the curve; only
+/// an identification learns one, which is always saved.
+fn stored_curve(session: &mut Session, version: u64) -> Result<(Option<f64>, Option<u64>)> {
+    let file = session.state_dir().join("model.json");
+    let start = Instant::now();
+    loop {
+        let stored = std::fs::read_to_string(&file)
+            .ok()
+            .and_then(|text| thrusterd_core::model_file::from_json(&text, "model.json").ok());
+        match stored {
+            Some(m) if m.version >= version || start.elapsed() > Duration::from_secs(1) => {
+                return Ok((m.dynamics.and_then(|d| d.command_exponent), Some(m.version)))
+            }
+            None if start.elapsed() > Duration::from_secs(1) => return Ok((None, None)),
+            _ => {
+                session.tick()?;
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+    }
 }
 
 /// Each of the vehicle file's thrusters' time constant, s (empty when it cannot be read).
@@ -506,6 +524,7 @@ fn report(args: &DemoArgs, s: &Summary) {
             "linearize": s.linearize,
             "vehicle_as_is": s.as_is,
             "effectiveness": s.matrices,
+            "thrust_exponent_learned": s.thrust_exponent,
             "model_after_hold": s.after_hold,
             "clean_exit": s.clean_exit,
             "files_left": s.leftovers,

@@ -662,19 +662,6 @@ impl Estimator {
         self.pulse.as_ref().map(|p| p.u.as_slice()).unwrap_or(&[])
     }
 
-    /// The dynamic fit's navigation settings: the accelerometer noise measured at rest, the
-    /// configured bias prior.
-    pub(crate) fn navigation_aid(&self) -> DepthAid {
-        DepthAid {
-            accel_std_mps2: self.noise.sigma_acc(),
-            bias_std_mps2: self.cfg.accel_bias_std,
-            // The bias state needs the Kalman filter; without it the complementary aid is kept
-            // (docs/study.md).
-            kalman: self.cfg.accel_bias_std > 0.0,
-            ..DepthAid::default()
-        }
-    }
-
     /// Command of the pulse in progress, if any.
     pub fn current_command(&self) -> Option<&[f64]> {
         self.pulse.as_ref().map(|p| p.u.as_slice())

@@ -301,6 +301,19 @@ impl Estimator {
         );
     }
 
+    /// The dynamic fit's navigation settings: the accelerometer noise measured at rest, the
+    /// configured bias prior.
+    pub(crate) fn navigation_aid(&self) -> DepthAid {
+        DepthAid {
+            accel_std_mps2: self.noise.sigma_acc(),
+            bias_std_mps2: self.cfg.accel_bias_std,
+            // The bias state needs the Kalman filter; without it the complementary aid is kept
+            // (docs/study.md).
+            kalman: self.cfg.accel_bias_std > 0.0,
+            ..DepthAid::default()
+        }
+    }
+
     /// The lag that best explains `run`'s log, the IMU at `imu_m` from the centre: one for
     /// all thrusters, or one each where the data says they differ
     /// (`EstimatorConfig::thruster_lag_evidence`).
