@@ -314,6 +314,10 @@ pub(super) fn lag_sweep() {
                         _ => Excitation::DoubletPairs,
                     };
                 }
+                if let Ok(a) = std::env::var("LAG_SECOND") {
+                    // The open loop's second level (docs/study.md, "A second level").
+                    cfg.second_amplitude = a.parse().unwrap();
+                }
                 if let Ok(r) = std::env::var("LAG_REVERSE_RATIO") {
                     cfg.reverse_ratio = r.parse().unwrap();
                 }
@@ -394,8 +398,12 @@ pub(super) fn lag_sweep() {
                     )
                 });
                 let refused = if o.refused { " REFUSED" } else { "" };
+                let curve = o
+                    .terms
+                    .command_exponent
+                    .map_or(String::new(), |p| format!(" curve ^{p:.3}"));
                 println!(
-                "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s){refused}{check}",
+                "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s){curve}{refused}{check}",
                 o.spin_up_s,
                 o.terms.spin_up_per_thruster_s.iter().map(|l| (l * 1e4).round() / 1e4).collect::<Vec<_>>(),
                 o.terms.spin_up_sd_ln,
