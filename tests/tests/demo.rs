@@ -322,3 +322,64 @@ fn at_the_papers_noise_the_configured_lag_is_checked_against_the_data() {
         &["s by the data, not spin_up_s 0.100"],
     );
 }
+
+/// Issues 29 item 5 and 32 item 4 through the processes: thrusters of another make whose
+/// thrust goes as command^1.5 (`config/vehicles/eight_vectored_lag80ms_curve.toml`, 0.58 in
+/// reverse, 80 ms; the daemon told none of it). With one pulse level per direction the model
+/// came out 0.081 / 0.083 off under bounds of 0.022 / 0.028 and was swapped in. With
+/// `estimator.second_amplitude = 0.6` (and `[supply] compensation = "none"`, another make's)
+/// the estimate learns the curve and carries it: seed 1 realistic, ^1.508 learned, 0.024 /
+/// 0.029 under 0.062 / 0.066, the lag 0.0799 s. Thrusters taken for T200s (the shipped
+/// compensation) refuse it, naming the curve and what to configure (docs/study.md, "A second
+/// level: the open loop sees the curve"). Errors bounded at 1.5x the figures, the exponent
+/// within 3 %.
+#[test]
+fn an_untold_thrust_curve_is_learned_at_two_pulse_levels_and_refused_for_t200s() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = [
+        "--noise",
+        "realistic",
+        "--vehicle",
+        "config/vehicles/eight_vectored_lag80ms_curve.toml",
+    ];
+    let other_make = dir.path().join("other_make.toml");
+    std::fs::write(
+        &other_make,
+        "[estimator]\nsecond_amplitude = 0.6\n\n[supply]\ncompensation = \"none\"\n",
+    )
+    .unwrap();
+    let arg = other_make.display().to_string();
+    let v = demo(&[&base[..], &["--daemon-config", &arg]].concat());
+    let p = v["thrust_exponent_learned"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no curve learned: {v}"));
+    assert!((p / 1.5 - 1.0).abs() <= 0.03, "exponent {p}");
+    let (rot, acc) = (
+        v["err_rot"].as_f64().unwrap(),
+        v["err_acc"].as_f64().unwrap(),
+    );
+    assert!(
+        rot <= 0.036 && acc <= 0.044,
+        "errors {rot:.4} / {acc:.4}: {v}"
+    );
+    assert!(
+        rot <= v["bound_rot"].as_f64().unwrap() && acc <= v["bound_acc"].as_f64().unwrap(),
+        "errors {rot:.4} / {acc:.4} beyond the bounds: {v}"
+    );
+    let lag = v["spin_up_s"].as_f64().unwrap();
+    assert!((lag - 0.08).abs() <= 0.005, "lag {lag}");
+    assert_eq!(v["clean_exit"], true);
+    assert_eq!(v["files_left"], 0);
+
+    let t200 = dir.path().join("t200.toml");
+    std::fs::write(&t200, "[estimator]\nsecond_amplitude = 0.6\n").unwrap();
+    let arg = t200.display().to_string();
+    refused_demo(
+        &[&base[..], &["--daemon-config", &arg]].concat(),
+        &[
+            "thrust ~ command^1.5",
+            "not linear",
+            "set [supply] linearize (T200) or power_law_exponent",
+        ],
+    );
+}

@@ -323,8 +323,9 @@ impl Machine {
             .and_then(|d| d.command_exponent.zip(d.thrust_curve));
         if let Some((p, c)) = own_curve {
             if !self.setup.identification.learn_thrust_curve || self.supply.takes_t200_curve() {
+                // Within the status's 128 bytes (a 5-digit ratio: 125), the advice included.
                 let text = format!(
-                    "the thrust does not follow the command linearly (thrust ~ command^{p:.2}, ln likelihood ratio {:.0}): model rejected; old model kept; configure the curve ([supply] linearize for T200s, power_law_exponent for another make)",
+                    "thrust ~ command^{p:.2}, not linear (lnLR {:.0}): model rejected, old kept; set [supply] linearize (T200) or power_law_exponent",
                     c.log_likelihood_ratio
                 );
                 self.events.push(Event::ModelRejected(text.clone()));
