@@ -75,6 +75,21 @@ fn an_untold_curve_is_learned_in_the_open_loop_with_a_second_level() {
     }
 }
 
+/// At the paper's noise the lag is not learned (the gyro is too noisy) and the configured
+/// 0.1 s stands for the file's 0.08 s: learned there, the curve took up the lag's error
+/// (^1.52-1.66, the model 0.18-0.24 off under 0.08, seeds 1-5). So no curve is learned
+/// where the lag cannot be.
+#[test]
+fn no_curve_is_learned_where_the_lag_cannot_be() {
+    let o = estimate("eight_vectored_lag80ms_curve", NoisePreset::Paper, 1, 0.6);
+    println!(
+        "paper: err {:.4} / {:.4} under {:.4} / {:.4}, lag {:.3} learned {}",
+        o.err_rot, o.err_acc, o.bound[0], o.bound[1], o.spin_up_s, o.spin_up_learned
+    );
+    assert!(!o.spin_up_learned);
+    assert_eq!(o.terms.command_exponent, None);
+}
+
 #[test]
 fn linear_thrusters_learn_no_curve_at_two_levels() {
     for name in ["amour5", "eight_vectored"] {
