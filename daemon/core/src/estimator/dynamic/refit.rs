@@ -22,7 +22,7 @@ impl DynamicRun {
 
     /// This run with its log's commands bent to the power `p` (None without a log;
     /// `top_kept`: see [`SampleLog::with_commands_bent`]), not refitted: refit it to fit
-    /// thrust ~ command^p ([`super::thrust_curve::from_log`]).
+    /// thrust ~ command^p ([`super::thrust_curve::best_exponent`]).
     pub fn with_commands_bent(&self, p: f64, top_kept: bool) -> Option<DynamicRun> {
         let log = self.log.as_ref()?.with_commands_bent(p, top_kept);
         Some(DynamicRun {

@@ -180,46 +180,25 @@ impl ThrustCurveProbe {
     /// The best exponent and its evidence; None until every fit has residual degrees of
     /// freedom.
     pub fn evidence(&self) -> Option<ThrustCurveEvidence> {
-        evidence_of(&self.runs, &self.exponents)
+        let scores: Vec<f64> = self.runs.iter().map(profile_score).collect::<Option<_>>()?;
+        let rows = self.runs[1].samples() as f64;
+        let (best, score) = scores
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, s)| (i, *s))?;
+        // ln L = -(rows / 2) * score (see lag_search).
+        Some(ThrustCurveEvidence {
+            exponent: self.exponents[best],
+            fitted_exponent: fitted_exponent(&self.runs, &self.exponents, best),
+            log_likelihood_ratio: 0.5 * rows * (scores[1] - score),
+        })
     }
 }
 
-/// The evidence of three fits of the same samples with the commands bent by `exponents`
-/// (1/r, 1, r); None until every fit has residual degrees of freedom.
-fn evidence_of(runs: &[DynamicRun], exponents: &[f64; 3]) -> Option<ThrustCurveEvidence> {
-    let scores: Vec<f64> = runs.iter().map(profile_score).collect::<Option<_>>()?;
-    let rows = runs.get(1)?.samples() as f64;
-    let (best, score) = scores
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(b.1))
-        .map(|(i, s)| (i, *s))?;
-    // ln L = -(rows / 2) * score (see lag_search).
-    Some(ThrustCurveEvidence {
-        exponent: exponents[best],
-        fitted_exponent: fitted_exponent(runs, exponents, best),
-        log_likelihood_ratio: 0.5 * rows * (scores[1] - score),
-    })
-}
-
-/// The probe's evidence from a finished run's log: the log refitted three times at `lags`
-/// with its commands bent by 1/`ratio`, 1 and `ratio`. For the open-loop estimate, whose
-/// pulses take each thruster at two levels per direction only with
-/// `EstimatorConfig::second_amplitude` below 1 (one level per direction cannot tell a curve
-/// from a reverse ratio). None without a log or residual degrees of freedom.
-pub fn from_log(run: &DynamicRun, lags: &[f64], ratio: f64) -> Option<ThrustCurveEvidence> {
-    let exponents = [1.0 / ratio, 1.0, ratio];
-    let runs: Vec<DynamicRun> = exponents
-        .iter()
-        .map(|&p| run.with_commands_bent(p, true)?.refit(lags))
-        .collect::<Option<_>>()?;
-    evidence_of(&runs, &exponents)
-}
-
 /// The ln likelihood ratio over the linear fit above which an open-loop estimate learns the
-/// curve its log names (the identification's `max_curve_evidence` default; measured on the
-/// open loop's two levels: 0 on eight_vectored, six_dof and AMOUR-5 at every noise tried,
-/// 1,697-9,215 on eight_vectored_lag80ms_curve, docs/study.md).
+/// curve its log names (the identification's `max_curve_evidence` default; no linear vehicle
+/// learned a curve over 165 runs at two levels, docs/study.md).
 pub const OPEN_LOOP_CURVE_EVIDENCE: f64 = 50.0;
 
 /// The exponent whose fit (commands bent with each direction's top level kept) has the least
