@@ -269,7 +269,7 @@ fn drive(
     let excursion = session.last_excursion().filter(|e| e.samples > 0);
     let dynamics = session.dynamics(model.version)?;
     // The curve the estimate learned (`estimator.second_amplitude`), from the model file.
-    let (thrust_exponent, _) = stored_curve(session, model.version)?;
+    let (thrust_exponent, _) = stored_curve(session, model.version, false)?;
     let published = latest(session.truth_inbox())?.unwrap_or(truth);
     // Scored at the voltage the model describes: the daemon's reference when it referred or
     // linearized its commands (`model_truth`).
@@ -399,7 +399,7 @@ fn model_after_hold(
     };
     let published = latest(session.truth_inbox())?.unwrap_or(*before);
     let truth = truth_for_model(vehicle, supply, &published)?;
-    let (exponent, file_version) = stored_curve(session, model.version)?;
+    let (exponent, file_version) = stored_curve(session, model.version, true)?;
     Ok(Some(serde_json::json!({
         "version": model.version,
         "err_rot": truth.relative_error(&model, 0),
@@ -419,7 +419,15 @@ fn model_after_hold(
 /// model's version may never be written (a hold that swapped 8 saved 1, 2 and 6), and the
 /// demo reported no curve where the model carried ^1.5. A refinement keeps the curve; only
 /// an identification learns one, which is always saved.
-fn stored_curve(session: &mut Session, version: u64) -> Result<(Option<f64>, Option<u64>)> {
+///
+/// `advance`: step the simulator while waiting (after the hold, where a refined save is due
+/// in vehicle time). Before the hold it must not: how many samples a wall-clock wait steps
+/// would move the hold's start, and the demo's JSON would differ between runs of one seed.
+fn stored_curve(
+    session: &mut Session,
+    version: u64,
+    advance: bool,
+) -> Result<(Option<f64>, Option<u64>)> {
     let file = session.state_dir().join("model.json");
     let start = Instant::now();
     loop {
@@ -432,7 +440,9 @@ fn stored_curve(session: &mut Session, version: u64) -> Result<(Option<f64>, Opt
             }
             None if start.elapsed() > Duration::from_secs(1) => return Ok((None, None)),
             _ => {
-                session.tick()?;
+                if advance {
+                    session.tick()?;
+                }
                 std::thread::sleep(Duration::from_millis(5));
             }
         }
