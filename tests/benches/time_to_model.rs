@@ -85,6 +85,11 @@ const SETTINGS: &[Setting] = &[
         noise: "realistic",
         toml: "",
     },
+    Setting {
+        name: "dynamic, stop once the pulses tell the thrusters apart (stop_once_spanned)",
+        noise: "realistic",
+        toml: "[estimator]\nstop_once_spanned = true\n",
+    },
 ];
 
 /// Relative error after the best single scale factor: the paper's model is in the units of its

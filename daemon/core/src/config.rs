@@ -250,9 +250,7 @@ impl DaemonConfig {
             return Ok(());
         }
         let plan = ExcitationPlan::new(e.excitation, n);
-        let need = (1..=plan.cycle_len())
-            .find(|&k| plan.confounded(k).is_empty())
-            .unwrap_or(plan.cycle_len());
+        let need = plan.spanned_at(1);
         if e.max_pulses < need {
             return Err(format!(
                 "{} is below the {need} pulses the {} excitation needs to tell {n} thrusters apart",

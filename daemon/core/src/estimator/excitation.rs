@@ -49,6 +49,9 @@ pub struct ExcitationPlan {
     n: usize,
     /// One full cycle of patterns; pulse k uses `cycle[k % cycle.len()]`.
     cycle: Vec<Vec<f64>>,
+    /// The fewest pulses whose patterns tell every thruster apart, found once here: asking
+    /// `confounded` is an eigendecomposition, and the stop gate asks every sample.
+    spans_at: usize,
 }
 
 impl ExcitationPlan {
@@ -61,7 +64,16 @@ impl ExcitationPlan {
             Excitation::Orthogonal => orthogonal(n),
             Excitation::DoubletPairs => doublet_pairs(n),
         };
-        ExcitationPlan { kind, n, cycle }
+        let mut plan = ExcitationPlan {
+            kind,
+            n,
+            cycle,
+            spans_at: 0,
+        };
+        plan.spans_at = (1..plan.cycle.len())
+            .find(|&k| plan.confounded(k).is_empty())
+            .unwrap_or(plan.cycle.len());
+        plan
     }
 
     pub fn kind(&self) -> Excitation {
@@ -138,6 +150,15 @@ impl ExcitationPlan {
         (0..n)
             .filter(|&i| null.iter().any(|&c| eig.eigenvectors[(i, c)].abs() > 1e-6))
             .collect()
+    }
+
+    /// The fewest pulses, a multiple of `step`, whose patterns tell every thruster apart
+    /// (`confounded` empty); at most a whole cycle, which always does.
+    /// Cheap: once the patterns span, more pulses never take it back.
+    pub fn spanned_at(&self, step: usize) -> usize {
+        self.spans_at
+            .next_multiple_of(step.max(1))
+            .min(self.cycle.len())
     }
 }
 
@@ -336,6 +357,9 @@ mod tests {
         let five = ExcitationPlan::new(Excitation::DoubletPairs, 5);
         assert!(!five.confounded(16).is_empty());
         assert!(five.confounded(20).is_empty());
+        assert_eq!(five.spanned_at(1), 17);
+        assert_eq!(five.spanned_at(4), 20);
+        assert_eq!(eight.spanned_at(4), 32);
         // Round robin: a thruster not yet pulsed is confounded (with nothing: its column
         // is all zero), the others not.
         let rr = ExcitationPlan::new(Excitation::RoundRobin, 3);

@@ -564,9 +564,18 @@ impl Estimator {
     pub fn planned_pulses(&self) -> usize {
         let cycles = match self.cfg.method {
             Method::Paper => self.cfg.paper_cycles,
+            Method::Dynamic if self.stops_once_spanned() => {
+                return self.plan.spanned_at(4).min(self.cfg.max_pulses);
+            }
             Method::Forward | Method::Dynamic => self.cfg.min_cycles,
         };
         (cycles * self.plan.cycle_len()).min(self.cfg.max_pulses)
+    }
+
+    /// Whether this run may stop before its first cycle ends (`stop_once_spanned`): not
+    /// where a learned curve needs the whole cycle's two levels.
+    fn stops_once_spanned(&self) -> bool {
+        self.cfg.stop_once_spanned && self.cfg.second_amplitude >= 1.0
     }
 
     /// The pulses the plan runs to as it stands, for progress: the minimum plan
