@@ -6,22 +6,16 @@
 //! bound covers what is left. Linear thrusters learn no curve. Figures in docs/study.md ("A
 //! second level: the open loop sees the curve").
 
-use thruster_inprocess::estimation::{estimate_on, Ideal, Outcome};
-use thruster_inprocess::run::vehicle;
-use thruster_sim::{NoisePreset, SensorConfig};
+use thruster_inprocess::estimation::{estimate_configured, Outcome};
+use thruster_sim::NoisePreset;
 use thrusterd_core::estimator::EstimatorConfig;
 
 fn estimate(name: &str, noise: NoisePreset, seed: u64, second_amplitude: f64) -> Outcome {
-    let sensors = SensorConfig {
-        rate_hz: 200.0,
-        noise,
-        ..SensorConfig::default()
-    };
     let cfg = EstimatorConfig {
         second_amplitude,
         ..EstimatorConfig::dynamic()
     };
-    estimate_on(vehicle(name), sensors, seed, cfg, Ideal::default())
+    estimate_configured(name, noise, seed, cfg)
 }
 
 fn worst_over_bound(o: &Outcome) -> f64 {

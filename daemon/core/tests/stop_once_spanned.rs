@@ -7,22 +7,16 @@
 //! row, is unchanged. Figures in docs/study.md ("Stopping once the pulses tell the thrusters
 //! apart").
 
-use thruster_inprocess::estimation::{estimate_on, Ideal, Outcome};
-use thruster_inprocess::run::vehicle;
-use thruster_sim::{NoisePreset, SensorConfig};
+use thruster_inprocess::estimation::{estimate_configured, Outcome};
+use thruster_sim::NoisePreset;
 use thrusterd_core::estimator::EstimatorConfig;
 
 fn estimate(name: &str, noise: NoisePreset, seed: u64, stop_once_spanned: bool) -> Outcome {
-    let sensors = SensorConfig {
-        rate_hz: 200.0,
-        noise,
-        ..SensorConfig::default()
-    };
     let cfg = EstimatorConfig {
         stop_once_spanned,
         ..EstimatorConfig::dynamic()
     };
-    estimate_on(vehicle(name), sensors, seed, cfg, Ideal::default())
+    estimate_configured(name, noise, seed, cfg)
 }
 
 fn show(label: &str, o: &Outcome) {

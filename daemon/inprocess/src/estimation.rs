@@ -66,12 +66,22 @@ pub fn tick(machine: &mut Machine, sim: &mut Simulator) {
 /// One estimation from rest on the vehicle file `name`, the IMU at 200 Hz with `noise`, the
 /// default dynamic method.
 pub fn estimate(name: &str, noise: NoisePreset, seed: u64) -> Outcome {
+    estimate_configured(name, noise, seed, EstimatorConfig::dynamic())
+}
+
+/// [`estimate`] with the estimator configured by the caller.
+pub fn estimate_configured(
+    name: &str,
+    noise: NoisePreset,
+    seed: u64,
+    estimator: EstimatorConfig,
+) -> Outcome {
     let sensors = SensorConfig {
         rate_hz: 200.0,
         noise,
         ..SensorConfig::default()
     };
-    estimate_with(name, sensors, seed, EstimatorConfig::dynamic())
+    estimate_with(name, sensors, seed, estimator)
 }
 
 /// What the decisive runs take away from the estimator's inputs, so that what is left of a
