@@ -77,7 +77,9 @@ pub struct EstimatorConfig {
     /// Automatic stop: a bound worth waiting for (default 0.03; 0: off). Once both bounds are
     /// at their targets, the open-loop run goes on while one of them is above this value and
     /// would reach it by `max_pulses` at the rate a bound falls (its statistical part as
-    /// 1/sqrt(pulses), `model_error_floor` not at all). At 0.03, eight_vectored with slow
+    /// 1/sqrt(pulses), `model_error_floor` not at all), or come within 1.2x of it where the
+    /// run learns its lag and the IMU is configured at the centre (the rule was a cliff: four_up
+    /// stopped 0.037 off where a wait gave 0.015; `run::fits::REACH_SLACK`). At 0.03, eight_vectored with slow
     /// thrusters (0.15 s) at a realistic IMU went from 3 to 9 of 10 seeds within 3 % for 0.8 s
     /// more (issue 29). Only where that premise holds: in still water (a current's drift grows
     /// with the run: AMOUR-5 waited its way from 0.016 to 0.022 off), with the IMU where it was

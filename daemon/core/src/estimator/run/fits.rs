@@ -69,9 +69,9 @@ impl Estimator {
     }
 
     /// Whether one of `bounds` (relative, 1 sigma, each with the share the learned lag's
-    /// uncertainty adds to it) is above `reach_rel_err` and would reach it by `max_pulses`:
-    /// its statistical part falling as 1/sqrt(pulses), the lag's share as 1/pulses, the
-    /// model-error floor (which no data removes) not at all.
+    /// uncertainty adds to it) is above `reach_rel_err` and would come within
+    /// [`REACH_SLACK`] of it by `max_pulses`: its statistical part falling as 1/sqrt(pulses),
+    /// the lag's share as 1/pulses, the model-error floor (which no data removes) not at all.
     ///
     /// Why the lag apart: its profile sharpens much faster than 1/sqrt(pulses) once the
     /// terms it trades against separate from B. eight_vectored with 0.2 s thrusters at a
@@ -85,8 +85,13 @@ impl Estimator {
             return false;
         }
         let ratio = self.pulses as f64 / self.cfg.max_pulses as f64;
+        let slack = if self.learns_lag() && self.cfg.imu_position_m.iter().all(|x| *x == 0.0) {
+            REACH_SLACK
+        } else {
+            1.0
+        };
         bounds.iter().any(|&(b, lag)| {
-            b > reach && projected_bound(b, lag, self.cfg.model_error_floor, ratio) <= reach
+            b > reach && projected_bound(b, lag, self.cfg.model_error_floor, ratio) <= reach * slack
         })
     }
 
@@ -561,6 +566,24 @@ impl Estimator {
 /// Bound `b` (relative, 1 sigma) with the lag's share `lag` and the model-error floor
 /// `floor`, projected to `ratio` (pulses now / pulses then, <= 1) times the information: the
 /// statistical part's variance scaled by `ratio`, the lag's by `ratio`^2, the floor's not.
+/// How far short of `reach_rel_err` the projected bound at `max_pulses` may stay and the run
+/// still go on (a factor on it), where the run learns its lag and the IMU is configured at the
+/// centre. Why not 1: the wait was a cliff. A run whose bound projected just over
+/// `reach_rel_err` stopped at once, at the 6 % target, with the widest bound of all the runs
+/// that met it, while one just under went on to the best model. four_up at a realistic IMU,
+/// seeds 8 and 9, stopped after the first cycle 0.037 / 0.032 off under acceleration bounds
+/// of 0.051 / 0.048, and with the slack go on to 0.015 / 0.019 in 0.8 s more; AMOUR-5 on
+/// 0.05 s pulses seed 4 0.037 -> 0.015; four_up at two pulse levels 3 of 5 seeds over 0.03 ->
+/// none. Why the two conditions (each measured): with an IMU configured 18 cm off, the
+/// acceleration bound carries the rotation rows' error over the lever, which no data removes,
+/// and eight_vectored noise-free waited to the limit and came out worse (0.020 -> 0.025); at a
+/// gyro too noisy to learn the lag (AMOUR-5 at 1 kHz and the paper's noise) the slack
+/// doubled the time to model (4.6 -> 9.0 s) and the later flight of seed 2 raised a false
+/// alarm. Everywhere else measured the figures are the same to the digit: issue 29's lag table,
+/// the paper's noise at 200 Hz, moving water, every vehicle file noise-free (docs/study.md,
+/// "The reach rule's cliff").
+pub(super) const REACH_SLACK: f64 = 1.2;
+
 fn projected_bound(b: f64, lag: f64, floor: f64, ratio: f64) -> f64 {
     let floor2 = floor * floor;
     let lag2 = lag.min(b).powi(2);
