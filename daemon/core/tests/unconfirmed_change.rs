@@ -47,10 +47,13 @@ fn assert_the_model_in_force_was_kept(kept: &Outcome) {
 /// chi-square named) and the first model on the bare command (`estimator.shaped_thrust` off).
 /// The shipped margin 20 (since 2026-12-03) waits for a clearer name, and the swell's alarms
 /// come later and stronger (below, `at_the_shipped_name_margin_...`); on a first model fitted
-/// to the thrust's shape no identification here reached its limit.
+/// to the thrust's shape no identification here reached its limit. The change test's terms
+/// as they were then, too (`refinement.change_term_z` 4; 8 since 2026-12-04, when this
+/// flight's alarms start other identifications: docs/study.md, "The change test's terms").
 const AS_FOUND: Flight = Flight {
     name_margin: 0.0,
     bare_first_model: true,
+    term_z: 4.0,
 };
 
 /// What of the setup the flight varies besides the limit's rule.
@@ -58,6 +61,7 @@ const AS_FOUND: Flight = Flight {
 struct Flight {
     name_margin: f64,
     bare_first_model: bool,
+    term_z: f64,
 }
 
 fn pitch_steps_in_a_swell(
@@ -73,6 +77,7 @@ fn pitch_steps_in_a_swell(
         s.identification.late_decision_s = late_decision_s;
         s.identification.instrument = instrument;
         s.refinement.change_name_margin = flight.name_margin;
+        s.refinement.change_term_z = flight.term_z;
         if flight.bare_first_model {
             common::bare_first_model(s);
         }
@@ -220,9 +225,11 @@ fn deciding_the_stop_every_tenth_of_a_second_in_a_swell_keeps_the_hold() {
 fn at_the_shipped_name_margin_the_swells_alarms_reach_the_limit_and_the_model_is_kept() {
     let shipped = thrusterd_core::machine::MachineSetup::default();
     let margin = shipped.refinement.change_name_margin;
+    // The change test's terms as when this was measured (4; see `AS_FOUND`).
     let flight = Flight {
         name_margin: margin,
         bare_first_model: false,
+        term_z: 4.0,
     };
     let (late, instrument) = (
         shipped.identification.late_decision_s,

@@ -161,6 +161,10 @@ pub struct KhzSettings {
     pub deadband: f64,
     pub change_test: bool,
     pub latency_us: Option<(u64, u64)>,
+    /// The first estimation's `estimator.target_rel_err` (None: the shipped 0.06). A lower
+    /// target runs longer and leaves the model's terms tighter, which is what the change
+    /// test's `change_term_z` is about.
+    pub target_rel_err: Option<f64>,
 }
 
 impl Default for KhzSettings {
@@ -170,6 +174,7 @@ impl Default for KhzSettings {
             deadband: 0.05,
             change_test: true,
             latency_us: None,
+            target_rel_err: None,
         }
     }
 }
@@ -187,6 +192,9 @@ pub fn khz_hold(seed: u64, k: KhzSettings) -> usize {
     // No driver in between: the machine compensates the deadband itself.
     setup.machine.deadband = k.deadband;
     setup.refinement.change_test = k.change_test;
+    if let Some(t) = k.target_rel_err {
+        setup.estimator.target_rel_err = t;
+    }
     run.machine = Machine::new(setup);
     run.run_for(1.0);
     run.estimate();

@@ -42,7 +42,7 @@ fn with_change_test() -> RefinementConfig {
 
 /// The 1 kHz hold with knobs, for the change test's runs in docs/experiments.md: KHZ_SEEDS
 /// (comma list, default 1,2,3), KHZ_SECONDS (180), KHZ_DEADBAND (0.05), KHZ_CHANGE_TEST=0
-/// (turn it off), RUN_LATENCY_US (`A` or `A-B`: the command takes effect that long after its
+/// (turn it off), KHZ_TARGET (the first estimation's `target_rel_err`), RUN_LATENCY_US (`A` or `A-B`: the command takes effect that long after its
 /// sample, as through the driver in real time). A measuring tool; run with
 /// `cargo run --release -p thrusterctl -- study sweep khz_sweep`.
 pub(super) fn khz_sweep() {
@@ -61,6 +61,7 @@ pub(super) fn khz_sweep() {
             deadband: std::env::var("KHZ_DEADBAND").map_or(0.05, |v| v.parse().unwrap()),
             change_test: std::env::var("KHZ_CHANGE_TEST").map_or(true, |v| v != "0"),
             latency_us,
+            target_rel_err: std::env::var("KHZ_TARGET").ok().map(|v| v.parse().unwrap()),
         };
         let windows = khz_hold(seed, k);
         println!("seed {seed}: no alarm, {windows} refinement windows");
