@@ -147,8 +147,9 @@ pub struct RefinementConfig {
     /// (since 2026-12-04): a first model learned longer at the paper's noise (a 4 % target,
     /// 1 kHz) has those terms' standard errors small enough that noise passed 4, and 2 of 12
     /// seeds raised false alarms on an unchanged vehicle; at 8 none, with the detection times
-    /// as at 4 (holding level, seeds 1-5: 2.5-6.8 s against 2.6-6.5 s) and every vehicle file
-    /// quiet at three noise levels (docs/study.md, "The change test's terms").
+    /// as at 4 (holding level, seeds 1-5: 2.5-6.8 s against 2.6-6.5 s) and the six flight
+    /// vehicles quiet at three noise levels, 12 vehicle-hours (docs/study.md, "The change
+    /// test's terms").
     pub change_term_z: f64,
     /// A candidate change time is judged only once this old, s (default 2): younger, the
     /// thrusters' signatures have barely risen (the observer's time constant is 0.2 s) and
