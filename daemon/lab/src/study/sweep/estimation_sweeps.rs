@@ -3,7 +3,7 @@
 
 use thruster_sim::disturbance::WaterPreset;
 use thruster_sim::{ImuNoise, NoisePreset, SensorConfig};
-use thrusterd_core::estimator::EstimatorConfig;
+use thrusterd_core::estimator::{EstimatorConfig, ExcitationPlan};
 
 use thruster_inprocess::estimation::*;
 
@@ -483,7 +483,11 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
 /// the simulator's), LA_ONE_LAG (no lag per thruster), LA_SHAPED (1|0: `shaped_thrust` on or off), LA_LAG_GAP (the machine's
-/// `max_lag_gap_over_bound`; 0: the row groups' check off). Each flight prints the rest's
+/// `max_lag_gap_over_bound`; 0: the row groups' check off). Each flight prints the first
+/// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
+/// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
+/// progress estimate at the lag hint, the configured lag: docs/study.md, "The first cycle
+/// against the whole run"). Each flight prints the rest's
 /// noise, the unexplained rotation and where the row groups put the lag ("The lag in a swell").
 pub(super) fn imu_and_water_sweep() {
     let noise = match std::env::var("LA_NOISE").as_deref() {
@@ -574,7 +578,37 @@ pub(super) fn imu_and_water_sweep() {
                 burst_rel_err: std::env::var("LA_BURST").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
             };
-            let o = estimate_ideal(name, sensors, seed, cfg, ideal);
+            // The first cycle's estimate beside the whole run's: how far apart, relative to B,
+            // and over the nested deviation sqrt(bound1^2 - bound^2) (a probe that was not
+            // shipped: docs/study.md, "The first cycle against the whole run").
+            let cycle =
+                ExcitationPlan::new(cfg.excitation, vehicle(name).thrusters.len()).cycle_len();
+            let mut first: Option<(nalgebra::DMatrix<f64>, [f64; 2], usize)> = None;
+            let o = estimate_observed(vehicle(name), sensors, seed, cfg, ideal, &mut |m, _| {
+                if first.is_none() {
+                    if let Some(e) = m.last_estimate().filter(|e| e.pulses >= cycle) {
+                        first = Some((
+                            e.effectiveness.clone(),
+                            [e.rel_err_rot, e.rel_err_acc],
+                            e.pulses,
+                        ));
+                    }
+                }
+            });
+            if let Some((b1, e1, pulses1)) = &first {
+                let bf = &o.b_err + &o.truth;
+                let part = |k: usize| {
+                    let d = (b1.rows(k, 3) - bf.rows(k, 3)).norm() / bf.rows(k, 3).norm();
+                    let (e1, ef) = (e1[k / 3], o.bound[k / 3]);
+                    let sd = (e1 * e1 - ef * ef).max(1e-12).sqrt();
+                    (d, d / sd)
+                };
+                let (r, a) = (part(0), part(3));
+                println!(
+                    "  first cycle ({pulses1} pulses) bound {:.4}/{:.4}; apart rot {:.4} ({:.2} sd) acc {:.4} ({:.2} sd); over bound {:.2}/{:.2}",
+                    e1[0], e1[1], r.0, r.1, a.0, a.1, o.err_rot / o.bound[0], o.err_acc / o.bound[1]
+                );
+            }
             let Some((p, l)) = o.terms.imu_position.and_then(|p| Some((p, p.learned?))) else {
                 // An identification under control (LA_BURST) does not place the IMU.
                 println!(
