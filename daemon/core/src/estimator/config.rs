@@ -219,6 +219,13 @@ pub struct EstimatorConfig {
     /// one width for all terms is wrong for the large real ones (the Munk moment's 33).
     /// Measured in docs/experiments.md ("Why the learned model is blind through manoeuvres").
     pub term_prior_sd: f64,
+    /// Research hook, not a configuration key (never read from or written to a file): the
+    /// terms' prior centred here instead of at 0 (6 x TERMS, the layout of
+    /// `DynamicTerms::coefficients`), with `term_prior_sd` its width. Why: the decisive run
+    /// for where a swell's bias enters B (the terms fixed at a still-water fit's values),
+    /// docs/study.md, "The first cycle against the whole run".
+    #[serde(skip)]
+    pub term_prior_mean: Option<nalgebra::DMatrix<f64>>,
     /// Dynamic method: the IMU's position from the vehicle's centre (its centre of mass, what
     /// the rates pivot about), body frame (x forward, y starboard, z down), m, from the
     /// vehicle's drawings (default [0, 0, 0]). The acceleration rows are referred from the
@@ -319,6 +326,7 @@ impl Default for EstimatorConfig {
             accel_bias_std: 0.02,
             model_error_floor: 0.02,
             term_prior_sd: 0.0,
+            term_prior_mean: None,
             imu_position_m: [0.0; 3],
             learn_imu_position: true,
             split_thrust: false,

@@ -165,6 +165,9 @@ pub struct DynamicSolution {
 /// Allocated once; each sample costs two rank-1 updates of a (N + 38)-wide Gram matrix.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DynamicRun {
+    /// The terms' prior mean (`EstimatorConfig::term_prior_mean`, a research hook; None: 0).
+    #[serde(skip)]
+    term_prior_mean: Option<DMatrix<f64>>,
     n: usize,
     /// Forward and reverse command in separate columns (thrust = k_f u+ + k_r u-): needed when
     /// the commands take many levels around zero (under control), where one symmetric column
@@ -321,7 +324,15 @@ impl DynamicRun {
             iv: None,
             rot_least_squares: None,
             last_nav: None,
+            term_prior_mean: None,
         }
+    }
+
+    /// The terms' prior centred at `mean` (6 x TERMS) instead of 0, where `term_prior_sd`
+    /// sets one (`EstimatorConfig::term_prior_mean`, a research hook).
+    pub fn with_term_prior_mean(mut self, mean: Option<DMatrix<f64>>) -> Self {
+        self.term_prior_mean = mean.filter(|m| m.shape() == (6, TERMS));
+        self
     }
 
     /// Fit the thrust columns by instrumental variables: every sample then comes with an
@@ -679,12 +690,13 @@ impl DynamicRun {
         // The terms' prior (`term_prior_sd`): the constant and the mean |command| (the last
         // two terms) carry offsets and the thrust asymmetry, not physics that shrinks to 0.
         let ridge = (term_prior_sd > 0.0 && term_prior_sd.is_finite()).then_some(term_prior_sd);
-        let ridge_entries = |out: &mut Vec<PriorEntry>| {
+        let mean = self.term_prior_mean.as_ref();
+        let ridge_entries = |out: &mut Vec<PriorEntry>, row: usize| {
             if let Some(sd) = ridge {
                 for j in 0..TERMS - 2 {
                     out.push(PriorEntry {
                         weights: [(c + j, 1.0), (c + j, 0.0)],
-                        value: 0.0,
+                        value: mean.map_or(0.0, |m| m[(row, j)]),
                         std_err: sd,
                     });
                 }
@@ -698,7 +710,7 @@ impl DynamicRun {
                         .as_ref()
                         .map(|p| p.entries(3 * g + a, self.split))
                         .unwrap_or_default();
-                    ridge_entries(&mut e);
+                    ridge_entries(&mut e, 3 * g + a);
                     e
                 })
             };

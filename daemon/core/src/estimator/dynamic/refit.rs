@@ -103,6 +103,7 @@ impl DynamicRun {
             floor_when_split: self.floor_when_split,
             asymmetry: self.asymmetry,
             at_rest_until_s: self.at_rest_until_s,
+            term_prior_mean: self.term_prior_mean.clone(),
             ..Self::with_columns(
                 self.n,
                 self.split,

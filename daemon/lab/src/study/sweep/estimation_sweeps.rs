@@ -483,7 +483,9 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
 /// the simulator's), LA_ONE_LAG (no lag per thruster), LA_SHAPED (1|0: `shaped_thrust` on or off), LA_LAG_GAP (the machine's
-/// `max_lag_gap_over_bound`; 0: the row groups' check off). Each flight prints the first
+/// `max_lag_gap_over_bound`; 0: the row groups' check off), LA_TERMS_FROM_STILL (sd: the
+/// terms' prior centred at a still-water flight's terms, `EstimatorConfig::term_prior_mean`).
+/// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
 /// progress estimate at the lag hint, the configured lag: docs/study.md, "The first cycle
@@ -578,6 +580,29 @@ pub(super) fn imu_and_water_sweep() {
                 burst_rel_err: std::env::var("LA_BURST").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
             };
+            // The decisive run for where the swell's bias enters B: the terms held at what a
+            // still-water flight of the same vehicle and seed learned (LA_TERMS_FROM_STILL=sd,
+            // the prior's width per unit term).
+            if let Ok(sd) = std::env::var("LA_TERMS_TRUE") {
+                let (truth, residual) = super::true_terms::true_terms_38(name);
+                cfg.term_prior_sd = sd.parse().unwrap();
+                cfg.term_prior_mean = Some(truth);
+                println!("  terms held at the simulator's (fit residual {residual:.1e})");
+            }
+            if let Ok(sd) = std::env::var("LA_TERMS_FROM_STILL") {
+                let still = Ideal {
+                    allow_refusal: true,
+                    idle_s: ideal.idle_s,
+                    ..Ideal::default()
+                };
+                let calm = estimate_ideal(name, sensors.clone(), seed, cfg.clone(), still);
+                cfg.term_prior_sd = sd.parse().unwrap();
+                cfg.term_prior_mean = Some(calm.terms.coefficients.clone());
+                println!(
+                    "  still water first: err {:.4} / {:.4}, refused {}",
+                    calm.err_rot, calm.err_acc, calm.refused
+                );
+            }
             // The first cycle's estimate beside the whole run's: how far apart, relative to B,
             // and over the nested deviation sqrt(bound1^2 - bound^2) (a probe that was not
             // shipped: docs/study.md, "The first cycle against the whole run").

@@ -16,6 +16,7 @@ mod refinement;
 mod refinement_update;
 mod silent_change;
 mod time_to_model;
+mod true_terms;
 mod window_floor;
 
 #[derive(Args, Debug)]
