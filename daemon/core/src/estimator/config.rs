@@ -222,8 +222,8 @@ pub struct EstimatorConfig {
     /// Research hook, not a configuration key (never read from or written to a file): the
     /// terms' prior centred here instead of at 0 (6 x TERMS, the layout of
     /// `DynamicTerms::coefficients`), with `term_prior_sd` its width. Why: the decisive run
-    /// for where a swell's bias enters B (the terms fixed at a still-water fit's values),
-    /// docs/study.md, "The first cycle against the whole run".
+    /// for where a swell's bias enters B, the terms held at the simulator's own (the lab's
+    /// `study/sweep/true_terms.rs`; docs/study.md, "The first cycle against the whole run").
     #[serde(skip)]
     pub term_prior_mean: Option<nalgebra::DMatrix<f64>>,
     /// Dynamic method: the IMU's position from the vehicle's centre (its centre of mass, what

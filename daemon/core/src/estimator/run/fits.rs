@@ -563,9 +563,6 @@ impl Estimator {
     }
 }
 
-/// Bound `b` (relative, 1 sigma) with the lag's share `lag` and the model-error floor
-/// `floor`, projected to `ratio` (pulses now / pulses then, <= 1) times the information: the
-/// statistical part's variance scaled by `ratio`, the lag's by `ratio`^2, the floor's not.
 /// How far short of `reach_rel_err` the projected bound at `max_pulses` may stay and the run
 /// still go on (a factor on it), where the run learns its lag and the IMU is configured at the
 /// centre. Why not 1: the wait was a cliff. A run whose bound projected just over
@@ -579,11 +576,14 @@ impl Estimator {
 /// and eight_vectored noise-free waited to the limit and came out worse (0.020 -> 0.025); at a
 /// gyro too noisy to learn the lag (AMOUR-5 at 1 kHz and the paper's noise) the slack
 /// doubled the time to model (4.6 -> 9.0 s; the false alarms its tighter models first drew
-/// were the change test's terms, `refinement.change_term_z`). Everywhere else measured the figures are the same to the digit: issue 29's lag table,
-/// the paper's noise at 200 Hz, moving water, every vehicle file noise-free (docs/study.md,
-/// "The reach rule's cliff").
+/// were the change test's terms, `refinement.change_term_z`). Everywhere else measured the
+/// figures are the same to the digit: issue 29's lag table, the paper's noise at 200 Hz,
+/// moving water, every vehicle file noise-free (docs/study.md, "The reach rule's cliff").
 pub(super) const REACH_SLACK: f64 = 1.2;
 
+/// Bound `b` (relative, 1 sigma) with the lag's share `lag` and the model-error floor
+/// `floor`, projected to `ratio` (pulses now / pulses then, <= 1) times the information: the
+/// statistical part's variance scaled by `ratio`, the lag's by `ratio`^2, the floor's not.
 fn projected_bound(b: f64, lag: f64, floor: f64, ratio: f64) -> f64 {
     let floor2 = floor * floor;
     let lag2 = lag.min(b).powi(2);

@@ -483,8 +483,9 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
 /// the simulator's), LA_ONE_LAG (no lag per thruster), LA_SHAPED (1|0: `shaped_thrust` on or off), LA_LAG_GAP (the machine's
-/// `max_lag_gap_over_bound`; 0: the row groups' check off), LA_TERMS_FROM_STILL (sd: the
-/// terms' prior centred at a still-water flight's terms, `EstimatorConfig::term_prior_mean`).
+/// `max_lag_gap_over_bound`; 0: the row groups' check off), LA_TERMS_TRUE (sd: the terms'
+/// prior centred at the simulator's own, `true_terms.rs`), LA_TERMS_FROM_STILL (sd: centred at
+/// a still-water flight's terms; both through `EstimatorConfig::term_prior_mean`).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -580,9 +581,9 @@ pub(super) fn imu_and_water_sweep() {
                 burst_rel_err: std::env::var("LA_BURST").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
             };
-            // The decisive run for where the swell's bias enters B: the terms held at what a
-            // still-water flight of the same vehicle and seed learned (LA_TERMS_FROM_STILL=sd,
-            // the prior's width per unit term).
+            // Where the swell's bias enters B: the terms held (a prior of width sd per unit
+            // term) at the simulator's own (LA_TERMS_TRUE=sd, the decisive run) or at what a
+            // still-water flight of the same vehicle and seed learned (LA_TERMS_FROM_STILL=sd).
             if let Ok(sd) = std::env::var("LA_TERMS_TRUE") {
                 let (truth, residual) = super::true_terms::true_terms_38(name);
                 cfg.term_prior_sd = sd.parse().unwrap();
@@ -604,8 +605,9 @@ pub(super) fn imu_and_water_sweep() {
                 );
             }
             // The first cycle's estimate beside the whole run's: how far apart, relative to B,
-            // and over the nested deviation sqrt(bound1^2 - bound^2) (a probe that was not
-            // shipped: docs/study.md, "The first cycle against the whole run").
+            // over the bounds in quadrature (q) and over the nested deviation
+            // sqrt(bound1^2 - bound^2 + 0.01^2) (the floor cancels in it): the statistics of a
+            // check that was not shipped (docs/study.md, "The first cycle against the whole run").
             let cycle =
                 ExcitationPlan::new(cfg.excitation, vehicle(name).thrusters.len()).cycle_len();
             let mut first: Option<(nalgebra::DMatrix<f64>, [f64; 2], usize)> = None;
@@ -625,13 +627,13 @@ pub(super) fn imu_and_water_sweep() {
                 let part = |k: usize| {
                     let d = (b1.rows(k, 3) - bf.rows(k, 3)).norm() / bf.rows(k, 3).norm();
                     let (e1, ef) = (e1[k / 3], o.bound[k / 3]);
-                    let sd = (e1 * e1 - ef * ef).max(1e-12).sqrt();
-                    (d, d / sd)
+                    let nested = (e1 * e1 - ef * ef).max(0.0) + 0.01 * 0.01;
+                    (d, d / e1.hypot(ef), d / nested.sqrt())
                 };
                 let (r, a) = (part(0), part(3));
                 println!(
-                    "  first cycle ({pulses1} pulses) bound {:.4}/{:.4}; apart rot {:.4} ({:.2} sd) acc {:.4} ({:.2} sd); over bound {:.2}/{:.2}",
-                    e1[0], e1[1], r.0, r.1, a.0, a.1, o.err_rot / o.bound[0], o.err_acc / o.bound[1]
+                    "  first cycle ({pulses1} pulses) bound {:.4}/{:.4}; apart rot {:.4} (q {:.2}, nested {:.2}) acc {:.4} (q {:.2}, nested {:.2}); over bound {:.2}/{:.2}",
+                    e1[0], e1[1], r.0, r.1, r.2, a.0, a.1, a.2, o.err_rot / o.bound[0], o.err_acc / o.bound[1]
                 );
             }
             let Some((p, l)) = o.terms.imu_position.and_then(|p| Some((p, p.learned?))) else {
