@@ -608,3 +608,53 @@ fn clients_killed_while_joining_leave_only_what_the_daemon_reports() {
     assert!(sim.stop().success(), "{}", sim.log_text());
     assert!(daemon.stop().success(), "{}", daemon.log_text());
 }
+
+/// A `watch` sent SIGTERM while it joins the namespace (its first file made, its node and
+/// ports not yet all) ends by itself and removes everything it made, with no reaper needed.
+/// Before, the Ctrl-C/SIGTERM handler was installed after connecting (the node was an
+/// earlier argument of the same call), so the signal's default action killed it with its
+/// node half made and its files stayed until the daemon's next dead-node search.
+#[test]
+fn a_watch_sent_sigterm_while_joining_ends_cleanly_and_leaves_nothing() {
+    let (world, mut daemon, mut sim) = reaper_world("ctlterm");
+    let files = || thruster_protocol::services::namespace_files(world.ipc()).unwrap();
+    let before = files();
+    for round in 0..3 {
+        let mut client = Proc::spawn(
+            "thrusterctl",
+            &["--namespace", &world.namespace(), "watch", "--json"],
+            world.dir.path(),
+        );
+        // Its first file: it is inside Daemon::connect now.
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let mut theirs = Vec::new();
+        while theirs.is_empty() && Instant::now() < deadline {
+            theirs = files()
+                .into_iter()
+                .filter(|p| !before.contains(p))
+                .collect();
+        }
+        assert!(!theirs.is_empty(), "round {round}: the watch made no file");
+        client.signal("TERM");
+        let status = client
+            .wait_timeout(Duration::from_secs(10))
+            .expect("the watch ended after SIGTERM");
+        let exited = Instant::now();
+        assert!(
+            status.code().is_some(),
+            "round {round}: the watch was killed by the signal ({status}), not stopped by it"
+        );
+        // What it made is gone at its exit: its own drop, not the daemon's search (every 2 s).
+        let left: Vec<_> = files()
+            .into_iter()
+            .filter(|p| !before.contains(p))
+            .collect();
+        assert!(
+            left.is_empty(),
+            "round {round}: left {:.0} ms after a clean exit: {left:?}",
+            exited.elapsed().as_secs_f64() * 1e3
+        );
+    }
+    assert!(sim.stop().success(), "{}", sim.log_text());
+    assert!(daemon.stop().success(), "{}", daemon.log_text());
+}

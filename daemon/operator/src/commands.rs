@@ -40,10 +40,14 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
         } => {
             let power = cli::estimate_power(power)?;
             let max_wait = cli::max_wait(max_wait_s)?;
-            let daemon = Daemon::connect(&target, timeout)?;
             if wait {
-                estimate::run_and_wait(&daemon, power, max_wait)
+                // The handler before the node: a SIGTERM while joining the namespace then
+                // ends the wait cleanly instead of killing it with its node half made.
+                let interrupted = interrupt_flag()?;
+                let daemon = Daemon::connect(&target, timeout)?;
+                estimate::run_and_wait(&daemon, power, max_wait, interrupted)
             } else {
+                let daemon = Daemon::connect(&target, timeout)?;
                 let text =
                     daemon.command(ControlRequest::with_value(RequestKind::Estimate, power))?;
                 say(&format!("estimation started: {}", or_ok(&text)))
@@ -70,11 +74,11 @@ pub fn run(target: Target, timeout: Duration, command: Command) -> Result<()> {
         Command::Model { json } => model(&Daemon::connect(&target, timeout)?, json),
         Command::Watch { json, interval_ms } => {
             let options = watch::Options::new(json, interval_ms)?;
-            watch::run(
-                &Daemon::connect(&target, timeout)?,
-                options,
-                interrupt_flag()?,
-            )
+            // The handler before the node (arguments are evaluated in order, and connecting
+            // first left a SIGTERM during the join to kill the watch with its node half
+            // made, for the daemon's reaper to find).
+            let interrupted = interrupt_flag()?;
+            watch::run(&Daemon::connect(&target, timeout)?, options, interrupted)
         }
         Command::Record {
             out,

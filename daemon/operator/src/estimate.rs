@@ -6,7 +6,8 @@
 //! was seen running, or the model version changed, or a grace period passed (an
 //! estimation that faulted before we ever saw it run).
 
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
@@ -15,7 +16,7 @@ use thruster_protocol::{ControlRequest, DaemonState, ModelMsg, RequestKind, Stat
 
 use crate::checks::{model_problem, status_problem, Warner};
 use crate::client::{wait_latest, Daemon};
-use crate::console::{interrupt_flag, interrupted_during_wait, say};
+use crate::console::{interrupted_during_wait, say};
 use crate::exit::{self, Failure};
 use crate::render;
 
@@ -140,17 +141,29 @@ impl Progress {
     }
 }
 
-pub fn run_and_wait(daemon: &Daemon, power: f64, max_wait: Duration) -> Result<()> {
+/// `interrupted`: the Ctrl-C/SIGTERM flag, installed by the caller before it connected.
+pub fn run_and_wait(
+    daemon: &Daemon,
+    power: f64,
+    max_wait: Duration,
+    interrupted: Arc<AtomicBool>,
+) -> Result<()> {
     let statuses = daemon.inbox::<StatusMsg>()?;
     let models = daemon.inbox::<ModelMsg>()?;
     daemon.ensure_running()?;
     let baseline = wait_latest(&statuses, BASELINE_WAIT.min(daemon.timeout()))?;
+    if interrupted.load(Ordering::SeqCst) {
+        return Err(Failure::new(
+            exit::INTERRUPTED,
+            "interrupted before the estimation was requested; nothing was started",
+        )
+        .into());
+    }
     let text = daemon.command(ControlRequest::with_value(RequestKind::Estimate, power))?;
     eprintln!(
         "estimation started: {}",
         if text.is_empty() { "ok" } else { &text }
     );
-    let interrupted = interrupt_flag()?;
 
     let started = Instant::now();
     let mut tracker = Tracker::new(baseline.map(|s| s.model_version), started, daemon.timeout());
