@@ -226,6 +226,13 @@ pub struct EstimatorConfig {
     /// `study/sweep/true_terms.rs`; docs/study.md, "The first cycle against the whole run").
     #[serde(skip)]
     pub term_prior_mean: Option<nalgebra::DMatrix<f64>>,
+    /// Research hook, not a configuration key: disturbance states in the dynamic fit
+    /// (`estimator::dynamic::disturbance_states`: a swell at a given frequency, a constant
+    /// force fixed in the world), columns with a free coefficient per DOF row. Why: the
+    /// decisive run for issue 32 item 3, whether forcing states in the model remove a swell's
+    /// bias and make the bound honest (docs/study.md, "Disturbance states").
+    #[serde(skip)]
+    pub disturbance: crate::estimator::dynamic::disturbance_states::DisturbanceStates,
     /// Dynamic method: the IMU's position from the vehicle's centre (its centre of mass, what
     /// the rates pivot about), body frame (x forward, y starboard, z down), m, from the
     /// vehicle's drawings (default [0, 0, 0]). The acceleration rows are referred from the
@@ -327,6 +334,7 @@ impl Default for EstimatorConfig {
             model_error_floor: 0.02,
             term_prior_sd: 0.0,
             term_prior_mean: None,
+            disturbance: Default::default(),
             imu_position_m: [0.0; 3],
             learn_imu_position: true,
             split_thrust: false,

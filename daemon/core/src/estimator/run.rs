@@ -438,7 +438,8 @@ impl Estimator {
                 run
             }
         }
-        .with_term_prior_mean(self.cfg.term_prior_mean.clone());
+        .with_term_prior_mean(self.cfg.term_prior_mean.clone())
+        .with_disturbance(self.cfg.disturbance);
         // The open-loop estimation only: the log keeps one command per pulse, split or not
         // (under control the command changes every sample; there the lag is the model's,
         // `EstimatorConfig::spin_up_s` set from it by the caller).

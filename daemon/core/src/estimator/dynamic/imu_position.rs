@@ -127,7 +127,8 @@ impl ImuPosition {
 /// coefficients `theta_rot` (K x 3, one column per rotation axis).
 pub fn lever_terms(theta_rot: &DMatrix<f64>, cols: usize) -> [DMatrix<f64>; 3] {
     let k = theta_rot.nrows();
-    debug_assert_eq!(k, cols + TERMS);
+    // The terms, and disturbance states after them when there are any.
+    debug_assert!(k >= cols + TERMS);
     std::array::from_fn(|a| {
         let mut l = DMatrix::zeros(k, 3);
         // Tangential: (alpha x r)_a = sum_{m,n} eps_amn alpha_m r_n, alpha_m = X theta_rot_m.

@@ -10,6 +10,7 @@
 //! Both are linear in the unknowns, so the fit stays incremental (normal equations, one
 //! intercept per segment) and gives covariances like the static forward model.
 
+pub mod disturbance_states;
 pub mod imu_position;
 pub mod instruments;
 pub mod lag_agreement;
@@ -42,6 +43,12 @@ use self::spin_state::{lag_step, MAX_LAG_STEP_S};
 use crate::navigation::{DepthAid, NavState, Navigator};
 
 use self::variance::{combination_var, group_sigma};
+
+fn no_disturbance() -> [f64; DISTURBANCE_COLUMNS] {
+    [0.0; DISTURBANCE_COLUMNS]
+}
+
+use self::disturbance_states::{DisturbanceStates, MAX_COLUMNS as DISTURBANCE_COLUMNS};
 
 /// What the dynamic fit learned besides B: the coefficients of every term, per DOF row.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -159,6 +166,10 @@ pub struct DynamicSolution {
     /// With forward and reverse thrust fitted apart (`DynamicRun::split`): the 6 x 2N gains,
     /// forward in columns 0..N, reverse in N..2N, and their standard errors.
     pub split: Option<(DMatrix<f64>, DMatrix<f64>)>,
+    /// With disturbance states (`DynamicRun::with_disturbance`, a research hook): their 6 x D
+    /// coefficients, which the IMU's lever arm needs as it needs B and the terms.
+    #[serde(skip)]
+    pub disturbance: Option<DMatrix<f64>>,
 }
 
 /// One dynamic-model fit in progress: navigation, thrust lag, integrals and both regressions.
@@ -168,6 +179,14 @@ pub struct DynamicRun {
     /// The terms' prior mean (`EstimatorConfig::term_prior_mean`, a research hook; None: 0).
     #[serde(skip)]
     term_prior_mean: Option<DMatrix<f64>>,
+    /// Disturbance states (`with_disturbance`, a research hook; default: none).
+    #[serde(skip)]
+    disturbance: DisturbanceStates,
+    /// Their regressors at this sample and the one before (for the integrals).
+    #[serde(skip, default = "no_disturbance")]
+    disturbance_now: [f64; DISTURBANCE_COLUMNS],
+    #[serde(skip, default = "no_disturbance")]
+    disturbance_prev: [f64; DISTURBANCE_COLUMNS],
     n: usize,
     /// Forward and reverse command in separate columns (thrust = k_f u+ + k_r u-): needed when
     /// the commands take many levels around zero (under control), where one symmetric column
@@ -325,6 +344,9 @@ impl DynamicRun {
             rot_least_squares: None,
             last_nav: None,
             term_prior_mean: None,
+            disturbance: DisturbanceStates::default(),
+            disturbance_now: no_disturbance(),
+            disturbance_prev: no_disturbance(),
         }
     }
 
@@ -332,6 +354,22 @@ impl DynamicRun {
     /// sets one (`EstimatorConfig::term_prior_mean`, a research hook).
     pub fn with_term_prior_mean(mut self, mean: Option<DMatrix<f64>>) -> Self {
         self.term_prior_mean = mean.filter(|m| m.shape() == (6, TERMS));
+        self
+    }
+
+    /// Disturbance states ([`disturbance_states`]) as more columns after the terms, each row
+    /// with its own coefficients. `EstimatorConfig::disturbance`, a research hook: not kept
+    /// across a checkpoint. Call before `with_instruments` and the first sample.
+    pub fn with_disturbance(mut self, states: DisturbanceStates) -> Self {
+        if !states.any() || self.disturbance.any() {
+            return self;
+        }
+        self.disturbance = states;
+        let k = self.cols + TERMS + states.columns();
+        self.rot = SegmentedLs::new(k);
+        self.acc = SegmentedLs::new(k);
+        self.integral = vec![0.0; k];
+        self.direct = vec![0.0; k];
         self
     }
 
@@ -483,6 +521,7 @@ impl DynamicRun {
                 down: nav.down,
                 motion: nav.motion,
                 command,
+                attitude: nav.attitude,
             });
         }
         self.fit(t_s, gyro, &nav, u, z);
@@ -555,6 +594,11 @@ impl DynamicRun {
             self.lag_abs,
             &mut self.terms,
         );
+        if self.disturbance.any() {
+            self.disturbance_prev = self.disturbance_now;
+            self.disturbance
+                .fill(t_s, &nav.attitude, &mut self.disturbance_now);
+        }
         let first = self.last_t_s.is_none();
         self.last_t_s = Some(t_s);
         if first || t_s - self.segment_start_s >= self.segment_s {
@@ -603,9 +647,17 @@ impl DynamicRun {
                 self.integral[c + j] += area;
             }
             self.slope_prev = (dt > 0.0).then_some((slopes, dt));
+            // Trapezoids: the swell and the attitude are slow against a 1-5 ms step.
+            let at = c + TERMS;
+            for e in 0..self.disturbance.columns() {
+                self.integral[at + e] +=
+                    0.5 * (self.disturbance_prev[e] + self.disturbance_now[e]) * dt;
+            }
         }
         self.direct[..self.cols].copy_from_slice(&self.lag);
-        self.direct[self.cols..].copy_from_slice(&self.terms);
+        self.direct[self.cols..self.cols + TERMS].copy_from_slice(&self.terms);
+        let d = self.disturbance.columns();
+        self.direct[self.cols + TERMS..].copy_from_slice(&self.disturbance_now[..d]);
 
         // Bias removed: what of it the filter found (the rest is the segment's intercept).
         match self.iv.as_mut() {
@@ -732,6 +784,10 @@ impl DynamicRun {
         let mut excited = true;
         let mut coef_ols = DMatrix::zeros(6, TERMS);
         let mut b_ols = DMatrix::zeros(6, n);
+        let mut disturbance = self
+            .disturbance
+            .any()
+            .then(|| DMatrix::zeros(6, self.disturbance.columns()));
         for (g, sol) in sols.iter().enumerate() {
             let s = group_sigma(sol, &rest_sigma[3 * g..3 * g + 3]);
             let mut var_sum = 0.0;
@@ -761,6 +817,11 @@ impl DynamicRun {
                     let v = var(&[(c + j, 1.0)]);
                     coef_se[(row, j)] = v.1.max(0.0).sqrt();
                     coef_ols[(row, j)] = v.2.max(0.0).sqrt();
+                }
+                if let Some(d) = disturbance.as_mut() {
+                    for e in 0..d.ncols() {
+                        d[(row, e)] = sol.theta[(c + TERMS + e, a)];
+                    }
                 }
             }
             let identified = (0..3).all(|a| (0..c).all(|i| sol.inverse(a)[(i, i)] > 0.0));
@@ -825,6 +886,7 @@ impl DynamicRun {
                 ),
             },
             split: self.split.then_some((split_b, split_se)),
+            disturbance,
         }
     }
 }

@@ -23,7 +23,9 @@ impl DynamicRun {
     #[allow(clippy::needless_range_loop)]
     pub fn refer_to_centre(&self, sol: &mut DynamicSolution, setting: &ImuSetting) {
         let (n, c) = (self.n, self.cols);
-        let k = c + TERMS;
+        // With disturbance states, their columns after the terms: the swell's angular
+        // acceleration is alpha too.
+        let k = c + TERMS + sol.disturbance.as_ref().map_or(0, |d| d.ncols());
         let mut theta_rot = DMatrix::zeros(k, 3);
         let mut se_rot = DMatrix::zeros(k, 3);
         for m in 0..3 {
@@ -38,6 +40,11 @@ impl DynamicRun {
             for j in 0..TERMS {
                 theta_rot[(c + j, m)] = sol.terms.coefficients[(m, j)];
                 se_rot[(c + j, m)] = sol.terms.std_err[(m, j)];
+            }
+            if let Some(d) = &sol.disturbance {
+                for e in 0..d.ncols() {
+                    theta_rot[(c + TERMS + e, m)] = d[(m, e)];
+                }
             }
         }
         let learned = (setting.learn && sol.excited)

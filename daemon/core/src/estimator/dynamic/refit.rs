@@ -97,7 +97,7 @@ impl DynamicRun {
         terms_from: Option<&DynamicRun>,
     ) -> Option<DynamicRun> {
         let log = self.log.as_ref()?;
-        let mut run = DynamicRun {
+        let run = DynamicRun {
             lags_learned: learned,
             log: None,
             floor_when_split: self.floor_when_split,
@@ -113,6 +113,7 @@ impl DynamicRun {
                 DepthAid::default(),
             )
         };
+        let mut run = run.with_disturbance(self.disturbance);
         run.set_lags(if lags.is_empty() { &[0.0] } else { lags });
         if terms_from.is_some() {
             run.skip_lag_free_terms();
@@ -120,7 +121,7 @@ impl DynamicRun {
         run.nav = self.nav.clone();
         for s in log.iter() {
             let nav = NavState {
-                attitude: nalgebra::UnitQuaternion::identity(),
+                attitude: s.attitude,
                 velocity: s.velocity - s.rate.cross(imu_m),
                 rate: s.rate,
                 down: s.down,

@@ -37,6 +37,14 @@ pub struct Navigated {
     pub motion: Vector3<f64>,
     /// Index of the command in force into [`SampleLog::command`]; `u32::MAX`: neutral.
     pub command: u32,
+    /// The navigation's attitude (body to NED): the disturbance states' world-fixed force
+    /// is seen through it (`DynamicRun::with_disturbance`, a research hook).
+    #[serde(default = "identity")]
+    pub attitude: nalgebra::UnitQuaternion<f64>,
+}
+
+fn identity() -> nalgebra::UnitQuaternion<f64> {
+    nalgebra::UnitQuaternion::identity()
 }
 
 /// The navigated samples of one run and the commands they were taken under.
@@ -274,6 +282,7 @@ mod tests {
             down: Vector3::z(),
             motion: Vector3::zeros(),
             command: u32::MAX,
+            attitude: identity(),
         }
     }
 

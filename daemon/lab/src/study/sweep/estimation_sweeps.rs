@@ -485,7 +485,10 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// the simulator's), LA_ONE_LAG (no lag per thruster), LA_SHAPED (1|0: `shaped_thrust` on or off), LA_LAG_GAP (the machine's
 /// `max_lag_gap_over_bound`; 0: the row groups' check off), LA_TERMS_TRUE (sd: the terms'
 /// prior centred at the simulator's own, `true_terms.rs`), LA_TERMS_FROM_STILL (sd: centred at
-/// a still-water flight's terms; both through `EstimatorConfig::term_prior_mean`).
+/// a still-water flight's terms; both through `EstimatorConfig::term_prior_mean`), LA_DIST_HZ
+/// (swell states at this frequency, `EstimatorConfig::disturbance`; LA_DIST_WORLD=1 with its
+/// force fixed in the world), LA_DIST_CONST=1 (a constant horizontal world-fixed force), LA_DIST_RAMP=1 (the same
+/// growing in time).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -590,6 +593,14 @@ pub(super) fn imu_and_water_sweep() {
                 cfg.term_prior_mean = Some(truth);
                 println!("  terms held at the simulator's (fit residual {residual:.1e})");
             }
+            // Disturbance states at a given frequency (LA_DIST_HZ=f, Hz; the swell's own is
+            // the decisive run: docs/study.md, "Disturbance states").
+            if let Ok(hz) = std::env::var("LA_DIST_HZ") {
+                cfg.disturbance.swell_hz = Some(hz.parse().unwrap());
+                cfg.disturbance.swell_in_world = std::env::var("LA_DIST_WORLD").is_ok();
+            }
+            cfg.disturbance.world_constant = std::env::var("LA_DIST_CONST").is_ok();
+            cfg.disturbance.world_ramp = std::env::var("LA_DIST_RAMP").is_ok();
             if let Ok(sd) = std::env::var("LA_TERMS_FROM_STILL") {
                 let still = Ideal {
                     allow_refusal: true,

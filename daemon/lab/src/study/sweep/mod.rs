@@ -9,6 +9,7 @@ use anyhow::Result;
 use clap::Args;
 
 mod detection_bound;
+mod disturbance_states;
 mod estimation_sweeps;
 mod identification;
 mod lost_hold;
