@@ -496,7 +496,14 @@ impl Estimator {
             .lag_hint
             .as_ref()
             .and_then(|(lags, sd_ln)| fit_at(run, lags, *sd_ln));
-        self.dynamic_estimate_with(run, fit, false)
+        let e = self.dynamic_estimate_with(run, fit, false);
+        self.in_moving_water(run, e, |moving| {
+            let fit = self
+                .lag_hint
+                .as_ref()
+                .and_then(|(lags, sd_ln)| fit_at(moving, lags, *sd_ln));
+            self.dynamic_estimate_with(moving, fit, false)
+        })
     }
 
     /// Whether this run learns the thrusters' lag: asked to, and the gyro quiet enough for

@@ -4,6 +4,7 @@
 
 use nalgebra::Vector3;
 
+use super::disturbance_states::DisturbanceStates;
 use super::regressors::TERMS;
 use super::sample_log::Navigated;
 use super::DynamicRun;
@@ -76,6 +77,23 @@ impl DynamicRun {
         self.replay(lags, learned, imu_m, None)
     }
 
+    /// This run made again from its log with disturbance states `states` in place of its
+    /// own ([`super::disturbance_states`]), at its lags, keeping the log so that it can be
+    /// refitted in turn (the lag searched with the states): the moving-water fit
+    /// (`EstimatorConfig::moving_water_states`). None without a log.
+    pub fn restated(&self, states: DisturbanceStates) -> Option<DynamicRun> {
+        let mut run = self.replay_with(
+            self.lags(),
+            self.lags_learned(),
+            &Vector3::zeros(),
+            None,
+            states,
+        )?;
+        run.log = self.log.clone();
+        run.last_command = self.last_command;
+        Some(run)
+    }
+
     /// A refitter for many refits of this run's log with the IMU at `imu_m`, each cheaper
     /// than [`Self::refit_with`] and the same to the bit. None without a log.
     pub fn refitter(&self, imu_m: &Vector3<f64>) -> Option<Refitter<'_>> {
@@ -96,6 +114,18 @@ impl DynamicRun {
         imu_m: &Vector3<f64>,
         terms_from: Option<&DynamicRun>,
     ) -> Option<DynamicRun> {
+        self.replay_with(lags, learned, imu_m, terms_from, self.disturbance)
+    }
+
+    /// [`Self::replay`] with disturbance states `states`.
+    fn replay_with(
+        &self,
+        lags: &[f64],
+        learned: bool,
+        imu_m: &Vector3<f64>,
+        terms_from: Option<&DynamicRun>,
+        states: DisturbanceStates,
+    ) -> Option<DynamicRun> {
         let log = self.log.as_ref()?;
         let run = DynamicRun {
             lags_learned: learned,
@@ -113,7 +143,7 @@ impl DynamicRun {
                 DepthAid::default(),
             )
         };
-        let mut run = run.with_disturbance(self.disturbance);
+        let mut run = run.with_disturbance(states);
         run.set_lags(if lags.is_empty() { &[0.0] } else { lags });
         if terms_from.is_some() {
             run.skip_lag_free_terms();
@@ -132,7 +162,7 @@ impl DynamicRun {
         if let Some(from) = terms_from {
             if !run.adopt_lag_free_terms(from) {
                 // Not a fit of the same rows: never expected; the full refit is the answer.
-                return self.replay(lags, learned, imu_m, None);
+                return self.replay_with(lags, learned, imu_m, None, states);
             }
         }
         Some(run)

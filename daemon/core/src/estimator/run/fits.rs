@@ -228,7 +228,42 @@ impl Estimator {
         if let Some(curved) = self.with_learned_curve(run, learned.as_ref()) {
             return curved;
         }
-        self.dynamic_estimate_with(run, learned, true)
+        let e = self.dynamic_estimate_with(run, learned, true);
+        self.in_moving_water(run, e, |moving| {
+            let learned = self
+                .learns_lag()
+                .then(|| self.learn_lags(moving, &Vector3::zeros()))
+                .flatten();
+            self.dynamic_estimate_with(moving, learned, true)
+        })
+    }
+
+    /// `e`, or where it says the water moves (rotation left unexplained beyond
+    /// `STILL_WATER_UNEXPLAINED_RADPS`) and `EstimatorConfig::moving_water_states()` names
+    /// disturbance states, the estimate `again` makes from `run`'s log refitted with them
+    /// (its lag searched again with them). The water is as the fit without states says: its
+    /// unexplained rotation is reported, whichever fit is kept.
+    pub(super) fn in_moving_water(
+        &self,
+        run: &DynamicRun,
+        e: Estimate,
+        again: impl FnOnce(&DynamicRun) -> Estimate,
+    ) -> Estimate {
+        let states = self.cfg.moving_water_states();
+        let Some(water) = e.dynamics.as_ref().map(|d| d.unexplained_rate_radps) else {
+            return e;
+        };
+        if !states.any() || water <= crate::estimator::STILL_WATER_UNEXPLAINED_RADPS {
+            return e;
+        }
+        let Some(moving) = run.restated(states) else {
+            return e;
+        };
+        let mut kept = again(&moving);
+        if let Some(d) = kept.dynamics.as_mut() {
+            d.unexplained_rate_radps = water;
+        }
+        kept
     }
 
     /// Open loop with two levels per direction (`second_amplitude` below 1) and a whole

@@ -488,7 +488,8 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// a still-water flight's terms; both through `EstimatorConfig::term_prior_mean`), LA_DIST_HZ
 /// (swell states at this frequency, `EstimatorConfig::disturbance`; LA_DIST_WORLD=1 with its
 /// force fixed in the world), LA_DIST_CONST=1 (a constant horizontal world-fixed force), LA_DIST_RAMP=1 (the same
-/// growing in time).
+/// growing in time), LA_GATE (1: those states in the moving-water refit instead; 0: that
+/// refit off).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -601,6 +602,16 @@ pub(super) fn imu_and_water_sweep() {
             }
             cfg.disturbance.world_constant = std::env::var("LA_DIST_CONST").is_ok();
             cfg.disturbance.world_ramp = std::env::var("LA_DIST_RAMP").is_ok();
+            // The same states in the fit made again when the water moves (LA_GATE=1), or
+            // that refit off (LA_GATE=0: `moving_water_swell_hz` 0).
+            match std::env::var("LA_GATE").as_deref() {
+                Ok("0") => cfg.moving_water_swell_hz = 0.0,
+                Ok(_) => {
+                    cfg.moving_water_states = cfg.disturbance;
+                    cfg.disturbance = Default::default();
+                }
+                Err(_) => {}
+            }
             if let Ok(sd) = std::env::var("LA_TERMS_FROM_STILL") {
                 let still = Ideal {
                     allow_refusal: true,
