@@ -11,6 +11,7 @@
 //! intercept per segment) and gives covariances like the static forward model.
 
 pub mod disturbance_states;
+mod dynamic_terms;
 pub mod imu_position;
 pub mod instruments;
 pub mod lag_agreement;
@@ -30,11 +31,11 @@ pub mod thrust_shape;
 pub mod thruster_lags;
 mod variance;
 
+pub use dynamic_terms::DynamicTerms;
 pub use thrust_shape::MAX_THRUST_ASYMMETRY;
 
 use nalgebra::{DMatrix, Vector3};
 
-use self::imu_position::ImuPosition;
 use self::prior::{DynamicPrior, PriorEntry};
 use self::regressors::{terms, TERMS};
 use self::sample_log::{Navigated, SampleLog};
@@ -49,104 +50,6 @@ fn no_disturbance() -> [f64; DISTURBANCE_COLUMNS] {
 }
 
 use self::disturbance_states::{DisturbanceStates, MAX_COLUMNS as DISTURBANCE_COLUMNS};
-
-/// What the dynamic fit learned besides B: the coefficients of every term, per DOF row.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct DynamicTerms {
-    /// 6 x TERMS coefficients, rows in DOF order (rotation rows per rad/s^2, translation rows
-    /// per m/s^2), columns as [`regressors::TERM_NAMES`].
-    pub coefficients: DMatrix<f64>,
-    /// Their standard errors, same shape: the larger of the i.i.d. and the segment-clustered
-    /// (autocorrelation-robust) one, see [`segmented_ls`].
-    pub std_err: DMatrix<f64>,
-    /// The i.i.d. least-squares standard errors sigma sqrt((X'X)^-1) of the same coefficients,
-    /// kept for comparison: they do not cover the error (docs/study.md).
-    pub ols_std_err: DMatrix<f64>,
-    /// The same for B (6 x N).
-    pub b_ols_std_err: DMatrix<f64>,
-    /// Largest tilt during the excitation, rad (navigation estimate).
-    pub max_tilt_rad: f64,
-    /// Largest heading change during the excitation, rad.
-    pub max_heading_change_rad: f64,
-    /// The thrusters' spin-up time constant the fit used, s: learned
-    /// ([`lag_search`]) or the configured `estimator.spin_up_s`.
-    pub spin_up_s: f64,
-    /// Whether `spin_up_s` was learned from this run's data.
-    pub spin_up_learned: bool,
-    /// One standard deviation of ln(`spin_up_s`) when learned (0 when configured).
-    pub spin_up_sd_ln: f64,
-    /// What that uncertainty adds to the rotation and acceleration rows' relative bounds (in
-    /// quadrature, [`lag_search::LagFit::widen`]; 0 when configured): the stop rule projects
-    /// this share apart, since a lag's profile sharpens faster than 1/sqrt(pulses).
-    #[serde(default)]
-    pub spin_up_rel_err: [f64; 2],
-    /// Each thruster's own lag, s, where the data said they differ
-    /// ([`thruster_lags`]; `spin_up_s` is then their mean). Empty: one lag for all.
-    #[serde(default)]
-    pub spin_up_per_thruster_s: Vec<f64>,
-    /// ln likelihood ratio of a lag per thruster over one for all (0 when not searched).
-    #[serde(default)]
-    pub thruster_lag_evidence: f64,
-    /// Where the rotation rows alone and the acceleration rows alone put the learned lag
-    /// ([`lag_agreement`]); None when the lag was configured or a group's profile is flat.
-    #[serde(default)]
-    pub spin_up_groups: Option<lag_agreement::LagAgreement>,
-    /// With a lag per thruster: what their floor (`EstimatorConfig::thruster_lag_floor`)
-    /// adds to the rotation and acceleration rows' bounds (in quadrature; inside
-    /// `spin_up_rel_err`'s bound but not in it): no more data removes it, so the stop rule
-    /// leaves it out of the bound it waits on.
-    #[serde(default)]
-    pub spin_up_floor_rel_err: [f64; 2],
-    /// With the lag configured because the gyro is too noisy to learn it: what the data says
-    /// of it ([`lag_check`]); None otherwise. A contradicted lag refuses the model.
-    #[serde(default)]
-    pub lag_check: Option<lag_check::LagCheck>,
-    /// The IMU's position from the centre the acceleration rows are referred to
-    /// ([`imu_position`]), learned or configured; None before [`DynamicRun::refer_to_centre`].
-    pub imu_position: Option<ImuPosition>,
-    /// The rotation rows' noise level beyond the gyro's white noise at rest (RMS over the axes
-    /// of sqrt(max(0, sigma^2 - 2 white^2))), rad/s: rotation neither thrust nor the
-    /// vehicle's dynamics explain, such as a swell's torque (set by the estimation run, which knows
-    /// the rest's noise; 0 until then).
-    pub unexplained_rate_radps: f64,
-    /// Per row group (rotation, acceleration): whether B came from the fit by instrumental
-    /// variables (`DynamicRun::with_instruments`, chosen where it and least squares disagree)
-    /// rather than least squares.
-    #[serde(default)]
-    pub instrumented: [bool; 2],
-    /// Under control: whether commands bent to a power explain the data better than the
-    /// linear model ([`thrust_curve`]); None open loop.
-    #[serde(default)]
-    pub thrust_curve: Option<thrust_curve::ThrustCurveEvidence>,
-    /// The forward/reverse asymmetry k = (f - r) / (f + r) B's columns assume: a thruster's
-    /// thrust is its column times u (1 + k) forward and u (1 - k) reverse, so B is the mean
-    /// of the forward and reverse gains ([`DynamicRun::with_asymmetry`]). 0: thrust taken as
-    /// proportional to the command, as B's split fits and older models have it. Whoever
-    /// predicts motion from B and the commands shapes the commands with it.
-    #[serde(default)]
-    pub thrust_asymmetry: f64,
-    /// Per row group (rotation, acceleration): how far the fit strayed from the prior it was
-    /// given, the mean over the prior's entries of ((fitted - prior) / prior's standard
-    /// error)^2 ([`prior::disagreement`]); 0 without a prior. Above 1 the data and the prior
-    /// disagree beyond their errors, and the fit's bound is too small by about its square root.
-    #[serde(default)]
-    pub prior_disagreement: [f64; 2],
-    /// The thrust curve the commands went out through when the model was learned (thrust ~
-    /// command^p, learned under control: `supply::Supply::set_learned_exponent`), so B is per
-    /// unit of the linearized command; None: the commands as the machine computed them.
-    /// The machine puts it in force with the model, from a file too. Set by the machine,
-    /// not the fit.
-    #[serde(default)]
-    pub command_exponent: Option<f64>,
-}
-
-impl DynamicTerms {
-    /// Coefficient and standard error of term `name` on DOF row `row`.
-    pub fn get(&self, row: usize, name: &str) -> Option<(f64, f64)> {
-        let j = regressors::TERM_NAMES.iter().position(|n| *n == name)?;
-        Some((self.coefficients[(row, j)], self.std_err[(row, j)]))
-    }
-}
 
 /// The fit of both groups.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
