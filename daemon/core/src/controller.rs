@@ -301,6 +301,7 @@ mod tests {
             prior_disagreement: [0.0; 2],
             imu_position: None,
             unexplained_rate_radps: 0.0,
+            lag_gap_without_states: None,
             instrumented: [false; 2],
         });
         let meas = Measured {

@@ -305,6 +305,7 @@ mod tests {
                 rel_err_share: 0.0,
             }),
             unexplained_rate_radps: 0.001,
+            lag_gap_without_states: None,
             instrumented: [true, false],
         }
     }

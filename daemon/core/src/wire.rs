@@ -371,6 +371,7 @@ mod tests {
                 0.03,
             )),
             unexplained_rate_radps: 0.0,
+            lag_gap_without_states: None,
             instrumented: [false; 2],
         });
         let d = dynamics_msg(0, &m).unwrap();

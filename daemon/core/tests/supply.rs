@@ -55,7 +55,12 @@ fn run_at(volts: f64, reported: Option<f64>, power: f64) -> Run {
 fn learned(run: &mut Run) -> DMatrix<f64> {
     run.run_for(1.0);
     run.estimate();
-    assert_eq!(run.machine.state(), State::Active, "no model");
+    assert_eq!(
+        run.machine.state(),
+        State::Active,
+        "no model: {}",
+        run.machine.status().text
+    );
 
     run.machine.model().unwrap().effectiveness.clone()
 }

@@ -234,7 +234,7 @@ pub struct EstimatorConfig {
     #[serde(skip)]
     pub disturbance: crate::estimator::dynamic::disturbance_states::DisturbanceStates,
     /// Dynamic method, open loop: in moving water (the fit leaves rotation unexplained
-    /// beyond the gyro's noise, `estimator::STILL_WATER_UNEXPLAINED_RADPS`) the log is
+    /// beyond the gyro's noise by `estimator::MOVING_WATER_REFIT_RADPS`) the log is
     /// fitted again with a swell at this frequency as disturbance states (sin and cos per
     /// DOF row, `estimator::dynamic::disturbance_states`), the lag searched again with them,
     /// and that fit is the estimate. Hz, default 0.15; 0: off; at most 1. Why: the swell's

@@ -65,6 +65,18 @@ pub struct DynamicTerms {
     /// vehicle's dynamics explain, such as a swell's torque (set by the estimation run, which knows
     /// the rest's noise; 0 until then).
     pub unexplained_rate_radps: f64,
+    /// With the moving-water refit (`EstimatorConfig::moving_water_swell_hz`): how far the
+    /// fit without states put the lag apart by its row groups, over its bound
+    /// ([`super::lag_agreement::gap_over_bound`]), which the machine's lag-gap check then
+    /// reads instead of the kept fit's own; None without the refit. Why: the states can take
+    /// the swell's pull on the lag out of the groups' disagreement without taking it out of
+    /// the lag (AMOUR-5 at a realistic IMU, the moderate preset at seed 5's swell phase: kept
+    /// 0.133 / 0.121 off under 0.053 / 0.056, where without the states the gap refused it),
+    /// and where a model error leaves the rotation unexplained (a T200 fitted as a line, in
+    /// still water) the states' own groups moved apart (13 sd) on a model the fit without them
+    /// let through.
+    #[serde(default)]
+    pub lag_gap_without_states: Option<f64>,
     /// Per row group (rotation, acceleration): whether B came from the fit by instrumental
     /// variables (`DynamicRun::with_instruments`, chosen where it and least squares disagree)
     /// rather than least squares.

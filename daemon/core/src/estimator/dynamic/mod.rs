@@ -778,6 +778,7 @@ impl DynamicRun {
                 command_exponent: None,
                 imu_position: None,
                 unexplained_rate_radps: 0.0,
+                lag_gap_without_states: None,
                 instrumented: [rot_ls.instrumented(), acc_ls.instrumented()],
                 thrust_asymmetry: if self.split { 0.0 } else { self.asymmetry },
                 // Reported, not applied: whoever reports the bound widens it by this (the

@@ -375,12 +375,22 @@ impl Machine {
         // in still water, where the groups of vehicles with slow or mixed lags are up to 7 sd
         // apart on good models.
         let gap_limit = self.setup.machine.max_lag_gap_over_bound;
-        let gap = candidate.dynamics.as_ref().map_or(0.0, |d| {
-            crate::estimator::dynamic::lag_agreement::gap_over_bound(
-                d,
-                [candidate.rel_err_rot, candidate.rel_err_acc],
-            )
-        });
+        // Fitted again with the swell's states, the fit without them says it
+        // (`lag_gap_without_states`).
+        let (gap, without_states) =
+            candidate
+                .dynamics
+                .as_ref()
+                .map_or((0.0, false), |d| match d.lag_gap_without_states {
+                    Some(g) => (g, true),
+                    None => (
+                        crate::estimator::dynamic::lag_agreement::gap_over_bound(
+                            d,
+                            [candidate.rel_err_rot, candidate.rel_err_acc],
+                        ),
+                        false,
+                    ),
+                });
         if gap_limit > 0.0
             && unexplained > crate::estimator::STILL_WATER_UNEXPLAINED_RADPS
             && gap > gap_limit
@@ -389,9 +399,15 @@ impl Machine {
             let (apart, z) = groups.map_or((0.0, 0.0), |g| (g.gap_ln() * 100.0, g.z));
             // Within the status's 128 bytes, "model rejected" included (the operator's tools
             // look for it).
-            let text = format!(
-                "row groups put the lag {apart:.0} % apart ({z:.1} sd), {gap:.1}x B's bound (limit {gap_limit:.1}; water?): model rejected; old model kept"
-            );
+            let text = if !without_states {
+                format!(
+                    "row groups put the lag {apart:.0} % apart ({z:.1} sd), {gap:.1}x B's bound (limit {gap_limit:.1}; water?): model rejected; old model kept"
+                )
+            } else {
+                format!(
+                    "row groups put the lag apart without swell states, {gap:.1}x B's bound (limit {gap_limit:.1}; water?): model rejected; old model kept"
+                )
+            };
             self.events.push(Event::ModelRejected(text.clone()));
             self.transition(self.after_refusal(), &text);
             return;
