@@ -239,9 +239,11 @@ pub struct EstimatorConfig {
     /// DOF row, `estimator::dynamic::disturbance_states`), the lag searched again with them,
     /// and that fit is the estimate. Hz, default 0.15; 0: off; at most 1. Why: the swell's
     /// moment went into the rotation rows; over 300 swell flights the kept models' mean
-    /// error 0.037 / 0.049 -> 0.017 / 0.031, over 1.5x their bound 34 of 125 -> 23 of 142;
-    /// still water is never refitted (identical to the digit), and any frequency from 0.05
-    /// to 0.3 Hz does alike over a run of seconds (docs/study.md, "Disturbance states").
+    /// error 0.037 / 0.049 -> 0.014 / 0.029, over 1.5x their bound 34 of 125 -> 6 of 122
+    /// (the refit's bound kept no tighter than the fit's without states, whose row groups'
+    /// lag gap the machine reads); still water is never refitted (identical to the digit),
+    /// and any frequency from 0.05 to 0.3 Hz does alike over a run of seconds
+    /// (docs/study.md, "Disturbance states").
     pub moving_water_swell_hz: f64,
     /// Research hook, not a configuration key: other states for that refit than the swell's
     /// (`moving_water_swell_hz` then ignored), for the lab's decisive runs.
