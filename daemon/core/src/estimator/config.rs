@@ -302,22 +302,6 @@ pub struct EstimatorConfig {
     pub second_amplitude: f64,
 }
 
-impl EstimatorConfig {
-    /// The disturbance states of the moving-water refit: the research hook's when it names
-    /// any, else the swell at `moving_water_swell_hz` (none at 0).
-    pub fn moving_water_states(
-        &self,
-    ) -> crate::estimator::dynamic::disturbance_states::DisturbanceStates {
-        if self.moving_water_states.any() {
-            return self.moving_water_states;
-        }
-        crate::estimator::dynamic::disturbance_states::DisturbanceStates {
-            swell_hz: (self.moving_water_swell_hz > 0.0).then_some(self.moving_water_swell_hz),
-            ..Default::default()
-        }
-    }
-}
-
 impl Default for EstimatorConfig {
     fn default() -> Self {
         EstimatorConfig {
@@ -411,6 +395,20 @@ impl EstimatorConfig {
     /// The acceleration rows' stop target (`target_rel_err_acc`, else `target_rel_err`).
     pub fn acc_target(&self) -> f64 {
         self.target_rel_err_acc.unwrap_or(self.target_rel_err)
+    }
+
+    /// The disturbance states of the moving-water refit: the research hook's when it names
+    /// any, else the swell at `moving_water_swell_hz` (none at 0).
+    pub fn moving_water_states(
+        &self,
+    ) -> crate::estimator::dynamic::disturbance_states::DisturbanceStates {
+        if self.moving_water_states.any() {
+            return self.moving_water_states;
+        }
+        crate::estimator::dynamic::disturbance_states::DisturbanceStates {
+            swell_hz: (self.moving_water_swell_hz > 0.0).then_some(self.moving_water_swell_hz),
+            ..Default::default()
+        }
     }
 
     /// (key under `[estimator]`, value, allowed range) of every number; the config file's

@@ -1,5 +1,8 @@
-//! Disturbance states (issue 32 item 3, a research hook): forcing the vehicle's model does
-//! not have, as more columns of the dynamic fit with a free coefficient per DOF row.
+//! Disturbance states (issue 32 item 3): forcing the vehicle's model does not have, as more
+//! columns of the dynamic fit with a free coefficient per DOF row. By default only the
+//! swell's two, in the open-loop fit made again where the water moves
+//! (`EstimatorConfig::moving_water_swell_hz`); the rest through the research hook
+//! `EstimatorConfig::disturbance`.
 //!
 //! - A swell at a known frequency f: sin and cos of 2 pi f t (a moment fixed in the body,
 //!   amplitude and phase free per row), and optionally the same times each of the nine
@@ -48,7 +51,13 @@ impl DisturbanceStates {
 
     /// The regressors at `t_s` under `attitude` (body to NED) into `out[..columns()]`.
     pub fn fill(&self, t_s: f64, attitude: &UnitQuaternion<f64>, out: &mut [f64; MAX_COLUMNS]) {
-        let r = attitude.to_rotation_matrix();
+        // The swell's two alone (the default) need no rotation.
+        let world = self.world_constant || self.world_ramp || self.swell_in_world;
+        let r = if world {
+            attitude.to_rotation_matrix()
+        } else {
+            nalgebra::Rotation3::identity()
+        };
         let mut k = 0;
         if let Some(hz) = self.swell_hz {
             let (s, c) = (std::f64::consts::TAU * hz * t_s).sin_cos();

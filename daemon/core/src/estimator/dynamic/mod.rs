@@ -36,6 +36,7 @@ pub use thrust_shape::MAX_THRUST_ASYMMETRY;
 
 use nalgebra::{DMatrix, Vector3};
 
+use self::disturbance_states::{DisturbanceStates, MAX_COLUMNS as DISTURBANCE_COLUMNS};
 use self::prior::{DynamicPrior, PriorEntry};
 use self::regressors::{terms, TERMS};
 use self::sample_log::{Navigated, SampleLog};
@@ -44,12 +45,6 @@ use self::spin_state::{lag_step, MAX_LAG_STEP_S};
 use crate::navigation::{DepthAid, NavState, Navigator};
 
 use self::variance::{combination_var, group_sigma};
-
-fn no_disturbance() -> [f64; DISTURBANCE_COLUMNS] {
-    [0.0; DISTURBANCE_COLUMNS]
-}
-
-use self::disturbance_states::{DisturbanceStates, MAX_COLUMNS as DISTURBANCE_COLUMNS};
 
 /// The fit of both groups.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -86,9 +81,9 @@ pub struct DynamicRun {
     #[serde(skip)]
     disturbance: DisturbanceStates,
     /// Their regressors at this sample and the one before (for the integrals).
-    #[serde(skip, default = "no_disturbance")]
+    #[serde(skip)]
     disturbance_now: [f64; DISTURBANCE_COLUMNS],
-    #[serde(skip, default = "no_disturbance")]
+    #[serde(skip)]
     disturbance_prev: [f64; DISTURBANCE_COLUMNS],
     n: usize,
     /// Forward and reverse command in separate columns (thrust = k_f u+ + k_r u-): needed when
@@ -248,8 +243,8 @@ impl DynamicRun {
             last_nav: None,
             term_prior_mean: None,
             disturbance: DisturbanceStates::default(),
-            disturbance_now: no_disturbance(),
-            disturbance_prev: no_disturbance(),
+            disturbance_now: [0.0; DISTURBANCE_COLUMNS],
+            disturbance_prev: [0.0; DISTURBANCE_COLUMNS],
         }
     }
 

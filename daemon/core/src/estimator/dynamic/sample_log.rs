@@ -19,7 +19,7 @@ const CHUNK: usize = 512;
 /// Chunks allocated when the log is made.
 const CHUNKS: usize = 64;
 
-/// Samples the log holds at most (~4.3 MB).
+/// Samples the log holds at most (~5.5 MB: 168 bytes each with the attitude).
 pub const CAPACITY: usize = CHUNK * CHUNKS;
 
 /// One sample as the fit sees it, after the navigation.
