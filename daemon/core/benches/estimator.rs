@@ -39,6 +39,15 @@ fn dynamic_sample(t: f64) -> (Vector3<f64>, Vector3<f64>) {
     )
 }
 
+/// `dynamic_sample` with a rate jitter of about 0.01 rad/s the terms cannot explain (a
+/// deterministic hash of the time, so every run is the same), five times a realistic gyro's
+/// noise: rotation left unexplained as in moving water.
+fn jittered_sample(t: f64) -> (Vector3<f64>, Vector3<f64>) {
+    let (w, f) = dynamic_sample(t);
+    let jitter = |k: f64| ((t * 7919.0 + k).sin() * 43758.547).fract() * 0.035;
+    (w + Vector3::new(jitter(1.0), jitter(2.0), jitter(3.0)), f)
+}
+
 /// A dynamic-method estimator (the default config) that has seen `pulses` back-to-back pulses
 /// of 0.1 s at 200 Hz, for the `estimate()` cost.
 fn warmed_dynamic(n: usize, pulses: usize) -> Estimator {
@@ -58,6 +67,17 @@ fn warmed_dynamic_with(
     noise: NoiseLevels,
     cfg: EstimatorConfig,
 ) -> Estimator {
+    warmed_dynamic_on(n, pulses, noise, cfg, dynamic_sample)
+}
+
+/// The same with the IMU samples of `sample`.
+fn warmed_dynamic_on(
+    n: usize,
+    pulses: usize,
+    noise: NoiseLevels,
+    cfg: EstimatorConfig,
+    sample: fn(f64) -> (Vector3<f64>, Vector3<f64>),
+) -> Estimator {
     let cfg = EstimatorConfig {
         max_pulses: 1000,
         ..cfg
@@ -68,7 +88,7 @@ fn warmed_dynamic_with(
         est.begin_pulse_at(t);
         for _ in 0..20 {
             t += 0.005;
-            let (w, f) = dynamic_sample(t);
+            let (w, f) = sample(t);
             est.push_dynamic_sample(t, &w, &f, Some(5.0));
         }
         est.end_pulse();
@@ -269,6 +289,31 @@ fn bench(c: &mut Criterion) {
                 ..EstimatorConfig::default()
             };
             let est = warmed_dynamic_with(n, 64, NoiseLevels::isotropic(0.002, 0.03), cfg);
+            c.bench_with_input(
+                BenchmarkId::new(format!("dynamic_estimate_{label}"), n),
+                &n,
+                |b, _| b.iter(|| black_box(est.estimate())),
+            );
+        }
+        // In moving water (`run/fits.rs in_moving_water`): the jittered rate leaves more
+        // rotation unexplained than `MOVING_WATER_REFIT_RADPS`, so the default estimate
+        // refits the log with the swell's two states and searches the lag again; the same
+        // estimator with the refit off (`moving_water_swell_hz = 0`) is the still-water cost.
+        for (label, swell_hz) in [("moving_water_refit", 0.15), ("moving_water_off", 0.0)] {
+            let cfg = EstimatorConfig {
+                moving_water_swell_hz: swell_hz,
+                ..EstimatorConfig::default()
+            };
+            let noise = NoiseLevels::isotropic(0.002, 0.03);
+            let est = warmed_dynamic_on(n, 64, noise, cfg, jittered_sample);
+            let water = est
+                .estimate()
+                .dynamics
+                .map_or(0.0, |d| d.unexplained_rate_radps);
+            assert!(
+                water > thrusterd_core::estimator::MOVING_WATER_REFIT_RADPS,
+                "the jitter must take the moving-water refit ({water} rad/s unexplained)"
+            );
             c.bench_with_input(
                 BenchmarkId::new(format!("dynamic_estimate_{label}"), n),
                 &n,
