@@ -249,6 +249,15 @@ pub struct EstimatorConfig {
     /// (`moving_water_swell_hz` then ignored), for the lab's decisive runs.
     #[serde(skip)]
     pub moving_water_states: crate::estimator::dynamic::disturbance_states::DisturbanceStates,
+    /// Research hook, not a configuration key: the moving-water refit reports the rotation
+    /// its own fit leaves unexplained (what the machine's water check reads) instead of the
+    /// fit's without states.
+    #[serde(skip)]
+    pub water_after_states: bool,
+    /// Research hook: the unexplained rotation from the fit's residual alone, not from the
+    /// larger of it and the rest's noise.
+    #[serde(skip)]
+    pub water_from_residual: bool,
     /// Dynamic method: the IMU's position from the vehicle's centre (its centre of mass, what
     /// the rates pivot about), body frame (x forward, y starboard, z down), m, from the
     /// vehicle's drawings (default [0, 0, 0]). The acceleration rows are referred from the
@@ -353,6 +362,8 @@ impl Default for EstimatorConfig {
             disturbance: Default::default(),
             moving_water_swell_hz: 0.15,
             moving_water_states: Default::default(),
+            water_after_states: false,
+            water_from_residual: false,
             imu_position_m: [0.0; 3],
             learn_imu_position: true,
             split_thrust: false,

@@ -68,6 +68,10 @@ pub struct DynamicSolution {
     /// coefficients, which the IMU's lever arm needs as it needs B and the terms.
     #[serde(skip)]
     pub disturbance: Option<DMatrix<f64>>,
+    /// The rotation rows' fit residual, rad/s per axis, where well determined (`sigma` is
+    /// the larger of it and the rest's noise).
+    #[serde(skip)]
+    pub residual_rot: Option<[f64; 3]>,
 }
 
 /// One dynamic-model fit in progress: navigation, thrust lag, integrals and both regressions.
@@ -747,7 +751,12 @@ impl DynamicRun {
                 rel_err[g] = var_sum.sqrt() / norm2.sqrt();
             }
         }
+        let residual_rot = sols[0]
+            .residual_var
+            .filter(|_| sols[0].residual_dof >= variance::MIN_RESIDUAL_DOF)
+            .map(|v| std::array::from_fn(|a| v[a].sqrt()));
         DynamicSolution {
+            residual_rot,
             b,
             std_err,
             rel_err,

@@ -4,7 +4,7 @@
 use super::segmented_ls::SegmentedSolution;
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
-const MIN_RESIDUAL_DOF: u64 = 10;
+pub(super) const MIN_RESIDUAL_DOF: u64 = 10;
 
 /// The cluster-robust covariance is used once it rests on this many segments: with S clusters
 /// it has S - 1 degrees of freedom, and with one it is zero.

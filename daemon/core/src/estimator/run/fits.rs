@@ -268,7 +268,9 @@ impl Estimator {
             )
         });
         if let Some(d) = kept.dynamics.as_mut() {
-            d.unexplained_rate_radps = water;
+            if !self.cfg.water_after_states {
+                d.unexplained_rate_radps = water;
+            }
             d.lag_gap_without_states = Some(gap);
         }
         // The bound no tighter than the fit's without states. Why: rotation is left
@@ -502,7 +504,11 @@ impl Estimator {
         if lag.is_none() {
             add_inherited_lag_error(&mut sol, self.inherited_lag_rel_err);
         }
-        sol.terms.unexplained_rate_radps = unexplained(&sol.sigma, &self.noise.gyro_white_sigma);
+        let water_sigma = match sol.residual_rot {
+            Some(r) if self.cfg.water_from_residual => [r[0], r[1], r[2], 0.0, 0.0, 0.0],
+            _ => sol.sigma,
+        };
+        sol.terms.unexplained_rate_radps = unexplained(&water_sigma, &self.noise.gyro_white_sigma);
         sol.terms.thrust_curve = self.thrust_curve.as_ref().and_then(|c| c.evidence());
         let rank = rank_report(&sol.b, &sol.std_err, &self.cfg);
         let alloc = pseudo_inverse(&sol.b, rank.actuated, rank.rank);

@@ -489,7 +489,10 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// (swell states at this frequency, `EstimatorConfig::disturbance`; LA_DIST_WORLD=1 with its
 /// force fixed in the world), LA_DIST_CONST=1 (a constant horizontal world-fixed force), LA_DIST_RAMP=1 (the same
 /// growing in time), LA_GATE (1: those states in the moving-water refit instead; 0: that
-/// refit off).
+/// refit off), LA_WATER_AFTER_STATES=1 (the water check reads the refit's unexplained
+/// rotation), LA_WATER_FROM_RESIDUAL=1 (the unexplained rotation from the fit's residual
+/// alone, not the larger of it and the rest's noise: docs/study.md, "What the water check
+/// reads").
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -604,6 +607,8 @@ pub(super) fn imu_and_water_sweep() {
             cfg.disturbance.world_ramp = std::env::var("LA_DIST_RAMP").is_ok();
             // The same states in the fit made again when the water moves (LA_GATE=1), or
             // that refit off (LA_GATE=0: `moving_water_swell_hz` 0).
+            cfg.water_after_states = std::env::var("LA_WATER_AFTER_STATES").is_ok();
+            cfg.water_from_residual = std::env::var("LA_WATER_FROM_RESIDUAL").is_ok();
             match std::env::var("LA_GATE").as_deref() {
                 Ok("0") => cfg.moving_water_swell_hz = 0.0,
                 Ok(_) => {
