@@ -477,7 +477,7 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s), LA_IDLE_S (idle before
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
-/// `--tether`), LA_REACH (`reach_rel_err`), LA_MIN_CYCLES (`min_cycles`), LA_TARGET
+/// `--tether`), LA_REACH (`reach_rel_err`), LA_MIN_CYCLES (`min_cycles`), LA_MAX_PULSES (`max_pulses`), LA_TARGET
 /// (`target_rel_err`), LA_BURST
 /// (`identification.burst_rel_err`: the open-loop model refined under control), LA_WAVE_SCALE (every wave's force and moment
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
@@ -551,6 +551,9 @@ pub(super) fn imu_and_water_sweep() {
             }
             if let Ok(c) = std::env::var("LA_MIN_CYCLES") {
                 cfg.min_cycles = c.parse().unwrap();
+            }
+            if let Ok(p) = std::env::var("LA_MAX_PULSES") {
+                cfg.max_pulses = p.parse().unwrap();
             }
             if std::env::var("LA_TOLD").is_ok() {
                 cfg.imu_position_m = [arm[0], arm[1], arm[2]];
