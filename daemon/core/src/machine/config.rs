@@ -62,8 +62,9 @@ pub struct MachineConfig {
     /// (default 0.25).
     pub max_swap_rel_err: f64,
     /// An estimated model is refused when more of the vehicle's rotation than this is
-    /// explained by neither thrust nor its own dynamics, rad/s (the rotation rows' residual
-    /// beyond the noise measured at rest; `DynamicTerms::unexplained_rate_radps`; default
+    /// explained by neither thrust nor its own dynamics, rad/s (the larger of the rotation
+    /// rows' residual and the gyro's level over the rest, beyond the gyro's white noise: in a
+    /// swell the rest is not still; `DynamicTerms::unexplained_rate_radps`; default
     /// 0.05). Why: a swell's torque made models 5-38 % off whose bounds said 4-20 %; it left
     /// 0.013-0.12 rad/s unexplained where still water leaves 0-0.0001 (docs/study.md, "Moving
     /// water"). Not 0.01: a real-time session on a loaded machine in still water left 0.021.

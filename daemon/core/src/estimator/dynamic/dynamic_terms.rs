@@ -61,9 +61,12 @@ pub struct DynamicTerms {
     /// ([`imu_position`]), learned or configured; None before [`DynamicRun::refer_to_centre`].
     pub imu_position: Option<ImuPosition>,
     /// The rotation rows' noise level beyond the gyro's white noise at rest (RMS over the axes
-    /// of sqrt(max(0, sigma^2 - 2 white^2))), rad/s: rotation neither thrust nor the
-    /// vehicle's dynamics explain, such as a swell's torque (set by the estimation run, which knows
-    /// the rest's noise; 0 until then).
+    /// of sqrt(max(0, sigma^2 - 2 white^2))), rad/s, where sigma is the larger of the fit's
+    /// residual and the gyro's level over the rest: rotation neither thrust nor the vehicle's
+    /// dynamics explain, such as a swell's torque, during the pulses or the rest before them
+    /// (set by the estimation run, which knows the rest's noise; 0 until then). Why the rest
+    /// counts: in a swell the fit's terms soak up a slow moment, so its residual alone is
+    /// small where B is off (docs/study.md, "What the water check reads").
     pub unexplained_rate_radps: f64,
     /// With the moving-water refit (`EstimatorConfig::moving_water_swell_hz`): how far the
     /// fit without states put the lag apart by its row groups, over its bound
