@@ -400,6 +400,11 @@ impl DaemonConfig {
                 Range::at_least(0.0),
             ),
             (
+                "machine.max_moving_water_tilt_deg".into(),
+                m.max_moving_water_tilt_deg,
+                Range::closed(0.0, 180.0),
+            ),
+            (
                 "machine.deadband".into(),
                 m.deadband,
                 Range::from_below(0.0, 0.5),

@@ -126,6 +126,8 @@ pub struct Ideal {
     pub tether_n: Option<f64>,
     /// The machine's `max_lag_gap_over_bound` (default the shipped one; 0: the check off).
     pub max_lag_gap_over_bound: Option<f64>,
+    /// `machine.max_moving_water_tilt_deg` (None: the default).
+    pub max_moving_water_tilt_deg: Option<f64>,
     /// `identification.burst_rel_err` (default the shipped 0: off): the open-loop run stops
     /// at this bound, its model goes in and the estimation goes on under control; the
     /// outcome is then the identification's.
@@ -269,6 +271,9 @@ pub fn estimate_observed(
     }
     if let Some(v) = ideal.rest_from_idle {
         setup.machine.rest_from_idle = v;
+    }
+    if let Some(v) = ideal.max_moving_water_tilt_deg {
+        setup.machine.max_moving_water_tilt_deg = v;
     }
     if let Some(v) = ideal.max_lag_gap_over_bound {
         setup.machine.max_lag_gap_over_bound = v;

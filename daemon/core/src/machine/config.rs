@@ -77,6 +77,14 @@ pub struct MachineConfig {
     /// deviation of 0.5-1 %, and the model 10-17 % off under a 4-6 % bound; the groups were
     /// then 3-18 deviations apart (docs/study.md, "The lag in a swell").
     pub max_lag_gap_over_bound: f64,
+    /// In moving water (rotation left unexplained), an open-loop model is refused when the
+    /// vehicle tilted more than this during the run, deg (default 50; 0: never). Why: the
+    /// pulses tilt every vehicle file 13-27 deg in still water (amour5_reverse60's uneven
+    /// thrust 63-75 deg, never refused: still water leaves no rotation unexplained), so a
+    /// vehicle past 50 deg was thrown by the water, and the fit's acceleration rows, which
+    /// rest on the dead-reckoned velocity, were then 0.08-0.29 off under bounds of 0.04-0.13
+    /// (docs/study.md, "A vehicle the water threw").
+    pub max_moving_water_tilt_deg: f64,
     /// "estimate" (default) or "on_request".
     pub on_reconfig: ReconfigPolicy,
     /// Hold attitude with the new model after an estimation (default true); otherwise Idle.
@@ -130,6 +138,7 @@ impl Default for MachineConfig {
             max_swap_rel_err: 0.25,
             max_unexplained_rate_radps: 0.05,
             max_lag_gap_over_bound: 1.5,
+            max_moving_water_tilt_deg: 50.0,
             on_reconfig: ReconfigPolicy::Estimate,
             control_after_estimate: true,
             max_sample_gap_s: 0.1,

@@ -412,6 +412,23 @@ impl Machine {
             self.transition(self.after_refusal(), &text);
             return;
         }
+        // In moving water, a vehicle tilted beyond what the pulses do in still water: the
+        // water threw it, and the acceleration rows rest on a velocity dead-reckoned through
+        // that (machine.max_moving_water_tilt_deg). The tilt is the navigation's: where its
+        // attitude went astray in a swell (118 deg against a true 30) the fit's regressors
+        // did too. After the lag's check, which names a more particular cause.
+        let tilt_limit = self.setup.machine.max_moving_water_tilt_deg;
+        if tilt_limit > 0.0
+            && unexplained > crate::estimator::STILL_WATER_UNEXPLAINED_RADPS
+            && tilt_deg > tilt_limit
+        {
+            let text = format!(
+                "tilted {tilt_deg:.0} deg in moving water (limit {tilt_limit:.0}; {unexplained:.3} rad/s unexplained): model rejected; old model kept"
+            );
+            self.events.push(Event::ModelRejected(text.clone()));
+            self.transition(self.after_refusal(), &text);
+            return;
+        }
         // A lag configured because the gyro is too noisy to learn it, which the data
         // contradicts: the model is as wrong as the lag (AMOUR-5 at 0.05 s: 95-109 % off) and
         // its bound does not know it (estimator::dynamic::lag_check).

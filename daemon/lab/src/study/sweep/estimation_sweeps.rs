@@ -587,6 +587,9 @@ pub(super) fn imu_and_water_sweep() {
                 max_lag_gap_over_bound: std::env::var("LA_LAG_GAP")
                     .ok()
                     .map(|v| v.parse().unwrap()),
+                max_moving_water_tilt_deg: std::env::var("LA_MAX_TILT")
+                    .ok()
+                    .map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
                 burst_rel_err: std::env::var("LA_BURST").ok().map(|v| v.parse().unwrap()),
                 ..Ideal::default()
