@@ -238,7 +238,8 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// errors against the truth), LAG_PROBE_SHIFT (each sample under the command that many
 /// samples later), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
 /// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
-/// `response` module).
+/// `response` module). LAG_WATER, LAG_WAVE_SCALE, LAG_WAVE_PHASE and LAG_IDLE_S fly it in
+/// moving water (as imu_and_water_sweep's LA_ knobs).
 pub(super) fn lag_sweep() {
     let noise = match std::env::var("LAG_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -346,6 +347,16 @@ pub(super) fn lag_sweep() {
                     // A refused model is a result here (the configured lag's check, the
                     // swell's): printed, not a failed run.
                     allow_refusal: true,
+                    // LAG_WATER (a preset: the probe in moving water), LAG_WAVE_SCALE,
+                    // LAG_WAVE_PHASE (rad or "seed"), LAG_IDLE_S (the water's time to come up).
+                    water: super::water_from_env("LAG_WATER").unwrap_or_default(),
+                    wave_scale: std::env::var("LAG_WAVE_SCALE")
+                        .ok()
+                        .map(|v| v.parse().unwrap()),
+                    wave_phase_rad: std::env::var("LAG_WAVE_PHASE")
+                        .ok()
+                        .map(|v| super::wave_phase("LAG_WAVE_PHASE", &v, seed)),
+                    idle_s: std::env::var("LAG_IDLE_S").ok().map(|v| v.parse().unwrap()),
                     ..Ideal::default()
                 };
                 let mut v = with_lag(name, tau);
