@@ -339,6 +339,11 @@ impl DaemonConfig {
         let mut floats: Vec<(String, f64, Range)> = vec![
             ("machine.noise_s".into(), m.noise_s, Range::above(0.0)),
             (
+                "machine.gyro_bias_rest_s".into(),
+                m.gyro_bias_rest_s,
+                Range::closed(0.0, 3600.0),
+            ),
+            (
                 "checkpoint.period_s".into(),
                 self.checkpoint.period_s,
                 Range::closed(0.0, 3600.0),

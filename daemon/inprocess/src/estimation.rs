@@ -119,6 +119,9 @@ pub struct Ideal {
     /// Whether the rest while idle counts towards the noise measurement (default the
     /// shipped `machine.rest_from_idle`).
     pub rest_from_idle: Option<bool>,
+    /// The long idle window of the gyro's bias, s (default the shipped
+    /// `machine.gyro_bias_rest_s`; 0 = the noise rest's).
+    pub gyro_bias_rest_s: Option<f64>,
     /// How long the machine idles before the request, s (default `IDLE_BEFORE_REQUEST_S`).
     pub idle_s: Option<f64>,
     /// A tether pulling this many newtons aft at the stern, varying 30 % over 20 s (the lab's
@@ -272,6 +275,9 @@ pub fn estimate_observed(
     if let Some(v) = ideal.rest_from_idle {
         setup.machine.rest_from_idle = v;
     }
+    if let Some(v) = ideal.gyro_bias_rest_s {
+        setup.machine.gyro_bias_rest_s = v;
+    }
     if let Some(v) = ideal.max_moving_water_tilt_deg {
         setup.machine.max_moving_water_tilt_deg = v;
     }
@@ -284,6 +290,7 @@ pub fn estimate_observed(
     let mut machine = Machine::new(setup);
     while sim.time_s() < ideal.idle_s.unwrap_or(IDLE_BEFORE_REQUEST_S) {
         tick(&mut machine, &mut sim);
+        observe(&machine, &sim);
     }
     machine.on_request(Request::Estimate).unwrap();
     let start = sim.time_s();

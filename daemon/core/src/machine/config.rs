@@ -35,6 +35,16 @@ pub struct MachineConfig {
     /// reconfiguration in it (`machine::estimation::idle_rest`). Estimations that start
     /// while controlling, or on a reconfiguration, still measure after the start.
     pub rest_from_idle: bool,
+    /// With `rest_from_idle`, once the machine has idled this long (s; default 60, 0 = never),
+    /// the gyro's bias over the last 1-2 `gyro_bias_rest_s` of the idle spell, from how the
+    /// gyro turned gravity and the magnetometer's heading (`navigation::long_rest_bias`), and
+    /// "down" averaged over its last third, carried by the gyro (`long_rest_down`), stand for
+    /// the 1-2 s rest's when the two biases differ by more than noise and a walking bias
+    /// explain: the rest moved. Why: in a swell the 1-2 s rest takes the swell's rotation for
+    /// bias (0.04-0.19 rad/s at a 6.7 s period) and its acceleration for a tilt, and the
+    /// navigation carried both through the run (eight_vectored in the full moderate swell:
+    /// gravity 0.36 rad off). In still water the short rest stays: fresher.
+    pub gyro_bias_rest_s: f64,
     /// An estimation that starts while the daemon controls (a reconfiguration, a mismatch, a
     /// request) first levels the vehicle with the model in force, for at most this long, s
     /// (default 5; 0 = pulse from wherever the vehicle is). Why: started mid-manoeuvre, the
@@ -128,6 +138,7 @@ impl Default for MachineConfig {
         MachineConfig {
             noise_s: 1.0,
             rest_from_idle: true,
+            gyro_bias_rest_s: 60.0,
             level_max_s: 5.0,
             level_tilt_deg: 5.0,
             level_hold_s: 1.0,

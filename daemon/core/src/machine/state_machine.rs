@@ -482,7 +482,12 @@ impl Machine {
             State::Idle => {
                 if self.setup.machine.rest_from_idle {
                     let m = self.motion(s, &gyro, &accel);
-                    self.idle_rest.push(s.t_ns, &m, self.setup.machine.noise_s);
+                    self.idle_rest.push(
+                        s.t_ns,
+                        &m,
+                        self.setup.machine.noise_s,
+                        self.setup.machine.gyro_bias_rest_s,
+                    );
                 }
                 if self.settling.is_some() {
                     self.await_settled(s.t_ns);
@@ -718,6 +723,7 @@ impl Machine {
             accel: motion_accel(accel, &self.attitude.attitude()),
             specific_force: *accel,
             depth: s.depth,
+            mag: s.mag.map(Vector3::from),
         }
     }
 

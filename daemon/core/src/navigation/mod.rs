@@ -20,6 +20,8 @@
 //! (docs/study.md).
 
 pub mod bias_filter;
+pub mod long_rest_bias;
+pub mod long_rest_down;
 pub mod rest_drift;
 pub mod rest_rotation;
 pub mod rest_shape;

@@ -155,7 +155,17 @@ pub fn probe(
     let mut pulses = usize::MAX;
     // The simulator's symmetric truth at the last sample (LAG_PROBE_FIT's reference).
     let mut truth_b: Option<DMatrix<f64>> = None;
+    let (mut idle_sum, mut idle_world, mut idle_n) = (Vector3::zeros(), Vector3::zeros(), 0.0);
+    let mut idle_f = Vector3::zeros();
     let outcome = estimate_observed(v, sensors, seed, cfg, ideal, &mut |machine, sim| {
+        if machine.state() == thrusterd_core::machine::State::Idle {
+            idle_sum += sim.angular_velocity();
+            idle_world += sim.attitude() * sim.angular_velocity();
+            idle_n += 1.0;
+            // The specific force in the world, forgetting over 20 s (LAG_PROBE_ERR's print).
+            let f_world = sim.attitude() * Vector3::from(sim.ideal_sample().accel);
+            idle_f = idle_f * (1.0 - 0.005 / 20.0) + f_world * (0.005 / 20.0);
+        }
         let (f, r) = sim.truth();
         truth_b = Some((f + r) * 0.5);
         let down = sim.attitude().inverse_transform_vector(&Vector3::z());
@@ -177,6 +187,20 @@ pub fn probe(
             }
         }
     });
+    if idle_n > 0.0 && std::env::var_os("LAG_PROBE_ERR").is_some() {
+        // What the vehicle did while idle (truth): its mean rotation, body and world, and
+        // the world's specific force, which a rest's "down" averages.
+        println!(
+            "  idle mean true rate body {:.4?} world {:.4?} over {idle_n} samples",
+            (idle_sum / idle_n).as_slice(),
+            (idle_world / idle_n).as_slice()
+        );
+        println!(
+            "  idle specific force in the world, last 20 s: {:.4?} (horizontal over g {:.4})",
+            idle_f.as_slice(),
+            idle_f.xy().norm() / idle_f.norm()
+        );
+    }
     let Some(run) = last else {
         return (outcome, Vec::new());
     };
@@ -358,6 +382,16 @@ fn print_errors(run: &DynamicRun, truth: &HashMap<u64, Truth>) {
             }
         }
     }
+    // The attitude's error at the log's start and end: where it came from.
+    let ends: Vec<f64> = [log.iter().next(), log.iter().last()]
+        .iter()
+        .flatten()
+        .filter_map(|s| {
+            let t = truth.get(&((s.t_s * 1e9).round() as u64))?;
+            Some((s.down - t.down).norm())
+        })
+        .collect();
+    println!("  down error at the log's start / end: {ends:.4?}");
     for (k, name) in ["gyro", "rate", "down", "velocity", "motion"]
         .iter()
         .enumerate()

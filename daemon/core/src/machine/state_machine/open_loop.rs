@@ -73,10 +73,12 @@ impl Machine {
         // first part (`machine.rest_from_idle`).
         if self.state == State::Idle && self.setup.machine.rest_from_idle {
             let now = self.last_t_ns.unwrap_or(t_ns);
-            if let Some(taken) =
-                self.idle_rest
-                    .take(now, self.setup.machine.noise_s, MIN_REST_SAMPLES)
-            {
+            if let Some(taken) = self.idle_rest.take(
+                now,
+                self.setup.machine.noise_s,
+                self.setup.machine.gyro_bias_rest_s,
+                MIN_REST_SAMPLES,
+            ) {
                 self.run.adopt_rest(taken);
             }
         }

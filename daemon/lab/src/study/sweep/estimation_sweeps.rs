@@ -357,6 +357,10 @@ pub(super) fn lag_sweep() {
                         .ok()
                         .map(|v| super::wave_phase("LAG_WAVE_PHASE", &v, seed)),
                     idle_s: std::env::var("LAG_IDLE_S").ok().map(|v| v.parse().unwrap()),
+                    // LAG_BIAS_REST: the long idle window of the gyro's bias, s (0: the rest's).
+                    gyro_bias_rest_s: std::env::var("LAG_BIAS_REST")
+                        .ok()
+                        .map(|v| v.parse().unwrap()),
                     ..Ideal::default()
                 };
                 let mut v = with_lag(name, tau);
@@ -388,9 +392,14 @@ pub(super) fn lag_sweep() {
                     let line: Vec<String> =
                         lags.iter().map(|(n, l)| format!("{n} {l:.4}")).collect();
                     println!(
-                        "{name} tau {tau:.3} seed {seed}: learned {:.4} err_rot {:.4} | {}",
+                        "{name} tau {tau:.3} seed {seed}: learned {:.4} err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s{} | {}",
                         o.spin_up_s,
                         o.err_rot,
+                        o.err_acc,
+                        o.bound[0],
+                        o.bound[1],
+                        o.seconds,
+                        if o.refused { " REFUSED" } else { "" },
                         line.join(", ")
                     );
                     continue;
@@ -588,6 +597,9 @@ pub(super) fn imu_and_water_sweep() {
                     .ok()
                     .map(|v| &*Box::leak(v.into_boxed_str())),
                 idle_s: std::env::var("LA_IDLE_S").ok().map(|v| v.parse().unwrap()),
+                gyro_bias_rest_s: std::env::var("LA_BIAS_REST")
+                    .ok()
+                    .map(|v| v.parse().unwrap()),
                 wave_scale: std::env::var("LA_WAVE_SCALE")
                     .ok()
                     .map(|v| v.parse().unwrap()),
