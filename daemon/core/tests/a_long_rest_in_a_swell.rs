@@ -9,18 +9,13 @@
 use thruster_inprocess::estimation::{estimate_ideal, Ideal, Outcome};
 use thruster_inprocess::swell_phase;
 use thruster_sim::disturbance::WaterPreset;
-use thruster_sim::{NoisePreset, SensorConfig};
+use thruster_sim::SensorConfig;
 use thrusterd_core::estimator::EstimatorConfig;
 
 /// AMOUR-5 asked for a model after idling 125 s in the moderate water at 0.7 of its swell
 /// (the swell at seed 2's phase; noise-free IMU at the centre), the long rest `bias_rest_s`.
 fn flight(bias_rest_s: f64) -> Outcome {
-    let sensors = SensorConfig {
-        rate_hz: 200.0,
-        noise: NoisePreset::None,
-        lever_arm_m: [0.0; 3],
-        ..SensorConfig::default()
-    };
+    let sensors = SensorConfig::ideal(200.0);
     let ideal = Ideal {
         allow_refusal: true,
         water: WaterPreset::Moderate,

@@ -105,8 +105,9 @@ pub fn heading(mag: &Vector3<f64>, specific_force: &Vector3<f64>) -> Option<(f64
 /// The long rest's running integrals.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct LongRestBias {
-    last: Option<(f64, Vector3<f64>)>,
+    /// The first and the last sample's times, s.
     t0: f64,
+    last_t_s: Option<f64>,
     n: u64,
     /// "Down" and the gyro crossed with it.
     down: Moments<Vector3<f64>>,
@@ -141,29 +142,25 @@ impl LongRestBias {
 
     /// One sample at `t_s`: raw gyro (rad/s), specific force (m/s^2) and magnetometer (any
     /// unit; None without one), body frame. A sample with a non-finite or degenerate value,
-    /// or a time that does not advance, is skipped: then false.
+    /// or a time that does not advance, is skipped.
     pub fn push(
         &mut self,
         t_s: f64,
         gyro: &Vector3<f64>,
         specific_force: &Vector3<f64>,
         mag: Option<&Vector3<f64>>,
-    ) -> bool {
+    ) {
         // At rest the specific force points up: "down" is its opposite.
         let Some(down) = specific_force.try_normalize(1e-9).map(|f| -f) else {
-            return false;
+            return;
         };
         let finite = t_s.is_finite()
             && gyro.iter().all(|v| v.is_finite())
             && down.iter().all(|v| v.is_finite());
-        if !finite {
-            return false;
+        if !finite || self.last_t_s.is_some_and(|t| t_s <= t) {
+            return;
         }
-        if let Some((t, _)) = self.last {
-            if t_s <= t {
-                return false;
-            }
-        } else {
+        if self.last_t_s.is_none() {
             self.t0 = t_s;
         }
         let t = t_s - self.t0;
@@ -187,19 +184,13 @@ impl LongRestBias {
             }
             _ => self.headless = true,
         }
-        self.last = Some((t_s, *gyro));
+        self.last_t_s = Some(t_s);
         self.n += 1;
-        true
-    }
-
-    /// Samples taken.
-    pub fn samples(&self) -> u64 {
-        self.n
     }
 
     /// The bias, when the rest is long enough ([`MIN_SAMPLES`], [`MIN_SPAN_S`]).
     pub fn bias(&self) -> Option<RestBias> {
-        let span_s = self.last.map_or(0.0, |(t, _)| t - self.t0);
+        let span_s = self.last_t_s.map_or(0.0, |t| t - self.t0);
         if self.n < MIN_SAMPLES || span_s < MIN_SPAN_S {
             return None;
         }
