@@ -1,6 +1,7 @@
 //! What telemetry costs the control tick in the pure core: the snapshot
 //! (`Machine::telemetry`) and its message (`wire::telemetry_msg`) after one IMU sample, beside
-//! the tick itself (`Machine::on_imu` while holding attitude), 8 thrusters. The IPC part (one
+//! the tick itself (`Machine::on_imu` while holding attitude, and while idle with and without
+//! the long rest's windows, `machine.gyro_bias_rest_s`), 8 thrusters. The IPC part (one
 //! copy into shared memory and a listener's wake-up) is in `cargo bench -p system-tests --bench
 //! latency`.
 //! Run: cargo bench -p thrusterd-core --bench telemetry
@@ -61,7 +62,37 @@ fn holding() -> (Machine, u64) {
     (m, k)
 }
 
+/// The same machine idle for two minutes (the long rest's windows full), with
+/// `gyro_bias_rest_s`.
+fn idle(gyro_bias_rest_s: f64) -> (Machine, u64) {
+    let mut setup = MachineSetup {
+        thrusters: 8,
+        ..MachineSetup::default()
+    };
+    setup.machine.gyro_bias_rest_s = gyro_bias_rest_s;
+    let mut m = Machine::new(setup);
+    let mut k = 0;
+    for _ in 0..24_000 {
+        k += 1;
+        m.on_imu(&sample(k));
+    }
+    assert_eq!(m.state(), State::Idle);
+    (m, k)
+}
+
 fn bench(c: &mut Criterion) {
+    for (name, bias_s) in [
+        ("control tick (on_imu, idle, long rest 60 s)", 60.0),
+        ("control tick (on_imu, idle, long rest off)", 0.0),
+    ] {
+        let (mut m, mut k) = idle(bias_s);
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                k += 1;
+                black_box(m.on_imu(black_box(&sample(k))))
+            })
+        });
+    }
     let (mut m, mut k) = holding();
     c.bench_function("control tick (on_imu, holding)", |b| {
         b.iter(|| {
