@@ -18,6 +18,7 @@ use thrusterd_core::estimator::EstimatorConfig;
 use crate::estimation::{estimate_observed, Ideal, Outcome};
 
 mod response;
+mod rate_noise;
 use response::{print_leaky, print_simulated, print_smoothed};
 
 /// The simulator's truth at one sample, in the log's terms.
@@ -216,6 +217,12 @@ pub fn probe(
     if let Ok(spec) = std::env::var("LAG_PROBE_SIM") {
         print_simulated(&run, &spec, &truth, weights);
     }
+    if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_SIMEX"), truth_b.as_ref()) {
+        rate_noise::print_simex(&run, &spec, &outcome, truth_b, seed);
+    }
+    if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_SMOOTH_FIT"), truth_b.as_ref()) {
+        rate_noise::print_smoothed_fit(&run, &spec, &outcome, truth_b);
+    }
     let default: Vec<(String, Replace)> =
         VARIANTS.iter().map(|(n, r)| (n.to_string(), *r)).collect();
     let variants = if variants.is_empty() {
@@ -283,14 +290,24 @@ fn print_fit(name: &str, run: &DynamicRun, outcome: &Outcome, truth_b: &DMatrix<
             *l = v.parse().expect("LAG_PROBE_LAGS: seconds");
         }
     }
-    let Some(fit) = run.refit(&lags[..n]) else {
+    let Some(b) = fitted_b(run, &lags[..n]) else {
         return;
     };
-    let b = fit.solve(&[1e-3; 6], 0.0, 0.0, None).b;
+    let (rot, acc) = rel_err(&b, truth_b);
+    println!("  fit {name}: err_rot {rot:.4} err_acc {acc:.4}");
+}
+
+/// `run`'s log fitted at `lags`: its B.
+pub(crate) fn fitted_b(run: &DynamicRun, lags: &[f64]) -> Option<DMatrix<f64>> {
+    Some(run.refit(lags)?.solve(&[1e-3; 6], 0.0, 0.0, None).b)
+}
+
+/// B's relative Frobenius error against `truth_b`, rotation and acceleration rows.
+pub(crate) fn rel_err(b: &DMatrix<f64>, truth_b: &DMatrix<f64>) -> (f64, f64) {
     let err = |rows: usize| {
         (b.rows(rows, 3) - truth_b.rows(rows, 3)).norm() / truth_b.rows(rows, 3).norm()
     };
-    println!("  fit {name}: err_rot {:.4} err_acc {:.4}", err(0), err(3));
+    (err(0), err(3))
 }
 
 /// The environment's `key` parsed, or `default` when unset or unparsable.
@@ -340,7 +357,7 @@ fn replaced(
 }
 
 /// Standard normal draws (xorshift64 and Box-Muller): the probe's own noise, seeded.
-struct Normal(u64);
+pub(crate) struct Normal(pub(crate) u64);
 
 impl Normal {
     fn uniform(&mut self) -> f64 {
@@ -350,7 +367,7 @@ impl Normal {
         ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
     }
 
-    fn sample(&mut self) -> f64 {
+    pub(crate) fn sample(&mut self) -> f64 {
         let (u, v) = (self.uniform(), self.uniform());
         (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
     }
