@@ -131,6 +131,8 @@ pub struct Ideal {
     pub max_lag_gap_over_bound: Option<f64>,
     /// `machine.max_moving_water_tilt_deg` (None: the default).
     pub max_moving_water_tilt_deg: Option<f64>,
+    /// `machine.max_unexplained_rate_radps` (None: the default).
+    pub max_unexplained_rate_radps: Option<f64>,
     /// `identification.burst_rel_err` (default the shipped 0: off): the open-loop run stops
     /// at this bound, its model goes in and the estimation goes on under control; the
     /// outcome is then the identification's.
@@ -277,6 +279,9 @@ pub fn estimate_observed(
     }
     if let Some(v) = ideal.gyro_bias_rest_s {
         setup.machine.gyro_bias_rest_s = v;
+    }
+    if let Some(v) = ideal.max_unexplained_rate_radps {
+        setup.machine.max_unexplained_rate_radps = v;
     }
     if let Some(v) = ideal.max_moving_water_tilt_deg {
         setup.machine.max_moving_water_tilt_deg = v;

@@ -1,14 +1,17 @@
 //! The terms' noisy rate, scored against the truth: what its white noise costs B, and two
 //! remedies tried on the log.
 //!
-//! LAG_PROBE_SIMEX="sd[,reps]": simulation-extrapolation (SIMEX, Cook and Stefanski 1994) on
-//! the terms' rate. The terms (damping, |w|w, Coriolis) are built from the measured gyro, whose
-//! white noise (sd rad/s per sample) biases their coefficients and, through them, B
-//! (errors-in-variables). The log is fitted again with more noise of the same kind on that
-//! rate, lambda sd^2 for lambda = 0.5, 1, 1.5, 2 (reps draws each, averaged), and B's trend in
-//! lambda extrapolated back to lambda = -1, where the rate would be noise-free. Printed: the
-//! fit as measured, the linear (from 0 and 1) and the quadratic (least squares over the five
-//! lambdas) extrapolations, each against the simulator's truth.
+//! LAG_PROBE_SIMEX="r=sd,v=sd,d=sd,reps=n" (any of them): simulation-extrapolation (SIMEX,
+//! Cook and Stefanski 1994) on the navigation's errors in the fit's inputs, which the least
+//! squares' bound does not count (errors-in-variables): white noise on the terms' rate (r,
+//! rad/s per sample, the gyro's), a random walk on the body velocity (v, m/s per sample: the
+//! accelerometer's sd over the rate, as the dead reckoning's) and on the gravity direction
+//! (d, rad per sample: the gyro's sd over the rate, the navigated attitude's; the
+//! acceleration rows' output moves with it, as `replaced` does). The log is fitted again with
+//! lambda times those variances added, lambda = 0.5, 1, 1.5, 2 (reps draws each, averaged),
+//! and B's trend in lambda extrapolated back to lambda = -1, where the inputs would be
+//! error-free. Printed: the fit as measured, the linear (from 0 and 1) and the quadratic
+//! (least squares over the five lambdas) extrapolations, each against the simulator's truth.
 
 use nalgebra::{DMatrix, Vector3};
 use thrusterd_core::estimator::dynamic::spin_state::lags_for_fit;
@@ -25,10 +28,22 @@ pub(super) fn print_simex(
     outcome: &Outcome,
     truth_b: &DMatrix<f64>,
     seed: u64,
+    gravity: f64,
 ) {
-    let mut parts = spec.split(',');
-    let sd: f64 = parts.next().and_then(|v| v.parse().ok()).unwrap_or(0.25);
-    let reps: usize = parts.next().and_then(|v| v.parse().ok()).unwrap_or(4);
+    let (mut sd_r, mut sd_v, mut sd_d, mut reps) = (0.0, 0.0, 0.0, 4usize);
+    for part in spec.split(',') {
+        let (k, v) = part
+            .split_once('=')
+            .expect("LAG_PROBE_SIMEX: key=value pairs");
+        let v: f64 = v.parse().expect("LAG_PROBE_SIMEX: a number");
+        match k {
+            "r" => sd_r = v,
+            "v" => sd_v = v,
+            "d" => sd_d = v,
+            "reps" => reps = v as usize,
+            other => panic!("LAG_PROBE_SIMEX: {other} is not r, v, d or reps"),
+        }
+    }
     let n = run.thrusters();
     let lags = lags_for_fit(
         n,
@@ -43,13 +58,20 @@ pub(super) fn print_simex(
     let mut rng = Normal(0x5171_3e80_d1ce_0001 ^ seed);
     let mut means = Vec::new();
     for &lambda in &LAMBDAS {
-        let s = (lambda).sqrt() * sd;
+        let k = lambda.sqrt();
         let mut sum = DMatrix::zeros(b0.nrows(), b0.ncols());
         let mut got = 0.0;
         for _ in 0..reps {
+            let (mut dv, mut dth) = (Vector3::<f64>::zeros(), Vector3::<f64>::zeros());
             let Some(mapped) = run.with_log_mapped(|smp| {
                 let mut out = *smp;
-                out.rate += Vector3::from_fn(|_, _| s * rng.sample());
+                out.rate += Vector3::from_fn(|_, _| k * sd_r * rng.sample());
+                dv += Vector3::from_fn(|_, _| k * sd_v * rng.sample());
+                dth += Vector3::from_fn(|_, _| k * sd_d * rng.sample());
+                out.velocity += dv;
+                let down = (smp.down + dth.cross(&smp.down)).normalize();
+                out.motion += (down - smp.down) * gravity;
+                out.down = down;
                 out
             }) else {
                 return;
@@ -85,7 +107,7 @@ pub(super) fn print_simex(
     let (rq, aq) = rel_err(&quad, truth_b);
     let (r2, a2) = rel_err(&means[3], truth_b);
     println!(
-        "  simex sd {sd} x{reps}: measured {r0:.4}/{a0:.4} linear {rl:.4}/{al:.4} quadratic {rq:.4}/{aq:.4} (at lambda 2: {r2:.4}/{a2:.4})"
+        "  simex r {sd_r} v {sd_v} d {sd_d} x{reps}: measured {r0:.4}/{a0:.4} linear {rl:.4}/{al:.4} quadratic {rq:.4}/{aq:.4} (at lambda 2: {r2:.4}/{a2:.4})"
     );
 }
 

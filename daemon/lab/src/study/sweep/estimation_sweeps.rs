@@ -498,7 +498,7 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
 /// `--tether`), LA_REACH (`reach_rel_err`), LA_MIN_CYCLES (`min_cycles`), LA_MAX_PULSES (`max_pulses`), LA_TARGET
-/// (`target_rel_err`), LA_BURST
+/// (`target_rel_err`), LA_TARGET_ACC (`target_rel_err_acc`), LA_BURST
 /// (`identification.burst_rel_err`: the open-loop model refined under control), LA_WAVE_SCALE (every wave's force and moment
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
@@ -569,6 +569,9 @@ pub(super) fn imu_and_water_sweep() {
             if let Ok(t) = std::env::var("LA_TARGET") {
                 cfg.target_rel_err = t.parse().unwrap();
             }
+            if let Ok(t) = std::env::var("LA_TARGET_ACC") {
+                cfg.target_rel_err_acc = Some(t.parse().unwrap());
+            }
             if let Ok(c) = std::env::var("LA_MIN_CYCLES") {
                 cfg.min_cycles = c.parse().unwrap();
             }
@@ -611,6 +614,9 @@ pub(super) fn imu_and_water_sweep() {
                     .ok()
                     .map(|v| v.parse().unwrap()),
                 max_moving_water_tilt_deg: std::env::var("LA_MAX_TILT")
+                    .ok()
+                    .map(|v| v.parse().unwrap()),
+                max_unexplained_rate_radps: std::env::var("LA_MAX_UNEXPLAINED")
                     .ok()
                     .map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),

@@ -239,7 +239,8 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// the operator configures the vehicle, `Run`), ID_SPLIT (0/1: `estimator.split_thrust` for the
 /// first model, one value), ID_DEADBAND (`machine.deadband`, one value: a
 /// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_MAX_SWAP
-/// (`machine.max_swap_rel_err`, one value), ID_DVL (the true velocity handed to the machine at
+/// (`machine.max_swap_rel_err`, one value), ID_TARGET_ACC (`estimator.target_rel_err_acc`, one
+/// value: the first model's and the identification's), ID_DVL (the true velocity handed to the machine at
 /// every sample, a perfect DVL), ID_SYM (thrusters as strong in reverse as forward, the daemon told), ID_FLOOR_PROBE (print the first model's bound, lag floor and lags, from a run of its own), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
@@ -396,12 +397,14 @@ pub(super) fn sweep_identification() {
                 let deadband: Vec<f64> = env_list("ID_DEADBAND", &[]);
                 let split: Vec<f64> = env_list("ID_SPLIT", &[]);
                 let max_swap: Vec<f64> = env_list("ID_MAX_SWAP", &[]);
+                let target_acc: Vec<f64> = env_list("ID_TARGET_ACC", &[]);
                 if *cfg != d
                     || !split.is_empty()
                     || !max_swap.is_empty()
                     || !segment_s.is_empty()
                     || !linearize.is_empty()
                     || !deadband.is_empty()
+                    || !target_acc.is_empty()
                 {
                     run.with_setup(|s| {
                         s.identification = cfg.clone();
@@ -419,6 +422,9 @@ pub(super) fn sweep_identification() {
                         }
                         if let Some(v) = max_swap.first() {
                             s.machine.max_swap_rel_err = *v;
+                        }
+                        if let Some(v) = target_acc.first() {
+                            s.estimator.target_rel_err_acc = Some(*v);
                         }
                     });
                 }
