@@ -19,6 +19,7 @@ use crate::estimation::{estimate_observed, Ideal, Outcome};
 
 mod rate_noise;
 mod response;
+mod velocity_error;
 use response::{print_leaky, print_simulated, print_smoothed};
 
 /// The simulator's truth at one sample, in the log's terms.
@@ -219,6 +220,9 @@ pub fn probe(
     }
     if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_SIMEX"), truth_b.as_ref()) {
         rate_noise::print_simex(&run, &spec, &outcome, truth_b, seed, gravity);
+    }
+    if let (Some(_), Some(truth_b)) = (std::env::var_os("LAG_PROBE_VEL_PARTS"), truth_b.as_ref()) {
+        velocity_error::print_velocity_parts(&run, &outcome, &truth, truth_b);
     }
     if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_SMOOTH_FIT"), truth_b.as_ref()) {
         rate_noise::print_smoothed_fit(&run, &spec, &outcome, truth_b);
@@ -426,4 +430,9 @@ fn print_errors(run: &DynamicRun, truth: &HashMap<u64, Truth>) {
             f(sig[k])
         );
     }
+}
+
+/// The truth at vehicle time `t_s` (s), keyed by its nanosecond.
+pub(crate) fn truth_at(truth: &HashMap<u64, Truth>, t_s: f64) -> Option<&Truth> {
+    truth.get(&((t_s * 1e9).round() as u64))
 }

@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 use thrusterd_core::estimator::dynamic::lag_search::{learn_common_lag_weighted, LagRange};
 use thrusterd_core::estimator::dynamic::DynamicRun;
 
-use super::Truth;
+use super::{truth_at, Truth};
 
 /// The model's own response, simulated from rest through the fit at `lag_s`: (rate, velocity)
 /// per log sample. The acceleration rows' intercepts and constant are left out (they carry
@@ -260,11 +260,6 @@ pub(super) fn print_leaky(
         "  leaky velocity tau {tau}{}: {lag:.4}",
         if true_rate { ", true rate" } else { "" }
     );
-}
-
-/// The truth at vehicle time `t_s` (s), keyed by its nanosecond.
-fn truth_at(truth: &HashMap<u64, Truth>, t_s: f64) -> Option<&Truth> {
-    truth.get(&((t_s * 1e9).round() as u64))
 }
 
 /// The lag learned from `run`'s log scored with `weights` (NaN when it cannot be).
