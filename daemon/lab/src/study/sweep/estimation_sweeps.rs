@@ -512,7 +512,8 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// refit off), LA_WATER_AFTER_STATES=1 (the water check reads the refit's unexplained
 /// rotation), LA_WATER_FROM_RESIDUAL=1 (the unexplained rotation from the fit's residual
 /// alone, not the larger of it and the rest's noise: docs/study.md, "What the water check
-/// reads").
+/// reads"), LA_MAX_UNEXPLAINED (`machine.max_unexplained_rate_radps`), LA_MAX_TILT
+/// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
