@@ -76,6 +76,16 @@ const SETTINGS: &[Setting] = &[
         toml: "[estimator]\ntarget_rel_err_acc = 0.10\n",
     },
     Setting {
+        name: "dynamic, the velocity terms held at 0 +- 0.1 (velocity_term_prior_sd)",
+        noise: "paper",
+        toml: "[estimator]\nvelocity_term_prior_sd = 0.1\n",
+    },
+    Setting {
+        name: "dynamic, the velocity terms held at 0 +- 0.1 (velocity_term_prior_sd)",
+        noise: "realistic",
+        toml: "[estimator]\nvelocity_term_prior_sd = 0.1\n",
+    },
+    Setting {
         name: "dynamic, noise measured after the request (rest_from_idle = false)",
         noise: "realistic",
         toml: "[machine]\nrest_from_idle = false\n",

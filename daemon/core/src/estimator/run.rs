@@ -439,6 +439,14 @@ impl Estimator {
             }
         }
         .with_term_prior_mean(self.cfg.term_prior_mean.clone())
+        // The velocity terms' prior in the open loop only: under control the vehicle hardly
+        // moves, and there it changed the identification (docs/study.md, "At the paper's
+        // noise").
+        .with_velocity_term_prior_sd(if open_loop {
+            self.cfg.velocity_term_prior_sd
+        } else {
+            0.0
+        })
         .with_disturbance(self.cfg.disturbance);
         // The open-loop estimation only: the log keeps one command per pulse, split or not
         // (under control the command changes every sample; there the lag is the model's,

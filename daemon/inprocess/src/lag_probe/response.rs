@@ -19,7 +19,7 @@ fn simulate(
     linear: bool,
     measured_rate: bool,
 ) -> Option<Vec<(Vector3<f64>, Vector3<f64>)>> {
-    use thrusterd_core::estimator::dynamic::regressors::{terms, RATE, TERMS, VELOCITY};
+    use thrusterd_core::estimator::dynamic::regressors::{self, terms, RATE, TERMS, VELOCITY};
     let fit = run.refit(&[lag_s])?;
     let sol = fit.solve(&[0.01; 6], 0.0, 0.0, None);
     let log = run.log()?;
@@ -53,9 +53,7 @@ fn simulate(
                     // The acceleration rows' model with the measured rate and the attitude,
                     // the velocity's own terms replaced by a stable linear damping.
                     for j in 0..TERMS {
-                        let velocity_term = (VELOCITY..VELOCITY + 6).contains(&j)
-                            || (j >= VELOCITY + 9 && j < constant && touches_velocity(j));
-                        if j == constant || velocity_term {
+                        if j == constant || regressors::touches_velocity(j) {
                             continue;
                         }
                         md[a] += theta[(3 + a, j)] * x[j];
@@ -206,21 +204,6 @@ pub(super) fn print_smoothed(
         "  smoothed over {w}{}: {lag:.4}",
         if true_v { ", true velocity" } else { "" }
     );
-}
-
-/// Whether product term `j` (of nu_i nu_j, after the five groups of three) has a velocity in it.
-fn touches_velocity(j: usize) -> bool {
-    use thrusterd_core::estimator::dynamic::regressors::DOWN;
-    let mut k = DOWN + 3;
-    for i in 0..6 {
-        for jj in i..6 {
-            if k == j {
-                return i < 3 || jj < 3;
-            }
-            k += 1;
-        }
-    }
-    false
 }
 
 /// LAG_PROBE_LEAK="tau[,T]": the lag learned with the velocity dead-reckoned again from the

@@ -81,6 +81,10 @@ pub struct DynamicRun {
     /// The terms' prior mean (`EstimatorConfig::term_prior_mean`, a research hook; None: 0).
     #[serde(skip)]
     term_prior_mean: Option<DMatrix<f64>>,
+    /// The velocity terms' own prior width (`EstimatorConfig::velocity_term_prior_sd`; 0:
+    /// none). Not in a checkpoint: the estimator's configuration sets it again on restore.
+    #[serde(skip)]
+    velocity_term_prior_sd: f64,
     /// Disturbance states (`with_disturbance`, a research hook; default: none).
     #[serde(skip)]
     disturbance: DisturbanceStates,
@@ -246,6 +250,7 @@ impl DynamicRun {
             rot_least_squares: None,
             last_nav: None,
             term_prior_mean: None,
+            velocity_term_prior_sd: 0.0,
             disturbance: DisturbanceStates::default(),
             disturbance_now: [0.0; DISTURBANCE_COLUMNS],
             disturbance_prev: [0.0; DISTURBANCE_COLUMNS],
@@ -256,6 +261,13 @@ impl DynamicRun {
     /// sets one (`EstimatorConfig::term_prior_mean`, a research hook).
     pub fn with_term_prior_mean(mut self, mean: Option<DMatrix<f64>>) -> Self {
         self.term_prior_mean = mean.filter(|m| m.shape() == (6, TERMS));
+        self
+    }
+
+    /// The velocity terms' own prior width (`EstimatorConfig::velocity_term_prior_sd`; 0:
+    /// none).
+    pub fn with_velocity_term_prior_sd(mut self, sd: f64) -> Self {
+        self.velocity_term_prior_sd = sd;
         self
     }
 
@@ -643,11 +655,18 @@ impl DynamicRun {
             .map(|p| self.uncontradicted(p, &base, &sigmas));
         // The terms' prior (`term_prior_sd`): the constant and the mean |command| (the last
         // two terms) carry offsets and the thrust asymmetry, not physics that shrinks to 0.
-        let ridge = (term_prior_sd > 0.0 && term_prior_sd.is_finite()).then_some(term_prior_sd);
+        // The velocity terms' own (`velocity_term_prior_sd`) where it is the narrower.
+        let width = |sd: f64| (sd > 0.0 && sd.is_finite()).then_some(sd);
+        let (all_sd, velocity_sd) = (width(term_prior_sd), width(self.velocity_term_prior_sd));
+        let term_sd = |j: usize| match (all_sd, velocity_sd) {
+            (a, Some(v)) if regressors::touches_velocity(j) => Some(a.map_or(v, |a| a.min(v))),
+            (a, _) => a,
+        };
+        let ridge = all_sd.or(velocity_sd);
         let mean = self.term_prior_mean.as_ref();
         let ridge_entries = |out: &mut Vec<PriorEntry>, row: usize| {
-            if let Some(sd) = ridge {
-                for j in 0..TERMS - 2 {
+            for j in 0..TERMS - 2 {
+                if let Some(sd) = term_sd(j) {
                     out.push(PriorEntry {
                         weights: [(c + j, 1.0), (c + j, 0.0)],
                         value: mean.map_or(0.0, |m| m[(row, j)]),

@@ -25,6 +25,24 @@ pub const VELOCITY: usize = 6;
 pub const VELOCITY_QUADRATIC: usize = 9;
 pub const DOWN: usize = 12;
 
+/// Whether term `j` has the body velocity in it (its own group, |v| v, and the products nu_i
+/// nu_j with a velocity among them): the terms a dead-reckoned velocity's error enters.
+pub fn touches_velocity(j: usize) -> bool {
+    if (VELOCITY..DOWN).contains(&j) {
+        return true;
+    }
+    let mut k = DOWN + 3;
+    for i in 0..6 {
+        for jj in i..6 {
+            if k == j {
+                return i < 3 || jj < 3;
+            }
+            k += 1;
+        }
+    }
+    false
+}
+
 /// Writes the terms for body velocity `v`, rate `w`, gravity direction `down` (unit, body
 /// frame) and mean lagged |command| into `out` (length [`TERMS`]).
 pub fn terms(
@@ -57,6 +75,19 @@ pub fn terms(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_velocity_terms_are_those_a_velocity_moves() {
+        let (w, down) = (Vector3::new(0.3, -0.2, 0.5), Vector3::new(0.1, 0.0, 0.99));
+        let mut at_rest = [0.0; TERMS];
+        let mut moving = [0.0; TERMS];
+        terms(&Vector3::zeros(), &w, &down, 0.4, &mut at_rest);
+        terms(&Vector3::new(0.2, -0.1, 0.3), &w, &down, 0.4, &mut moving);
+        for j in 0..TERMS {
+            assert_eq!(touches_velocity(j), at_rest[j] != moving[j], "term {j}");
+        }
+        assert_eq!((0..TERMS).filter(|&j| touches_velocity(j)).count(), 6 + 15);
+    }
 
     #[test]
     fn names_match_the_layout() {

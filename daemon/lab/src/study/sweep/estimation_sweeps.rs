@@ -504,7 +504,8 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
 /// the simulator's), LA_ONE_LAG (no lag per thruster), LA_SHAPED (1|0: `shaped_thrust` on or off), LA_LAG_GAP (the machine's
 /// `max_lag_gap_over_bound`; 0: the row groups' check off), LA_TERMS_TRUE (sd: the terms'
-/// prior centred at the simulator's own, `true_terms.rs`), LA_TERMS_FROM_STILL (sd: centred at
+/// prior centred at the simulator's own, `true_terms.rs`), LA_TERMS_ZERO (sd: every term's
+/// prior at 0, `term_prior_sd`), LA_TERMS_VEL (sd: the velocity terms', `velocity_term_prior_sd`; 0 off), LA_TERMS_FROM_STILL (sd: centred at
 /// a still-water flight's terms; both through `EstimatorConfig::term_prior_mean`), LA_DIST_HZ
 /// (swell states at this frequency, `EstimatorConfig::disturbance`; LA_DIST_WORLD=1 with its
 /// force fixed in the world), LA_DIST_CONST=1 (a constant horizontal world-fixed force), LA_DIST_RAMP=1 (the same
@@ -627,6 +628,15 @@ pub(super) fn imu_and_water_sweep() {
             // Where the swell's bias enters B: the terms held (a prior of width sd per unit
             // term) at the simulator's own (LA_TERMS_TRUE=sd, the decisive run) or at what a
             // still-water flight of the same vehicle and seed learned (LA_TERMS_FROM_STILL=sd).
+            // The velocity terms' prior (LA_TERMS_VEL=sd, `velocity_term_prior_sd`; 0: off),
+            // and every term's at 0 (LA_TERMS_ZERO=sd, `term_prior_sd`): docs/study.md, "At
+            // the paper's noise".
+            if let Ok(sd) = std::env::var("LA_TERMS_VEL") {
+                cfg.velocity_term_prior_sd = sd.parse().unwrap();
+            }
+            if let Ok(sd) = std::env::var("LA_TERMS_ZERO") {
+                cfg.term_prior_sd = sd.parse().unwrap();
+            }
             if let Ok(sd) = std::env::var("LA_TERMS_TRUE") {
                 let (truth, residual) = super::true_terms::true_terms_38(name);
                 cfg.term_prior_sd = sd.parse().unwrap();

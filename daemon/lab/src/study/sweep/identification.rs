@@ -240,7 +240,8 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// first model, one value), ID_DEADBAND (`machine.deadband`, one value: a
 /// driver that jumps the dead zone, thruster-hw's 25 us is 0.0625), ID_MAX_SWAP
 /// (`machine.max_swap_rel_err`, one value), ID_TARGET_ACC (`estimator.target_rel_err_acc`, one
-/// value: the first model's and the identification's), ID_DVL (the true velocity handed to the machine at
+/// value: the first model's and the identification's), ID_VEL_PRIOR
+/// (`estimator.velocity_term_prior_sd`, one value), ID_DVL (the true velocity handed to the machine at
 /// every sample, a perfect DVL), ID_SYM (thrusters as strong in reverse as forward, the daemon told), ID_FLOOR_PROBE (print the first model's bound, lag floor and lags, from a run of its own), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
@@ -398,6 +399,7 @@ pub(super) fn sweep_identification() {
                 let split: Vec<f64> = env_list("ID_SPLIT", &[]);
                 let max_swap: Vec<f64> = env_list("ID_MAX_SWAP", &[]);
                 let target_acc: Vec<f64> = env_list("ID_TARGET_ACC", &[]);
+                let velocity_prior: Vec<f64> = env_list("ID_VEL_PRIOR", &[]);
                 if *cfg != d
                     || !split.is_empty()
                     || !max_swap.is_empty()
@@ -405,6 +407,7 @@ pub(super) fn sweep_identification() {
                     || !linearize.is_empty()
                     || !deadband.is_empty()
                     || !target_acc.is_empty()
+                    || !velocity_prior.is_empty()
                 {
                     run.with_setup(|s| {
                         s.identification = cfg.clone();
@@ -425,6 +428,9 @@ pub(super) fn sweep_identification() {
                         }
                         if let Some(v) = target_acc.first() {
                             s.estimator.target_rel_err_acc = Some(*v);
+                        }
+                        if let Some(v) = velocity_prior.first() {
+                            s.estimator.velocity_term_prior_sd = *v;
                         }
                     });
                 }
