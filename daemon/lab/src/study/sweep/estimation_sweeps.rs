@@ -628,9 +628,7 @@ pub(super) fn imu_and_water_sweep() {
             // Where the swell's bias enters B: the terms held (a prior of width sd per unit
             // term) at the simulator's own (LA_TERMS_TRUE=sd, the decisive run) or at what a
             // still-water flight of the same vehicle and seed learned (LA_TERMS_FROM_STILL=sd).
-            // The velocity terms' prior (LA_TERMS_VEL=sd, `velocity_term_prior_sd`; 0: off),
-            // and every term's at 0 (LA_TERMS_ZERO=sd, `term_prior_sd`): docs/study.md, "At
-            // the paper's noise".
+            // The velocity terms' prior (LA_TERMS_VEL) and every term's (LA_TERMS_ZERO), sd.
             if let Ok(sd) = std::env::var("LA_TERMS_VEL") {
                 cfg.velocity_term_prior_sd = sd.parse().unwrap();
             }
