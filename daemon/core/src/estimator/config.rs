@@ -233,9 +233,10 @@ pub struct EstimatorConfig {
     /// is 0.6-2.5 m/s off where the vehicle moves a few tenths, and the velocity terms'
     /// nuisance was most of the bound; at 0.1, still water at that noise took 5.64 s instead
     /// of 6.50 s (five vehicles x 10 seeds) with errors 0.040 / 0.063 against 0.044 / 0.068
-    /// and the bound as honest. Not the default: under control, where the vehicle hardly
-    /// moves, it changes the identification (16 core tests moved; docs/study.md, "At the
-    /// paper's noise").
+    /// and the bound as honest. Open loop only (under control, where the vehicle hardly moves,
+    /// it changed the identification: 16 core tests moved). Not the default: in a swell at
+    /// the paper's noise it doubled the models over 1.5x their bound (14 -> 31 of 141;
+    /// docs/study.md, "The velocity terms held lightly").
     pub velocity_term_prior_sd: f64,
     /// Research hook, not a configuration key: disturbance states in the dynamic fit
     /// (`estimator::dynamic::disturbance_states`: a swell at a given frequency, a constant
