@@ -405,6 +405,11 @@ impl DaemonConfig {
                 Range::at_least(0.0),
             ),
             (
+                "machine.max_still_sway".into(),
+                m.max_still_sway,
+                Range::at_least(0.0),
+            ),
+            (
                 "machine.max_moving_water_tilt_deg".into(),
                 m.max_moving_water_tilt_deg,
                 Range::closed(0.0, 180.0),

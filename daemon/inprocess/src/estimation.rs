@@ -52,6 +52,8 @@ pub struct Outcome {
     pub sigma: [f64; 6],
     /// Why the machine refused the model, when it did.
     pub rejection: Option<String>,
+    /// How much the long idle rest swayed beyond the IMU's white noise (None: no long rest).
+    pub rest_sway: Option<f64>,
 }
 
 pub fn tick(machine: &mut Machine, sim: &mut Simulator) {
@@ -131,6 +133,8 @@ pub struct Ideal {
     pub max_lag_gap_over_bound: Option<f64>,
     /// `machine.max_moving_water_tilt_deg` (None: the default).
     pub max_moving_water_tilt_deg: Option<f64>,
+    /// `machine.max_still_sway` (None: the default).
+    pub max_still_sway: Option<f64>,
     /// `machine.max_unexplained_rate_radps` (None: the default).
     pub max_unexplained_rate_radps: Option<f64>,
     /// `identification.burst_rel_err` (default the shipped 0: off): the open-loop run stops
@@ -280,6 +284,9 @@ pub fn estimate_observed(
     if let Some(v) = ideal.gyro_bias_rest_s {
         setup.machine.gyro_bias_rest_s = v;
     }
+    if let Some(v) = ideal.max_still_sway {
+        setup.machine.max_still_sway = v;
+    }
     if let Some(v) = ideal.max_unexplained_rate_radps {
         setup.machine.max_unexplained_rate_radps = v;
     }
@@ -356,6 +363,7 @@ pub fn estimate_observed(
         rank: est.rank.rank,
         actuated: est.rank.actuated.count(),
         sigma: est.sigma,
+        rest_sway: machine.last_rest_sway(),
     }
 }
 

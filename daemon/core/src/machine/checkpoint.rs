@@ -18,7 +18,7 @@ use super::state_machine::Machine;
 const MAGIC: &[u8; 4] = b"TDCK";
 /// Raised whenever the layout of the serialised state changes in a way a reader could not
 /// tell from a decoding error.
-pub const FORMAT: u32 = 20;
+pub const FORMAT: u32 = 21;
 
 /// Why a checkpoint cannot be made or used.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -45,6 +45,14 @@ pub struct MachineConfig {
     /// navigation carried both through the run (eight_vectored in the full moderate swell:
     /// gravity 0.36 rad off). In still water the short rest stays: fresher.
     pub gyro_bias_rest_s: f64,
+    /// A long idle rest (`gyro_bias_rest_s`) saw still water when the vehicle swayed from one
+    /// second to the next no more than this many times what the IMU's white noise explains
+    /// (`navigation::long_rest_sway`; default 1.5, still water reading 1 +- 0.1; 0: never
+    /// still). Only then does the open-loop fit hold the velocity terms lightly
+    /// (`estimator.velocity_term_prior_sd`). Why: at the paper's noise that prior's tighter
+    /// bound is honest in still water but not in a swell, which neither the 1-2 s rest nor the
+    /// fit's unexplained rotation can see there, and a minute's rest can.
+    pub max_still_sway: f64,
     /// An estimation that starts while the daemon controls (a reconfiguration, a mismatch, a
     /// request) first levels the vehicle with the model in force, for at most this long, s
     /// (default 5; 0 = pulse from wherever the vehicle is). Why: started mid-manoeuvre, the
@@ -139,6 +147,7 @@ impl Default for MachineConfig {
             noise_s: 1.0,
             rest_from_idle: true,
             gyro_bias_rest_s: 60.0,
+            max_still_sway: 1.5,
             level_max_s: 5.0,
             level_tilt_deg: 5.0,
             level_hold_s: 1.0,

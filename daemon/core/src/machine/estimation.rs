@@ -93,6 +93,9 @@ pub(super) struct EstimationRun {
     /// With it, the long idle rest's average of "down", carried on through the noise
     /// measurement: where the navigation starts.
     idle_down: Option<LongRestDown>,
+    /// With it, how much the vehicle swayed over that long rest beyond the IMU's white noise
+    /// (`navigation::long_rest_sway`; 1: still).
+    idle_sway: Option<f64>,
     /// Under control (state Identify): the dither and its clock.
     closed: Option<ClosedLoop>,
     /// This open-loop run is a burst: its model is refined under control next.
@@ -118,6 +121,7 @@ impl EstimationRun {
             rest_restarts: 0,
             idle_gyro_bias: None,
             idle_down: None,
+            idle_sway: None,
             closed: None,
             burst: false,
             prior: None,
@@ -176,6 +180,7 @@ impl EstimationRun {
         self.rest_restarts = 0;
         self.idle_gyro_bias = None;
         self.idle_down = None;
+        self.idle_sway = None;
         self.est = None;
         self.closed = None;
         self.burst = false;
@@ -190,6 +195,13 @@ impl EstimationRun {
         self.rested_s = taken.span_s;
         self.idle_gyro_bias = taken.gyro_bias;
         self.idle_down = taken.down;
+        self.idle_sway = taken.sway;
+    }
+
+    /// How much the vehicle swayed over the long idle rest this run started from, beyond the
+    /// IMU's white noise (1: still; None: no long rest).
+    pub(super) fn idle_sway(&self) -> Option<f64> {
+        self.idle_sway
     }
 
     /// Whether the run that just concluded was an open-loop burst to be refined under control.
@@ -404,7 +416,14 @@ impl EstimationRun {
         if self.burst {
             cfg.target_rel_err = setup.identification.burst_rel_err;
         }
-        self.est = Some(self.new_estimator(cfg, n, levels, model));
+        let est = self.new_estimator(cfg, n, levels, model);
+        self.est = Some(
+            if still_by_long_rest(self.idle_sway, setup.machine.max_still_sway) {
+                est.with_still_water()
+            } else {
+                est
+            },
+        );
         true
     }
 
@@ -534,6 +553,16 @@ fn long_rest_bias(levels: &NoiseLevels, long: &RestBias) -> Option<Vector3<f64>>
         gap[a].abs() > REST_MOVED_SIGMAS * sd
     });
     moved.then_some(bias)
+}
+
+/// Whether a long idle rest saw still water: it swayed (`navigation::long_rest_sway`) no more
+/// than `max_sway` times what the IMU's white noise explains. Without a long rest, or with
+/// `max_sway` 0, no. What hangs on it: the velocity terms' prior
+/// (`estimator.velocity_term_prior_sd`), whose tighter bound is honest in still water at
+/// the paper's noise but not in a swell there, which nothing shorter than a long rest sees
+/// (docs/study.md, "The velocity terms held where a long rest saw still water").
+fn still_by_long_rest(sway: Option<f64>, max_sway: f64) -> bool {
+    max_sway > 0.0 && sway.is_some_and(|r| r <= max_sway)
 }
 
 /// What the rest before an estimation measured, for its navigation: how the vehicle turned

@@ -219,6 +219,13 @@ impl Machine {
         self.models.current()
     }
 
+    /// How much the vehicle swayed over the long idle rest the last estimation started from,
+    /// beyond the IMU's white noise (1: still; None: no long rest;
+    /// `navigation::long_rest_sway`).
+    pub fn last_rest_sway(&self) -> Option<f64> {
+        self.run.idle_sway()
+    }
+
     pub fn last_estimate(&self) -> Option<&Estimate> {
         self.run.last_estimate()
     }

@@ -22,6 +22,7 @@
 pub mod bias_filter;
 pub mod long_rest_bias;
 pub mod long_rest_down;
+pub mod long_rest_sway;
 pub mod rest_drift;
 pub mod rest_rotation;
 pub mod rest_shape;

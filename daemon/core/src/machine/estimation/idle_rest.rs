@@ -27,6 +27,7 @@ use nalgebra::Vector3;
 use super::{Motion, NoiseMeter, Rest};
 use crate::navigation::long_rest_bias::{LongRestBias, RestBias};
 use crate::navigation::long_rest_down::LongRestDown;
+use crate::navigation::long_rest_sway::LongRestSway;
 
 /// One window: since when, the noise meter and the rest (start attitude, depth trend).
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
@@ -50,17 +51,17 @@ impl Window {
 struct BiasWindow {
     since_ns: Option<u64>,
     rest: LongRestBias,
+    /// How much it swayed beyond the IMU's white noise (`long_rest_sway`).
+    sway: LongRestSway,
 }
 
 impl BiasWindow {
     fn push(&mut self, t_ns: u64, m: &Motion) {
         self.since_ns.get_or_insert(t_ns);
-        self.rest.push(
-            t_ns as f64 * 1e-9,
-            &m.gyro,
-            &m.specific_force,
-            m.mag.as_ref(),
-        );
+        let t_s = t_ns as f64 * 1e-9;
+        self.rest
+            .push(t_s, &m.gyro, &m.specific_force, m.mag.as_ref());
+        self.sway.push(t_s, &m.gyro, &m.specific_force);
     }
 }
 
@@ -142,6 +143,9 @@ pub(in crate::machine) struct TakenRest {
     /// With it, the long average of "down" (`long_rest_down`), to be carried on through the
     /// noise measurement.
     pub(in crate::machine) down: Option<LongRestDown>,
+    /// With it, how much the vehicle swayed over the long window beyond the IMU's white noise
+    /// (`long_rest_sway`; 1: still).
+    pub(in crate::machine) sway: Option<f64>,
 }
 
 impl IdleRest {
@@ -172,13 +176,17 @@ impl IdleRest {
         }
     }
 
-    /// The bias of the older long window that covers at least `bias_s` and has one.
-    fn oldest_bias(&self, t_ns: u64, bias_s: f64) -> Option<RestBias> {
+    /// The older long window that covers at least `bias_s`.
+    fn oldest(&self, t_ns: u64, bias_s: f64) -> Option<&BiasWindow> {
         self.bias
             .iter()
             .filter(|w| w.age_s(t_ns) >= bias_s)
             .max_by(|x, y| x.age_s(t_ns).total_cmp(&y.age_s(t_ns)))
-            .and_then(|w| w.rest.bias())
+    }
+
+    /// The bias of the older long window that covers at least `bias_s` and has one.
+    fn oldest_bias(&self, t_ns: u64, bias_s: f64) -> Option<RestBias> {
+        self.oldest(t_ns, bias_s).and_then(|w| w.rest.bias())
     }
 
     /// Forget the rest (the machine left idle, or the vehicle was changed).
@@ -205,12 +213,16 @@ impl IdleRest {
         let gyro_bias = (bias_s > 0.0)
             .then(|| self.oldest_bias(t_ns, bias_s))
             .flatten();
+        let sway = gyro_bias
+            .and(self.oldest(t_ns, bias_s))
+            .and_then(|w| w.sway.ratio());
         let taken = TakenRest {
             noise: best.noise.clone(),
             rest: best.rest.clone(),
             span_s: best.age_s(t_ns),
             gyro_bias,
             down: gyro_bias.and(self.down.clone()),
+            sway,
         };
         self.clear();
         Some(taken)

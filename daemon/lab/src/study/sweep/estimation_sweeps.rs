@@ -514,7 +514,8 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// rotation), LA_WATER_FROM_RESIDUAL=1 (the unexplained rotation from the fit's residual
 /// alone, not the larger of it and the rest's noise: docs/study.md, "What the water check
 /// reads"), LA_MAX_UNEXPLAINED (`machine.max_unexplained_rate_radps`), LA_MAX_TILT
-/// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`).
+/// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`), LA_MAX_SWAY
+/// (`machine.max_still_sway`).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -619,6 +620,9 @@ pub(super) fn imu_and_water_sweep() {
                     .ok()
                     .map(|v| v.parse().unwrap()),
                 max_unexplained_rate_radps: std::env::var("LA_MAX_UNEXPLAINED")
+                    .ok()
+                    .map(|v| v.parse().unwrap()),
+                max_still_sway: std::env::var("LA_MAX_SWAY")
                     .ok()
                     .map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
@@ -733,117 +737,10 @@ pub(super) fn imu_and_water_sweep() {
                 println!("  rejected: {why}");
             }
             println!(
-                "{name} seed {seed}: tilt {:.0} refused {} lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} (share {:.4}) in {:.2} s; used [{:.4} {:.4} {:.4}] learned [{:.4} {:.4} {:.4}] sd [{:.4} {:.4} {:.4}] contradicted {}",
-                o.max_tilt_deg, o.refused, o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], p.rel_err_share, o.seconds, p.position_m[0], p.position_m[1], p.position_m[2], l.position_m[0], l.position_m[1], l.position_m[2], sd[0], sd[1], sd[2], p.contradicted
+                "{name} seed {seed}: tilt {:.0} refused {} lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} (share {:.4}) in {:.2} s; used [{:.4} {:.4} {:.4}] learned [{:.4} {:.4} {:.4}] sd [{:.4} {:.4} {:.4}] contradicted {} sway {:.2}",
+                o.max_tilt_deg, o.refused, o.spin_up_s, o.err_rot, o.err_acc, o.bound[0], o.bound[1], p.rel_err_share, o.seconds, p.position_m[0], p.position_m[1], p.position_m[2], l.position_m[0], l.position_m[1], l.position_m[2], sd[0], sd[1], sd[2], p.contradicted, o.rest_sway.unwrap_or(f64::NAN)
             );
         }
-    }
-}
-
-/// The measurement behind docs/study.md's "Vehicles the estimator was not told about (issue
-/// 31)": AMOUR-5 and eight_vectored with thrusters that differ from the daemon's assumptions
-/// (`MISMATCHES`), per case and noise the mean and range of err_rot / err_acc against the
-/// simulator's symmetric truth, the largest error / bound (the daemon's own rel_err_rot /
-/// rel_err_acc), the fraction of B's entries within 2 standard errors, the vehicle seconds to
-/// the model and how many were refused. Knobs: MM_NOISE = none | realistic | paper (default
-/// none), MM_SEEDS = the last seed (default 1), MM_VEHICLES (default amour5,eight_vectored),
-/// MM_CASES = indices into MISMATCHES (default all), MM_TOLD (set: the daemon told the true
-/// reverse ratio, dead band and lag, learning the lag off: the decisive comparison). For example
-/// `MM_NOISE=realistic MM_SEEDS=5 cargo run --release -p thrusterctl -- study sweep mismatch_sweep`.
-pub(super) fn mismatch_sweep() {
-    let noise = match std::env::var("MM_NOISE").as_deref() {
-        Ok("realistic") => NoisePreset::Realistic,
-        Ok("paper") => NoisePreset::Paper,
-        _ => NoisePreset::None,
-    };
-    let n_seeds: u64 = std::env::var("MM_SEEDS").map_or(1, |s| s.parse().unwrap());
-    let names = std::env::var("MM_VEHICLES").unwrap_or("amour5,eight_vectored".into());
-    let cases: Vec<usize> = std::env::var("MM_CASES")
-        .map_or((0..MISMATCHES.len()).collect(), |s| {
-            s.split(',').map(|c| c.parse().unwrap()).collect()
-        });
-    let mut summary = Vec::new();
-    for name in names.split(',') {
-        for &c in &cases {
-            let (what, m) = MISMATCHES[c];
-            let mut rot = Vec::new();
-            let mut acc = Vec::new();
-            let mut ratio = 0.0f64;
-            let mut covered = 0;
-            let mut within = 0.0;
-            let mut secs = Vec::new();
-            let mut refused = 0;
-            let mut lags = Vec::new();
-            for seed in 1..=n_seeds {
-                let t0 = std::time::Instant::now();
-                let mut cfg = EstimatorConfig::dynamic();
-                let mut ideal = Ideal {
-                    allow_refusal: true,
-                    ..Ideal::default()
-                };
-                if std::env::var("MM_TOLD").is_ok() {
-                    // The decisive comparison: the daemon told the thrusters' true constants.
-                    if let Some(r) = m.reverse_ratio {
-                        cfg.reverse_ratio = r;
-                    }
-                    ideal.deadband = m.deadband;
-                    if let Some(tau) = m.lag_s {
-                        cfg.spin_up_s = tau;
-                        cfg.learn_spin_up = false;
-                    }
-                }
-                let sensors = SensorConfig {
-                    rate_hz: 200.0,
-                    noise,
-                    ..SensorConfig::default()
-                };
-                let o = estimate_on(mismatched(name, m), sensors, seed, cfg, ideal);
-                println!(
-                    "{name} {what} {noise:?} seed {seed}: err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} B within 2 se {:.2} lag {:.4} ({}) refused {} tilt {:.0} deg unexplained {:.4} in {:.2} s (wall {:.1} s)",
-                    o.err_rot,
-                    o.err_acc,
-                    o.bound[0],
-                    o.bound[1],
-                    b_within_2se(&o),
-                    o.spin_up_s,
-                    if o.spin_up_learned { "learned" } else { "configured" },
-                    o.refused,
-                    o.max_tilt_deg,
-                    o.terms.unexplained_rate_radps,
-                    o.seconds,
-                    t0.elapsed().as_secs_f64()
-                );
-                rot.push(o.err_rot);
-                acc.push(o.err_acc);
-                ratio = ratio
-                    .max(o.err_rot / o.bound[0])
-                    .max(o.err_acc / o.bound[1]);
-                if o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1] {
-                    covered += 1;
-                }
-                within += b_within_2se(&o) / n_seeds as f64;
-                secs.push(o.seconds);
-                refused += o.refused as usize;
-                lags.push(o.spin_up_s);
-            }
-            let stats = |v: &[f64]| {
-                let mean = v.iter().sum::<f64>() / v.len() as f64;
-                let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
-                let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                format!("{mean:.3} ({lo:.3}-{hi:.3})")
-            };
-            summary.push(format!(
-                "| {name} | {what} | {noise:?} | {} | {} | {covered}/{n_seeds}, <= {ratio:.2} x | {within:.2} | {} | lag {} | refused {refused} |",
-                stats(&rot),
-                stats(&acc),
-                stats(&secs),
-                stats(&lags),
-            ));
-        }
-    }
-    println!("| vehicle | differs | noise | err_rot mean (min-max) | err_acc mean (min-max) | within bound, largest err/bound | B within 2 se | vehicle-s | lag | refused |");
-    for line in summary {
-        println!("{line}");
     }
 }
 
@@ -854,7 +751,7 @@ pub(super) fn mismatch_sweep() {
 /// (g (1 + q k) - q m / N) with q = (a - 1) / (a + 1). k by least squares over the rows,
 /// each weighted by its group's norm; R (the weighted norm of the G) near 0 means k is not
 /// there to find.
-fn print_unmixed(o: &thruster_inprocess::estimation::Outcome, reverse_ratio: f64) {
+pub(super) fn print_unmixed(o: &thruster_inprocess::estimation::Outcome, reverse_ratio: f64) {
     let b = &o.b_err + &o.truth;
     let n = b.ncols() as f64;
     let q = (reverse_ratio - 1.0) / (reverse_ratio + 1.0);

@@ -13,6 +13,7 @@ mod disturbance_states;
 mod estimation_sweeps;
 mod identification;
 mod lost_hold;
+mod mismatch;
 mod refinement;
 mod refinement_update;
 mod silent_change;
@@ -116,7 +117,7 @@ pub const SWEEPS: &[Sweep] = &[
         name: "mismatch_sweep",
         knobs: "MM_*",
         about: "thrusters' reverse ratio, dead band or lag not what the daemon assumes",
-        run: estimation_sweeps::mismatch_sweep,
+        run: mismatch::mismatch_sweep,
     },
     Sweep {
         name: "khz_sweep",

@@ -1,0 +1,219 @@
+//! Whether the vehicle swayed over a long rest more than its IMU's white noise explains: the
+//! water moved it (a swell, a current swinging it), or it was still.
+//!
+//! Why: at the paper's noise (a gyro of 0.25 rad/s white) a moderate swell is below what a
+//! 1-2 s rest or the fit's unexplained rotation can see, so every rule that acts "in moving
+//! water" stays shut there. Over a minute of rest it is not: the swell's 6.7 s period shows in
+//! the means of 1 s bins, whose white noise is 1/sqrt(200) of a sample's. What reads it: the
+//! Allan variance at one bin, the mean square of adjacent bins' difference, against what the
+//! white noise alone gives it, sigma^2 (1/n_k + 1/n_k+1), with sigma^2 from adjacent samples'
+//! differences (half their mean square: a swell or a slow drift hardly moves the next sample,
+//! and a walking bias hardly moves the next bin). Still water reads 1 (its scatter about
+//! sqrt(2 / bins) over the axes summed); the swell adds its motion. For the gyro and the
+//! specific force each; the larger ratio is the reading. Running sums, no buffer, no
+//! allocation.
+
+use nalgebra::Vector3;
+
+/// One bin's length, s: several samples' worth of white noise averaged away, a small part of a
+/// swell's period.
+const BIN_S: f64 = 1.0;
+
+/// Fewest adjacent-bin pairs for a reading (their ratio's scatter is about sqrt(2 / (3
+/// pairs)): 0.15 at 30).
+const MIN_PAIRS: u64 = 30;
+
+/// The least white noise a sample is taken to have, gyro (rad/s) and specific force (m/s^2):
+/// half a realistic MEMS IMU's. Why: noise-free (the simulator's), a vehicle settling by a
+/// micro-radian would otherwise read as swaying without bound.
+const MIN_GYRO_SIGMA: f64 = 1e-3;
+const MIN_FORCE_SIGMA: f64 = 1.5e-2;
+
+/// One quantity's running sums: its present bin, the last closed bin's mean, the squared
+/// differences of adjacent bins and adjacent samples.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+struct Allan {
+    bin_sum: Vector3<f64>,
+    last_bin: Option<(Vector3<f64>, u64)>,
+    bins_d2: f64,
+    /// The sum over pairs of (1/n_k + 1/n_k+1): what multiplies sigma^2 in the white noise's
+    /// share of `bins_d2` (per axis).
+    bins_weight: f64,
+    pairs: u64,
+    last_sample: Option<Vector3<f64>>,
+    samples_d2: f64,
+    sample_pairs: u64,
+}
+
+impl Allan {
+    fn push(&mut self, v: &Vector3<f64>) {
+        if let Some(last) = self.last_sample {
+            self.samples_d2 += (v - last).norm_squared();
+            self.sample_pairs += 1;
+        }
+        self.last_sample = Some(*v);
+        self.bin_sum += v;
+    }
+
+    fn close_bin(&mut self, n: u64) {
+        let mean = self.bin_sum / n as f64;
+        if let Some((last, last_n)) = self.last_bin {
+            self.bins_d2 += (mean - last).norm_squared();
+            self.bins_weight += 1.0 / n as f64 + 1.0 / last_n as f64;
+            self.pairs += 1;
+        }
+        self.last_bin = Some((mean, n));
+        self.bin_sum = Vector3::zeros();
+    }
+
+    /// The adjacent bins' mean square difference over the white noise's share of it, the
+    /// noise taken as no less than `min_sigma` a sample (per axis).
+    fn ratio(&self, min_sigma: f64) -> Option<f64> {
+        if self.pairs < MIN_PAIRS || self.sample_pairs == 0 {
+            return None;
+        }
+        // Half the adjacent samples' mean square difference is sigma^2 (summed over the axes).
+        let sigma2 =
+            (0.5 * self.samples_d2 / self.sample_pairs as f64).max(3.0 * min_sigma * min_sigma);
+        Some(self.bins_d2 / (sigma2 * self.bins_weight))
+    }
+}
+
+/// The sway over a rest, for the gyro (rad/s) and the specific force (m/s^2).
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+pub struct LongRestSway {
+    bin_start_s: Option<f64>,
+    bin_n: u64,
+    gyro: Allan,
+    force: Allan,
+}
+
+impl LongRestSway {
+    /// One sample at `t_s`. A non-finite sample is skipped.
+    pub fn push(&mut self, t_s: f64, gyro: &Vector3<f64>, specific_force: &Vector3<f64>) {
+        let finite = t_s.is_finite()
+            && gyro.iter().all(|v| v.is_finite())
+            && specific_force.iter().all(|v| v.is_finite());
+        if !finite {
+            return;
+        }
+        let start = *self.bin_start_s.get_or_insert(t_s);
+        if t_s - start >= BIN_S && self.bin_n > 0 {
+            self.gyro.close_bin(self.bin_n);
+            self.force.close_bin(self.bin_n);
+            self.bin_n = 0;
+            self.bin_start_s = Some(t_s);
+        }
+        self.gyro.push(gyro);
+        self.force.push(specific_force);
+        self.bin_n += 1;
+    }
+
+    /// How much more the vehicle moved from bin to bin than the white noise explains (1:
+    /// still), the larger of the gyro's and the specific force's; None before `MIN_PAIRS`
+    /// pairs of bins.
+    pub fn ratio(&self) -> Option<f64> {
+        Some(
+            self.gyro
+                .ratio(MIN_GYRO_SIGMA)?
+                .max(self.force.ratio(MIN_FORCE_SIGMA)?),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const G: f64 = 9.80665;
+    const DT: f64 = 0.005;
+
+    /// Deterministic white noise (xorshift, Box-Muller): the tests need no random crate.
+    struct Noise(u64);
+    impl Noise {
+        fn uniform(&mut self) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn normal(&mut self) -> f64 {
+            let (u, v) = (self.uniform().max(1e-300), self.uniform());
+            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        }
+        fn vec(&mut self, sd: f64) -> Vector3<f64> {
+            Vector3::new(self.normal(), self.normal(), self.normal()) * sd
+        }
+    }
+
+    /// A rest of `span_s` at the paper's noise (gyro 0.25 rad/s, accelerometer 0.49 m/s^2),
+    /// rocking `roll_rad` at a 6.7 s period, with a bias walking `walk` rad/s/sqrt(s).
+    fn rest(span_s: f64, roll_rad: f64, walk: f64, seed: u64) -> Option<f64> {
+        let (mut s, mut noise, mut bias) = (LongRestSway::default(), Noise(seed), Vector3::zeros());
+        let w = std::f64::consts::TAU / 6.7;
+        for k in 0..(span_s / DT) as usize {
+            let t = k as f64 * DT;
+            let roll = roll_rad * (w * t).sin();
+            let rate = Vector3::new(roll_rad * w * (w * t).cos(), 0.0, 0.0);
+            let force = Vector3::new(0.0, G * roll.sin(), -G * roll.cos());
+            bias += noise.vec(walk * DT.sqrt());
+            s.push(
+                t,
+                &(rate + bias + noise.vec(0.25)),
+                &(force + noise.vec(0.05 * G)),
+            );
+        }
+        s.ratio()
+    }
+
+    #[test]
+    fn still_water_reads_about_one_at_any_seed() {
+        for seed in 1..=10 {
+            let r = rest(60.0, 0.0, 0.0, seed).unwrap();
+            assert!((0.6..1.5).contains(&r), "seed {seed}: {r:.3}");
+        }
+    }
+
+    /// A realistic gyro's walk (5e-5 rad/s/sqrt(s)) is a bin-to-bin difference far below the
+    /// paper's white noise: still.
+    #[test]
+    fn a_walking_bias_is_not_sway() {
+        let r = rest(60.0, 0.0, 5e-5, 3).unwrap();
+        assert!(r < 1.5, "{r:.3}");
+    }
+
+    /// Rocking 0.03 rad (under two degrees) at the swell's period stands out of the paper's
+    /// noise over a minute.
+    #[test]
+    fn two_degrees_of_swell_is_sway() {
+        for seed in 1..=5 {
+            let r = rest(60.0, 0.03, 0.0, seed).unwrap();
+            assert!(r > 2.0, "seed {seed}: {r:.3}");
+        }
+    }
+
+    #[test]
+    fn too_short_a_rest_reads_nothing() {
+        assert!(rest(20.0, 0.3, 0.0, 1).is_none());
+    }
+
+    /// Noise-free: still reads 0, a settling by micro-radians below 1, a swell far above it.
+    #[test]
+    fn noise_free_still_and_moving() {
+        let mut still = LongRestSway::default();
+        let (mut settling, mut rocking) = (LongRestSway::default(), LongRestSway::default());
+        for k in 0..(60.0 / DT) as usize {
+            let t = k as f64 * DT;
+            let f = Vector3::new(0.0, 0.0, -G);
+            still.push(t, &Vector3::zeros(), &f);
+            let creep = Vector3::new(1e-5 * (-t / 5.0).exp(), 0.0, 0.0);
+            settling.push(t, &creep, &f);
+            let w = std::f64::consts::TAU / 6.7;
+            let rate = Vector3::new(0.05 * w * (w * t).cos(), 0.0, 0.0);
+            rocking.push(t, &rate, &f);
+        }
+        assert!(still.ratio().unwrap() < 1e-9);
+        assert!(settling.ratio().unwrap() < 0.1);
+        assert!(rocking.ratio().unwrap() > 100.0);
+    }
+}
