@@ -322,10 +322,21 @@ fn the_supply_voltage_reaches_the_daemon_and_the_operator() {
                     v["driver"]["supply_current_a"].as_f64().unwrap() > 0.9,
                     "{v}"
                 );
+                // The text is asked for after the JSON, the simulator running on meanwhile:
+                // on a loaded machine tens of vehicle-s later, the pack a hundredth of a volt
+                // lower (16.77 V at 83 s), so the figure is read, not matched.
+                let line = text
+                    .lines()
+                    .find(|l| l.starts_with("  supply "))
+                    .unwrap_or_else(|| panic!("no supply line\n{text}"));
+                let shown: f64 = line
+                    .split_whitespace()
+                    .nth(1)
+                    .and_then(|w| w.parse().ok())
+                    .unwrap_or_else(|| panic!("no figure in {line:?}"));
                 assert!(
-                    text.contains(
-                        "supply       16.78 V, commands referred to the reference voltage"
-                    ),
+                    (shown - 16.78).abs() < 0.03
+                        && line.ends_with(" V, commands referred to the reference voltage"),
                     "{text}"
                 );
             } else {

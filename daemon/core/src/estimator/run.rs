@@ -272,6 +272,10 @@ pub struct Estimator {
     /// holds the velocity terms (`EstimatorConfig::velocity_term_prior_sd`).
     #[serde(default)]
     still_water: bool,
+    /// A long rest before the run saw the water move (`with_water_moved`): the moving-water
+    /// refit is made whatever the fit leaves unexplained.
+    #[serde(default)]
+    water_moved: bool,
     /// `cfg.spin_up_s` is a lag an earlier run learned (`with_learned_lag`).
     lag_inherited: bool,
     /// Each thruster's own lag an earlier run learned (`with_learned_thruster_lags`), used in
@@ -322,6 +326,7 @@ impl Estimator {
             rest_force: None,
             rest_velocity_down: None,
             still_water: false,
+            water_moved: false,
             lag_inherited: false,
             lag_hint: None,
             inherited_lags: Vec::new(),
@@ -410,6 +415,14 @@ impl Estimator {
     /// but not in a swell, which nothing shorter than a long rest sees there.
     pub fn with_still_water(mut self) -> Self {
         self.still_water = true;
+        self
+    }
+
+    /// A long rest before the run saw the water move (`navigation::long_rest_sway`): the
+    /// open-loop fit is made again with the moving-water states
+    /// (`EstimatorConfig::moving_water_states`) whatever rotation it leaves unexplained.
+    pub fn with_water_moved(mut self) -> Self {
+        self.water_moved = true;
         self
     }
 

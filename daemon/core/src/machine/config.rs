@@ -51,7 +51,8 @@ pub struct MachineConfig {
     /// still). Only then does the open-loop fit hold the velocity terms lightly
     /// (`estimator.velocity_term_prior_sd`). Why: at the paper's noise that prior's tighter
     /// bound is honest in still water but not in a swell, which neither the 1-2 s rest nor the
-    /// fit's unexplained rotation can see there, and a minute's rest can.
+    /// fit's unexplained rotation can see there, and a minute's rest can. Where it read more,
+    /// the water moved: `estimator.moving_rest_drift_states`.
     pub max_still_sway: f64,
     /// An estimation that starts while the daemon controls (a reconfiguration, a mismatch, a
     /// request) first levels the vehicle with the model in force, for at most this long, s

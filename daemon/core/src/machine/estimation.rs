@@ -417,13 +417,17 @@ impl EstimationRun {
             cfg.target_rel_err = setup.identification.burst_rel_err;
         }
         let est = self.new_estimator(cfg, n, levels, model);
-        self.est = Some(
-            if still_by_long_rest(self.idle_sway, setup.machine.max_still_sway) {
-                est.with_still_water()
-            } else {
-                est
-            },
-        );
+        let sway_limit = setup.machine.max_still_sway;
+        self.est = Some(if still_by_long_rest(self.idle_sway, sway_limit) {
+            est.with_still_water()
+        } else if self
+            .idle_sway
+            .is_some_and(|r| sway_limit > 0.0 && r > sway_limit)
+        {
+            est.with_water_moved()
+        } else {
+            est
+        });
         true
     }
 

@@ -239,7 +239,8 @@ impl Estimator {
     }
 
     /// `e`, or where it says the water moves (rotation left unexplained beyond
-    /// `MOVING_WATER_REFIT_RADPS`) and `EstimatorConfig::moving_water_states()` names
+    /// `MOVING_WATER_REFIT_RADPS`, or a long rest saw it: `with_water_moved`) and
+    /// `EstimatorConfig::moving_water_states()` names
     /// disturbance states, the estimate `again` makes from `run`'s log refitted with them
     /// (its lag searched again with them), its bound no tighter than `e`'s. The water is as
     /// the fit without states says: its unexplained rotation is reported, whichever fit is
@@ -250,11 +251,22 @@ impl Estimator {
         e: Estimate,
         again: impl FnOnce(&DynamicRun) -> Estimate,
     ) -> Estimate {
-        let states = self.cfg.moving_water_states();
+        let mut states = self.cfg.moving_water_states();
         let Some(water) = e.dynamics.as_ref().map(|d| d.unexplained_rate_radps) else {
             return e;
         };
-        if !states.any() || water <= crate::estimator::MOVING_WATER_REFIT_RADPS {
+        // A long rest saw the water move (`with_water_moved`), and the gyro is quiet enough
+        // for more columns (`EstimatorConfig::moving_rest_drift_states`): a world-fixed
+        // constant force and a ramp join the states, whatever the fit leaves unexplained.
+        let rest_saw_water = self.water_moved
+            && self.cfg.moving_rest_drift_states
+            && self.noise.sigma_rot() <= self.cfg.spin_up_max_gyro_sigma;
+        if rest_saw_water {
+            states.world_constant = true;
+            states.world_ramp = true;
+        }
+        if !states.any() || (water <= crate::estimator::MOVING_WATER_REFIT_RADPS && !rest_saw_water)
+        {
             return e;
         }
         let Some(moving) = run.restated(states) else {

@@ -515,7 +515,7 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// alone, not the larger of it and the rest's noise: docs/study.md, "What the water check
 /// reads"), LA_MAX_UNEXPLAINED (`machine.max_unexplained_rate_radps`), LA_MAX_TILT
 /// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`), LA_MAX_SWAY
-/// (`machine.max_still_sway`).
+/// (`machine.max_still_sway`), LA_DRIFT_STATES=0 (`estimator.moving_rest_drift_states` off).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -633,6 +633,9 @@ pub(super) fn imu_and_water_sweep() {
             // term) at the simulator's own (LA_TERMS_TRUE=sd, the decisive run) or at what a
             // still-water flight of the same vehicle and seed learned (LA_TERMS_FROM_STILL=sd).
             // The velocity terms' prior (LA_TERMS_VEL) and every term's (LA_TERMS_ZERO), sd.
+            if std::env::var("LA_DRIFT_STATES").as_deref() == Ok("0") {
+                cfg.moving_rest_drift_states = false;
+            }
             if let Ok(sd) = std::env::var("LA_TERMS_VEL") {
                 cfg.velocity_term_prior_sd = sd.parse().unwrap();
             }
