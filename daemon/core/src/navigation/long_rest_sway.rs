@@ -6,20 +6,27 @@
 //! water" stays shut there. Over a minute of rest it is not: the swell's 6.7 s period shows in
 //! the means of 1 s bins, whose white noise is 1/sqrt(200) of a sample's. What reads it: the
 //! Allan variance at one bin, the mean square of adjacent bins' difference, against what the
-//! white noise alone gives it, sigma^2 (1/n_k + 1/n_k+1), with sigma^2 from adjacent samples'
-//! differences (half their mean square: a swell or a slow drift hardly moves the next sample,
-//! and a walking bias hardly moves the next bin). Still water reads 1 (its scatter about
+//! white noise alone gives it, sigma^2 (1/n_k + 1/n_k+1), with sigma^2 from the same over
+//! 0.1 s bins (a swell or a slow drift hardly moves the next tenth of a second, and a walking
+//! bias hardly moves the next second). Why tenths and not single samples: a real IMU's
+//! readings are low-passed before they are sampled (ArduPilot's gyro filter is 20 Hz by
+//! default), so adjacent samples share their noise and their differences understate it;
+//! a tenth of a second is many such correlation times. Still water reads 1 (its scatter about
 //! sqrt(2 / bins) over the axes summed); the swell adds its motion. For the gyro and the
 //! specific force each; the larger ratio is the reading. Running sums, no buffer, no
 //! allocation.
 
 use nalgebra::Vector3;
 
-/// One bin's length, s: several samples' worth of white noise averaged away, a small part of a
+/// The long bins, s: many samples' worth of white noise averaged away, a small part of a
 /// swell's period.
 const BIN_S: f64 = 1.0;
 
-/// Fewest adjacent-bin pairs for a reading (their ratio's scatter is about sqrt(2 / (3
+/// The short bins that measure the white noise, s: long against a sensor filter's
+/// correlation (a 20 Hz low-pass: 8 ms), short against a swell.
+const NOISE_BIN_S: f64 = 0.1;
+
+/// Fewest adjacent long-bin pairs for a reading (their ratio's scatter is about sqrt(2 / (3
 /// pairs)): 0.15 at 30).
 const MIN_PAIRS: u64 = 30;
 
@@ -29,61 +36,72 @@ const MIN_PAIRS: u64 = 30;
 const MIN_GYRO_SIGMA: f64 = 1e-3;
 const MIN_FORCE_SIGMA: f64 = 1.5e-2;
 
-/// One quantity's running sums: its present bin, the last closed bin's mean, the squared
-/// differences of adjacent bins and adjacent samples.
+/// Means of consecutive bins `span_s` long, and the squared differences of adjacent ones.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+struct Bins {
+    start_s: Option<f64>,
+    sum: Vector3<f64>,
+    n: u64,
+    last: Option<(Vector3<f64>, u64)>,
+    d2: f64,
+    /// The sum over pairs of (1/n_k + 1/n_k+1): what multiplies sigma^2 (per axis, per
+    /// sample) in the white noise's share of `d2`.
+    weight: f64,
+    pairs: u64,
+}
+
+impl Bins {
+    fn push(&mut self, span_s: f64, t_s: f64, v: &Vector3<f64>) {
+        let start = *self.start_s.get_or_insert(t_s);
+        if t_s - start >= span_s && self.n > 0 {
+            let mean = self.sum / self.n as f64;
+            if let Some((last, last_n)) = self.last {
+                self.d2 += (mean - last).norm_squared();
+                self.weight += 1.0 / self.n as f64 + 1.0 / last_n as f64;
+                self.pairs += 1;
+            }
+            self.last = Some((mean, self.n));
+            self.sum = Vector3::zeros();
+            self.n = 0;
+            self.start_s = Some(t_s);
+        }
+        self.sum += v;
+        self.n += 1;
+    }
+
+    /// sigma^2 summed over the axes if the bins' differences were white noise alone.
+    fn white_sigma2(&self) -> Option<f64> {
+        (self.weight > 0.0).then(|| self.d2 / self.weight)
+    }
+}
+
+/// One quantity's long and short bins.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 struct Allan {
-    bin_sum: Vector3<f64>,
-    last_bin: Option<(Vector3<f64>, u64)>,
-    bins_d2: f64,
-    /// The sum over pairs of (1/n_k + 1/n_k+1): what multiplies sigma^2 in the white noise's
-    /// share of `bins_d2` (per axis).
-    bins_weight: f64,
-    pairs: u64,
-    last_sample: Option<Vector3<f64>>,
-    samples_d2: f64,
-    sample_pairs: u64,
+    long: Bins,
+    short: Bins,
 }
 
 impl Allan {
-    fn push(&mut self, v: &Vector3<f64>) {
-        if let Some(last) = self.last_sample {
-            self.samples_d2 += (v - last).norm_squared();
-            self.sample_pairs += 1;
-        }
-        self.last_sample = Some(*v);
-        self.bin_sum += v;
+    fn push(&mut self, t_s: f64, v: &Vector3<f64>) {
+        self.long.push(BIN_S, t_s, v);
+        self.short.push(NOISE_BIN_S, t_s, v);
     }
 
-    fn close_bin(&mut self, n: u64) {
-        let mean = self.bin_sum / n as f64;
-        if let Some((last, last_n)) = self.last_bin {
-            self.bins_d2 += (mean - last).norm_squared();
-            self.bins_weight += 1.0 / n as f64 + 1.0 / last_n as f64;
-            self.pairs += 1;
-        }
-        self.last_bin = Some((mean, n));
-        self.bin_sum = Vector3::zeros();
-    }
-
-    /// The adjacent bins' mean square difference over the white noise's share of it, the
-    /// noise taken as no less than `min_sigma` a sample (per axis).
+    /// The long bins' mean square difference over the white noise's share of it (the noise
+    /// from the short bins, taken as no less than `min_sigma` a sample per axis).
     fn ratio(&self, min_sigma: f64) -> Option<f64> {
-        if self.pairs < MIN_PAIRS || self.sample_pairs == 0 {
+        if self.long.pairs < MIN_PAIRS {
             return None;
         }
-        // Half the adjacent samples' mean square difference is sigma^2 (summed over the axes).
-        let sigma2 =
-            (0.5 * self.samples_d2 / self.sample_pairs as f64).max(3.0 * min_sigma * min_sigma);
-        Some(self.bins_d2 / (sigma2 * self.bins_weight))
+        let sigma2 = self.short.white_sigma2()?.max(3.0 * min_sigma * min_sigma);
+        Some(self.long.d2 / (sigma2 * self.long.weight))
     }
 }
 
 /// The sway over a rest, for the gyro (rad/s) and the specific force (m/s^2).
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct LongRestSway {
-    bin_start_s: Option<f64>,
-    bin_n: u64,
     gyro: Allan,
     force: Allan,
 }
@@ -97,21 +115,13 @@ impl LongRestSway {
         if !finite {
             return;
         }
-        let start = *self.bin_start_s.get_or_insert(t_s);
-        if t_s - start >= BIN_S && self.bin_n > 0 {
-            self.gyro.close_bin(self.bin_n);
-            self.force.close_bin(self.bin_n);
-            self.bin_n = 0;
-            self.bin_start_s = Some(t_s);
-        }
-        self.gyro.push(gyro);
-        self.force.push(specific_force);
-        self.bin_n += 1;
+        self.gyro.push(t_s, gyro);
+        self.force.push(t_s, specific_force);
     }
 
-    /// How much more the vehicle moved from bin to bin than the white noise explains (1:
-    /// still), the larger of the gyro's and the specific force's; None before `MIN_PAIRS`
-    /// pairs of bins.
+    /// How much more the vehicle moved from second to second than the white noise explains
+    /// (1: still), the larger of the gyro's and the specific force's; None before
+    /// `MIN_PAIRS` pairs of long bins.
     pub fn ratio(&self) -> Option<f64> {
         Some(
             self.gyro
@@ -189,6 +199,26 @@ mod tests {
         for seed in 1..=5 {
             let r = rest(60.0, 0.03, 0.0, seed).unwrap();
             assert!(r > 2.0, "seed {seed}: {r:.3}");
+        }
+    }
+
+    /// The noise low-passed before sampling (a first-order 20 Hz filter at 200 Hz, as
+    /// ArduPilot's gyro filter): adjacent samples share it, but tenths of a second do not, so
+    /// still water still reads about one (adjacent samples' differences read about 7 there:
+    /// (1 + a) / (1 - a)^2 with the filter's a = 0.53).
+    #[test]
+    fn a_low_passed_imu_in_still_water_reads_about_one() {
+        let alpha = 1.0 - (-std::f64::consts::TAU * 20.0 * DT).exp();
+        for seed in 1..=5 {
+            let (mut s, mut noise) = (LongRestSway::default(), Noise(seed));
+            let (mut g, mut f) = (Vector3::zeros(), Vector3::zeros());
+            for k in 0..(60.0 / DT) as usize {
+                g += (noise.vec(0.25) - g) * alpha;
+                f += (noise.vec(0.05 * G) - f) * alpha;
+                s.push(k as f64 * DT, &g, &(Vector3::new(0.0, 0.0, -G) + f));
+            }
+            let r = s.ratio().unwrap();
+            assert!((0.6..1.5).contains(&r), "seed {seed}: {r:.3}");
         }
     }
 

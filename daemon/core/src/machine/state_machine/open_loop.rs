@@ -163,13 +163,26 @@ impl Machine {
         if let Some(k) = self.run.begin_pulse(t_ns, power_cap, &mut cmd.thrust) {
             // The first pulse is the estimation's news; the ones after a settle are phases.
             let first = !matches!(self.state, State::Pulse | State::Settle);
-            let news = match self.run.rest_restarts() {
+            let mut news = match self.run.rest_restarts() {
                 0 => "noise measured: pulsing".to_string(),
                 r => format!(
                     "noise measured: pulsing (the rest started over {r} time{}: the accelerometer saw the vehicle pushed, not turned)",
                     if r == 1 { "" } else { "s" }
                 ),
             };
+            // What the long idle rest read of the water (`navigation::long_rest_sway`): the
+            // operator's word for why the fit holds the velocity terms or fits a drift.
+            if let Some(sway) = self.run.idle_sway() {
+                let limit = self.setup.machine.max_still_sway;
+                let water = if limit > 0.0 && sway <= limit {
+                    "still water"
+                } else {
+                    "the water moved"
+                };
+                news.push_str(&format!(
+                    "; the long rest: {water} (sway {sway:.1}x the IMU's noise)"
+                ));
+            }
             let announce = first.then_some(news.as_str());
             self.enter(State::Pulse, Some(t_ns), format!("pulse {k}"), announce);
         }
