@@ -230,7 +230,7 @@ pub struct EstimatorConfig {
     /// the terms with the body velocity in them (linear and quadratic damping in v, the
     /// products nu_i nu_j with a velocity), per unit term, where `term_prior_sd` is wider or
     /// off; default 0.1, 0 turns it off. Applied in the open loop only, and only where a long
-    /// idle rest saw still water (`Estimator::with_still_water`, which the machine gives from
+    /// idle rest saw still water (`Estimator::with_rest_water`, which the machine gives from
     /// `machine.max_still_sway`); otherwise off. Why: at the paper's noise the dead-reckoned
     /// velocity is 0.6-2.5 m/s off where the vehicle moves a few tenths, and the velocity
     /// terms' nuisance was most of the bound; at 0.1, still water after a long rest took 5.60 s

@@ -26,6 +26,7 @@ use super::noise::NoiseLevels;
 use super::paper::PaperLs;
 use super::response::PulseShape;
 use crate::allocation::pseudo_inverse;
+use crate::navigation::long_rest_sway::RestWater;
 use crate::navigation::DepthAid;
 
 mod closed_loop;
@@ -268,14 +269,12 @@ pub struct Estimator {
     rest_force: Option<Vector3<f64>>,
     /// The vertical velocity at the end of that rest (NED, m/s), from the depth.
     rest_velocity_down: Option<f64>,
-    /// A long rest before the run saw still water (`with_still_water`): the open-loop fit
-    /// holds the velocity terms (`EstimatorConfig::velocity_term_prior_sd`).
+    /// What a long rest before the run read of the water (`with_rest_water`; None: no long
+    /// rest). Still: the open-loop fit holds the velocity terms
+    /// (`EstimatorConfig::velocity_term_prior_sd`); moved: the moving-water refit is made
+    /// whatever the fit leaves unexplained (`EstimatorConfig::moving_rest_drift_states`).
     #[serde(default)]
-    still_water: bool,
-    /// A long rest before the run saw the water move (`with_water_moved`): the moving-water
-    /// refit is made whatever the fit leaves unexplained.
-    #[serde(default)]
-    water_moved: bool,
+    rest_water: Option<RestWater>,
     /// `cfg.spin_up_s` is a lag an earlier run learned (`with_learned_lag`).
     lag_inherited: bool,
     /// Each thruster's own lag an earlier run learned (`with_learned_thruster_lags`), used in
@@ -325,8 +324,7 @@ impl Estimator {
             dynamic: None,
             rest_force: None,
             rest_velocity_down: None,
-            still_water: false,
-            water_moved: false,
+            rest_water: None,
             lag_inherited: false,
             lag_hint: None,
             inherited_lags: Vec::new(),
@@ -409,20 +407,15 @@ impl Estimator {
         self
     }
 
-    /// A long rest before the run saw still water (`navigation::long_rest_sway`): the
-    /// open-loop fit holds the velocity terms at `EstimatorConfig::velocity_term_prior_sd`.
-    /// Why only then: at the paper's noise that prior's tighter bound is honest in still water
-    /// but not in a swell, which nothing shorter than a long rest sees there.
-    pub fn with_still_water(mut self) -> Self {
-        self.still_water = true;
-        self
-    }
-
-    /// A long rest before the run saw the water move (`navigation::long_rest_sway`): the
-    /// open-loop fit is made again with the moving-water states
-    /// (`EstimatorConfig::moving_water_states`) whatever rotation it leaves unexplained.
-    pub fn with_water_moved(mut self) -> Self {
-        self.water_moved = true;
+    /// What a long rest before the run read of the water (`navigation::long_rest_sway`).
+    /// Still: the open-loop fit holds the velocity terms at
+    /// `EstimatorConfig::velocity_term_prior_sd` (why only then: at the paper's noise that
+    /// prior's tighter bound is honest in still water but not in a swell, which nothing
+    /// shorter than a long rest sees there). Moved: the open-loop fit is made again with the
+    /// moving-water states whatever rotation it leaves unexplained
+    /// (`EstimatorConfig::moving_rest_drift_states`).
+    pub fn with_rest_water(mut self, water: RestWater) -> Self {
+        self.rest_water = Some(water);
         self
     }
 
@@ -471,7 +464,7 @@ impl Estimator {
         // identification (docs/study.md, "At the paper's noise"); in a swell at the paper's
         // noise its bound was not honest ("The velocity terms held where a long rest saw
         // still water").
-        .with_velocity_term_prior_sd(if open_loop && self.still_water {
+        .with_velocity_term_prior_sd(if open_loop && self.rest_water == Some(RestWater::Still) {
             self.cfg.velocity_term_prior_sd
         } else {
             0.0

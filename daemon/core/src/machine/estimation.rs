@@ -16,6 +16,7 @@ use crate::estimator::{
 use crate::model::{Model, ModelSource};
 use crate::navigation::long_rest_bias::RestBias;
 use crate::navigation::long_rest_down::LongRestDown;
+use crate::navigation::long_rest_sway::RestWater;
 use crate::navigation::rest_drift::RestDrift;
 use crate::navigation::rest_rotation::RestRotation;
 use crate::navigation::rest_shape::RestShape;
@@ -202,6 +203,16 @@ impl EstimationRun {
     /// IMU's white noise (1: still; None: no long rest).
     pub(super) fn idle_sway(&self) -> Option<f64> {
         self.idle_sway
+    }
+
+    /// What that long rest read of the water against `max_still` (`machine.max_still_sway`;
+    /// None: no long rest, or the limit 0). What hangs on it: the velocity terms' prior where
+    /// still (its tighter bound honest in still water at the paper's noise but not in a swell
+    /// there, which nothing shorter than a long rest sees), the drift states where moved
+    /// (docs/study.md, "The velocity terms held where a long rest saw still water", "The water
+    /// a long rest saw").
+    pub(super) fn idle_water(&self, max_still: f64) -> Option<RestWater> {
+        RestWater::read(self.idle_sway?, max_still)
     }
 
     /// Whether the run that just concluded was an open-loop burst to be refined under control.
@@ -417,16 +428,9 @@ impl EstimationRun {
             cfg.target_rel_err = setup.identification.burst_rel_err;
         }
         let est = self.new_estimator(cfg, n, levels, model);
-        let sway_limit = setup.machine.max_still_sway;
-        self.est = Some(if still_by_long_rest(self.idle_sway, sway_limit) {
-            est.with_still_water()
-        } else if self
-            .idle_sway
-            .is_some_and(|r| sway_limit > 0.0 && r > sway_limit)
-        {
-            est.with_water_moved()
-        } else {
-            est
+        self.est = Some(match self.idle_water(setup.machine.max_still_sway) {
+            Some(water) => est.with_rest_water(water),
+            None => est,
         });
         true
     }
@@ -557,16 +561,6 @@ fn long_rest_bias(levels: &NoiseLevels, long: &RestBias) -> Option<Vector3<f64>>
         gap[a].abs() > REST_MOVED_SIGMAS * sd
     });
     moved.then_some(bias)
-}
-
-/// Whether a long idle rest saw still water: it swayed (`navigation::long_rest_sway`) no more
-/// than `max_sway` times what the IMU's white noise explains. Without a long rest, or with
-/// `max_sway` 0, no. What hangs on it: the velocity terms' prior
-/// (`estimator.velocity_term_prior_sd`), whose tighter bound is honest in still water at
-/// the paper's noise but not in a swell there, which nothing shorter than a long rest sees
-/// (docs/study.md, "The velocity terms held where a long rest saw still water").
-fn still_by_long_rest(sway: Option<f64>, max_sway: f64) -> bool {
-    max_sway > 0.0 && sway.is_some_and(|r| r <= max_sway)
 }
 
 /// What the rest before an estimation measured, for its navigation: how the vehicle turned

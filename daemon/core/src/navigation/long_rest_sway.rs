@@ -99,6 +99,38 @@ impl Allan {
     }
 }
 
+/// What a long rest's sway says of the water, against a limit (`machine.max_still_sway`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum RestWater {
+    /// It swayed no more than the limit times what the IMU's white noise explains.
+    Still,
+    /// It swayed more: a swell, a vehicle swinging on a tether.
+    Moved,
+}
+
+impl RestWater {
+    /// What `sway` (a `LongRestSway::ratio`) says against `max_still`; None when the limit is
+    /// 0 (the reading not used) or not finite.
+    pub fn read(sway: f64, max_still: f64) -> Option<Self> {
+        if !(max_still > 0.0 && max_still.is_finite()) {
+            return None;
+        }
+        Some(if sway <= max_still {
+            RestWater::Still
+        } else {
+            RestWater::Moved
+        })
+    }
+
+    /// The operator's word for it.
+    pub fn text(self) -> &'static str {
+        match self {
+            RestWater::Still => "still water",
+            RestWater::Moved => "the water moved",
+        }
+    }
+}
+
 /// The sway over a rest, for the gyro (rad/s) and the specific force (m/s^2).
 #[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct LongRestSway {
@@ -249,6 +281,15 @@ mod tests {
             let r = s.ratio().unwrap();
             assert!(r < 1.5, "seed {seed}: {r:.3}");
         }
+    }
+
+    #[test]
+    fn the_water_is_read_against_the_limit_and_not_at_all_at_zero() {
+        assert_eq!(RestWater::read(1.2, 1.5), Some(RestWater::Still));
+        assert_eq!(RestWater::read(1.5, 1.5), Some(RestWater::Still));
+        assert_eq!(RestWater::read(9.9, 1.5), Some(RestWater::Moved));
+        assert_eq!(RestWater::read(1.2, 0.0), None);
+        assert_eq!(RestWater::read(1.2, f64::NAN), None);
     }
 
     #[test]

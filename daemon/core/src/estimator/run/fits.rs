@@ -239,7 +239,7 @@ impl Estimator {
     }
 
     /// `e`, or where it says the water moves (rotation left unexplained beyond
-    /// `MOVING_WATER_REFIT_RADPS`, or a long rest saw it: `with_water_moved`) and
+    /// `MOVING_WATER_REFIT_RADPS`, or a long rest saw it: `with_rest_water`) and
     /// `EstimatorConfig::moving_water_states()` names
     /// disturbance states, the estimate `again` makes from `run`'s log refitted with them
     /// (its lag searched again with them), its bound no tighter than `e`'s. The water is as
@@ -255,10 +255,10 @@ impl Estimator {
         let Some(water) = e.dynamics.as_ref().map(|d| d.unexplained_rate_radps) else {
             return e;
         };
-        // A long rest saw the water move (`with_water_moved`), and the gyro is quiet enough
+        // A long rest saw the water move (`with_rest_water`), and the gyro is quiet enough
         // for more columns (`EstimatorConfig::moving_rest_drift_states`): a world-fixed
         // constant force and a ramp join the states, whatever the fit leaves unexplained.
-        let rest_saw_water = self.water_moved
+        let rest_saw_water = self.rest_water == Some(RestWater::Moved)
             && self.cfg.moving_rest_drift_states
             && self.noise.sigma_rot() <= self.cfg.spin_up_max_gyro_sigma;
         if rest_saw_water {

@@ -172,15 +172,11 @@ impl Machine {
             };
             // What the long idle rest read of the water (`navigation::long_rest_sway`): the
             // operator's word for why the fit holds the velocity terms or fits a drift.
-            if let Some(sway) = self.run.idle_sway() {
-                let limit = self.setup.machine.max_still_sway;
-                let water = if limit > 0.0 && sway <= limit {
-                    "still water"
-                } else {
-                    "the water moved"
-                };
+            let water = self.run.idle_water(self.setup.machine.max_still_sway);
+            if let (Some(sway), Some(water)) = (self.run.idle_sway(), water) {
                 news.push_str(&format!(
-                    "; the long rest: {water} (sway {sway:.1}x the IMU's noise)"
+                    "; the long rest: {} (sway {sway:.1}x the IMU's noise)",
+                    water.text()
                 ));
             }
             let announce = first.then_some(news.as_str());
