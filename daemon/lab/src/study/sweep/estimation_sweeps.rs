@@ -227,7 +227,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset alone, `noise_only`), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
 /// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
-/// (`reach_rel_err`), LAG_PULSES, LAG_SPANNED (`stop_once_spanned`), LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_SHAPED (1|0: `shaped_thrust` on or off; set to anything else: on), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
+/// (`reach_rel_err`), LAG_PULSES, LAG_SPANNED (`stop_once_spanned`), LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_SHAPED (1|0: `shaped_thrust` on or off; set to anything else: on), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_DIST_CONST=1 and LAG_DIST_RAMP=1 (a world-fixed constant force and its ramp as states in the fit), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
 /// comma-separated sets of letters (g the rotation rows' gyro, r the terms' rate, d the
@@ -326,6 +326,10 @@ pub(super) fn lag_sweep() {
                 if let Ok(r) = std::env::var("LAG_REVERSE_RATIO") {
                     cfg.reverse_ratio = r.parse().unwrap();
                 }
+                // A world-fixed constant and ramp in the fit (`EstimatorConfig::disturbance`):
+                // the navigation's velocity drift, taken as states (docs/study.md).
+                cfg.disturbance.world_constant = std::env::var("LAG_DIST_CONST").is_ok();
+                cfg.disturbance.world_ramp = std::env::var("LAG_DIST_RAMP").is_ok();
                 if std::env::var("LAG_NO_IMU").is_ok() {
                     cfg.learn_imu_position = false;
                 }
