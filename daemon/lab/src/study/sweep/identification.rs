@@ -130,6 +130,42 @@ fn print_steps(steps: &[(f64, nalgebra::DMatrix<f64>, f64, f64)], truth: &nalgeb
     }
 }
 
+/// `ID_FIRST`: the first model as the sweep's run learns it (from a request after 1 s, with
+/// `ID_TARGET_ACC` when given), against the truth before the change, column by column (of
+/// its rows' norm, as `ID_STEPS_COLUMNS`), beside its bound: what the identification carries
+/// over.
+fn first_model_probe(name: &str, noise: NoisePreset, seed: u64, target_acc: Option<f64>) {
+    use thruster_inprocess::rel_err;
+    let mut first = Run::new(name, noise, seed);
+    if let Some(t) = target_acc {
+        first.with_setup(|s| s.estimator.target_rel_err_acc = Some(t));
+    }
+    first.run_for(1.0);
+    let took = first.estimate();
+    let Some(m) = first.machine.model() else {
+        println!("    first model: none");
+        return;
+    };
+    let (b, truth) = (&m.effectiveness, first.truth());
+    let cols: Vec<String> = (0..b.ncols())
+        .map(|i| {
+            let d = |r: usize| {
+                (b.view((r, i), (3, 1)) - truth.view((r, i), (3, 1))).norm()
+                    / truth.rows(r, 3).norm()
+            };
+            format!("{:.3}/{:.3}", d(0), d(3))
+        })
+        .collect();
+    println!(
+        "    first model ({took:.2} s): err {:.3} / {:.3} bound {:.3} / {:.3}; each column's error: {}",
+        rel_err(b, &truth, 0),
+        rel_err(b, &truth, 3),
+        m.rel_err_rot,
+        m.rel_err_acc,
+        cols.join(" ")
+    );
+}
+
 /// One row of the sweep: took_s, err_rot, err_acc, max_tilt, mean_err, b_rot, b_acc, t_rot, t_acc.
 fn line(label: &str, v: &[f64; 7], t_rot: Option<f64>, t_acc: Option<f64>) -> String {
     let t = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.1}"));
@@ -242,7 +278,7 @@ pub(super) fn carry_over_on_every_vehicle() {
 /// (`machine.max_swap_rel_err`, one value), ID_TARGET_ACC (`estimator.target_rel_err_acc`, one
 /// value: the first model's and the identification's), ID_VEL_PRIOR
 /// (`estimator.velocity_term_prior_sd`, one value), ID_DVL (the true velocity handed to the machine at
-/// every sample, a perfect DVL), ID_SYM (thrusters as strong in reverse as forward, the daemon told), ID_FLOOR_PROBE (print the first model's bound, lag floor and lags, from a run of its own), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
+/// every sample, a perfect DVL), ID_SYM (thrusters as strong in reverse as forward, the daemon told), ID_FLOOR_PROBE (print the first model's bound, lag floor and lags, from a run of its own), ID_FIRST (the first model against the truth, column by column, `first_model_probe`), ID_VEHICLE (default amour5; its first thruster is turned). The last column is the final estimate's
 /// rotation that neither thrust nor the dynamics explain (what refuses an open-loop model in
 /// moving water). Besides the outcome it shows the last error bounds of the re-estimation (b_rot,
 /// b_acc) and when each first reached the stop target (t_rot, t_acc: s after the announcement,
@@ -433,6 +469,9 @@ pub(super) fn sweep_identification() {
                             s.estimator.velocity_term_prior_sd = *v;
                         }
                     });
+                }
+                if std::env::var_os("ID_FIRST").is_some() {
+                    first_model_probe(&vehicle_name, noise, seed, target_acc.first().copied());
                 }
                 if std::env::var_os("ID_FLOOR_PROBE").is_some() {
                     let mut probe = Run::new(&vehicle_name, noise, seed);
