@@ -80,6 +80,9 @@ fn wrongly_declared_set(
         // As found: with the first model fitted to the thrust's shape no seed of 1-5 loses
         // the hold (each is identified under control), and the watch is not exercised.
         common::bare_first_model(s);
+        // As found, too: with the acceleration rows stopping at 0.07 seed 6 with the 1 s hold
+        // is held within 1.7 deg, and the case the watch is for does not arise there.
+        common::acc_target_as_found(s);
         s.machine.lost_hold_s = lost_hold_s;
         s.identification.min_dither_share = min_dither_share;
         s.identification.lead_in_s = lead_in_s;

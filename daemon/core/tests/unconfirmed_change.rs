@@ -49,7 +49,9 @@ fn assert_the_model_in_force_was_kept(kept: &Outcome) {
 /// come later and stronger (below, `at_the_shipped_name_margin_...`); on a first model fitted
 /// to the thrust's shape no identification here reached its limit. The change test's terms
 /// as they were then, too (`refinement.change_term_z` 4; 8 since 2026-12-04, when this
-/// flight's alarms start other identifications: docs/study.md, "The change test's terms").
+/// flight's alarms start other identifications: docs/study.md, "The change test's terms"),
+/// and the first model's acceleration rows stopping at 0.06 (0.07 since 2026-12-05, when no
+/// identification here reached its limit either).
 const AS_FOUND: Flight = Flight {
     name_margin: 0.0,
     bare_first_model: true,
@@ -80,6 +82,7 @@ fn pitch_steps_in_a_swell(
         s.refinement.change_term_z = flight.term_z;
         if flight.bare_first_model {
             common::bare_first_model(s);
+            common::acc_target_as_found(s);
         }
         // The detectors uncalibrated, as they were when this was found: since 2026-12-01 an
         // alarm its identification does not confirm is taken for the water, the calibrations
