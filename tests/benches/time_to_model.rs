@@ -77,10 +77,24 @@ const SETTINGS: &[Setting] = &[
         toml: "[machine]\nrest_from_idle = false\n",
     },
     Setting {
-        name: "dynamic, defaults (doublet pairs at 1.0, stop at 0.06, the rest while idle)",
+        name: "dynamic, defaults (doublet pairs at 1.0, stop at 0.06 / 0.07, the rest while idle)",
         noise: "paper",
         idle_s: IDLE_BEFORE_REQUEST_S,
         toml: "",
+    },
+    // The acceleration rows' target before 2026-12-05 (0.06, the rotation rows'), beside the
+    // default 0.07, from a short and a long idle.
+    Setting {
+        name: "dynamic, acceleration rows stop at 0.06 (target_rel_err_acc, before 2026-12-05)",
+        noise: "paper",
+        idle_s: IDLE_BEFORE_REQUEST_S,
+        toml: "[estimator]\ntarget_rel_err_acc = 0.06\n",
+    },
+    Setting {
+        name: "dynamic, after a long idle, acceleration rows stop at 0.06 (before 2026-12-05)",
+        noise: "paper",
+        idle_s: LONG_IDLE_S,
+        toml: "[estimator]\ntarget_rel_err_acc = 0.06\n",
     },
     Setting {
         name: "dynamic, defaults, acceleration rows stop at 0.10 (target_rel_err_acc)",
@@ -300,13 +314,16 @@ fn start(
 /// each IMU noise (see the module doc).
 fn under_control(seeds: u64, filter: &str) {
     // The rows that mean before a change carry the key it moved, so they still mean before.
-    const BEFORE_2026_12_02: &str = "[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
-    const HOLD_1_S: &str = "[identification]\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
+    const BEFORE_2026_12_02: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
+    const HOLD_1_S: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
     const BEFORE: &str =
         "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise, 1 s hold, a decision a segment";
     const HOLD: &str =
         "1 s hold before the dither (lead_in_s = 1, the morning of 2026-12-02), a decision a segment";
-    const ONCE_A_SEGMENT: &str = "[identification]\nlate_decision_s = 1.0\n";
+    const ONCE_A_SEGMENT: &str =
+        "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nlate_decision_s = 1.0\n";
+    const ACC_006: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n";
+    const ACC: &str = "the acceleration rows stop at 0.06 (target_rel_err_acc, before 2026-12-05)";
     const SEGMENT: &str =
         "the stop decided once a segment (late_decision_s = 1, the default until 2026-12-02)";
     // (name, the daemon's configuration, IMU)
@@ -316,6 +333,7 @@ fn under_control(seeds: u64, filter: &str) {
         (HOLD, HOLD_1_S, "realistic"),
         (BEFORE, BEFORE_2026_12_02, "realistic"),
         ("defaults", "", "paper"),
+        (ACC, ACC_006, "paper"),
         (SEGMENT, ONCE_A_SEGMENT, "paper"),
         (HOLD, HOLD_1_S, "paper"),
         (BEFORE, BEFORE_2026_12_02, "paper"),
