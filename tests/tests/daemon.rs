@@ -199,16 +199,30 @@ fn reconfiguration_mid_control_leads_to_a_new_model() {
     let e_new = model_error(&second, &truth, 0);
     let e_old = model_error(&first, &truth, 0);
     println!(
-        "re-estimated {e_new:.3} (v{} at {:.3} vehicle-s; first v{}, nominal v{}), first model \
+        "re-estimated {e_new:.3} under its bound {:.3} (v{} at {:.3} vehicle-s; first v{}, nominal v{}), first model \
          against the new truth {e_old:.3}",
+        second.rel_err_rot,
         second.version,
         clock.now_s(),
         first.version,
         nominal.version
     );
-    // Identified under control at the paper's noise: measured 0.033, the same every run (the
-    // old model: 0.377 against the new truth). The bound is 1.5x that.
-    assert!(e_new < 0.05, "re-estimated model vs new truth: {e_new:.3}");
+    // Identified under control at the paper's noise, the same every run: measured 0.059 under
+    // its own bound of 0.057 (the old model: 0.380 against the new truth). Before 2026-12-05,
+    // with the acceleration rows stopping at 0.06 instead of 0.07, 0.033: the first model and
+    // the identification now stop sooner (docs/study.md, "The acceleration rows' target at
+    // 0.07"). Asserted: the identification's stop (a rotation bound at the 0.06 target) and
+    // the error within 1.5x that bound (issue 32's honest bound).
+    assert!(
+        second.rel_err_rot <= 0.061,
+        "the identification's bound {:.3}",
+        second.rel_err_rot
+    );
+    assert!(
+        e_new < 1.5 * second.rel_err_rot,
+        "re-estimated model vs new truth: {e_new:.3} under its bound {:.3}",
+        second.rel_err_rot
+    );
     assert!(
         e_new < e_old,
         "the new model must fit the new truth better ({e_new:.3} vs {e_old:.3})"
