@@ -26,14 +26,26 @@ fn flight(
     idle_s: f64,
     swell: Option<f64>,
 ) -> Outcome {
+    let cfg = EstimatorConfig {
+        velocity_term_prior_sd: sd,
+        ..EstimatorConfig::dynamic()
+    };
+    flight_with(vehicle, noise, seed, cfg, idle_s, swell)
+}
+
+/// [`flight`] with the estimator's configuration given whole.
+fn flight_with(
+    vehicle: &str,
+    noise: NoisePreset,
+    seed: u64,
+    cfg: EstimatorConfig,
+    idle_s: f64,
+    swell: Option<f64>,
+) -> Outcome {
     let sensors = SensorConfig {
         rate_hz: 200.0,
         noise,
         ..SensorConfig::default()
-    };
-    let cfg = EstimatorConfig {
-        velocity_term_prior_sd: sd,
-        ..EstimatorConfig::dynamic()
     };
     let ideal = Ideal {
         allow_refusal: true,
@@ -91,9 +103,66 @@ fn at_the_papers_noise_after_a_still_long_rest_the_velocity_terms_held_stop_soon
         lines.join("\n")
     );
     eprintln!("{summary}");
-    // Measured: 6.52 -> 5.22 s on these eight flights, err_rot 0.0458 -> 0.0380.
+    // Measured: 5.27 -> 4.12 s on these eight flights, err_rot 0.0530 -> 0.0444 (with the
+    // acceleration rows at 0.06, before 2026-12-05: 6.52 -> 5.22 s, 0.0458 -> 0.0380).
     assert!(
         held_s / n < free_s / n - 0.5 && held_rot <= free_rot + 0.005 * n,
+        "{summary}"
+    );
+}
+
+/// Issue 30, the acceleration rows' own target (`estimator.target_rel_err_acc`, 0.07 since
+/// 2026-12-05, 0.06 before): with the velocity terms held after a still long rest the rotation
+/// rows are well inside 0.06 when the acceleration rows stop the run, and at 0.07 it stops
+/// sooner with every model within 1.5x its bound. docs/study.md, "The acceleration rows'
+/// target at 0.07".
+#[test]
+fn at_the_papers_noise_after_a_still_long_rest_the_acceleration_rows_at_0_07_stop_sooner() {
+    let shipped = EstimatorConfig::dynamic();
+    assert_eq!(shipped.acc_target(), 0.07);
+    let before = EstimatorConfig {
+        target_rel_err_acc: None,
+        ..shipped.clone()
+    };
+    assert_eq!(before.acc_target(), 0.06);
+    let (mut s06, mut s07, mut rot07) = (0.0, 0.0, 0.0);
+    let mut lines = Vec::new();
+    for vehicle in ["amour5", "six_dof"] {
+        for seed in 1..=4 {
+            let paper = NoisePreset::Paper;
+            let at06 = flight_with(vehicle, paper, seed, before.clone(), LONG_IDLE_S, None);
+            let at07 = flight_with(vehicle, paper, seed, shipped.clone(), LONG_IDLE_S, None);
+            lines.push(format!(
+                "{vehicle} seed {seed}: 0.06 {:.2} s {:.4} / {:.4}, 0.07 {:.2} s {:.4} / {:.4} under {:.4} / {:.4}",
+                at06.seconds, at06.err_rot, at06.err_acc, at07.seconds, at07.err_rot,
+                at07.err_acc, at07.bound[0], at07.bound[1]
+            ));
+            assert!(
+                !at07.refused
+                    && at07.seconds <= at06.seconds
+                    && at07.err_rot < 1.5 * at07.bound[0]
+                    && at07.err_acc < 1.5 * at07.bound[1],
+                "{}",
+                lines.join("\n")
+            );
+            s06 += at06.seconds;
+            s07 += at07.seconds;
+            rot07 += at07.err_rot;
+        }
+    }
+    let n = 8.0;
+    let summary = format!(
+        "mean {:.2} -> {:.2} s, err_rot at 0.07 {:.4}\n{}",
+        s06 / n,
+        s07 / n,
+        rot07 / n,
+        lines.join("\n")
+    );
+    eprintln!("{summary}");
+    // Measured: 5.22 -> 4.12 s on these eight flights (0.7-1.6 s sooner on seven, 0.4 on
+    // six_dof seed 4), err_rot at 0.07 0.0444.
+    assert!(
+        s07 / n < s06 / n - 0.5 && s07 / n < 5.0 && rot07 / n < 0.06,
         "{summary}"
     );
 }
