@@ -69,15 +69,16 @@ pub struct EstimatorConfig {
     /// stopping at 0.06 gave a true rotation error of 0.056 in 7.5 vehicle-s (docs/study.md).
     pub target_rel_err: f64,
     /// Automatic stop: the dynamic method's acceleration rows' own target (default 0.07;
-    /// unset: `target_rel_err`; the static methods stop both at `target_rel_err`). The rotation rows are what attitude control stands on; the
-    /// acceleration rows, measured with an accelerometer ten times noisier relative to their
-    /// signal at the paper's noise, hold the slowest part of the run (docs/study.md, "How
-    /// fast a model can be learned"). Why 0.07, not 0.06: at the paper's noise after a long
-    /// rest the open loop took 5.46 / 6.42 s (mean / worst, AMOUR-5) at 0.06 and 4.18 / 5.22 s
-    /// at 0.07, the identification under control 8.0-12.9 s against 6.9-8.9 s, with no more
-    /// models beyond 1.5x their bound (open loop 5 -> 4 of 50, first models 6 -> 4 of 30); a
-    /// realistic IMU and noise-free runs are unchanged (the cycle and the reach rule stop
-    /// them). docs/study.md, "The acceleration rows' target at 0.07".
+    /// unset: `target_rel_err`; the static methods stop both at `target_rel_err`). The
+    /// rotation rows are what attitude control stands on; the acceleration rows, measured
+    /// with an accelerometer ten times noisier relative to their signal at the paper's noise,
+    /// hold the slowest part of the run (docs/study.md, "How fast a model can be learned").
+    /// Why 0.07, not 0.06: at the paper's noise after a long rest the open loop took 5.46 /
+    /// 6.42 s (mean / worst, AMOUR-5) at 0.06 and 4.18 / 5.22 s at 0.07, the identification
+    /// under control 8.0-12.9 s against 6.9-8.9 s, with no more models beyond 1.5x their
+    /// bound (open loop 5 -> 4 of 50, first models 6 -> 4 of 30); a realistic IMU and
+    /// noise-free runs are unchanged (the cycle and the reach rule stop them). docs/study.md,
+    /// "The acceleration rows' target at 0.07".
     pub target_rel_err_acc: Option<f64>,
     /// Automatic stop: a bound worth waiting for (default 0.03; 0: off). Once both bounds are
     /// at their targets, the open-loop run goes on while one of them is above this value and

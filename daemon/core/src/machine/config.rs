@@ -48,8 +48,8 @@ pub struct MachineConfig {
     /// A long idle rest (`gyro_bias_rest_s`) saw still water when the vehicle swayed from one
     /// second to the next no more than this many times what the IMU's white noise explains
     /// (`navigation::long_rest_sway`; default 1.5, still water reading 1 +- 0.1; 0: the
-    /// reading not used, neither still nor moved). Only then does the open-loop fit hold the velocity terms lightly
-    /// (`estimator.velocity_term_prior_sd`). Why: at the paper's noise that prior's tighter
+    /// reading not used, neither still nor moved). Only then does the open-loop fit hold the
+    /// velocity terms lightly (`estimator.velocity_term_prior_sd`). Why: at the paper's noise that prior's tighter
     /// bound is honest in still water but not in a swell, which neither the 1-2 s rest nor the
     /// fit's unexplained rotation can see there, and a minute's rest can. Where it read more,
     /// the water moved: `estimator.moving_rest_drift_states`.

@@ -163,27 +163,38 @@ impl Machine {
         if let Some(k) = self.run.begin_pulse(t_ns, power_cap, &mut cmd.thrust) {
             // The first pulse is the estimation's news; the ones after a settle are phases.
             let first = !matches!(self.state, State::Pulse | State::Settle);
-            let mut news = match self.run.rest_restarts() {
-                0 => "noise measured: pulsing".to_string(),
-                r => format!(
-                    "noise measured: pulsing (the rest started over {r} time{}: the accelerometer saw the vehicle pushed, not turned)",
-                    if r == 1 { "" } else { "s" }
-                ),
-            };
-            // What the long idle rest read of the water (`navigation::long_rest_sway`): the
-            // operator's word for why the fit holds the velocity terms or fits a drift.
-            let water = self.run.idle_water(self.setup.machine.max_still_sway);
-            if let (Some(sway), Some(water)) = (self.run.idle_sway(), water) {
-                news.push_str(&format!(
-                    "; the long rest: {} (sway {sway:.1}x the IMU's noise)",
-                    water.text()
-                ));
-            }
-            let announce = first.then_some(news.as_str());
-            self.enter(State::Pulse, Some(t_ns), format!("pulse {k}"), announce);
+            let news = first.then(|| self.first_pulse_news());
+            self.enter(
+                State::Pulse,
+                Some(t_ns),
+                format!("pulse {k}"),
+                news.as_deref(),
+            );
         }
         finish(&mut cmd);
         cmd
+    }
+
+    /// The estimation's news at its first pulse: the noise measured, how often the rest
+    /// started over, and what the long idle rest read of the water
+    /// (`navigation::long_rest_sway`: the operator's word for why the fit holds the velocity
+    /// terms or fits a drift). Made only for the first pulse, not on every one.
+    fn first_pulse_news(&self) -> String {
+        let mut news = match self.run.rest_restarts() {
+            0 => "noise measured: pulsing".to_string(),
+            r => format!(
+                "noise measured: pulsing (the rest started over {r} time{}: the accelerometer saw the vehicle pushed, not turned)",
+                if r == 1 { "" } else { "s" }
+            ),
+        };
+        let water = self.run.idle_water(self.setup.machine.max_still_sway);
+        if let (Some(sway), Some(water)) = (self.run.idle_sway(), water) {
+            news.push_str(&format!(
+                "; the long rest: {} (sway {sway:.1}x the IMU's noise)",
+                water.text()
+            ));
+        }
+        news
     }
 
     pub(super) fn pulse_tick(

@@ -112,18 +112,9 @@ fn print_steps(steps: &[(f64, nalgebra::DMatrix<f64>, f64, f64)], truth: &nalgeb
             change(3)
         );
         if std::env::var_os("ID_STEPS_COLUMNS").is_some() {
-            let cols: Vec<String> = (0..b.ncols())
-                .map(|i| {
-                    let d = |r: usize| {
-                        (b.view((r, i), (3, 1)) - truth.view((r, i), (3, 1))).norm()
-                            / truth.rows(r, 3).norm()
-                    };
-                    format!("{:.3}/{:.3}", d(0), d(3))
-                })
-                .collect();
             println!(
                 "      each column's error (of its rows' norm): {}",
-                cols.join(" ")
+                column_errors(b, truth)
             );
         }
         prev = Some(b);
@@ -147,6 +138,19 @@ fn first_model_probe(name: &str, noise: NoisePreset, seed: u64, target_acc: Opti
         return;
     };
     let (b, truth) = (&m.effectiveness, first.truth());
+    println!(
+        "    first model ({took:.2} s): err {:.3} / {:.3} bound {:.3} / {:.3}; each column's error: {}",
+        rel_err(b, &truth, 0),
+        rel_err(b, &truth, 3),
+        m.rel_err_rot,
+        m.rel_err_acc,
+        column_errors(b, &truth)
+    );
+}
+
+/// Each column's error against `truth`, rotation / acceleration rows, as a share of those
+/// rows' whole norm (so their squares sum to the model's squared relative error).
+fn column_errors(b: &nalgebra::DMatrix<f64>, truth: &nalgebra::DMatrix<f64>) -> String {
     let cols: Vec<String> = (0..b.ncols())
         .map(|i| {
             let d = |r: usize| {
@@ -156,14 +160,7 @@ fn first_model_probe(name: &str, noise: NoisePreset, seed: u64, target_acc: Opti
             format!("{:.3}/{:.3}", d(0), d(3))
         })
         .collect();
-    println!(
-        "    first model ({took:.2} s): err {:.3} / {:.3} bound {:.3} / {:.3}; each column's error: {}",
-        rel_err(b, &truth, 0),
-        rel_err(b, &truth, 3),
-        m.rel_err_rot,
-        m.rel_err_acc,
-        cols.join(" ")
-    );
+    cols.join(" ")
 }
 
 /// One row of the sweep: took_s, err_rot, err_acc, max_tilt, mean_err, b_rot, b_acc, t_rot, t_acc.
