@@ -299,6 +299,7 @@ mod tests {
             command_exponent: None,
             thrust_asymmetry: k,
             prior_disagreement: [0.0; 2],
+            navigation_rel_err: [0.0; 2],
             imu_position: None,
             unexplained_rate_radps: 0.0,
             lag_gap_without_states: None,

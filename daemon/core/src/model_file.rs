@@ -297,6 +297,7 @@ mod tests {
             command_exponent: Some(1.5),
             thrust_asymmetry: 0.22 / 1.78,
             prior_disagreement: [0.5, 0.7],
+            navigation_rel_err: [0.0; 2],
             imu_position: Some(ImuPosition {
                 position_m: nalgebra::Vector3::new(0.15, 0.05, -0.1),
                 cov: nalgebra::Matrix3::identity() * 1e-6,

@@ -142,6 +142,12 @@ impl SolveJob {
         // at 64 pulses, N = 8) and decides nothing but the model's refusal.
         if decision.is_stop() {
             self.est.check_configured_lag(&mut estimate);
+            // The open loop's model has the navigation's errors counted in its bound: drawn
+            // only here, since the refits cost a second estimate's worth and the stop rule
+            // does not wait on them.
+            if matches!(self.work, Work::Pulse) {
+                self.est.count_navigation_error(&mut estimate);
+            }
         }
         // The model is made here too when the run stops: the control thread only checks it.
         let candidate = decision

@@ -362,6 +362,7 @@ mod tests {
             command_exponent: None,
             thrust_asymmetry: 0.0,
             prior_disagreement: [0.0; 2],
+            navigation_rel_err: [0.0; 2],
             imu_position: Some(ImuPosition::decide(
                 nalgebra::Vector3::zeros(),
                 Learned {

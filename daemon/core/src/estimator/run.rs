@@ -32,6 +32,7 @@ use crate::navigation::DepthAid;
 mod closed_loop;
 pub use closed_loop::Settle;
 mod fits;
+mod navigation_bound;
 mod stop;
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.

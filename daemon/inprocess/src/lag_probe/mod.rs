@@ -17,6 +17,7 @@ use thrusterd_core::estimator::EstimatorConfig;
 
 use crate::estimation::{estimate_observed, Ideal, Outcome};
 
+mod nav_bootstrap;
 mod rate_noise;
 mod response;
 mod velocity_error;
@@ -220,6 +221,9 @@ pub fn probe(
     }
     if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_SIMEX"), truth_b.as_ref()) {
         rate_noise::print_simex(&run, &spec, &outcome, truth_b, seed, gravity);
+    }
+    if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_BOOT"), truth_b.as_ref()) {
+        nav_bootstrap::print_nav_bootstrap(&run, &spec, &outcome, &truth, truth_b, seed, gravity);
     }
     if let (Some(_), Some(truth_b)) = (std::env::var_os("LAG_PROBE_VEL_PARTS"), truth_b.as_ref()) {
         velocity_error::print_velocity_parts(&run, &outcome, &truth, truth_b);

@@ -102,6 +102,12 @@ pub struct DynamicTerms {
     /// disagree beyond their errors, and the fit's bound is too small by about its square root.
     #[serde(default)]
     pub prior_disagreement: [f64; 2],
+    /// Per row group (rotation, acceleration): the relative error the navigation's own errors
+    /// leave in B, which the fit's statistical bound does not count
+    /// ([`navigation_error`](super::navigation_error)); in the bound and the standard errors
+    /// once the run stops, never in what the stop rule waits on. 0 where not drawn.
+    #[serde(default)]
+    pub navigation_rel_err: [f64; 2],
     /// The thrust curve the commands went out through when the model was learned (thrust ~
     /// command^p, learned under control: `supply::Supply::set_learned_exponent`), so B is per
     /// unit of the linearized command; None: the commands as the machine computed them.

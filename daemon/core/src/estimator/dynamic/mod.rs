@@ -17,6 +17,7 @@ pub mod instruments;
 pub mod lag_agreement;
 pub mod lag_check;
 pub mod lag_search;
+pub mod navigation_error;
 pub mod prior;
 pub mod refer_to_centre;
 pub mod refit;
@@ -811,6 +812,8 @@ impl DynamicRun {
                     [&sols[0].theta, &sols[1].theta],
                     self.split,
                 ),
+                // Drawn once the run stops (`navigation_error`), not per fit.
+                navigation_rel_err: [0.0; 2],
             },
             split: self.split.then_some((split_b, split_se)),
             disturbance,

@@ -502,7 +502,8 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
 /// `--tether`), LA_REACH (`reach_rel_err`), LA_MIN_CYCLES (`min_cycles`), LA_MAX_PULSES (`max_pulses`), LA_TARGET
-/// (`target_rel_err`), LA_TARGET_ACC (`target_rel_err_acc`), LA_BURST
+/// (`target_rel_err`), LA_TARGET_ACC (`target_rel_err_acc`), LA_NAV_DRAWS
+/// (`navigation_error_draws`; 0: the navigation's errors not in the bound), LA_BURST
 /// (`identification.burst_rel_err`: the open-loop model refined under control), LA_WAVE_SCALE (every wave's force and moment
 /// times this), LA_WAVE_PHASE (every wave's phase at the start: rad, or `seed` for a phase
 /// each seed draws, `wave_phase`), LA_LAG_KNOWN (the lag not learned: the configured 0.1 s,
@@ -578,6 +579,9 @@ pub(super) fn imu_and_water_sweep() {
             }
             if let Ok(t) = std::env::var("LA_TARGET_ACC") {
                 cfg.target_rel_err_acc = Some(t.parse().unwrap());
+            }
+            if let Ok(d) = std::env::var("LA_NAV_DRAWS") {
+                cfg.navigation_error_draws = d.parse().unwrap();
             }
             if let Ok(c) = std::env::var("LA_MIN_CYCLES") {
                 cfg.min_cycles = c.parse().unwrap();

@@ -18,7 +18,7 @@ fn knob<T: std::str::FromStr>(key: &str) -> Option<T> {
 /// Knobs: TTM_VEHICLES (default amour5,six_dof,eight_vectored), TTM_NOISE
 /// (none|realistic|paper, default realistic), TTM_SEEDS (default 5), TTM_PULSE_S,
 /// TTM_REST_FROM_IDLE (0|1), TTM_IDLE_S (idle before the request), TTM_NOISE_S, TTM_TARGET (target_rel_err), TTM_TARGET_ACC, TTM_MIN_CYCLES,
-/// TTM_SPANNED (1: `stop_once_spanned`),
+/// TTM_SPANNED (1: `stop_once_spanned`), TTM_NAV_DRAWS (`navigation_error_draws`),
 /// TTM_EXCITATION (doublet_pairs|orthogonal|...), TTM_POWER (initial_power), TTM_MAX_PULSES.
 pub(super) fn ttm_sweep() {
     let noise = match std::env::var("TTM_NOISE").as_deref() {
@@ -40,6 +40,9 @@ pub(super) fn ttm_sweep() {
     }
     if let Some(t) = knob("TTM_TARGET_ACC") {
         cfg.target_rel_err_acc = Some(t);
+    }
+    if let Some(d) = knob("TTM_NAV_DRAWS") {
+        cfg.navigation_error_draws = d;
     }
     if let Some(m) = knob("TTM_MAX_PULSES") {
         cfg.max_pulses = m;
