@@ -264,6 +264,25 @@ fn bench(c: &mut Criterion) {
                 })
             },
         );
+        // And the whole of what the stopping job computes there: the navigation's errors
+        // drawn into the acceleration rows' bound besides (`navigation_error_draws` refits,
+        // `estimator::dynamic::navigation_error`), which it asserts it drew.
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_estimate_stopping_with_navigation", n),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    let mut e = dynamic.estimate();
+                    dynamic.check_configured_lag(&mut e);
+                    dynamic.count_navigation_error(&mut e);
+                    assert!(e
+                        .dynamics
+                        .as_ref()
+                        .is_some_and(|d| d.navigation_rel_err[1] > 0.0));
+                    black_box(e)
+                })
+            },
+        );
         c.bench_with_input(BenchmarkId::new("dynamic_estimate", n), &n, |b, _| {
             b.iter(|| black_box(dynamic.estimate()))
         });
@@ -344,6 +363,7 @@ fn bench(c: &mut Criterion) {
             imu_position_m: None,
             thruster_lags_s: Vec::new(),
             lag_rel_err: [0.0; 2],
+            navigation_rel_err: [0.0; 2],
         };
         let carried = dynamic.clone().with_prior(prior);
         c.bench_with_input(

@@ -159,6 +159,16 @@ impl Model {
         })
     }
 
+    /// The relative error the navigation's own errors left in B, per row group, which the
+    /// bound counts and the standard errors do not (`DynamicTerms::navigation_rel_err`); 0
+    /// where none was drawn or inherited.
+    pub fn navigation_rel_err(&self) -> [f64; 2] {
+        self.dynamics.as_ref().map_or([0.0; 2], |d| {
+            d.navigation_rel_err
+                .map(|e| if e.is_finite() && e > 0.0 { e } else { 0.0 })
+        })
+    }
+
     /// Each thruster's own lag this model learned, s, where its run kept them apart
     /// (`DynamicTerms::spin_up_per_thruster_s`); None when it learned one for all or none.
     /// Fits against this model under control use them, not their mean.

@@ -92,3 +92,59 @@ fn where_the_gyro_learns_the_lag_the_bound_is_the_fits_own() {
         assert_eq!(on.terms.navigation_rel_err, [0.0; 2], "{noise:?}");
     }
 }
+
+/// Under control after an announced change, at the paper's noise: the identification keeps
+/// every column but the changed one, and with them the error the first run's navigation left
+/// in them. Its bound takes it (in the share of B those columns are) as a floor its stop does
+/// not wait on: the same stop and model, an honest claim. Measured over seeds 1-10
+/// (`sweep_identification`): eight_vectored's acceleration rows 1.28 -> 1.06 on the RMS.
+#[test]
+fn under_control_the_kept_columns_keep_their_navigation_error_in_the_bound() {
+    use thruster_inprocess::run::{rotate_while_holding_on, vehicle, Run};
+    let draws = EstimatorConfig::dynamic().navigation_error_draws;
+    let (mut before, mut after, mut lines) = (Vec::new(), Vec::new(), Vec::new());
+    for seed in [3u64, 5, 7] {
+        let mut out = Vec::new();
+        for d in [0, draws] {
+            let mut run = Run::new("eight_vectored", NoisePreset::Paper, seed);
+            run.with_setup(|s| s.estimator.navigation_error_draws = d);
+            let (run, r) =
+                rotate_while_holding_on(run, &vehicle("eight_vectored"), None, |_, _| {});
+            let m = run.machine.model().expect("a model").clone();
+            out.push((r, m));
+        }
+        let ((r0, m0), (r1, m1)) = (&out[0], &out[1]);
+        let inherited = m1.navigation_rel_err()[1];
+        lines.push(format!(
+            "seed {seed}: {:.1} s, err {:.4} / {:.4}, bound {:.4} / {:.4} -> {:.4} / {:.4} (inherited {inherited:.4})",
+            r1.took_s, r1.err_rot, r1.err_acc, m0.rel_err_rot, m0.rel_err_acc, m1.rel_err_rot,
+            m1.rel_err_acc
+        ));
+        let report = lines.join("\n");
+        // The same identification: its stop and model; only the claim moves.
+        assert_eq!(
+            (r1.took_s, r1.err_rot, r1.err_acc),
+            (r0.took_s, r0.err_rot, r0.err_acc),
+            "{report}"
+        );
+        assert_eq!(m1.effectiveness, m0.effectiveness, "{report}");
+        assert_eq!(m0.navigation_rel_err(), [0.0; 2], "{report}");
+        assert!(
+            inherited > 0.01 && m1.rel_err_acc > m0.rel_err_acc,
+            "{report}"
+        );
+        before.push(r0.err_acc / m0.rel_err_acc);
+        after.push(r1.err_acc / m1.rel_err_acc);
+    }
+    let summary = format!(
+        "acceleration rows, error / bound: {:.2?} -> {:.2?}\n{}",
+        before,
+        after,
+        lines.join("\n")
+    );
+    eprintln!("{summary}");
+    // Measured: seeds 3, 5 and 7 (the three of ten furthest out) 1.36 / 1.51 / 1.63 -> 1.11 /
+    // 1.26 / 1.31, the inherited error 0.040-0.052.
+    assert!(after.iter().all(|r| *r < 1.5), "{summary}");
+    assert!(rms(&after) < rms(&before) - 0.1, "{summary}");
+}

@@ -297,6 +297,10 @@ pub struct Estimator {
     /// (`with_inherited_lag_error`), rotation and acceleration rows.
     #[serde(default)]
     inherited_lag_rel_err: [f64; 2],
+    /// The relative error the prior's navigation left in its columns
+    /// (`with_inherited_navigation_error`), rotation and acceleration rows.
+    #[serde(default)]
+    inherited_navigation_rel_err: [f64; 2],
     /// Fed the commands sent under control (`begin_closed_loop`), not its own plan's pulses.
     #[serde(default)]
     under_control: bool,
@@ -332,6 +336,7 @@ impl Estimator {
             thrust_curve: None,
             last_interval: None,
             inherited_lag_rel_err: [0.0; 2],
+            inherited_navigation_rel_err: [0.0; 2],
             under_control: false,
             noise,
             cfg,

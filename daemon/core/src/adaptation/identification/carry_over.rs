@@ -104,6 +104,7 @@ pub fn carried_over(
         imu_position_m: model.imu_position_m().map(Into::into),
         thruster_lags_s: carried_lags(model, change, &map),
         lag_rel_err: model.lag_rel_err(),
+        navigation_rel_err: model.navigation_rel_err(),
     })
 }
 

@@ -37,6 +37,11 @@ pub struct DynamicPrior {
     /// ([`crate::model::Model::lag_rel_err`]): a fit that keeps them keeps it too.
     #[serde(default)]
     pub lag_rel_err: [f64; 2],
+    /// The relative error the model's navigation left in B that its bound counts and its
+    /// standard errors do not ([`crate::model::Model::navigation_rel_err`]): the kept columns
+    /// keep it.
+    #[serde(default)]
+    pub navigation_rel_err: [f64; 2],
 }
 
 /// A carried-over column is contradicted by the data when the data alone moved it by more
@@ -200,6 +205,7 @@ mod tests {
             spin_up_s: None,
             thruster_lags_s: Vec::new(),
             lag_rel_err: [0.0; 2],
+            navigation_rel_err: [0.0; 2],
             imu_position_m: None,
         }
     }

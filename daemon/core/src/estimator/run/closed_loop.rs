@@ -109,6 +109,17 @@ impl Estimator {
         self
     }
 
+    /// The relative error the navigation of the run that learned the prior's columns left in
+    /// them (`DynamicPrior::navigation_rel_err`): a fit that keeps those columns keeps it, in
+    /// the share of B they are, and adds it to its bound as a floor the stop rule does not
+    /// wait on (`run/navigation_bound.rs`).
+    pub fn with_inherited_navigation_error(mut self, rel_err: [f64; 2]) -> Self {
+        if rel_err.iter().all(|e| e.is_finite() && *e >= 0.0) {
+            self.inherited_navigation_rel_err = rel_err;
+        }
+        self
+    }
+
     /// The estimate of a decision interval that did not stop the run, for the next
     /// decision's settling check. The machine calls it when it applies the result, at a
     /// sample fixed in vehicle time, so a replay remembers the same one. Copied in place once

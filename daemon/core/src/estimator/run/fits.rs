@@ -516,6 +516,7 @@ impl Estimator {
         if lag.is_none() {
             add_inherited_lag_error(&mut sol, self.inherited_lag_rel_err);
         }
+        self.add_inherited_navigation_error(&mut sol);
         let water_sigma = match sol.residual_rot {
             Some(r) if self.cfg.water_from_residual => [r[0], r[1], r[2], 0.0, 0.0, 0.0],
             _ => sol.sigma,
@@ -662,7 +663,7 @@ fn projected_bound(b: f64, lag: f64, floor: f64, ratio: f64) -> f64 {
 }
 
 /// `e`'s error bounds (rotation, acceleration rows) without what no more data removes: the
-/// lag's floor and the IMU position's share.
+/// lag's floor, the IMU position's share and the navigation's errors.
 pub(super) fn reducible_bounds(e: &Estimate) -> [f64; 2] {
     let share = e
         .dynamics
@@ -673,6 +674,12 @@ pub(super) fn reducible_bounds(e: &Estimate) -> [f64; 2] {
         .dynamics
         .as_ref()
         .map_or([0.0; 2], |d| d.spin_up_floor_rel_err);
+    // The navigation's errors (drawn once a run stops, or inherited with a prior's columns):
+    // no more data removes them.
+    let navigation = e
+        .dynamics
+        .as_ref()
+        .map_or([0.0; 2], |d| d.navigation_rel_err);
     // A curve the open loop learned (`with_learned_curve`) adds its share in quadrature,
     // which no more pulses at the same two levels remove.
     let curve = e
@@ -681,12 +688,16 @@ pub(super) fn reducible_bounds(e: &Estimate) -> [f64; 2] {
         .filter(|d| d.command_exponent.is_some())
         .map_or(0.0, |_| LEARNED_CURVE_REL_ERR);
     [
-        (e.rel_err_rot.powi(2) - lag_floor[0].powi(2) - curve.powi(2))
+        (e.rel_err_rot.powi(2) - lag_floor[0].powi(2) - curve.powi(2) - navigation[0].powi(2))
             .max(0.0)
             .sqrt(),
-        (e.rel_err_acc.powi(2) - share.powi(2) - lag_floor[1].powi(2) - curve.powi(2))
-            .max(0.0)
-            .sqrt(),
+        (e.rel_err_acc.powi(2)
+            - share.powi(2)
+            - lag_floor[1].powi(2)
+            - curve.powi(2)
+            - navigation[1].powi(2))
+        .max(0.0)
+        .sqrt(),
     ]
 }
 

@@ -255,6 +255,10 @@ impl EstimationRun {
                 None => prior.map_or([0.0; 2], |p| p.lag_rel_err),
             };
             est = est.with_inherited_lag_error(lag_rel_err);
+            // And what the kept columns' own run's navigation left in them.
+            if let Some(p) = prior {
+                est = est.with_inherited_navigation_error(p.navigation_rel_err);
+            }
             // The IMU did not move with the thrusters: where the model in force (or the prior's)
             // put it, else where it is configured. Never learned again here: closed-loop data
             // cannot place it (eight_vectored in moderate water found it 16 cm off and its
