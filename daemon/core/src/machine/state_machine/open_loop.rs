@@ -357,9 +357,19 @@ impl Machine {
         }
         self.stamp_curve(&mut candidate);
         let why = match decision {
-            StopDecision::Converged { rel_err_rot, rel_err_acc } => format!(
-                "converged after {pulses} pulses (error bound rot {rel_err_rot:.3}, acc {rel_err_acc:.3})"
-            ),
+            // The model's bound, not the decision's: the solve job added the navigation's
+            // errors to it after deciding (`Estimator::count_navigation_error`), and says so.
+            StopDecision::Converged { .. } => {
+                let navigation = candidate.navigation_rel_err()[1];
+                let (rot, acc) = (candidate.rel_err_rot, candidate.rel_err_acc);
+                if navigation > 0.0 {
+                    format!("converged after {pulses} pulses (error bound rot {rot:.3}, acc {acc:.3} with navigation {navigation:.3})")
+                } else {
+                    format!(
+                        "converged after {pulses} pulses (error bound rot {rot:.3}, acc {acc:.3})"
+                    )
+                }
+            }
             StopDecision::PlanComplete => format!("planned {pulses} pulses done"),
             StopDecision::MaxPulses => format!("pulse limit {pulses} reached"),
             StopDecision::Continue => "stopped".into(),
