@@ -210,8 +210,15 @@ pub fn fuse(
     } else {
         0.0
     };
-    refined.rel_err_rot = block_bound(&out, &var, 0..3, n).hypot(floor);
-    refined.rel_err_acc = block_bound(&out, &var, 3..6, n).hypot(floor);
+    // So does what the model's own navigation left in it (`Model::navigation_rel_err`):
+    // counted in its bound, not in its standard errors, so not in `var`.
+    let navigation = model.navigation_rel_err();
+    refined.rel_err_rot = block_bound(&out, &var, 0..3, n)
+        .hypot(floor)
+        .hypot(navigation[0]);
+    refined.rel_err_acc = block_bound(&out, &var, 3..6, n)
+        .hypot(floor)
+        .hypot(navigation[1]);
     refined.effectiveness = out;
     refined.std_err = var.map(f64::sqrt);
     refined.made_t_ns = t_ns;
@@ -310,6 +317,38 @@ mod tests {
         // The allocation follows: thruster 1 now rolls less, so it is commanded more for roll.
         assert!(f.model.allocation[(0, 0)].abs() > model.allocation[(0, 0)].abs());
         assert!(f.model.check(2, 1.0).is_ok());
+    }
+
+    #[test]
+    fn the_navigations_share_of_the_bound_stays_in_the_refined_bound() {
+        // A model whose acceleration rows' bound counts 0.04 of its navigation's errors
+        // beside a statistical 0.02 per entry (`Model::navigation_rel_err`).
+        let mut model = learned(b(), 0.02);
+        let mut terms = crate::estimator::dynamic::DynamicTerms::blank(2);
+        terms.navigation_rel_err = [0.0, 0.04];
+        model.dynamics = Some(terms);
+        let fuse_on = |m: &Model| {
+            fuse(
+                m,
+                &window(b(), 0.02),
+                11_000_000_000,
+                10.0,
+                &SETTINGS,
+                &EstimatorConfig::default(),
+                &mut [false; 2],
+            )
+            .expect("fused")
+            .model
+        };
+        let with = fuse_on(&model);
+        model.dynamics = None;
+        let without = fuse_on(&model);
+        // The same fusion: B and its standard errors; the acceleration rows' bound takes the
+        // navigation's share in quadrature, the rotation rows' nothing.
+        assert_eq!(with.effectiveness, without.effectiveness);
+        assert_eq!(with.std_err, without.std_err);
+        assert_eq!(with.rel_err_rot, without.rel_err_rot);
+        assert!((with.rel_err_acc - without.rel_err_acc.hypot(0.04)).abs() < 1e-12);
     }
 
     #[test]

@@ -124,3 +124,38 @@ impl DynamicTerms {
         Some((self.coefficients[(row, j)], self.std_err[(row, j)]))
     }
 }
+
+#[cfg(test)]
+impl DynamicTerms {
+    /// Terms of `n` thrusters with nothing learned (zeros, the configured lag): for the tests
+    /// of what reads a field or two of them.
+    pub(crate) fn blank(n: usize) -> DynamicTerms {
+        let zeros = DMatrix::zeros(6, regressors::TERMS);
+        DynamicTerms {
+            coefficients: zeros.clone(),
+            std_err: zeros.clone(),
+            ols_std_err: zeros,
+            b_ols_std_err: DMatrix::zeros(6, n),
+            max_tilt_rad: 0.0,
+            max_heading_change_rad: 0.0,
+            spin_up_s: 0.1,
+            spin_up_learned: false,
+            spin_up_sd_ln: 0.0,
+            spin_up_rel_err: [0.0; 2],
+            spin_up_per_thruster_s: Vec::new(),
+            thruster_lag_evidence: 0.0,
+            spin_up_groups: None,
+            spin_up_floor_rel_err: [0.0; 2],
+            lag_check: None,
+            thrust_curve: None,
+            command_exponent: None,
+            thrust_asymmetry: 0.0,
+            prior_disagreement: [0.0; 2],
+            navigation_rel_err: [0.0; 2],
+            imu_position: None,
+            unexplained_rate_radps: 0.0,
+            lag_gap_without_states: None,
+            instrumented: [false; 2],
+        }
+    }
+}

@@ -133,38 +133,18 @@ pub fn gap_over_bound(terms: &super::DynamicTerms, bounds: [f64; 2]) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::regressors::TERMS;
     use super::super::DynamicTerms;
     use super::*;
-    use nalgebra::DMatrix;
 
     fn terms(groups: Option<LagAgreement>, sd_ln: f64, rel_err: [f64; 2]) -> DynamicTerms {
-        let zeros = DMatrix::zeros(6, TERMS);
         DynamicTerms {
-            coefficients: zeros.clone(),
-            std_err: zeros.clone(),
-            ols_std_err: zeros,
-            b_ols_std_err: DMatrix::zeros(6, 5),
-            max_tilt_rad: 0.0,
-            max_heading_change_rad: 0.0,
             spin_up_s: 0.088,
             spin_up_learned: true,
             spin_up_sd_ln: sd_ln,
             spin_up_rel_err: rel_err,
-            spin_up_per_thruster_s: Vec::new(),
-            thruster_lag_evidence: 0.0,
             spin_up_groups: groups,
-            spin_up_floor_rel_err: [0.0; 2],
-            lag_check: None,
-            thrust_curve: None,
-            command_exponent: None,
-            thrust_asymmetry: 0.0,
-            prior_disagreement: [0.0; 2],
-            navigation_rel_err: [0.0; 2],
-            imu_position: None,
             unexplained_rate_radps: 0.03,
-            lag_gap_without_states: None,
-            instrumented: [false; 2],
+            ..DynamicTerms::blank(5)
         }
     }
 
