@@ -301,6 +301,10 @@ pub struct Estimator {
     /// (`with_inherited_navigation_error`), rotation and acceleration rows.
     #[serde(default)]
     inherited_navigation_rel_err: [f64; 2],
+    /// The gyro bias's error where it came from a long idle rest (`with_gyro_bias_sd`), rad/s;
+    /// None: the rest's, `gyro_sd / sqrt(samples)`.
+    #[serde(default)]
+    gyro_bias_sd: Option<f64>,
     /// Fed the commands sent under control (`begin_closed_loop`), not its own plan's pulses.
     #[serde(default)]
     under_control: bool,
@@ -337,6 +341,7 @@ impl Estimator {
             last_interval: None,
             inherited_lag_rel_err: [0.0; 2],
             inherited_navigation_rel_err: [0.0; 2],
+            gyro_bias_sd: None,
             under_control: false,
             noise,
             cfg,
@@ -422,6 +427,16 @@ impl Estimator {
     /// (`EstimatorConfig::moving_rest_drift_states`).
     pub fn with_rest_water(mut self, water: RestWater) -> Self {
         self.rest_water = Some(water);
+        self
+    }
+
+    /// The error of the gyro's bias (rad/s per axis) where the machine took it from a long idle
+    /// rest (`machine.gyro_bias_rest_s`) instead of the short one the noise levels come from:
+    /// the navigation's errors are drawn with it (`count_navigation_error`).
+    pub fn with_gyro_bias_sd(mut self, sd: f64) -> Self {
+        if sd.is_finite() && sd >= 0.0 {
+            self.gyro_bias_sd = Some(sd);
+        }
         self
     }
 

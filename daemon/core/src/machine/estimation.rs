@@ -384,13 +384,18 @@ impl EstimationRun {
             return false;
         }
         let mut levels = self.rest.correct(self.noise.levels());
+        let mut bias_sd = None;
         match self
             .idle_gyro_bias
-            .map(|long| long_rest_bias(&levels, &long))
+            .map(|long| (long, long_rest_bias(&levels, &long)))
         {
             // The rest moved (a swell): the long idle spell's bias and "down"
-            // (`machine.gyro_bias_rest_s`).
-            Some(Some(bias)) => levels.gyro_baseline = bias.into(),
+            // (`machine.gyro_bias_rest_s`), and that bias's error for the bound.
+            Some((long, Some(bias))) => {
+                levels.gyro_baseline = bias.into();
+                let rate_hz = levels.samples as f64 / rested_s.max(1e-3);
+                bias_sd = Some(long_rest_bias_sd(&levels, &long, rate_hz));
+            }
             // Still: the short rest's, as fresh as can be (a long one's bias is a minute old).
             _ => self.idle_down = None,
         }
@@ -431,7 +436,10 @@ impl EstimationRun {
             cfg.target_rel_err = burst;
             cfg.target_rel_err_acc = cfg.target_rel_err_acc.map(|t| t.max(burst));
         }
-        let est = self.new_estimator(cfg, n, levels, model);
+        let mut est = self.new_estimator(cfg, n, levels, model);
+        if let Some(sd) = bias_sd {
+            est = est.with_gyro_bias_sd(sd);
+        }
         self.est = Some(match self.idle_water(setup.machine.max_still_sway) {
             Some(water) => est.with_rest_water(water),
             None => est,
@@ -567,6 +575,14 @@ fn long_rest_bias(levels: &NoiseLevels, long: &RestBias) -> Option<Vector3<f64>>
     moved.then_some(bias)
 }
 
+/// The error of a long idle rest's gyro bias, rad/s per axis: the white noise over the spell's
+/// samples at `rate_hz` and the bias's walk over it, as `long_rest_bias` judges the gap by.
+fn long_rest_bias_sd(levels: &NoiseLevels, long: &RestBias, rate_hz: f64) -> f64 {
+    let white = Vector3::from(levels.gyro_white_sigma).norm() / 3f64.sqrt();
+    let n = (long.span_s * rate_hz).max(1.0);
+    (white * white / n + GYRO_BIAS_WALK * GYRO_BIAS_WALK * long.span_s / 3.0).sqrt()
+}
+
 /// What the rest before an estimation measured, for its navigation: how the vehicle turned
 /// (the attitude at its end, and the gyro's bias net of that turning, `rest_rotation`) and
 /// the depth's trend (the vertical velocity at its end).
@@ -629,5 +645,28 @@ impl Rest {
             est = est.with_rest_velocity_down(w);
         }
         est
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_minutes_rest_knows_the_gyros_bias_far_better_than_a_second() {
+        // The paper's gyro (0.25 rad/s per sample) at 200 Hz: a 1.5 s rest knows the bias to
+        // 0.25 / sqrt(300) = 0.0144 rad/s; a minute to 0.25 / sqrt(12000) = 0.0023, the walk
+        // adding 1e-4 x sqrt(60 / 3) = 0.00045 in quadrature.
+        let levels = NoiseLevels::isotropic(0.25, 0.49);
+        let long = RestBias {
+            bias: Vector3::zeros(),
+            down: Vector3::z(),
+            about_down_seen: true,
+            span_s: 60.0,
+        };
+        let sd = long_rest_bias_sd(&levels, &long, 200.0);
+        let expected = (0.25f64.powi(2) / 12_000.0 + 1e-8 * 20.0).sqrt();
+        assert!((sd - expected).abs() < 1e-12, "{sd} {expected}");
+        assert!(sd < 0.25 / 300f64.sqrt() / 5.0, "{sd}");
     }
 }

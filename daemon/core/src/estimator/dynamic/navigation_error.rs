@@ -13,7 +13,8 @@
 //! drawn here added in quadrature, 1.02.
 //!
 //! How: the same log is fitted again `draws` times, each time with a draw of those errors
-//! for the IMU's measured noise (the bias's error constant, sd gyro / sqrt(rest samples); the
+//! for the IMU's measured noise (the bias's error constant, sd gyro / sqrt(rest samples) or the
+//! long idle rest's where that gave the bias; the
 //! gyro's white noise integrated into "down"; the starting tilt's error, sd accelerometer / g
 //! / sqrt(rest samples); the leaked gravity and the accelerometer's white noise integrated
 //! into the velocity), and B's variance over the draws is the part of its error the bound
@@ -30,7 +31,10 @@ pub struct NavigationNoise {
     pub gyro_sd: f64,
     /// The accelerometer's white noise per sample (RMS of the axes), m/s^2.
     pub accel_sd: f64,
-    /// Samples of the rest the gyro's bias and the starting "down" were measured from.
+    /// The error of the gyro's bias the navigation subtracts, rad/s per axis (a 1-2 s rest's:
+    /// `gyro_sd / sqrt(rest samples)`; a long idle rest's is far smaller).
+    pub bias_sd: f64,
+    /// Samples of the rest the starting "down" was measured from.
     pub rest_samples: f64,
     /// Gravity, m/s^2.
     pub gravity: f64,
@@ -59,7 +63,7 @@ pub fn navigation_variance(
     let mut sum = DMatrix::<f64>::zeros(base.nrows(), base.ncols());
     let mut got = 0usize;
     for _ in 0..draws {
-        let bias = rng.vector(noise.gyro_sd / rest.sqrt());
+        let bias = rng.vector(noise.bias_sd);
         let tilt = rng.vector(noise.accel_sd / noise.gravity.max(1.0) / rest.sqrt());
         // About the body's horizontal axes only: a heading error does not move gravity.
         let mut theta = Vector3::new(tilt.x, tilt.y, 0.0);

@@ -44,10 +44,13 @@ impl Estimator {
             Some(&terms.spin_up_per_thruster_s),
         );
         let rest = self.rest_sigma();
+        let gyro_sd = rms3(&self.noise.gyro_white_sigma);
+        let rest_samples = self.noise.samples.max(1) as f64;
         let noise = NavigationNoise {
-            gyro_sd: rms3(&self.noise.gyro_white_sigma),
+            gyro_sd,
             accel_sd: self.noise.sigma_acc(),
-            rest_samples: self.noise.samples.max(1) as f64,
+            bias_sd: self.gyro_bias_sd.unwrap_or(gyro_sd / rest_samples.sqrt()),
+            rest_samples,
             gravity: gravity_from(&self.noise.accel_baseline),
         };
         let fit = |r: &DynamicRun| {
