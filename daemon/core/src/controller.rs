@@ -274,36 +274,12 @@ mod tests {
     /// the forward command is 1 / (1 + k) and the reverse 1 / (1 - k) of the bare one.
     #[test]
     fn a_shaped_model_is_commanded_through_its_thrust_shape() {
-        use crate::estimator::dynamic::regressors::TERMS;
         let bare = model();
         let k = (1.0 - 0.78) / (1.0 + 0.78);
         let mut shaped = model();
-        let zeros = nalgebra::DMatrix::zeros(6, TERMS);
         shaped.dynamics = Some(DynamicTerms {
-            coefficients: zeros.clone(),
-            std_err: zeros.clone(),
-            ols_std_err: zeros,
-            b_ols_std_err: nalgebra::DMatrix::zeros(6, 4),
-            max_tilt_rad: 0.0,
-            max_heading_change_rad: 0.0,
-            spin_up_s: 0.1,
-            spin_up_learned: false,
-            spin_up_sd_ln: 0.0,
-            spin_up_rel_err: [0.0; 2],
-            spin_up_per_thruster_s: Vec::new(),
-            thruster_lag_evidence: 0.0,
-            spin_up_groups: None,
-            spin_up_floor_rel_err: [0.0; 2],
-            lag_check: None,
-            thrust_curve: None,
-            command_exponent: None,
             thrust_asymmetry: k,
-            prior_disagreement: [0.0; 2],
-            navigation_rel_err: [0.0; 2],
-            imu_position: None,
-            unexplained_rate_radps: 0.0,
-            lag_gap_without_states: None,
-            instrumented: [false; 2],
+            ..DynamicTerms::blank(4)
         });
         let meas = Measured {
             attitude: UnitQuaternion::identity(),

@@ -346,23 +346,11 @@ mod tests {
             coefficients,
             std_err: std_err.clone(),
             ols_std_err: std_err.clone(),
-            b_ols_std_err: nalgebra::DMatrix::zeros(6, 3),
             max_tilt_rad: 0.3,
             max_heading_change_rad: 0.2,
             spin_up_s: 0.07,
             spin_up_learned: true,
             spin_up_sd_ln: 0.01,
-            spin_up_rel_err: [0.0; 2],
-            spin_up_per_thruster_s: Vec::new(),
-            thruster_lag_evidence: 0.0,
-            spin_up_groups: None,
-            spin_up_floor_rel_err: [0.0; 2],
-            lag_check: None,
-            thrust_curve: None,
-            command_exponent: None,
-            thrust_asymmetry: 0.0,
-            prior_disagreement: [0.0; 2],
-            navigation_rel_err: [0.0; 2],
             imu_position: Some(ImuPosition::decide(
                 nalgebra::Vector3::zeros(),
                 Learned {
@@ -371,9 +359,7 @@ mod tests {
                 },
                 0.03,
             )),
-            unexplained_rate_radps: 0.0,
-            lag_gap_without_states: None,
-            instrumented: [false; 2],
+            ..DynamicTerms::blank(3)
         });
         let d = dynamics_msg(0, &m).unwrap();
         assert!(d.validate().is_ok(), "{:?}", d.validate());

@@ -349,7 +349,7 @@ pub struct EstimatorConfig {
     /// the acceleration rows' bound and standard errors take B's spread over them in
     /// quadrature (`estimator::dynamic::navigation_error`); the stop rule does not wait on
     /// it. Default 16; 0: off; at most 256. Why: at the paper's noise the acceleration rows
-    /// were 1.25x their bound on the RMS (AMOUR-5, six_dof, eight_vectored, seeds 1-10), 1.02
+    /// were 1.25x their bound on the RMS (AMOUR-5, six_dof, eight_vectored, seeds 1-10), 1.01
     /// with the spread; the rotation rows were covered without it (0.96). Below that gyro
     /// noise the spread is a fifth of the 0.02 model-error floor and is not drawn
     /// (docs/study.md, "The navigation's errors in the bound").

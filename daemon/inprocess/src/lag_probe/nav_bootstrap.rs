@@ -1,24 +1,23 @@
-//! LAG_PROBE_BOOT="g=sd,a=sd,rest=s,reps=n[,parts=bdwv]": does the acceleration rows' missing
-//! bound at the paper's noise come from the navigation's errors, and can the estimator count
-//! them? The log is fitted again `reps` times, each with a draw of the errors a dead-reckoning
-//! navigation makes from an IMU of that noise (g: the gyro's white noise per sample, rad/s; a:
-//! the accelerometer's, m/s^2) after a rest of `rest` s that measured the gyro's bias and
-//! "down": the bias's error (b, constant: sd g / sqrt(rest samples)) and the gyro's white noise
-//! integrated (w) turn "down"; the navigated gravity moves the acceleration rows' output and,
-//! integrated, the velocity, with the accelerometer's white noise integrated besides (v); the
-//! starting tilt's error (d: sd a / g / sqrt(rest samples)). The spread of those fits' B is the
-//! part of B's error the fit's own (white-noise) bound cannot see. Printed: the fit's
-//! statistical bound, the spread, the two in quadrature, and the error against the truth; and
-//! the navigation's actual errors against the truth beside the draws', so the error model
+//! LAG_PROBE_BOOT="g=sd,a=sd,rest=s,reps=n": does the acceleration rows' missing bound at the
+//! paper's noise come from the navigation's errors? The log is fitted again `reps` times, each
+//! with a draw of the errors a dead-reckoning navigation makes from an IMU of that noise (g: the
+//! gyro's white noise per sample, rad/s; a: the accelerometer's, m/s^2) after a rest of `rest`
+//! s that measured the gyro's bias and "down", as the estimator draws them itself
+//! (`thrusterd_core::estimator::dynamic::navigation_error`). Printed: the fit's statistical
+//! bound, B's spread over the draws, the two in quadrature and the error against the truth;
+//! and the navigation's actual errors against the truth beside the draws', so the error model
 //! itself is checked.
 
 use std::collections::HashMap;
 
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::DMatrix;
+use thrusterd_core::estimator::dynamic::navigation_error::{
+    navigation_variance, with_drawn_errors, Gaussian, NavigationNoise,
+};
 use thrusterd_core::estimator::dynamic::spin_state::lags_for_fit;
 use thrusterd_core::estimator::dynamic::DynamicRun;
 
-use super::{rel_err, truth_at, Normal, Truth};
+use super::{fitted_b, rel_err, truth_at, Truth};
 use crate::estimation::Outcome;
 
 pub(super) fn print_nav_bootstrap(
@@ -31,7 +30,6 @@ pub(super) fn print_nav_bootstrap(
     gravity: f64,
 ) {
     let (mut sd_g, mut sd_a, mut rest_s, mut reps) = (0.25, 0.49, 1.5, 8usize);
-    let mut parts = "bdwv".to_string();
     for part in spec.split(',').filter(|p| !p.is_empty()) {
         let (k, v) = part
             .split_once('=')
@@ -41,26 +39,25 @@ pub(super) fn print_nav_bootstrap(
             "a" => sd_a = v.parse().expect("LAG_PROBE_BOOT a: m/s^2"),
             "rest" => rest_s = v.parse().expect("LAG_PROBE_BOOT rest: s"),
             "reps" => reps = v.parse().expect("LAG_PROBE_BOOT reps: a count"),
-            "parts" => parts = v.to_string(),
-            other => panic!("LAG_PROBE_BOOT: {other} is not g, a, rest, reps or parts"),
+            other => panic!("LAG_PROBE_BOOT: {other} is not g, a, rest or reps"),
         }
     }
     let Some(log) = run.log() else { return };
+    let (Some(first), Some(last)) = (log.iter().next(), log.iter().last()) else {
+        return;
+    };
     if log.len() < 10 {
         return;
     }
-    let (first, last) = match (log.iter().next(), log.iter().last()) {
-        (Some(f), Some(l)) => (f.t_s, l.t_s),
-        _ => return,
+    let dt = (last.t_s - first.t_s) / (log.len() - 1) as f64;
+    let rest_samples = (rest_s / dt).max(1.0);
+    let noise = NavigationNoise {
+        gyro_sd: sd_g,
+        accel_sd: sd_a,
+        bias_sd: sd_g / rest_samples.sqrt(),
+        rest_samples,
+        gravity,
     };
-    let dt: f64 = (last - first) / (log.len() - 1) as f64;
-    let n_rest = (rest_s / dt).max(1.0);
-    let (use_b, use_d, use_w, use_v) = (
-        parts.contains('b'),
-        parts.contains('d'),
-        parts.contains('w'),
-        parts.contains('v'),
-    );
     let n = run.thrusters();
     let lags = lags_for_fit(
         n,
@@ -71,79 +68,32 @@ pub(super) fn print_nav_bootstrap(
     let lags = &lags[..n];
     let Some(fit) = run.refit(lags) else { return };
     let sol = fit.solve(&[1e-3; 6], 0.0, 0.0, None);
-    let b0 = sol.b.clone();
-    let (e_rot, e_acc) = rel_err(&b0, truth_b);
-    let mut rng = Normal(0xb007_57a9_0000_0001 ^ seed);
-    let mut spread = DMatrix::<f64>::zeros(b0.nrows(), b0.ncols());
-    let (mut got, mut att_ms, mut vel_ms, mut cnt) = (0.0, 0.0, 0.0, 0.0);
-    for _ in 0..reps {
-        let mut draw = |sd: f64| Vector3::from_fn(|_, _| sd * rng.sample());
-        let bias = if use_b {
-            draw(sd_g / n_rest.sqrt())
-        } else {
-            Vector3::zeros()
-        };
-        // The starting tilt's error: about the body's horizontal axes only (the heading does
-        // not move gravity).
-        let mut theta = if use_d {
-            let d = draw(sd_a / gravity / n_rest.sqrt());
-            Vector3::new(d.x, d.y, 0.0)
-        } else {
-            Vector3::zeros()
-        };
-        let walk: Vec<Vector3<f64>> = (0..log.len())
-            .map(|_| {
-                if use_w {
-                    draw(sd_g * dt)
-                } else {
-                    Vector3::zeros()
-                }
-            })
-            .collect();
-        let kick: Vec<Vector3<f64>> = (0..log.len())
-            .map(|_| {
-                if use_v {
-                    draw(sd_a * dt)
-                } else {
-                    Vector3::zeros()
-                }
-            })
-            .collect();
-        let mut dv = Vector3::zeros();
-        let mut k = 0usize;
-        let Some(mapped) = run.with_log_mapped(|smp| {
-            let mut out = *smp;
-            theta += bias * dt + walk[k];
-            let down = (smp.down + theta.cross(&smp.down)).normalize();
-            let leak = (down - smp.down) * gravity;
-            dv += leak * dt + kick[k];
-            out.rate += bias;
-            out.down = down;
-            out.motion += leak;
-            out.velocity += dv;
-            k += 1;
-            att_ms += theta.norm_squared();
-            vel_ms += dv.norm_squared();
-            cnt += 1.0;
-            out
-        }) else {
-            return;
-        };
-        if let Some(f) = mapped.refit(lags) {
-            let b = f.solve(&[1e-3; 6], 0.0, 0.0, None).b;
-            spread += (&b - &b0).map(|x| x * x);
-            got += 1.0;
-        }
-    }
-    if got == 0.0 {
+    let (e_rot, e_acc) = rel_err(&sol.b, truth_b);
+    let seed = 0xb007_57a9_0000_0001 ^ seed;
+    let Some(var) = navigation_variance(run, &noise, reps, seed, |r| fitted_b(r, lags)) else {
         return;
-    }
-    let spread = spread / got;
-    let part = |rows: usize| (spread.rows(rows, 3).sum()).sqrt() / truth_b.rows(rows, 3).norm();
+    };
+    let part = |rows: usize| var.rows(rows, 3).sum().sqrt() / truth_b.rows(rows, 3).norm();
     let (boot_rot, boot_acc) = (part(0), part(3));
     let (s_rot, s_acc) = (sol.rel_err[0], sol.rel_err[1]);
     let (c_rot, c_acc) = (s_rot.hypot(boot_rot), s_acc.hypot(boot_acc));
-    // The navigation's actual errors against the truth over the same log.
+    // The draws' size, from the drawn logs against the log (other draws of the same model),
+    // and the navigation's actual errors against the truth over the same log.
+    let (mut d_att, mut d_vel, mut d_n) = (0.0, 0.0, 0.0);
+    let mut rng = Gaussian::new(seed ^ 0x5a5a);
+    for _ in 0..reps {
+        let Some(drawn) = with_drawn_errors(run, &noise, dt, &mut rng) else {
+            continue;
+        };
+        let Some(drawn_log) = drawn.log() else {
+            continue;
+        };
+        for (d, s) in drawn_log.iter().zip(log.iter()) {
+            d_att += d.down.cross(&s.down).norm_squared();
+            d_vel += (d.velocity - s.velocity).norm_squared();
+            d_n += 1.0;
+        }
+    }
     let (mut a_att, mut a_vel, mut a_n) = (0.0, 0.0, 0.0);
     for s in log.iter() {
         if let Some(t) = truth_at(truth, s.t_s) {
@@ -154,10 +104,10 @@ pub(super) fn print_nav_bootstrap(
     }
     let rms = |x: f64, n: f64| (x / n.max(1.0)).sqrt();
     println!(
-        "  nav bootstrap {parts} x{reps}: err {e_rot:.4}/{e_acc:.4} stat {s_rot:.4}/{s_acc:.4} spread {boot_rot:.4}/{boot_acc:.4} combined {c_rot:.4}/{c_acc:.4}; nav error actual att {:.2} deg vel {:.3} m/s, drawn att {:.2} deg vel {:.3} m/s",
-        rms(a_att, a_n).to_degrees(),
+        "  nav bootstrap x{reps}: err {e_rot:.4}/{e_acc:.4} stat {s_rot:.4}/{s_acc:.4} spread {boot_rot:.4}/{boot_acc:.4} combined {c_rot:.4}/{c_acc:.4}; nav error actual att {:.2} deg vel {:.3} m/s, drawn att {:.2} deg vel {:.3} m/s",
+        rms(a_att, a_n).asin().to_degrees(),
         rms(a_vel, a_n),
-        rms(att_ms, cnt).to_degrees(),
-        rms(vel_ms, cnt),
+        rms(d_att, d_n).asin().to_degrees(),
+        rms(d_vel, d_n),
     );
 }

@@ -10,7 +10,7 @@
 //! eight_vectored, seeds 1-10; docs/study.md "The navigation's errors in the bound"): the
 //! acceleration rows' error against the truth was 1.25x their statistical bound on the RMS,
 //! 1.00 with the truth's velocity and gravity in place of the navigation's; with the spread
-//! drawn here added in quadrature, 1.02.
+//! drawn here added in quadrature, 1.01.
 //!
 //! How: the same log is fitted again `draws` times, each time with a draw of those errors
 //! for the IMU's measured noise (the bias's error constant, sd gyro / sqrt(rest samples) or the
@@ -58,29 +58,11 @@ pub fn navigation_variance(
     }
     let dt = (last - first) / (len - 1) as f64;
     let base = fit(run)?;
-    let rest = noise.rest_samples.max(1.0);
     let mut rng = Gaussian::new(seed);
     let mut sum = DMatrix::<f64>::zeros(base.nrows(), base.ncols());
     let mut got = 0usize;
     for _ in 0..draws {
-        let bias = rng.vector(noise.bias_sd);
-        let tilt = rng.vector(noise.accel_sd / noise.gravity.max(1.0) / rest.sqrt());
-        // About the body's horizontal axes only: a heading error does not move gravity.
-        let mut theta = Vector3::new(tilt.x, tilt.y, 0.0);
-        let mut dv = Vector3::zeros();
-        let (sd_turn, sd_kick) = (noise.gyro_sd * dt, noise.accel_sd * dt);
-        let Some(drawn) = run.with_log_mapped(|s| {
-            let mut out = *s;
-            theta += bias * dt + rng.vector(sd_turn);
-            let down = (s.down + theta.cross(&s.down)).normalize();
-            let leak = (down - s.down) * noise.gravity;
-            dv += leak * dt + rng.vector(sd_kick);
-            out.rate += bias;
-            out.down = down;
-            out.motion += leak;
-            out.velocity += dv;
-            out
-        }) else {
+        let Some(drawn) = with_drawn_errors(run, noise, dt, &mut rng) else {
             continue;
         };
         let Some(b) = fit(&drawn) else { continue };
@@ -93,12 +75,42 @@ pub fn navigation_variance(
     (got > 0).then(|| sum / got as f64)
 }
 
+/// `run` with its log's inputs moved by one draw of the navigation's errors for `noise`
+/// (samples `dt` apart): what [`navigation_variance`] refits, and what the lab's probe holds
+/// against the navigation's errors against the truth. None without a log.
+pub fn with_drawn_errors(
+    run: &DynamicRun,
+    noise: &NavigationNoise,
+    dt: f64,
+    rng: &mut Gaussian,
+) -> Option<DynamicRun> {
+    let rest = noise.rest_samples.max(1.0);
+    let bias = rng.vector(noise.bias_sd);
+    let tilt = rng.vector(noise.accel_sd / noise.gravity.max(1.0) / rest.sqrt());
+    // About the body's horizontal axes only: a heading error does not move gravity.
+    let mut theta = Vector3::new(tilt.x, tilt.y, 0.0);
+    let mut dv = Vector3::zeros();
+    let (sd_turn, sd_kick) = (noise.gyro_sd * dt, noise.accel_sd * dt);
+    run.with_log_mapped(|s| {
+        let mut out = *s;
+        theta += bias * dt + rng.vector(sd_turn);
+        let down = (s.down + theta.cross(&s.down)).normalize();
+        let leak = (down - s.down) * noise.gravity;
+        dv += leak * dt + rng.vector(sd_kick);
+        out.rate += bias;
+        out.down = down;
+        out.motion += leak;
+        out.velocity += dv;
+        out
+    })
+}
+
 /// Standard normal draws: xorshift64 and Box-Muller (no dependency for a few hundred draws a
 /// run; the seed makes them the same on every machine).
-struct Gaussian(u64);
+pub struct Gaussian(u64);
 
 impl Gaussian {
-    fn new(seed: u64) -> Self {
+    pub fn new(seed: u64) -> Self {
         // xorshift must not start at zero.
         Gaussian(seed ^ 0x9E37_79B9_7F4A_7C15)
     }

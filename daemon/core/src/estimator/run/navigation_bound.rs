@@ -88,7 +88,7 @@ fn gravity_from(accel_baseline: &[f64; 3]) -> f64 {
     if g.is_finite() && g > 1.0 {
         g
     } else {
-        9.80665
+        crate::estimator::response::GRAVITY
     }
 }
 
