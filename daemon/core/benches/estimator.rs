@@ -339,6 +339,33 @@ fn bench(c: &mut Criterion) {
                 |b, _| b.iter(|| black_box(est.estimate())),
             );
         }
+        // After a long rest that saw the vehicle move (`with_rest_water`): the estimate refits
+        // with the drift states, and the job a run stops in makes the model again with the
+        // start velocity searched (`run/start_velocity_search.rs`, ~120 refits with the states).
+        let moved = warmed_dynamic_on(
+            n,
+            64,
+            NoiseLevels::isotropic(0.002, 0.03),
+            EstimatorConfig::default(),
+            jittered_sample,
+        )
+        .with_rest_water(thrusterd_core::navigation::long_rest_sway::RestWater::Moved);
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_estimate_after_a_moving_rest", n),
+            &n,
+            |b, _| b.iter(|| black_box(moved.estimate())),
+        );
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_estimate_stopping_searching_start_velocity", n),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    let mut e = moved.estimate();
+                    moved.search_start_velocity(&mut e);
+                    black_box(e)
+                })
+            },
+        );
         c.bench_with_input(
             BenchmarkId::new("dynamic_job_copy_learning_lag", n),
             &n,

@@ -141,6 +141,11 @@ impl SolveJob {
         // was too noisy to learn it: only then, since the check searches the lag (~150 ms
         // at 64 pulses, N = 8) and decides nothing but the model's refusal.
         if decision.is_stop() {
+            // Where a long rest saw the vehicle move, the model is made again with its steady
+            // velocity at the start searched (~120 refits): only here, as the draws below.
+            if matches!(self.work, Work::Pulse) {
+                self.est.search_start_velocity(&mut estimate);
+            }
             self.est.check_configured_lag(&mut estimate);
             // The open loop's model has the navigation's errors counted in its bound: drawn
             // only here, since the refits cost a second estimate's worth and the stop rule

@@ -354,6 +354,15 @@ pub struct EstimatorConfig {
     /// noise the spread is a fifth of the 0.02 model-error floor and is not drawn
     /// (docs/study.md, "The navigation's errors in the bound").
     pub navigation_error_draws: usize,
+    /// Dynamic method, open loop, where a long rest saw the vehicle move and the moving-water
+    /// refit is made with the drift states (`moving_rest_drift_states`): that refit also
+    /// searches a steady horizontal velocity through the water at the run's start, fixed in
+    /// the world, up to this speed (m/s), and keeps it where the log supports it
+    /// ([`START_VELOCITY_EVIDENCE`](crate::estimator::START_VELOCITY_EVIDENCE)); 0: off; at
+    /// most 5. Why: the navigation starts from zero at the rest, and a vehicle a tether tows
+    /// at a steady speed is at rest to an accelerometer (docs/study.md, "A tether's tow at
+    /// the start").
+    pub start_velocity_search_mps: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -418,6 +427,7 @@ impl Default for EstimatorConfig {
             imu_position_tolerance_m: 0.03,
             second_amplitude: 1.0,
             navigation_error_draws: 16,
+            start_velocity_search_mps: 1.5,
         }
     }
 }
@@ -476,7 +486,7 @@ impl EstimatorConfig {
 
     /// (key under `[estimator]`, value, allowed range) of every number; the config file's
     /// checker locates a failing one in the file.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 39] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 40] {
         [
             ("k_sigma", self.k_sigma, Range::above(0.0)),
             (
@@ -562,6 +572,11 @@ impl EstimatorConfig {
                 "navigation_error_draws",
                 self.navigation_error_draws as f64,
                 Range::closed(0.0, 256.0),
+            ),
+            (
+                "start_velocity_search_mps",
+                self.start_velocity_search_mps,
+                Range::closed(0.0, 5.0),
             ),
             (
                 "second_amplitude",

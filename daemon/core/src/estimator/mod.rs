@@ -43,6 +43,11 @@ pub const STILL_WATER_UNEXPLAINED_RADPS: f64 = 0.0005;
 /// water at most 0.0001 (docs/study.md, "Disturbance states").
 pub const MOVING_WATER_REFIT_RADPS: f64 = 0.0025;
 
+/// ln of the likelihood ratio a start velocity must win by before the moving-water refit keeps
+/// it (`EstimatorConfig::start_velocity_search_mps`, `dynamic::start_velocity`): two
+/// parameters searched, so a chi-square of 2 degrees of freedom at about 1 in 20000.
+pub const START_VELOCITY_EVIDENCE: f64 = 10.0;
+
 pub use analysis::{RankReport, ThrusterDiagnosis};
 pub use config::{EstimatorConfig, Method};
 pub use dof::{Dof, DofMask};

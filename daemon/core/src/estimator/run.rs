@@ -33,6 +33,7 @@ mod closed_loop;
 pub use closed_loop::Settle;
 mod fits;
 mod navigation_bound;
+mod start_velocity_search;
 mod stop;
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
@@ -301,6 +302,10 @@ pub struct Estimator {
     /// (`with_inherited_navigation_error`), rotation and acceleration rows.
     #[serde(default)]
     inherited_navigation_rel_err: [f64; 2],
+    /// The moving-water refit searches the start velocity (`search_start_velocity`, only in
+    /// the job a stopping open loop makes its model in).
+    #[serde(default)]
+    searching_start_velocity: bool,
     /// The gyro bias's error where it came from a long idle rest (`with_gyro_bias_sd`), rad/s;
     /// None: the rest's, `gyro_sd / sqrt(samples)`.
     #[serde(default)]
@@ -341,6 +346,7 @@ impl Estimator {
             last_interval: None,
             inherited_lag_rel_err: [0.0; 2],
             inherited_navigation_rel_err: [0.0; 2],
+            searching_start_velocity: false,
             gyro_bias_sd: None,
             under_control: false,
             noise,

@@ -20,6 +20,7 @@ use crate::estimation::{estimate_observed, Ideal, Outcome};
 mod nav_bootstrap;
 mod rate_noise;
 mod response;
+mod tow_scan;
 mod velocity_error;
 use response::{print_leaky, print_simulated, print_smoothed};
 
@@ -46,6 +47,10 @@ pub struct Replace {
     pub velocity: bool,
     /// The body velocity in the terms set to zero (the velocity terms left out).
     pub zero_velocity: bool,
+    /// The body velocity in the terms moved by the navigation's error at the log's start, held
+    /// fixed in the world: what the velocity would be had the run started from the vehicle's
+    /// true velocity (a vehicle moving steadily through the water, which no IMU sees).
+    pub world_offset: bool,
     /// The acceleration rows' output whole (noise-free specific force, true gravity).
     pub motion: bool,
     /// With `motion`: white noise of this standard deviation added to it (m/s^2, seeded): the
@@ -105,6 +110,7 @@ pub const VARIANTS: [(&str, Replace); 9] = [
             down: true,
             velocity: true,
             zero_velocity: false,
+            world_offset: false,
             motion: true,
             motion_noise: 0.0,
         },
@@ -117,14 +123,16 @@ const NONE: Replace = Replace {
     down: false,
     velocity: false,
     zero_velocity: false,
+    world_offset: false,
     motion: false,
     motion_noise: 0.0,
 };
 
 impl Replace {
     /// From letters: g the target gyro, r the terms' rate, d the attitude, v the velocity, z
-    /// the velocity zeroed, m the acceleration rows' output, n that output true plus the
-    /// paper's accelerometer noise ("-": nothing).
+    /// the velocity zeroed, o the velocity's error at the start taken out (fixed in the
+    /// world), m the acceleration rows' output, n that output true plus the paper's
+    /// accelerometer noise ("-": nothing).
     pub fn from_letters(s: &str) -> Replace {
         Replace {
             target_gyro: s.contains('g'),
@@ -132,6 +140,7 @@ impl Replace {
             down: s.contains('d'),
             velocity: s.contains('v'),
             zero_velocity: s.contains('z'),
+            world_offset: s.contains('o'),
             motion: s.contains('m') || s.contains('n'),
             // The paper's accelerometer, 0.05 g.
             motion_noise: if s.contains('n') { 0.49 } else { 0.0 },
@@ -228,6 +237,9 @@ pub fn probe(
     if let (Some(_), Some(truth_b)) = (std::env::var_os("LAG_PROBE_VEL_PARTS"), truth_b.as_ref()) {
         velocity_error::print_velocity_parts(&run, &outcome, &truth, truth_b);
     }
+    if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_TOW"), truth_b.as_ref()) {
+        tow_scan::print_tow_scan(&run, &spec, &truth, truth_b, weights);
+    }
     if let (Ok(spec), Some(truth_b)) = (std::env::var("LAG_PROBE_SMOOTH_FIT"), truth_b.as_ref()) {
         rate_noise::print_smoothed_fit(&run, &spec, &outcome, truth_b);
     }
@@ -242,7 +254,8 @@ pub fn probe(
         .iter()
         .map(|(name, r)| {
             let mut rng = Normal(0x9e37_79b9_7f4a_7c15 ^ seed);
-            let mapped = run.with_log_mapped(|s| replaced(s, r, &truth, gravity, &mut rng));
+            let offset = start_offset_in_world(&run, &truth);
+            let mapped = run.with_log_mapped(|s| replaced(s, r, &truth, gravity, offset, &mut rng));
             let mapped = mapped.map(|m| shifted_commands(m, env_or("LAG_PROBE_SHIFT", 0)));
             if let (Some(m), Some(truth_b), true) = (
                 mapped.as_ref(),
@@ -338,6 +351,7 @@ fn replaced(
     r: &Replace,
     truth: &HashMap<u64, Truth>,
     gravity: f64,
+    world_offset: Vector3<f64>,
     rng: &mut Normal,
 ) -> Navigated {
     let Some(t) = truth.get(&((s.t_s * 1e9).round() as u64)) else {
@@ -359,6 +373,9 @@ fn replaced(
     if r.zero_velocity {
         out.velocity = Vector3::zeros();
     }
+    if r.world_offset {
+        out.velocity = s.velocity + s.attitude.inverse_transform_vector(&world_offset);
+    }
     if r.down {
         out.down = t.down;
         // The navigated gravity in the acceleration rows' output goes with the attitude.
@@ -368,6 +385,19 @@ fn replaced(
         out.motion = t.motion + Vector3::from_fn(|_, _| r.motion_noise * rng.sample());
     }
     out
+}
+
+/// The navigated velocity's error at the log's first sample with a truth, in the world
+/// (true less navigated, through the navigation's attitude); zero without one.
+fn start_offset_in_world(run: &DynamicRun, truth: &HashMap<u64, Truth>) -> Vector3<f64> {
+    run.log()
+        .and_then(|log| {
+            log.iter().find_map(|s| {
+                let t = truth.get(&((s.t_s * 1e9).round() as u64))?;
+                Some(s.attitude.transform_vector(&(t.velocity - s.velocity)))
+            })
+        })
+        .unwrap_or_else(Vector3::zeros)
 }
 
 /// Standard normal draws (xorshift64 and Box-Muller): the probe's own noise, seeded.

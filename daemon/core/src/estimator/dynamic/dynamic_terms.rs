@@ -108,6 +108,13 @@ pub struct DynamicTerms {
     /// once the run stops, never in what the stop rule waits on. 0 where not drawn.
     #[serde(default)]
     pub navigation_rel_err: [f64; 2],
+    /// The steady velocity through the water at the run's start that the navigation missed
+    /// and the fit found (NED, m/s; [`start_velocity`](super::start_velocity)): where a long
+    /// rest saw the vehicle move, the moving-water refit searches it
+    /// (`EstimatorConfig::start_velocity_search_mps`) and keeps it when the log supports it.
+    /// None where not searched or not kept.
+    #[serde(default)]
+    pub start_velocity_ned_mps: Option<[f64; 3]>,
     /// The thrust curve the commands went out through when the model was learned (thrust ~
     /// command^p, learned under control: `supply::Supply::set_learned_exponent`), so B is per
     /// unit of the linearized command; None: the commands as the machine computed them.
@@ -152,6 +159,7 @@ impl DynamicTerms {
             thrust_asymmetry: 0.0,
             prior_disagreement: [0.0; 2],
             navigation_rel_err: [0.0; 2],
+            start_velocity_ned_mps: None,
             imu_position: None,
             unexplained_rate_radps: 0.0,
             lag_gap_without_states: None,

@@ -26,6 +26,7 @@ pub mod sample_log;
 pub mod segment_basis;
 pub mod segmented_ls;
 pub mod spin_state;
+pub mod start_velocity;
 pub mod stored_terms;
 pub mod thrust_curve;
 pub mod thrust_shape;
@@ -814,6 +815,8 @@ impl DynamicRun {
                 ),
                 // Drawn once the run stops (`navigation_error`), not per fit.
                 navigation_rel_err: [0.0; 2],
+                // Searched by the moving-water refit (`start_velocity`), not per fit.
+                start_velocity_ned_mps: None,
             },
             split: self.split.then_some((split_b, split_se)),
             disturbance,

@@ -272,6 +272,11 @@ impl Estimator {
         let Some(moving) = run.restated(states) else {
             return e;
         };
+        let (moving, start_velocity) = if rest_saw_water && self.searching_start_velocity {
+            self.with_start_velocity(moving, &e, states)
+        } else {
+            (moving, None)
+        };
         let mut kept = again(&moving);
         let gap = e.dynamics.as_ref().map_or(0.0, |d| {
             crate::estimator::dynamic::lag_agreement::gap_over_bound(
@@ -284,6 +289,7 @@ impl Estimator {
                 d.unexplained_rate_radps = water;
             }
             d.lag_gap_without_states = Some(gap);
+            d.start_velocity_ned_mps = start_velocity.map(|v| v.into());
         }
         // The bound no tighter than the fit's without states. Why: rotation is left
         // unexplained by a model error too (a T200's curve fitted as a line leaves 0.002

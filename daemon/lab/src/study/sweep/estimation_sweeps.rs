@@ -238,8 +238,8 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// errors against the truth), LAG_PROBE_SHIFT (each sample under the command that many
 /// samples later), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
 /// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
-/// `response` module). LAG_WATER, LAG_WAVE_SCALE, LAG_WAVE_PHASE and LAG_IDLE_S fly it in
-/// moving water (as imu_and_water_sweep's LA_ knobs).
+/// `response` module). LAG_WATER, LAG_WAVE_SCALE, LAG_WAVE_PHASE, LAG_IDLE_S and LAG_TETHER fly it in
+/// moving water or on a tether (as imu_and_water_sweep's LA_ knobs).
 pub(super) fn lag_sweep() {
     let noise = match std::env::var("LAG_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -361,6 +361,8 @@ pub(super) fn lag_sweep() {
                         .ok()
                         .map(|v| super::wave_phase("LAG_WAVE_PHASE", &v, seed)),
                     idle_s: std::env::var("LAG_IDLE_S").ok().map(|v| v.parse().unwrap()),
+                    // LAG_TETHER: a tether's pull, N (the lab's `--tether`).
+                    tether_n: std::env::var("LAG_TETHER").ok().map(|v| v.parse().unwrap()),
                     // LAG_BIAS_REST: the long idle window of the gyro's bias, s (0: the rest's).
                     gyro_bias_rest_s: std::env::var("LAG_BIAS_REST")
                         .ok()
@@ -467,7 +469,7 @@ pub(super) fn lag_sweep() {
 
 /// One part of `noise`'s preset alone (a sweep's LA_NOISE_ONLY / LAG_NOISE_ONLY, named by
 /// `key`): "gyro" / "accel", that sensor's white noise and bias; "white", no biases; "bias",
-/// the biases only. Why: tells which part of a noise moves a figure.
+/// the biases only; "gyro_white" / "accel_white", that sensor's white noise alone. Why: tells which part of a noise moves a figure.
 fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
     let mut n = noise.params();
     let (gyro, accel, white, bias) = match part {
@@ -475,7 +477,11 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
         "accel" => (false, true, true, true),
         "white" => (true, true, true, false),
         "bias" => (true, true, false, true),
-        other => panic!("{key}: {other} is not gyro, accel, white or bias"),
+        "gyro_white" => (true, false, true, false),
+        "accel_white" => (false, true, true, false),
+        other => {
+            panic!("{key}: {other} is not gyro, accel, white, bias, gyro_white or accel_white")
+        }
     };
     if !gyro || !white {
         n.gyro_std_radps = 0.0;
@@ -520,7 +526,8 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// alone, not the larger of it and the rest's noise: docs/study.md, "What the water check
 /// reads"), LA_MAX_UNEXPLAINED (`machine.max_unexplained_rate_radps`), LA_MAX_TILT
 /// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`), LA_MAX_SWAY
-/// (`machine.max_still_sway`), LA_DRIFT_STATES=0 (`estimator.moving_rest_drift_states` off).
+/// (`machine.max_still_sway`), LA_DRIFT_STATES=0 (`estimator.moving_rest_drift_states` off),
+/// LA_TOW (`estimator.start_velocity_search_mps`; 0 off).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -644,6 +651,9 @@ pub(super) fn imu_and_water_sweep() {
             if std::env::var("LA_DRIFT_STATES").as_deref() == Ok("0") {
                 cfg.moving_rest_drift_states = false;
             }
+            if let Ok(v) = std::env::var("LA_TOW") {
+                cfg.start_velocity_search_mps = v.parse().unwrap();
+            }
             if let Ok(sd) = std::env::var("LA_TERMS_VEL") {
                 cfg.velocity_term_prior_sd = sd.parse().unwrap();
             }
@@ -746,6 +756,9 @@ pub(super) fn imu_and_water_sweep() {
             );
             if let Some(why) = &o.rejection {
                 println!("  rejected: {why}");
+            }
+            if let Some(v) = o.terms.start_velocity_ned_mps {
+                println!("  start velocity found {v:.3?} m/s");
             }
             println!(
                 "{name} seed {seed}: tilt {:.0} refused {} lag {:.4} err_rot {:.4} err_acc {:.4} bound {:.4}/{:.4} (share {:.4}) in {:.2} s; used [{:.4} {:.4} {:.4}] learned [{:.4} {:.4} {:.4}] sd [{:.4} {:.4} {:.4}] contradicted {} sway {:.2}",
