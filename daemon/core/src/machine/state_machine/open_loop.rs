@@ -362,7 +362,16 @@ impl Machine {
             StopDecision::Converged { .. } => {
                 let navigation = candidate.navigation_rel_err()[1];
                 let (rot, acc) = (candidate.rel_err_rot, candidate.rel_err_acc);
-                if navigation > 0.0 {
+                // The fit found the vehicle moving through the water at the start (a tow,
+                // `Estimator::search_start_velocity`): said, since no sensor showed it.
+                let towed = candidate
+                    .dynamics
+                    .as_ref()
+                    .and_then(|d| d.start_velocity_ned_mps)
+                    .map(|v| v[0].hypot(v[1]));
+                if let Some(speed) = towed {
+                    format!("converged after {pulses} pulses (error bound rot {rot:.3}, acc {acc:.3}), moving {speed:.2} m/s at the start")
+                } else if navigation > 0.0 {
                     format!("converged after {pulses} pulses (error bound rot {rot:.3}, acc {acc:.3} with navigation {navigation:.3})")
                 } else {
                     format!(
