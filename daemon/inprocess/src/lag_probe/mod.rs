@@ -250,11 +250,11 @@ pub fn probe(
     } else {
         variants
     };
+    let offset = start_offset_in_world(&run, &truth);
     let lags = variants
         .iter()
         .map(|(name, r)| {
             let mut rng = Normal(0x9e37_79b9_7f4a_7c15 ^ seed);
-            let offset = start_offset_in_world(&run, &truth);
             let mapped = run.with_log_mapped(|s| replaced(s, r, &truth, gravity, offset, &mut rng));
             let mapped = mapped.map(|m| shifted_commands(m, env_or("LAG_PROBE_SHIFT", 0)));
             if let (Some(m), Some(truth_b), true) = (

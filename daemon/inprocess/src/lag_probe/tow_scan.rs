@@ -12,7 +12,7 @@ use nalgebra::DMatrix;
 use thrusterd_core::estimator::dynamic::lag_search::{
     learn_common_lag_weighted, profile_score_weighted, LagRange,
 };
-use thrusterd_core::estimator::dynamic::DynamicRun;
+use thrusterd_core::estimator::dynamic::{start_velocity, DynamicRun};
 
 use super::{fitted_b, rel_err, start_offset_in_world, Truth};
 
@@ -29,12 +29,9 @@ pub(super) fn print_tow_scan(
         offset.as_slice()
     );
     for k in spec.split(',').filter_map(|k| k.parse::<f64>().ok()) {
-        let moved = run.with_log_mapped(|s| {
-            let mut out = *s;
-            out.velocity = s.velocity + s.attitude.inverse_transform_vector(&(offset * k));
-            out
-        });
-        let Some(moved) = moved else { continue };
+        let Some(moved) = start_velocity::with_start_velocity(run, &(offset * k)) else {
+            continue;
+        };
         let Some(fit) =
             learn_common_lag_weighted(&moved, &LagRange::default(), &Default::default(), weights)
         else {

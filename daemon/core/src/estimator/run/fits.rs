@@ -255,12 +255,9 @@ impl Estimator {
         let Some(water) = e.dynamics.as_ref().map(|d| d.unexplained_rate_radps) else {
             return e;
         };
-        // A long rest saw the water move (`with_rest_water`), and the gyro is quiet enough
-        // for more columns (`EstimatorConfig::moving_rest_drift_states`): a world-fixed
-        // constant force and a ramp join the states, whatever the fit leaves unexplained.
-        let rest_saw_water = self.rest_water == Some(RestWater::Moved)
-            && self.cfg.moving_rest_drift_states
-            && self.noise.sigma_rot() <= self.cfg.spin_up_max_gyro_sigma;
+        // A long rest saw the water move: a world-fixed constant force and a ramp join the
+        // states, whatever the fit leaves unexplained.
+        let rest_saw_water = self.drift_states_from_rest();
         if rest_saw_water {
             states.world_constant = true;
             states.world_ramp = true;
@@ -301,6 +298,15 @@ impl Estimator {
         kept.rel_err_rot = kept.rel_err_rot.max(e.rel_err_rot);
         kept.rel_err_acc = kept.rel_err_acc.max(e.rel_err_acc);
         kept
+    }
+
+    /// A long rest saw the water move (`with_rest_water`), and the gyro is quiet enough for
+    /// more columns (`EstimatorConfig::moving_rest_drift_states`): the moving-water refit
+    /// takes the drift states, and the stopping job may search the start velocity.
+    pub(super) fn drift_states_from_rest(&self) -> bool {
+        self.rest_water == Some(RestWater::Moved)
+            && self.cfg.moving_rest_drift_states
+            && self.noise.sigma_rot() <= self.cfg.spin_up_max_gyro_sigma
     }
 
     /// Open loop with two levels per direction (`second_amplitude` below 1) and a whole

@@ -21,9 +21,7 @@ impl Estimator {
         if self.cfg.method != Method::Dynamic
             || self.under_control
             || self.cfg.start_velocity_search_mps <= 0.0
-            || !self.cfg.moving_rest_drift_states
-            || self.rest_water != Some(RestWater::Moved)
-            || self.noise.sigma_rot() > self.cfg.spin_up_max_gyro_sigma
+            || !self.drift_states_from_rest()
         {
             return;
         }

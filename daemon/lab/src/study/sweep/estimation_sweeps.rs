@@ -238,8 +238,8 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// errors against the truth), LAG_PROBE_SHIFT (each sample under the command that many
 /// samples later), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
 /// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
-/// `response` module). LAG_WATER, LAG_WAVE_SCALE, LAG_WAVE_PHASE, LAG_IDLE_S and LAG_TETHER fly it in
-/// moving water or on a tether (as imu_and_water_sweep's LA_ knobs).
+/// `response` module). LAG_WATER, LAG_WAVE_SCALE, LAG_WAVE_PHASE, LAG_IDLE_S and LAG_TETHER fly
+/// it in moving water or on a tether (as imu_and_water_sweep's LA_ knobs).
 pub(super) fn lag_sweep() {
     let noise = match std::env::var("LAG_NOISE").as_deref() {
         Ok("realistic") => NoisePreset::Realistic,
@@ -469,7 +469,8 @@ pub(super) fn lag_sweep() {
 
 /// One part of `noise`'s preset alone (a sweep's LA_NOISE_ONLY / LAG_NOISE_ONLY, named by
 /// `key`): "gyro" / "accel", that sensor's white noise and bias; "white", no biases; "bias",
-/// the biases only; "gyro_white" / "accel_white", that sensor's white noise alone. Why: tells which part of a noise moves a figure.
+/// the biases only; "gyro_white" / "accel_white", that sensor's white noise alone. Why: tells
+/// which part of a noise moves a figure.
 fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
     let mut n = noise.params();
     let (gyro, accel, white, bias) = match part {
