@@ -346,7 +346,10 @@ fn bench(c: &mut Criterion) {
             n,
             64,
             NoiseLevels::isotropic(0.002, 0.03),
-            EstimatorConfig::default(),
+            EstimatorConfig {
+                start_velocity_search_mps: 1.5,
+                ..EstimatorConfig::default()
+            },
             jittered_sample,
         )
         .with_rest_water(thrusterd_core::navigation::long_rest_sway::RestWater::Moved);

@@ -117,7 +117,10 @@ fn the_status_says_the_vehicle_was_moving() {
         vehicle("amour5"),
         sensors,
         1,
-        EstimatorConfig::dynamic(),
+        EstimatorConfig {
+            start_velocity_search_mps: 1.5,
+            ..EstimatorConfig::dynamic()
+        },
         tethered(),
         &mut |m, _| {
             let text = m.status().text;

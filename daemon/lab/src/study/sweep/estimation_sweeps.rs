@@ -528,7 +528,7 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// reads"), LA_MAX_UNEXPLAINED (`machine.max_unexplained_rate_radps`), LA_MAX_TILT
 /// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`), LA_MAX_SWAY
 /// (`machine.max_still_sway`), LA_DRIFT_STATES=0 (`estimator.moving_rest_drift_states` off),
-/// LA_TOW (`estimator.start_velocity_search_mps`; 0 off).
+/// LA_TOW (`estimator.start_velocity_search_mps`, m/s: 1.5 on; off by default).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
