@@ -410,6 +410,11 @@ impl DaemonConfig {
                 Range::at_least(0.0),
             ),
             (
+                "machine.max_rest_swing_radps".into(),
+                m.max_rest_swing_radps,
+                Range::at_least(0.0),
+            ),
+            (
                 "machine.max_moving_water_tilt_deg".into(),
                 m.max_moving_water_tilt_deg,
                 Range::closed(0.0, 180.0),

@@ -8,7 +8,9 @@ use thruster_sim::sim::SimOptions;
 use thruster_sim::{NoisePreset, SensorConfig, Simulator, Vehicle};
 use thrusterd_core::estimator::dynamic::DynamicTerms;
 use thrusterd_core::estimator::{EstimatorConfig, Method};
-use thrusterd_core::machine::{Event, Machine, MachineSetup, Request, State};
+use thrusterd_core::machine::{
+    Event, Machine, MachineSetup, Request, SolveResult, SolverMode, State,
+};
 
 pub use crate::run::vehicle;
 
@@ -54,6 +56,35 @@ pub struct Outcome {
     pub rejection: Option<String>,
     /// How much the long idle rest swayed beyond the IMU's white noise (None: no long rest).
     pub rest_sway: Option<f64>,
+}
+
+/// Solves run as the daemon's worker would on a starved machine: each job computed when it
+/// goes out, its result handed back `delay_s` of vehicle time later.
+struct LateSolver {
+    delay_s: f64,
+    out: std::collections::VecDeque<(f64, SolveResult)>,
+}
+
+impl LateSolver {
+    fn new(machine: &mut Machine, delay_s: f64) -> Self {
+        machine.set_solver_mode(SolverMode::External);
+        Self {
+            delay_s,
+            out: Default::default(),
+        }
+    }
+
+    fn tick(&mut self, machine: &mut Machine, sim: &mut Simulator) {
+        let now = sim.time_s();
+        while self.out.front().is_some_and(|(at, _)| *at <= now) {
+            let (_, r) = self.out.pop_front().unwrap();
+            machine.deliver(r);
+        }
+        tick(machine, sim);
+        while let Some(job) = machine.take_job() {
+            self.out.push_back((now + self.delay_s, job.run()));
+        }
+    }
 }
 
 pub fn tick(machine: &mut Machine, sim: &mut Simulator) {
@@ -141,6 +172,10 @@ pub struct Ideal {
     /// at this bound, its model goes in and the estimation goes on under control; the
     /// outcome is then the identification's.
     pub burst_rel_err: Option<f64>,
+    /// Each solve's result handed back this long after its job went out, vehicle s (None:
+    /// inline, at its due sample): the daemon in real time on a machine too loaded for
+    /// `machine.solve_budget_s`, whose late results are applied when they come.
+    pub solve_delay_s: Option<f64>,
 }
 
 /// How long the machine idles, reading the IMU, before the estimation is asked for, s: so the
@@ -300,6 +335,13 @@ pub fn estimate_observed(
         setup.identification.burst_rel_err = v;
     }
     let mut machine = Machine::new(setup);
+    let mut late = ideal
+        .solve_delay_s
+        .map(|d| LateSolver::new(&mut machine, d));
+    let mut tick = |machine: &mut Machine, sim: &mut Simulator| match late.as_mut() {
+        Some(l) => l.tick(machine, sim),
+        None => tick(machine, sim),
+    };
     while sim.time_s() < ideal.idle_s.unwrap_or(IDLE_BEFORE_REQUEST_S) {
         tick(&mut machine, &mut sim);
         observe(&machine, &sim);

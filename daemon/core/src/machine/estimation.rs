@@ -38,6 +38,13 @@ pub(super) const MIN_REST_SAMPLES: u64 = 10;
 /// restart.
 pub(super) const MAX_PUSHED_WAIT_S: f64 = 10.0;
 
+/// A rest that swings from the thrusters' last push (`machine.max_rest_swing_radps`) starts
+/// over until the thrusters have been neutral this long, s; then the rest is taken as it is.
+/// Why 10: AMOUR-5, six_dof and four_up swing down to the default limit in 4-7 s after an
+/// emergency stop in their pulses (docs/reliability.md); a swing that outlasts 10 s is the
+/// water's, which waiting does not end.
+pub(super) const MAX_SWING_WAIT_S: f64 = 10.0;
+
 /// The estimation run's owner number for its solver (see `solve::owner_of`).
 pub(super) const ESTIMATION: u64 = 0;
 
@@ -88,6 +95,10 @@ pub(super) struct EstimationRun {
     /// How often the rest was started over for a push.
     #[serde(default)]
     rest_restarts: u32,
+    /// How often the rest was started over for a swing the thrusters left
+    /// (`MAX_SWING_WAIT_S`).
+    #[serde(default)]
+    swing_restarts: u32,
     /// The gyro's bias over a long idle spell before the run (`machine.gyro_bias_rest_s`):
     /// stands for the rest's when there is one.
     idle_gyro_bias: Option<RestBias>,
@@ -120,6 +131,7 @@ impl EstimationRun {
             rested_s: 0.0,
             rest_from_s: 0.0,
             rest_restarts: 0,
+            swing_restarts: 0,
             idle_gyro_bias: None,
             idle_down: None,
             idle_sway: None,
@@ -171,6 +183,14 @@ impl EstimationRun {
         est
     }
 
+    /// The rest measured so far is dropped; the noise measurement goes on from `elapsed_s`.
+    fn start_rest_over(&mut self, elapsed_s: f64) {
+        self.noise = NoiseMeter::new();
+        self.rest = Rest::default();
+        self.rested_s = 0.0;
+        self.rest_from_s = elapsed_s;
+    }
+
     /// A new run begins: the noise is measured afresh.
     pub(super) fn restart(&mut self) {
         self.solver.cancel();
@@ -179,6 +199,7 @@ impl EstimationRun {
         self.rested_s = 0.0;
         self.rest_from_s = 0.0;
         self.rest_restarts = 0;
+        self.swing_restarts = 0;
         self.idle_gyro_bias = None;
         self.idle_down = None;
         self.idle_sway = None;
@@ -335,6 +356,12 @@ impl EstimationRun {
         self.last_estimate.as_ref()
     }
 
+    /// How often this run's rest started over for a swing the thrusters left
+    /// (`MAX_SWING_WAIT_S`).
+    pub(super) fn swing_restarts(&self) -> u32 {
+        self.swing_restarts
+    }
+
     /// How often this run's rest started over for a push (`MAX_PUSHED_WAIT_S`).
     pub(super) fn rest_restarts(&self) -> u32 {
         self.rest_restarts
@@ -361,9 +388,13 @@ impl EstimationRun {
     /// (0, 1]) bounds every pulse's power: the largest the thrusters can give at the present
     /// supply voltage, so a pulse the estimator believes it applied is the one applied
     /// (`crate::supply`).
+    /// `neutral_s`: how long the thrusters have been neutral (None: they never drove the
+    /// vehicle).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn measure_noise(
         &mut self,
         elapsed_s: f64,
+        neutral_s: Option<f64>,
         setup: &MachineSetup,
         model: Option<&Model>,
         n: usize,
@@ -376,11 +407,19 @@ impl EstimationRun {
         // A rest that saw the vehicle pushed (a current's drag still taking it) would put the
         // push into the gyro's bias: it starts over, until `MAX_PUSHED_WAIT_S`.
         if self.rest.pushed() && elapsed_s < MAX_PUSHED_WAIT_S {
-            self.noise = NoiseMeter::new();
-            self.rest = Rest::default();
-            self.rested_s = 0.0;
-            self.rest_from_s = elapsed_s;
+            self.start_rest_over(elapsed_s);
             self.rest_restarts += 1;
+            return false;
+        }
+        // A rest the thrusters' last push still swings would take the swing for the gyro's
+        // noise: it starts over, until they have been neutral `MAX_SWING_WAIT_S`.
+        let swing_limit = setup.machine.max_rest_swing_radps;
+        if neutral_s.is_some_and(|s| s < MAX_SWING_WAIT_S)
+            && swing_limit > 0.0
+            && swinging(&self.noise.levels(), swing_limit)
+        {
+            self.start_rest_over(elapsed_s);
+            self.swing_restarts += 1;
             return false;
         }
         let mut levels = self.rest.correct(self.noise.levels());
@@ -549,6 +588,19 @@ const GYRO_BIAS_WALK: f64 = 1e-4;
 /// The long rest's bias and the short one's further apart than this many of their combined
 /// standard deviations say the short rest moved.
 const REST_MOVED_SIGMAS: f64 = 4.0;
+
+/// Whether a rest with `levels` swung more than `limit` rad/s on some gyro axis: the part of
+/// its spread beyond the white noise (`NoiseLevels::gyro_white_sigma`, from successive
+/// differences, which a slow swing hardly moves), with a margin of four of that part's own
+/// standard errors in white noise alone (sigma_white^2 / sqrt(samples), by simulation), so
+/// that a noisy gyro (the paper's 0.25 rad/s) is not read as swinging.
+fn swinging(levels: &NoiseLevels, limit: f64) -> bool {
+    let n = levels.samples.max(2) as f64;
+    (0..3).any(|a| {
+        let white2 = levels.gyro_white_sigma[a].powi(2);
+        levels.gyro_sigma[a].powi(2) - white2 > limit * limit + 4.0 * white2 / n.sqrt()
+    })
+}
 
 /// The long idle spell's bias when the short rest's (in `levels`) is further from it than
 /// noise and the bias's walk explain: the short rest moved (a swell rocks a 1-2 s rest, and

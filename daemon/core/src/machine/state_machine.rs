@@ -120,6 +120,10 @@ pub struct Machine {
     /// Idle after a lost hold, waiting for the vehicle to settle before estimating from rest.
     #[serde(default)]
     settling: Option<Settling>,
+    /// The last sample whose command drove a thruster, ns (None: none has yet): a noise
+    /// rest soon after it waits for the swing it left (`machine.max_rest_swing_radps`).
+    #[serde(default)]
+    last_driven_ns: Option<u64>,
     /// The identification under way was started by the daemon's own suspicion (the
     /// refinement's change test or the monitor's mismatch), not an announced change: at its
     /// limit its model is refused (`identification.at_limit_unannounced`).
@@ -188,6 +192,7 @@ impl Machine {
             hold_watch: HoldWatch::default(),
             hold_lost_once: false,
             settling: None,
+            last_driven_ns: None,
             identifying_unannounced: false,
             confirming_fight: false,
             pending_confirmation: None,
@@ -440,6 +445,9 @@ impl Machine {
         self.supply.through_curve(thrust);
         jump_deadband(thrust, self.setup.machine.deadband);
         self.supply.to_present(thrust);
+        if thrust.iter().any(|v| *v != 0.0) {
+            self.last_driven_ns = Some(s.t_ns);
+        }
         cmd
     }
 
@@ -521,8 +529,12 @@ impl Machine {
                 let db = self.setup.machine.deadband.clamp(0.0, 0.5);
                 let cap = ((self.supply.attainable() - db) / (1.0 - db)).clamp(0.0, 1.0);
                 self.run.rest_sample(&m, s.t_ns);
+                let neutral_s = self
+                    .last_driven_ns
+                    .map(|t| s.t_ns.saturating_sub(t) as f64 * 1e-9);
                 let ready = self.run.measure_noise(
                     elapsed,
+                    neutral_s,
                     &self.setup,
                     self.models.current(),
                     self.n,

@@ -187,6 +187,15 @@ impl Machine {
                 if r == 1 { "" } else { "s" }
             ),
         };
+        let swung = self.run.swing_restarts();
+        if swung > 0 {
+            // The rest waited for the swing the thrusters' last push left (about a second a
+            // time: `machine.max_rest_swing_radps`).
+            news.push_str(&format!(
+                "; the rest waited {swung} time{} for the vehicle to stop swinging",
+                if swung == 1 { "" } else { "s" }
+            ));
+        }
         let water = self.run.idle_water(self.setup.machine.max_still_sway);
         if let (Some(sway), Some(water)) = (self.run.idle_sway(), water) {
             news.push_str(&format!(

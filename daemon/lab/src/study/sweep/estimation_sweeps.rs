@@ -528,7 +528,8 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// reads"), LA_MAX_UNEXPLAINED (`machine.max_unexplained_rate_radps`), LA_MAX_TILT
 /// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`), LA_MAX_SWAY
 /// (`machine.max_still_sway`), LA_DRIFT_STATES=0 (`estimator.moving_rest_drift_states` off),
-/// LA_TOW (`estimator.start_velocity_search_mps`, m/s: 1.5 on; off by default).
+/// LA_TOW (`estimator.start_velocity_search_mps`, m/s: 1.5 on; off by default),
+/// LA_SOLVE_DELAY (s: each solve's result back this late, a starved real-time daemon's).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -643,6 +644,9 @@ pub(super) fn imu_and_water_sweep() {
                     .map(|v| v.parse().unwrap()),
                 noise_s: std::env::var("LA_NOISE_S").ok().map(|v| v.parse().unwrap()),
                 burst_rel_err: std::env::var("LA_BURST").ok().map(|v| v.parse().unwrap()),
+                solve_delay_s: std::env::var("LA_SOLVE_DELAY")
+                    .ok()
+                    .map(|v| v.parse().unwrap()),
                 ..Ideal::default()
             };
             // Where the swell's bias enters B: the terms held (a prior of width sd per unit
