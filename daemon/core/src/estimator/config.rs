@@ -361,10 +361,12 @@ pub struct EstimatorConfig {
     /// ([`START_VELOCITY_EVIDENCE`](crate::estimator::START_VELOCITY_EVIDENCE)); 0: off; at
     /// most 5. Why: the navigation starts from zero at the rest, and a vehicle a tether tows
     /// at a steady speed is at rest to an accelerometer (docs/study.md, "A tether's tow at
-    /// the start"). Default 0 (off, opt-in 1.5): on a 10 N tether it took the realistic models
-    /// over 1.5x their bound from 2 of 30 to 0, but noise-free on eight_vectored_lag100_120ms
-    /// (thrusters of two lags) the lags searched again on the moved log made the model 0.086 /
-    /// 0.138 off at 2.35x its bound, where without it 0.004 / 0.009.
+    /// the start"). Default 1.5: on a 10 N tether it took the realistic models over 1.5x their
+    /// bound from 2 of 30 to 0, noise-free every vehicle file as close to the truth or closer
+    /// (eight_vectored_lag100_120ms, thrusters of two lags, once 2.35x its bound with it: the
+    /// lags searched again on the moved log now start from those found before the move too,
+    /// "The lags searched again after the tow"), the swell's flights and still water as
+    /// before or better.
     pub start_velocity_search_mps: f64,
 }
 
@@ -430,7 +432,7 @@ impl Default for EstimatorConfig {
             imu_position_tolerance_m: 0.03,
             second_amplitude: 1.0,
             navigation_error_draws: 16,
-            start_velocity_search_mps: 0.0,
+            start_velocity_search_mps: 1.5,
         }
     }
 }

@@ -554,7 +554,7 @@ impl Estimator {
             .as_ref()
             .and_then(|(lags, sd_ln)| fit_at(run, lags, *sd_ln));
         let e = self.dynamic_estimate_with(run, fit, false);
-        self.in_moving_water(run, e, |moving| {
+        self.in_moving_water(run, e, |moving, _| {
             let fit = self
                 .lag_hint
                 .as_ref()

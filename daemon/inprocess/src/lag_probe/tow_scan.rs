@@ -28,10 +28,36 @@ pub(super) fn print_tow_scan(
         "  tow scan: start error in the world {:.3?} m/s",
         offset.as_slice()
     );
+    // LAG_PROBE_TOW_LAGS=l1,l2,...: also fitted at these lags, one per thruster (the
+    // vehicle file's true ones), with the moving-water refit's drift states (a world-fixed
+    // constant force and ramp) as the estimator restates the moved log: where the lag
+    // search's profile and the truth part.
+    let at: Vec<f64> = std::env::var("LAG_PROBE_TOW_LAGS")
+        .map(|v| v.split(',').filter_map(|l| l.parse().ok()).collect())
+        .unwrap_or_default();
+    let states = thrusterd_core::estimator::dynamic::disturbance_states::DisturbanceStates {
+        world_constant: true,
+        world_ramp: true,
+        ..Default::default()
+    };
     for k in spec.split(',').filter_map(|k| k.parse::<f64>().ok()) {
         let Some(moved) = start_velocity::with_start_velocity(run, &(offset * k)) else {
             continue;
         };
+        if !at.is_empty() {
+            let drift = moved.restated(states);
+            for (name, log) in [("plain", Some(&moved)), ("drift states", drift.as_ref())] {
+                let Some(fit) = log.and_then(|l| l.refit(&at)) else {
+                    continue;
+                };
+                let score = profile_score_weighted(&fit, weights).unwrap_or(f64::NAN);
+                let (rot, acc) = fitted_b(log.unwrap(), &at)
+                    .map_or((f64::NAN, f64::NAN), |b| rel_err(&b, truth_b));
+                println!(
+                    "    k {k:+.2} at the given lags, {name}: score {score:.4} err_rot {rot:.4} err_acc {acc:.4}"
+                );
+            }
+        }
         let Some(fit) =
             learn_common_lag_weighted(&moved, &LagRange::default(), &Default::default(), weights)
         else {

@@ -98,7 +98,7 @@ pub fn check_configured_lag(
 ) -> Option<LagCheck> {
     let common = learn_common_lag_centred(run, range, imu_m)?;
     let per_thruster_evidence = evidence_limit
-        .and_then(|_| search_thruster_lags(run, &common, range, imu_m, f64::INFINITY, 0.0))
+        .and_then(|_| search_thruster_lags(run, &common, range, imu_m, f64::INFINITY, 0.0, None))
         .map_or(0.0, |s| s.log_likelihood_ratio);
     Some(LagCheck {
         configured_s,

@@ -92,6 +92,7 @@ pub struct ThrusterLagSearch {
 /// velocity of the centre with the IMU at `imu_m`. The per-thruster fit is returned in
 /// `fit` when its ln likelihood ratio over the common lag exceeds `min_evidence`. None
 /// without a log or residual degrees of freedom.
+#[allow(clippy::too_many_arguments)]
 pub fn search_thruster_lags(
     run: &DynamicRun,
     common: &LagFit,
@@ -99,6 +100,7 @@ pub fn search_thruster_lags(
     imu_m: &Vector3<f64>,
     min_evidence: f64,
     floor_ln: f64,
+    start: Option<&[f64]>,
 ) -> Option<ThrusterLagSearch> {
     let n = run.thrusters();
     if n < 2 {
@@ -137,6 +139,17 @@ pub fn search_thruster_lags(
     let try_lags = |best: &mut Best, trial: Vec<f64>| best.try_lags(trial, &refit, &score_of);
     let rows = best.run.samples() as f64;
     let lags_at = |x: &[f64]| -> Vec<f64> { x.iter().map(|v| v.clamp(lo, hi).exp()).collect() };
+    // Lags found on this log before it was changed, where the caller has them: a place to
+    // search from besides the common lag, kept only where it scores better. Why: the
+    // tether's start velocity moved into eight_vectored_lag100_120ms's log, noise-free, the
+    // search from the common lag (0.1195 s) stopped at 0.115 / 0.141 s on the vectored
+    // thrusters, 0.086 / 0.138 off, where the lags found before the move (0.100 / 0.120)
+    // score 15 units of ln likelihood per output better and fit 0.0007 / 0.0004 off
+    // (docs/study.md, "The lags searched again after the tow").
+    if let Some(start) = start.filter(|s| s.len() == n && s.iter().all(|l| l.is_finite())) {
+        let x: Vec<f64> = start.iter().map(|l| l.max(1e-4).ln()).collect();
+        try_lags(&mut best, lags_at(&x))?;
+    }
     // The score's local quadratic form at `best`, in ln(lag) by finite differences: each
     // output's residual variance over its value here, summed (its gradient here is the
     // profile's; its Hessian is the profile's without the -(v'/v)^2 part, which noise-free,

@@ -229,10 +229,10 @@ impl Estimator {
             return curved;
         }
         let e = self.dynamic_estimate_with(run, learned, true);
-        self.in_moving_water(run, e, |moving| {
+        self.in_moving_water(run, e, |moving, moved_from| {
             let learned = self
                 .learns_lag()
-                .then(|| self.learn_lags(moving, &Vector3::zeros()))
+                .then(|| self.learn_lags_from(moving, &Vector3::zeros(), moved_from))
                 .flatten();
             self.dynamic_estimate_with(moving, learned, true)
         })
@@ -249,7 +249,7 @@ impl Estimator {
         &self,
         run: &DynamicRun,
         e: Estimate,
-        again: impl FnOnce(&DynamicRun) -> Estimate,
+        again: impl FnOnce(&DynamicRun, Option<&[f64]>) -> Estimate,
     ) -> Estimate {
         let mut states = self.cfg.moving_water_states();
         let Some(water) = e.dynamics.as_ref().map(|d| d.unexplained_rate_radps) else {
@@ -274,7 +274,13 @@ impl Estimator {
         } else {
             (moving, None)
         };
-        let mut kept = again(&moving);
+        // A log moved by a start velocity has its lags searched again from those found
+        // before the move too (`search_thruster_lags`' start).
+        let moved_from = start_velocity
+            .and(e.dynamics.as_ref())
+            .map(|d| d.spin_up_per_thruster_s.as_slice())
+            .filter(|l| !l.is_empty());
+        let mut kept = again(&moving, moved_from);
         let gap = e.dynamics.as_ref().map_or(0.0, |d| {
             crate::estimator::dynamic::lag_agreement::gap_over_bound(
                 d,
@@ -428,6 +434,17 @@ impl Estimator {
     /// all thrusters, or one each where the data says they differ
     /// (`EstimatorConfig::thruster_lag_evidence`).
     fn learn_lags(&self, run: &DynamicRun, imu_m: &Vector3<f64>) -> Option<LagFit> {
+        self.learn_lags_from(run, imu_m, None)
+    }
+
+    /// [`Self::learn_lags`], the lag per thruster also searched from `start` (lags found on
+    /// this log before it was changed: `search_thruster_lags`).
+    fn learn_lags_from(
+        &self,
+        run: &DynamicRun,
+        imu_m: &Vector3<f64>,
+        start: Option<&[f64]>,
+    ) -> Option<LagFit> {
         let range = self.lag_range();
         let mut common = learn_common_lag_centred(run, &range, imu_m)?;
         // Judged on the common lag's fits, whichever fit is returned.
@@ -443,6 +460,7 @@ impl Estimator {
                     imu_m,
                     self.cfg.thruster_lag_evidence,
                     self.cfg.thruster_lag_floor,
+                    start,
                 )
             })
             .flatten();

@@ -528,8 +528,9 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// reads"), LA_MAX_UNEXPLAINED (`machine.max_unexplained_rate_radps`), LA_MAX_TILT
 /// (`machine.max_moving_water_tilt_deg`), LA_BIAS_REST (`machine.gyro_bias_rest_s`), LA_MAX_SWAY
 /// (`machine.max_still_sway`), LA_DRIFT_STATES=0 (`estimator.moving_rest_drift_states` off),
-/// LA_TOW (`estimator.start_velocity_search_mps`, m/s: 1.5 on; off by default),
-/// LA_SOLVE_DELAY (s: each solve's result back this late, a starved real-time daemon's).
+/// LA_TOW (`estimator.start_velocity_search_mps`, m/s: 0 off; on at 1.5 by default),
+/// LA_SOLVE_DELAY (s: each solve's result back this late, a starved real-time daemon's),
+/// LA_PRINT_LAGS=1 (each thruster's lag, their evidence and the start velocity found).
 /// Each flight prints the first
 /// cycle's estimate beside the whole run's when the run went beyond it (with LA_TARGET=0.001
 /// the first cycle's is the stop decision's, its lag searched; with LA_MIN_CYCLES=2 it is a
@@ -746,6 +747,19 @@ pub(super) fn imu_and_water_sweep() {
                 continue;
             };
             let sd = l.sd_m();
+            if std::env::var("LA_PRINT_LAGS").is_ok() {
+                // Each thruster's lag and the evidence for them (over one common lag).
+                println!(
+                    "  lags {:?} evidence {:.1} start velocity {:?}",
+                    o.terms
+                        .spin_up_per_thruster_s
+                        .iter()
+                        .map(|v| (v * 1e4).round() / 1e4)
+                        .collect::<Vec<_>>(),
+                    o.terms.thruster_lag_evidence,
+                    o.terms.start_velocity_ned_mps
+                );
+            }
             println!(
                 "  sigma {:?} unexplained {:.4} rad/s lag sd_ln {:.4} rel_err {:.4}/{:.4} groups {:?} gap {:.4} z {:.2}",
                 o.sigma.map(|v| (v * 1e4).round() / 1e4),
