@@ -338,12 +338,13 @@ pub fn estimate_observed(
     let mut late = ideal
         .solve_delay_s
         .map(|d| LateSolver::new(&mut machine, d));
-    let mut tick = |machine: &mut Machine, sim: &mut Simulator| match late.as_mut() {
+    // One sample, its solves inline or (`solve_delay_s`) handed back late.
+    let mut step = |machine: &mut Machine, sim: &mut Simulator| match late.as_mut() {
         Some(l) => l.tick(machine, sim),
         None => tick(machine, sim),
     };
     while sim.time_s() < ideal.idle_s.unwrap_or(IDLE_BEFORE_REQUEST_S) {
-        tick(&mut machine, &mut sim);
+        step(&mut machine, &mut sim);
         observe(&machine, &sim);
     }
     machine.on_request(Request::Estimate).unwrap();
@@ -357,7 +358,7 @@ pub fn estimate_observed(
             let v = sim.linear_velocity();
             machine.on_dvl([v.x, v.y, v.z]);
         }
-        tick(&mut machine, &mut sim);
+        step(&mut machine, &mut sim);
         observe(&machine, &sim);
         let down = sim.attitude().inverse_transform_vector(&Vector3::z());
         max_tilt = max_tilt.max(down.z.clamp(-1.0, 1.0).acos().to_degrees());

@@ -55,9 +55,9 @@ pub struct MachineConfig {
     /// the water moved: `estimator.moving_rest_drift_states`.
     pub max_still_sway: f64,
     /// A noise rest begun within 10 s (`MAX_SWING_WAIT_S`, `machine/estimation.rs`) of the
-    /// thrusters driving the vehicle
-    /// starts over while its gyro swings, beyond the gyro's white noise, more than this,
-    /// rad/s (default 0.0125, a quarter of `max_unexplained_rate_radps`; 0: never). Why: an
+    /// thrusters driving the vehicle starts over while its gyro swings, beyond the gyro's
+    /// white noise, more than this, rad/s (default 0.0125, a quarter of
+    /// `max_unexplained_rate_radps`; 0: never). Why: an
     /// estimate asked for 0.5 s after an emergency stop that came 10 ms into the pulses found
     /// AMOUR-5 swinging at up to 0.23 rad/s from that push; the rest took the swing for the
     /// gyro's noise (0.053 rad/s against a white 0.002), the water check read it as
