@@ -314,14 +314,17 @@ fn start(
 /// each IMU noise (see the module doc).
 fn under_control(seeds: u64, filter: &str) {
     // The rows that mean before a change carry the key it moved, so they still mean before.
-    const BEFORE_2026_12_02: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
-    const HOLD_1_S: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nlead_in_s = 1.0\nlate_decision_s = 1.0\n";
+    const BEFORE_2026_12_02: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nmin_s = 4.0\nsettle = 0.0\nfocus_gain_noisy = 1.7\nfocus_others_noisy = 0.1\nlead_in_s = 1.0\nlate_decision_s = 1.0\nsettle_decision_s = 1.0\n";
+    const HOLD_1_S: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nlead_in_s = 1.0\nlate_decision_s = 1.0\nsettle_decision_s = 1.0\n";
     const BEFORE: &str =
         "before 2026-12-02: min_s 4, no wait to settle, one focus at every noise, 1 s hold, a decision a segment";
     const HOLD: &str =
         "1 s hold before the dither (lead_in_s = 1, the morning of 2026-12-02), a decision a segment";
     const ONCE_A_SEGMENT: &str =
-        "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nlate_decision_s = 1.0\n";
+        "[estimator]\ntarget_rel_err_acc = 0.06\n[identification]\nlate_decision_s = 1.0\nsettle_decision_s = 1.0\n";
+    const SETTLE_ONCE_A_SEGMENT: &str = "[identification]\nsettle_decision_s = 1.0\n";
+    const SETTLE_SEGMENT: &str =
+        "the settle wait decided once a segment (settle_decision_s = 1, the default until 2026-12-06)";
     const ACC_006: &str = "[estimator]\ntarget_rel_err_acc = 0.06\n";
     const ACC: &str = "the acceleration rows stop at 0.06 (target_rel_err_acc, before 2026-12-05)";
     const SEGMENT: &str =
@@ -329,6 +332,7 @@ fn under_control(seeds: u64, filter: &str) {
     // (name, the daemon's configuration, IMU)
     const ROWS: &[(&str, &str, &str)] = &[
         ("defaults", "", "realistic"),
+        (SETTLE_SEGMENT, SETTLE_ONCE_A_SEGMENT, "realistic"),
         (SEGMENT, ONCE_A_SEGMENT, "realistic"),
         (HOLD, HOLD_1_S, "realistic"),
         (BEFORE, BEFORE_2026_12_02, "realistic"),

@@ -130,10 +130,10 @@ fn answering_a_sample_does_not_allocate() {
 }
 
 /// With the defaults (background refinement while controlling, identification under control):
-/// only the decisions (`estimator.segment_s`, and every `identification.late_decision_s` once
-/// the settle wait is over: the tick that hands out the solve job, and the tick its result is
-/// applied at, `machine.solve_budget_s` later) and a window's or run's start allocate; every
-/// other tick allocates nothing.
+/// only the decisions (`estimator.segment_s`, every `identification.settle_decision_s` while
+/// the stop may wait for a settled estimate and every `late_decision_s` after: the tick that
+/// hands out the solve job, and the tick its result is applied at, `machine.solve_budget_s`
+/// later) and a window's or run's start allocate; every other tick allocates nothing.
 /// The same with the thrust columns instrumented (`identification.instrument = "always"`:
 /// the instruments' sums, a ramp per segment, a least-squares twin).
 #[test]
@@ -141,36 +141,38 @@ fn under_control_only_the_decisions_allocate() {
     use thrusterd_core::adaptation::identification::Instrument;
     for instrument in [Instrument::InASea, Instrument::Always] {
         // One decision a segment: a count that says so.
-        let once_a_segment = under_control_with(instrument, 1.0);
+        let once_a_segment = under_control_with(instrument, Some(1.0));
         assert!(
             once_a_segment.len() <= 10,
             "identifying ({instrument:?}, a decision a segment): {} of 1000 ticks allocated",
             once_a_segment.len()
         );
-        // The default, late decisions every 0.1 s (20 ticks): measured 18 ticks of 1000. Any
-        // four allocating ticks span at least 20 ticks, so no more than a decision's hand-out
-        // and its result (and a run's start) allocate in any 0.1 s: the per-sample path, which
-        // would allocate on every tick, does not.
-        let default = under_control_with(
-            instrument,
-            MachineSetup::default().identification.late_decision_s,
-        );
+        // The default, decisions every 0.1 s (20 ticks) from 2 s of dither: DEFAULT_TICKS
+        // of 1000. Any four allocating ticks span at least 20 ticks, so no more than a
+        // decision's hand-out and its result (and a run's start) allocate in any 0.1 s: the
+        // per-sample path, which would allocate on every tick, does not.
+        let default = under_control_with(instrument, None);
         assert!(
             default.windows(4).all(|w| w[3] - w[0] >= 20),
             "identifying ({instrument:?}, the default cadence): allocating ticks {default:?}"
         );
         assert!(
-            default.len() > once_a_segment.len() && default.len() <= 30,
+            default.len() > once_a_segment.len() && default.len() <= DEFAULT_TICKS,
             "identifying ({instrument:?}, the default cadence): {} of 1000 ticks allocated",
             default.len()
         );
     }
 }
 
-/// The ticks, of 1000 (5 s) identifying after 10 s of control, that allocated.
+/// The most ticks of the 1000 that may allocate with the default cadence: a hand-out and a
+/// result for each 0.1 s decision over the 2.5 s of dither from 2 s on, and the run's start.
+const DEFAULT_TICKS: usize = 60;
+
+/// The ticks, of 1000 (5 s) identifying after 10 s of control, that allocated; `cadence`:
+/// both the settle wait's and the late decisions' spacing, s (None: the defaults).
 fn under_control_with(
     instrument: thrusterd_core::adaptation::identification::Instrument,
-    late_decision_s: f64,
+    cadence: Option<f64>,
 ) -> Vec<u64> {
     let mut setup = MachineSetup {
         thrusters: 4,
@@ -178,7 +180,10 @@ fn under_control_with(
         ..MachineSetup::default()
     };
     setup.identification.instrument = instrument;
-    setup.identification.late_decision_s = late_decision_s;
+    if let Some(s) = cadence {
+        setup.identification.settle_decision_s = s;
+        setup.identification.late_decision_s = s;
+    }
     let mut m = Machine::new(setup);
     let mut k = 0;
     count(&mut m, &mut k, 10);

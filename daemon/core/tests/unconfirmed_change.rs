@@ -76,7 +76,9 @@ fn pitch_steps_in_a_swell(
     let mut run = Run::new("amour5_top45", NoisePreset::Paper, 2);
     run.with_setup(|s| {
         s.identification.at_limit_unannounced = at_limit;
+        // The stop's spacing in the settle wait and after it (both 0.1 s by default).
         s.identification.late_decision_s = late_decision_s;
+        s.identification.settle_decision_s = late_decision_s;
         s.identification.instrument = instrument;
         s.refinement.change_name_margin = flight.name_margin;
         s.refinement.change_term_z = flight.term_z;

@@ -5,6 +5,8 @@
 //! estimate whenever it asks, and a decision to go on or stop. The daemon's state machine, the
 //! simulator experiments, the study and the tests all drive this same code.
 
+use std::collections::VecDeque;
+
 use nalgebra::{DMatrix, Vector3};
 
 use super::analysis::{diagnose, rank_report, RankReport, ThrusterDiagnosis};
@@ -289,11 +291,12 @@ pub struct Estimator {
     /// Under control, the fit made again with bent commands (`thrust_curve`).
     #[serde(default)]
     thrust_curve: Option<ThrustCurveProbe>,
-    /// Under control, the effectiveness of the last decision interval's estimate that did
-    /// not stop the run (`remember_interval`): the next decision asks whether the estimate
-    /// has settled since (`closed_loop_decision`).
+    /// Under control, the effectiveness of the recent decision intervals' estimates that did
+    /// not stop the run, each with its seconds into the run, oldest first
+    /// (`remember_interval`): a decision asks whether the estimate has settled since the one
+    /// a segment earlier (`closed_loop_decision`).
     #[serde(default)]
-    last_interval: Option<DMatrix<f64>>,
+    intervals: VecDeque<(f64, DMatrix<f64>)>,
     /// The relative error the lags inherited from an earlier model carry into B
     /// (`with_inherited_lag_error`), rotation and acceleration rows.
     #[serde(default)]
@@ -343,7 +346,7 @@ impl Estimator {
             lag_hint: None,
             inherited_lags: Vec::new(),
             thrust_curve: None,
-            last_interval: None,
+            intervals: VecDeque::new(),
             inherited_lag_rel_err: [0.0; 2],
             inherited_navigation_rel_err: [0.0; 2],
             searching_start_velocity: false,

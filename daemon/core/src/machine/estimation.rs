@@ -323,9 +323,9 @@ impl EstimationRun {
 
     /// A decision interval's estimate that did not stop the run: the next decision judges
     /// whether the estimate has settled against it (`IdentificationConfig::settle`).
-    pub(super) fn remember_interval(&mut self, estimate: &Estimate) {
+    pub(super) fn remember_interval(&mut self, estimate: &Estimate, elapsed_s: f64) {
         if let Some(est) = self.est.as_mut() {
-            est.remember_interval(estimate);
+            est.remember_interval(estimate, elapsed_s);
         }
     }
 

@@ -94,6 +94,18 @@ pub struct IdentificationConfig {
     /// 5 s, 0.034 at 7 s; with a perfect DVL 0.007-0.019; the cause was the 1 s hold's
     /// starting tilt, `lead_in_s`) only drifts further.
     pub settle_wait_s: f64,
+    /// While the stop may wait for a settled estimate (from a segment before `min_s` to the
+    /// wait's end), the stop is decided every this many seconds, at most every
+    /// `estimator.segment_s` (default 0.1; 1, every segment, until 2026-12-06); each decision
+    /// still compares with the estimate a segment earlier, so a wandering estimate, which
+    /// moves little between close decisions, is still caught. Why: a steady estimate that
+    /// moved just over its bound at `min_s` waited a whole second. Measured in process
+    /// (realistic IMU, seeds 1-30): the worst of AMOUR-5 / six_dof / eight_vectored 4.5 s ->
+    /// 4.0 / 4.1 / 3.8 s with the same errors; amour5_reverse60 noise-free 4.5 -> 4.0 s and
+    /// 1.8x -> 0.9x its bound; the cost, amour5_reverse60 at a realistic IMU: the worst
+    /// acceleration rows 0.030 -> 0.034 (1.2x their bound; docs/study.md, "The settle
+    /// wait's second").
+    pub settle_decision_s: f64,
     /// Once the wait for a settled estimate is over (`min_s` + `settle_wait_s` of dither), the
     /// stop is decided every this many seconds, at most every `estimator.segment_s` (default
     /// 0.1; 1 until 2026-12-02: every segment). Why: a run decided once a segment stops up to a
@@ -272,6 +284,7 @@ impl Default for IdentificationConfig {
             settle: 1.0,
             settle_floor: 0.01,
             settle_wait_s: 1.0,
+            settle_decision_s: 0.1,
             late_decision_s: 0.1,
             burst_rel_err: 0.0,
             carry_over: true,
@@ -301,8 +314,13 @@ impl IdentificationConfig {
     }
 
     /// (key, value, allowed range) for the config checker.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 21] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 22] {
         [
+            (
+                "identification.settle_decision_s",
+                self.settle_decision_s,
+                Range::closed(0.05, 60.0),
+            ),
             (
                 "identification.late_decision_s",
                 self.late_decision_s,

@@ -1,7 +1,9 @@
 //! The estimator under control: the dynamic method fed with whatever command was sent (the
 //! controller's plus a dither), instead of its own pulses. See `crate::adaptation::identification`.
 
-use nalgebra::Vector3;
+use std::collections::VecDeque;
+
+use nalgebra::{DMatrix, Vector3};
 
 use super::{Estimate, Estimator, StopDecision};
 use crate::estimator::config::Method;
@@ -120,16 +122,19 @@ impl Estimator {
         self
     }
 
-    /// The estimate of a decision interval that did not stop the run, for the next
-    /// decision's settling check. The machine calls it when it applies the result, at a
-    /// sample fixed in vehicle time, so a replay remembers the same one. Copied in place once
-    /// the shapes agree (the control thread applies results).
-    pub fn remember_interval(&mut self, estimate: &Estimate) {
-        let b = &estimate.effectiveness;
-        match self.last_interval.as_mut() {
-            Some(m) if m.shape() == b.shape() => m.copy_from(b),
-            _ => self.last_interval = Some(b.clone()),
-        }
+    /// The estimate of a decision interval that did not stop the run, `elapsed_s` into it,
+    /// for later decisions' settling check. The machine calls it when it applies the result,
+    /// at a sample fixed in vehicle time, so a replay remembers the same ones. Kept while a
+    /// later decision may still compare with it (two segments); the oldest's storage is
+    /// reused once the shapes agree (the control thread applies results).
+    pub fn remember_interval(&mut self, estimate: &Estimate, elapsed_s: f64) {
+        let keep_s = 2.0 * self.cfg.segment_s;
+        remember(
+            &mut self.intervals,
+            elapsed_s,
+            &estimate.effectiveness,
+            keep_s,
+        );
     }
 
     /// Stop under control: never before `min_s`, at `max_s` whatever the bound (reported as
@@ -150,20 +155,22 @@ impl Estimator {
         }
         let decision = self.bound_decision(estimate, false);
         let judged = settle.factor > 0.0 && elapsed_s < min_s + settle.wait_s;
-        if judged && decision.is_stop() && !self.settled(estimate, settle) {
+        if judged && decision.is_stop() && !self.settled(estimate, elapsed_s, settle) {
             return StopDecision::Continue;
         }
         decision
     }
 
-    /// Whether `estimate` moved from the last interval's by at most `settle.factor` times its
-    /// reducible bound, or `settle.floor`, in both row groups. Without a last estimate (or one
-    /// of another shape) it has not settled: nothing says it has.
-    fn settled(&self, estimate: &Estimate, settle: Settle) -> bool {
-        let Some(last) = self.last_interval.as_ref() else {
+    /// Whether `estimate`, `elapsed_s` into the run, moved from the latest remembered one at
+    /// least a segment older by at most `settle.factor` times its reducible bound, or
+    /// `settle.floor`, in both row groups. Without such an estimate (or with one of another
+    /// shape) it has not settled: nothing says it has. A segment, whatever the decisions'
+    /// spacing: a wandering estimate moves little between close decisions.
+    fn settled(&self, estimate: &Estimate, elapsed_s: f64, settle: Settle) -> bool {
+        let Some(earlier) = a_segment_before(&self.intervals, elapsed_s, self.cfg.segment_s) else {
             return false;
         };
-        let change = row_group_change(&estimate.effectiveness, last);
+        let change = row_group_change(&estimate.effectiveness, earlier);
         // The part of the bound more data reduces: a floor (the inherited lags') says nothing
         // of how much the estimate may still move.
         within_settle(
@@ -173,6 +180,50 @@ impl Estimator {
             settle.floor,
         )
     }
+}
+
+/// The most decision intervals' estimates kept for the settling check: two segments at the
+/// finest spacing the configuration allows (`identification.settle_decision_s` >= 0.05 s of
+/// a 1 s segment) with room; more is never compared with.
+const MAX_INTERVALS: usize = 48;
+
+/// `b`, `elapsed_s` into the run, appended to `intervals` (oldest first); the ones older than
+/// `keep_s` before it, and the oldest beyond `MAX_INTERVALS`, dropped, the last of them giving
+/// its storage when the shapes agree.
+fn remember(
+    intervals: &mut VecDeque<(f64, DMatrix<f64>)>,
+    elapsed_s: f64,
+    b: &DMatrix<f64>,
+    keep_s: f64,
+) {
+    let mut spare = None;
+    while intervals
+        .front()
+        .is_some_and(|(t, _)| *t < elapsed_s - keep_s || intervals.len() >= MAX_INTERVALS)
+    {
+        spare = intervals.pop_front().map(|(_, m)| m);
+    }
+    let m = match spare {
+        Some(mut m) if m.shape() == b.shape() => {
+            m.copy_from(b);
+            m
+        }
+        _ => b.clone(),
+    };
+    intervals.push_back((elapsed_s, m));
+}
+
+/// The latest remembered estimate at least `segment_s` older than `elapsed_s`.
+fn a_segment_before(
+    intervals: &VecDeque<(f64, DMatrix<f64>)>,
+    elapsed_s: f64,
+    segment_s: f64,
+) -> Option<&DMatrix<f64>> {
+    intervals
+        .iter()
+        .rev()
+        .find(|(t, _)| *t <= elapsed_s - segment_s + 1e-6)
+        .map(|(_, m)| m)
 }
 
 /// The identification's wait for a settled estimate (`IdentificationConfig::settle`,
@@ -209,8 +260,60 @@ fn within_settle(change: [f64; 2], bound: [f64; 2], settle: f64, floor: f64) -> 
 
 #[cfg(test)]
 mod tests {
-    use super::{row_group_change, within_settle};
+    use super::{a_segment_before, remember, row_group_change, within_settle, MAX_INTERVALS};
     use nalgebra::DMatrix;
+    use std::collections::VecDeque;
+
+    #[test]
+    fn a_decision_compares_with_the_estimate_a_segment_before_it() {
+        let at = |v: f64| DMatrix::from_element(6, 5, v);
+        let mut kept = VecDeque::new();
+        // Decisions every 0.25 s from 2 s (the value stands for the time).
+        for i in 0..=8 {
+            let t = 2.0 + 0.25 * i as f64;
+            remember(&mut kept, t, &at(t), 2.0);
+        }
+        let before = |t: f64| a_segment_before(&kept, t, 1.0).map(|m| m[(0, 0)]);
+        assert_eq!(before(4.25), Some(3.25));
+        assert_eq!(before(3.1), Some(2.0));
+        // Nothing a segment old: no comparison (the caller reads that as unsettled).
+        assert_eq!(before(2.9), None);
+        // Decisions a segment apart, as before the finer spacing: the one before.
+        let mut sparse = VecDeque::new();
+        for t in [1.0, 2.0, 3.0] {
+            remember(&mut sparse, t, &at(t), 2.0);
+        }
+        assert_eq!(
+            a_segment_before(&sparse, 4.0, 1.0).map(|m| m[(0, 0)]),
+            Some(3.0)
+        );
+    }
+
+    #[test]
+    fn only_two_segments_of_estimates_are_kept_and_never_more_than_the_cap() {
+        let mut kept = VecDeque::new();
+        for i in 0..=40 {
+            let t = 0.1 * i as f64;
+            remember(&mut kept, t, &DMatrix::from_element(6, 4, t), 2.0);
+        }
+        // 2.0 ..= 4.0 s kept (21 of 41), the oldest first.
+        assert_eq!(kept.len(), 21);
+        assert!(
+            (kept.front().unwrap().0 - 2.0).abs() < 1e-9,
+            "{:?}",
+            kept.front()
+        );
+        assert_eq!(kept.back().unwrap().1[(0, 0)], 4.0);
+        // A thruster added: the new shape is kept as it is.
+        remember(&mut kept, 4.1, &DMatrix::from_element(6, 5, 1.0), 2.0);
+        assert_eq!(kept.back().unwrap().1.shape(), (6, 5));
+        // Decisions finer than the cap allows over two segments: at most the cap.
+        let mut dense = VecDeque::new();
+        for i in 0..200 {
+            remember(&mut dense, 0.01 * i as f64, &DMatrix::zeros(6, 4), 2.0);
+        }
+        assert_eq!(dense.len(), MAX_INTERVALS);
+    }
 
     #[test]
     fn the_change_is_measured_per_row_group_relative_to_the_last_estimate() {

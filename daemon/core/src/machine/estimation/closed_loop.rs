@@ -317,15 +317,23 @@ impl EstimationRun {
             return ClosedStep::Exciting;
         }
         let elapsed_s = t_ns.saturating_sub(excite_from) as f64 * 1e-9;
-        // Every segment while the stop may wait for a settled estimate (it compares with the
-        // decision before), then every `late_decision_s`; a fight (the dither under its share)
-        // keeps the segments: stopped sooner, its model was out of its widened bound.
+        // Every segment, then every `late_decision_s` once the wait for a settled estimate is
+        // over; a fight (the dither under its share) keeps the segments: stopped sooner, its
+        // model was out of its widened bound.
+        // While the stop may wait for a settled estimate, every `settle_decision_s` from a
+        // segment before `min_s` (each compares with the estimate a segment earlier).
         let ident = &setup.identification;
+        let segment_s = setup.estimator.segment_s;
         let late = elapsed_s + 1e-9 >= ident.min_s + ident.settle_wait_s;
-        let every_s = if late && c.excitation.dither_share() >= ident.min_dither_share {
-            ident.late_decision_s.min(setup.estimator.segment_s)
+        let settling = ident.settle > 0.0 && elapsed_s + 1e-9 >= ident.min_s - segment_s;
+        let every_s = if c.excitation.dither_share() < ident.min_dither_share {
+            segment_s
+        } else if late {
+            ident.late_decision_s.min(segment_s)
+        } else if settling {
+            ident.settle_decision_s.min(segment_s)
         } else {
-            setup.estimator.segment_s
+            segment_s
         };
         c.next_decision_ns += (every_s * 1e9) as u64;
         est.end_interval();

@@ -302,7 +302,8 @@ impl Machine {
             // The refinement's own (see `Refiner::observe`); never the run's.
             Purpose::Window => {}
             Purpose::Interval => {
-                self.run.remember_interval(&result.estimate);
+                self.run
+                    .remember_interval(&result.estimate, result.elapsed_s);
                 self.run.keep_estimate(result.estimate);
                 let t = self.last_t_ns.unwrap_or(0);
                 let excited = self.run.excited_s(t);

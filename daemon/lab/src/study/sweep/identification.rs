@@ -318,6 +318,9 @@ pub(super) fn sweep_identification() {
     vary("ID_DITHER_MAX", d.dither_max, |c, v| c.dither_max = v);
     vary("ID_HOLD_S", d.hold_s, |c, v| c.hold_s = v);
     vary("ID_LEAD_IN", d.lead_in_s, |c, v| c.lead_in_s = v);
+    vary("ID_SETTLE_DECISION", d.settle_decision_s, |c, v| {
+        c.settle_decision_s = v
+    });
     vary("ID_LATE_DECISION", d.late_decision_s, |c, v| {
         c.late_decision_s = v
     });
@@ -371,7 +374,7 @@ pub(super) fn sweep_identification() {
         };
         for cfg in &cfgs {
             println!(
-                "== noise {name} hold_s {} lead_in_s {} dither {} dither_max {} budget {} min_s {} max_s {} settle {} {} {} \
+                "== noise {name} hold_s {} lead_in_s {} dither {} dither_max {} budget {} min_s {} max_s {} settle {} {} {} every {} late {} \
                  carry_over {} se_scale {} focus {} others {} instrument {:?} min_share {} \
                  (stop target {target})",
                 cfg.hold_s,
@@ -384,6 +387,8 @@ pub(super) fn sweep_identification() {
                 cfg.settle,
                 cfg.settle_floor,
                 cfg.settle_wait_s,
+                cfg.settle_decision_s,
+                cfg.late_decision_s,
                 cfg.carry_over,
                 cfg.carry_over_se_scale,
                 cfg.focus_gain,
@@ -433,7 +438,11 @@ pub(super) fn sweep_identification() {
                 let max_swap: Vec<f64> = env_list("ID_MAX_SWAP", &[]);
                 let target_acc: Vec<f64> = env_list("ID_TARGET_ACC", &[]);
                 let velocity_prior: Vec<f64> = env_list("ID_VEL_PRIOR", &[]);
+                // ID_SHAPED=0: the first model fitted on the bare command (as the wandering
+                // estimate was found, before `estimator.shaped_thrust`).
+                let shaped: Vec<f64> = env_list("ID_SHAPED", &[]);
                 if *cfg != d
+                    || !shaped.is_empty()
                     || !split.is_empty()
                     || !max_swap.is_empty()
                     || !segment_s.is_empty()
@@ -464,6 +473,9 @@ pub(super) fn sweep_identification() {
                         }
                         if let Some(v) = velocity_prior.first() {
                             s.estimator.velocity_term_prior_sd = *v;
+                        }
+                        if let Some(v) = shaped.first() {
+                            s.estimator.shaped_thrust = *v > 0.0;
                         }
                     });
                 }
