@@ -36,6 +36,16 @@ pub const MIN_SHARE: f64 = 1.0 / 900.0;
 /// 0.018 (3.4x); the recovery is the controller's fight too.
 pub const HELD_S: f64 = 1.0;
 
+/// The longest a wait for the vehicle to be held (a fight's confirmation, a curve just
+/// learned) lasts, s: after that the model in force does not hold the vehicle, and the machine
+/// lets go and estimates from rest. Why: the hold watch catches a vehicle whose error's mean
+/// is beyond `machine.lost_hold_deg` (45 deg), and one that orbits under it was waited for
+/// for good (amour5_top45 at a realistic IMU, seed 28, on a curve the fight named: 40 deg off
+/// for 112 s). A hold that comes took 1.0-2.7 s noise-free and at a realistic IMU, 7.3 s at
+/// most at the paper's noise (amour5_top45, eight_vectored_lag80ms_curve: 30 seeds each;
+/// docs/reliability.md, "A wait for a hold that never comes").
+pub const MAX_WAIT_FOR_HOLD_S: f64 = 15.0;
+
 /// A fight's model in force, its confirmation waiting for the vehicle to be held.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PendingConfirmation {
@@ -43,6 +53,9 @@ pub struct PendingConfirmation {
     /// alone, from the model learned before it).
     pub prior: Option<DynamicPrior>,
     held_since_ns: Option<u64>,
+    /// The first tick the wait saw, ns.
+    #[serde(default)]
+    waiting_since_ns: Option<u64>,
 }
 
 impl PendingConfirmation {
@@ -50,12 +63,21 @@ impl PendingConfirmation {
         PendingConfirmation {
             prior,
             held_since_ns: None,
+            waiting_since_ns: None,
         }
+    }
+
+    /// Whether the wait has lasted beyond [`MAX_WAIT_FOR_HOLD_S`] at `t_ns` without the hold
+    /// (counted from the first tick it saw: `held` or this).
+    pub fn waited_too_long(&mut self, t_ns: u64) -> bool {
+        let since = *self.waiting_since_ns.get_or_insert(t_ns);
+        t_ns.saturating_sub(since) as f64 * 1e-9 > MAX_WAIT_FOR_HOLD_S
     }
 
     /// One control tick with the error `err_deg` on the actuated axes: whether the vehicle
     /// has now been held within `budget_deg` for [`HELD_S`] without a break (time to start).
     pub fn held(&mut self, t_ns: u64, err_deg: f64, budget_deg: f64) -> bool {
+        self.waiting_since_ns.get_or_insert(t_ns);
         // A non-finite error is no hold.
         if !err_deg.is_finite() || err_deg > budget_deg {
             self.held_since_ns = None;
@@ -83,6 +105,20 @@ mod tests {
         assert!(!p.held(ms(1600), 5.0, 10.0));
         assert!(!p.held(ms(2599), 5.0, 10.0));
         assert!(p.held(ms(2600), 5.0, 10.0));
+    }
+
+    #[test]
+    fn a_wait_for_a_hold_ends_after_its_limit() {
+        let mut p = PendingConfirmation::new(None);
+        let s = |t: f64| (t * 1e9) as u64;
+        assert!(!p.held(s(100.0), 30.0, 10.0));
+        assert!(!p.waited_too_long(s(100.0 + MAX_WAIT_FOR_HOLD_S - 0.01)));
+        assert!(p.waited_too_long(s(100.0 + MAX_WAIT_FOR_HOLD_S + 0.01)));
+        // Counted from the first tick seen, whichever asked.
+        let mut q = PendingConfirmation::new(None);
+        assert!(!q.waited_too_long(s(5.0)));
+        assert!(!q.held(s(6.0), 30.0, 10.0));
+        assert!(q.waited_too_long(s(5.0 + MAX_WAIT_FOR_HOLD_S + 0.01)));
     }
 
     #[test]

@@ -16,7 +16,7 @@
 //! same way, `identification::fight`).
 
 use super::*;
-use crate::adaptation::identification::fight::PendingConfirmation;
+use crate::adaptation::identification::fight::{PendingConfirmation, MAX_WAIT_FOR_HOLD_S};
 use crate::estimator::dynamic::thrust_curve::{
     ThrustCurveEvidence, FITTED_RANGE, LEARNED_CURVE_REL_ERR,
 };
@@ -102,6 +102,18 @@ impl Machine {
         let budget = self.setup.identification.attitude_budget_deg;
         let err_deg = actuated_error_deg(attitude, target, model.actuated);
         if !pending.hold.held(t_ns, err_deg, budget) {
+            if pending.hold.waited_too_long(t_ns) {
+                // `let_go_and_estimate` ends the wait: the curve goes with the model again.
+                self.let_go_and_estimate(
+                    t_ns,
+                    format!(
+                        "the model in force did not hold the vehicle within {budget} deg in {:.0} s on the curve learned",
+                        MAX_WAIT_FOR_HOLD_S
+                    ),
+                    "no model holds it on that curve",
+                );
+                return true;
+            }
             return false;
         }
         let Some(pending) = self.curve_pending.take() else {
