@@ -56,6 +56,11 @@ pub(super) fn lost_hold_soak() {
     let name_margin: Option<f64> = std::env::var("LH_NAME_MARGIN")
         .ok()
         .map(|v| v.parse().unwrap());
+    // LH_SETTLE_DECISION: `identification.settle_decision_s` (1: the settle wait decided once
+    // a segment, as until 2026-12-06).
+    let settle_decision_s: Option<f64> = std::env::var("LH_SETTLE_DECISION")
+        .ok()
+        .map(|v| v.parse().unwrap());
     let flight = if level {
         "held level"
     } else {
@@ -88,6 +93,7 @@ pub(super) fn lost_hold_soak() {
                     change_calibration_s,
                     monitor_calibration_s,
                     name_margin,
+                    settle_decision_s,
                 ];
                 if knobs.iter().any(Option::is_some) || calibrate_when.is_some() || no_learn {
                     run.with_setup(|c| {
@@ -107,6 +113,9 @@ pub(super) fn lost_hold_soak() {
                         }
                         if let Some(m) = name_margin {
                             c.refinement.change_name_margin = m;
+                        }
+                        if let Some(s) = settle_decision_s {
+                            c.identification.settle_decision_s = s;
                         }
                     });
                 }
