@@ -63,9 +63,18 @@ fn swaps_through(
 /// 0.010 / 0.010 off; at the paper's noise seed 2's confirmation is no fight and nothing lets
 /// go).
 fn top45(noise: NoisePreset, seed: u64) -> (Run, Reestimation, Vec<Swapped>) {
+    top45_with(noise, seed, bare_first_model)
+}
+
+/// The same flight with the daemon's setup changed by `setup` (from the shipped one).
+fn top45_with(
+    noise: NoisePreset,
+    seed: u64,
+    setup: impl FnOnce(&mut thrusterd_core::machine::MachineSetup),
+) -> (Run, Reestimation, Vec<Swapped>) {
     let v = vehicle("amour5_top45");
     let mut run = Run::new("amour5_top45", noise, seed);
-    run.with_setup(bare_first_model);
+    run.with_setup(setup);
     swaps_through(run, |run, observe| {
         rotate_while_holding_on(run, &v, None, observe)
     })
@@ -149,9 +158,7 @@ fn at_the_papers_noise_a_fight_twice_or_a_refused_fight_lets_go() {
         (2, "twice", None),
         (3, "the fight's model was refused", Some(0.09)),
     ] {
-        let v = vehicle("amour5_top45");
-        let mut run = Run::new("amour5_top45", NoisePreset::Paper, seed);
-        run.with_setup(|s| {
+        let (mut run, r, swaps) = top45_with(NoisePreset::Paper, seed, |s| {
             bare_first_model(s);
             // As found: with the acceleration rows stopping at 0.07 seed 2 flies otherwise and
             // does not fight twice.
@@ -159,9 +166,6 @@ fn at_the_papers_noise_a_fight_twice_or_a_refused_fight_lets_go() {
             if let Some(gate) = gate {
                 s.machine.max_swap_rel_err = gate;
             }
-        });
-        let (mut run, r, swaps) = swaps_through(run, |run, observe| {
-            rotate_while_holding_on(run, &v, None, observe)
         });
         let events = run.machine.take_events();
         println!("seed {seed}: {r:?}");
@@ -327,11 +331,7 @@ fn at_a_realistic_imu_every_model_after_a_misdeclared_screw_is_within_its_bound(
 /// model is swapped in widened and confirmed once held: 0.006 / 0.010 off at 13.4 s.
 #[test]
 fn a_fights_data_name_no_thrust_curve() {
-    let v = vehicle("amour5_top45");
-    let run = Run::new("amour5_top45", NoisePreset::Realistic, 28);
-    let (mut run, r, swaps) = swaps_through(run, |run, observe| {
-        rotate_while_holding_on(run, &v, None, observe)
-    });
+    let (mut run, r, swaps) = top45_with(NoisePreset::Realistic, 28, |_| {});
     let events = run.machine.take_events();
     println!("{r:?}\n{swaps:#?}");
     let named = events
@@ -354,14 +354,9 @@ fn a_fights_data_name_no_thrust_curve() {
 /// would be held on for good, unconfirmed.
 #[test]
 fn a_wait_for_a_hold_that_never_comes_ends_in_an_estimate_from_rest() {
-    let v = vehicle("amour5_top45");
-    let mut run = Run::new("amour5_top45", NoisePreset::None, 1);
-    run.with_setup(|s| {
+    let (mut run, r, swaps) = top45_with(NoisePreset::None, 1, |s| {
         s.identification.attitude_budget_deg = 0.01;
         s.machine.max_swap_rel_err = 100.0;
-    });
-    let (mut run, r, swaps) = swaps_through(run, |run, observe| {
-        rotate_while_holding_on(run, &v, None, observe)
     });
     let events = run.machine.take_events();
     println!("{r:?}\n{swaps:#?}");

@@ -184,7 +184,9 @@ impl Estimator {
 
 /// The most decision intervals' estimates kept for the settling check: two segments at the
 /// finest spacing the configuration allows (`identification.settle_decision_s` >= 0.05 s of
-/// a 1 s segment) with room; more is never compared with.
+/// the default 1 s segment) with room. With a longer segment the oldest go first, and a
+/// decision that then finds none a segment old takes the estimate as unsettled: the wait
+/// goes on, for at most `settle_wait_s`.
 const MAX_INTERVALS: usize = 48;
 
 /// `b`, `elapsed_s` into the run, appended to `intervals` (oldest first); the ones older than

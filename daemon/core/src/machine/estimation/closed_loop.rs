@@ -317,11 +317,11 @@ impl EstimationRun {
             return ClosedStep::Exciting;
         }
         let elapsed_s = t_ns.saturating_sub(excite_from) as f64 * 1e-9;
-        // Every segment, then every `late_decision_s` once the wait for a settled estimate is
-        // over; a fight (the dither under its share) keeps the segments: stopped sooner, its
-        // model was out of its widened bound.
-        // While the stop may wait for a settled estimate, every `settle_decision_s` from a
-        // segment before `min_s` (each compares with the estimate a segment earlier).
+        // Every segment; every `settle_decision_s` while the stop may wait for a settled
+        // estimate (from a segment before `min_s`: each decision compares with the estimate a
+        // segment earlier); every `late_decision_s` once that wait is over. A fight (the dither
+        // under its share) keeps the segments: stopped sooner, its model was out of its widened
+        // bound.
         let ident = &setup.identification;
         let segment_s = setup.estimator.segment_s;
         let late = elapsed_s + 1e-9 >= ident.min_s + ident.settle_wait_s;

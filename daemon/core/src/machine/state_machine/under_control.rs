@@ -459,7 +459,7 @@ impl Machine {
         let err_deg = actuated_error_deg(attitude, target, model.actuated);
         if !pending.held(t_ns, err_deg, budget) {
             if pending.waited_too_long(t_ns) {
-                self.pending_confirmation = None;
+                // `let_go_and_estimate` ends the wait (it leaves Active).
                 self.let_go_and_estimate(
                     t_ns,
                     format!(
