@@ -226,7 +226,7 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// LAG_SEEDS (1..=N), LAG_RATE (the IMU's rate, Hz; 200), LAG_LEARN=0, LAG_CHECK=0 (`check_configured_lag` off), LAG_TOLD (the true lag given), LAG_FORCE (learn
 /// whatever the gyro noise: `spin_up_max_gyro_sigma` off), LAG_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset alone, `noise_only`), LAG_GYRO_ONLY (<rad/s>|gyro|acc:
-/// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH
+/// only that sensor's noise), LAG_MIN_POWER, LAG_BIAS_STD, LAG_TARGET, LAG_REACH, LAG_FLOOR (`model_error_floor`)
 /// (`reach_rel_err`), LAG_PULSES, LAG_SPANNED (`stop_once_spanned`), LAG_PULSE_S (`machine.pulse_s`), LAG_DVL (a perfect DVL), LAG_SYM (symmetric thrusters), LAG_SPLIT (`split_thrust`), LAG_SHAPED (1|0: `shaped_thrust` on or off; set to anything else: on), LAG_BOUND_PARTS (the bound's lag, lag-floor and IMU-position parts), LAG_NO_IMU (`learn_imu_position` off), LAG_DIST_CONST=1 and LAG_DIST_RAMP=1 (a world-fixed constant force and its ramp as states in the fit), LAG_TILT (the largest tilt), LAG_UNMIX (the one column's gains unmixed from a shared forward/reverse asymmetry k, derived in docs/study.md), LAG_REVERSE_RATIO (`reverse_ratio`: the pulses' forward level is this times the reverse), LAG_EXCITATION (round_robin|pairs|orthogonal|doublet_pairs), LAG_NOISE_S (the rest's length, s), and
 /// LAG_PROBE: the lag learned again from the last decision's log with inputs replaced by the
 /// simulator's truth ([`thruster_inprocess::lag_probe`]): "1" for the named variants, or
@@ -296,6 +296,9 @@ pub(super) fn lag_sweep() {
                 }
                 if let Ok(r) = std::env::var("LAG_REACH") {
                     cfg.reach_rel_err = r.parse().unwrap();
+                }
+                if let Ok(f) = std::env::var("LAG_FLOOR") {
+                    cfg.model_error_floor = f.parse().unwrap();
                 }
                 if let Ok(p) = std::env::var("LAG_PULSES") {
                     cfg.max_pulses = p.parse().unwrap();
@@ -508,7 +511,7 @@ fn noise_only(noise: NoisePreset, part: &str, key: &str) -> ImuNoise {
 /// part of the swell alone), LA_DVL (a perfect DVL), LA_SEG (segment_s), LA_IDLE_S (idle before
 /// the request, s), LA_NOISE_S (the noise measurement, s), LA_NOISE_ONLY (gyro|accel|white|bias:
 /// that part of the preset's noise alone), LA_TETHER (N aft at the stern, as the lab's
-/// `--tether`), LA_REACH (`reach_rel_err`), LA_MIN_CYCLES (`min_cycles`), LA_MAX_PULSES (`max_pulses`), LA_TARGET
+/// `--tether`), LA_REACH (`reach_rel_err`), LA_FLOOR (`model_error_floor`), LA_MIN_CYCLES (`min_cycles`), LA_MAX_PULSES (`max_pulses`), LA_TARGET
 /// (`target_rel_err`), LA_TARGET_ACC (`target_rel_err_acc`), LA_NAV_DRAWS
 /// (`navigation_error_draws`; 0: the navigation's errors not in the bound), LA_BURST
 /// (`identification.burst_rel_err`: the open-loop model refined under control), LA_WAVE_SCALE (every wave's force and moment
@@ -583,6 +586,9 @@ pub(super) fn imu_and_water_sweep() {
             }
             if let Ok(r) = std::env::var("LA_REACH") {
                 cfg.reach_rel_err = r.parse().unwrap();
+            }
+            if let Ok(f) = std::env::var("LA_FLOOR") {
+                cfg.model_error_floor = f.parse().unwrap();
             }
             if let Ok(t) = std::env::var("LA_TARGET") {
                 cfg.target_rel_err = t.parse().unwrap();

@@ -19,7 +19,8 @@ fn knob<T: std::str::FromStr>(key: &str) -> Option<T> {
 /// (none|realistic|paper, default realistic), TTM_SEEDS (default 5), TTM_PULSE_S,
 /// TTM_REST_FROM_IDLE (0|1), TTM_IDLE_S (idle before the request), TTM_NOISE_S, TTM_TARGET (target_rel_err), TTM_TARGET_ACC, TTM_MIN_CYCLES,
 /// TTM_SPANNED (1: `stop_once_spanned`), TTM_NAV_DRAWS (`navigation_error_draws`),
-/// TTM_EXCITATION (doublet_pairs|orthogonal|...), TTM_POWER (initial_power), TTM_MAX_PULSES.
+/// TTM_EXCITATION (doublet_pairs|orthogonal|...), TTM_POWER (initial_power), TTM_MAX_PULSES,
+/// TTM_REACH (`reach_rel_err`, 0: off), TTM_FLOOR (`model_error_floor`).
 pub(super) fn ttm_sweep() {
     let noise = match std::env::var("TTM_NOISE").as_deref() {
         Ok("none") => NoisePreset::None,
@@ -43,6 +44,12 @@ pub(super) fn ttm_sweep() {
     }
     if let Some(d) = knob("TTM_NAV_DRAWS") {
         cfg.navigation_error_draws = d;
+    }
+    if let Some(r) = knob("TTM_REACH") {
+        cfg.reach_rel_err = r;
+    }
+    if let Some(f) = knob("TTM_FLOOR") {
+        cfg.model_error_floor = f;
     }
     if let Some(m) = knob("TTM_MAX_PULSES") {
         cfg.max_pulses = m;
