@@ -436,7 +436,7 @@ pub(super) fn lag_sweep() {
                     .command_exponent
                     .map_or(String::new(), |p| format!(" curve ^{p:.3}"));
                 println!(
-                "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s){curve}{refused}{check}",
+                "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s){curve}{refused}{check} groups z {:.2} gap {:.4}",
                 o.spin_up_s,
                 o.terms.spin_up_per_thruster_s.iter().map(|l| (l * 1e4).round() / 1e4).collect::<Vec<_>>(),
                 o.terms.spin_up_sd_ln,
@@ -447,7 +447,9 @@ pub(super) fn lag_sweep() {
                 o.bound[0],
                 o.bound[1],
                 o.seconds,
-                t0.elapsed().as_secs_f64()
+                t0.elapsed().as_secs_f64(),
+                o.terms.spin_up_groups.map_or(f64::NAN, |g| g.z),
+                o.terms.spin_up_groups.map_or(f64::NAN, |g| g.gap_ln())
             );
                 if std::env::var_os("LAG_UNMIX").is_some() {
                     print_unmixed(&o, reverse_ratio);
