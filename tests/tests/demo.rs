@@ -262,12 +262,73 @@ fn t200_thrusters_on_a_sagging_pack_are_learned_at_the_reference_voltage() {
         f("truth_voltage_v")
     );
     assert_eq!(v["linearize"], true, "{v}");
+    assert_eq!(v["compensation"], "t200", "{v}");
     assert_eq!(f("truth_voltage_v"), 16.0);
     assert!(
         f("supply_voltage_v") < 15.5,
         "the pack sagged and drained: {v}"
     );
     assert!(rot < 0.02 && acc < 0.02, "errors {rot:.4} / {acc:.4}: {v}");
+    assert_eq!(v["clean_exit"], true);
+    assert_eq!(v["files_left"], 0);
+}
+
+/// Issues 29 and 32 item 4 through the processes: eight_vectored_lag80ms_curve (another make's
+/// thrust ~ command^1.5) under the daemon's defaults, which take thrusters for T200s, at a
+/// realistic IMU. The open-loop model is a line through the pulses' amplitude, 0.081 / 0.083
+/// off under a learned bound of 0.021 / 0.028. Under control the identification names the curve
+/// and is refused (the daemon says to configure it); the model in force stays, and the model
+/// the daemon publishes after the hold is the same B with its bound restated to cover it
+/// (measured 0.69 / 0.97). Before, it kept 0.021 / 0.028: a confident wrong model.
+#[test]
+fn a_curve_named_restates_the_model_in_force_bound() {
+    let out = system_tests::cli::lab(&[
+        "demo",
+        "--json",
+        "--noise",
+        "realistic",
+        "--hold-s",
+        "40",
+        "--vehicle",
+        "config/vehicles/eight_vectored_lag80ms_curve.toml",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
+    let f = |v: &Value, k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k}: {v}"));
+    assert_eq!(v["compensation"], "t200", "{v}");
+    let after = &v["model_after_hold"];
+    println!(
+        "open loop {:.3} / {:.3} under {:.3} / {:.3}; after the hold (v{}) {:.3} / {:.3} under {:.3} / {:.3}",
+        f(&v, "err_rot"),
+        f(&v, "err_acc"),
+        f(&v, "bound_rot"),
+        f(&v, "bound_acc"),
+        after["version"],
+        f(after, "err_rot"),
+        f(after, "err_acc"),
+        f(after, "bound_rot"),
+        f(after, "bound_acc")
+    );
+    // The learned bound did not cover the line: what is checked below could fail.
+    assert!(f(&v, "err_rot") > 2.0 * f(&v, "bound_rot"), "{v}");
+    // Refused, not learned: the same B, restated under a later version.
+    assert!(after["thrust_exponent_learned"].is_null(), "{after}");
+    assert_eq!(f(after, "err_rot"), f(&v, "err_rot"), "{after}");
+    assert!(
+        after["version"].as_u64() > v["dynamics"]["model_version"].as_u64(),
+        "{after}"
+    );
+    for g in ["rot", "acc"] {
+        assert!(
+            f(after, &format!("err_{g}")) <= f(after, &format!("bound_{g}")),
+            "{g}: {after}"
+        );
+    }
     assert_eq!(v["clean_exit"], true);
     assert_eq!(v["files_left"], 0);
 }

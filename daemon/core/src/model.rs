@@ -169,6 +169,20 @@ impl Model {
         })
     }
 
+    /// What a thrust curve named and not learned puts this line model off at the hold's
+    /// commands, per row group (`DynamicTerms::curve_named_rel_err`); 0 where none was named.
+    pub fn curve_named_rel_err(&self) -> [f64; 2] {
+        self.dynamics.as_ref().map_or([0.0; 2], |d| {
+            d.curve_named_rel_err.map(|e| {
+                if e.is_finite() && e > 0.0 {
+                    e.min(crate::estimator::dynamic::MAX_CURVE_NAMED_REL_ERR)
+                } else {
+                    0.0
+                }
+            })
+        })
+    }
+
     /// Each thruster's own lag this model learned, s, where its run kept them apart
     /// (`DynamicTerms::spin_up_per_thruster_s`); None when it learned one for all or none.
     /// Fits against this model under control use them, not their mean.

@@ -295,6 +295,7 @@ mod tests {
             lag_check: None,
             thrust_curve: None,
             command_exponent: Some(1.5),
+            curve_named_rel_err: [0.3, 0.4],
             thrust_asymmetry: 0.22 / 1.78,
             prior_disagreement: [0.5, 0.7],
             navigation_rel_err: [0.0; 2],
@@ -389,6 +390,21 @@ mod tests {
                 "{to}: {e}"
             );
         }
+        // A restated bound's share opens the swap gate: a file may not open it wider than
+        // the machine does.
+        let text_curve = text.split_whitespace().collect::<String>();
+        let from = "\"curve_named_rel_err\":[0.3,0.4]";
+        assert!(text_curve.contains(from), "{text_curve}");
+        let e = from_json(
+            &text_curve.replace(from, "\"curve_named_rel_err\":[30.0,0.4]"),
+            "m.json",
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("dynamics.curve_named_rel_err: 30 is not in [0, 2]"),
+            "{e}"
+        );
         let mut lags = m.clone();
         lags.dynamics.as_mut().unwrap().spin_up_per_thruster_s = vec![0.1, 0.1];
         // Written without them (they would not load), never as a file that fails.

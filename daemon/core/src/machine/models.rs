@@ -46,6 +46,17 @@ impl ModelSlot {
         Ok(model)
     }
 
+    /// The model in force changed in place by `f` (what it claims, not what it is: a bound
+    /// restated) under the next version number; the previous model stays the one a revert
+    /// goes back to. Returns what is now in force, None without a model.
+    pub(super) fn restate_current(&mut self, f: impl FnOnce(&mut Model)) -> Option<Model> {
+        let current = self.current.as_mut()?;
+        f(current);
+        self.versions += 1;
+        current.version = self.versions;
+        Some(current.clone())
+    }
+
     /// The model the current one replaced, taken out of the slot (revert).
     pub(super) fn take_previous(&mut self) -> Option<Model> {
         self.previous.take()

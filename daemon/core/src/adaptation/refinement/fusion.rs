@@ -213,12 +213,17 @@ pub fn fuse(
     // So does what the model's own navigation left in it (`Model::navigation_rel_err`):
     // counted in its bound, not in its standard errors, so not in `var`.
     let navigation = model.navigation_rel_err();
+    // And a thrust curve named and not learned: the windows at the hold's amplitude carry the
+    // line toward the hold's gain, but the pulses' amplitude is as far from it as before.
+    let curve = model.curve_named_rel_err();
     refined.rel_err_rot = block_bound(&out, &var, 0..3, n)
         .hypot(floor)
-        .hypot(navigation[0]);
+        .hypot(navigation[0])
+        .hypot(curve[0]);
     refined.rel_err_acc = block_bound(&out, &var, 3..6, n)
         .hypot(floor)
-        .hypot(navigation[1]);
+        .hypot(navigation[1])
+        .hypot(curve[1]);
     refined.effectiveness = out;
     refined.std_err = var.map(f64::sqrt);
     refined.made_t_ns = t_ns;

@@ -122,7 +122,19 @@ pub struct DynamicTerms {
     /// not the fit.
     #[serde(default)]
     pub command_exponent: Option<f64>,
+    /// Per row group (rotation, acceleration): how far an identification under control put
+    /// this model off at the hold's commands when it named a thrust curve that was not
+    /// learned (`machine::state_machine::curve_named`): the model is a line through its
+    /// pulses' amplitude. In the bound from then on, the refinement's too; 0 otherwise. Set
+    /// by the machine, not the fit.
+    #[serde(default)]
+    pub curve_named_rel_err: [f64; 2],
 }
+
+/// The most `DynamicTerms::curve_named_rel_err` says: a line twice off at the hold's commands.
+/// It opens the swap gate as far (`machine::state_machine::swaps::swap_gate`), so it is capped
+/// where it is set and checked where it is loaded (`stored_terms`).
+pub const MAX_CURVE_NAMED_REL_ERR: f64 = 2.0;
 
 impl DynamicTerms {
     /// Coefficient and standard error of term `name` on DOF row `row`.
@@ -156,6 +168,7 @@ impl DynamicTerms {
             lag_check: None,
             thrust_curve: None,
             command_exponent: None,
+            curve_named_rel_err: [0.0; 2],
             thrust_asymmetry: 0.0,
             prior_disagreement: [0.0; 2],
             navigation_rel_err: [0.0; 2],

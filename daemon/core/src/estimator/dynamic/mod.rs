@@ -33,7 +33,7 @@ pub mod thrust_shape;
 pub mod thruster_lags;
 mod variance;
 
-pub use dynamic_terms::DynamicTerms;
+pub use dynamic_terms::{DynamicTerms, MAX_CURVE_NAMED_REL_ERR};
 pub use thrust_shape::MAX_THRUST_ASYMMETRY;
 
 use nalgebra::{DMatrix, Vector3};
@@ -801,6 +801,7 @@ impl DynamicRun {
                 lag_check: None,
                 thrust_curve: None,
                 command_exponent: None,
+                curve_named_rel_err: [0.0; 2],
                 imu_position: None,
                 unexplained_rate_radps: 0.0,
                 lag_gap_without_states: None,

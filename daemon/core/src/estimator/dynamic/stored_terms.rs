@@ -12,7 +12,7 @@
 //! Finiteness needs no check here: JSON has no NaN, so a file's numbers are finite, and a
 //! model whose terms hold a non-finite value is written without them (`model_file`).
 
-use super::{DynamicTerms, MAX_THRUST_ASYMMETRY, TERMS};
+use super::{DynamicTerms, MAX_CURVE_NAMED_REL_ERR, MAX_THRUST_ASYMMETRY, TERMS};
 use thruster_protocol::validate::limits::MAX_POSITION_M;
 
 /// The largest spin-up time constant a stored model may carry, s: the configuration's own
@@ -123,5 +123,10 @@ pub fn check(terms: &DynamicTerms, thrusters: usize) -> Result<(), TermsOutOfBou
         MAX_THRUST_ASYMMETRY,
     )?;
     non_negative("prior_disagreement", &terms.prior_disagreement)?;
+    for e in terms.curve_named_rel_err {
+        // What the machine writes (`curve_named::MAX_CURVE_NAMED_REL_ERR`): it also opens
+        // the swap gate, which a file must not open wider.
+        within("curve_named_rel_err", e, 0.0, MAX_CURVE_NAMED_REL_ERR)?;
+    }
     Ok(())
 }

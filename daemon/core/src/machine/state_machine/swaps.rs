@@ -54,8 +54,22 @@ impl Machine {
         model: Model,
         source: ModelSource,
     ) -> Result<(), crate::model::SwapRejection> {
-        let limit = self.setup.machine.max_swap_rel_err;
+        let limit = self.swap_gate(&model);
         self.try_swap_within(model, source, limit)
+    }
+
+    /// The confidence gate `model` passes: `machine.max_swap_rel_err` on what the data know,
+    /// with the line's known distance from a curve named and not learned (`curve_named`,
+    /// in its bound too) let through. Without it a T200 without `linearize` stopped following
+    /// its draining pack (3 refinements in 60 s instead of 10, `supply::
+    /// a_draining_battery_is_not_a_weakening_thruster`), and the model it flew on would not
+    /// load at the next start. A fit's own models have none.
+    pub(super) fn swap_gate(&self, model: &Model) -> f64 {
+        let curve = model.curve_named_rel_err();
+        self.setup
+            .machine
+            .max_swap_rel_err
+            .hypot(curve[0].max(curve[1]))
     }
 
     /// `candidate`'s bound widened for how far its fit strayed from the prior it kept
@@ -151,12 +165,11 @@ impl Machine {
         if self.curve_pending.is_some() {
             return;
         }
-        match self.models.swap(
-            model,
-            ModelSource::Estimated,
-            self.n,
-            self.setup.machine.max_swap_rel_err,
-        ) {
+        let gate = self.swap_gate(&model);
+        match self
+            .models
+            .swap(model, ModelSource::Estimated, self.n, gate)
+        {
             Ok(installed) => {
                 self.follow_model_curve();
                 if let Some(k) = installed.geometry_key {

@@ -205,6 +205,16 @@ impl Machine {
                 "{why}: the thrust does not follow the command linearly (thrust ~ command^{exponent:.2} explains the data better, ln likelihood ratio {:.0}, limit {:.0}): configure the thrusters' curve ([supply] linearize for T200s, power_law_exponent for another make): model rejected; old model kept",
                 c.log_likelihood_ratio, curve_limit
             );
+            // The model in force is a line through its pulses' amplitude: what the hold's
+            // line puts it off goes into its bound before the status says it is kept.
+            let restated = self.widen_in_force_for_curve(&candidate.effectiveness);
+            let text = match restated {
+                Some([r, a]) => text.replace(
+                    "old model kept",
+                    &format!("old model kept, its bound widened to rot {r:.3}, acc {a:.3}"),
+                ),
+                None => text,
+            };
             self.keep_old_model(text);
             self.curve_named = Some(CurveNamed::new(
                 exponent,

@@ -156,6 +156,8 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
     let why_each = std::env::var_os("LH_WHY").is_some();
     let mut last = String::new();
     let mut last_b = run.machine.model().map(|m| m.effectiveness.clone());
+    // A model restated in place (its bound, not its B) is a swap to trace too.
+    let mut last_version = run.machine.model().map(|m| m.version);
     // LH_DRIFT: how far the refinement carries the model from the last estimated one, as the
     // common scale of the columns per row group over the estimate's own bound (the largest).
     let drift = std::env::var_os("LH_DRIFT").is_some();
@@ -186,9 +188,11 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
             }
         }
         let b = run.machine.model().map(|m| &m.effectiveness);
-        if trace && b != last_b.as_ref() {
+        let version = run.machine.model().map(|m| m.version);
+        if trace && (b != last_b.as_ref() || version != last_version) {
             trace_swap(run, t, last_b.as_ref(), b);
             last_b = b.cloned();
+            last_version = version;
         }
         if trace && ((t * 200.0).round() as u64).is_multiple_of(2000) {
             println!(
@@ -280,12 +284,31 @@ fn trace_swap(run: &Run, t: f64, old: Option<&DMatrix<f64>>, new: Option<&DMatri
         .machine
         .last_estimate()
         .map_or([f64::NAN; 2], |e| [e.rel_err_rot, e.rel_err_acc]);
+    // What the model in force claims (a restated one's differs from its estimate's).
+    let claims = run
+        .machine
+        .model()
+        .map_or([f64::NAN; 2], |m| [m.rel_err_rot, m.rel_err_acc]);
+    // The curve the commands go out through and what the fit's probe said of what is left.
+    let curve = run
+        .machine
+        .model()
+        .and_then(|m| m.dynamics.as_ref())
+        .map(|d| {
+            (
+                d.command_exponent,
+                d.thrust_curve
+                    .map(|c| (c.fitted_exponent, c.log_likelihood_ratio)),
+            )
+        });
     println!(
-        "    {t:6.1} s swap: new {:.3} / {:.3} (bound {:.3} / {:.3}), old {:.3} / {:.3}, new vs old {:.3} / {:.3}, sea state {:?}",
+        "    {t:6.1} s swap: new {:.3} / {:.3} (estimate's bound {:.3} / {:.3}, model's {:.3} / {:.3}), old {:.3} / {:.3}, new vs old {:.3} / {:.3}, curve {curve:?}, sea state {:?}",
         err(new, 0),
         err(new, 3),
         bound[0],
         bound[1],
+        claims[0],
+        claims[1],
         err(old, 0),
         err(old, 3),
         apart(0),
