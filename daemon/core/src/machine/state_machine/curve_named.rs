@@ -112,7 +112,7 @@ impl Machine {
                 old[g]
             }
         });
-        if new.iter().zip(old).all(|(n, o)| !(*n > o)) {
+        if !new.iter().zip(old).any(|(n, o)| *n > o) {
             return None;
         }
         let restated = self.models.restate_current(|m| {
