@@ -70,6 +70,7 @@ pub fn fuse(
     window_s: f64,
     settings: &FusionSettings,
     est_cfg: &EstimatorConfig,
+    command_log_level: Option<f64>,
     exceeded: &mut [bool],
 ) -> Option<Fused> {
     if !model.estimated || !model.std_err.iter().all(|v| v.is_finite()) {
@@ -200,13 +201,15 @@ pub fn fuse(
     // On a learned thrust curve the exponent's error stays in the bound: the windows, all at
     // the hold's amplitude, cannot tell it, and they carry B by it (eight_vectored_lag80ms_
     // curve, realistic: from 0.024 to 0.048 off in 40 s while the windows took the bound from
-    // 0.060 to 0.032).
+    // 0.060 to 0.032), by as much as the window's commands are below full command
+    // (`command_level`: held through pitch steps, from 0.04 to 0.08-0.17 off under a floor
+    // that assumed a third of full command).
     let floor = if model
         .dynamics
         .as_ref()
         .is_some_and(|d| d.command_exponent.is_some())
     {
-        crate::estimator::dynamic::thrust_curve::LEARNED_CURVE_REL_ERR
+        crate::estimator::dynamic::thrust_curve::learned_curve_rel_err(command_log_level)
     } else {
         0.0
     };
@@ -301,6 +304,7 @@ mod tests {
             10.0,
             &SETTINGS,
             &EstimatorConfig::default(),
+            None,
             &mut [false; 2],
         )
         .expect("fused");
@@ -340,6 +344,7 @@ mod tests {
                 10.0,
                 &SETTINGS,
                 &EstimatorConfig::default(),
+                None,
                 &mut [false; 2],
             )
             .expect("fused")
@@ -357,6 +362,52 @@ mod tests {
     }
 
     #[test]
+    fn a_learned_curves_floor_follows_the_windows_command_level() {
+        use crate::estimator::dynamic::thrust_curve::NARROW_HALF_STEP;
+        // A model on a learned curve (its exponent's error a floor of the bound), and one
+        // with a thrust curve named and not learned (the line's distance, 0.3 / 0.5).
+        let mut model = learned(b(), 0.02);
+        let mut terms = crate::estimator::dynamic::DynamicTerms::blank(2);
+        terms.command_exponent = Some(1.5);
+        model.dynamics = Some(terms);
+        let fuse_at = |m: &Model, level: Option<f64>| {
+            fuse(
+                m,
+                &window(b(), 0.02),
+                11_000_000_000,
+                10.0,
+                &SETTINGS,
+                &EstimatorConfig::default(),
+                level,
+                &mut [false; 2],
+            )
+            .expect("fused")
+            .model
+        };
+        let mut plain = model.clone();
+        plain.dynamics = None;
+        let stat = fuse_at(&plain, None);
+        let floor = |level: f64| level * NARROW_HALF_STEP;
+        for (level, want) in [(None, 1.2), (Some(0.5), 1.2), (Some(2.3), 2.3)] {
+            let m = fuse_at(&model, level);
+            assert_eq!(m.effectiveness, stat.effectiveness, "the bound only");
+            let expect = stat.rel_err_rot.hypot(floor(want));
+            assert!(
+                (m.rel_err_rot - expect).abs() < 1e-12,
+                "{level:?}: {}",
+                m.rel_err_rot
+            );
+        }
+        let mut named = plain.clone();
+        let mut terms = crate::estimator::dynamic::DynamicTerms::blank(2);
+        terms.curve_named_rel_err = [0.3, 0.5];
+        named.dynamics = Some(terms);
+        let m = fuse_at(&named, Some(2.3));
+        assert!((m.rel_err_rot - stat.rel_err_rot.hypot(0.3)).abs() < 1e-12);
+        assert!((m.rel_err_acc - stat.rel_err_acc.hypot(0.5)).abs() < 1e-12);
+    }
+
+    #[test]
     fn a_changed_column_and_a_nominal_model_are_left_to_the_detector() {
         let model = learned(b(), 0.02);
         let mut rotated = b();
@@ -370,6 +421,7 @@ mod tests {
             1.0,
             &SETTINGS,
             &cfg,
+            None,
             &mut [false; 2]
         )
         .is_none());
@@ -381,6 +433,7 @@ mod tests {
             1.0,
             &SETTINGS,
             &cfg,
+            None,
             &mut [false; 2]
         )
         .is_none());
@@ -405,6 +458,7 @@ mod tests {
             1.0,
             &settings,
             &EstimatorConfig::default(),
+            None,
             &mut [false; 2],
         )
         .unwrap();
@@ -429,7 +483,7 @@ mod tests {
         let w = window(weak, 0.01);
         let t = 2_000_000_000;
         let step = |s: &FusionSettings| {
-            1.0 - fuse(&model, &w, t, 1.0, s, &cfg, &mut [true; 2])
+            1.0 - fuse(&model, &w, t, 1.0, s, &cfg, None, &mut [true; 2])
                 .unwrap()
                 .model
                 .effectiveness[(0, 0)]
@@ -441,13 +495,13 @@ mod tests {
         // drop at once; the unchanged column stays.
         assert!(step(&fast) > 0.15, "{}", step(&fast));
         let mut exceeded = [true; 2];
-        let f = fuse(&model, &w, t, 1.0, &fast, &cfg, &mut exceeded).unwrap();
+        let f = fuse(&model, &w, t, 1.0, &fast, &cfg, None, &mut exceeded).unwrap();
         assert!((f.model.effectiveness[(1, 1)] - 1.0).abs() < 1e-12);
         assert_eq!(exceeded, [true, false]);
         // A first window beyond the bound only arms the widening: one stray window is not
         // taken at face value.
         let mut exceeded = [false; 2];
-        let f = fuse(&model, &w, t, 1.0, &fast, &cfg, &mut exceeded).unwrap();
+        let f = fuse(&model, &w, t, 1.0, &fast, &cfg, None, &mut exceeded).unwrap();
         assert!((1.0 - f.model.effectiveness[(0, 0)] - 0.2 / 6.0).abs() < 1e-9);
         assert_eq!(exceeded, [true, false]);
     }
@@ -464,6 +518,7 @@ mod tests {
             0.1,
             &SETTINGS,
             &EstimatorConfig::default(),
+            None,
             &mut [false; 2],
         )
         .unwrap();

@@ -27,6 +27,7 @@
 
 mod calibration;
 pub mod change_test;
+mod command_level;
 mod config;
 pub mod fusion;
 
@@ -115,6 +116,10 @@ struct Window {
     next_decision_ns: u64,
     gyro_bias: Vector3<f64>,
     sent: [f64; MAX_THRUSTERS],
+    /// How far below full command the window's commands were (`command_level`): the
+    /// floor of a learned curve's exponent error in a refined bound scales with it.
+    #[serde(default)]
+    level: command_level::CommandLevel,
 }
 
 /// The background fit.
@@ -416,6 +421,7 @@ impl Refiner {
             &window.sent[..n],
             None,
         );
+        window.level.push(&window.sent[..n]);
         if self.cfg.dither > 0.0 {
             let fade = ((10.0 - tick.err_deg) / 5.0).clamp(0.0, 1.0);
             let a = self.cfg.dither * fade;
@@ -451,6 +457,9 @@ impl Refiner {
         est_cfg: &EstimatorConfig,
     ) -> Option<WindowVerdict> {
         let (e, elapsed, t_ns) = (result.estimate, result.elapsed_s, result.made_t_ns);
+        // The window's commands' level so far: the fit's samples and a few since its decision
+        // point, which are dropped with the window.
+        let level = self.window.as_ref().and_then(|w| w.level.log_level());
         if e.rel_err_rot > self.cfg.window_rel_err && elapsed < self.cfg.window_max_s {
             return None;
         }
@@ -496,6 +505,7 @@ impl Refiner {
                 elapsed,
                 &settings,
                 est_cfg,
+                level,
                 &mut self.exceeded,
             )
         } else {
@@ -545,6 +555,7 @@ fn open_window(
         next_decision_ns: tick.t_ns + (est_cfg.segment_s * 1e9) as u64,
         gyro_bias: *tick.gyro_bias,
         sent: [0.0; MAX_THRUSTERS],
+        level: command_level::CommandLevel::default(),
     }
 }
 

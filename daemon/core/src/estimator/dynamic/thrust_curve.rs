@@ -35,7 +35,22 @@ pub const NARROW_HALF_STEP: f64 = 0.048_808_848_170_151_55; // sqrt(1.1) - 1
 /// (noise-free): an exponent 2.8 % low gave B 3.6-3.9 % off, 1.3 % low 1.5-2.0 %. A floor of
 /// every bound on such a model: no window of the refinement removes it, as no data at the
 /// hold's amplitude tells the exponent (`refinement::fusion`).
-pub const LEARNED_CURVE_REL_ERR: f64 = 1.2 * NARROW_HALF_STEP;
+pub const LEARNED_CURVE_REL_ERR: f64 = THIRD_OF_FULL_COMMAND * NARROW_HALF_STEP;
+
+/// |ln 0.3|: the level [`LEARNED_CURVE_REL_ERR`] takes the commands at, and the least the
+/// refinement's floor takes them at.
+const THIRD_OF_FULL_COMMAND: f64 = 1.2;
+
+/// The same at commands whose weighted mean |ln |u|| is `log_level` (the refinement's window,
+/// `refinement::command_level`), never below the third of full command's; that one without a
+/// level. Held through pitch steps eight_vectored_lag80ms_curve's windows are at about 2, and
+/// they carried B by twice the exponent's error.
+pub fn learned_curve_rel_err(log_level: Option<f64>) -> f64 {
+    let level = log_level
+        .filter(|l| l.is_finite())
+        .map_or(THIRD_OF_FULL_COMMAND, |l| l.max(THIRD_OF_FULL_COMMAND));
+    level * NARROW_HALF_STEP
+}
 
 /// The exponents a fitted one is kept within: the configuration's `power_law_exponent` range
 /// (thrust from the square root to the cube of the command).
