@@ -61,18 +61,34 @@ pub struct Fused {
 /// Rows of the two blocks: rotation (rad/s^2) and acceleration (m/s^2).
 const BLOCKS: [std::ops::Range<usize>; 2] = [0..3, 3..6];
 
-/// The model refined by the window's estimate `e`, ended at vehicle time `t_ns`; None when the
+/// A window's fit as the fusion takes it.
+#[derive(Debug, Clone, Copy)]
+pub struct WindowFit<'a> {
+    /// The window's estimate.
+    pub estimate: &'a Estimate,
+    /// Vehicle time the window ended, ns.
+    pub t_ns: u64,
+    /// Its length, s.
+    pub window_s: f64,
+    /// How far below full command its commands were (`command_level`); None when unknown.
+    pub command_log_level: Option<f64>,
+}
+
+/// The model refined by the window's estimate (`window.estimate`), ended at vehicle time `window.t_ns`; None when the
 /// model cannot be refined (no standard errors) or nothing was updated.
 pub fn fuse(
     model: &Model,
-    e: &Estimate,
-    t_ns: u64,
-    window_s: f64,
+    window: WindowFit,
     settings: &FusionSettings,
     est_cfg: &EstimatorConfig,
-    command_log_level: Option<f64>,
     exceeded: &mut [bool],
 ) -> Option<Fused> {
+    let WindowFit {
+        estimate: e,
+        t_ns,
+        window_s,
+        command_log_level,
+    } = window;
     if !model.estimated || !model.std_err.iter().all(|v| v.is_finite()) {
         return None;
     }
@@ -289,6 +305,16 @@ mod tests {
         inflate_above: f64::INFINITY,
     };
 
+    /// The window `e`, ended at `t_ns` after `window_s`, its commands at `level`.
+    fn at(e: &Estimate, t_ns: u64, window_s: f64, level: Option<f64>) -> WindowFit<'_> {
+        WindowFit {
+            estimate: e,
+            t_ns,
+            window_s,
+            command_log_level: level,
+        }
+    }
+
     #[test]
     fn a_weakened_column_is_followed_by_its_weight_and_the_error_shrinks() {
         let model = learned(b(), 0.02);
@@ -299,12 +325,9 @@ mod tests {
         let t = 11_000_000_000;
         let f = fuse(
             &model,
-            &window(weak, 0.02),
-            t,
-            10.0,
+            at(&window(weak, 0.02), t, 10.0, None),
             &SETTINGS,
             &EstimatorConfig::default(),
-            None,
             &mut [false; 2],
         )
         .expect("fused");
@@ -339,12 +362,9 @@ mod tests {
         let fuse_on = |m: &Model| {
             fuse(
                 m,
-                &window(b(), 0.02),
-                11_000_000_000,
-                10.0,
+                at(&window(b(), 0.02), 11_000_000_000, 10.0, None),
                 &SETTINGS,
                 &EstimatorConfig::default(),
-                None,
                 &mut [false; 2],
             )
             .expect("fused")
@@ -373,12 +393,9 @@ mod tests {
         let fuse_at = |m: &Model, level: Option<f64>| {
             fuse(
                 m,
-                &window(b(), 0.02),
-                11_000_000_000,
-                10.0,
+                at(&window(b(), 0.02), 11_000_000_000, 10.0, level),
                 &SETTINGS,
                 &EstimatorConfig::default(),
-                level,
                 &mut [false; 2],
             )
             .expect("fused")
@@ -416,25 +433,19 @@ mod tests {
         let t = 2_000_000_000;
         assert!(fuse(
             &model,
-            &window(rotated, 0.02),
-            t,
-            1.0,
+            at(&window(rotated, 0.02), t, 1.0, None),
             &SETTINGS,
             &cfg,
-            None,
             &mut [false; 2]
         )
         .is_none());
         let nominal = Model::nominal(b(), None);
         assert!(fuse(
             &nominal,
-            &window(b(), 0.02),
-            t,
-            1.0,
+            at(&window(b(), 0.02), t, 1.0, None),
             &SETTINGS,
             &cfg,
-            None,
-            &mut [false; 2]
+            &mut [false; 2],
         )
         .is_none());
     }
@@ -453,12 +464,9 @@ mod tests {
         // 0.0004 / (0.0004 + 0.0016) = 0.2.
         let f = fuse(
             &model,
-            &window(off, 1e-6),
-            2_000_000_000,
-            1.0,
+            at(&window(off, 1e-6), 2_000_000_000, 1.0, None),
             &settings,
             &EstimatorConfig::default(),
-            None,
             &mut [false; 2],
         )
         .unwrap();
@@ -483,7 +491,7 @@ mod tests {
         let w = window(weak, 0.01);
         let t = 2_000_000_000;
         let step = |s: &FusionSettings| {
-            1.0 - fuse(&model, &w, t, 1.0, s, &cfg, None, &mut [true; 2])
+            1.0 - fuse(&model, at(&w, t, 1.0, None), s, &cfg, &mut [true; 2])
                 .unwrap()
                 .model
                 .effectiveness[(0, 0)]
@@ -495,13 +503,13 @@ mod tests {
         // drop at once; the unchanged column stays.
         assert!(step(&fast) > 0.15, "{}", step(&fast));
         let mut exceeded = [true; 2];
-        let f = fuse(&model, &w, t, 1.0, &fast, &cfg, None, &mut exceeded).unwrap();
+        let f = fuse(&model, at(&w, t, 1.0, None), &fast, &cfg, &mut exceeded).unwrap();
         assert!((f.model.effectiveness[(1, 1)] - 1.0).abs() < 1e-12);
         assert_eq!(exceeded, [true, false]);
         // A first window beyond the bound only arms the widening: one stray window is not
         // taken at face value.
         let mut exceeded = [false; 2];
-        let f = fuse(&model, &w, t, 1.0, &fast, &cfg, None, &mut exceeded).unwrap();
+        let f = fuse(&model, at(&w, t, 1.0, None), &fast, &cfg, &mut exceeded).unwrap();
         assert!((1.0 - f.model.effectiveness[(0, 0)] - 0.2 / 6.0).abs() < 1e-9);
         assert_eq!(exceeded, [true, false]);
     }
@@ -513,12 +521,9 @@ mod tests {
         off[(0, 0)] = 1.3;
         let f = fuse(
             &model,
-            &window(off, 0.5),
-            1_100_000_000,
-            0.1,
+            at(&window(off, 0.5), 1_100_000_000, 0.1, None),
             &SETTINGS,
             &EstimatorConfig::default(),
-            None,
             &mut [false; 2],
         )
         .unwrap();

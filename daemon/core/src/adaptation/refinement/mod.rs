@@ -498,16 +498,13 @@ impl Refiner {
                 window_floor: self.cfg.window_floor,
                 inflate_above: self.cfg.inflate_above,
             };
-            fusion::fuse(
-                model,
-                &e,
+            let window = fusion::WindowFit {
+                estimate: &e,
                 t_ns,
-                elapsed,
-                &settings,
-                est_cfg,
-                level,
-                &mut self.exceeded,
-            )
+                window_s: elapsed,
+                command_log_level: level,
+            };
+            fusion::fuse(model, window, &settings, est_cfg, &mut self.exceeded)
         } else {
             None
         };
