@@ -43,7 +43,9 @@ pub(super) struct RunSpec {
     /// Sensor noise preset of the simulator ("paper" unless said otherwise).
     pub(super) noise: &'static str,
     pub(super) plan: Plan,
-    /// `[supply] compensation`: "t200" (the daemon's default) or "none".
+    /// `[supply] compensation` for T200 vehicles: "t200" (the daemon's default) or "none".
+    /// Another make's thrusters run with "none", as their operator configures them
+    /// (`daemon_config`).
     pub(super) compensation: &'static str,
     /// `[supply] linearize` (default false).
     pub(super) linearize: bool,
@@ -282,7 +284,8 @@ pub(super) fn runs(name: Name, t_change: f64, vehicle: &'static str) -> Vec<RunS
 /// The daemon's configuration for a run.
 pub(super) fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> Result<String> {
     let mut t = String::new();
-    let n = crate::vehicle::load(vehicle)?.thrusters.len();
+    let v = crate::vehicle::load(vehicle)?;
+    let n = v.thrusters.len();
     let _ = writeln!(t, "[vehicle]\nthrusters = {n}");
     if spec.start == Start::Manual {
         let file = config_file(&format!("vehicles/{}.toml", spec.declared));
@@ -309,10 +312,17 @@ pub(super) fn daemon_config(spec: &RunSpec, bins: &Binaries, vehicle: &Path) -> 
         "[refinement]\nupdate = {}\nchange_test = {}",
         spec.refine, spec.change_test
     );
+    // Another make's thrusters are not taken for T200s, so a curve the identification names
+    // is learned: as the demo's and the in-process harness's operator has it.
+    let compensation = if v.all_t200() {
+        spec.compensation
+    } else {
+        "none"
+    };
     let _ = writeln!(
         t,
-        "[supply]\ncompensation = \"{}\"\nlinearize = {}",
-        spec.compensation, spec.linearize
+        "[supply]\ncompensation = \"{compensation}\"\nlinearize = {}",
+        spec.linearize
     );
     if spec.deadband > 0.0 {
         let _ = writeln!(t, "[machine]\ndeadband = {}", spec.deadband);
