@@ -296,7 +296,11 @@ fn curve_demo(daemon_toml: Option<&str>, hold_s: &str) -> Value {
     }
     let out = system_tests::cli::lab(&args);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
     let f = |v: &Value, k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k}: {v}"));
     let after = &v["model_after_hold"];

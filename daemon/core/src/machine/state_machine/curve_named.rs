@@ -94,7 +94,8 @@ pub(super) fn line_disagreement(line: &DMatrix<f64>, in_force: &DMatrix<f64>) ->
 
 impl Machine {
     /// The model in force's bound restated for the curve just named: each row group's bound
-    /// and the line's disagreement (`line_disagreement`) in quadrature, recorded in the
+    /// (less the share a curve named before put in) and the line's disagreement
+    /// (`line_disagreement`) in quadrature, recorded in the
     /// model's terms (`DynamicTerms::curve_named_rel_err`) so the refinement keeps it. Its B,
     /// allocation and standard errors are untouched: the controller holds on as before, and
     /// what changed is what the daemon claims. Published as a new version (`ModelSwapped`)
@@ -105,9 +106,13 @@ impl Machine {
         let d =
             line_disagreement(line, &current.effectiveness).map(|e| e.min(MAX_CURVE_NAMED_REL_ERR));
         let old = [current.rel_err_rot, current.rel_err_acc];
+        // A curve named again on the same model (after an announced change) replaces the
+        // share the last one put in, rather than adding to it.
+        let before = current.curve_named_rel_err();
         let new = [0, 1].map(|g| {
             if old[g].is_finite() {
-                old[g].hypot(d[g])
+                let base = (old[g].powi(2) - before[g].powi(2)).max(0.0).sqrt();
+                base.hypot(d[g])
             } else {
                 old[g]
             }
