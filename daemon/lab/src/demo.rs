@@ -91,8 +91,8 @@ struct Summary {
     truth_voltage_v: f64,
     /// Whether the daemon commanded through the T200's curve (`[supply] linearize`).
     linearize: bool,
-    /// The daemon's `[supply] compensation` ("t200" or "none").
-    compensation: String,
+    /// The daemon's `[supply] compensation` (in the JSON as the configuration spells it).
+    compensation: thrusterd_core::supply::CompensationModel,
     /// The IMU position and water the simulator had ([`crate::water::WaterArgs::json`]).
     as_is: serde_json::Value,
     clean_exit: bool,
@@ -387,10 +387,7 @@ fn drive(
         supply_voltage_v: published.supply_voltage_v,
         truth_voltage_v,
         linearize: supply.linearize,
-        compensation: serde_json::to_value(supply.compensation)?
-            .as_str()
-            .unwrap_or_default()
-            .to_string(),
+        compensation: supply.compensation,
         as_is: args.water.json()?,
         clean_exit: false,
         leftovers: 0,

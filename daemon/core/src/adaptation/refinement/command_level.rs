@@ -7,7 +7,8 @@
 //! (`thrust_curve::learned_curve_rel_err`) had assumed a third of full command, |L| = 1.2:
 //! eight_vectored_lag80ms_curve held through pitch steps is at |L| of about 2, and the windows
 //! carried its model from 0.04 to 0.08-0.17 off under a bound of 0.066-0.08 (docs/study.md,
-//! "A curve learned and the windows' level").
+//! "A curve named: the model in force's bound restated, the windows' level, and the demo's
+//! operator").
 
 /// The running weighted sums over the samples of one window.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -74,8 +74,9 @@ pub struct WindowFit<'a> {
     pub command_log_level: Option<f64>,
 }
 
-/// The model refined by the window's estimate (`window.estimate`), ended at vehicle time `window.t_ns`; None when the
-/// model cannot be refined (no standard errors) or nothing was updated.
+/// The model refined by the window's estimate (`window.estimate`), ended at vehicle time
+/// `window.t_ns`; None when the model cannot be refined (no standard errors) or nothing was
+/// updated.
 pub fn fuse(
     model: &Model,
     window: WindowFit,
@@ -315,6 +316,20 @@ mod tests {
         }
     }
 
+    /// `m` refined by a window that agrees with `b()` (0.02 per entry, 10 s, 11 s after the
+    /// model), its commands at `level`.
+    fn steady_window_on(m: &Model, level: Option<f64>) -> Model {
+        fuse(
+            m,
+            at(&window(b(), 0.02), 11_000_000_000, 10.0, level),
+            &SETTINGS,
+            &EstimatorConfig::default(),
+            &mut [false; 2],
+        )
+        .expect("fused")
+        .model
+    }
+
     #[test]
     fn a_weakened_column_is_followed_by_its_weight_and_the_error_shrinks() {
         let model = learned(b(), 0.02);
@@ -359,20 +374,9 @@ mod tests {
         let mut terms = crate::estimator::dynamic::DynamicTerms::blank(2);
         terms.navigation_rel_err = [0.0, 0.04];
         model.dynamics = Some(terms);
-        let fuse_on = |m: &Model| {
-            fuse(
-                m,
-                at(&window(b(), 0.02), 11_000_000_000, 10.0, None),
-                &SETTINGS,
-                &EstimatorConfig::default(),
-                &mut [false; 2],
-            )
-            .expect("fused")
-            .model
-        };
-        let with = fuse_on(&model);
+        let with = steady_window_on(&model, None);
         model.dynamics = None;
-        let without = fuse_on(&model);
+        let without = steady_window_on(&model, None);
         // The same fusion: B and its standard errors; the acceleration rows' bound takes the
         // navigation's share in quadrature, the rotation rows' nothing.
         assert_eq!(with.effectiveness, without.effectiveness);
@@ -390,23 +394,12 @@ mod tests {
         let mut terms = crate::estimator::dynamic::DynamicTerms::blank(2);
         terms.command_exponent = Some(1.5);
         model.dynamics = Some(terms);
-        let fuse_at = |m: &Model, level: Option<f64>| {
-            fuse(
-                m,
-                at(&window(b(), 0.02), 11_000_000_000, 10.0, level),
-                &SETTINGS,
-                &EstimatorConfig::default(),
-                &mut [false; 2],
-            )
-            .expect("fused")
-            .model
-        };
         let mut plain = model.clone();
         plain.dynamics = None;
-        let stat = fuse_at(&plain, None);
+        let stat = steady_window_on(&plain, None);
         let floor = |level: f64| level * NARROW_HALF_STEP;
         for (level, want) in [(None, 1.2), (Some(0.5), 1.2), (Some(2.3), 2.3)] {
-            let m = fuse_at(&model, level);
+            let m = steady_window_on(&model, level);
             assert_eq!(m.effectiveness, stat.effectiveness, "the bound only");
             let expect = stat.rel_err_rot.hypot(floor(want));
             assert!(
@@ -419,7 +412,7 @@ mod tests {
         let mut terms = crate::estimator::dynamic::DynamicTerms::blank(2);
         terms.curve_named_rel_err = [0.3, 0.5];
         named.dynamics = Some(terms);
-        let m = fuse_at(&named, Some(2.3));
+        let m = steady_window_on(&named, Some(2.3));
         assert!((m.rel_err_rot - stat.rel_err_rot.hypot(0.3)).abs() < 1e-12);
         assert!((m.rel_err_acc - stat.rel_err_acc.hypot(0.5)).abs() < 1e-12);
     }

@@ -124,7 +124,7 @@ pub fn check(terms: &DynamicTerms, thrusters: usize) -> Result<(), TermsOutOfBou
     )?;
     non_negative("prior_disagreement", &terms.prior_disagreement)?;
     for e in terms.curve_named_rel_err {
-        // What the machine writes (`curve_named::MAX_CURVE_NAMED_REL_ERR`): it also opens
+        // What the machine writes (`dynamic_terms::MAX_CURVE_NAMED_REL_ERR`): it also opens
         // the swap gate, which a file must not open wider.
         within("curve_named_rel_err", e, 0.0, MAX_CURVE_NAMED_REL_ERR)?;
     }
