@@ -353,10 +353,10 @@ fn a_curve_named_and_refused_restates_the_model_in_force_bound() {
 
 /// The same thrusters as their operator configures them (`compensation = "none"`, the demo's
 /// own): the curve named is learned, the commands go out through it, and after a 60 s hold
-/// the model carries it: ^1.513 (true 1.5), 0.021 / 0.045 off under 0.119 / 0.133 (seeds
-/// 1-5: 0.015-0.116 under 0.119, within 1.00x), where the line was 0.081. Not at 40 s: the
-/// first curve learned, the wide grid's ^1.64, is then in force, 0.147 / 0.169 off under
-/// 0.122 / 0.134, worse than the line, until the narrow grid names the rest.
+/// the model carries it: ^1.519 (true 1.5), 0.022 / 0.042 off under 0.121 / 0.130 (seeds
+/// 1-10: 0.002-0.056, within 0.52x, since the confirmation on the curve runs 8 s), where the
+/// line was 0.081. Not at 40 s: the identifications on the curve are then still running
+/// and the line is in force, its bound restated (0.081 / 0.083 under 0.77 / 0.97).
 #[test]
 fn the_demo_learns_another_makes_curve() {
     let v = curve_demo(None, "60");

@@ -169,8 +169,9 @@ impl Model {
         })
     }
 
-    /// What a thrust curve named and not learned puts this line model off at the hold's
-    /// commands, per row group (`DynamicTerms::curve_named_rel_err`); 0 where none was named.
+    /// What a thrust curve named puts this line model off at the hold's commands, per row
+    /// group (`DynamicTerms::curve_named_rel_err`): refused, or learned and the model on it
+    /// not yet identified; 0 where none was named.
     pub fn curve_named_rel_err(&self) -> [f64; 2] {
         self.dynamics.as_ref().map_or([0.0; 2], |d| {
             d.curve_named_rel_err.map(|e| {

@@ -843,7 +843,7 @@ fn an_untold_thrust_curve_is_learned_under_control() {
         let first_err = common::rel_err(&first.effectiveness, &truth, 0);
         let mut plan = PitchSteps::new(&run);
         let start = run.sim.time_s();
-        let (mut learned, mut swapped) = (0, None);
+        let (mut learned, mut swapped, mut restated) = (0, None, None);
         while run.sim.time_s() - start < 60.0 && swapped.is_none() {
             let t = run.sim.time_s() - start;
             plan.at(&mut run, t);
@@ -852,6 +852,11 @@ fn an_untold_thrust_curve_is_learned_under_control() {
                 match e {
                     Event::ModelRejected(why) if why.contains("learned; commands go out") => {
                         learned += 1
+                    }
+                    // While the identification on the curve runs, the line in force says
+                    // what the curve puts it off: its B as it was, its bound restated.
+                    Event::ModelSwapped(m) if m.curve_named_rel_err() != [0.0; 2] => {
+                        restated = Some(*m)
                     }
                     Event::ModelSwapped(m) if m.refinements == 0 && m.version > first.version => {
                         swapped = Some(*m)
@@ -875,6 +880,14 @@ fn an_untold_thrust_curve_is_learned_under_control() {
             m.rel_err_rot, m.rel_err_acc
         );
         assert!((1..=3).contains(&learned), "{learned}");
+        let line = restated.expect("the line in force restated while the curve was learned");
+        let line_err = common::rel_err(&line.effectiveness, &truth, 0);
+        assert!(
+            line_err <= line.rel_err_rot && first_err > first.rel_err_rot,
+            "the line {line_err:.4} off under {:.3} restated (the open loop's {first_err:.4} under {:.3})",
+            line.rel_err_rot,
+            first.rel_err_rot
+        );
         assert!((p / exponent - 1.0).abs() < 0.06, "{p}");
         // Better than the open-loop model at every amplitude, and the bound covers it.
         assert!(

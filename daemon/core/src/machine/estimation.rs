@@ -308,8 +308,9 @@ impl EstimationRun {
         } else {
             cfg.settle_rule()
         };
+        let min_s = self.shortest_s(cfg);
         self.solver
-            .submit_interval(est, t_ns, (elapsed_s, cfg.min_s, cfg.max_s, settle), key);
+            .submit_interval(est, t_ns, (elapsed_s, min_s, cfg.max_s, settle), key);
         true
     }
 

@@ -27,7 +27,7 @@
 
 mod calibration;
 pub mod change_test;
-mod command_level;
+pub(crate) mod command_level;
 mod config;
 pub mod fusion;
 
@@ -147,6 +147,11 @@ pub struct Refiner {
     /// started from rest was 1-2 % off noise-free; `estimator::dynamic::spin_state`).
     #[serde(default)]
     spin: SpinState,
+    /// The deepest command level (`command_level`, |E ln |u||) of the windows judged since
+    /// the model was estimated: how far below full command the model's B may have been
+    /// carried (the machine's restatement for a curve named, `curve_named`).
+    #[serde(default)]
+    deepest_level: Option<f64>,
     /// A window's fit (~1 ms) is a job, not a control tick's work (`crate::solve`); its result
     /// is judged at the first tick at or after its due time.
     solver: Solver,
@@ -180,6 +185,7 @@ impl Refiner {
             cfg,
             window: None,
             last: None,
+            deepest_level: None,
             refined: None,
             exceeded: [false; MAX_THRUSTERS],
             solver: Solver::new(0.0, REFINEMENT),
@@ -234,6 +240,17 @@ impl Refiner {
     }
 
     /// Start over (a new model, control restarted): the next tick opens a fresh window.
+    /// The deepest command level of the windows judged since `model_estimated` (None before
+    /// any): where the refinement may have carried the model's B on a thrust curve.
+    pub fn deepest_command_level(&self) -> Option<f64> {
+        self.deepest_level
+    }
+
+    /// A model estimated (not refined) is in force: the windows' levels start over.
+    pub fn model_estimated(&mut self) {
+        self.deepest_level = None;
+    }
+
     pub fn reset(&mut self) {
         self.solver.cancel();
         self.window = None;
@@ -462,6 +479,9 @@ impl Refiner {
         let level = self.window.as_ref().and_then(|w| w.level.log_level());
         if e.rel_err_rot > self.cfg.window_rel_err && elapsed < self.cfg.window_max_s {
             return None;
+        }
+        if let Some(l) = level {
+            self.deepest_level = Some(self.deepest_level.map_or(l, |d| d.max(l)));
         }
         let (mut verdict, failed) = judge(&e, model, &self.cfg, elapsed);
         if failed {

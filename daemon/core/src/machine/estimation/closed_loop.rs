@@ -9,6 +9,7 @@ use thruster_protocol::MAX_THRUSTERS;
 
 use super::{EstimationRun, Motion};
 use crate::adaptation::identification::{Dither, IdentificationConfig};
+use crate::adaptation::refinement::command_level::CommandLevel;
 use crate::estimator::dynamic::spin_state::{lags_for_fit, SpinState};
 use crate::estimator::dynamic::thrust_curve;
 use crate::estimator::Method;
@@ -50,6 +51,14 @@ pub(in crate::machine) struct ClosedLoop {
     /// when the commands already go through a learned curve).
     #[serde(default = "wide_curve")]
     curve_ratio: f64,
+    /// The run's shortest dither, s, where it is not `identification.min_s`: the
+    /// identification that confirms a curve just learned (`run_at_least`).
+    #[serde(default)]
+    shortest_s: Option<f64>,
+    /// How far below full command the commands sent since the dither started were
+    /// (`refinement::command_level`): where a line fitted on them sits on a thrust curve.
+    #[serde(default)]
+    level: CommandLevel,
 }
 
 fn wide_curve() -> f64 {
@@ -149,7 +158,32 @@ impl EstimationRun {
             } else {
                 thrust_curve::WIDE
             },
+            shortest_s: None,
+            level: CommandLevel::default(),
         });
+    }
+
+    /// The run under control goes on for at least `s` of dither (and `identification.min_s`),
+    /// never beyond `max_s`. Nothing open loop.
+    pub(in crate::machine) fn run_at_least(&mut self, s: f64, cfg: &IdentificationConfig) {
+        if let Some(c) = self.closed.as_mut() {
+            c.shortest_s = Some(s.max(cfg.min_s).min(cfg.max_s));
+        }
+    }
+
+    /// |E ln |u|| of the commands sent under control since the dither started, weighted as a
+    /// linear fit weighs them (`CommandLevel`); None open loop or before any.
+    pub(in crate::machine) fn command_log_level(&self) -> Option<f64> {
+        self.closed.as_ref().and_then(|c| c.level.log_level())
+    }
+
+    /// The shortest dither of the run under control, s: `identification.min_s` unless the
+    /// run was lengthened (`run_at_least`).
+    pub(in crate::machine) fn shortest_s(&self, cfg: &IdentificationConfig) -> f64 {
+        self.closed
+            .as_ref()
+            .and_then(|c| c.shortest_s)
+            .unwrap_or(cfg.min_s)
     }
 
     /// The dither against the controller's command so far (None open loop).
@@ -307,6 +341,7 @@ impl EstimationRun {
         c.dither
             .add_to(t_s, amplitude, setup.estimator.reverse_ratio, command);
         c.excitation.push(&control[..k], command);
+        c.level.push(command);
         c.sent[..k].copy_from_slice(command);
         c.spin.hold(command);
         if instrumented {
@@ -324,8 +359,9 @@ impl EstimationRun {
         // bound.
         let ident = &setup.identification;
         let segment_s = setup.estimator.segment_s;
-        let late = elapsed_s + 1e-9 >= ident.min_s + ident.settle_wait_s;
-        let settling = ident.settle > 0.0 && elapsed_s + 1e-9 >= ident.min_s - segment_s;
+        let min_s = c.shortest_s.unwrap_or(ident.min_s);
+        let late = elapsed_s + 1e-9 >= min_s + ident.settle_wait_s;
+        let settling = ident.settle > 0.0 && elapsed_s + 1e-9 >= min_s - segment_s;
         let every_s = if c.excitation.dither_share() < ident.min_dither_share {
             segment_s
         } else if late {

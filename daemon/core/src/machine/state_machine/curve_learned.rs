@@ -126,6 +126,11 @@ impl Machine {
             &format!("thrust ~ command^{p:.2} learned and the vehicle held on it"),
             None,
         );
+        // Long enough for the narrow grid to name what is left of the exponent.
+        self.run.run_at_least(
+            self.setup.identification.curve_confirm_min_s,
+            &self.setup.identification,
+        );
         self.identifying_unannounced = pending.unannounced;
         true
     }

@@ -109,6 +109,7 @@ impl Machine {
                 self.follow_model_curve();
                 self.monitor.reset(self.n);
                 self.refiner.reset();
+                self.refiner.model_estimated();
                 self.hold_watch.reset();
                 self.events.push(Event::ModelSwapped(Box::new(installed)));
                 Ok(())

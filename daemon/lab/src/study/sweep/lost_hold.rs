@@ -24,7 +24,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// is the sea-state gauge at the end (`identification/sea_state.rs`, deg RMS; NaN: not known).
 /// LH_WHY: print each mismatch's reason. LH_TRACE: print the machine's status as it changes,
 /// with the angle to the setpoint, the sea-state gauge every 10 s, and each model swap against
-/// the truth (the new and the old model, the new one's bound, the sea state).
+/// the truth (the new and the old model, the new one's bound, the sea state; the first model
+/// too, as a swap from none). LH_CURVE_CONFIRM (s): `identification.curve_confirm_min_s`.
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
     let minutes: f64 = std::env::var("LH_MINUTES").map_or(5.0, |v| v.parse().unwrap());
@@ -95,7 +96,14 @@ pub(super) fn lost_hold_soak() {
                     name_margin,
                     settle_decision_s,
                 ];
-                if knobs.iter().any(Option::is_some) || calibrate_when.is_some() || no_learn {
+                let curve_confirm: Option<f64> = std::env::var("LH_CURVE_CONFIRM")
+                    .ok()
+                    .map(|v| v.parse().unwrap());
+                if knobs.iter().any(Option::is_some)
+                    || calibrate_when.is_some()
+                    || no_learn
+                    || curve_confirm.is_some()
+                {
                     run.with_setup(|c| {
                         c.identification.learn_thrust_curve = !no_learn;
                         if let Some(w) = calibrate_when {
@@ -116,6 +124,9 @@ pub(super) fn lost_hold_soak() {
                         }
                         if let Some(s) = settle_decision_s {
                             c.identification.settle_decision_s = s;
+                        }
+                        if let Some(s) = curve_confirm {
+                            c.identification.curve_confirm_min_s = s;
                         }
                     });
                 }
@@ -155,9 +166,14 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
     let trace = std::env::var_os("LH_TRACE").is_some();
     let why_each = std::env::var_os("LH_WHY").is_some();
     let mut last = String::new();
-    let mut last_b = run.machine.model().map(|m| m.effectiveness.clone());
+    // Traced, the first model is shown too (as a swap from none).
+    let mut last_b = run
+        .machine
+        .model()
+        .filter(|_| !trace)
+        .map(|m| m.effectiveness.clone());
     // A model restated in place (its bound, not its B) is a swap to trace too.
-    let mut last_version = run.machine.model().map(|m| m.version);
+    let mut last_version = run.machine.model().filter(|_| !trace).map(|m| m.version);
     // LH_DRIFT: how far the refinement carries the model from the last estimated one, as the
     // common scale of the columns per row group over the estimate's own bound (the largest).
     let drift = std::env::var_os("LH_DRIFT").is_some();
