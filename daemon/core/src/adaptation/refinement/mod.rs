@@ -239,18 +239,20 @@ impl Refiner {
         self.refined.take()
     }
 
-    /// Start over (a new model, control restarted): the next tick opens a fresh window.
     /// The deepest command level of the windows judged since `model_estimated` (None before
     /// any): where the refinement may have carried the model's B on a thrust curve.
     pub fn deepest_command_level(&self) -> Option<f64> {
         self.deepest_level
     }
 
-    /// A model estimated (not refined) is in force: the windows' levels start over.
+    /// A model estimated (not refined) is in force: the windows' levels start over. Apart
+    /// from `reset`, which also comes with a curve just learned, when the model in force
+    /// (and what the windows did to it) stays.
     pub fn model_estimated(&mut self) {
         self.deepest_level = None;
     }
 
+    /// Start over (a new model, control restarted): the next tick opens a fresh window.
     pub fn reset(&mut self) {
         self.solver.cancel();
         self.window = None;

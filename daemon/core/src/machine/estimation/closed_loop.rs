@@ -61,6 +61,14 @@ pub(in crate::machine) struct ClosedLoop {
     level: CommandLevel,
 }
 
+impl ClosedLoop {
+    /// The run's shortest dither, s: `identification.min_s` unless lengthened
+    /// (`EstimationRun::run_at_least`).
+    fn shortest_s(&self, cfg: &IdentificationConfig) -> f64 {
+        self.shortest_s.unwrap_or(cfg.min_s)
+    }
+}
+
 fn wide_curve() -> f64 {
     thrust_curve::WIDE
 }
@@ -182,8 +190,7 @@ impl EstimationRun {
     pub(in crate::machine) fn shortest_s(&self, cfg: &IdentificationConfig) -> f64 {
         self.closed
             .as_ref()
-            .and_then(|c| c.shortest_s)
-            .unwrap_or(cfg.min_s)
+            .map_or(cfg.min_s, |c| c.shortest_s(cfg))
     }
 
     /// The dither against the controller's command so far (None open loop).
@@ -359,7 +366,7 @@ impl EstimationRun {
         // bound.
         let ident = &setup.identification;
         let segment_s = setup.estimator.segment_s;
-        let min_s = c.shortest_s.unwrap_or(ident.min_s);
+        let min_s = c.shortest_s(ident);
         let late = elapsed_s + 1e-9 >= min_s + ident.settle_wait_s;
         let settling = ident.settle > 0.0 && elapsed_s + 1e-9 >= min_s - segment_s;
         let every_s = if c.excitation.dither_share() < ident.min_dither_share {

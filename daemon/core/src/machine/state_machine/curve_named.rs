@@ -111,11 +111,10 @@ pub(super) fn curve_share(exponent: f64, log_level: f64) -> f64 {
 impl Machine {
     /// The model in force's bound restated for the curve just named (thrust ~
     /// command^`named_exponent`): each row group's bound (less the share a curve named before
-    /// put in) and the larger of the line's disagreement (`line_disagreement`) and how far
-    /// the curve puts a line at the identification's commands (`command_log_level`) off
-    /// (`curve_share`) in
-    /// quadrature, recorded in the
-    /// model's terms (`DynamicTerms::curve_named_rel_err`) so the refinement keeps it. Its B,
+    /// put in) and, in quadrature, the larger of the line's disagreement
+    /// (`line_disagreement`) and how far the curve puts a line at commands of
+    /// `command_log_level` off (`curve_share`), recorded in the model's terms
+    /// (`DynamicTerms::curve_named_rel_err`) so the refinement keeps it. Its B,
     /// allocation and standard errors are untouched: the controller holds on as before, and
     /// what changed is what the daemon claims. Published as a new version (`ModelSwapped`)
     /// that the model slot keeps in place: a revert still goes back to the model before it.
@@ -180,6 +179,7 @@ pub(super) struct Said {
 #[cfg(test)]
 mod tests {
     use super::{curve_share, line_disagreement, CurveNamed};
+    use nalgebra::DMatrix;
 
     /// A line at commands of level L on thrust ~ command^p is off full command's gain by
     /// |u^(p - 1) - 1|, u = exp(-L); nothing for a linear thrust, a level of 0 or no number.
@@ -196,7 +196,6 @@ mod tests {
         // ^1.3 held at about a tenth of full command: 0.41 off, as the refinement carried it.
         assert!((curve_share(1.291, 1.84) - 0.414).abs() < 0.01);
     }
-    use nalgebra::DMatrix;
 
     #[test]
     fn the_line_disagrees_by_its_fitted_columns_alone() {

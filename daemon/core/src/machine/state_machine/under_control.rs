@@ -135,13 +135,12 @@ impl Machine {
         let prior = self.run.prior().cloned();
         // Where on a thrust curve the identification's line sits, and the lines the
         // refinement carried the model in force to (`widen_in_force_for_curve`): the deeper.
-        let level = match (
-            self.run.command_log_level(),
-            self.refiner.deepest_command_level(),
-        ) {
-            (Some(a), Some(b)) => Some(a.max(b)),
-            (a, b) => a.or(b),
-        };
+        let level = self
+            .run
+            .command_log_level()
+            .into_iter()
+            .chain(self.refiner.deepest_command_level())
+            .reduce(f64::max);
         let Some((mut candidate, _)) = self.run.conclude(result) else {
             return;
         };
