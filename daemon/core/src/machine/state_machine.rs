@@ -32,6 +32,7 @@ use crate::supply::Supply;
 
 mod curve_learned;
 mod curve_named;
+mod gain_gap;
 mod open_loop;
 mod requests;
 mod swaps;
@@ -239,6 +240,15 @@ impl Machine {
     /// model in force), if a window has ended since start.
     pub fn refinement(&self) -> Option<&WindowVerdict> {
         self.refiner.last()
+    }
+
+    /// The refinement's windows' common gain over the model in force, pooled
+    /// (`refinement::common_gain`); None without a model or a window judged against it.
+    pub fn refinement_gain(
+        &self,
+    ) -> Option<crate::adaptation::refinement::common_gain::PooledGain> {
+        self.refiner
+            .pooled_gain(&self.models.current()?.effectiveness)
     }
 
     /// The change test's largest statistic at the last control tick (passed or not), for

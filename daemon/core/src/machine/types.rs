@@ -109,6 +109,10 @@ pub enum Event {
     /// While controlling, the vehicle stayed beyond `machine.lost_hold_deg` of its setpoint
     /// for `machine.lost_hold_s`: the model in force does not hold it (see `hold_watch`).
     HoldLost(String),
+    /// The model in force's bound widened in place, B untouched, for what the daemon saw
+    /// while holding (the windows' gain at the hold's commands, `gain_gap`); the restated
+    /// model comes as a `ModelSwapped` beside it.
+    BoundWidened(String),
     StateChanged {
         from: State,
         to: State,

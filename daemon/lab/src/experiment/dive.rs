@@ -105,6 +105,10 @@ pub(super) struct Scores {
     pub(super) tilt_last_over_first: Num,
     pub(super) refinements: usize,
     pub(super) new_models: usize,
+    /// The model in force's bound restated, its B the same (vehicle s since the hold, and
+    /// the rotation bound it then claimed): with the supply unread, the windows find the
+    /// thrusters weaker than the model at the hold's commands (`refinement.gain_gap_min`).
+    pub(super) bounds_restated: Vec<(Num, Num)>,
 }
 
 pub(super) fn summary(out: &RunOutput) -> Scores {
@@ -125,6 +129,11 @@ pub(super) fn summary(out: &RunOutput) -> Scores {
         tilt_last_over_first: num(last_tilt / first_tilt),
         refinements: out.refinements,
         new_models: out.swaps.len(),
+        bounds_restated: out
+            .restated
+            .iter()
+            .map(|(t, b)| (num(t - out.hold_start), num(*b)))
+            .collect(),
     }
 }
 

@@ -53,6 +53,10 @@ pub(super) struct RunOutput {
     /// Models the continuous refinement updated (new versions of the model in force, not
     /// new models: they are not in `swaps`).
     pub(super) refinements: usize,
+    /// The model in force published again with the same B and its bound restated (a curve
+    /// named, the hold's gain: `curve_named`, `gain_gap`): not new models either. (Vehicle
+    /// s when it came, its rotation bound.)
+    pub(super) restated: Vec<(f64, f64)>,
     /// Status changes: (t, state, text).
     pub(super) notes: Vec<(f64, String, String)>,
     pub(super) mismatch_at: Option<f64>,
@@ -265,6 +269,10 @@ pub(super) fn drive(
     let mut rows = Vec::new();
     let mut swaps = Vec::new();
     let mut refinements = 0;
+    let mut restated = Vec::new();
+    let mut last_b = model.effectiveness;
+    // Vehicle time of the last status read: a restated model keeps the time it was made.
+    let mut now = hold_start;
     let mut loaded_truth: Option<TruthMsg> = None;
     let mut notes: Vec<(f64, String, String)> = Vec::new();
     let mut mismatch_at = None;
@@ -290,6 +298,7 @@ pub(super) fn drive(
         let mut got = false;
         while let Some(st) = session.status_inbox().recv()? {
             let t = secs(st.vehicle_time_ns);
+            now = t;
             let s = st.state().unwrap_or(DaemonState::Fault);
             if s != state || st.text() != text {
                 notes.push((t, s.name().to_string(), st.text().to_string()));
@@ -309,6 +318,9 @@ pub(super) fn drive(
             if m.version > last_version && m.refinements > 0 {
                 last_version = m.version;
                 refinements += 1;
+            } else if m.version > last_version && m.effectiveness == last_b {
+                last_version = m.version;
+                restated.push((now, m.rel_err_rot));
             } else if m.version > last_version {
                 last_version = m.version;
                 swaps.push(Swap {
@@ -317,6 +329,7 @@ pub(super) fn drive(
                     source: source_name(&m),
                 });
             }
+            last_b = m.effectiveness;
             final_model = m;
         }
         while let Some(tr) = session.truth_inbox().recv()? {
@@ -459,6 +472,7 @@ pub(super) fn drive(
         rows,
         swaps,
         refinements,
+        restated,
         notes,
         mismatch_at,
         mismatch_reports,

@@ -86,6 +86,7 @@ impl Daemon {
                 Event::ModelRejected(why) => warn!("model rejected, old one kept: {why}"),
                 Event::MismatchDetected(why) => warn!("{why}"),
                 Event::HoldLost(why) => warn!("{why}"),
+                Event::BoundWidened(why) => warn!("{why}"),
                 Event::StateChanged { from, to, why } => {
                     info!("{} -> {}: {why}", from.name(), to.name());
                     self.record_intent(to);

@@ -28,6 +28,7 @@
 mod calibration;
 pub mod change_test;
 pub(crate) mod command_level;
+pub mod common_gain;
 mod config;
 pub mod fusion;
 
@@ -152,6 +153,13 @@ pub struct Refiner {
     /// carried (the machine's restatement for a curve named, `curve_named`).
     #[serde(default)]
     deepest_level: Option<f64>,
+    /// The windows' common gain over the model in force, pooled (`common_gain`).
+    #[serde(default)]
+    gains: common_gain::GainPool,
+    /// A window was judged against the model in force (and its gain pooled) since the machine
+    /// last asked (`take_judged`): the windows' verdicts without a change do not reach it.
+    #[serde(default)]
+    judged: bool,
     /// A window's fit (~1 ms) is a job, not a control tick's work (`crate::solve`); its result
     /// is judged at the first tick at or after its due time.
     solver: Solver,
@@ -186,6 +194,8 @@ impl Refiner {
             window: None,
             last: None,
             deepest_level: None,
+            gains: common_gain::GainPool::default(),
+            judged: false,
             refined: None,
             exceeded: [false; MAX_THRUSTERS],
             solver: Solver::new(0.0, REFINEMENT),
@@ -243,6 +253,17 @@ impl Refiner {
     /// any): where the refinement may have carried the model's B on a thrust curve.
     pub fn deepest_command_level(&self) -> Option<f64> {
         self.deepest_level
+    }
+
+    /// The windows' common gain over `model` (the B in force), pooled since it was put in
+    /// force; None before a window was judged against it.
+    pub fn pooled_gain(&self, model: &nalgebra::DMatrix<f64>) -> Option<common_gain::PooledGain> {
+        self.gains.pooled(model)
+    }
+
+    /// Whether a window was judged since the last call (its gain is in `pooled_gain`).
+    pub fn take_judged(&mut self) -> bool {
+        std::mem::take(&mut self.judged)
     }
 
     /// A model estimated (not refined) is in force: the windows' levels start over. Apart
@@ -495,6 +516,16 @@ impl Refiner {
             self.refined = None;
             return Some(verdict);
         }
+        self.gains.push(
+            &model.effectiveness,
+            common_gain::window_gain(
+                &e.effectiveness,
+                &e.std_err,
+                &model.effectiveness,
+                self.cfg.window_se_scale,
+            ),
+        );
+        self.judged = true;
         verdict.in_a_row = match self.last {
             Some(prev)
                 if verdict.changed && prev.in_a_row > 0 && prev.thruster == verdict.thruster =>

@@ -125,8 +125,10 @@ pub struct DynamicTerms {
     /// Per row group (rotation, acceleration): how far an identification under control put
     /// this model off at the hold's commands when it named a thrust curve that was not
     /// learned (`machine::state_machine::curve_named`): the model is a line through its
-    /// pulses' amplitude. In the bound from then on, the refinement's too; 0 otherwise. Set
-    /// by the machine, not the fit.
+    /// pulses' amplitude; or how far the refinement's windows, pooled, found its gain off at
+    /// the hold's commands where nothing named a curve (`machine::state_machine::gain_gap`).
+    /// In the bound from then on, the refinement's too; 0 otherwise. Set by the machine, not
+    /// the fit.
     #[serde(default)]
     pub curve_named_rel_err: [f64; 2],
 }

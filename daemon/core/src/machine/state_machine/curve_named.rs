@@ -135,8 +135,18 @@ impl Machine {
             .and_then(|d| d.command_exponent)
             .unwrap_or(1.0);
         let on_the_curve = command_log_level.map_or(0.0, |l| curve_share(named_exponent / own, l));
-        let d = line_disagreement(line, &current.effectiveness)
-            .map(|e| e.max(on_the_curve).min(MAX_CURVE_NAMED_REL_ERR));
+        let d = line_disagreement(line, &current.effectiveness).map(|e| e.max(on_the_curve));
+        self.restate_in_force(d)
+    }
+
+    /// The model in force's bound restated with `share` per row group (rotation,
+    /// acceleration; at most `MAX_CURVE_NAMED_REL_ERR`) in place of the share a curve put in
+    /// before (`DynamicTerms::curve_named_rel_err`): each group's bound less that share, and
+    /// `share` in quadrature. Published as a new version, B untouched (see
+    /// `widen_in_force_for_curve`). Returns the restated bounds, None when nothing widened.
+    pub(super) fn restate_in_force(&mut self, share: [f64; 2]) -> Option<[f64; 2]> {
+        let current = self.models.current()?;
+        let d = share.map(|e| e.min(MAX_CURVE_NAMED_REL_ERR));
         let old = [current.rel_err_rot, current.rel_err_acc];
         // A curve named again on the same model (after an announced change) replaces the
         // share the last one put in, rather than adding to it.

@@ -455,12 +455,16 @@ impl Machine {
         if self.identify_when_curve_held(s.t_ns, &attitude, &target.attitude) {
             return cmd;
         }
+        let judged = self.refiner.take_judged();
         if let Some(m) = mismatch {
             self.on_mismatch(s.t_ns, m.to_string(), ThrusterChange::Unknown);
         } else if let Some(v) = verdict.filter(|v| v.changed) {
             self.on_mismatch(s.t_ns, v.to_string(), ThrusterChange::Moved(v.thruster));
         } else if let Some(fused) = self.refiner.take_refined() {
             self.install_refined(fused.model);
+        } else if judged {
+            // A window judged against the model in force and not folded into it.
+            self.restate_for_gain_gap();
         }
         cmd
     }

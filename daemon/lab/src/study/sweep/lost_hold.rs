@@ -26,6 +26,8 @@ use thrusterd_core::machine::{actuated_error_deg, Event, State};
 /// with the angle to the setpoint, the sea-state gauge every 10 s, and each model swap against
 /// the truth (the new and the old model, the new one's bound, the sea state; the first model
 /// too, as a swap from none). LH_CURVE_CONFIRM (s): `identification.curve_confirm_min_s`.
+/// LH_GAIN_GAP: `refinement.gain_gap_min` (0: off); LH_GAIN: print the refinement's pooled
+/// common gain at each window; every bound widened for it is printed.
 ///   `cargo run --release -p thrusterctl -- study sweep lost_hold_soak`
 pub(super) fn lost_hold_soak() {
     let minutes: f64 = std::env::var("LH_MINUTES").map_or(5.0, |v| v.parse().unwrap());
@@ -99,10 +101,14 @@ pub(super) fn lost_hold_soak() {
                 let curve_confirm: Option<f64> = std::env::var("LH_CURVE_CONFIRM")
                     .ok()
                     .map(|v| v.parse().unwrap());
+                let gain_gap: Option<f64> = std::env::var("LH_GAIN_GAP")
+                    .ok()
+                    .map(|v| v.parse().unwrap());
                 if knobs.iter().any(Option::is_some)
                     || calibrate_when.is_some()
                     || no_learn
                     || curve_confirm.is_some()
+                    || gain_gap.is_some()
                 {
                     run.with_setup(|c| {
                         c.identification.learn_thrust_curve = !no_learn;
@@ -127,6 +133,9 @@ pub(super) fn lost_hold_soak() {
                         }
                         if let Some(s) = curve_confirm {
                             c.identification.curve_confirm_min_s = s;
+                        }
+                        if let Some(g) = gain_gap {
+                            c.refinement.gain_gap_min = g;
                         }
                     });
                 }
@@ -179,10 +188,35 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
     let drift = std::env::var_os("LH_DRIFT").is_some();
     let mut estimated: Option<(DMatrix<f64>, [f64; 2])> = None;
     let mut worst_drift = [0.0f64; 2];
+    // LH_GAIN: the refinement's pooled common gain over the model in force, at each window.
+    let gain_trace = std::env::var_os("LH_GAIN").is_some();
+    let mut gain_windows = 0u32;
     while run.sim.time_s() - start < seconds {
         let t = run.sim.time_s() - start;
         let sp = if level { level_at } else { plan.at(run, t) };
         run.tick();
+        if gain_trace {
+            let pooled = run.machine.refinement_gain();
+            let w = pooled.map_or(0, |p| p.windows);
+            if w != gain_windows {
+                gain_windows = w;
+                if let (Some(p), Some(m)) = (pooled, run.machine.model()) {
+                    let truth = run.truth();
+                    let err = |rows| {
+                        if m.effectiveness.shape() == truth.shape() {
+                            rel_err(&m.effectiveness, &truth, rows)
+                        } else {
+                            f64::NAN
+                        }
+                    };
+                    println!(
+                        "    {t:6.1} s gain {} windows: rot {:.3} +- {:.3}, acc {:.3} +- {:.3}; model v{} {:.3} / {:.3} under {:.3} / {:.3}",
+                        p.windows, p.gain[0], p.std_err[0], p.gain[1], p.std_err[1],
+                        m.version, err(0), err(3), m.rel_err_rot, m.rel_err_acc
+                    );
+                }
+            }
+        }
         if drift {
             if let Some(m) = run.machine.model() {
                 if m.refinements == 0 {
@@ -240,6 +274,25 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
                 // thruster linear, or a T200 linearized) each one is a false alarm.
                 Event::ModelRejected(why) if why.contains("not follow the command linearly") => {
                     println!("    {t:.1} s: curve refusal: {why}");
+                }
+                // Every widening shown: on a linear vehicle in still water it is a false
+                // alarm of the hold's gain (`gain_gap`).
+                Event::BoundWidened(why) => {
+                    let truth = run.truth();
+                    let errs = run.machine.model().map_or([f64::NAN; 2], |m| {
+                        if m.effectiveness.shape() == truth.shape() {
+                            [
+                                rel_err(&m.effectiveness, &truth, 0),
+                                rel_err(&m.effectiveness, &truth, 3),
+                            ]
+                        } else {
+                            [f64::NAN; 2]
+                        }
+                    });
+                    println!(
+                        "    {t:.1} s: bound widened (model {:.3} / {:.3} off): {why}",
+                        errs[0], errs[1]
+                    );
                 }
                 Event::MismatchDetected(why) => {
                     mismatches += 1;
