@@ -18,6 +18,7 @@
 //! understate its real error at the paper's noise); the pool is the windows' weighted mean.
 
 use nalgebra::DMatrix;
+use thruster_protocol::MAX_THRUSTERS;
 
 /// The rows of each group: rotation (rad/s^2), acceleration (m/s^2).
 const GROUPS: [std::ops::Range<usize>; 2] = [0..3, 3..6];
@@ -57,12 +58,45 @@ pub fn window_gain(
     })
 }
 
+/// A model's B kept by value in a fixed array: the pool takes a window's gain on the control
+/// tick, where nothing allocates.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+struct Against {
+    rows: [[f64; MAX_THRUSTERS]; 6],
+    thrusters: usize,
+}
+
+impl Against {
+    /// None for a matrix that is not 6 x at most `MAX_THRUSTERS`.
+    fn of(b: &DMatrix<f64>) -> Option<Self> {
+        if b.nrows() != 6 || b.ncols() > MAX_THRUSTERS {
+            return None;
+        }
+        let mut rows = [[0.0; MAX_THRUSTERS]; 6];
+        for (r, row) in rows.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().take(b.ncols()).enumerate() {
+                *v = b[(r, j)];
+            }
+        }
+        Some(Against {
+            rows,
+            thrusters: b.ncols(),
+        })
+    }
+
+    fn is(&self, b: &DMatrix<f64>) -> bool {
+        b.nrows() == 6
+            && b.ncols() == self.thrusters
+            && (0..6).all(|r| (0..self.thrusters).all(|j| self.rows[r][j] == b[(r, j)]))
+    }
+}
+
 /// The windows' gains pooled since the model in force's B last changed.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GainPool {
     /// The B the windows were judged against (a refinement or a new model starts over; a
     /// bound restated in place does not).
-    against: Option<DMatrix<f64>>,
+    against: Option<Against>,
     /// Per group: sum of 1 / se^2 and of gain / se^2.
     information: [f64; 2],
     weighted: [f64; 2],
@@ -81,11 +115,14 @@ pub struct PooledGain {
 impl GainPool {
     /// One window's gain over `model` (the B in force when it was judged).
     pub fn push(&mut self, model: &DMatrix<f64>, gain: WindowGain) {
-        if self.against.as_ref() != Some(model) {
+        if !self.against.is_some_and(|a| a.is(model)) {
             *self = GainPool {
-                against: Some(model.clone()),
+                against: Against::of(model),
                 ..GainPool::default()
             };
+            if self.against.is_none() {
+                return;
+            }
         }
         let mut any = false;
         for (g, v) in gain.iter().enumerate() {
@@ -109,7 +146,7 @@ impl GainPool {
     /// The pooled gain over `model`; None when the windows were judged against another B, or
     /// before any.
     pub fn pooled(&self, model: &DMatrix<f64>) -> Option<PooledGain> {
-        if self.windows == 0 || self.against.as_ref() != Some(model) {
+        if self.windows == 0 || !self.against.is_some_and(|a| a.is(model)) {
             return None;
         }
         let each = |g: usize| {
