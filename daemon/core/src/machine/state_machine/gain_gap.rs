@@ -36,38 +36,39 @@ const RESTATE_AGAIN_ABOVE: f64 = 1.2;
 impl Machine {
     /// After a window was judged against the model in force (and not folded into it): its
     /// bound restated when the pooled gain is off (`gain_gap`), the status and journal say
-    /// so. Returns whether it was.
-    pub(super) fn restate_for_gain_gap(&mut self) -> bool {
+    /// so.
+    pub(super) fn restate_for_gain_gap(&mut self) {
         // Not in a sea: the controller's answer to the water is in the commands, and the
         // windows read it as a weaker thruster. AMOUR-5 held in rough water at the paper's
         // noise pooled 0.52-0.54, as low as the untold curve (docs/study.md).
         let calm = self.setup.identification.min_sea_state_deg;
         if self.in_a_sea.get() || self.sea_state.sea_reading_deg().is_some_and(|d| d > calm) {
-            return false;
+            return;
         }
         let cfg = &self.setup.refinement;
         let (min_gap, z) = (cfg.gain_gap_min, cfg.gain_gap_z);
         let Some(model) = self.models.current() else {
-            return false;
+            return;
         };
         let Some(pooled) = self.refiner.pooled_gain(&model.effectiveness) else {
-            return false;
+            return;
         };
         let Some(gap) = gain_gap(&pooled, min_gap, z) else {
-            return false;
+            return;
         };
         let before = model.curve_named_rel_err();
         if gap <= RESTATE_AGAIN_ABOVE * before[0].max(before[1]) {
-            return false;
+            return;
         }
         let Some([r, a]) = self.restate_in_force(before.map(|b| b.max(gap))) else {
-            return false;
+            return;
         };
         let why = format!(
-            "the model in force gives {:.0} % / {:.0} % of its rotation / acceleration gain at the hold's commands ({} refinement windows, +-{:.0} %): thrust not linear in the command (a curve not configured) or a supply the daemon cannot read; its bound widened to rot {r:.3}, acc {a:.3}",
+            "the model in force gives {:.0} % / {:.0} % of its rotation / acceleration gain at the hold's commands ({} refinement window{}, +-{:.0} %): thrust not linear in the command (a curve not configured) or a supply the daemon cannot read; its bound widened to rot {r:.3}, acc {a:.3}",
             100.0 * pooled.gain[0],
             100.0 * pooled.gain[1],
             pooled.windows,
+            if pooled.windows == 1 { "" } else { "s" },
             100.0 * pooled.std_err[0],
         );
         self.text = format!(
@@ -75,7 +76,6 @@ impl Machine {
             100.0 * pooled.gain[0]
         );
         self.events.push(Event::BoundWidened(why));
-        true
     }
 }
 
