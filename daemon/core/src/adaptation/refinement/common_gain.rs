@@ -20,8 +20,7 @@
 use nalgebra::DMatrix;
 use thruster_protocol::MAX_THRUSTERS;
 
-/// The rows of each group: rotation (rad/s^2), acceleration (m/s^2).
-const GROUPS: [std::ops::Range<usize>; 2] = [0..3, 3..6];
+use super::fusion::BLOCKS;
 
 /// One window's common gain over the model in force, per row group: (gain, standard error);
 /// None for a group with nothing to weigh.
@@ -40,7 +39,7 @@ pub fn window_gain(
     if window.shape() != model.shape() || window_se.shape() != model.shape() || model.nrows() != 6 {
         return [None; 2];
     }
-    GROUPS.map(|rows| {
+    BLOCKS.map(|rows| {
         let (mut mm, mut mw) = (0.0, 0.0);
         for j in 0..model.ncols() {
             for r in rows.clone() {

@@ -59,7 +59,7 @@ pub struct Fused {
 }
 
 /// Rows of the two blocks: rotation (rad/s^2) and acceleration (m/s^2).
-const BLOCKS: [std::ops::Range<usize>; 2] = [0..3, 3..6];
+pub(super) const BLOCKS: [std::ops::Range<usize>; 2] = [0..3, 3..6];
 
 /// A window's fit as the fusion takes it.
 #[derive(Debug, Clone, Copy)]

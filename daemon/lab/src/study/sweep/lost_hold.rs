@@ -202,13 +202,7 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
                 gain_windows = w;
                 if let (Some(p), Some(m)) = (pooled, run.machine.model()) {
                     let truth = run.truth();
-                    let err = |rows| {
-                        if m.effectiveness.shape() == truth.shape() {
-                            rel_err(&m.effectiveness, &truth, rows)
-                        } else {
-                            f64::NAN
-                        }
-                    };
+                    let err = |rows| err_vs_truth(Some(&m.effectiveness), &truth, rows);
                     println!(
                         "    {t:6.1} s gain {} windows: rot {:.3} +- {:.3}, acc {:.3} +- {:.3}; model v{} {:.3} / {:.3} under {:.3} / {:.3}",
                         p.windows, p.gain[0], p.std_err[0], p.gain[1], p.std_err[1],
@@ -279,16 +273,8 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
                 // alarm of the hold's gain (`gain_gap`).
                 Event::BoundWidened(why) => {
                     let truth = run.truth();
-                    let errs = run.machine.model().map_or([f64::NAN; 2], |m| {
-                        if m.effectiveness.shape() == truth.shape() {
-                            [
-                                rel_err(&m.effectiveness, &truth, 0),
-                                rel_err(&m.effectiveness, &truth, 3),
-                            ]
-                        } else {
-                            [f64::NAN; 2]
-                        }
-                    });
+                    let b = run.machine.model().map(|m| &m.effectiveness);
+                    let errs = [0, 3].map(|rows| err_vs_truth(b, &truth, rows));
                     println!(
                         "    {t:.1} s: bound widened (model {:.3} / {:.3} off): {why}",
                         errs[0], errs[1]
@@ -337,14 +323,17 @@ fn fly(run: &mut Run, seconds: f64, level: bool) -> (usize, usize, f64, f64, f64
     (lost, mismatches, worst, away, tail)
 }
 
+/// A model's rows from `rows` against the truth; NaN without one or of another shape.
+fn err_vs_truth(b: Option<&DMatrix<f64>>, truth: &DMatrix<f64>, rows: usize) -> f64 {
+    b.filter(|b| b.shape() == truth.shape())
+        .map_or(f64::NAN, |b| rel_err(b, truth, rows))
+}
+
 /// LH_TRACE: a model swap, the new and the old model against the truth, the new one's own
 /// bound, and how far the new one is from the old (relative, per row group).
 fn trace_swap(run: &Run, t: f64, old: Option<&DMatrix<f64>>, new: Option<&DMatrix<f64>>) {
     let truth = run.truth();
-    let err = |b: Option<&DMatrix<f64>>, rows| {
-        b.filter(|b| b.shape() == truth.shape())
-            .map_or(f64::NAN, |b| rel_err(b, &truth, rows))
-    };
+    let err = |b: Option<&DMatrix<f64>>, rows| err_vs_truth(b, &truth, rows);
     let apart = |rows| match (old, new) {
         (Some(o), Some(n)) if o.shape() == n.shape() => rel_err(n, o, rows),
         _ => f64::NAN,
