@@ -1,0 +1,528 @@
+use super::*;
+
+const AP: (u8, u8) = (1, 1);
+
+fn specs() -> Vec<OutputSpec> {
+    vec![
+        OutputSpec {
+            channel: 1,
+            neutral: Pwm(1500),
+        },
+        OutputSpec {
+            channel: 4,
+            neutral: Pwm(1510),
+        },
+    ]
+}
+
+fn hdr(sys: u8, comp: u8) -> MavHeader {
+    MavHeader {
+        system_id: u32::from(sys),
+        component_id: comp,
+        sequence: 0,
+    }
+}
+
+fn heartbeat(autopilot: MavAutopilot, armed: bool) -> MavMessage {
+    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_SUBMARINE,
+        autopilot,
+        base_mode: if armed {
+            MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+        } else {
+            MavModeFlag::empty()
+        },
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    })
+}
+
+fn ap_heartbeat(armed: bool) -> MavMessage {
+    heartbeat(MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA, armed)
+}
+
+fn ack(command: MavCmd, result: MavResult) -> MavMessage {
+    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA { command, result })
+}
+
+fn imu2(acc: [i16; 3], gyro: [i16; 3]) -> MavMessage {
+    MavMessage::SCALED_IMU2(SCALED_IMU2_DATA {
+        xacc: acc[0],
+        yacc: acc[1],
+        zacc: acc[2],
+        xgyro: gyro[0],
+        ygyro: gyro[1],
+        zgyro: gyro[2],
+        ..SCALED_IMU2_DATA::DEFAULT
+    })
+}
+
+fn commands(out: &[MavMessage]) -> Vec<COMMAND_LONG_DATA> {
+    out.iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) => Some(c.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A conversation with the link up (armed as given) and the set-up requests acknowledged.
+fn up(armed: bool) -> Conversation {
+    let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
+    s.on_message(1, &hdr(AP.0, AP.1), &ap_heartbeat(armed));
+    s.service(1);
+    for _ in 0..3 {
+        s.on_message(
+            2,
+            &hdr(AP.0, AP.1),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+    }
+    s.drain_outgoing();
+    s
+}
+
+/// Our HEARTBEAT every `heartbeat_ms` on the conversation's own clock: one at the start, none
+/// before the period is up, the next at the deadline (the process test, on the wall clock
+/// of a shared machine, checks only that they keep coming at about 1 Hz).
+#[test]
+fn heartbeats_every_heartbeat_ms() {
+    let heartbeats = |s: &mut Conversation| {
+        s.drain_outgoing()
+            .iter()
+            .filter(|m| matches!(m, MavMessage::HEARTBEAT(_)))
+            .count()
+    };
+    let mut s = up(false);
+    let period = MavlinkConfig::default().heartbeat_ms * MS;
+    assert_eq!(period, 1_000 * MS, "the shipped period");
+    // `up` sent the first at its first service, 1 ns.
+    let t0 = 1;
+    for k in 1..=3u64 {
+        s.service(t0 + k * period - 1);
+        assert_eq!(heartbeats(&mut s), 0, "early before heartbeat {k}");
+        s.service(t0 + k * period);
+        assert_eq!(heartbeats(&mut s), 1, "heartbeat {k}");
+        assert!(s.next_deadline_ns() <= t0 + (k + 1) * period);
+    }
+}
+
+#[test]
+fn finds_the_autopilot_and_requests_rates_one_at_a_time() {
+    let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
+    s.service(0);
+    let out = s.drain_outgoing();
+    assert!(
+        matches!(out.as_slice(), [MavMessage::HEARTBEAT(h)] if h.mavtype == MavType::MAV_TYPE_ONBOARD_CONTROLLER)
+    );
+    assert_eq!(s.header().system_id, 255);
+    // A ground station's heartbeat is not the autopilot.
+    s.on_message(
+        1,
+        &hdr(255, 190),
+        &heartbeat(MavAutopilot::MAV_AUTOPILOT_INVALID, false),
+    );
+    assert_eq!((s.target(), s.link()), (None, LinkState::Connecting));
+    s.on_message(2, &hdr(1, 1), &ap_heartbeat(false));
+    assert_eq!((s.target(), s.link()), (Some(AP), LinkState::Up));
+    s.service(3);
+    let c = commands(&s.drain_outgoing());
+    assert_eq!(c.len(), 1, "one request in flight");
+    assert_eq!(c[0].command, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+    assert_eq!((c[0].param1, c[0].param2), (116.0, 10_000.0));
+    assert_eq!(
+        (c[0].target_system, c[0].target_component, c[0].confirmation),
+        (1, 1, 0)
+    );
+    // The ACK sends the next at once: ATTITUDE at 50 Hz, then SCALED_PRESSURE2 at 20 Hz.
+    s.on_message(
+        4,
+        &hdr(1, 1),
+        &ack(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            MavResult::MAV_RESULT_ACCEPTED,
+        ),
+    );
+    let c = commands(&s.drain_outgoing());
+    assert_eq!((c[0].param1, c[0].param2), (30.0, 20_000.0));
+    s.on_message(
+        5,
+        &hdr(1, 1),
+        &ack(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            MavResult::MAV_RESULT_DENIED,
+        ),
+    );
+    let c = commands(&s.drain_outgoing());
+    assert_eq!((c[0].param1, c[0].param2), (137.0, 50_000.0));
+    s.on_message(
+        6,
+        &hdr(1, 1),
+        &ack(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            MavResult::MAV_RESULT_ACCEPTED,
+        ),
+    );
+    assert!(commands(&s.drain_outgoing()).is_empty());
+}
+
+#[test]
+fn unacknowledged_requests_are_retried_then_given_up() {
+    let cfg = MavlinkConfig {
+        command_retries: 2,
+        // Longer than the retries take: a link loss clears the queue.
+        link_timeout_ms: 60_000,
+        attitude_rate_hz: 0.0,
+        pressure_rate_hz: 0.0,
+        ..MavlinkConfig::default()
+    };
+    let timeout = cfg.command_timeout_ms * MS;
+    let mut s = Conversation::new(cfg, specs(), 0);
+    s.on_message(0, &hdr(1, 1), &ap_heartbeat(false));
+    let mut confirmations = Vec::new();
+    let mut t = 0;
+    for _ in 0..6 {
+        s.service(t);
+        confirmations.extend(commands(&s.drain_outgoing()).iter().map(|c| c.confirmation));
+        t += timeout;
+    }
+    assert_eq!(confirmations, [0, 1, 2]);
+    assert_eq!(s.counters().commands_unacked, 1);
+}
+
+#[test]
+fn the_supply_comes_from_the_autopilots_battery_reports_and_goes_stale() {
+    use mavlink::dialects::ardupilotmega::{BATTERY_STATUS_DATA, SYS_STATUS_DATA};
+    let mut s = up(true);
+    assert_eq!(s.supply(10), Supply::default(), "nothing reported yet");
+    let sys = |mv: u16, ca: i16| {
+        MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+            voltage_battery: mv,
+            current_battery: ca,
+            ..SYS_STATUS_DATA::default()
+        })
+    };
+    s.on_message(100, &hdr(AP.0, AP.1), &sys(15_600, 850));
+    assert_eq!(
+        s.supply(200),
+        Supply {
+            voltage_v: Some(15.6),
+            current_a: Some(8.5)
+        }
+    );
+    // Another system's battery is not ours; an unknown voltage keeps the last one.
+    s.on_message(300, &hdr(7, 1), &sys(12_000, -1));
+    s.on_message(300, &hdr(AP.0, AP.1), &sys(u16::MAX, -1));
+    assert_eq!(s.supply(400).voltage_v, Some(15.6));
+    // BATTERY_STATUS of monitor 0 counts too.
+    let mut cells = [u16::MAX; 10];
+    cells[0] = 14_900;
+    s.on_message(
+        500,
+        &hdr(AP.0, AP.1),
+        &MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
+            voltages: cells,
+            current_battery: -1,
+            ..BATTERY_STATUS_DATA::default()
+        }),
+    );
+    assert_eq!(
+        s.supply(600),
+        Supply {
+            voltage_v: Some(14.9),
+            current_a: None
+        }
+    );
+    // Older than SUPPLY_STALE_NS: unknown.
+    assert_eq!(s.supply(500 + SUPPLY_STALE_NS + 1), Supply::default());
+}
+
+#[test]
+fn imu_messages_become_si_readings_with_fresh_depth_only_while_up() {
+    let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
+    // Before the link is up: dropped.
+    s.on_message(1, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+    assert_eq!(s.take_reading(), None);
+    s.on_message(2, &hdr(1, 1), &ap_heartbeat(false));
+    assert_eq!(
+        s.counters().dropped_link_down,
+        0,
+        "before the target is known it is not even ours"
+    );
+    // From another system: ignored.
+    s.on_message(3, &hdr(2, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+    assert_eq!(s.take_reading(), None);
+    let p = 1013.25 + 2.0 * 997.0 * 9.80665 / 100.0;
+    s.on_message(
+        10 * MS,
+        &hdr(1, 1),
+        &MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
+            press_abs: p as f32,
+            ..SCALED_PRESSURE2_DATA::DEFAULT
+        }),
+    );
+    s.on_message(
+        20 * MS,
+        &hdr(1, 1),
+        &imu2([100, -200, -1000], [10, -20, 3000]),
+    );
+    let r = s.take_reading().unwrap();
+    assert_eq!(r.t_ns, 20 * MS);
+    assert_eq!(r.gyro, [0.01, -0.02, 3.0]);
+    assert!((r.accel[2] + 9.80665).abs() < 1e-12);
+    assert!((r.depth.unwrap() - 2.0).abs() < 1e-3, "{:?}", r.depth);
+    assert_eq!(r.mag, None);
+    // 600 ms later the depth is too old to attach.
+    s.on_message(610 * MS, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+    assert_eq!(s.take_reading().unwrap().depth, None);
+}
+
+#[test]
+fn link_loss_stops_readings_and_recovery_requests_rates_again() {
+    let mut s = up(true);
+    let timeout = MavlinkConfig::default().link_timeout_ms * MS;
+    s.on_message(timeout, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+    s.service(timeout + 1);
+    assert!(matches!(s.link(), LinkState::Down(_)));
+    assert_eq!(
+        s.take_reading(),
+        None,
+        "pending readings are dropped with the link"
+    );
+    s.on_message(timeout + 2, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+    assert_eq!(s.take_reading(), None);
+    assert!(
+        s.next_deadline_ns() > timeout + 1,
+        "no deadline stuck in the past"
+    );
+    s.on_message(timeout + 3, &hdr(1, 1), &ap_heartbeat(true));
+    assert_eq!(s.link(), LinkState::Up);
+    s.service(timeout + 4);
+    let c = commands(&s.drain_outgoing());
+    assert!(c
+        .iter()
+        .any(|c| c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL));
+    assert_eq!(s.counters().link_losses, 1);
+}
+
+#[test]
+fn motor_tests_only_while_armed_at_once_on_change_and_resent() {
+    let mut s = up(false);
+    s.set_outputs(&[Pwm(1700), Pwm(1300)]);
+    s.service(10 * MS);
+    assert!(
+        commands(&s.drain_outgoing()).is_empty(),
+        "disarmed: no motor test"
+    );
+    s.on_message(11 * MS, &hdr(1, 1), &ap_heartbeat(true));
+    s.service(12 * MS);
+    let c = commands(&s.drain_outgoing());
+    assert_eq!(c.len(), 2);
+    // Channels 1 and 4 are ArduSub's motors 0 and 3 (0-based).
+    for (c, (motor, pwm)) in c.iter().zip([(0.0, 1700.0), (3.0, 1300.0)]) {
+        assert_eq!(c.command, MavCmd::MAV_CMD_DO_MOTOR_TEST);
+        assert_eq!(
+            [c.param1, c.param2, c.param3, c.param4, c.param5, c.param6],
+            [motor, 1.0, pwm, 0.5, 0.0, 2.0]
+        );
+    }
+    // Nothing new before the resend period...
+    s.service(50 * MS);
+    assert!(commands(&s.drain_outgoing()).is_empty());
+    // ...a change goes out at once...
+    s.set_outputs(&[Pwm(1500), Pwm(1300)]);
+    s.service(60 * MS);
+    assert_eq!(commands(&s.drain_outgoing())[0].param3, 1500.0);
+    // ...and the same pulses again after resend_ms.
+    assert_eq!(s.next_deadline_ns(), 160 * MS);
+    s.service(160 * MS);
+    assert_eq!(commands(&s.drain_outgoing()).len(), 2);
+    // Refusals are counted.
+    s.on_message(
+        161 * MS,
+        &hdr(1, 1),
+        &ack(MavCmd::MAV_CMD_DO_MOTOR_TEST, MavResult::MAV_RESULT_FAILED),
+    );
+    assert_eq!(s.counters().motor_test_refused, 1);
+    // Shutdown: neutral at once.
+    s.set_outputs(&[Pwm(1900), Pwm(1900)]);
+    s.shutdown(170 * MS);
+    let c = commands(&s.drain_outgoing());
+    assert_eq!(
+        c.iter().map(|c| c.param3).collect::<Vec<_>>(),
+        [1500.0, 1510.0]
+    );
+}
+
+#[test]
+fn rc_override_sets_our_channels_and_ignores_the_rest() {
+    let cfg = MavlinkConfig {
+        output: OutputMode::RcOverride,
+        ..MavlinkConfig::default()
+    };
+    let mut s = Conversation::new(cfg, specs(), 0);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+    s.set_outputs(&[Pwm(1600), Pwm(1400)]);
+    s.service(2);
+    let rc: Vec<_> = s
+        .drain_outgoing()
+        .into_iter()
+        .filter_map(|m| match m {
+            MavMessage::RC_CHANNELS_OVERRIDE(r) => Some(r),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(rc.len(), 1, "sent even while disarmed");
+    let r = &rc[0];
+    assert_eq!((r.chan1_raw, r.chan4_raw), (1600, 1400));
+    assert_eq!(
+        (r.chan2_raw, r.chan3_raw, r.chan8_raw),
+        (RC_IGNORE, RC_IGNORE, RC_IGNORE)
+    );
+    assert_eq!((r.target_system, r.target_component), (1, 1));
+}
+
+#[test]
+fn arming_is_requested_and_undone_when_configured() {
+    let cfg = MavlinkConfig {
+        arm: true,
+        attitude_rate_hz: 0.0,
+        pressure_rate_hz: 0.0,
+        ..MavlinkConfig::default()
+    };
+    let mut s = Conversation::new(cfg, specs(), 0);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+    s.service(2);
+    s.on_message(
+        3,
+        &hdr(1, 1),
+        &ack(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            MavResult::MAV_RESULT_ACCEPTED,
+        ),
+    );
+    let c = commands(&s.drain_outgoing());
+    assert_eq!(
+        (c.last().unwrap().command, c.last().unwrap().param1),
+        (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    );
+    s.on_message(
+        4,
+        &hdr(1, 1),
+        &ack(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            MavResult::MAV_RESULT_ACCEPTED,
+        ),
+    );
+    assert!(s.armed_by_us());
+    s.shutdown(5);
+    let c = commands(&s.drain_outgoing());
+    assert_eq!(
+        (c.last().unwrap().command, c.last().unwrap().param1),
+        (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0)
+    );
+}
+#[test]
+fn motor_test_param1_is_ardusubs_zero_based_motor_index() {
+    assert_eq!(ardusub_motor_index(1), 0.0);
+    assert_eq!(ardusub_motor_index(8), 7.0);
+    let m = motor_test(1, 1, 8, Pwm(1600), 0.5);
+    let MavMessage::COMMAND_LONG(c) = m else {
+        panic!("{m:?}")
+    };
+    assert_eq!((c.param1, c.param3), (7.0, 1600.0));
+}
+
+#[test]
+fn no_motor_tests_while_there_is_nothing_to_command() {
+    let mut s = up(true);
+    // Armed, link up, outputs neutral: motor-test mode would bypass the pilot and
+    // disarm the vehicle after we stop, so nothing goes out.
+    for t in 1..=10 {
+        s.service(t * 100 * MS);
+    }
+    assert!(commands(&s.drain_outgoing()).is_empty());
+    assert!(!s.engaged());
+    // A shutdown with nothing of ours on the outputs sends nothing either.
+    let mut quiet = up(true);
+    quiet.shutdown(5 * MS);
+    assert!(commands(&quiet.drain_outgoing()).is_empty());
+    // The first real pulse starts them; neutral then keeps going out.
+    s.set_outputs(&[Pwm(1600), Pwm(1510)]);
+    s.service(1100 * MS);
+    assert_eq!(commands(&s.drain_outgoing()).len(), 2);
+    assert!(s.engaged());
+    s.set_outputs(&[Pwm(1500), Pwm(1510)]);
+    s.service(1110 * MS);
+    s.service(1210 * MS);
+    let c = commands(&s.drain_outgoing());
+    assert_eq!(c.len(), 4);
+    assert!(c.iter().all(|c| c.param3 == 1500.0 || c.param3 == 1510.0));
+}
+
+#[test]
+fn heartbeat_loss_with_imu_flowing_ends_in_a_neutral_round() {
+    let mut s = up(true);
+    s.set_outputs(&[Pwm(1750), Pwm(1300)]);
+    s.service(10 * MS);
+    s.drain_outgoing();
+    let timeout = MavlinkConfig::default().link_timeout_ms * MS;
+    // IMU keeps coming, HEARTBEATs do not.
+    let mut t = 20 * MS;
+    let mut sent = Vec::new();
+    while t <= timeout + 200 * MS {
+        s.on_message(t, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+        s.service(t);
+        sent.extend(commands(&s.drain_outgoing()));
+        t += 10 * MS;
+    }
+    assert!(matches!(s.link(), LinkState::Down(_)));
+    let last: Vec<f32> = sent[sent.len() - 2..].iter().map(|c| c.param3).collect();
+    assert_eq!(last, [1500.0, 1510.0], "the last motor tests are neutral");
+    // Nothing more while down, whatever the loop asks.
+    s.set_outputs(&[Pwm(1900), Pwm(1900)]);
+    s.service(t + 500 * MS);
+    assert!(commands(&s.drain_outgoing()).is_empty());
+}
+
+#[test]
+fn a_vehicle_disarmed_from_the_start_is_known_as_such() {
+    let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
+    assert_eq!(s.armed_state(), None);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+    assert_eq!(s.armed_state(), Some(false));
+    s.on_message(2, &hdr(1, 1), &ap_heartbeat(true));
+    assert_eq!(s.armed_state(), Some(true));
+}
+
+#[test]
+fn implausible_imu_readings_are_dropped_and_counted() {
+    let cfg = MavlinkConfig {
+        imu_message: ImuMessage::RawImu,
+        ..MavlinkConfig::default()
+    };
+    let mut s = Conversation::new(cfg, specs(), 0);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(true));
+    let raw = |z: i16, mag: [i16; 3]| {
+        MavMessage::RAW_IMU(RAW_IMU_DATA {
+            zacc: z,
+            xmag: mag[0],
+            ymag: mag[1],
+            zmag: mag[2],
+            ..RAW_IMU_DATA::DEFAULT
+        })
+    };
+    // ADC counts (1 g = 4096) are not mG.
+    s.on_message(2, &hdr(1, 1), &raw(-4096, [0; 3]));
+    assert_eq!(s.take_reading(), None);
+    assert_eq!(s.counters().imu_implausible, 1);
+    s.on_message(3, &hdr(1, 1), &raw(-1000, [30000, 0, 0]));
+    let r = s.take_reading().unwrap();
+    assert!((r.accel[2] + 9.80665).abs() < 1e-9);
+    assert_eq!(r.mag, None, "an implausible magnetometer is dropped alone");
+    assert_eq!(s.counters().mag_implausible, 1);
+}
