@@ -3,6 +3,7 @@
 //!
 //! ```text
 //! thruster-hw run --config FILE [--namespace NS] [--backend mavlink|linux]
+//! thruster-hw neutral --config FILE [--backend mavlink|linux]
 //! ```
 
 use std::path::PathBuf;
@@ -26,6 +27,33 @@ pub struct Cli {
 pub enum Command {
     /// Publish IMU samples and apply thrust commands until SIGINT/SIGTERM.
     Run(RunArgs),
+    /// Leave the outputs neutral after the driver process is gone, however it ended
+    /// (systemd's ExecStopPost): every exported PWM channel of the config gets its neutral
+    /// pulse. Touches no IPC; exits non-zero if an output could not be written.
+    Neutral(NeutralArgs),
+}
+
+/// Options of `thruster-hw neutral`.
+#[derive(Debug, Clone, Args)]
+pub struct NeutralArgs {
+    /// The config file the driver ran with.
+    #[arg(long, value_name = "FILE")]
+    pub config: PathBuf,
+    /// Hardware backend (as given to `run`).
+    #[arg(long, value_name = "BACKEND", value_parser = parse_backend)]
+    pub backend: Option<BackendKind>,
+}
+
+impl From<&NeutralArgs> for Overrides {
+    fn from(args: &NeutralArgs) -> Overrides {
+        Overrides {
+            config: args.config.clone(),
+            // No IPC here: any valid name satisfies the settings' check, so a config that
+            // leaves the namespace to `run --namespace` still works.
+            namespace: Some("neutral".to_string()),
+            backend: args.backend,
+        }
+    }
 }
 
 /// Options of `thruster-hw run`; each overrides the same key of `--config`.
@@ -84,7 +112,9 @@ mod tests {
             "linux",
         ])
         .unwrap();
-        let Command::Run(a) = cli.command;
+        let Command::Run(a) = cli.command else {
+            panic!("not run")
+        };
         assert_eq!(a.config, PathBuf::from("hw.toml"));
         assert_eq!(a.namespace.as_deref(), Some("veh1"));
         assert_eq!(a.backend, Some(BackendKind::Linux));
@@ -92,5 +122,11 @@ mod tests {
             .unwrap_err();
         assert!(e.to_string().contains("pca"), "{e}");
         assert!(Cli::try_parse_from(["thruster-hw", "run"]).is_err());
+        let cli = Cli::try_parse_from(["thruster-hw", "neutral", "--config", "hw.toml"]).unwrap();
+        let Command::Neutral(a) = cli.command else {
+            panic!("not neutral")
+        };
+        assert_eq!(Overrides::from(&a).config, PathBuf::from("hw.toml"));
+        assert!(Cli::try_parse_from(["thruster-hw", "neutral"]).is_err());
     }
 }

@@ -373,3 +373,38 @@ fn a_failing_output_ends_the_process_with_the_other_outputs_neutral() {
     drop(daemon);
     assert_namespace_clean(&ns);
 }
+
+#[test]
+fn the_stall_guard_takes_a_silent_loops_outputs_neutral_and_gives_a_slow_one_its_own_back() {
+    let limit = Duration::from_millis(300);
+    let fake = FakeSysfs::new(true);
+    let mut b = LinuxBackend::new(config(&fake), outputs()).with_stall_guard(limit);
+    let t = monotonic_ns();
+    b.start(Waker::noop(), t).unwrap();
+    b.write_outputs(&[Pwm(1900), Pwm(1100)], t).unwrap();
+    let pulses = |f: &FakeSysfs| (f.pulse_us(0), f.pulse_us(3));
+    // A loop that calls in keeps its outputs.
+    let end = Instant::now() + Duration::from_millis(600);
+    let mut silent = Instant::now();
+    while Instant::now() < end {
+        std::thread::sleep(Duration::from_millis(10));
+        b.service(monotonic_ns()).unwrap();
+        silent = Instant::now();
+        assert_eq!(pulses(&fake), (Some(1900), Some(1100)));
+    }
+    // A silent one gets neutral, not before the limit.
+    let end = silent + Duration::from_secs(3);
+    while pulses(&fake) != (Some(1500), Some(1510)) {
+        assert!(Instant::now() < end, "not neutral: {:?}", pulses(&fake));
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    assert!(silent.elapsed() >= limit, "neutral after {:?}", silent.elapsed());
+    // It was only slow: the end of its next round writes what it had again, though its
+    // outputs did not change (so it wrote none itself).
+    b.service(monotonic_ns()).unwrap();
+    assert_eq!(pulses(&fake), (Some(1900), Some(1100)));
+    // Stopped (the guard's thread joined first): neutral, and it stays so.
+    b.stop().unwrap();
+    std::thread::sleep(limit * 2);
+    assert_eq!(pulses(&fake), (Some(1500), Some(1510)));
+}

@@ -178,6 +178,20 @@ inside "set -e
     grep -q '^imu_timeout_ms = 500\$' /etc/thrusterd/thrusterd.toml" \
     || fail "install: imu_timeout_ms of the test bed"
 
+# The unit's ExecStopPost (`thruster-hw neutral`) reads the driver's config; here the unit runs
+# the simulator, so that config may name the Linux backend on a stand-in sysfs tree whose
+# duties the SIGSTOP check below sets to full thrust, as a killed driver would leave them.
+FAKE_SYSFS=/var/lib/thruster-hw-fake-sysfs
+inside "set -e
+    sed -i 's|^backend = .*|backend = \"linux\"|; s|^sysfs_root = .*|sysfs_root = \"$FAKE_SYSFS\"|' /etc/thrusterd/thruster-hw.toml
+    grep -q '^sysfs_root = \"$FAKE_SYSFS\"' /etc/thrusterd/thruster-hw.toml
+    for ch in 1 2 3 4 5; do
+        install -d $FAKE_SYSFS/class/pwm/pwmchip0/pwm\$ch
+        echo 1500000 > $FAKE_SYSFS/class/pwm/pwmchip0/pwm\$ch/duty_cycle
+    done
+    chown -R thrusterd:thrusterd $FAKE_SYSFS" \
+    || fail "install: the stand-in PWM tree for ExecStopPost"
+
 # No vehicle here: thruster-hw.service runs the simulator in real time (a runtime drop-in).
 inside "set -e
     install -m 0755 /root/thrusterd-src/target/release/thruster-sim /usr/local/bin/
@@ -382,8 +396,10 @@ wait_imu_back "after the daemon's restart"
 imu_ok "$(now)" "" "after the daemon's restart"
 say "kill -9: restarted, saved model loaded, control resumed, IMU flows"
 
-# The driver's watchdog: a stopped (hung) driver is killed and restarted by systemd.
+# The driver's watchdog: a stopped (hung) driver is killed and restarted by systemd, and its
+# ExecStopPost leaves the outputs neutral (the stand-in tree at full thrust before).
 PID_H=$(prop thruster-hw MainPID)
+inside "for ch in 1 2 3 4 5; do echo 1900000 > $FAKE_SYSFS/class/pwm/pwmchip0/pwm\$ch/duty_cycle; done"
 inside "kill -STOP $PID_H"
 for _ in $(seq 150); do
     pid=$(prop thruster-hw MainPID)
@@ -394,10 +410,14 @@ done
     || fail "driver watchdog: SIGSTOPped thruster-hw not restarted within 15 s (NRestarts $(prop thruster-hw NRestarts))"
 inside "journalctl -u thruster-hw --no-pager | grep -q 'Watchdog timeout'" \
     || fail "driver watchdog: no 'Watchdog timeout' for thruster-hw in the journal"
+duties=$(inside "cat $FAKE_SYSFS/class/pwm/pwmchip0/pwm*/duty_cycle | sort -u")
+[ "$duties" = 1500000 ] || fail "driver watchdog: ExecStopPost left the duties at $duties, not neutral"
+inside "journalctl -u thruster-hw --no-pager -o cat | grep -q 'pwm5: neutral (1500 us)'" \
+    || fail "driver watchdog: no 'pwm5: neutral' from ExecStopPost in the journal"
 wait_imu_back "after the driver's restart"
 imu_ok "$(now)" "" "after the driver's restart"
 [ "$(prop thrusterd NRestarts)" = "$NR_D" ] || fail "driver watchdog: thrusterd restarted too"
-say "driver watchdog: a stopped thruster-hw was killed and restarted, IMU flows again"
+say "driver watchdog: a stopped thruster-hw was killed, its outputs left neutral (ExecStopPost), restarted, IMU flows again"
 
 # The watcher ends before the stop (a status call then would only time out).
 inside "touch /tmp/imu-watch.stop; for _ in \$(seq 30); do kill -0 $WATCHER 2>/dev/null || exit 0; sleep 0.1; done; exit 1" \

@@ -68,15 +68,16 @@ impl fmt::Display for LinkState {
 #[derive(Debug, thiserror::Error)]
 pub enum BackendError {
     /// A file (sysfs attribute, device) could not be read or written.
-    #[error("{}: cannot {op}: {source}", path.display())]
+    // The OS error is in the message and not a `source`: a chain printed whole
+    // ("{:#}") said it twice.
+    #[error("{}: cannot {op}: {error}", path.display())]
     File {
         /// The file.
         path: PathBuf,
         /// "read", "write", "open", ...
         op: &'static str,
         /// Why.
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A file held something unexpected.
     #[error("{}: {reason}", path.display())]

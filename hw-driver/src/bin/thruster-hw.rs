@@ -25,5 +25,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .with_context(|| format!("thruster-hw ({} backend)", settings.backend.name()))?;
             Ok(())
         }
+        Command::Neutral(args) => {
+            let settings = Settings::resolve(&Overrides::from(&args))?;
+            let lines = driver::after_exit::neutral_after_exit(&settings)
+                .with_context(|| format!("thruster-hw neutral ({})", args.config.display()))?;
+            for line in lines {
+                tracing::info!("{line}");
+            }
+            Ok(())
+        }
     }
 }

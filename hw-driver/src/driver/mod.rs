@@ -15,6 +15,7 @@
 //! command is invalid, and before leaving for any reason: signal, backend error, panic
 //! (the backends' `Drop`).
 
+pub mod after_exit;
 pub mod shutdown;
 pub mod status;
 pub mod wake;
@@ -113,8 +114,18 @@ pub fn build_backend(settings: &Settings) -> Box<dyn Backend> {
     let (_, specs) = outputs(settings);
     match settings.backend {
         BackendKind::Mavlink => Box::new(MavlinkBackend::new(settings.mavlink.clone(), specs)),
-        BackendKind::Linux => Box::new(LinuxBackend::new(settings.linux.clone(), specs)),
+        BackendKind::Linux => Box::new(
+            LinuxBackend::new(settings.linux.clone(), specs)
+                .with_stall_guard(stall_limit(settings)),
+        ),
     }
+}
+
+/// How long the loop may stop calling the Linux backend before its guard thread takes the
+/// outputs neutral: the command watchdog's time, but never under two of the loop's longest
+/// waits (a loop idle between samples calls in every `MAX_BLOCK` at least).
+pub fn stall_limit(settings: &Settings) -> Duration {
+    Duration::from_millis(settings.watchdog_ms).max(2 * MAX_BLOCK)
 }
 
 /// Runs the driver with the backend the settings select until `stop` is requested.

@@ -27,10 +27,10 @@ pub fn find_device(root: &Path, spec: &str) -> Result<PathBuf, BackendError> {
             })
         };
     }
-    let entries = std::fs::read_dir(&devices).map_err(|source| BackendError::File {
+    let entries = std::fs::read_dir(&devices).map_err(|error| BackendError::File {
         path: devices.clone(),
         op: "list",
-        source,
+        error,
     })?;
     let mut dirs: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
     dirs.sort();

@@ -6,12 +6,14 @@
 
 pub mod iio;
 pub mod pwm;
+pub mod stall_guard;
 pub mod sysfs;
 
 use std::time::Duration;
 
 use self::iio::{find_device, Channel, Pressure, Vector3};
 use self::pwm::PwmChannel;
+use self::stall_guard::StallGuard;
 use thruster_protocol::ImuReading;
 
 use super::{Backend, BackendError, LinkState, OutputSpec, Supply, Waker};
@@ -67,6 +69,15 @@ pub struct LinuxBackend {
     next_supply_ns: u64,
     supply_log: LogLimiter,
     stopped: bool,
+    /// The longest the loop may stop calling in before a thread of its own takes the
+    /// outputs neutral (`stall_guard`); None: no guard (the in-process tests).
+    stall_limit: Option<Duration>,
+    guard: Option<StallGuard>,
+    /// The outputs last written, to write again after the guard took them neutral.
+    last_outputs: Vec<Pwm>,
+    /// The guard took the outputs neutral and the loop has not written them since: `service`
+    /// (the end of the loop's round, after its watchdog decided) writes `last_outputs` again.
+    restore_pending: bool,
 }
 
 impl LinuxBackend {
@@ -87,6 +98,32 @@ impl LinuxBackend {
             next_supply_ns: 0,
             supply_log: LogLimiter::default(),
             stopped: false,
+            stall_limit: None,
+            guard: None,
+            last_outputs: Vec::new(),
+            restore_pending: false,
+        }
+    }
+
+    /// With the stall guard (`stall_guard`): the outputs go neutral once the loop has not
+    /// called into the backend for `limit` (the driver gives its `watchdog_ms`).
+    pub fn with_stall_guard(mut self, limit: Duration) -> Self {
+        self.stall_limit = Some(limit);
+        self
+    }
+
+    /// The loop is alive. If the guard took the outputs neutral meanwhile, the channels'
+    /// cached duties are forgotten (the next writes happen) and a restore is pending.
+    fn beat(&mut self) {
+        let Some(guard) = &self.guard else {
+            return;
+        };
+        guard.beat();
+        if guard.take_neutralized() {
+            for ch in &mut self.channels {
+                ch.forget();
+            }
+            self.restore_pending = true;
         }
     }
 
@@ -120,6 +157,40 @@ impl LinuxBackend {
         self.cfg
             .sysfs_root
             .join(format!("class/pwm/pwmchip{}", self.cfg.pwm_chip))
+    }
+
+    /// `thruster-hw neutral`: every configured channel that is exported gets the neutral
+    /// duty (see [`pwm::neutral_left_channel`]); one line per channel, or the first error
+    /// after trying them all.
+    pub fn neutral_left_outputs(&self) -> Result<Vec<String>, BackendError> {
+        let chip = self.chip_dir();
+        let mut lines = Vec::new();
+        let mut first_err = None;
+        for o in &self.outputs {
+            match pwm::neutral_left_channel(&chip, o.channel, o.neutral) {
+                Ok(pwm::LeftChannel::Neutral) => {
+                    lines.push(format!("pwm{}: neutral ({} us)", o.channel, o.neutral.us()))
+                }
+                Ok(pwm::LeftChannel::NotExported) => {
+                    lines.push(format!("pwm{}: not exported, nothing to write", o.channel))
+                }
+                Err(e) => {
+                    first_err.get_or_insert(e);
+                }
+            }
+        }
+        first_err.map_or(Ok(lines), Err)
+    }
+
+    /// The outputs the loop last wrote, again (after the guard took them neutral while the
+    /// loop was only slow).
+    fn write_last_outputs(&mut self) -> Result<(), BackendError> {
+        tracing::warn!("the driver loop runs again: its outputs written again");
+        for (ch, &p) in self.channels.iter_mut().zip(&self.last_outputs) {
+            ch.set(p)?;
+        }
+        self.restore_pending = false;
+        Ok(())
     }
 
     fn open_sensors(&self) -> Result<Sensors, BackendError> {
@@ -200,6 +271,22 @@ impl Backend for LinuxBackend {
             self.channels.push(ch);
         }
         self.next_due_ns = now_ns;
+        self.last_outputs = self.outputs.iter().map(|o| o.neutral).collect();
+        if let Some(limit) = self.stall_limit {
+            let duties = self
+                .channels
+                .iter()
+                .zip(&self.outputs)
+                .map(|(ch, o)| (ch.duty_path().to_path_buf(), o.neutral))
+                .collect();
+            self.guard =
+                Some(
+                    StallGuard::start(duties, limit).map_err(|e| BackendError::Content {
+                        path: chip.clone(),
+                        reason: format!("cannot start the stall guard thread: {e}"),
+                    })?,
+                );
+        }
         tracing::info!(
             chip = %chip.display(),
             channels = ?self.outputs.iter().map(|o| o.channel).collect::<Vec<_>>(),
@@ -211,6 +298,9 @@ impl Backend for LinuxBackend {
     }
 
     fn read_sensors(&mut self, now_ns: u64) -> Result<Option<ImuReading>, BackendError> {
+        // Before the reads: a read that hangs leaves this heartbeat to age. Nothing is
+        // restored here: after a long stall the loop's watchdog first decides on neutral.
+        self.beat();
         self.poll_supply(now_ns);
         let Some(sensors) = &self.sensors else {
             return Ok(None);
@@ -248,13 +338,23 @@ impl Backend for LinuxBackend {
     }
 
     fn write_outputs(&mut self, outputs: &[Pwm], _now_ns: u64) -> Result<(), BackendError> {
+        self.beat();
+        for (last, &p) in self.last_outputs.iter_mut().zip(outputs) {
+            *last = p;
+        }
         for (ch, &p) in self.channels.iter_mut().zip(outputs) {
             ch.set(p)?;
         }
+        self.restore_pending = false;
         Ok(())
     }
 
     fn neutral(&mut self, _now_ns: u64) -> Result<(), BackendError> {
+        self.beat();
+        self.restore_pending = false;
+        for (last, o) in self.last_outputs.iter_mut().zip(&self.outputs) {
+            *last = o.neutral;
+        }
         // Try every channel even if one fails, then report the first failure.
         let mut first_err = None;
         for (ch, o) in self.channels.iter_mut().zip(&self.outputs) {
@@ -266,6 +366,10 @@ impl Backend for LinuxBackend {
     }
 
     fn service(&mut self, _now_ns: u64) -> Result<(), BackendError> {
+        self.beat();
+        if self.restore_pending {
+            self.write_last_outputs()?;
+        }
         Ok(())
     }
 
@@ -289,6 +393,8 @@ impl Backend for LinuxBackend {
 
     fn stop(&mut self) -> Result<(), BackendError> {
         self.stopped = true;
+        // The guard's thread is joined before the last writes: none of its may follow them.
+        self.guard = None;
         self.neutral(monotonic_ns())
     }
 }
@@ -296,6 +402,7 @@ impl Backend for LinuxBackend {
 impl Drop for LinuxBackend {
     /// Safety net for panics and early returns: outputs neutral.
     fn drop(&mut self) {
+        self.guard = None;
         if !self.stopped && !self.channels.is_empty() {
             let _ = self.neutral(0);
         }

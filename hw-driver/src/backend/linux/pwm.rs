@@ -19,6 +19,34 @@ use super::sysfs::{read_attr, read_u64, write_attr};
 use crate::backend::BackendError;
 use crate::core::pwm::Pwm;
 
+/// What [`neutral_left_channel`] found and did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LeftChannel {
+    /// The channel was exported: its duty is now neutral.
+    Neutral,
+    /// Not exported: nothing drives its ESC, nothing to write.
+    NotExported,
+}
+
+/// The outputs neutral after the process that drove them is gone (`thruster-hw neutral`,
+/// systemd's `ExecStopPost`): writes the neutral duty to channel `index` of `chip_dir` if it
+/// is exported. Why: the kernel keeps a channel's last duty when its writer dies without
+/// reaching `Drop` (SIGKILL, SIGABRT from systemd's watchdog, the OOM killer), so the ESC
+/// would hold the last command. Nothing is exported, enabled or disabled here: a pulse train
+/// that runs keeps running, at neutral.
+pub fn neutral_left_channel(
+    chip_dir: &Path,
+    index: u32,
+    neutral: Pwm,
+) -> Result<LeftChannel, BackendError> {
+    let duty = chip_dir.join(format!("pwm{index}")).join("duty_cycle");
+    if !duty.exists() {
+        return Ok(LeftChannel::NotExported);
+    }
+    write_attr(&duty, &neutral.ns().to_string())?;
+    Ok(LeftChannel::Neutral)
+}
+
 /// One exported PWM channel.
 #[derive(Debug)]
 pub struct PwmChannel {
@@ -71,6 +99,17 @@ impl PwmChannel {
     /// The channel's directory.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// Its `duty_cycle` attribute.
+    pub fn duty_path(&self) -> &Path {
+        &self.duty_path
+    }
+
+    /// Forget the duty last written (someone else wrote the attribute): the next `set`
+    /// writes whatever it is given.
+    pub fn forget(&mut self) {
+        self.duty_ns = None;
     }
 
     /// Waits until the freshly exported channel's attributes accept a write: the kernel

@@ -16,16 +16,16 @@ pub fn write_attr(path: &Path, value: &str) -> Result<(), BackendError> {
         .write(true)
         .truncate(true)
         .open(path)
-        .map_err(|source| BackendError::File {
+        .map_err(|error| BackendError::File {
             path: path.to_path_buf(),
             op: "open for writing",
-            source,
+            error,
         })?;
     f.write_all(format!("{value}\n").as_bytes())
-        .map_err(|source| BackendError::File {
+        .map_err(|error| BackendError::File {
             path: path.to_path_buf(),
             op: "write",
-            source,
+            error,
         })
 }
 
@@ -33,10 +33,10 @@ pub fn write_attr(path: &Path, value: &str) -> Result<(), BackendError> {
 pub fn read_attr(path: &Path) -> Result<String, BackendError> {
     std::fs::read_to_string(path)
         .map(|s| s.trim().to_string())
-        .map_err(|source| BackendError::File {
+        .map_err(|error| BackendError::File {
             path: path.to_path_buf(),
             op: "read",
-            source,
+            error,
         })
 }
 
