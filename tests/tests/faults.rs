@@ -20,6 +20,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use fake_sysfs::FakeSysfs;
+use system_tests::driver_stand_in::DriverStandIn;
 use system_tests::mount::{fill, is_root, Mount};
 use system_tests::{bin, state, workspace, Operator, Proc, World};
 use thruster_hw::clock::monotonic_ns;
@@ -842,42 +843,15 @@ fn a_stalled_disk_never_stalls_control() {
 #[test]
 fn a_model_load_never_stops_control() {
     use std::process::Child;
-    use thruster_protocol::services::Port;
-    use thruster_protocol::ImuSample;
 
     let world = World::new("ldstall");
     let mut daemon = world.daemon(&["--thrusters", "5"]);
-    let imu: Port<ImuSample> = Port::create(world.node(), world.ipc()).unwrap();
-    let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
-    let mut seq = 0u64;
-    let sample = |seq: u64| ImuSample {
-        seq,
-        t_ns: 1_000_000_000 + seq * 5_000_000,
-        gyro: [0.0; 3],
-        accel: [0.0, 0.0, -9.80665],
-        mag: [0.0; 3],
-        depth: 0.0,
-        flags: 0,
-    };
-    // One round trip: the answer's latency (None: none within 2 s).
-    let round_trip = |seq: &mut u64| -> Option<Duration> {
-        *seq += 1;
-        let start = Instant::now();
-        imu.send(&sample(*seq)).unwrap();
-        while start.elapsed() < Duration::from_secs(2) {
-            if let Some(c) = thrust.recv().unwrap() {
-                if c.imu_seq == *seq {
-                    return Some(start.elapsed());
-                }
-            }
-            std::thread::sleep(Duration::from_micros(50));
-        }
-        None
-    };
-    let up = Instant::now();
-    while round_trip(&mut seq).is_none() {
-        assert!(up.elapsed() < LONG, "no answer\n{}", daemon.log_text());
-    }
+    let mut driver = DriverStandIn::new(&world);
+    assert!(
+        driver.until_answered(LONG),
+        "no answer\n{}",
+        daemon.log_text()
+    );
 
     let fifo = world.path("model.fifo");
     let c_path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
@@ -915,8 +889,12 @@ fn a_model_load_never_stops_control() {
         let mut done_at = None;
         while done_at.is_none_or(|t: Instant| t.elapsed() < Duration::from_millis(500)) {
             assert!(start.elapsed() < CTL_BOUND, "thrusterctl load {what} hung");
-            let latency = round_trip(&mut seq)
-                .unwrap_or_else(|| panic!("sample {seq} unanswered during the load of {what}"));
+            let latency = driver.round_trip().unwrap_or_else(|| {
+                panic!(
+                    "sample {} unanswered during the load of {what}",
+                    driver.seq()
+                )
+            });
             worst = worst.max(latency);
             answered += 1;
             if done_at.is_none() && load.try_wait().unwrap().is_some() {

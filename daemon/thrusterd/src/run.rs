@@ -96,9 +96,9 @@ pub struct RunArgs {
 const REFINED_SAVE_EVERY_NS: u64 = 60_000_000_000;
 /// In low-latency mode, other inputs and status are looked at least this often.
 const HOUSEKEEPING: Duration = Duration::from_millis(1);
-/// How long an operator's `save` request may wait for the saving thread inside the loop: a
-/// healthy disk or a fast failure (full, read-only) answers well within it; a stalled disk
-/// gets a "saving" answer instead of stalling control.
+/// How long an operator's `save` request is kept open for the saving thread's outcome (the
+/// loop never waits for it: the answer goes out from a later round): a healthy disk or a fast
+/// failure (full, read-only) answers well within it; a stalled disk gets a "saving" answer.
 const SAVE_ANSWER_WAIT: Duration = Duration::from_millis(50);
 /// How long a stopping daemon waits for its last saves (thrust already neutral).
 const SHUTDOWN_SAVE_WAIT: Duration = Duration::from_secs(3);
@@ -234,8 +234,10 @@ struct Daemon {
     late_logged: u64,
     /// Reads operators' model files off this thread.
     loader: Loader,
-    /// Number of the next deferred request (a load).
+    /// Number of the next deferred request (a load or a save).
     next_token: u64,
+    /// Operators' saves not yet answered (`persistence::SaveAnswer`).
+    save_answers: Vec<persistence::SaveAnswer>,
 }
 
 impl Daemon {
@@ -282,6 +284,7 @@ impl Daemon {
             late_logged: 0,
             loader,
             next_token: 1,
+            save_answers: Vec::new(),
             shutdown,
             model_path,
             ipc,

@@ -9,7 +9,7 @@
 //! another thread's malloc arena can wait on that arena's lock: `solver.rs`).
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::mpsc::{self, Receiver, Sender};
 use std::time::{Duration, Instant};
 
 use crate::store;
@@ -38,7 +38,8 @@ pub struct Outcome {
 pub struct Saver {
     jobs: Option<Sender<Job>>,
     outcomes: Receiver<Outcome>,
-    /// Outcomes read while waiting for another one, handed out by [`Saver::poll`].
+    /// Outcomes made here (a submission the thread could not take), handed out by
+    /// [`Saver::poll`].
     early: Vec<Outcome>,
     next_id: u64,
     pending: usize,
@@ -107,29 +108,6 @@ impl Saver {
             out.push(o);
         }
         out
-    }
-
-    /// The outcome of save `id` if it comes within `within` (bounded: the loop can afford a
-    /// few milliseconds for an operator's `save`, never a disk's worst case). Other outcomes
-    /// read meanwhile are kept for [`Saver::poll`].
-    pub fn wait_for(&mut self, id: u64, within: Duration) -> Option<Outcome> {
-        if let Some(i) = self.early.iter().position(|o| o.id == id) {
-            return Some(self.early.remove(i));
-        }
-        let deadline = Instant::now() + within;
-        loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            match self.outcomes.recv_timeout(left) {
-                Ok(o) => {
-                    self.pending -= 1;
-                    if o.id == id {
-                        return Some(o);
-                    }
-                    self.early.push(o);
-                }
-                Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => return None,
-            }
-        }
     }
 
     /// At shutdown (thrusters already neutral): waits up to `within` for the saves still

@@ -46,10 +46,30 @@ impl Daemon {
             last: Instant::now(),
         };
         let mut systemd = self.start_serving(&ports.out);
+        if let Err(e) = self.serve_rounds(&node, &mut ports, &mut clock, &mut systemd) {
+            // An IPC or wait failure ends the process; the thrusters are not left to the
+            // driver's watchdog: neutral now, as far as the thrust port still works.
+            error!("serving failed: thrusters neutral before exit: {e:#}");
+            let neutral = Command::neutral(self.machine.thrusters());
+            self.send_thrust(&ports.out.thrust, &neutral);
+            return Err(e);
+        }
+        self.shut_down(&ports.out, &mut systemd);
+        Ok(())
+    }
+
+    /// Serves rounds until stopped, renewing the IMU listener when asked to.
+    fn serve_rounds(
+        &mut self,
+        node: &thruster_protocol::services::IpcNode,
+        ports: &mut Ports,
+        clock: &mut StatusClock,
+        systemd: &mut thruster_driver_kit::Systemd,
+    ) -> Result<()> {
         let mut imu_socket = socket_of(ports.imu_in.listener());
-        while self.serve_until_renewal(&ports, &mut clock, &mut systemd)? {
+        while self.serve_until_renewal(ports, clock, systemd)? {
             // The wait set and its guards are gone: the IMU listener may be replaced.
-            let old = ports.imu_in.replace_listener(&node)?;
+            let old = ports.imu_in.replace_listener(node)?;
             let now = socket_of(&old);
             if now == imu_socket {
                 drop(old);
@@ -68,7 +88,6 @@ impl Daemon {
                 "IMU listener replaced: the drivers' notifiers connect to the new one"
             );
         }
-        self.shut_down(&ports.out, &mut systemd);
         Ok(())
     }
 
@@ -139,7 +158,7 @@ impl Daemon {
             self.start_pending();
             self.poll_load(control, out);
             let changed = self.handle_events(&out.model);
-            self.poll_saves();
+            self.poll_saves(control);
             systemd.tick();
             self.keep_status(changed, clock, systemd, out, config_out);
             if renew {

@@ -89,10 +89,67 @@ impl Daemon {
         self.saver.submit(model, &path);
     }
 
-    /// Takes the outcomes of finished saves (non-blocking).
-    pub(super) fn poll_saves(&mut self) {
+    /// An operator's `save`: the model in force handed to the saving thread, the request kept
+    /// open until `poll_saves` sees its outcome.
+    pub(super) fn start_save(&mut self, req: &thruster_protocol::ControlRequest) -> Reply {
+        let Some(model) = self.machine.model().cloned() else {
+            return Reply::Now(ControlResponse::new(
+                ResponseCode::Rejected,
+                "no model to save",
+            ));
+        };
+        let path = if req.text.as_str().is_empty() {
+            self.model_path.clone()
+        } else {
+            PathBuf::from(req.text.as_str())
+        };
+        let id = self.saver.submit(&model, &path);
+        let token = self.next_token;
+        self.next_token += 1;
+        self.save_answers.push(SaveAnswer {
+            token,
+            id,
+            version: model.version,
+            path,
+            since: Instant::now(),
+        });
+        Reply::Later(token)
+    }
+
+    /// Takes the outcomes of finished saves (non-blocking) and answers the operators' saves
+    /// among them; one still under way after [`SAVE_ANSWER_WAIT`] is answered that it is
+    /// (a stalled disk), and status reports how it ends.
+    pub(super) fn poll_saves(&mut self, control: &ControlServer) {
         for outcome in self.saver.poll() {
+            if let Some(i) = self.save_answers.iter().position(|a| a.id == outcome.id) {
+                let asked = self.save_answers.swap_remove(i);
+                let response = match &outcome.result {
+                    Ok(()) => ControlResponse::ok(&format!(
+                        "saved model v{} to {}",
+                        asked.version,
+                        asked.path.display()
+                    )),
+                    Err(e) => ControlResponse::new(ResponseCode::Failed, e),
+                };
+                control.answer(asked.token, response);
+            }
             self.on_saved(outcome);
+        }
+        let mut i = 0;
+        while i < self.save_answers.len() {
+            if self.save_answers[i].since.elapsed() < SAVE_ANSWER_WAIT {
+                i += 1;
+                continue;
+            }
+            let asked = self.save_answers.swap_remove(i);
+            control.answer(
+                asked.token,
+                ControlResponse::ok(&format!(
+                    "saving model v{} to {} (the disk is slow: status reports a failure)",
+                    asked.version,
+                    asked.path.display()
+                )),
+            );
         }
     }
 
@@ -109,4 +166,14 @@ impl Daemon {
             self.save_error = outcome.result.err();
         }
     }
+}
+
+/// An operator's save kept open until its outcome (or [`SAVE_ANSWER_WAIT`]).
+pub(crate) struct SaveAnswer {
+    token: u64,
+    /// The saver's id of the save.
+    id: u64,
+    version: u64,
+    path: PathBuf,
+    since: Instant,
 }

@@ -1,5 +1,5 @@
-//! Operator requests: answered at once, except a model load, which is read off this thread
-//! and answered when it is back; every request the machine acted on is journaled.
+//! Operator requests: answered at once, except a model load or save, which is done off this
+//! thread and answered when it is back; every request the machine acted on is journaled.
 
 // The daemon's fields, ports and imports are the parent's: these are its methods, by job.
 use super::*;
@@ -20,10 +20,14 @@ impl Daemon {
                 Err(busy) => Reply::Now(ControlResponse::new(ResponseCode::Busy, &busy)),
             };
         }
+        if kind == RequestKind::Save {
+            // Answered when the saving thread is done (`poll_saves`): never waited for here.
+            return self.start_save(req);
+        }
         Reply::Now(self.on_immediate_request(kind, req))
     }
 
-    /// Every request but a load: answered at once.
+    /// Every request but a load or a save: answered at once.
     pub(super) fn on_immediate_request(
         &mut self,
         kind: RequestKind,
@@ -47,41 +51,8 @@ impl Daemon {
             RequestKind::Idle => Request::Idle,
             RequestKind::Stop => Request::Stop,
             RequestKind::Revert => Request::Revert,
-            RequestKind::Save => {
-                let Some(model) = self.machine.model().cloned() else {
-                    return ControlResponse::new(ResponseCode::Rejected, "no model to save");
-                };
-                let path = if req.text.as_str().is_empty() {
-                    self.model_path.clone()
-                } else {
-                    PathBuf::from(req.text.as_str())
-                };
-                // On the saving thread; the answer waits for it a few milliseconds at most
-                // (a healthy disk, or a fast failure such as a full one), never for a stalled
-                // disk: then the answer says so and status reports the outcome.
-                let id = self.saver.submit(&model, &path);
-                return match self.saver.wait_for(id, SAVE_ANSWER_WAIT) {
-                    Some(outcome) => {
-                        let result = outcome.result.clone();
-                        self.on_saved(outcome);
-                        match result {
-                            Ok(()) => ControlResponse::ok(&format!(
-                                "saved model v{} to {}",
-                                model.version,
-                                path.display()
-                            )),
-                            Err(e) => ControlResponse::new(ResponseCode::Failed, &e),
-                        }
-                    }
-                    None => ControlResponse::ok(&format!(
-                        "saving model v{} to {} (the disk is slow: status reports a failure)",
-                        model.version,
-                        path.display()
-                    )),
-                };
-            }
-            RequestKind::Load => {
-                unreachable!("loads are answered by poll_load")
+            RequestKind::Load | RequestKind::Save => {
+                unreachable!("loads and saves are answered when done (poll_load, poll_saves)")
             }
             RequestKind::Shutdown => {
                 self.shutdown.store(true, Ordering::SeqCst);
