@@ -398,7 +398,11 @@ fn the_stall_guard_takes_a_silent_loops_outputs_neutral_and_gives_a_slow_one_its
         assert!(Instant::now() < end, "not neutral: {:?}", pulses(&fake));
         std::thread::sleep(Duration::from_millis(2));
     }
-    assert!(silent.elapsed() >= limit, "neutral after {:?}", silent.elapsed());
+    assert!(
+        silent.elapsed() >= limit,
+        "neutral after {:?}",
+        silent.elapsed()
+    );
     // It was only slow: the end of its next round writes what it had again, though its
     // outputs did not change (so it wrote none itself).
     b.service(monotonic_ns()).unwrap();

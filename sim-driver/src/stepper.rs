@@ -24,6 +24,8 @@ pub enum StepError {
     Stuck(u64),
     #[error("the simulator closed its standard output (it exited)")]
     Exited,
+    #[error("a process the step waited on is gone")]
+    PeerGone,
     #[error("the simulator's stepping line {0:?} is not `at SEQ T_NS`")]
     Garbled(String),
 }
@@ -36,6 +38,10 @@ pub const STEP_SAMPLES: u64 = 8;
 /// Longest wall time one step may take (the daemon answers each sample within the
 /// simulator's lockstep timeout, 2 s by default, or the simulator goes on without it).
 const STEP_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// How often a step's wait asks whether the processes it waits on still run: a daemon that
+/// died mid-step was otherwise noticed only after `STEP_TIMEOUT`.
+const LIVENESS_EVERY: Duration = Duration::from_millis(100);
 
 /// Where the simulator stands: the newest sample, answered, and nothing newer taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -80,22 +86,43 @@ impl Stepper {
     /// Lets the simulator take `n` more samples and waits until it holds again; the first
     /// call first waits for the answer to the first sample.
     pub fn advance(&mut self, n: u64) -> Result<Held, StepError> {
+        self.advance_while(n, || true)
+    }
+
+    /// [`Self::advance`], giving up with [`StepError::PeerGone`] as soon as `alive` says a
+    /// process the step depends on (the daemon that answers the samples) is gone; asked
+    /// every [`LIVENESS_EVERY`] of the wait.
+    pub fn advance_while(
+        &mut self,
+        n: u64,
+        mut alive: impl FnMut() -> bool,
+    ) -> Result<Held, StepError> {
         if self.held.is_none() {
-            self.held = Some(self.next_hold()?);
+            self.held = Some(self.next_hold(&mut alive)?);
         }
         writeln!(self.to_sim, "run {n}")
             .and_then(|_| self.to_sim.flush())
             .map_err(StepError::Closed)?;
-        let held = self.next_hold()?;
+        let held = self.next_hold(&mut alive)?;
         self.held = Some(held);
         Ok(held)
     }
 
-    fn next_hold(&mut self) -> Result<Held, StepError> {
-        let line = match self.lines.recv_timeout(STEP_TIMEOUT) {
-            Ok(line) => line,
-            Err(RecvTimeoutError::Timeout) => return Err(StepError::Stuck(STEP_TIMEOUT.as_secs())),
-            Err(RecvTimeoutError::Disconnected) => return Err(StepError::Exited),
+    fn next_hold(&mut self, alive: &mut impl FnMut() -> bool) -> Result<Held, StepError> {
+        let start = std::time::Instant::now();
+        let line = loop {
+            match self.lines.recv_timeout(LIVENESS_EVERY) {
+                Ok(line) => break line,
+                Err(RecvTimeoutError::Disconnected) => return Err(StepError::Exited),
+                Err(RecvTimeoutError::Timeout) => {
+                    if !alive() {
+                        return Err(StepError::PeerGone);
+                    }
+                    if start.elapsed() >= STEP_TIMEOUT {
+                        return Err(StepError::Stuck(STEP_TIMEOUT.as_secs()));
+                    }
+                }
+            }
         };
         parse_held(&line).ok_or(StepError::Garbled(line))
     }
@@ -128,5 +155,38 @@ mod tests {
         for bad in ["at 17", "at x 5", "held 1 2", "at 1 2 3", ""] {
             assert_eq!(parse_held(bad), None, "{bad:?}");
         }
+    }
+
+    /// A simulator that never holds and a peer that is gone: the step gives up within a
+    /// liveness period, not after `STEP_TIMEOUT` (a demo whose daemon died mid-step sat two
+    /// minutes silent).
+    #[test]
+    fn a_step_gives_up_once_its_peer_is_gone() {
+        use std::process::{Command, Stdio};
+        let mut never = Command::new("sleep")
+            .arg("30")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut stepper =
+            Stepper::new(never.stdin.take().unwrap(), never.stdout.take().unwrap()).unwrap();
+        let start = std::time::Instant::now();
+        let mut asked = 0;
+        let e = stepper
+            .advance_while(STEP_SAMPLES, || {
+                asked += 1;
+                asked < 3
+            })
+            .unwrap_err();
+        let took = start.elapsed();
+        let _ = never.kill();
+        let _ = never.wait();
+        assert!(matches!(e, StepError::PeerGone), "{e}");
+        assert_eq!(asked, 3);
+        assert!(
+            took >= LIVENESS_EVERY * 3 && took < STEP_TIMEOUT / 10,
+            "{took:?}"
+        );
     }
 }

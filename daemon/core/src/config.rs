@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use thruster_driver_kit::{parse_toml, LoadError, Range};
 use thruster_protocol::services::{IpcConfig, IpcError, DEFAULT_ROOT_BASE};
+use thruster_protocol::validate::limits::MAX_POSITION_M;
 
 use crate::adaptation::identification::IdentificationConfig;
 use crate::adaptation::monitor::MonitorConfig;
@@ -304,14 +305,18 @@ impl DaemonConfig {
             ));
         }
         for (i, t) in self.vehicle.thruster.iter().enumerate() {
+            // Within the protocol's reach, as the IMU's position: a position the model
+            // bounds would refuse (a units slip, 1e9 m) is named here, not found at start as
+            // "model rejected" with no starting model.
+            let reach = Range::closed(-MAX_POSITION_M, MAX_POSITION_M);
             for (j, &v) in t.position_m.iter().enumerate() {
-                if !v.is_finite() {
+                if !reach.contains(v) {
                     let key = format!("vehicle.thruster[{i}].position_m[{j}]");
                     return Err(LoadError::value(
                         origin,
                         text,
                         &key,
-                        format!("must be finite, got {v}"),
+                        format!("must be in {reach} m, got {v}"),
                     ));
                 }
             }
@@ -780,6 +785,14 @@ mod tests {
             (
                 "[[vehicle.thruster]]\nposition_m = [0, 0, 0]\ndirection = [0, 0, 0]\n",
                 "d.toml:3:13: vehicle.thruster[0].direction: must be finite and non-zero, got [0.0, 0.0, 0.0]",
+            ),
+            (
+                "[[vehicle.thruster]]\nposition_m = [1e9, 0, 0]\ndirection = [1, 0, 0]\n",
+                "d.toml:2:15: vehicle.thruster[0].position_m[0]: must be in [-10, 10] m, got 1000000000",
+            ),
+            (
+                "[[vehicle.thruster]]\nposition_m = [0, nan, 0]\ndirection = [1, 0, 0]\n",
+                "d.toml:2:18: vehicle.thruster[0].position_m[1]: must be in [-10, 10] m, got NaN",
             ),
         ] {
             let e = DaemonConfig::from_toml_str(text, "d.toml").unwrap_err();

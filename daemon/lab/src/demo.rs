@@ -34,8 +34,8 @@ pub struct DemoArgs {
     #[arg(long, default_value = "paper")]
     pub noise: String,
     /// Vehicle seconds of attitude hold after the estimation (half level, half a 15 degree
-    /// pitch step).
-    #[arg(long, default_value_t = 10.0)]
+    /// pitch step), 0..=3600.
+    #[arg(long, default_value_t = 10.0, value_parser = parse_hold_s, allow_hyphen_values = true)]
     pub hold_s: f64,
     /// Print one JSON summary instead of the report.
     #[arg(long)]
@@ -53,6 +53,23 @@ pub struct DemoArgs {
     #[command(flatten)]
     pub water: crate::water::WaterArgs,
 }
+
+/// `--hold-s`: a finite number of vehicle seconds up to an hour (NaN or a negative one left
+/// the hold out of the report with exit 0; inf never ended).
+fn parse_hold_s(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected seconds, got {s:?}"))?;
+    if (0.0..=MAX_HOLD_S).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("must be within 0..={MAX_HOLD_S} s, got {v}"))
+    }
+}
+
+/// Longest `--hold-s`, vehicle s.
+const MAX_HOLD_S: f64 = 3600.0;
 
 fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))

@@ -538,7 +538,11 @@ impl Session {
         }
         match self.stepper.as_mut() {
             Some(stepper) => {
-                if let Err(e) = stepper.advance(thruster_sim::stepper::STEP_SAMPLES) {
+                // A daemon that died mid-step (a bad configuration, an abort) is told at once,
+                // not after the step's two-minute limit.
+                let (daemon, sim) = (&mut self.daemon, &mut self.sim);
+                let alive = || !interrupted() && daemon.alive() && sim.alive();
+                if let Err(e) = stepper.advance_while(thruster_sim::stepper::STEP_SAMPLES, alive) {
                     self.check_alive("the next step of the simulator")?;
                     return Err(anyhow::Error::new(e)
                         .context(self.timeout_error("the next step of the simulator")));

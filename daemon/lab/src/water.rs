@@ -34,8 +34,24 @@ pub struct WaterArgs {
     #[arg(long, value_name = "FILE.toml")]
     pub water_file: Option<PathBuf>,
     /// A tether pulling this many newtons aft at the stern, varying by 30 % over 20 s.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = parse_tether, allow_hyphen_values = true)]
     pub tether: Option<f64>,
+}
+
+/// Most a `--tether` may pull, N.
+const MAX_TETHER_N: f64 = 1000.0;
+
+/// `--tether`: checked where it is given (exit 2), as the other flags.
+fn parse_tether(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected newtons, got {s:?}"))?;
+    if (0.0..=MAX_TETHER_N).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("must be within 0..={MAX_TETHER_N} N, got {v}"))
+    }
 }
 
 fn parse_xyz(s: &str) -> Result<[f64; 3], String> {
@@ -67,9 +83,10 @@ impl WaterArgs {
             None => self.water.disturbance(),
         };
         if let Some(pull) = self.tether {
+            // Also for runs built in code, which no flag parser saw.
             anyhow::ensure!(
-                pull.is_finite() && (0.0..=1000.0).contains(&pull),
-                "--tether must be within 0..=1000 N, got {pull}"
+                (0.0..=MAX_TETHER_N).contains(&pull),
+                "--tether must be within 0..={MAX_TETHER_N} N, got {pull}"
             );
             d.tether = Some(TetherConfig {
                 attach_m: [-0.3, 0.0, 0.0],

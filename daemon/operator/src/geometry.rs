@@ -1,9 +1,10 @@
 //! Declared thruster geometry from a vehicle file (the config/vehicles/*.toml format).
 //!
-//! The simulator owns that format and denies unknown keys; we read only what a
-//! `ReconfigEvent` needs and ignore everything else, so a richer vehicle file (names,
-//! thrust curves, hydrodynamics) still works here. Two conversions make the file's
-//! numbers mean what the protocol says:
+//! The simulator owns that format: a file is first checked by its parser (unknown keys,
+//! ranges, file:line:col), so a typo such as `reversd = true`, which would announce a wrong
+//! thrust sign to a running daemon, is refused instead of ignored. Then we read only what a
+//! `ReconfigEvent` needs. Two conversions make the file's numbers mean what the protocol
+//! says:
 //! - positions in the file are from the centre of origin (CO); the protocol measures from
 //!   the centre of mass, so the file's `[body] cg_m` is subtracted;
 //! - a `reversed` (left-handed) thruster pushes against its `direction` for a positive
@@ -39,7 +40,8 @@ impl Geometry {
     }
 }
 
-/// Deliberately without `deny_unknown_fields`: see the module docs.
+/// Without `deny_unknown_fields`: the simulator's parser has refused unknown keys already
+/// (`checked_text`); this reads the few the protocol needs.
 #[derive(Deserialize)]
 struct VehicleFile {
     #[serde(default)]
@@ -75,18 +77,27 @@ struct ThrusterKeys {
     reversed: bool,
 }
 
-/// Reads and checks the geometry in `path`; errors name the file and the thruster.
-pub fn load(path: &Path) -> anyhow::Result<Geometry> {
+/// The text of the vehicle file at `path`, once the simulator's parser, which owns the
+/// format, has accepted it (every key known, every value in range; its errors say
+/// file:line:col and the key).
+fn checked_text(path: &Path) -> anyhow::Result<String> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    thruster_sim::Vehicle::from_toml_str(&text, &path.display().to_string())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    Ok(text)
+}
+
+/// Reads and checks the geometry in `path`; errors name the file and the thruster.
+pub fn load(path: &Path) -> anyhow::Result<Geometry> {
+    let text = checked_text(path)?;
     parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
 /// The thrusters' names in `path`, in the protocol's order, after the same checks as [`load`]:
 /// the file's `name`, or `thruster i` where it has none.
 pub fn load_names(path: &Path) -> anyhow::Result<Vec<String>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+    let text = checked_text(path)?;
     parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let file: VehicleFile =
         toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
@@ -219,6 +230,22 @@ reversed = true
         std::fs::write(&path, "[[thruster]]\nposition_m = 3\n").unwrap();
         let e = load(&path).unwrap_err().to_string();
         assert!(e.starts_with(&path.display().to_string()), "{e}");
+        // A typo in a key is refused where it is, not ignored (it would announce a thruster
+        // pushing the wrong way, or the centre of mass in the wrong place).
+        for (typo, key, line) in [
+            ("reversd = true\n", "reversd", 5),
+            ("[body]\ncg = [0, 0, 0.5]\n", "cg", 6),
+        ] {
+            let text = format!(
+                "[[thruster]]\nname = \"a\"\nposition_m = [0, 0, 0]\ndirection = [1, 0, 0]\n{typo}"
+            );
+            std::fs::write(&path, text).unwrap();
+            let e = load(&path).unwrap_err().to_string();
+            assert!(e.starts_with(&format!("{}:{line}:", path.display())), "{e}");
+            assert!(e.contains(&format!("unknown field `{key}`")), "{e}");
+            let e = load_names(&path).unwrap_err().to_string();
+            assert!(e.contains(&format!("unknown field `{key}`")), "{e}");
+        }
     }
 
     /// Every shipped vehicle file reads the same here as in the simulator that owns the

@@ -180,3 +180,27 @@ fn bad_input_exits_2_before_touching_ipc() {
     // Rejected before any node was created: not even a directory.
     assert_eq!(namespace_files(&guard).unwrap(), Vec::<PathBuf>::new());
 }
+
+/// The demo's numbers are checked before it starts anything (it runs its own daemon on a
+/// private namespace, so no --namespace here). NaN or a negative `--hold-s` left the hold
+/// out of the report with exit 0, inf never ended, and "-5" was taken for a flag.
+#[test]
+fn the_demos_numbers_are_refused_with_their_range() {
+    for (args, message) in [
+        (["--hold-s", "nan"], "must be within 0..=3600 s, got NaN"),
+        (["--hold-s", "-1"], "must be within 0..=3600 s, got -1"),
+        (["--hold-s", "inf"], "must be within 0..=3600 s, got inf"),
+        (["--tether", "-5"], "must be within 0..=1000 N, got -5"),
+        (["--tether", "nan"], "must be within 0..=1000 N, got NaN"),
+    ] {
+        let started = Instant::now();
+        let out = Command::new(env!("CARGO_BIN_EXE_thrusterctl"))
+            .arg("demo")
+            .args(args)
+            .output()
+            .expect("thrusterctl runs");
+        assert!(started.elapsed() < QUICK, "{args:?} ran");
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains(message), "{args:?}: {}", stderr(&out));
+    }
+}

@@ -7,6 +7,9 @@ use thruster_protocol::validate::limits::MAX_POSITION_M;
 use super::dof::Dof;
 use super::excitation::Excitation;
 
+/// Most quiet samples `baseline_samples` may ask for: 10 s at 1 kHz.
+pub const MAX_BASELINE_SAMPLES: usize = 10_000;
+
 /// Which estimator produces the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -165,7 +168,8 @@ pub struct EstimatorConfig {
     /// (default 2). Why: at 1 kHz the learned lag scatters up to 8 % long (aligned, seed 6:
     /// 0.1075 s of 0.1, sd 0.027), which no bias explains.
     pub lag_check_z: f64,
-    /// Quiet samples just before each pulse that anchor its intercept (default 20).
+    /// Quiet samples just before each pulse that anchor its intercept (default 20, at most
+    /// [`MAX_BASELINE_SAMPLES`]).
     pub baseline_samples: usize,
     /// Remove a per-pulse linear drift as well as the intercept (default false). Meant to let
     /// pauses be short while the vehicle still swings back; measured on AMOUR-5 at the paper's
@@ -625,11 +629,12 @@ impl EstimatorConfig {
                 self.imu_position_tolerance_m,
                 Range::closed(0.0, MAX_POSITION_M),
             ),
-            // Counted like the others so the array stays one list; always in range.
+            // At most 10 s of quiet at 1 kHz: the window is allocated when a run starts, and
+            // an unbounded count (1e11 passed the check) aborted the daemon there.
             (
                 "baseline_samples",
                 self.baseline_samples as f64,
-                Range::at_least(0.0),
+                Range::closed(0.0, MAX_BASELINE_SAMPLES as f64),
             ),
         ]
     }
@@ -693,5 +698,10 @@ mod tests {
             e.to_string(),
             "estimator.initial_power: must be in (0, 1], got 1.5"
         );
+        // A count allocated when a run starts: refused here, not as an abort there.
+        let c: EstimatorConfig = toml::from_str("baseline_samples = 100000000000").unwrap();
+        let e = c.validate().unwrap_err();
+        assert_eq!(e.key, "baseline_samples");
+        assert!(e.to_string().contains("[0, 10000]"), "{e}");
     }
 }
