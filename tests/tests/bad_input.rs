@@ -759,6 +759,25 @@ fn bad_config_files_are_refused_with_file_line_and_key() {
             }
         }
     }
+    // The command line's overrides pass the same ranges as the file's keys (a spin of
+    // u64::MAX us started, a lockstep wait of 0 was clamped without a word).
+    for (flags, expect) in [
+        (
+            ["--spin-us", "18446744073709551615"],
+            "command line: runtime.spin_us: must be in [0, 1000000], got 18446744073709551615",
+        ),
+        (
+            ["--lockstep-wait-ms", "0"],
+            "command line: runtime.lockstep_wait_ms: must be in [1, 600000], got 0",
+        ),
+    ] {
+        let mut daemon = world.daemon(&flags);
+        let status = daemon
+            .wait_timeout(Duration::from_secs(10))
+            .unwrap_or_else(|| panic!("{flags:?}: the daemon runs"));
+        assert_eq!(status.code(), Some(2), "{flags:?}\n{}", daemon.log_text());
+        assert!(daemon.log_text().contains(expect), "{}", daemon.log_text());
+    }
     world.assert_nothing_left();
 }
 

@@ -210,6 +210,9 @@ impl DaemonConfig {
     /// directory that is not a directory, a pulse limit too short for the thruster count
     /// (which `--thrusters` may change after the file is read). `text` is the file's, to locate the key.
     pub fn check_runnable(&self, text: &str, origin: &str) -> Result<(), ConfigError> {
+        // Every range again, with the command line applied: `thrusterd run --spin-us` and
+        // the like set keys the file's check has already passed (u64::MAX started).
+        self.validate(text, origin)?;
         let root = self
             .ipc
             .root
