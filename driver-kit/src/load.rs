@@ -11,11 +11,12 @@ use serde::de::DeserializeOwned;
 #[derive(Debug, thiserror::Error)]
 pub enum LoadError {
     /// The file could not be read.
-    #[error("{}: cannot read: {source}", path.display())]
+    // The OS error is in the message and not a `source`: a chain printed whole ("{:#}", as
+    // every binary prints its error) said it twice.
+    #[error("{}: cannot read: {error}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The text is not valid TOML or does not match the expected structure (unknown key, wrong
     /// type, missing field). `line` and `column` are 1-based; 0 when toml gave no position.
@@ -157,10 +158,22 @@ impl LoadError {
 
     /// Any other unusable value, located the same way: `file:line:col: key: reason`.
     pub fn value(origin: &str, text: &str, key: &str, reason: impl Into<String>) -> Self {
+        Self::value_shown(origin, text, key, key, reason)
+    }
+
+    /// As [`LoadError::value`], but the message shows `shown` for the key, e.g.
+    /// `thruster[2] ("L").forward_max_n` for the value located by `thruster[2].forward_max_n`.
+    pub fn value_shown(
+        origin: &str,
+        text: &str,
+        key: &str,
+        shown: impl Into<String>,
+        reason: impl Into<String>,
+    ) -> Self {
         LoadError::Value {
             origin: origin.to_string(),
             at: At(locate(text, key)),
-            key: key.to_string(),
+            key: shown.into(),
             reason: reason.into(),
         }
     }
@@ -177,38 +190,140 @@ impl LoadError {
 
 /// Reads a whole file as UTF-8 text.
 pub fn read_text(path: &Path) -> Result<String, LoadError> {
-    std::fs::read_to_string(path).map_err(|source| LoadError::Io {
+    std::fs::read_to_string(path).map_err(|error| LoadError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 
-/// Parses `text` into `T`; `origin` (usually the file path) prefixes every error.
+/// Parses `text` into `T`; `origin` (usually the file path) prefixes every error. An error
+/// about a value names its key when serde's message does not (a wrong type, a range check
+/// inside deserialisation): `file:line:col: sensors.rate_hz: invalid type: string "fast",
+/// expected f64`.
 pub fn parse_toml<T: DeserializeOwned>(text: &str, origin: &str) -> Result<T, LoadError> {
     toml::from_str(text).map_err(|e| {
         let (line, column) = e
             .span()
             .map(|span| line_column(text, span.start))
             .unwrap_or((0, 0));
+        // Some syntax errors carry their reason only in the rendered form (the last line,
+        // under the caret), not in `message()`.
+        let message = match e.message().trim() {
+            "" => e
+                .to_string()
+                .lines()
+                .rev()
+                .map(str::trim)
+                .find(|l| !l.is_empty() && !l.ends_with('|') && !l.contains('^'))
+                .unwrap_or("invalid TOML")
+                .to_string(),
+            m => m.to_string(),
+        };
+        let key = e.span().and_then(|span| key_at(text, span.start));
         LoadError::Parse {
             origin: origin.to_string(),
             line,
             column,
-            // Some syntax errors carry their reason only in the rendered form (the last
-            // line, under the caret), not in `message()`.
-            message: match e.message().trim() {
-                "" => e
-                    .to_string()
-                    .lines()
-                    .rev()
-                    .map(str::trim)
-                    .find(|l| !l.is_empty() && !l.ends_with('|') && !l.contains('^'))
-                    .unwrap_or("invalid TOML")
-                    .to_string(),
-                m => m.to_string(),
+            message: match key {
+                Some(key) if !names(&message, &key) => format!("{key}: {message}"),
+                _ => message,
             },
         }
     })
+}
+
+/// Whether `message` already names `key`'s last part as a word (`unknown field `spinn_us``,
+/// `rate_hz: ...`), so the key is not repeated in front of it.
+fn names(message: &str, key: &str) -> bool {
+    let leaf = key.rsplit('.').next().unwrap_or(key);
+    let leaf = leaf.split('[').next().unwrap_or(leaf);
+    if leaf.is_empty() {
+        return true;
+    }
+    let word = |c: char| c.is_alphanumeric() || c == '_' || c == '-';
+    message.match_indices(leaf).any(|(i, _)| {
+        let before = message[..i].chars().next_back();
+        let after = message[i + leaf.len()..].chars().next();
+        !before.is_some_and(word) && !after.is_some_and(word)
+    })
+}
+
+/// The key path (`lockstep.timeout_ms`, `thruster[1].position_m[2]`) of the innermost key or
+/// value of `text` whose text contains byte `offset`; None when `text` is not valid TOML or
+/// nothing there contains it.
+pub fn key_at(text: &str, offset: usize) -> Option<String> {
+    let doc = toml_edit::ImDocument::parse(text).ok()?;
+    let mut found = None;
+    find_in_table(doc.as_table(), "", offset, &mut found);
+    found
+}
+
+fn contains(span: Option<std::ops::Range<usize>>, offset: usize) -> bool {
+    span.is_some_and(|s| s.contains(&offset))
+}
+
+fn join(path: &str, key: &str) -> String {
+    if path.is_empty() {
+        key.to_string()
+    } else {
+        format!("{path}.{key}")
+    }
+}
+
+// Parents are visited before their children, so the innermost match is the last one kept.
+fn find_in_table(table: &toml_edit::Table, path: &str, offset: usize, found: &mut Option<String>) {
+    for (name, item) in table.iter() {
+        let path = join(path, name);
+        if contains(table.key(name).and_then(toml_edit::Key::span), offset) {
+            *found = Some(path.clone());
+        }
+        find_in_item(item, &path, offset, found);
+    }
+}
+
+fn find_in_item(item: &toml_edit::Item, path: &str, offset: usize, found: &mut Option<String>) {
+    match item {
+        toml_edit::Item::Value(v) => find_in_value(v, path, offset, found),
+        toml_edit::Item::Table(t) => {
+            if contains(t.span(), offset) {
+                *found = Some(path.to_string());
+            }
+            find_in_table(t, path, offset, found);
+        }
+        toml_edit::Item::ArrayOfTables(a) => {
+            for (i, t) in a.iter().enumerate() {
+                let path = format!("{path}[{i}]");
+                if contains(t.span(), offset) {
+                    *found = Some(path.clone());
+                }
+                find_in_table(t, &path, offset, found);
+            }
+        }
+        toml_edit::Item::None => {}
+    }
+}
+
+fn find_in_value(value: &toml_edit::Value, path: &str, offset: usize, found: &mut Option<String>) {
+    if contains(value.span(), offset) {
+        *found = Some(path.to_string());
+    }
+    match value {
+        toml_edit::Value::Array(a) => {
+            for (i, v) in a.iter().enumerate() {
+                find_in_value(v, &format!("{path}[{i}]"), offset, found);
+            }
+        }
+        toml_edit::Value::InlineTable(t) => {
+            for (name, v) in t.iter() {
+                let path = join(path, name);
+                if contains(t.key(name).and_then(toml_edit::Key::span), offset) {
+                    *found = Some(path.clone());
+                }
+                find_in_value(v, &path, offset, found);
+            }
+        }
+        _ => {}
+    }
 }
 
 /// Line and column of the value of `key` (dotted path, `[i]` for an array element or a
@@ -329,6 +444,85 @@ mod tests {
         assert!(
             !Range::at_least(0.0).contains(f64::NAN)
                 && !Range::at_least(0.0).contains(f64::INFINITY)
+        );
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Nested {
+        #[serde(default)]
+        lockstep: Option<Lockstep>,
+        #[serde(default)]
+        thruster: Vec<Small>,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Lockstep {
+        #[serde(default, deserialize_with = "positive")]
+        timeout_ms: u64,
+        #[serde(default)]
+        pace: f64,
+    }
+
+    fn positive<'de, D: serde::Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+        let v = <u64 as serde::Deserialize>::deserialize(d)?;
+        if v > 0 {
+            Ok(v)
+        } else {
+            Err(serde::de::Error::custom(format!(
+                "must be in [1, 600000] ms, got {v}"
+            )))
+        }
+    }
+
+    #[test]
+    fn errors_about_a_value_name_its_key() {
+        let parse = |text: &str| {
+            parse_toml::<Nested>(text, "s.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        // A range check inside deserialisation, shared by several keys, knows no key name.
+        assert_eq!(
+            parse("[lockstep]\ntimeout_ms = 0\n"),
+            "s.toml:2:14: lockstep.timeout_ms: must be in [1, 600000] ms, got 0"
+        );
+        // A wrong type.
+        assert_eq!(
+            parse("[lockstep]\npace = \"fast\"\n"),
+            "s.toml:2:8: lockstep.pace: invalid type: string \"fast\", expected f64"
+        );
+        // In a table of an array of tables, and in an inline table.
+        assert_eq!(
+            parse("[[thruster]]\na = 1.0\n[[thruster]]\na = true\n"),
+            "s.toml:4:5: thruster[1].a: invalid type: boolean `true`, expected f64"
+        );
+        assert_eq!(
+            parse("lockstep = { pace = 1.0, timeout_ms = -1 }\n"),
+            "s.toml:1:39: lockstep.timeout_ms: invalid value: integer `-1`, expected u64"
+        );
+        // A message that names the key already is left as it is.
+        let e = parse("[lockstep]\ntimeout_ms = 3\nspinn_us = 3\n");
+        assert!(e.starts_with("s.toml:3:1: unknown field `spinn_us`"), "{e}");
+        assert!(names("unknown field `pace`, expected", "lockstep.pace"));
+        assert!(!names("space", "lockstep.pace"));
+        assert_eq!(key_at("a = [1, 2]\n", 8), Some("a[1]".to_string()));
+        assert_eq!(key_at("a = [1, 2\n", 8), None);
+    }
+
+    #[test]
+    fn a_file_that_cannot_be_read_says_why_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = read_text(&dir.path().join("nope.toml")).unwrap_err();
+        // Not also a `source`: "{:#}" (anyhow, every binary) printed the OS error twice.
+        assert!(std::error::Error::source(&e).is_none(), "{e:?}");
+        let msg = e.to_string();
+        assert!(
+            msg.ends_with("nope.toml: cannot read: No such file or directory (os error 2)"),
+            "{msg}"
         );
     }
 

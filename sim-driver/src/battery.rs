@@ -14,7 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::load::LoadError;
+use crate::load::{number, LoadError};
 use thruster_driver_kit::load::Range;
 
 /// A generic LiPo/Li-ion cell's open-circuit voltage at state of charge 0, 0.1, ..., 1 (V):
@@ -94,7 +94,7 @@ impl BatterySpec {
                     text,
                     &format!("battery.{key}"),
                     range,
-                    v,
+                    number(v),
                 ))
             }
         };

@@ -4,7 +4,17 @@
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
-use crate::load::{check_finite, LoadError};
+use thruster_protocol::validate::limits::{MAX_DVL_SPEED, MAX_POSITION_M};
+
+use crate::load::{symmetric, Checker, LoadError, Range};
+
+/// Fastest water current per axis, m/s: the fastest tidal races. A vehicle drifting with it
+/// stays within the DVL's range (the protocol's `MAX_DVL_SPEED`, 10 m/s).
+pub const MAX_CURRENT_MPS: f64 = MAX_DVL_SPEED / 2.0;
+
+/// Largest wave force or moment amplitude and tether pull per axis, N or N m (about a
+/// tonne-force; the lab's strongest tether is 1000 N, its rough swell 20 N).
+pub const MAX_FORCING: f64 = 1e4;
 
 /// One sinusoidal forcing component: `amplitude * sin(2 pi f t + phase)`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -123,31 +133,39 @@ impl DisturbanceConfig {
 
     /// Checks ranges; `origin` names the source in errors.
     pub fn validate(&self, origin: &str) -> Result<(), LoadError> {
-        check_finite(origin, "disturbance.current_ned_mps", &self.current_ned_mps)?;
+        self.check(&Checker::new(origin, ""), "")
+    }
+
+    /// Checks ranges, locating a bad value in `c.text`; `prefix` is the path of the table
+    /// holding `[disturbance]` (`"sim."` in thruster-sim's config file). The bounds: a
+    /// current of at most [`MAX_CURRENT_MPS`] per axis, forces and moments of at most
+    /// [`MAX_FORCING`] (N, N m), periods of 0.1 s (a wave) to a day (a tether), attachment
+    /// within the protocol's `MAX_POSITION_M`.
+    pub(crate) fn check(&self, c: &Checker, prefix: &str) -> Result<(), LoadError> {
+        let key = |k: &str| format!("{prefix}disturbance.{k}");
+        let forcing = symmetric(MAX_FORCING);
+        c.each(
+            &key("current_ned_mps"),
+            &self.current_ned_mps,
+            symmetric(MAX_CURRENT_MPS),
+        )?;
         for (i, w) in self.waves.iter().enumerate() {
-            let key = format!("disturbance.wave[{i}]");
-            if !(w.frequency_hz.is_finite() && w.frequency_hz > 0.0) {
-                return Err(LoadError::invalid(
-                    origin,
-                    format!("{key}.frequency_hz"),
-                    "must be > 0",
-                ));
-            }
-            check_finite(origin, &format!("{key}.phase_rad"), &[w.phase_rad])?;
-            check_finite(origin, &format!("{key}.force_ned_n"), &w.force_ned_n)?;
-            check_finite(origin, &format!("{key}.torque_body_nm"), &w.torque_body_nm)?;
+            let key = |k: &str| key(&format!("wave[{i}].{k}"));
+            c.range(
+                &key("frequency_hz"),
+                w.frequency_hz,
+                Range::above_to(0.0, 10.0),
+            )?;
+            c.range(&key("phase_rad"), w.phase_rad, symmetric(1e3))?;
+            c.each(&key("force_ned_n"), &w.force_ned_n, forcing)?;
+            c.each(&key("torque_body_nm"), &w.torque_body_nm, forcing)?;
         }
         if let Some(t) = &self.tether {
-            check_finite(origin, "disturbance.tether.attach_m", &t.attach_m)?;
-            check_finite(origin, "disturbance.tether.pull_ned_n", &t.pull_ned_n)?;
-            check_finite(origin, "disturbance.tether.vary_ned_n", &t.vary_ned_n)?;
-            if !(t.period_s.is_finite() && t.period_s > 0.0) {
-                return Err(LoadError::invalid(
-                    origin,
-                    "disturbance.tether.period_s",
-                    "must be > 0",
-                ));
-            }
+            let key = |k: &str| key(&format!("tether.{k}"));
+            c.each(&key("attach_m"), &t.attach_m, symmetric(MAX_POSITION_M))?;
+            c.each(&key("pull_ned_n"), &t.pull_ned_n, forcing)?;
+            c.each(&key("vary_ned_n"), &t.vary_ned_n, forcing)?;
+            c.range(&key("period_s"), t.period_s, Range::closed(0.1, 86_400.0))?;
         }
         Ok(())
     }

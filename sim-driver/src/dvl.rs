@@ -7,7 +7,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
-use crate::load::LoadError;
+use thruster_protocol::validate::limits::MAX_DVL_SPEED;
+
+use crate::load::{Checker, LoadError, Range};
 
 /// DVL settings (`[sensors.dvl]`); absent: the vehicle has no DVL.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -30,21 +32,22 @@ impl Default for DvlConfig {
 
 impl DvlConfig {
     pub fn validate(&self, origin: &str) -> Result<(), LoadError> {
-        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 50.0) {
-            return Err(LoadError::invalid(
-                origin,
-                "dvl.rate_hz",
-                format!("must be in (0, 50], got {}", self.rate_hz),
-            ));
-        }
-        if !(self.std_mps.is_finite() && self.std_mps >= 0.0) {
-            return Err(LoadError::invalid(
-                origin,
-                "dvl.std_mps",
-                format!("must be >= 0, got {}", self.std_mps),
-            ));
-        }
-        Ok(())
+        self.check(&Checker::new(origin, ""), "")
+    }
+
+    /// Checks ranges, locating a bad value in `c.text`; `prefix` is the path of the table
+    /// holding `[dvl]` (`"sensors."`). Noise within the protocol's `MAX_DVL_SPEED`.
+    pub(crate) fn check(&self, c: &Checker, prefix: &str) -> Result<(), LoadError> {
+        c.range(
+            &format!("{prefix}dvl.rate_hz"),
+            self.rate_hz,
+            Range::above_to(0.0, 50.0),
+        )?;
+        c.range(
+            &format!("{prefix}dvl.std_mps"),
+            self.std_mps,
+            Range::closed(0.0, MAX_DVL_SPEED),
+        )
     }
 }
 

@@ -21,11 +21,11 @@ pub const HULL_HALF_EXTENTS_M: [f64; 3] = [0.2285, 0.169, 0.127];
 /// placed and oriented at random from `seed`. The same seed always gives the same vehicle.
 pub fn random_vehicle(n: usize, seed: u64) -> Result<Vehicle, LoadError> {
     let origin = "random vehicle";
-    if n > MAX_THRUSTERS {
+    if !(1..=MAX_THRUSTERS).contains(&n) {
         return Err(LoadError::invalid(
             origin,
             "n",
-            format!("{n} thrusters, at most {MAX_THRUSTERS}"),
+            format!("{n} thrusters: must be in [1, {MAX_THRUSTERS}]"),
         ));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -111,5 +111,6 @@ mod tests {
             assert!(on_face, "{:?}", t.position_m);
         }
         assert!(random_vehicle(17, 0).is_err());
+        assert!(random_vehicle(0, 0).is_err());
     }
 }

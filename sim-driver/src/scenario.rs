@@ -26,7 +26,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::load::{check_finite, parse_toml, read_text, LoadError};
+use thruster_protocol::validate::limits::MAX_POSITION_M;
+
+use crate::load::{parse_toml, read_text, symmetric, Checker, LoadError, Range};
 use crate::vehicle::ThrusterSpec;
 
 /// What happens to the vehicle.
@@ -56,7 +58,9 @@ pub enum Action {
     Add { spec: ThrusterSpec },
     /// The thruster stops producing thrust (it stays in the command vector).
     Kill { thruster: String },
-    /// Forward and reverse thrust multiplied by `factor` (> 0).
+    /// Forward and reverse thrust multiplied by `factor`, in (0, 10]; the thrust that results
+    /// must still be valid for the vehicle (checked when applied, and by the driver's dry run
+    /// before it starts).
     Weaken { thruster: String, factor: f64 },
     /// Thrust falls linearly to `to` (0 < to <= 1) times its value at `t_s`, reached `over_s`
     /// later. [`Scenario::new`] turns it into `weaken` steps; it must not be announced.
@@ -66,6 +70,9 @@ pub enum Action {
         over_s: f64,
     },
 }
+
+/// Latest event time, s (about 30 years of vehicle time).
+pub const MAX_EVENT_T_S: f64 = 1e9;
 
 /// Time between the `weaken` steps of a `degrade`, s: 10 steps a second is smooth for a
 /// controller and an estimator working over seconds.
@@ -86,60 +93,38 @@ impl Action {
         }
     }
 
-    fn validate(&mut self, origin: &str, key: &str) -> Result<(), LoadError> {
+    /// Checks the action on its own (whether it applies to the vehicle is the dry run's
+    /// question: `Simulator::apply` on a copy), locating a bad value in `c.text` by `key`.
+    fn check(&mut self, c: &Checker, key: &str) -> Result<(), LoadError> {
+        let key = |k: &str| format!("{key}.{k}");
+        let nonzero = |k: &str, v: &[f64; 3]| {
+            c.each(&key(k), v, symmetric(1e6))?;
+            if v.iter().map(|a| a * a).sum::<f64>() < 1e-12 {
+                return Err(c.error(&key(k), &key(k), "must not be zero"));
+            }
+            Ok(())
+        };
         match self {
             Action::Rotate {
                 axis, angle_deg, ..
             } => {
-                check_finite(origin, &format!("{key}.axis"), axis)?;
-                check_finite(origin, &format!("{key}.angle_deg"), &[*angle_deg])?;
-                if axis.iter().map(|a| a * a).sum::<f64>() < 1e-12 {
-                    return Err(LoadError::invalid(
-                        origin,
-                        format!("{key}.axis"),
-                        "must not be zero",
-                    ));
-                }
+                nonzero("axis", axis)?;
+                c.range(&key("angle_deg"), *angle_deg, symmetric(360.0))?;
             }
-            Action::SetDirection { direction, .. } => {
-                check_finite(origin, &format!("{key}.direction"), direction)?;
-                if direction.iter().map(|a| a * a).sum::<f64>() < 1e-12 {
-                    return Err(LoadError::invalid(
-                        origin,
-                        format!("{key}.direction"),
-                        "must not be zero",
-                    ));
-                }
-            }
+            Action::SetDirection { direction, .. } => nonzero("direction", direction)?,
             Action::Move { position_m, .. } => {
-                check_finite(origin, &format!("{key}.position_m"), position_m)?;
+                c.each(&key("position_m"), position_m, symmetric(MAX_POSITION_M))?;
             }
-            Action::Add { spec } => spec.validate(origin, &format!("{key}.spec"))?,
+            Action::Add { spec } => spec.check(c, &key("spec"))?,
             Action::Remove { .. } | Action::Kill { .. } => {}
             Action::Weaken { factor, .. } => {
-                if !(factor.is_finite() && *factor > 0.0) {
-                    return Err(LoadError::invalid(
-                        origin,
-                        format!("{key}.factor"),
-                        format!("must be > 0, got {factor}"),
-                    ));
-                }
+                // At most ten times stronger (a weakened thruster restored, and more); the
+                // thrust that results is checked against the vehicle when applied.
+                c.range(&key("factor"), *factor, Range::above_to(0.0, 10.0))?;
             }
             Action::Degrade { to, over_s, .. } => {
-                if !(to.is_finite() && *to > 0.0 && *to <= 1.0) {
-                    return Err(LoadError::invalid(
-                        origin,
-                        format!("{key}.to"),
-                        format!("must be in (0, 1], got {to}"),
-                    ));
-                }
-                if !(over_s.is_finite() && *over_s > 0.0 && *over_s <= 86_400.0) {
-                    return Err(LoadError::invalid(
-                        origin,
-                        format!("{key}.over_s"),
-                        format!("must be in (0, 86400] s, got {over_s}"),
-                    ));
-                }
+                c.range(&key("to"), *to, Range::above_to(0.0, 1.0))?;
+                c.range(&key("over_s"), *over_s, Range::above_to(0.0, 86_400.0))?;
             }
         }
         Ok(())
@@ -154,7 +139,7 @@ fn default_announce() -> bool {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Event {
-    /// Simulation time, s (>= 0).
+    /// Simulation time, s, in [0, 1e9].
     pub t_s: f64,
     /// Whether the driver tells the daemon (a reconfiguration event); false models an
     /// unannounced change (a bumped or failed thruster) the daemon must discover. Default true.
@@ -212,21 +197,25 @@ pub struct Scenario {
 
 impl Scenario {
     /// Validates and sorts `events` by time (stable: same-time events keep their order).
-    pub fn new(mut events: Vec<Event>, origin: &str) -> Result<Self, LoadError> {
+    pub fn new(events: Vec<Event>, origin: &str) -> Result<Self, LoadError> {
+        Scenario::checked(events, &Checker::new(origin, ""))
+    }
+
+    /// As [`Scenario::new`], locating a bad value in `c.text` (keys `event[i]` in file order).
+    fn checked(mut events: Vec<Event>, c: &Checker) -> Result<Self, LoadError> {
         for (i, e) in events.iter_mut().enumerate() {
             let key = format!("event[{i}]");
-            if !(e.t_s.is_finite() && e.t_s >= 0.0) {
-                return Err(LoadError::invalid(
-                    origin,
-                    format!("{key}.t_s"),
-                    format!("must be >= 0, got {}", e.t_s),
-                ));
-            }
-            e.action.validate(origin, &format!("{key}.action"))?;
+            c.range(
+                &format!("{key}.t_s"),
+                e.t_s,
+                Range::closed(0.0, MAX_EVENT_T_S),
+            )?;
+            e.action.check(c, &format!("{key}.action"))?;
             if e.announce && matches!(e.action, Action::Degrade { .. }) {
-                return Err(LoadError::invalid(
-                    origin,
-                    format!("{key}.announce"),
+                let key = format!("{key}.announce");
+                return Err(c.error(
+                    &key,
+                    &key,
                     "a degrade is gradual and never announced: set announce = false",
                 ));
             }
@@ -246,7 +235,7 @@ impl Scenario {
     /// Parses TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, LoadError> {
         let file: ScenarioFile = parse_toml(text, origin)?;
-        Scenario::new(file.events, origin)
+        Scenario::checked(file.events, &Checker::new(origin, text))
     }
 
     /// Events not handed out yet whose time is <= `t_ns`, in order; each is returned once.
@@ -345,6 +334,40 @@ action = { kind = "degrade", thruster = "L", to = 0.7, over_s = 60 }
             .unwrap_err()
             .to_string();
         assert!(err.contains("event[0].action.to"), "{err}");
+    }
+
+    #[test]
+    fn absurd_values_name_file_line_key_and_range() {
+        let err = |text: &str| {
+            Scenario::from_toml_str(text, "s.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        let event = |action: &str| format!("[[event]]\nt_s = 1.0\naction = {{ {action} }}\n");
+        assert_eq!(
+            err(&event(
+                "kind = \"weaken\", thruster = \"T\", factor = 1e300"
+            )),
+            "s.toml:3:54: event[0].action.factor: must be in (0, 10], got 1e300"
+        );
+        assert_eq!(
+            err(&event(
+                "kind = \"move\", thruster = \"T\", position_m = [0, 1e9, 0]"
+            )),
+            "s.toml:3:60: event[0].action.position_m[1]: must be in [-10, 10], got 1000000000"
+        );
+        assert_eq!(
+            err(&event(
+                "kind = \"add\", spec = { name = \"X\", position_m = [0, 0, 0], \
+                 direction = [0, 1, 0], forward_max_n = 1e300 }"
+            )),
+            "s.toml:3:110: event[0].action.spec (\"X\").forward_max_n: must be in (0, 10000], \
+             got 1e300"
+        );
+        assert_eq!(
+            err("[[event]]\nt_s = inf\naction = { kind = \"kill\", thruster = \"T\" }\n"),
+            "s.toml:2:7: event[0].t_s: must be in [0, 1000000000], got inf"
+        );
     }
 
     #[test]

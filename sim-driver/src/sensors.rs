@@ -12,7 +12,11 @@ use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 use thruster_protocol::ImuReading;
 
-use crate::load::{check_finite, LoadError};
+use thruster_protocol::validate::limits::{
+    MAX_ACCEL_M_S2, MAX_GYRO_RAD_S, MAX_MAG_UT, MAX_POSITION_M,
+};
+
+use crate::load::{symmetric, Checker, LoadError, Range};
 
 /// Standard gravity used to express the paper's accelerometer noise (0.05 g), m/s^2.
 pub const STANDARD_GRAVITY: f64 = 9.80665;
@@ -107,27 +111,35 @@ impl NoisePreset {
 }
 
 impl ImuNoise {
-    fn validate(&self, origin: &str) -> Result<(), LoadError> {
+    /// Each level within the full scale of its sensor in the protocol (a gyro's 50 rad/s,
+    /// an accelerometer's 200 m/s^2, a magnetometer's 5000 uT) and depth noise within 100 m.
+    fn check(&self, c: &Checker, prefix: &str) -> Result<(), LoadError> {
         let all = [
-            ("gyro_std_radps", self.gyro_std_radps),
-            ("accel_std_mps2", self.accel_std_mps2),
-            ("mag_std_ut", self.mag_std_ut),
-            ("depth_std_m", self.depth_std_m),
-            ("gyro_bias_walk", self.gyro_bias_walk),
-            ("accel_bias_walk", self.accel_bias_walk),
-            ("mag_bias_walk", self.mag_bias_walk),
-            ("gyro_bias_init_std", self.gyro_bias_init_std),
-            ("accel_bias_init_std", self.accel_bias_init_std),
-            ("mag_bias_init_std", self.mag_bias_init_std),
+            ("gyro_std_radps", self.gyro_std_radps, MAX_GYRO_RAD_S),
+            ("accel_std_mps2", self.accel_std_mps2, MAX_ACCEL_M_S2),
+            ("mag_std_ut", self.mag_std_ut, MAX_MAG_UT),
+            ("depth_std_m", self.depth_std_m, 100.0),
+            ("gyro_bias_walk", self.gyro_bias_walk, MAX_GYRO_RAD_S),
+            ("accel_bias_walk", self.accel_bias_walk, MAX_ACCEL_M_S2),
+            ("mag_bias_walk", self.mag_bias_walk, MAX_MAG_UT),
+            (
+                "gyro_bias_init_std",
+                self.gyro_bias_init_std,
+                MAX_GYRO_RAD_S,
+            ),
+            (
+                "accel_bias_init_std",
+                self.accel_bias_init_std,
+                MAX_ACCEL_M_S2,
+            ),
+            ("mag_bias_init_std", self.mag_bias_init_std, MAX_MAG_UT),
         ];
-        for (key, v) in all {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(LoadError::invalid(
-                    origin,
-                    format!("custom_noise.{key}"),
-                    format!("must be >= 0, got {v}"),
-                ));
-            }
+        for (key, v, max) in all {
+            c.range(
+                &format!("{prefix}custom_noise.{key}"),
+                v,
+                Range::closed(0.0, max),
+            )?;
         }
         Ok(())
     }
@@ -190,21 +202,34 @@ impl SensorConfig {
 
     /// Checks ranges; `origin` names the source in errors.
     pub fn validate(&self, origin: &str) -> Result<(), LoadError> {
+        self.check(&Checker::new(origin, ""), "")
+    }
+
+    /// Checks ranges, locating a bad value in `c.text`; `prefix` is the path of these keys
+    /// (`"sensors."` in thruster-sim's config file). The IMU sits within the protocol's
+    /// `MAX_POSITION_M` of the centre, the field within a magnetometer's full scale.
+    pub(crate) fn check(&self, c: &Checker, prefix: &str) -> Result<(), LoadError> {
         let (lo, hi) = RATE_RANGE_HZ;
-        if !(self.rate_hz.is_finite() && (lo..=hi).contains(&self.rate_hz)) {
-            return Err(LoadError::invalid(
-                origin,
-                "rate_hz",
-                format!("must be in [{lo}, {hi}] Hz, got {}", self.rate_hz),
-            ));
-        }
-        check_finite(origin, "lever_arm_m", &self.lever_arm_m)?;
-        check_finite(origin, "mag_field_ned_ut", &self.mag_field_ned_ut)?;
+        c.range(
+            &format!("{prefix}rate_hz"),
+            self.rate_hz,
+            Range::closed(lo, hi),
+        )?;
+        c.each(
+            &format!("{prefix}lever_arm_m"),
+            &self.lever_arm_m,
+            symmetric(MAX_POSITION_M),
+        )?;
+        c.each(
+            &format!("{prefix}mag_field_ned_ut"),
+            &self.mag_field_ned_ut,
+            symmetric(MAX_MAG_UT),
+        )?;
         if let Some(n) = &self.custom_noise {
-            n.validate(origin)?;
+            n.check(c, prefix)?;
         }
         if let Some(d) = &self.dvl {
-            d.validate(origin)?;
+            d.check(c, prefix)?;
         }
         Ok(())
     }

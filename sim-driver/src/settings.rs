@@ -13,7 +13,7 @@ use serde::{Deserialize, Deserializer};
 use thruster_protocol::services::DEFAULT_ROOT_BASE;
 
 use crate::cli::RunArgs;
-use crate::load::{parse_toml, read_text, LoadError};
+use crate::load::{parse_toml, read_text, Checker, LoadError};
 use crate::sensors::{ImuNoise, NoisePreset, SensorConfig, RATE_RANGE_HZ};
 use crate::sim::SimOptions;
 
@@ -310,8 +310,10 @@ impl Settings {
         } else {
             file.mode
         };
-        sensors.validate(&format!("{origin} [sensors]"))?;
-        file.sim.validate(&format!("{origin} [sim]"))?;
+        // Checked (and located) when the file was read; again here for what the command line
+        // changed and for a `FileConfig` made in code.
+        sensors.check(&Checker::new(origin, ""), "sensors.")?;
+        file.sim.check(&Checker::new(origin, ""), "sim.")?;
         Ok(Settings {
             namespace,
             vehicle,
@@ -359,10 +361,20 @@ impl Settings {
     }
 }
 
-/// Reads and parses a config file.
+/// Reads and parses a config file, and checks its `[sensors]` and `[sim]` (the simulator's
+/// own types, checked after parsing: errors name file, line, column and key).
 pub fn load_file(path: &Path) -> Result<FileConfig, LoadError> {
     let text = read_text(path)?;
-    parse_toml(&text, &path.display().to_string())
+    from_toml_str(&text, &path.display().to_string())
+}
+
+/// As [`load_file`], for the text of a file; `origin` names it in errors.
+pub fn from_toml_str(text: &str, origin: &str) -> Result<FileConfig, LoadError> {
+    let file: FileConfig = parse_toml(text, origin)?;
+    let c = Checker::new(origin, text);
+    file.sensors.to_sensor_config().check(&c, "sensors.")?;
+    file.sim.check(&c, "sim.")?;
+    Ok(file)
 }
 
 fn rebase(base_dir: Option<&Path>, p: PathBuf) -> PathBuf {
@@ -377,7 +389,7 @@ fn check_rate(rate: f64) -> Result<f64, String> {
     if rate.is_finite() && (lo..=hi).contains(&rate) {
         Ok(rate)
     } else {
-        Err(format!("rate must be in [{lo}, {hi}] Hz, got {rate}"))
+        Err(format!("must be in [{lo}, {hi}] Hz, got {rate}"))
     }
 }
 
@@ -386,18 +398,20 @@ fn check_duration(d: f64) -> Result<f64, String> {
     if d.is_finite() && d > 0.0 && d < 1e10 {
         Ok(d)
     } else {
-        Err(format!("duration must be > 0 s (and < 1e10), got {d}"))
+        Err(format!("must be in (0, 1e10) s, got {d}"))
     }
 }
 
+// The range checks inside deserialisation say what is wrong; `parse_toml` puts the key of the
+// value in front (`s.toml:2:14: lockstep.timeout_ms: must be in ...`).
 fn de_rate_hz<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    check_rate(f64::deserialize(d)?).map_err(|e| serde::de::Error::custom(format!("rate_hz: {e}")))
+    check_rate(f64::deserialize(d)?).map_err(serde::de::Error::custom)
 }
 
 fn de_duration_s<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
     check_duration(f64::deserialize(d)?)
         .map(Some)
-        .map_err(|e| serde::de::Error::custom(format!("duration_s: {e}")))
+        .map_err(serde::de::Error::custom)
 }
 
 fn de_ms<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
@@ -421,7 +435,7 @@ fn check_pace(v: f64) -> Result<f64, String> {
     if v == 0.0 || (1.0..=100_000.0).contains(&v) {
         Ok(v)
     } else {
-        Err(format!("pace must be 0 or in [1, 100000], got {v}"))
+        Err(format!("must be 0 or in [1, 100000], got {v}"))
     }
 }
 
@@ -431,7 +445,7 @@ fn de_spin_us<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
         Ok(v)
     } else {
         Err(serde::de::Error::custom(format!(
-            "spin_us must be in [0, 10000] us, got {v}"
+            "must be in [0, 10000] us, got {v}"
         )))
     }
 }
@@ -582,6 +596,61 @@ mod tests {
     }
 
     #[test]
+    fn bad_values_name_file_line_key_and_range() {
+        let err = |text: &str| from_toml_str(text, "s.toml").unwrap_err().to_string();
+        for (text, expected) in [
+            // Once loaded, then "the simulation diverged at t = 0.005 s".
+            (
+                "[sim.initial]\nangular_radps = [1e6, 0, 0]\n",
+                "s.toml:2:18: sim.initial.angular_radps[0]: must be in [-50, 50], got 1000000",
+            ),
+            (
+                "[sim.disturbance]\ncurrent_ned_mps = [1e6, 0, 0]\n",
+                "s.toml:2:20: sim.disturbance.current_ned_mps[0]: must be in [-5, 5], got 1000000",
+            ),
+            (
+                "[[sim.disturbance.wave]]\nfrequency_hz = 0\n",
+                "s.toml:2:16: sim.disturbance.wave[0].frequency_hz: must be in (0, 10], got 0",
+            ),
+            (
+                "[sim.initial]\nposition_ned_m = [0, 0, inf]\n",
+                "s.toml:2:25: sim.initial.position_ned_m[2]: must be in [-10, 11000], got inf",
+            ),
+            (
+                "[sensors]\nlever_arm_m = [0, 0, 20]\n",
+                "s.toml:2:22: sensors.lever_arm_m[2]: must be in [-10, 10], got 20",
+            ),
+            (
+                "[sensors.custom_noise]\ngyro_std_radps = inf\n",
+                "s.toml:2:18: sensors.custom_noise.gyro_std_radps: must be in [0, 50], got inf",
+            ),
+            (
+                "[sensors.dvl]\nstd_mps = -1\n",
+                "s.toml:2:11: sensors.dvl.std_mps: must be in [0, 10], got -1",
+            ),
+            // Range checks inside deserialisation, and wrong types, name the key too.
+            (
+                "[lockstep]\ntimeout_ms = 0\n",
+                "s.toml:2:14: lockstep.timeout_ms: must be in [1, 600000] ms, got 0",
+            ),
+            (
+                "[realtime]\nwatchdog_ms = 0\n",
+                "s.toml:2:15: realtime.watchdog_ms: must be in [1, 600000] ms, got 0",
+            ),
+            (
+                "[sensors]\nrate_hz = \"fast\"\n",
+                "s.toml:2:11: sensors.rate_hz: invalid type: string \"fast\", expected f64",
+            ),
+            (
+                "duration_s = -1\n",
+                "s.toml:1:14: duration_s: must be in (0, 1e10) s, got -1",
+            ),
+        ] {
+            assert_eq!(err(text), expected);
+        }
+    }
+
+    #[test]
     fn embedded_sim_options_are_checked() {
         let f = parse("[sim]\nintegration_rate_hz = 10\n").unwrap();
         let a = RunArgs {
@@ -592,9 +661,17 @@ mod tests {
         let err = Settings::merge(f, None, "sim.toml", &a)
             .unwrap_err()
             .to_string();
-        assert!(
-            err.contains("sim.toml [sim]") && err.contains("integration_rate_hz"),
-            "{err}"
+        assert_eq!(
+            err,
+            "sim.toml: sim.integration_rate_hz: must be in [1000, 1000000], got 10"
+        );
+        // Read from a file, the value is located too.
+        let err = from_toml_str("[sim]\nintegration_rate_hz = 10\n", "sim.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "sim.toml:2:23: sim.integration_rate_hz: must be in [1000, 1000000], got 10"
         );
         let err = parse("[sim.initial]\nposition_ned_m = [0, 0]\n")
             .unwrap_err()

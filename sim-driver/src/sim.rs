@@ -11,12 +11,18 @@ use crate::battery::Battery;
 use crate::disturbance::DisturbanceConfig;
 use crate::dynamics::{RigidBody, State};
 use crate::effectiveness::effectiveness_at;
-use crate::load::{check_finite, LoadError};
+use crate::load::{symmetric, Checker, LoadError, Range};
 use crate::scenario::Action;
 use crate::sensors::{Imu, SensorBiases, SensorConfig, SensorTruth};
 use crate::thruster::{Thruster, FIXED_SUPPLY_V};
 use crate::vehicle::{ThrusterSpec, Vehicle};
+use thruster_protocol::validate::limits::{
+    MAX_DEPTH_M, MAX_DVL_SPEED, MAX_GYRO_RAD_S, MIN_DEPTH_M,
+};
 use thruster_protocol::{ImuReading, MAX_THRUSTERS};
+
+/// Farthest start north or east of the origin, m (1000 km).
+pub const MAX_NORTH_EAST_M: f64 = 1e6;
 
 /// Errors of the simulator.
 #[derive(Debug, thiserror::Error)]
@@ -85,11 +91,35 @@ impl InitialState {
         }
     }
 
-    fn validate(&self, origin: &str) -> Result<(), LoadError> {
-        check_finite(origin, "initial.position_ned_m", &self.position_ned_m)?;
-        check_finite(origin, "initial.attitude_rpy_deg", &self.attitude_rpy_deg)?;
-        check_finite(origin, "initial.linear_mps", &self.linear_mps)?;
-        check_finite(origin, "initial.angular_radps", &self.angular_radps)
+    /// North and east within [`MAX_NORTH_EAST_M`], depth within the protocol's depth range,
+    /// angles within a turn, speeds within what the protocol's DVL (10 m/s) and gyro
+    /// (50 rad/s) can report.
+    fn check(&self, c: &Checker, prefix: &str) -> Result<(), LoadError> {
+        let key = |k: &str| format!("{prefix}initial.{k}");
+        let [n, e, d] = self.position_ned_m;
+        let position = key("position_ned_m");
+        c.range(&format!("{position}[0]"), n, symmetric(MAX_NORTH_EAST_M))?;
+        c.range(&format!("{position}[1]"), e, symmetric(MAX_NORTH_EAST_M))?;
+        c.range(
+            &format!("{position}[2]"),
+            d,
+            Range::closed(MIN_DEPTH_M, MAX_DEPTH_M),
+        )?;
+        c.each(
+            &key("attitude_rpy_deg"),
+            &self.attitude_rpy_deg,
+            symmetric(360.0),
+        )?;
+        c.each(
+            &key("linear_mps"),
+            &self.linear_mps,
+            symmetric(MAX_DVL_SPEED),
+        )?;
+        c.each(
+            &key("angular_radps"),
+            &self.angular_radps,
+            symmetric(MAX_GYRO_RAD_S),
+        )
     }
 }
 
@@ -97,7 +127,7 @@ impl InitialState {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimOptions {
-    /// Inner integration rate, Hz (>= 1000). Default 1000.
+    /// Inner integration rate, Hz, in [1000, 1e6]. Default 1000.
     pub integration_rate_hz: f64,
     /// Initial conditions.
     pub initial: InitialState,
@@ -118,18 +148,21 @@ impl Default for SimOptions {
 impl SimOptions {
     /// Checks ranges; `origin` names the source in errors.
     pub fn validate(&self, origin: &str) -> Result<(), LoadError> {
-        let r = self.integration_rate_hz;
+        self.check(&Checker::new(origin, ""), "")
+    }
+
+    /// Checks ranges, locating a bad value in `c.text`; `prefix` is the path of these keys
+    /// (`"sim."` in thruster-sim's config file).
+    pub(crate) fn check(&self, c: &Checker, prefix: &str) -> Result<(), LoadError> {
         // Below 1 kHz the 100 ms thruster lag and fast roll modes are resolved poorly; above
         // 1 MHz the ns clock would quantise the step noticeably.
-        if !(r.is_finite() && (1000.0..=1e6).contains(&r)) {
-            return Err(LoadError::invalid(
-                origin,
-                "integration_rate_hz",
-                format!("must be in [1000, 1e6] Hz, got {r}"),
-            ));
-        }
-        self.initial.validate(origin)?;
-        self.disturbance.validate(origin)
+        c.range(
+            &format!("{prefix}integration_rate_hz"),
+            self.integration_rate_hz,
+            Range::closed(1000.0, 1e6),
+        )?;
+        self.initial.check(c, prefix)?;
+        self.disturbance.check(c, prefix)
     }
 }
 
@@ -431,7 +464,11 @@ impl Simulator {
             }
             Action::Remove { thruster } => {
                 let i = find(thruster)?;
-                self.vehicle.thrusters.remove(i);
+                // The vehicle must keep a thruster (and its truth stay publishable).
+                let mut vehicle = self.vehicle.clone();
+                vehicle.thrusters.remove(i);
+                vehicle.validate(origin)?;
+                self.vehicle = vehicle;
                 self.thrusters.remove(i);
                 Change {
                     kind: ChangeKind::Removed,
@@ -448,7 +485,11 @@ impl Simulator {
                 }
                 let mut spec = spec.clone();
                 spec.validate(origin, "spec")?;
-                self.vehicle.thrusters.push(spec.clone());
+                let mut vehicle = self.vehicle.clone();
+                vehicle.thrusters.push(spec);
+                vehicle.validate(origin)?;
+                let spec = vehicle.thrusters[vehicle.thrusters.len() - 1].clone();
+                self.vehicle = vehicle;
                 self.thrusters.push(Thruster::new(spec));
                 Change {
                     kind: ChangeKind::Added,
@@ -460,15 +501,14 @@ impl Simulator {
         Ok(change)
     }
 
-    fn replace_spec(
-        &mut self,
-        i: usize,
-        mut spec: ThrusterSpec,
-        origin: &str,
-    ) -> Result<(), SimError> {
-        spec.validate(origin, &format!("thruster[{i}]"))?;
-        self.vehicle.thrusters[i] = spec.clone();
-        self.thrusters[i].set_spec(spec);
+    /// Replaces thruster `i` when the vehicle with it is still valid (every range, and what
+    /// is published about it publishable); otherwise changes nothing.
+    fn replace_spec(&mut self, i: usize, spec: ThrusterSpec, origin: &str) -> Result<(), SimError> {
+        let mut vehicle = self.vehicle.clone();
+        vehicle.thrusters[i] = spec;
+        vehicle.validate(origin)?;
+        self.thrusters[i].set_spec(vehicle.thrusters[i].clone());
+        self.vehicle = vehicle;
         Ok(())
     }
 

@@ -14,10 +14,15 @@ use nalgebra::{Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 // The largest thruster count a vehicle may have is the protocol's (the fixed capacity of its
 // messages), so every simulated vehicle can be driven by the daemon.
+use thruster_protocol::validate::limits::{MAX_EFFECTIVENESS, MAX_POSITION_M, MAX_SPIN_UP_S};
 use thruster_protocol::MAX_THRUSTERS;
+use thruster_table::ThrusterTable;
 
 use crate::battery::BatterySpec;
-use crate::load::{check_finite, parse_toml, read_text, LoadError};
+use crate::dynamics::RigidBody;
+use crate::effectiveness::effectiveness_at;
+use crate::load::{number, parse_toml, read_text, symmetric, Checker, LoadError, Range};
+use crate::thruster::FIXED_SUPPLY_V;
 
 /// Standard gravity, m/s^2 per kgf (thrust data sheets are in kgf).
 pub const KGF_N: f64 = 9.80665;
@@ -173,48 +178,45 @@ impl Body {
 
     /// Checks ranges; `origin` names the file in errors.
     pub fn validate(&self, origin: &str) -> Result<(), LoadError> {
-        let positive = |key: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(LoadError::invalid(
-                    origin,
-                    key,
-                    format!("must be > 0, got {v}"),
-                ))
-            }
-        };
-        let non_negative = |key: String, v: f64| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(LoadError::invalid(
-                    origin,
-                    key,
-                    format!("must be >= 0, got {v}"),
-                ))
-            }
-        };
-        positive("body.mass_kg", self.mass_kg)?;
-        positive("body.gravity_mps2", self.gravity_mps2)?;
-        for (i, v) in self.inertia_kgm2.iter().enumerate() {
-            positive(&format!("body.inertia_kgm2[{i}]"), *v)?;
-        }
-        non_negative("body.buoyancy_n".into(), self.buoyancy_n)?;
-        for (table, values) in [
-            ("added_mass", &self.added_mass),
-            ("linear_damping", &self.linear_damping),
-            ("quadratic_damping", &self.quadratic_damping),
+        self.check(&Checker::new(origin, ""))
+    }
+
+    /// Checks ranges, locating a bad value in `c.text`. They are wide enough for anything
+    /// from a toy to a work-class ROV (BlueROV2: 11.5 kg, 0.16 kg m^2; the Heavy's quadratic
+    /// sway damping 217) and keep absurd values out of the physics; at rest the accelerometer
+    /// reads `gravity_mps2`, within the protocol's 200 m/s^2, and `cg_m`, `cb_m` are within
+    /// its `MAX_POSITION_M` of the CO.
+    pub(crate) fn check(&self, c: &Checker) -> Result<(), LoadError> {
+        c.range("body.mass_kg", self.mass_kg, Range::closed(0.1, 1e4))?;
+        c.range(
+            "body.gravity_mps2",
+            self.gravity_mps2,
+            Range::closed(0.1, 100.0),
+        )?;
+        c.each(
+            "body.inertia_kgm2",
+            &self.inertia_kgm2,
+            Range::closed(1e-4, 1e4),
+        )?;
+        c.range("body.buoyancy_n", self.buoyancy_n, Range::closed(0.0, 1e6))?;
+        for (table, values, hi) in [
+            ("added_mass", &self.added_mass, 1e4),
+            ("linear_damping", &self.linear_damping, 1e5),
+            ("quadratic_damping", &self.quadratic_damping, 1e5),
         ] {
             for (dof, v) in values.named() {
-                non_negative(format!("body.{table}.{dof}"), v)?;
+                c.range(&format!("body.{table}.{dof}"), v, Range::closed(0.0, hi))?;
             }
         }
-        check_finite(origin, "body.cg_m", &self.cg_m)?;
-        check_finite(origin, "body.cb_m", &self.cb_m)?;
+        c.each("body.cg_m", &self.cg_m, symmetric(MAX_POSITION_M))?;
+        c.each("body.cb_m", &self.cb_m, symmetric(MAX_POSITION_M))?;
         Ok(())
     }
 }
+
+/// Largest `forward_max_n` / `reverse_max_n`, N (about a tonne-force; a T200 gives 51.5 N).
+/// What a thruster may really give is bounded by the body: see [`Vehicle::validate`].
+pub const MAX_THRUST_N: f64 = 1e4;
 
 fn default_forward_max_n() -> f64 {
     T200_FORWARD_MAX_N
@@ -254,15 +256,18 @@ pub enum ThrusterModel {
 pub struct ThrusterSpec {
     /// Unique name within the vehicle (used by scenarios).
     pub name: String,
-    /// Position of the thrust application point relative to the CO, body frame, m.
+    /// Position of the thrust application point relative to the CO, body frame, m: each
+    /// within the protocol's `MAX_POSITION_M` (10 m) of the CO and of the centre of gravity.
     pub position_m: [f64; 3],
     /// Direction of the force on the vehicle for a positive command (for a `reversed` thruster
     /// the force is opposite), body frame. Any non-zero length; normalised on load.
     pub direction: [f64; 3],
-    /// Thrust at command +1, N (> 0). Default 51.5 N (T200, 5.25 kgf).
+    /// Thrust at command +1, N, in (0, 10000] and no more than the body can take (the truth
+    /// within the protocol's `MAX_EFFECTIVENESS`). Default 51.5 N (T200, 5.25 kgf).
     #[serde(default = "default_forward_max_n")]
     pub forward_max_n: f64,
-    /// Thrust magnitude at command -1, N (>= 0). Default 40.2 N (T200, 4.1 kgf).
+    /// Thrust magnitude at command -1, N, in [0, 10000] (bounded like `forward_max_n`).
+    /// Default 40.2 N (T200, 4.1 kgf).
     #[serde(default = "default_reverse_max_n")]
     pub reverse_max_n: f64,
     /// Commands with |u| <= deadband give no thrust; beyond it the curve starts at zero and
@@ -270,7 +275,8 @@ pub struct ThrusterSpec {
     /// of a Blue Robotics ESC over its +-400 us range is 0.0625).
     #[serde(default = "default_deadband")]
     pub deadband: f64,
-    /// First-order spin-up/down time constant of the thrust, s (0 = instantaneous). Default 0.1.
+    /// First-order spin-up/down time constant of the thrust, s, in [0, 2] (the protocol's
+    /// `MAX_SPIN_UP_S`; 0 = instantaneous). Default 0.1.
     #[serde(default = "default_time_constant_s")]
     pub time_constant_s: f64,
     /// Shape of the curve beyond the deadband: thrust = max * e^exponent, e in [0, 1] the
@@ -328,68 +334,57 @@ impl ThrusterSpec {
     /// Checks ranges and normalises `direction`. `key` prefixes error keys (e.g.
     /// `thruster[2]`).
     pub fn validate(&mut self, origin: &str, key: &str) -> Result<(), LoadError> {
+        self.check(&Checker::new(origin, ""), key)
+    }
+
+    /// As [`ThrusterSpec::validate`], locating a bad value in `c.text` by `key` (the
+    /// thruster's table: `thruster[2]`, `event[0].action.spec`). Errors show the key with the
+    /// thruster's name: `thruster[2] ("L").forward_max_n`. Whether the body can take what
+    /// the thruster gives is the vehicle's check ([`Vehicle::validate`]).
+    pub(crate) fn check(&mut self, c: &Checker, key: &str) -> Result<(), LoadError> {
         if self.name.trim().is_empty() {
-            return Err(LoadError::invalid(
-                origin,
-                format!("{key}.name"),
-                "must not be empty",
-            ));
+            let key = format!("{key}.name");
+            return Err(c.error(&key, &key, "must not be empty"));
         }
-        let key = format!("{key} ({:?})", self.name);
-        check_finite(origin, &format!("{key}.position_m"), &self.position_m)?;
-        check_finite(origin, &format!("{key}.direction"), &self.direction)?;
+        let shown = format!("{key} ({:?})", self.name);
+        let path = |field: &str| (format!("{key}.{field}"), format!("{shown}.{field}"));
+        let range = |field: &str, v: f64, r: Range| {
+            let (key, shown) = path(field);
+            c.range_shown(&key, &shown, v, r)
+        };
+        let each = |field: &str, v: &[f64], r: Range| {
+            let (key, shown) = path(field);
+            c.each_shown(&key, &shown, v, r)
+        };
+        // Within the protocol's reach of the vehicle's centre (declared geometry).
+        each("position_m", &self.position_m, symmetric(MAX_POSITION_M))?;
+        each("direction", &self.direction, symmetric(1e6))?;
         let d = self.direction();
         let norm = d.norm();
         // Anything this short is a typo, not a direction: normalising it would amplify noise.
         if norm < 1e-6 {
-            return Err(LoadError::invalid(
-                origin,
-                format!("{key}.direction"),
-                "must not be zero",
-            ));
+            let (key, shown) = path("direction");
+            return Err(c.error(&key, &shown, "must not be zero"));
         }
         self.direction = (d / norm).into();
-        let check = |field: &str, v: f64, ok: bool, what: &str| {
-            if v.is_finite() && ok {
-                Ok(())
-            } else {
-                Err(LoadError::invalid(
-                    origin,
-                    format!("{key}.{field}"),
-                    format!("must be {what}, got {v}"),
-                ))
-            }
-        };
-        check(
+        range(
             "forward_max_n",
             self.forward_max_n,
-            self.forward_max_n > 0.0,
-            "> 0",
+            Range::above_to(0.0, MAX_THRUST_N),
         )?;
-        check(
+        range(
             "reverse_max_n",
             self.reverse_max_n,
-            self.reverse_max_n >= 0.0,
-            ">= 0",
+            Range::closed(0.0, MAX_THRUST_N),
         )?;
-        check(
-            "deadband",
-            self.deadband,
-            (0.0..1.0).contains(&self.deadband),
-            "in [0, 1)",
-        )?;
-        check(
+        range("deadband", self.deadband, Range::from_below(0.0, 1.0))?;
+        // The protocol's longest spin-up: a daemon could not report a longer lag.
+        range(
             "time_constant_s",
             self.time_constant_s,
-            self.time_constant_s >= 0.0,
-            ">= 0",
+            Range::closed(0.0, MAX_SPIN_UP_S),
         )?;
-        check(
-            "exponent",
-            self.exponent,
-            (0.2..=5.0).contains(&self.exponent),
-            "in [0.2, 5]",
-        )?;
+        range("exponent", self.exponent, Range::closed(0.2, 5.0))?;
         Ok(())
     }
 }
@@ -427,40 +422,95 @@ impl Vehicle {
     /// Parses and validates TOML text; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Vehicle, LoadError> {
         let mut vehicle: Vehicle = parse_toml(text, origin)?;
-        // With the text at hand, a bad battery value is located (file:line:col).
-        if let Some(b) = &vehicle.battery {
-            b.validate(origin, text)?;
-        }
-        vehicle.validate(origin)?;
+        // With the text at hand, a bad value is located (file:line:col).
+        vehicle.check(&Checker::new(origin, text))?;
         Ok(vehicle)
     }
 
-    /// Checks every value, thruster names unique, count <= [`MAX_THRUSTERS`]; normalises
+    /// Checks every value, 1 to [`MAX_THRUSTERS`] thrusters with unique names, and that what
+    /// is published about them can be: positions within the protocol's `MAX_POSITION_M` of
+    /// the centre of gravity, effectiveness within its `MAX_EFFECTIVENESS`. Normalises
     /// thruster directions.
     pub fn validate(&mut self, origin: &str) -> Result<(), LoadError> {
-        self.body.validate(origin)?;
+        self.check(&Checker::new(origin, ""))
+    }
+
+    pub(crate) fn check(&mut self, c: &Checker) -> Result<(), LoadError> {
+        self.body.check(c)?;
         if let Some(b) = &self.battery {
-            b.validate(origin, "")?;
+            b.validate(c.origin, c.text)?;
         }
-        if self.thrusters.len() > MAX_THRUSTERS {
-            return Err(LoadError::invalid(
-                origin,
+        let n = self.thrusters.len();
+        if !(1..=MAX_THRUSTERS).contains(&n) {
+            return Err(c.error(
                 "thruster",
-                format!(
-                    "{} thrusters, at most {MAX_THRUSTERS} are supported",
-                    self.thrusters.len()
-                ),
+                "thruster",
+                format!("the number of thrusters ([[thruster]] tables) must be in [1, {MAX_THRUSTERS}], got {n}"),
             ));
         }
         let mut names = HashSet::new();
         for (i, t) in self.thrusters.iter_mut().enumerate() {
-            t.validate(origin, &format!("thruster[{i}]"))?;
+            t.check(c, &format!("thruster[{i}]"))?;
             if !names.insert(t.name.clone()) {
-                return Err(LoadError::invalid(
-                    origin,
-                    format!("thruster[{i}].name"),
-                    format!("{:?} is used twice", t.name),
-                ));
+                let key = format!("thruster[{i}].name");
+                return Err(c.error(&key, &key, format!("{:?} is used twice", t.name)));
+            }
+        }
+        self.check_publishable(c)
+    }
+
+    /// What the driver publishes about the thrusters must pass the protocol's validation:
+    /// the declared positions (from the centre of gravity) and the true effectiveness, at the
+    /// highest supply voltage the T200 table knows (the most a `t200` thruster can give).
+    fn check_publishable(&self, c: &Checker) -> Result<(), LoadError> {
+        let cg = self.body.cg_m;
+        for (i, t) in self.thrusters.iter().enumerate() {
+            for (k, (p, g)) in t.position_m.iter().zip(cg).enumerate() {
+                let range = Range::closed(g - MAX_POSITION_M, g + MAX_POSITION_M);
+                if !range.contains(*p) {
+                    return Err(c.error(
+                        &format!("thruster[{i}].position_m[{k}]"),
+                        &format!("thruster[{i}] ({:?}).position_m[{k}]", t.name),
+                        format!(
+                            "must be in {range} (within {MAX_POSITION_M} m of body.cg_m), got {p}"
+                        ),
+                    ));
+                }
+            }
+        }
+        let body = RigidBody::new(&self.body)?;
+        let supply_v = ThrusterTable::t200().voltage_range().1.max(FIXED_SUPPLY_V);
+        let (fwd, rev) = effectiveness_at(body.mass_matrix_inverse(), &self.thrusters, supply_v);
+        const DOFS: [(&str, &str); 6] = [
+            ("roll", "rad/s^2"),
+            ("pitch", "rad/s^2"),
+            ("yaw", "rad/s^2"),
+            ("surge", "m/s^2"),
+            ("sway", "m/s^2"),
+            ("heave", "m/s^2"),
+        ];
+        for (i, t) in self.thrusters.iter().enumerate() {
+            for (b, field, thrust) in [
+                (&fwd, "forward_max_n", t.forward_max_n),
+                (&rev, "reverse_max_n", t.reverse_max_n),
+            ] {
+                for (row, v) in b.column(i).iter().enumerate() {
+                    if v.abs() <= MAX_EFFECTIVENESS {
+                        continue;
+                    }
+                    let (dof, unit) = DOFS[row];
+                    return Err(c.error(
+                        &format!("thruster[{i}].{field}"),
+                        &format!("thruster[{i}] ({:?}).{field}", t.name),
+                        format!(
+                            "{} N accelerates this body by {} {unit} in {dof}, more than the \
+                             {MAX_EFFECTIVENESS} per unit command the protocol accepts: lower \
+                             it, or check body mass and inertia",
+                            number((thrust * 10.0).round() / 10.0),
+                            number((v.abs() * 10.0).round() / 10.0),
+                        ),
+                    ));
+                }
             }
         }
         Ok(())
@@ -545,6 +595,68 @@ direction = [0.0, 0.0, -2.0]
             }
             other => panic!("expected parse error, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn absurd_values_are_refused_naming_file_line_key_and_range() {
+        let err = |text: &str| {
+            Vehicle::from_toml_str(text, "m.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        let with = |line: &str| MINIMAL.replace("name = \"a\"", &format!("name = \"a\"\n{line}"));
+        // Each once started a simulator whose truth failed the protocol's validation, or
+        // whose integration diverged.
+        assert_eq!(
+            err(&with("forward_max_n = 1e300")),
+            "m.toml:5:17: thruster[0] (\"a\").forward_max_n: must be in (0, 10000], got 1e300"
+        );
+        assert_eq!(
+            err(&MINIMAL.replace("[0.1, 0.0, 0.0]", "[1e9, 0.0, 0.0]")),
+            "m.toml:5:15: thruster[0] (\"a\").position_m[0]: must be in [-10, 10], got 1000000000"
+        );
+        assert_eq!(
+            err(&with("time_constant_s = inf")),
+            "m.toml:5:19: thruster[0] (\"a\").time_constant_s: must be in [0, 2], got inf"
+        );
+        assert_eq!(
+            err(&format!("{MINIMAL}[body]\nmass_kg = inf\n")),
+            "m.toml:8:11: body.mass_kg: must be in [0.1, 10000], got inf"
+        );
+        assert_eq!(
+            err(&format!("{MINIMAL}[body]\ninertia_kgm2 = [0.1, -1, 0.1]\n")),
+            "m.toml:8:22: body.inertia_kgm2[1]: must be in [0.0001, 10000], got -1"
+        );
+        // Within its own range, but more than the body can take: the truth would exceed
+        // the protocol's MAX_EFFECTIVENESS.
+        assert_eq!(
+            err(&with("forward_max_n = 9000")),
+            "m.toml:5:17: thruster[0] (\"a\").forward_max_n: 9000 N accelerates this body by \
+             3197.3 rad/s^2 in pitch, more than the 1000 per unit command the protocol accepts: \
+             lower it, or check body mass and inertia"
+        );
+        // Declared positions are from the centre of gravity.
+        assert_eq!(
+            err(&format!(
+                "{}[body]\ncg_m = [0, 0, 1]\n",
+                MINIMAL.replace("[0.1, 0.0, 0.0]", "[0.1, 0.0, -9.5]")
+            )),
+            "m.toml:5:25: thruster[0] (\"a\").position_m[2]: must be in [-9, 11] (within 10 m \
+             of body.cg_m), got -9.5"
+        );
+        // No thrusters (an empty file), or more than the protocol carries.
+        let none = "m.toml: thruster: the number of thrusters ([[thruster]] tables) must be in \
+                    [1, 16], got 0";
+        assert_eq!(err(""), none);
+        assert_eq!(err("name = \"m\"\n[body]\nmass_kg = 12.0\n"), none);
+        let many: String = (0..17)
+            .map(|i| format!("[[thruster]]\nname = \"t{i}\"\nposition_m = [0, 0, 0]\ndirection = [1, 0, 0]\n"))
+            .collect();
+        assert!(
+            err(&many).ends_with("must be in [1, 16], got 17"),
+            "{}",
+            err(&many)
+        );
     }
 
     #[test]

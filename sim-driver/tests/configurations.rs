@@ -190,6 +190,62 @@ spec = { name = "S", position_m = [0, 0, 0.1], direction = [0, 2, 0], reversed =
 }
 
 #[test]
+fn an_action_that_would_break_the_vehicle_is_refused_and_changes_nothing() {
+    let mut s = sim(load("amour5"));
+    let weaken = |factor| Action::Weaken {
+        thruster: "T".into(),
+        factor,
+    };
+    s.apply(&weaken(10.0))
+        .expect("515 N is within what the body takes");
+    // Each step is within its own range, but together they would give the body more than
+    // the protocol's truth can carry (or a scenario's dry run would find that they do).
+    let e = s.apply(&weaken(10.0)).unwrap_err().to_string();
+    assert!(
+        e.starts_with("scenario action: thruster[0] (\"T\").forward_max_n: 5148.5")
+            && e.contains("pitch"),
+        "{e}"
+    );
+    assert!((s.vehicle().thrusters[0].forward_max_n - 514.85).abs() < 0.01);
+    let (fwd, rev) = s.truth();
+    assert!(fwd.amax() <= 1e3 && rev.amax() <= 1e3);
+    let e = s
+        .apply(&Action::Move {
+            thruster: "L".into(),
+            position_m: [0.0, 0.0, 10.5],
+        })
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "scenario action: thruster[3] (\"L\").position_m[2]: must be in [-10, 10], got 10.5"
+    );
+    assert_eq!(s.vehicle().thrusters[3].position_m, [0.0, -0.2, 0.0]);
+    // A vehicle keeps at least one thruster.
+    let mut s = sim(load("four_up"));
+    let names: Vec<String> = s
+        .vehicle()
+        .thrusters
+        .iter()
+        .map(|t| t.name.clone())
+        .collect();
+    for name in &names[..3] {
+        s.apply(&Action::Remove {
+            thruster: name.clone(),
+        })
+        .expect("removes");
+    }
+    let e = s
+        .apply(&Action::Remove {
+            thruster: names[3].clone(),
+        })
+        .unwrap_err()
+        .to_string();
+    assert!(e.ends_with("must be in [1, 16], got 0"), "{e}");
+    assert_eq!(s.thruster_count(), 1);
+}
+
+#[test]
 fn random_vehicles_simulate() {
     for (n, seed) in [(2, 1), (4, 2), (6, 3), (8, 4)] {
         let v = random_vehicle(n, seed).expect("valid");

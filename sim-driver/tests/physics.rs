@@ -389,6 +389,58 @@ fn inner_rate_is_configurable_and_converges() {
     assert!(Simulator::with_options(vehicle, SensorConfig::default(), 1, low).is_err());
 }
 
+/// The bounds of `[sim.initial]` and `[sim.disturbance]` are safe for the physics: every
+/// shipped vehicle started at their corners, in the strongest current and forcing, at full
+/// thrust, stays finite.
+#[test]
+fn every_vehicle_stays_finite_at_the_limits_of_the_start_and_the_water() {
+    use thruster_sim::disturbance::{TetherConfig, MAX_CURRENT_MPS, MAX_FORCING};
+    use thruster_sim::WaveComponent;
+    let limits = |sign: f64| SimOptions {
+        initial: InitialState {
+            position_ned_m: [1e6 * sign, -1e6 * sign, 11_000.0],
+            attitude_rpy_deg: [360.0 * sign, -360.0, 360.0],
+            linear_mps: [10.0 * sign, -10.0, 10.0],
+            angular_radps: [50.0 * sign, -50.0, 50.0],
+        },
+        disturbance: thruster_sim::DisturbanceConfig {
+            current_ned_mps: [MAX_CURRENT_MPS * sign, -MAX_CURRENT_MPS, MAX_CURRENT_MPS],
+            waves: vec![WaveComponent {
+                frequency_hz: 10.0,
+                phase_rad: 0.0,
+                force_ned_n: [MAX_FORCING * sign, MAX_FORCING, -MAX_FORCING],
+                torque_body_nm: [MAX_FORCING, -MAX_FORCING * sign, MAX_FORCING],
+            }],
+            tether: Some(TetherConfig {
+                attach_m: [10.0 * sign, -10.0, 10.0],
+                pull_ned_n: [MAX_FORCING, MAX_FORCING * sign, -MAX_FORCING],
+                vary_ned_n: [MAX_FORCING; 3],
+                period_s: 0.1,
+            }),
+        },
+        ..SimOptions::default()
+    };
+    for entry in std::fs::read_dir(vehicles_dir()).expect("config/vehicles") {
+        let path = entry.expect("entry").path();
+        let vehicle = Vehicle::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let n = vehicle.thrusters.len();
+        for (sign, u) in [(1.0, 1.0), (-1.0, -1.0)] {
+            let mut sim =
+                Simulator::with_options(vehicle.clone(), SensorConfig::default(), 1, limits(sign))
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            sim.set_commands(&vec![u; n]).expect("count");
+            for _ in 0..200 {
+                assert!(
+                    sim.advance_and_sample().is_finite(),
+                    "{} diverged at t = {} s",
+                    path.display(),
+                    sim.time_s()
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn current_carries_the_vehicle_along() {
     let mut vehicle = load("four_up");

@@ -70,7 +70,9 @@ pub enum DriverError {
     #[error(transparent)]
     Sim(#[from] SimError),
     /// A scenario event cannot be applied to this vehicle (checked before the run starts).
-    #[error("{origin}: event[{index}] at t = {t_s} s ({action}): {source}")]
+    // The reason is in the message and not a `source`: a chain printed whole ("{:#}") said
+    // it twice.
+    #[error("{origin}: event[{index}] at t = {t_s} s ({action}): {error}")]
     Scenario {
         /// The scenario file.
         origin: String,
@@ -81,8 +83,7 @@ pub enum DriverError {
         /// Its action kind.
         action: &'static str,
         /// Why it fails (boxed: keeps every `Result` of the driver small).
-        #[source]
-        source: Box<SimError>,
+        error: Box<SimError>,
     },
     /// The truth file could not be written.
     #[error(transparent)]
@@ -664,12 +665,12 @@ fn dry_run(sim: &Simulator, scenario: &Scenario, origin: &str) -> Result<(), Dri
     let mut copy = sim.clone();
     for (index, e) in scenario.events().iter().enumerate() {
         copy.apply(&e.action)
-            .map_err(|source| DriverError::Scenario {
+            .map_err(|error| DriverError::Scenario {
                 origin: origin.to_string(),
                 index,
                 t_s: e.t_s,
                 action: action_name(&e.action),
-                source: Box::new(source),
+                error: Box::new(error),
             })?;
     }
     debug!(events = scenario.events().len(), "scenario checked");

@@ -17,11 +17,12 @@ const PERIOD: Duration = Duration::from_secs(1);
 
 /// Failure to create or write the stats file.
 #[derive(Debug, thiserror::Error)]
-#[error("stats file {path}: {source}")]
+// The OS error is in the message and not a `source`: a chain printed whole ("{:#}") said it
+// twice.
+#[error("stats file {path}: {error}")]
 pub struct StatsFileError {
     path: PathBuf,
-    #[source]
-    source: std::io::Error,
+    error: std::io::Error,
 }
 
 /// The tracker and its file.
@@ -38,9 +39,9 @@ pub struct StatsFile {
 impl StatsFile {
     /// Creates (truncates) `path`.
     pub fn create(path: &Path) -> Result<StatsFile, StatsFileError> {
-        let file = File::create(path).map_err(|source| StatsFileError {
+        let file = File::create(path).map_err(|error| StatsFileError {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         let now = Instant::now();
         Ok(StatsFile {
@@ -108,9 +109,9 @@ impl StatsFile {
         let text = serde_json::to_string(&line).unwrap_or_default();
         writeln!(self.out, "{text}")
             .and_then(|()| self.out.flush())
-            .map_err(|source| StatsFileError {
+            .map_err(|error| StatsFileError {
                 path: self.path.clone(),
-                source,
+                error,
             })
     }
 }

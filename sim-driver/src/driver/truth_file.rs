@@ -64,13 +64,14 @@ struct FileBody<'a> {
 
 /// Errors writing the truth file.
 #[derive(Debug, thiserror::Error)]
-#[error("cannot write truth file {}: {source}", path.display())]
+// The OS error is in the message and not a `source`: a chain printed whole ("{:#}") said it
+// twice.
+#[error("cannot write truth file {}: {error}", path.display())]
 pub struct TruthFileError {
     /// The file.
     pub path: PathBuf,
     /// Why.
-    #[source]
-    pub source: std::io::Error,
+    pub error: std::io::Error,
 }
 
 /// The truth file and the entries written so far.
@@ -98,9 +99,9 @@ impl TruthFile {
     }
 
     fn write(&self) -> Result<(), TruthFileError> {
-        let err = |source| TruthFileError {
+        let err = |error| TruthFileError {
             path: self.path.clone(),
-            source,
+            error,
         };
         let body = FileBody {
             vehicle: &self.vehicle,
