@@ -26,7 +26,14 @@ pub struct DriverWatch {
     new_rejections: u64,
     /// Reports in a row that counted new rejections.
     rejecting: u32,
+    /// The daemon runs in lockstep (`runtime.lockstep`): the simulator's time, no stale-IMU
+    /// fault. Only the simulator may drive then (checkpoints from before it read false).
+    #[serde(default)]
+    lockstep: bool,
 }
+
+/// The driver name of the simulator, the one driver lockstep is for.
+const SIMULATOR: &str = "thruster-sim";
 
 /// Reports in a row with new rejections that make the outputs unusable. One burst is not
 /// enough: when a driver announces a new thruster count, the commands already on their way
@@ -38,6 +45,14 @@ const REJECTING_REPORTS: u32 = 2;
 impl DriverWatch {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// A watch for a daemon that runs in lockstep or not (`runtime.lockstep`).
+    pub fn for_daemon(lockstep: bool) -> Self {
+        DriverWatch {
+            lockstep,
+            ..Self::default()
+        }
     }
 
     /// Takes a validated report and judges it for a daemon driving `thrusters` thrusters.
@@ -75,6 +90,15 @@ impl DriverWatch {
         } else {
             driver
         };
+        // Lockstep turns the stale-IMU fault off and lets a solve hold a sample for minutes:
+        // harmless against a simulator that waits, dangerous next to real thrusters.
+        if self.lockstep && !r.driver().is_empty() && r.driver() != SIMULATOR {
+            return OutputVerdict::Blocked(format!(
+                "{driver} drives the thrusters but thrusterd runs in lockstep \
+                 (runtime.lockstep: the simulator's time, no stale-IMU fault), which is for \
+                 {SIMULATOR} only"
+            ));
+        }
         if r.thruster_count as usize != thrusters {
             return OutputVerdict::Blocked(format!(
                 "{driver} drives {} thrusters, the daemon {thrusters}: every command would be \
@@ -124,6 +148,27 @@ mod tests {
         r.set_output_state(state);
         r.driver.set("thruster-test");
         r
+    }
+
+    #[test]
+    fn in_lockstep_only_the_simulator_may_drive() {
+        let mut hw = report(5, OutputState::Active, 10, 0);
+        hw.driver.set("thruster-hw linux");
+        let mut sim = report(5, OutputState::Active, 10, 0);
+        sim.driver.set(SIMULATOR);
+        let mut w = DriverWatch::for_daemon(true);
+        let OutputVerdict::Blocked(why) = w.observe(&hw, 5) else {
+            panic!("thruster-hw allowed in lockstep");
+        };
+        assert!(
+            why.contains("thruster-hw linux") && why.contains("lockstep"),
+            "{why}"
+        );
+        assert_eq!(w.observe(&sim, 5), OutputVerdict::Usable);
+        assert_eq!(
+            DriverWatch::for_daemon(false).observe(&hw, 5),
+            OutputVerdict::Usable
+        );
     }
 
     #[test]

@@ -309,7 +309,7 @@ impl Daemon {
             resume_marker: None,
             stale_reported: false,
             imu_wakeups: Default::default(),
-            driver: DriverWatch::new(),
+            driver: DriverWatch::for_daemon(cfg.runtime.lockstep),
             driver_verdict: OutputVerdict::Usable,
             supply_v: None,
             supply_taken_ns: 0,
