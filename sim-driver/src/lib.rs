@@ -44,6 +44,7 @@ pub mod sim;
 pub mod stepper;
 pub mod thruster;
 pub mod vehicle;
+pub mod vehicle_file;
 
 pub use battery::{Battery, BatterySpec};
 pub use disturbance::{DisturbanceConfig, WaveComponent};

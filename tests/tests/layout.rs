@@ -33,7 +33,11 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
         let path = entry.unwrap().path();
         if path.is_dir() {
             rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
+        } else if path.extension().is_some_and(|e| e == "rs")
+            // A module's unit tests in a file of their own (`#[cfg(test)] mod tests;`) are
+            // tests, as the part after `mod tests {` of a file is.
+            && path.file_name().is_none_or(|n| n != "tests.rs")
+        {
             out.push(path);
         }
     }
