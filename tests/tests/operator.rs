@@ -164,12 +164,12 @@ fn a_demo_refused_for_its_vehicle_or_noise_leaves_no_namespace_folder() {
         (
             "0 thrusters",
             vec!["--vehicle", zero.to_str().unwrap()],
-            "0 thrusters",
+            "must be in [1, 16], got 0",
         ),
         (
             "17 thrusters",
             vec!["--vehicle", seventeen.to_str().unwrap()],
-            "17 thrusters",
+            "must be in [1, 16], got 17",
         ),
         (
             "an unknown noise preset",
@@ -227,7 +227,7 @@ fn an_interrupted_demo_leaves_no_process_and_no_namespace() {
     for sig in ["TERM", "KILL"] {
         let demo = Proc::spawn(
             "thrusterctl",
-            &["demo", "--hold-s", "100000", "--noise", "paper"],
+            &["demo", "--hold-s", "3600", "--noise", "paper"],
             world.dir.path(),
         );
         // The demo's namespace is `demo-<pid>-<n>` (session.rs).
