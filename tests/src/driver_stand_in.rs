@@ -8,6 +8,16 @@ use thruster_protocol::{ImuSample, ThrustCommand};
 
 use crate::World;
 
+/// What the samples met while something else ran ([`DriverStandIn::time_while`]).
+pub struct Timed {
+    /// The slowest answer.
+    pub worst: Duration,
+    /// Samples answered.
+    pub answered: u64,
+    /// From the start until the other thing was done.
+    pub done_after: Duration,
+}
+
 /// A level vehicle at rest, one sample every 5 ms of its own clock.
 pub struct DriverStandIn {
     imu: Port<ImuSample>,
@@ -59,6 +69,37 @@ impl DriverStandIn {
             }
         }
         false
+    }
+
+    /// Round trips every `gap` while `done` says the thing under test still runs, and half a
+    /// second beyond; panics on an unanswered sample or when it runs past `limit`.
+    pub fn time_while(
+        &mut self,
+        mut done: impl FnMut() -> bool,
+        gap: Duration,
+        limit: Duration,
+    ) -> Timed {
+        let start = Instant::now();
+        let mut timed = Timed {
+            worst: Duration::ZERO,
+            answered: 0,
+            done_after: Duration::ZERO,
+        };
+        let mut done_at: Option<Instant> = None;
+        while done_at.is_none_or(|t| t.elapsed() < Duration::from_millis(500)) {
+            assert!(start.elapsed() < limit, "still running after {limit:?}");
+            let latency = self
+                .round_trip()
+                .unwrap_or_else(|| panic!("sample {} unanswered", self.seq));
+            timed.worst = timed.worst.max(latency);
+            timed.answered += 1;
+            if done_at.is_none() && done() {
+                done_at = Some(Instant::now());
+                timed.done_after = start.elapsed();
+            }
+            std::thread::sleep(gap);
+        }
+        timed
     }
 
     /// The sequence number of the last sample sent.

@@ -19,6 +19,7 @@ use thruster_protocol::{
 
 pub mod cli;
 pub mod driver_stand_in;
+pub mod linux_driver;
 pub mod mount;
 pub mod node;
 pub mod python;

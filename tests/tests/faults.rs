@@ -128,21 +128,13 @@ fn estimate_and_save_a_model(world: &World, op: &Operator) {
 
 /// The thruster-hw config: Linux backend on `fake`, five thrusters, the shipped watchdog.
 fn hw_config(world: &World, fake: &FakeSysfs) -> PathBuf {
-    let mut cfg = format!(
-        "namespace = \"{}\"\nbackend = \"linux\"\nwatchdog_ms = 200\narming_ms = 200\n\
-         status_period_ms = 1000\n",
-        world.namespace()
-    );
-    for ch in CHANNELS {
-        cfg += &format!("[[thruster]]\nchannel = {ch}\n");
-    }
-    cfg += &format!(
-        "[linux]\nsysfs_root = \"{}\"\nrate_hz = 200.0\ngyro_device = \"icm20602\"\n\
-         mag_device = \"ak09915\"\npressure_device = \"ms5837\"\n\
-         fluid_density_kg_m3 = {}\nsurface_pressure_kpa = {}\n",
-        fake.root().display(),
+    let cfg = system_tests::linux_driver::config(
+        &world.namespace(),
+        &CHANNELS,
+        1000,
+        fake.root(),
         fake_sysfs::DENSITY,
-        fake_sysfs::SURFACE_KPA
+        fake_sysfs::SURFACE_KPA,
     );
     let path = world.path("thruster-hw.toml");
     std::fs::write(&path, cfg).unwrap();
@@ -882,26 +874,13 @@ fn a_model_load_never_stops_control() {
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        let start = Instant::now();
-        let mut worst = Duration::ZERO;
-        let mut answered = 0;
         // Samples while the load is under way, and half a second beyond.
-        let mut done_at = None;
-        while done_at.is_none_or(|t: Instant| t.elapsed() < Duration::from_millis(500)) {
-            assert!(start.elapsed() < CTL_BOUND, "thrusterctl load {what} hung");
-            let latency = driver.round_trip().unwrap_or_else(|| {
-                panic!(
-                    "sample {} unanswered during the load of {what}",
-                    driver.seq()
-                )
-            });
-            worst = worst.max(latency);
-            answered += 1;
-            if done_at.is_none() && load.try_wait().unwrap().is_some() {
-                done_at = Some(Instant::now());
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        let timed = driver.time_while(
+            || load.try_wait().unwrap().is_some(),
+            Duration::from_millis(5),
+            CTL_BOUND,
+        );
+        let (worst, answered) = (timed.worst, timed.answered);
         let out = load.wait_with_output().unwrap();
         let text = String::from_utf8_lossy(&out.stderr).into_owned()
             + &String::from_utf8_lossy(&out.stdout);
@@ -909,7 +888,7 @@ fn a_model_load_never_stops_control() {
             "load of {what}: thrusterctl exit {:?} after {:.2} s ({}); {answered} samples \
              answered meanwhile, the slowest in {:.1} ms",
             out.status.code(),
-            (done_at.unwrap() - start).as_secs_f64(),
+            timed.done_after.as_secs_f64(),
             text.trim(),
             worst.as_secs_f64() * 1e3
         );

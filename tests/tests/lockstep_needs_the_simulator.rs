@@ -27,21 +27,13 @@ fn a_daemon_in_lockstep_will_not_drive_real_thrusters() {
     let world = World::new("lockhw");
     let op = Operator::new(&world);
     let fake = FakeSysfs::new(true);
-    let mut cfg = format!(
-        "namespace = \"{}\"\nbackend = \"linux\"\nwatchdog_ms = 200\narming_ms = 200\n\
-         status_period_ms = 200\n",
-        world.namespace()
-    );
-    for ch in CHANNELS {
-        cfg += &format!("[[thruster]]\nchannel = {ch}\n");
-    }
-    cfg += &format!(
-        "[linux]\nsysfs_root = \"{}\"\nrate_hz = 200.0\ngyro_device = \"icm20602\"\n\
-         mag_device = \"ak09915\"\npressure_device = \"ms5837\"\n\
-         fluid_density_kg_m3 = {}\nsurface_pressure_kpa = {}\n",
-        fake.root().display(),
+    let cfg = system_tests::linux_driver::config(
+        &world.namespace(),
+        &CHANNELS,
+        200,
+        fake.root(),
         fake_sysfs::DENSITY,
-        fake_sysfs::SURFACE_KPA
+        fake_sysfs::SURFACE_KPA,
     );
     let hw_cfg = world.path("thruster-hw.toml");
     std::fs::write(&hw_cfg, cfg).unwrap();

@@ -4,7 +4,7 @@
 //! each (eight clients with four requests each: 1.6 s, past the driver's 200 ms watchdog).
 
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use system_tests::driver_stand_in::DriverStandIn;
 use system_tests::{bin, workspace, World};
@@ -54,29 +54,19 @@ fn saves_to_a_stalled_disk_hold_no_sample() {
     assert!(loaded.status.success(), "{loaded:?}");
 
     let mut savers: Vec<_> = (0..SAVERS).map(|_| ctl(&["save"])).collect();
-    let start = Instant::now();
-    let mut worst = Duration::ZERO;
-    let mut answered = 0;
-    let mut done_at = None;
     // Samples while the saves are under way, and half a second beyond.
-    while done_at.is_none_or(|t: Instant| t.elapsed() < Duration::from_millis(500)) {
-        assert!(start.elapsed() < LONG, "thrusterctl save hung");
-        let latency = driver
-            .round_trip()
-            .unwrap_or_else(|| panic!("sample {} unanswered during the saves", driver.seq()));
-        worst = worst.max(latency);
-        answered += 1;
-        if done_at.is_none() {
+    let timed = driver.time_while(
+        || {
             let mut all = true;
             for s in &mut savers {
                 all &= s.try_wait().unwrap().is_some();
             }
-            if all {
-                done_at = Some(Instant::now());
-            }
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
+            all
+        },
+        Duration::from_millis(2),
+        LONG,
+    );
+    let (worst, answered) = (timed.worst, timed.answered);
     for s in savers {
         let out = s.wait_with_output().unwrap();
         let text = String::from_utf8_lossy(&out.stdout).into_owned()
@@ -87,7 +77,7 @@ fn saves_to_a_stalled_disk_hold_no_sample() {
     println!(
         "{SAVERS} saves to a stalled disk answered within {:.2} s; {answered} samples \
          meanwhile, the slowest in {:.1} ms",
-        (done_at.unwrap() - start).as_secs_f64(),
+        timed.done_after.as_secs_f64(),
         worst.as_secs_f64() * 1e3
     );
     // Event mode on this 2-core VM answers within a millisecond or two, 18-23 ms with three

@@ -57,15 +57,7 @@ pub struct DemoArgs {
 /// `--hold-s`: a finite number of vehicle seconds up to an hour (NaN or a negative one left
 /// the hold out of the report with exit 0; inf never ended).
 fn parse_hold_s(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("expected seconds, got {s:?}"))?;
-    if (0.0..=MAX_HOLD_S).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("must be within 0..={MAX_HOLD_S} s, got {v}"))
-    }
+    crate::flags::within(s, MAX_HOLD_S, "s")
 }
 
 /// Longest `--hold-s`, vehicle s.

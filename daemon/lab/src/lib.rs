@@ -7,6 +7,7 @@ pub mod child;
 pub mod demo;
 pub mod excursion;
 pub mod experiment;
+mod flags;
 pub mod model_truth;
 pub mod plot;
 pub mod recording;

@@ -43,15 +43,7 @@ const MAX_TETHER_N: f64 = 1000.0;
 
 /// `--tether`: checked where it is given (exit 2), as the other flags.
 fn parse_tether(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("expected newtons, got {s:?}"))?;
-    if (0.0..=MAX_TETHER_N).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("must be within 0..={MAX_TETHER_N} N, got {v}"))
-    }
+    crate::flags::within(s, MAX_TETHER_N, "N")
 }
 
 fn parse_xyz(s: &str) -> Result<[f64; 3], String> {

@@ -75,9 +75,6 @@ pub struct LinuxBackend {
     guard: Option<StallGuard>,
     /// The outputs last written, to write again after the guard took them neutral.
     last_outputs: Vec<Pwm>,
-    /// The guard took the outputs neutral and the loop has not written them since: `service`
-    /// (the end of the loop's round, after its watchdog decided) writes `last_outputs` again.
-    restore_pending: bool,
 }
 
 impl LinuxBackend {
@@ -101,7 +98,6 @@ impl LinuxBackend {
             stall_limit: None,
             guard: None,
             last_outputs: Vec::new(),
-            restore_pending: false,
         }
     }
 
@@ -112,19 +108,28 @@ impl LinuxBackend {
         self
     }
 
-    /// The loop is alive. If the guard took the outputs neutral meanwhile, the channels'
-    /// cached duties are forgotten (the next writes happen) and a restore is pending.
-    fn beat(&mut self) {
-        let Some(guard) = &self.guard else {
-            return;
-        };
-        guard.beat();
-        if guard.take_neutralized() {
+    /// The loop is alive.
+    fn beat(&self) {
+        if let Some(guard) = &self.guard {
+            guard.beat();
+        }
+    }
+
+    /// Whether the guard took the outputs neutral since the last look; if so the channels'
+    /// cached duties are forgotten, so the next writes happen. Looked at where the loop
+    /// writes (its outputs then replace the guard's) and at the end of its round (`service`:
+    /// its watchdog has decided by then, and the outputs it had are written again).
+    fn took_neutral(&mut self) -> bool {
+        let taken = self
+            .guard
+            .as_ref()
+            .is_some_and(StallGuard::take_neutralized);
+        if taken {
             for ch in &mut self.channels {
                 ch.forget();
             }
-            self.restore_pending = true;
         }
+        taken
     }
 
     /// Reads the supply voltage when due. A failed read is logged and leaves the last good
@@ -189,7 +194,6 @@ impl LinuxBackend {
         for (ch, &p) in self.channels.iter_mut().zip(&self.last_outputs) {
             ch.set(p)?;
         }
-        self.restore_pending = false;
         Ok(())
     }
 
@@ -299,7 +303,7 @@ impl Backend for LinuxBackend {
 
     fn read_sensors(&mut self, now_ns: u64) -> Result<Option<ImuReading>, BackendError> {
         // Before the reads: a read that hangs leaves this heartbeat to age. Nothing is
-        // restored here: after a long stall the loop's watchdog first decides on neutral.
+        // written again here: after a long stall the loop's watchdog first decides on neutral.
         self.beat();
         self.poll_supply(now_ns);
         let Some(sensors) = &self.sensors else {
@@ -339,19 +343,19 @@ impl Backend for LinuxBackend {
 
     fn write_outputs(&mut self, outputs: &[Pwm], _now_ns: u64) -> Result<(), BackendError> {
         self.beat();
+        self.took_neutral();
         for (last, &p) in self.last_outputs.iter_mut().zip(outputs) {
             *last = p;
         }
         for (ch, &p) in self.channels.iter_mut().zip(outputs) {
             ch.set(p)?;
         }
-        self.restore_pending = false;
         Ok(())
     }
 
     fn neutral(&mut self, _now_ns: u64) -> Result<(), BackendError> {
         self.beat();
-        self.restore_pending = false;
+        self.took_neutral();
         for (last, o) in self.last_outputs.iter_mut().zip(&self.outputs) {
             *last = o.neutral;
         }
@@ -367,7 +371,7 @@ impl Backend for LinuxBackend {
 
     fn service(&mut self, _now_ns: u64) -> Result<(), BackendError> {
         self.beat();
-        if self.restore_pending {
+        if self.took_neutral() {
             self.write_last_outputs()?;
         }
         Ok(())
