@@ -284,7 +284,10 @@ fn heartbeat_loss_stops_samples_and_recovery_resumes_them() {
 #[test]
 fn rc_override_sets_the_configured_channels_only() {
     let _s = serial();
-    let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |_| {});
+    // As docs/hardware.md asks before this mode is used.
+    let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {
+        fx.0.with(|s| s.params.insert("RC_OVERRIDE_TIME".into(), 0.5));
+    });
     let end = Instant::now() + TIMEOUT;
     loop {
         h.daemon.answer(&A);
@@ -317,6 +320,73 @@ fn rc_override_sets_the_configured_channels_only() {
         ],
         NEUTRAL
     );
+}
+
+/// ArduSub keeps an override for RC_OVERRIDE_TIME after our last one: 3 s by default, forever
+/// with -1. Until it says a short one, the driver asks for it, sends neutral overrides only,
+/// and reports its outputs held with the reason, while the vehicle is armed and the link up.
+#[test]
+fn rc_overrides_stay_neutral_while_the_autopilot_would_hold_them_long() {
+    let _s = serial();
+    for (value, says) in [
+        (
+            3.0,
+            "RC_OVERRIDE_TIME = 3 s: the autopilot would keep our last override 3 s",
+        ),
+        (
+            -1.0,
+            "RC_OVERRIDE_TIME = -1: the autopilot would keep our last override forever",
+        ),
+    ] {
+        let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {
+            fx.0.with(|s| s.params.insert("RC_OVERRIDE_TIME".into(), value));
+        });
+        h.daemon.try_sample(TIMEOUT).expect("samples");
+        h.daemon.hold(&A, Duration::from_millis(800));
+        let st = h.daemon.wait_status(TIMEOUT, |m| m.text().contains("held"));
+        assert_eq!(st.output_state(), Ok(OutputState::Disarmed), "{st:?}");
+        assert_eq!((st.armed, st.link_up), (1, 1), "{st:?}");
+        assert!(st.text().contains(says), "{}", st.text());
+        let (overrides, asked) =
+            h.fx.0
+                .with(|s| (s.overrides.clone(), s.param_requests.clone()));
+        assert!(
+            asked.iter().any(|(_, n)| n == "RC_OVERRIDE_TIME"),
+            "{asked:?}"
+        );
+        assert!(overrides.len() > 3, "{} overrides", overrides.len());
+        for (_, _, o) in &overrides {
+            assert_eq!(
+                [o.chan1_raw, o.chan2_raw, o.chan3_raw, o.chan4_raw],
+                NEUTRAL,
+                "thrust went out with RC_OVERRIDE_TIME = {value}"
+            );
+        }
+        assert!(h.fx.0.with(|s| s.motor_tests()).is_empty());
+        let (proc, _) = h.finish();
+        assert!(proc.log().contains(says), "{}", proc.log());
+    }
+}
+
+/// ArduSub's SYS_STATUS reaches `driver_status` as the supply (the receive thread dropped it
+/// until the RC_OVERRIDE_TIME test found its filter short of what the conversation handles).
+#[test]
+fn the_autopilots_battery_reaches_driver_status() {
+    let _s = serial();
+    let h = Harness::<Mavlink>::start(100, "");
+    h.daemon.try_sample(TIMEOUT).expect("samples");
+    let st = h
+        .daemon
+        .wait_status(TIMEOUT, |m| m.supply_voltage_v.is_finite());
+    assert!((st.supply_voltage_v - 15.8).abs() < 1e-9, "{st:?}");
+    assert!((st.supply_current_a - 12.5).abs() < 1e-9, "{st:?}");
+    // No battery monitor (ArduSub sends UINT16_MAX): unknown again once the reading is stale.
+    h.fx.0.with(|s| s.battery_mv = u16::MAX);
+    let st = h
+        .daemon
+        .wait_status(Duration::from_secs(8), |m| m.supply_voltage_v.is_nan());
+    assert!(st.supply_current_a.is_nan(), "{st:?}");
+    h.finish();
 }
 
 #[test]

@@ -161,8 +161,9 @@ fn operator_session_estimate_inspect_save_steer_reconfigure_shutdown() {
     world.assert_nothing_left();
 }
 
-/// An absurd model (a units mistake, a hand edit) is refused with the entry named, the model
-/// in force stays, and it is the good one that is saved at shutdown and loaded at restart.
+/// An absurd model (a units mistake, a hand edit) or a learned one without its error bounds is
+/// refused with what is wrong named, the model in force stays, and it is the good one that is
+/// saved at shutdown and loaded at restart.
 #[test]
 fn load_refuses_an_absurd_model_and_the_good_one_stays_saved_and_reloaded() {
     let world = World::new("ctlabsurd");
@@ -193,6 +194,30 @@ fn load_refuses_an_absurd_model_and_the_good_one_stays_saved_and_reloaded() {
     assert_eq!(
         s["model_version"], version,
         "the absurd model was swapped in"
+    );
+    // A learned model with its error bounds cut out of the file: the confidence gate let it
+    // through at any error (a missing bound compared as none) until it named what was missing.
+    let mut unbounded: Value = serde_json::from_str(&good).unwrap();
+    let fields = unbounded.as_object_mut().unwrap();
+    fields.remove("rel_err_rot");
+    fields.remove("rel_err_acc");
+    let unbounded_path = world.path("unbounded.json");
+    std::fs::write(
+        &unbounded_path,
+        serde_json::to_string_pretty(&unbounded).unwrap(),
+    )
+    .unwrap();
+    let out = ctl(&world, &["load", unbounded_path.to_str().unwrap()]);
+    expect_code(&out, 4, "load of a learned model without its bounds");
+    assert!(
+        text(&out.stderr).contains("must carry its error bounds: rel_err_rot unknown"),
+        "{}",
+        text(&out.stderr)
+    );
+    let s = wait_status(&world, "a status", |_| true);
+    assert_eq!(
+        s["model_version"], version,
+        "the model without bounds was swapped in"
     );
     assert!(daemon.stop().success(), "{}", daemon.log_text());
     let on_disk: Value = serde_json::from_str(&std::fs::read_to_string(&saved).unwrap()).unwrap();

@@ -78,6 +78,13 @@ pub enum SwapRejection {
     LowConfidence { rel_err: f64, limit: f64 },
     #[error("thrusters were never excited in both directions, or not apart from each other")]
     NotExcited,
+    /// A learned model without its error bounds: the confidence gate could not judge it (a
+    /// missing bound compares as no bound) and the allocation would take its B as exact.
+    #[error("a learned ({method:?}) model must carry its error bounds: {missing} unknown")]
+    NoBound {
+        method: Method,
+        missing: &'static str,
+    },
     /// Beyond the protocol's physical bounds: no thruster of a small vehicle does that, so
     /// the model comes from a units mistake, a corrupt file or a failed estimate.
     #[error("model {what}[{row}][{col}] = {value:e} is outside the physical bound +-{max:e}")]
@@ -315,7 +322,9 @@ impl Model {
         if self.actuated.count() == 0 || self.allocation.norm() == 0.0 {
             return Err(SwapRejection::NoDof);
         }
-        // Infinite bounds were refused above; a NaN one (none) compares false.
+        self.check_bound_known()?;
+        // Infinite bounds were refused above; a NaN one (none: a nominal or paper model,
+        // checked just above) compares false.
         for rel in [self.rel_err_rot, self.rel_err_acc] {
             if rel > max_rel_err {
                 return Err(SwapRejection::LowConfidence {
@@ -325,6 +334,29 @@ impl Model {
             }
         }
         Ok(())
+    }
+
+    /// A learned model's bounds are all known. Every fit of the forward and dynamic methods
+    /// has them (an infinite one is refused as never excited), so a missing one comes from a
+    /// hand-made or cut file, which the gate below would otherwise let through at any error.
+    /// Nominal models and the paper's method have none by design.
+    fn check_bound_known(&self) -> Result<(), SwapRejection> {
+        if !self.estimated || self.method == Method::Paper {
+            return Ok(());
+        }
+        let missing = if self.rel_err_rot.is_nan() {
+            "rel_err_rot"
+        } else if self.rel_err_acc.is_nan() {
+            "rel_err_acc"
+        } else if self.std_err.iter().any(|v| v.is_nan()) {
+            "std_err"
+        } else {
+            return Ok(());
+        };
+        Err(SwapRejection::NoBound {
+            method: self.method,
+            missing,
+        })
     }
 
     /// Thruster commands for a desired motion (6, DOF order). Unactuated DOFs contribute
@@ -499,6 +531,51 @@ mod tests {
         let mut unexcited = good;
         unexcited.rel_err_acc = f64::INFINITY;
         assert_eq!(unexcited.check(2, 0.1), Err(SwapRejection::NotExcited));
+    }
+
+    /// A learned model whose file left its bounds out passed the gate at any error (a missing
+    /// bound compared false); now it names what is missing. A nominal model and the paper's
+    /// method still have none by design.
+    #[test]
+    fn a_learned_model_without_its_bounds_is_refused_and_a_nominal_one_needs_none() {
+        let body = RigidBody::default();
+        let pos = [[0.0, -0.2, 0.0], [0.0, 0.2, 0.0]];
+        let dir = [[1.0, 0.0, 0.0]; 2];
+        let nominal = Model::nominal(nominal_effectiveness(&body, &pos, &dir), None);
+        nominal.check(2, 0.1).unwrap();
+        let mut learned = nominal.clone();
+        learned.estimated = true;
+        learned.method = Method::Dynamic;
+        learned.std_err.fill(0.001);
+        learned.rel_err_rot = 0.01;
+        learned.rel_err_acc = 0.01;
+        learned.check(2, 0.1).unwrap();
+        for (missing, cut) in [
+            (
+                "rel_err_rot",
+                (|m: &mut Model| m.rel_err_rot = f64::NAN) as fn(&mut Model),
+            ),
+            ("rel_err_acc", |m: &mut Model| m.rel_err_acc = f64::NAN),
+            ("std_err", |m: &mut Model| m.std_err[(4, 1)] = f64::NAN),
+        ] {
+            let mut m = learned.clone();
+            cut(&mut m);
+            let e = m.check(2, 0.1).unwrap_err();
+            assert_eq!(
+                e,
+                SwapRejection::NoBound {
+                    method: Method::Dynamic,
+                    missing
+                }
+            );
+            assert!(e.to_string().contains(missing), "{e}");
+        }
+        let mut paper = learned;
+        paper.method = Method::Paper;
+        paper.rel_err_rot = f64::NAN;
+        paper.rel_err_acc = f64::NAN;
+        paper.std_err.fill(f64::NAN);
+        paper.check(2, 0.1).unwrap();
     }
 
     #[test]

@@ -182,6 +182,12 @@ pub trait Backend {
         true
     }
 
+    /// Why the output device takes none of our thrust although it is up and armed (an
+    /// autopilot setting that would make a crash of ours unsafe): only neutral goes out.
+    fn held(&self) -> Option<String> {
+        None
+    }
+
     /// The supply's voltage and current as last measured, if the hardware measures them and
     /// the measurement is fresh at `now_ns` (the driver reports it on `driver_status`).
     fn supply(&self, _now_ns: u64) -> Supply {

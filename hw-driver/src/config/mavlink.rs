@@ -75,6 +75,16 @@ ranged!(
     " ms"
 );
 ranged!(de_read_timeout_ms, "read_timeout_ms", u64, 1, 1000, " ms");
+// ArduSub's RC_OVERRIDE_TIME is 0-120 s; a hold shorter than a resend period would lapse
+// between our messages.
+ranged!(
+    de_max_override_hold_s,
+    "max_override_hold_s",
+    f64,
+    0.25,
+    120.0,
+    " s"
+);
 
 /// Which MAVLink message carries the IMU sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -162,6 +172,13 @@ pub struct MavlinkConfig {
     pub gyro_source: GyroSource,
     /// "motor_test" (default) or "rc_override".
     pub output: OutputMode,
+    /// `rc_override` only: the longest the autopilot may keep our last override after we
+    /// stop (its `RC_OVERRIDE_TIME`, read at link-up), s (0.25..=120). Default 1.0. Until the
+    /// autopilot says a value in (0, this], overrides carry neutral only and `driver_status`
+    /// says why: a SIGKILL leaves the thrusters at our last pulses for that long, and -1 (never
+    /// lapse) forever. ArduSub's own default, 3 s, is refused by this default.
+    #[serde(deserialize_with = "de_max_override_hold_s")]
+    pub max_override_hold_s: f64,
     /// Resend period of the thrust messages while nothing changes, ms (10..=250). Default
     /// 100, five resends within ArduSub's 500 ms motor-test timeout. Changes are sent at once.
     #[serde(deserialize_with = "de_resend_ms")]
@@ -212,6 +229,7 @@ impl Default for MavlinkConfig {
             pressure_rate_hz: 20.0,
             gyro_source: GyroSource::Imu,
             output: OutputMode::MotorTest,
+            max_override_hold_s: 1.0,
             resend_ms: 100,
             motor_test_timeout_ms: 500,
             command_timeout_ms: 1000,

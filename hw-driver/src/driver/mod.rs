@@ -353,11 +353,17 @@ impl Loop {
     /// The driver's own status on `driver_status` (see [`status`]).
     fn publish_status(&mut self, backend: &dyn Backend, now: u64) -> Result<(), DriverError> {
         let core = self.controller.state(now);
-        let (link, armed) = (backend.link(), backend.armed());
+        let (link, armed, held) = (backend.link(), backend.armed(), backend.held());
         let supply = backend.supply(now);
-        if let Some(msg) =
-            self.reporter
-                .report(now, core, self.controller.counters(), &link, armed, supply)
+        let device = status::Device {
+            link: &link,
+            armed,
+            held: held.as_deref(),
+            supply,
+        };
+        if let Some(msg) = self
+            .reporter
+            .report(now, core, self.controller.counters(), device)
         {
             self.driver_status.send(&msg)?;
         }
@@ -397,8 +403,10 @@ impl Loop {
         self.publish_status(backend, now)?;
         let state = self.controller.state(now);
         // What reaches the water: the backend's link and armed state win over the core's.
-        let reported = status::output_state(state, &backend.link(), backend.armed());
-        let described = status::describe(state, reported);
+        let held = backend.held();
+        let moves = backend.armed() && held.is_none();
+        let reported = status::output_state(state, &backend.link(), moves);
+        let described = status::describe(state, reported, held.as_deref());
         if state != self.last_state || Some(reported) != self.last_reported {
             if let Some(suppressed) = self.state_log.allow() {
                 info!(suppressed, pwm_us = ?us(self.controller.outputs(now)), "outputs: {described}");

@@ -14,12 +14,14 @@ use crate::core::controller::{Counters, OutputState as CoreState};
 
 const MS: u64 = 1_000_000;
 
-/// The state to report.
-pub fn output_state(core: CoreState, link: &LinkState, armed: bool) -> OutputState {
+/// The state to report. `moves`: the device is armed and holds none of our thrust back
+/// ([`crate::backend::Backend::held`]); a device that holds it is reported as `Disarmed`
+/// (nothing reaches the water), with the reason in the text.
+pub fn output_state(core: CoreState, link: &LinkState, moves: bool) -> OutputState {
     match link {
         LinkState::Connecting => OutputState::Unknown,
         LinkState::Down(_) => OutputState::LinkDown,
-        LinkState::Up | LinkState::Local if !armed => OutputState::Disarmed,
+        LinkState::Up | LinkState::Local if !moves => OutputState::Disarmed,
         LinkState::Up | LinkState::Local => match core {
             CoreState::Active => OutputState::Active,
             _ => OutputState::Neutral,
@@ -28,9 +30,13 @@ pub fn output_state(core: CoreState, link: &LinkState, armed: bool) -> OutputSta
 }
 
 /// The outputs as the log says them: the core's state unless the backend's overrides it
-/// (a disarmed vehicle's outputs are not "active", whatever the core applies).
-pub fn describe(core: CoreState, reported: OutputState) -> String {
+/// (a disarmed vehicle's outputs are not "active", whatever the core applies). `held`: why
+/// the device holds our thrust back, if it does.
+pub fn describe(core: CoreState, reported: OutputState, held: Option<&str>) -> String {
     match reported {
+        OutputState::Disarmed if held.is_some() => {
+            format!("held neutral, {} ({core})", held.unwrap_or_default())
+        }
         OutputState::Unknown => format!("{core}; waiting for the output device"),
         OutputState::LinkDown => format!("link down, nothing reaches the thrusters ({core})"),
         OutputState::Disarmed => {
@@ -40,6 +46,17 @@ pub fn describe(core: CoreState, reported: OutputState) -> String {
     }
 }
 
+/// The output device as the backend reports it.
+#[derive(Debug, Clone, Copy)]
+pub struct Device<'a> {
+    pub link: &'a LinkState,
+    /// The device moves thrusters when told ([`crate::backend::Backend::armed`]).
+    pub armed: bool,
+    /// Why it holds our thrust back, if it does ([`crate::backend::Backend::held`]).
+    pub held: Option<&'a str>,
+    pub supply: Supply,
+}
+
 /// Builds the reports; the loop publishes them.
 #[derive(Debug)]
 pub struct StatusReporter {
@@ -47,7 +64,7 @@ pub struct StatusReporter {
     thrusters: u32,
     seq: u64,
     next_ns: u64,
-    last: Option<(OutputState, bool, bool)>,
+    last: Option<(OutputState, bool, bool, bool)>,
     last_core: CoreState,
     watchdog_expiries: u64,
     last_rejection: Option<String>,
@@ -89,18 +106,22 @@ impl StatusReporter {
         now_ns: u64,
         core: CoreState,
         counters: &Counters,
-        link: &LinkState,
-        armed: bool,
-        supply: Supply,
+        device: Device<'_>,
     ) -> Option<DriverStatusMsg> {
+        let Device {
+            link,
+            armed,
+            held,
+            supply,
+        } = device;
         // An expiry is the core going from following commands to the watchdog's neutral.
         if core == CoreState::Watchdog && self.last_core == CoreState::Active {
             self.watchdog_expiries += 1;
         }
         self.last_core = core;
-        let state = output_state(core, link, armed);
+        let state = output_state(core, link, armed && held.is_none());
         let link_up = matches!(link, LinkState::Up | LinkState::Local);
-        let now = (state, link_up, armed);
+        let now = (state, link_up, armed, held.is_some());
         if self.last == Some(now) && now_ns < self.next_ns {
             return None;
         }
@@ -110,7 +131,10 @@ impl StatusReporter {
         let text = match (state, link) {
             (OutputState::LinkDown, LinkState::Down(why)) => format!("link down: {why}"),
             (OutputState::Unknown, _) => "waiting for the output device".to_string(),
-            (OutputState::Disarmed, _) => "autopilot disarmed".to_string(),
+            (OutputState::Disarmed, _) => match held {
+                Some(why) if armed => format!("outputs held neutral: {why}"),
+                _ => "autopilot disarmed".to_string(),
+            },
             _ => self
                 .last_rejection
                 .as_ref()
@@ -174,7 +198,16 @@ mod tests {
             output_state(CoreState::Active, &LinkState::Local, true),
             OutputState::Active
         );
-        assert!(!describe(CoreState::Active, OutputState::Disarmed).starts_with("active"));
+        assert!(!describe(CoreState::Active, OutputState::Disarmed, None).starts_with("active"));
+    }
+
+    fn dev<'a>(link: &'a LinkState, armed: bool, held: Option<&'a str>) -> Device<'a> {
+        Device {
+            link,
+            armed,
+            held,
+            supply: Supply::default(),
+        }
     }
 
     #[test]
@@ -183,7 +216,7 @@ mod tests {
         let c = Counters::default();
         let up = LinkState::Up;
         let first = r
-            .report(0, CoreState::Arming, &c, &up, false, Supply::default())
+            .report(0, CoreState::Arming, &c, dev(&up, false, None))
             .unwrap();
         assert_eq!(first.driver(), "thruster-hw mavlink");
         assert_eq!(
@@ -192,80 +225,54 @@ mod tests {
         );
         assert_eq!(first.output_state(), Ok(OutputState::Disarmed));
         assert!(r
-            .report(
-                50 * MS,
-                CoreState::Arming,
-                &c,
-                &up,
-                false,
-                Supply::default()
-            )
+            .report(50 * MS, CoreState::Arming, &c, dev(&up, false, None))
             .is_none());
         // Armed: at once.
         let armed = r
-            .report(
-                60 * MS,
-                CoreState::Waiting,
-                &c,
-                &up,
-                true,
-                Supply::default(),
-            )
+            .report(60 * MS, CoreState::Waiting, &c, dev(&up, true, None))
             .unwrap();
         assert_eq!(armed.output_state(), Ok(OutputState::Neutral));
         // Nothing new: the next after 100 ms.
         assert!(r
-            .report(
-                159 * MS,
-                CoreState::Waiting,
-                &c,
-                &up,
-                true,
-                Supply::default()
-            )
+            .report(159 * MS, CoreState::Waiting, &c, dev(&up, true, None))
             .is_none());
         assert!(r
-            .report(
-                160 * MS,
-                CoreState::Waiting,
-                &c,
-                &up,
-                true,
-                Supply::default()
-            )
+            .report(160 * MS, CoreState::Waiting, &c, dev(&up, true, None))
             .is_some());
         // Active, then the watchdog: counted once.
-        r.report(
-            170 * MS,
-            CoreState::Active,
-            &c,
-            &up,
-            true,
-            Supply::default(),
-        )
-        .unwrap();
+        r.report(170 * MS, CoreState::Active, &c, dev(&up, true, None))
+            .unwrap();
         let w = r
-            .report(
-                400 * MS,
-                CoreState::Watchdog,
-                &c,
-                &up,
-                true,
-                Supply::default(),
-            )
+            .report(400 * MS, CoreState::Watchdog, &c, dev(&up, true, None))
             .unwrap();
         assert_eq!(w.watchdog_expiries, 1);
         r.rejected("count 4, configured 5");
         let t = r
-            .report(
-                600 * MS,
-                CoreState::Rejected,
-                &c,
-                &up,
-                true,
-                Supply::default(),
-            )
+            .report(600 * MS, CoreState::Rejected, &c, dev(&up, true, None))
             .unwrap();
         assert!(t.text().contains("count 4"), "{}", t.text());
+        // Held back by the device while armed: reported at once as reaching nothing, with why;
+        // released: at once again.
+        let held = r
+            .report(
+                610 * MS,
+                CoreState::Active,
+                &c,
+                dev(&up, true, Some("RC_OVERRIDE_TIME = -1")),
+            )
+            .unwrap();
+        assert_eq!(held.output_state(), Ok(OutputState::Disarmed));
+        assert_eq!(held.armed, 1);
+        assert_eq!(held.text(), "outputs held neutral: RC_OVERRIDE_TIME = -1");
+        let released = r
+            .report(620 * MS, CoreState::Active, &c, dev(&up, true, None))
+            .unwrap();
+        assert_eq!(released.output_state(), Ok(OutputState::Active));
+        assert!(describe(
+            CoreState::Active,
+            OutputState::Disarmed,
+            Some("RC_OVERRIDE_TIME = 3 s")
+        )
+        .starts_with("held neutral, RC_OVERRIDE_TIME = 3 s"));
     }
 }

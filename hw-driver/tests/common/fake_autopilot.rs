@@ -3,7 +3,9 @@
 //! RAW_IMU, ATTITUDE and SCALED_PRESSURE2 at the requested intervals, handles DO_MOTOR_TEST
 //! like ArduSub (param1 is the 0-based motor index, FAILED when disarmed or for a motor the
 //! frame does not have; 500 ms without one ends motor-test mode with a disarm, counted as
-//! a lapse), and records everything it receives with the CLOCK_MONOTONIC time of
+//! a lapse), answers PARAM_REQUEST_READ by name from its parameters (`RC_OVERRIDE_TIME` 3 s,
+//! ArduSub's default), sends SYS_STATUS with the battery's voltage and current with each
+//! HEARTBEAT (ArduSub streams it by default, SR0_EXT_STAT), and records everything it receives with the CLOCK_MONOTONIC time of
 //! reception. Bounded: the thread ends after `MAX_LIFETIME`.
 
 use std::collections::HashMap;
@@ -40,6 +42,9 @@ pub struct ApState {
     pub gyro: [i16; 3],
     pub mag: [i16; 3],
     pub press_hpa: f32,
+    /// SYS_STATUS's battery: voltage, mV (u16::MAX: none), current, cA (-1: none).
+    pub battery_mv: u16,
+    pub battery_ca: i16,
     /// Requested intervals by message id, us.
     pub intervals: HashMap<u32, u64>,
     /// Received, with reception time (ns, CLOCK_MONOTONIC).
@@ -53,6 +58,10 @@ pub struct ApState {
     pub last_motor_test_ns: u64,
     /// Motor-test timeouts (each disarmed the fake, as on ArduSub).
     pub lapses: u64,
+    /// Parameters answered by name (PARAM_VALUE, REAL32).
+    pub params: HashMap<String, f32>,
+    /// PARAM_REQUEST_READ received: the name asked for.
+    pub param_requests: Vec<(u64, String)>,
 }
 
 impl Default for ApState {
@@ -66,6 +75,8 @@ impl Default for ApState {
             gyro: [0; 3],
             mag: [0; 3],
             press_hpa: 1013.25,
+            battery_mv: 15_800,
+            battery_ca: 1_250,
             intervals: HashMap::new(),
             heartbeats: Vec::new(),
             commands: Vec::new(),
@@ -74,6 +85,8 @@ impl Default for ApState {
             motor_test_mode: false,
             last_motor_test_ns: 0,
             lapses: 0,
+            params: HashMap::from([("RC_OVERRIDE_TIME".to_string(), 3.0)]),
+            param_requests: Vec::new(),
         }
     }
 }
@@ -216,6 +229,24 @@ fn run(
             match msg {
                 MavMessage::HEARTBEAT(hb) => s.heartbeats.push((t, h, hb)),
                 MavMessage::RC_CHANNELS_OVERRIDE(o) => s.overrides.push((t, h, o)),
+                MavMessage::PARAM_REQUEST_READ(r) => {
+                    let name = r.param_id.to_str().unwrap_or("").trim_end_matches('\0');
+                    s.param_requests.push((t, name.to_string()));
+                    // ArduPilot's GCS_Param answers a name it has with PARAM_VALUE, and
+                    // sends nothing for one it lacks.
+                    let value = s.params.get(name).copied();
+                    let count = s.params.len() as u16;
+                    drop(s);
+                    if let Some(param_value) = value {
+                        send(&MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+                            param_value,
+                            param_count: count,
+                            param_index: 0,
+                            param_id: name.into(),
+                            param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
+                        }));
+                    }
+                }
                 MavMessage::COMMAND_LONG(c) => {
                     s.commands.push((t, h, c.clone()));
                     let result = match c.command {
@@ -278,6 +309,12 @@ fn run(
                     },
                     system_status: MavState::MAV_STATE_ACTIVE,
                     mavlink_version: 3,
+                }));
+                send(&MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+                    voltage_battery: s.battery_mv,
+                    current_battery: s.battery_ca,
+                    battery_remaining: -1,
+                    ..SYS_STATUS_DATA::DEFAULT
                 }));
             }
             next_hb = now + 1_000_000_000;
@@ -352,6 +389,8 @@ impl ApState {
             gyro: self.gyro,
             mag: self.mag,
             press_hpa: self.press_hpa,
+            battery_mv: self.battery_mv,
+            battery_ca: self.battery_ca,
             intervals: self.intervals.clone(),
             heartbeats: Vec::new(),
             commands: Vec::new(),
@@ -360,6 +399,8 @@ impl ApState {
             motor_test_mode: self.motor_test_mode,
             last_motor_test_ns: self.last_motor_test_ns,
             lapses: self.lapses,
+            params: HashMap::new(),
+            param_requests: Vec::new(),
         }
     }
 }

@@ -24,6 +24,8 @@
 //! - DO_MOTOR_TEST param1 is ArduSub's 0-based motor index: `channel - 1` (see
 //!   [`ardusub_motor_index`]).
 //! - Our HEARTBEAT every `heartbeat_ms`, from the start.
+//! - RC override mode: the autopilot's `RC_OVERRIDE_TIME` is read at each link-up; until it
+//!   is known and short, overrides carry neutral only ([`super::override_hold`]).
 //! - Supply: the newest voltage (and current) of SYS_STATUS or BATTERY_STATUS monitor 0
 //!   ([`super::battery`]), reported while younger than [`SUPPLY_STALE_NS`]; ArduSub streams
 //!   both at its default rates (SR0_EXT_STAT), so no interval is requested.
@@ -41,6 +43,7 @@ use tracing::{debug, info, warn};
 
 use super::battery::{self, SupplyReading};
 use super::convert::{depth_from_hpa, implausible, plausible_mag, scaled_imu};
+use super::override_hold::OverrideHold;
 use crate::backend::{LinkState, OutputSpec, Supply};
 
 /// A supply reading older than this is not reported, ns (ArduSub sends SYS_STATUS at 1-2 Hz).
@@ -110,6 +113,8 @@ pub struct Conversation {
     depth: Option<(u64, f64)>,
     /// The newest supply reading and when it came.
     supply: Option<(u64, SupplyReading)>,
+    /// How long the autopilot keeps an override (asked only in `rc_override` mode).
+    override_hold: OverrideHold,
     readings: VecDeque<ImuReading>,
     pwm: Vec<Pwm>,
     thrust_dirty: bool,
@@ -129,6 +134,7 @@ impl Conversation {
         let pwm = outputs.iter().map(|o| o.neutral).collect();
         let target = (cfg.target_system != 0 && cfg.target_component != 0)
             .then_some((cfg.target_system, cfg.target_component));
+        let override_hold = OverrideHold::new(cfg.max_override_hold_s);
         Conversation {
             cfg,
             outputs,
@@ -143,6 +149,7 @@ impl Conversation {
             attitude: None,
             depth: None,
             supply: None,
+            override_hold,
             readings: VecDeque::new(),
             pwm,
             thrust_dirty: true,
@@ -191,6 +198,17 @@ impl Conversation {
         self.engaged
     }
 
+    /// Why our thrust cannot reach the outputs although the link is up (RC override mode
+    /// with an override hold not known, or too long): only neutral goes out then.
+    pub fn held(&self) -> Option<String> {
+        match self.cfg.output {
+            OutputMode::RcOverride if self.link == LinkState::Up => {
+                self.override_hold.verdict().err()
+            }
+            _ => None,
+        }
+    }
+
     /// The connection itself failed (TCP closed, serial gone): the link is down at once,
     /// nothing can be sent until the backend has reconnected.
     pub fn on_disconnect(&mut self, reason: &str) {
@@ -209,6 +227,7 @@ impl Conversation {
         self.commands.clear();
         self.armed = None;
         self.engaged = false;
+        self.override_hold.link_lost();
     }
 
     /// We armed the vehicle (so we disarm it on exit).
@@ -266,7 +285,32 @@ impl Conversation {
         if let Some(sent) = self.commands.front().and_then(|c| c.sent_ns) {
             d = d.min(sent + self.cfg.command_timeout_ms * MS);
         }
+        if let Some(t) = self.override_hold.next_deadline_ns() {
+            d = d.min(t);
+        }
         d
+    }
+
+    /// The messages [`Conversation::on_message`] uses: only these are handed over by the
+    /// receive thread (`io`), and the rest (dozens of streams a GCS link carries) are dropped
+    /// there so the loop is woken only for something it uses. Kept beside `on_message`: a
+    /// message handled there and missing here is never seen (SYS_STATUS, BATTERY_STATUS and
+    /// PARAM_VALUE were, found by the process test of RC_OVERRIDE_TIME).
+    pub fn takes(msg: &MavMessage) -> bool {
+        matches!(
+            msg,
+            MavMessage::HEARTBEAT(_)
+                | MavMessage::COMMAND_ACK(_)
+                | MavMessage::SCALED_IMU(_)
+                | MavMessage::SCALED_IMU2(_)
+                | MavMessage::RAW_IMU(_)
+                | MavMessage::ATTITUDE(_)
+                | MavMessage::SCALED_PRESSURE2(_)
+                | MavMessage::STATUSTEXT(_)
+                | MavMessage::SYS_STATUS(_)
+                | MavMessage::BATTERY_STATUS(_)
+                | MavMessage::PARAM_VALUE(_)
+        )
     }
 
     /// Handles one message received at `t_ns`.
@@ -305,6 +349,18 @@ impl Conversation {
                 }
             }
             MavMessage::COMMAND_ACK(ack) => self.on_ack(t_ns, ack),
+            MavMessage::PARAM_VALUE(v) => {
+                if let Some(value) = self.override_hold.on_value(v) {
+                    match self.override_hold.verdict() {
+                        Ok(()) => info!(
+                            "autopilot {}: {value} s, overrides carry thrust",
+                            super::override_hold::PARAM
+                        ),
+                        Err(why) => warn!("RC overrides held neutral: {why}"),
+                    }
+                    self.thrust_dirty = true;
+                }
+            }
             MavMessage::STATUSTEXT(s) => {
                 if let Some(suppressed) = self.text_log.allow() {
                     let text = s
@@ -375,6 +431,9 @@ impl Conversation {
             info!(previous = %self.link, "link to the autopilot up; requesting message rates");
             self.link = LinkState::Up;
             self.queue_setup();
+            if self.cfg.output == OutputMode::RcOverride {
+                self.override_hold.link_up(t_ns);
+            }
         }
     }
 
@@ -530,6 +589,11 @@ impl Conversation {
             self.next_heartbeat_ns = now_ns + self.cfg.heartbeat_ms * MS;
         }
         self.service_commands(now_ns);
+        if let Some((sys, comp)) = self.target {
+            if let Some(ask) = self.override_hold.request(now_ns, sys, comp) {
+                self.outgoing.push(ask);
+            }
+        }
         let resend_due = self
             .last_thrust_ns
             .is_none_or(|t| now_ns >= t + self.cfg.resend_ms * MS);
@@ -642,7 +706,11 @@ impl Conversation {
             }
             OutputMode::RcOverride => {
                 let mut ch = [RC_IGNORE; 8];
+                // Thrust only once the autopilot's hold after our last message is known to
+                // be short: until then the outputs get neutral.
+                let cleared = self.override_hold.verdict().is_ok();
                 for (o, p) in self.outputs.iter().zip(&self.pwm) {
+                    let p = if cleared { p } else { &o.neutral };
                     let slot = (o.channel as usize)
                         .checked_sub(1)
                         .and_then(|i| ch.get_mut(i));

@@ -25,6 +25,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use super::conversation::Conversation;
 use mavlink::dialects::ardupilotmega::{MavAutopilot, MavMessage};
 use mavlink::error::MessageReadError;
 use mavlink::{
@@ -339,22 +340,6 @@ impl Link for StreamLink {
     }
 }
 
-/// Only these reach the conversation; the rest (dozens of streams a GCS link carries) are
-/// dropped here so the loop is woken only for something it uses.
-fn wanted(msg: &MavMessage) -> bool {
-    matches!(
-        msg,
-        MavMessage::HEARTBEAT(_)
-            | MavMessage::COMMAND_ACK(_)
-            | MavMessage::SCALED_IMU(_)
-            | MavMessage::SCALED_IMU2(_)
-            | MavMessage::RAW_IMU(_)
-            | MavMessage::ATTITUDE(_)
-            | MavMessage::SCALED_PRESSURE2(_)
-            | MavMessage::STATUSTEXT(_)
-    )
-}
-
 /// Starts the receive thread. It ends when `stop` is set (within one receive timeout), when
 /// the loop's receiver is dropped, or when the link closes.
 pub fn spawn(
@@ -378,7 +363,7 @@ fn receive_loop(link: SharedLink, tx: Sender<Incoming>, waker: Waker, stop: Arc<
             Recv::Messages(msgs) => {
                 let t_ns = monotonic_ns();
                 let mut any = false;
-                for (header, msg) in msgs.into_iter().filter(|(_, m)| wanted(m)) {
+                for (header, msg) in msgs.into_iter().filter(|(_, m)| Conversation::takes(m)) {
                     let m = Incoming::Message {
                         t_ns,
                         header,

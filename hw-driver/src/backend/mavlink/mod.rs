@@ -14,6 +14,7 @@ pub mod battery;
 pub mod conversation;
 pub mod convert;
 pub mod io;
+pub mod override_hold;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
@@ -313,6 +314,10 @@ impl Backend for MavlinkBackend {
         self.conversation
             .as_ref()
             .is_some_and(Conversation::autopilot_armed)
+    }
+
+    fn held(&self) -> Option<String> {
+        self.conversation.as_ref().and_then(Conversation::held)
     }
 
     fn stats(&self) -> Vec<(&'static str, u64)> {

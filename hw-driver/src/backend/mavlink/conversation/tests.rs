@@ -358,6 +358,25 @@ fn motor_tests_only_while_armed_at_once_on_change_and_resent() {
     );
 }
 
+fn overrides(out: Vec<MavMessage>) -> Vec<RC_CHANNELS_OVERRIDE_DATA> {
+    out.into_iter()
+        .filter_map(|m| match m {
+            MavMessage::RC_CHANNELS_OVERRIDE(r) => Some(r),
+            _ => None,
+        })
+        .collect()
+}
+
+fn override_time(v: f32) -> MavMessage {
+    MavMessage::PARAM_VALUE(mavlink::dialects::ardupilotmega::PARAM_VALUE_DATA {
+        param_value: v,
+        param_count: 900,
+        param_index: 31,
+        param_id: "RC_OVERRIDE_TIME".into(),
+        param_type: mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_REAL32,
+    })
+}
+
 #[test]
 fn rc_override_sets_our_channels_and_ignores_the_rest() {
     let cfg = MavlinkConfig {
@@ -366,16 +385,10 @@ fn rc_override_sets_our_channels_and_ignores_the_rest() {
     };
     let mut s = Conversation::new(cfg, specs(), 0);
     s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+    s.on_message(2, &hdr(1, 1), &override_time(0.5));
     s.set_outputs(&[Pwm(1600), Pwm(1400)]);
     s.service(2);
-    let rc: Vec<_> = s
-        .drain_outgoing()
-        .into_iter()
-        .filter_map(|m| match m {
-            MavMessage::RC_CHANNELS_OVERRIDE(r) => Some(r),
-            _ => None,
-        })
-        .collect();
+    let rc = overrides(s.drain_outgoing());
     assert_eq!(rc.len(), 1, "sent even while disarmed");
     let r = &rc[0];
     assert_eq!((r.chan1_raw, r.chan4_raw), (1600, 1400));
@@ -384,6 +397,75 @@ fn rc_override_sets_our_channels_and_ignores_the_rest() {
         (RC_IGNORE, RC_IGNORE, RC_IGNORE)
     );
     assert_eq!((r.target_system, r.target_component), (1, 1));
+}
+
+/// RC_OVERRIDE_TIME is asked for at link-up; overrides carry neutral until it is known and
+/// short, and again when a re-read finds it long; a new link asks again.
+#[test]
+fn rc_overrides_carry_thrust_only_while_the_autopilots_hold_is_known_and_short() {
+    let cfg = MavlinkConfig {
+        output: OutputMode::RcOverride,
+        ..MavlinkConfig::default()
+    };
+    let mut s = Conversation::new(cfg, specs(), 0);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(true));
+    s.set_outputs(&[Pwm(1600), Pwm(1400)]);
+    s.service(2);
+    let out = s.drain_outgoing();
+    let asked = out
+        .iter()
+        .filter(|m| matches!(m, MavMessage::PARAM_REQUEST_READ(r) if r.param_id.to_str().unwrap().starts_with("RC_OVERRIDE_TIME")))
+        .count();
+    assert_eq!(asked, 1, "{out:?}");
+    let rc = overrides(out);
+    assert_eq!(
+        (rc[0].chan1_raw, rc[0].chan4_raw),
+        (1500, 1510),
+        "thrust before the hold is known"
+    );
+    assert!(s.held().unwrap().contains("waiting"), "{:?}", s.held());
+    // ArduSub's default: refused.
+    s.on_message(3, &hdr(1, 1), &override_time(3.0));
+    s.service(4);
+    let rc = overrides(s.drain_outgoing());
+    assert_eq!((rc[0].chan1_raw, rc[0].chan4_raw), (1500, 1510));
+    assert!(s.held().unwrap().contains("3 s after we stop"));
+    // Set short from the ground station, seen at the re-read: thrust.
+    s.on_message(5, &hdr(1, 1), &override_time(0.5));
+    s.service(6);
+    let rc = overrides(s.drain_outgoing());
+    assert_eq!((rc[0].chan1_raw, rc[0].chan4_raw), (1600, 1400));
+    assert_eq!(s.held(), None);
+    // Never lapsing: neutral at once.
+    s.on_message(7, &hdr(1, 1), &override_time(-1.0));
+    s.service(8);
+    let rc = overrides(s.drain_outgoing());
+    assert_eq!((rc[0].chan1_raw, rc[0].chan4_raw), (1500, 1510));
+    assert!(s.held().unwrap().contains("forever"));
+    // A lost link forgets it; the next link-up asks again.
+    s.on_message(9, &hdr(1, 1), &override_time(0.5));
+    s.on_disconnect("test");
+    assert_eq!(s.held(), None, "no link: the link state says it");
+    s.on_message(10, &hdr(1, 1), &ap_heartbeat(true));
+    assert!(s.held().unwrap().contains("waiting"));
+    s.service(11);
+    assert!(s
+        .drain_outgoing()
+        .iter()
+        .any(|m| matches!(m, MavMessage::PARAM_REQUEST_READ(_))));
+}
+
+/// Motor tests never ask: the parameter does not concern them.
+#[test]
+fn motor_tests_do_not_ask_for_the_override_hold() {
+    let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(true));
+    s.service(2);
+    assert!(!s
+        .drain_outgoing()
+        .iter()
+        .any(|m| matches!(m, MavMessage::PARAM_REQUEST_READ(_))));
+    assert_eq!(s.held(), None);
 }
 
 #[test]
