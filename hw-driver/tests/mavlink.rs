@@ -331,11 +331,11 @@ fn rc_overrides_stay_neutral_while_the_autopilot_would_hold_them_long() {
     for (value, says) in [
         (
             3.0,
-            "RC_OVERRIDE_TIME = 3 s: the autopilot would keep our last override 3 s",
+            "RC_OVERRIDE_TIME = 3 s: our last override would outlive us 3 s",
         ),
         (
             -1.0,
-            "RC_OVERRIDE_TIME = -1: the autopilot would keep our last override forever",
+            "RC_OVERRIDE_TIME = -1: our last override would outlive us forever",
         ),
     ] {
         let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {

@@ -1,4 +1,5 @@
-//! Python's `mcap` package (Foxglove's MCAP reader, not ours) for the recording tests: a venv
+//! Python packages we did not write (Foxglove's `mcap` reader for the recording tests, pymavlink
+//! for the MAVLink peer): a venv
 //! under the target dir, made once from tests/python/requirements.txt, and the reader script
 //! tests/python/read_mcap.py run in it.
 //!

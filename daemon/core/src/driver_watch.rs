@@ -119,6 +119,14 @@ impl DriverWatch {
             ));
         }
         match r.output_state() {
+            // Armed but held back (an autopilot setting the driver will not drive through):
+            // the driver's words say which, and arming would not help.
+            Ok(OutputState::Disarmed) if r.armed == 1 && !r.text().is_empty() => {
+                OutputVerdict::Blocked(format!(
+                    "{driver}: {}; thrust does not reach the water",
+                    r.text()
+                ))
+            }
             Ok(OutputState::Disarmed) => OutputVerdict::Blocked(format!(
                 "{driver}: outputs disarmed, thrust does not reach the water (arm the vehicle)"
             )),
@@ -240,6 +248,21 @@ mod tests {
             panic!("disarmed accepted");
         };
         assert!(why.contains("disarmed"), "{why}");
+        assert!(why.contains("arm the vehicle"), "{why}");
+        // Armed, but the device holds our thrust back: its reason, not "arm the vehicle".
+        let mut held = report(5, OutputState::Disarmed, 0, 0);
+        held.armed = 1;
+        held.text.set(
+            "outputs held neutral: RC_OVERRIDE_TIME = 3 s: our last override would outlive us 3 s",
+        );
+        let OutputVerdict::Blocked(why) = w.observe(&held, 5) else {
+            panic!("held outputs accepted");
+        };
+        assert!(
+            why.contains("outputs held neutral: RC_OVERRIDE_TIME = 3 s"),
+            "{why}"
+        );
+        assert!(!why.contains("arm the vehicle"), "{why}");
         let mut r = report(5, OutputState::LinkDown, 0, 0);
         r.text.set("no heartbeat for 3 s");
         let OutputVerdict::Blocked(why) = w.observe(&r, 5) else {

@@ -356,7 +356,12 @@ impl Conversation {
                             "autopilot {}: {value} s, overrides carry thrust",
                             super::override_hold::PARAM
                         ),
-                        Err(why) => warn!("RC overrides held neutral: {why}"),
+                        Err(why) => warn!(
+                            max_override_hold_s = self.cfg.max_override_hold_s,
+                            "RC overrides held neutral: {why} (the autopilot keeps driving an \
+                             override that long after our last one: after a crash of ours, \
+                             our last thrust)"
+                        ),
                     }
                     self.thrust_dirty = true;
                 }

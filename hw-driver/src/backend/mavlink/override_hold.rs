@@ -87,23 +87,20 @@ impl OverrideHold {
         changed.then_some(v.param_value)
     }
 
-    /// Ok when overrides may carry thrust; else why only neutral ones go out.
+    /// Ok when overrides may carry thrust; else why only neutral ones go out, short enough
+    /// for `driver_status`'s text (128 bytes with its prefix).
     pub fn verdict(&self) -> Result<(), String> {
         let max = self.max_s;
         match self.known_s {
-            None => Err(format!(
-                "waiting for the autopilot's {PARAM} (how long it keeps an override after we stop)"
-            )),
+            None => Err(format!("waiting for the autopilot's {PARAM}")),
             Some(v) if !v.is_finite() || v < 0.0 => Err(format!(
-                "{PARAM} = {v}: the autopilot would keep our last override forever after we \
-                 stop; set it to at most {max} s"
+                "{PARAM} = {v}: our last override would outlive us forever; set it <= {max} s"
             )),
             Some(0.0) => Err(format!(
-                "{PARAM} = 0: the autopilot ignores RC overrides; set it to at most {max} s"
+                "{PARAM} = 0: the autopilot ignores overrides; set it <= {max} s"
             )),
             Some(v) if f64::from(v) > max => Err(format!(
-                "{PARAM} = {v} s: the autopilot would keep our last override {v} s after we \
-                 stop; set it to at most {max} s (or raise max_override_hold_s)"
+                "{PARAM} = {v} s: our last override would outlive us {v} s; set it <= {max} s"
             )),
             Some(_) => Ok(()),
         }
@@ -138,9 +135,9 @@ mod tests {
         for (v, ok, says) in [
             (0.5, true, ""),
             (1.0, true, ""),
-            (3.0, false, "3 s after we stop"),
+            (3.0, false, "outlive us 3 s"),
             (-1.0, false, "forever"),
-            (0.0, false, "ignores RC overrides"),
+            (0.0, false, "ignores overrides"),
             (f32::NAN, false, "forever"),
         ] {
             h.on_value(&value(PARAM, v));
@@ -148,7 +145,8 @@ mod tests {
             assert_eq!(verdict.is_ok(), ok, "{v}: {verdict:?}");
             if let Err(why) = verdict {
                 assert!(why.contains(says), "{v}: {why}");
-                assert!(why.contains("at most 1 s"), "{v}: {why}");
+                assert!(why.ends_with("set it <= 1 s"), "{v}: {why}");
+                assert!(why.len() <= 100, "{v}: {} bytes", why.len());
             }
         }
         // Another parameter's value changes nothing; a lost link forgets and stops asking.

@@ -429,7 +429,7 @@ fn rc_overrides_carry_thrust_only_while_the_autopilots_hold_is_known_and_short()
     s.service(4);
     let rc = overrides(s.drain_outgoing());
     assert_eq!((rc[0].chan1_raw, rc[0].chan4_raw), (1500, 1510));
-    assert!(s.held().unwrap().contains("3 s after we stop"));
+    assert!(s.held().unwrap().contains("outlive us 3 s"));
     // Set short from the ground station, seen at the re-read: thrust.
     s.on_message(5, &hdr(1, 1), &override_time(0.5));
     s.service(6);
