@@ -65,17 +65,66 @@ fn is_broken_pipe_panic(message: &str) -> bool {
         && message.to_ascii_lowercase().contains("broken pipe")
 }
 
+/// Exit code of a configuration that cannot be used (a file or the command line), where
+/// any other failure exits 1: a script tells "fix the config" from "it failed", and the
+/// units' `RestartPreventExitStatus=2` keeps systemd from restarting what a restart cannot fix.
+pub const EXIT_CONFIG: u8 = 2;
+
+/// An error that is the configuration's: [`driver_main`] exits [`EXIT_CONFIG`] for it.
+/// Prints as the error it wraps, with that error's causes.
+#[derive(Debug)]
+pub struct BadConfig(pub Box<dyn std::error::Error + Send + Sync>);
+
+impl BadConfig {
+    pub fn new(error: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> BadConfig {
+        BadConfig(error.into())
+    }
+}
+
+impl std::fmt::Display for BadConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl std::error::Error for BadConfig {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.0.source()
+    }
+}
+
+/// True when `error` or one of its sources is a [`BadConfig`].
+pub fn is_bad_config(error: &(dyn std::error::Error + 'static)) -> bool {
+    let mut next = Some(error);
+    while let Some(e) = next {
+        if e.is::<BadConfig>() {
+            return true;
+        }
+        next = e.source();
+    }
+    false
+}
+
 /// The whole `main` of a driver process: [`main`]'s quiet exit on a closed pipe, logging
 /// (journald under systemd, stderr otherwise), then `run`; an error is logged on one line
-/// (`{:#}`: anyhow joins its causes) and the process exits 1.
-pub fn driver_main<E: std::fmt::Display>(run: impl FnOnce() -> Result<(), E>) -> ExitCode {
+/// (`{:#}`: anyhow joins its causes) and the process exits [`EXIT_CONFIG`] for a
+/// [`BadConfig`], else 1.
+pub fn driver_main<E>(run: impl FnOnce() -> Result<(), E>) -> ExitCode
+where
+    E: std::fmt::Display + AsRef<dyn std::error::Error + Send + Sync + 'static>,
+{
     main(|| {
         crate::logging::init("info");
         match run() {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 tracing::error!("{e:#}");
-                ExitCode::FAILURE
+                let error: &(dyn std::error::Error + 'static) = e.as_ref();
+                if is_bad_config(error) {
+                    ExitCode::from(EXIT_CONFIG)
+                } else {
+                    ExitCode::FAILURE
+                }
             }
         }
     })
@@ -84,6 +133,19 @@ pub fn driver_main<E: std::fmt::Display>(run: impl FnOnce() -> Result<(), E>) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bad_config_is_found_under_any_context_and_prints_as_itself() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("starting the driver")]
+        struct Context(#[source] BadConfig);
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "x.toml: no such file");
+        let bad = Context(BadConfig::new(io));
+        assert!(is_bad_config(&bad));
+        assert_eq!(bad.0.to_string(), "x.toml: no such file");
+        let other = std::io::Error::other("the PWM chip is gone");
+        assert!(!is_bad_config(&other));
+    }
 
     #[test]
     fn a_print_to_a_closed_pipe_exits_quietly_and_other_panics_propagate() {

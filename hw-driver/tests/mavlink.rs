@@ -405,6 +405,23 @@ fn an_unreachable_autopilot_is_an_error_naming_the_address() {
     assert_namespace_clean(&ns);
 }
 
+/// A configuration that cannot be used exits 2 (the unit does not restart it); the
+/// unreachable autopilot above, a failure of the run, exits 1 (the unit restarts it).
+#[test]
+fn a_bad_configuration_exits_2_naming_the_key() {
+    let ns = thruster_protocol::services::NamespaceGuard::unique_for_test("badcfg").unwrap();
+    let config = format!(
+        "namespace = \"{}\"\nbackend = \"mavlink\"\n{}[mavlink]\nmax_override_hold_s = -1\n",
+        ns.namespace(),
+        thrusters(Mavlink::CHANNELS)
+    );
+    let mut p = Proc::run(&config, &[]);
+    let status = p.wait_exit(Duration::from_secs(5)).expect("exits");
+    assert_eq!(status.code(), Some(2), "{}", p.log());
+    assert!(p.log().contains("max_override_hold_s"), "{}", p.log());
+    assert_namespace_clean(&ns);
+}
+
 /// A free loopback UDP port for a driver in udpin mode.
 fn free_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0")

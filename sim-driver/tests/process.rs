@@ -740,6 +740,8 @@ fn the_respond_subcommand_drives_a_lockstep_run_to_its_end() {
     assert_namespace_clean(&ns);
 }
 
+/// Exit 2 (`EXIT_CONFIG`), as thrusterd's: the units' `RestartPreventExitStatus=2` does not
+/// restart what a restart cannot fix, and a script tells a config from a failure.
 #[test]
 fn bad_configuration_fails_with_file_line_and_key() {
     let ns = NamespaceGuard::unique_for_test("bad").unwrap();
@@ -764,7 +766,7 @@ fn bad_configuration_fails_with_file_line_and_key() {
         "--namespace",
         x,
     ]);
-    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains(&format!("{}:3:", cfg.display())) && err.contains("spin"),
         "{err}"
@@ -772,7 +774,7 @@ fn bad_configuration_fails_with_file_line_and_key() {
 
     fs::write(&cfg, "[sensors]\nrate_hz = 2000\n").unwrap();
     let (code, err) = run(&["run", "--config", cfg.to_str().unwrap()]);
-    assert_eq!(code, Some(1));
+    assert_eq!(code, Some(2));
     assert!(
         err.contains(&format!("{}:2:", cfg.display())) && err.contains("rate_hz"),
         "{err}"
@@ -791,14 +793,14 @@ fn bad_configuration_fails_with_file_line_and_key() {
         "--vehicle",
         bad_vehicle.to_str().unwrap(),
     ]);
-    assert_eq!(code, Some(1));
+    assert_eq!(code, Some(2));
     assert!(
         err.contains("v.toml") && err.contains("thruster[0]") && err.contains("direction"),
         "{err}"
     );
 
     let (code, err) = run(&["run", "--vehicle", v.to_str().unwrap()]);
-    assert_eq!(code, Some(1));
+    assert_eq!(code, Some(2));
     assert!(err.contains("--namespace"), "{err}");
 
     // A scenario naming a thruster the vehicle lacks fails before anything runs.
@@ -817,7 +819,7 @@ fn bad_configuration_fails_with_file_line_and_key() {
         "--scenario",
         sc.to_str().unwrap(),
     ]);
-    assert_eq!(code, Some(1));
+    assert_eq!(code, Some(2));
     assert!(err.contains("event[0]") && err.contains("\"Q\""), "{err}");
     // Nothing got as far as creating IPC resources.
     assert_eq!(namespace_files(&ns).unwrap(), Vec::<PathBuf>::new());

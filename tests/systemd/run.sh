@@ -485,6 +485,21 @@ inside "systemctl stop thruster-bridge"
 inside "journalctl -u thruster-bridge --no-pager -o cat | grep -q 'live view logged'" \
     || fail "bridge: no summary in its journal at stop"
 
+# A configuration that cannot be used: exit 2, and RestartPreventExitStatus=2 keeps systemd
+# from restarting it (RestartSec=1: three seconds would be three restarts).
+NR_B=$(prop thruster-bridge NRestarts)
+inside "cp /etc/thrusterd/thruster-bridge.toml /etc/thrusterd/thruster-bridge.toml.good \
+    && echo 'bogus_key = 1' >> /etc/thrusterd/thruster-bridge.toml"
+inside "systemctl start thruster-bridge" 2>/dev/null && fail "bad config: the bridge's start succeeded"
+sleep 3
+bad="$(prop thruster-bridge ActiveState) $(prop thruster-bridge Result) $(prop thruster-bridge ExecMainStatus) $(prop thruster-bridge NRestarts)"
+[ "$bad" = "failed exit-code 2 $NR_B" ] \
+    || fail "bad config: the bridge is '$bad', want 'failed exit-code 2 $NR_B' (state result status restarts)"
+inside "journalctl -u thruster-bridge --no-pager -o cat -n 20 | grep -q 'unknown field .bogus_key.'" \
+    || fail "bad config: the journal does not name the unknown key"
+inside "mv /etc/thrusterd/thruster-bridge.toml.good /etc/thrusterd/thruster-bridge.toml && systemctl reset-failed thruster-bridge"
+say "bad config: the bridge exits 2 naming the key, failed at once, not restarted"
+
 # systemctl stop -> neutral and model saved.
 inside "systemctl stop thrusterd"
 [ "$(prop thrusterd ActiveState)" = inactive ] && [ "$(prop thrusterd Result)" = success ] \

@@ -14,6 +14,7 @@ use anyhow::{anyhow, Context, Result};
 use clap::Parser;
 use thruster_bridge::bridge::{self, Plan};
 use thruster_bridge::config::{self, BridgeConfig, Record, Websocket};
+use thruster_driver_kit::pipe::BadConfig;
 use thruster_driver_kit::systemd::Systemd;
 use thruster_recorder::RecordOptions;
 use thrusterctl_operator::client::Target;
@@ -149,7 +150,7 @@ fn run() -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&layout)?);
         return Ok(());
     }
-    let c = settings(&args)?;
+    let c = settings(&args).map_err(BadConfig::new)?;
     let plan = plan(&args, c)?;
     // A live view without a recording still honours --duration-s: the session needs a
     // deadline, which lives in the recording options, so stop it from a timer instead.

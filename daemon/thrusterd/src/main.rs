@@ -47,8 +47,8 @@ enum Command {
 }
 
 /// Exit code of a configuration that cannot be used (file or command line): a script tells
-/// "fix the config" from "the daemon failed".
-const EXIT_CONFIG: u8 = 2;
+/// "fix the config" from "the daemon failed", and the unit does not restart it. The drivers'.
+const EXIT_CONFIG: u8 = thruster_driver_kit::pipe::EXIT_CONFIG;
 
 fn main() -> ExitCode {
     // A closed stdout pipe (`thrusterd check-config FILE | head -1`) ends quietly.

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Parser;
+use thruster_driver_kit::pipe::BadConfig;
 use thruster_hw::cli::{Cli, Command};
 use thruster_hw::config::{Overrides, Settings};
 use thruster_hw::driver::{self, shutdown::Shutdown};
@@ -20,13 +21,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let stop = Shutdown::on_signals().context("cannot install the signal handlers")?;
     match cli.command {
         Command::Run(args) => {
-            let settings = Settings::resolve(&Overrides::from(&args))?;
+            let settings = Settings::resolve(&Overrides::from(&args)).map_err(BadConfig::new)?;
             driver::run(&settings, &stop)
                 .with_context(|| format!("thruster-hw ({} backend)", settings.backend.name()))?;
             Ok(())
         }
         Command::Neutral(args) => {
-            let settings = Settings::resolve(&Overrides::from(&args))?;
+            let settings = Settings::resolve(&Overrides::from(&args)).map_err(BadConfig::new)?;
             let lines = driver::after_exit::neutral_after_exit(&settings)
                 .with_context(|| format!("thruster-hw neutral ({})", args.config.display()))?;
             for line in lines {

@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::Parser;
+use thruster_driver_kit::pipe::BadConfig;
 use thruster_protocol::services::IpcConfig;
 use thruster_sim::cli::{Cli, Command, RespondArgs, RunArgs};
 use thruster_sim::driver::shutdown::Shutdown;
@@ -27,8 +28,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn run_sim(args: &RunArgs, stop: Shutdown) -> anyhow::Result<()> {
-    let settings = Settings::resolve(args)?;
-    let driver = Driver::new(settings, stop)?;
+    let settings = Settings::resolve(args).map_err(BadConfig::new)?;
+    // Only the set-up's errors can be the configuration's: the run's (`driver.run`) are the
+    // run's, a simulator that diverged included.
+    let driver = Driver::new(settings, stop).map_err(|e| {
+        if e.is_config() {
+            anyhow::Error::new(BadConfig::new(e))
+        } else {
+            e.into()
+        }
+    })?;
     driver.run()?;
     Ok(())
 }

@@ -212,6 +212,17 @@ pub struct Driver {
     ports: Ports,
 }
 
+impl DriverError {
+    /// The error is the configuration's (a vehicle, scenario or simulator setting), not the
+    /// run's: the process then exits `EXIT_CONFIG`.
+    pub fn is_config(&self) -> bool {
+        matches!(
+            self,
+            DriverError::Load(_) | DriverError::Sim(_) | DriverError::Scenario { .. }
+        )
+    }
+}
+
 impl Driver {
     /// Loads the vehicle and scenario, checks that every scenario event applies, builds the
     /// simulator and opens the ports in `settings.namespace`.
