@@ -19,7 +19,7 @@ fn config(fake: &FakeSysfs) -> LinuxConfig {
         sysfs_root: fake.root().to_path_buf(),
         rate_hz: 100.0,
         gyro_device: "icm20602".into(),
-        mag_device: Some("ak09915".into()),
+        mag_device: Some("ak09916".into()),
         pressure_device: Some("iio:device2".into()),
         export_timeout_ms: 500,
         ..LinuxConfig::default()
@@ -73,7 +73,7 @@ fn export_then_period_neutral_duty_enable_in_ns_and_only_changes_written() {
     assert_eq!(
         of(&w, Some(0)),
         [
-            pair("period", "2500000"),
+            pair("period", "2621440"),
             pair("duty_cycle", "1500000"),
             pair("enable", "1")
         ]
@@ -81,7 +81,7 @@ fn export_then_period_neutral_duty_enable_in_ns_and_only_changes_written() {
     assert_eq!(
         of(&w, Some(3)),
         [
-            pair("period", "2500000"),
+            pair("period", "2621440"),
             pair("duty_cycle", "1510000"),
             pair("enable", "1")
         ]
@@ -152,14 +152,14 @@ fn a_channel_left_with_a_long_duty_gets_neutral_before_the_shorter_period() {
         of(&w, Some(0)),
         [
             pair("duty_cycle", "1500000"),
-            pair("period", "2500000"),
+            pair("period", "2621440"),
             pair("enable", "1")
         ]
     );
     assert_eq!(
         of(&w, Some(3)),
         [
-            pair("period", "2500000"),
+            pair("period", "2621440"),
             pair("duty_cycle", "1510000"),
             pair("enable", "1")
         ]

@@ -284,9 +284,9 @@ fn heartbeat_loss_stops_samples_and_recovery_resumes_them() {
 #[test]
 fn rc_override_sets_the_configured_channels_only() {
     let _s = serial();
-    // As docs/hardware.md asks before this mode is used.
+    // As docs/hardware.md asks before this mode is used (FS_PILOT_INPUT 2 is the default).
     let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {
-        fx.0.with(|s| s.params.insert("RC_OVERRIDE_TIME".into(), 0.5));
+        fx.0.with(|s| s.params.insert("FS_PILOT_TIMEOUT".into(), 0.5));
     });
     let end = Instant::now() + TIMEOUT;
     loop {
@@ -322,24 +322,30 @@ fn rc_override_sets_the_configured_channels_only() {
     );
 }
 
-/// ArduSub keeps an override for RC_OVERRIDE_TIME after our last one: 3 s by default, forever
-/// with -1. Until it says a short one, the driver asks for it, sends neutral overrides only,
-/// and reports its outputs held with the reason, while the vehicle is armed and the link up.
+/// ArduSub keeps driving our last override until its pilot-input failsafe takes the channels
+/// back to neutral, FS_PILOT_TIMEOUT (3 s by default) after it, or never with FS_PILOT_INPUT
+/// 0. Until the autopilot says a short one, the driver asks, sends neutral overrides only, and
+/// reports its outputs held with the reason, while the vehicle is armed and the link up.
 #[test]
-fn rc_overrides_stay_neutral_while_the_autopilot_would_hold_them_long() {
+fn rc_overrides_stay_neutral_while_the_autopilot_would_keep_a_left_one_long() {
     let _s = serial();
-    for (value, says) in [
+    for (name, value, says) in [
         (
+            "FS_PILOT_TIMEOUT",
             3.0,
-            "RC_OVERRIDE_TIME = 3 s: our last override would outlive us 3 s",
+            "FS_PILOT_TIMEOUT = 3 s: our last override would outlive us 3 s",
         ),
         (
-            -1.0,
-            "RC_OVERRIDE_TIME = -1: our last override would outlive us forever",
+            "FS_PILOT_INPUT",
+            0.0,
+            "FS_PILOT_INPUT = 0: nothing neutralises our last override",
         ),
     ] {
         let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {
-            fx.0.with(|s| s.params.insert("RC_OVERRIDE_TIME".into(), value));
+            fx.0.with(|s| {
+                s.params.insert("FS_PILOT_TIMEOUT".into(), 0.5);
+                s.params.insert(name.into(), value)
+            });
         });
         h.daemon.try_sample(TIMEOUT).expect("samples");
         h.daemon.hold(&A, Duration::from_millis(800));
@@ -350,16 +356,18 @@ fn rc_overrides_stay_neutral_while_the_autopilot_would_hold_them_long() {
         let (overrides, asked) =
             h.fx.0
                 .with(|s| (s.overrides.clone(), s.param_requests.clone()));
-        assert!(
-            asked.iter().any(|(_, n)| n == "RC_OVERRIDE_TIME"),
-            "{asked:?}"
-        );
+        for p in ["FS_PILOT_INPUT", "FS_PILOT_TIMEOUT", "RC_OVERRIDE_TIME"] {
+            assert!(
+                asked.iter().any(|(_, n)| n == p),
+                "{p} not asked: {asked:?}"
+            );
+        }
         assert!(overrides.len() > 3, "{} overrides", overrides.len());
         for (_, _, o) in &overrides {
             assert_eq!(
                 [o.chan1_raw, o.chan2_raw, o.chan3_raw, o.chan4_raw],
                 NEUTRAL,
-                "thrust went out with RC_OVERRIDE_TIME = {value}"
+                "thrust went out with {name} = {value}"
             );
         }
         assert!(h.fx.0.with(|s| s.motor_tests()).is_empty());
@@ -369,7 +377,7 @@ fn rc_overrides_stay_neutral_while_the_autopilot_would_hold_them_long() {
 }
 
 /// ArduSub's SYS_STATUS reaches `driver_status` as the supply (the receive thread dropped it
-/// until the RC_OVERRIDE_TIME test found its filter short of what the conversation handles).
+/// until the RC override check's test found its filter short of what the conversation handles).
 #[test]
 fn the_autopilots_battery_reaches_driver_status() {
     let _s = serial();

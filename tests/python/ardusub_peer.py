@@ -10,7 +10,8 @@ once a second; COMMAND_ACK for SET_MESSAGE_INTERVAL, then the message at that in
 PARAM_VALUE for a PARAM_REQUEST_READ of a parameter it has, nothing otherwise. After
 --seconds it prints one JSON object with what it received and exits.
 
-usage: ardusub_peer.py --port PORT --seconds S [--override-time T]
+usage: ardusub_peer.py --port PORT --seconds S [--param NAME=VALUE ...]
+(parameters default to ArduSub's: FS_PILOT_INPUT 2, FS_PILOT_TIMEOUT 3, RC_OVERRIDE_TIME 3)
 """
 
 import argparse
@@ -37,9 +38,12 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--port", type=int, required=True)
     ap.add_argument("--seconds", type=float, required=True)
-    ap.add_argument("--override-time", type=float, default=3.0)
+    ap.add_argument("--param", action="append", default=[])
     args = ap.parse_args()
-    params = {"RC_OVERRIDE_TIME": args.override_time}
+    params = {"FS_PILOT_INPUT": 2.0, "FS_PILOT_TIMEOUT": 3.0, "RC_OVERRIDE_TIME": 3.0}
+    for p in args.param:
+        name, value = p.split("=", 1)
+        params[name] = float(value)
 
     conn = mavutil.mavlink_connection(
         f"udpout:127.0.0.1:{args.port}",

@@ -23,7 +23,7 @@ pub fn config(
     }
     cfg += &format!(
         "[linux]\nsysfs_root = \"{}\"\nrate_hz = 200.0\ngyro_device = \"icm20602\"\n\
-         mag_device = \"ak09915\"\npressure_device = \"ms5837\"\n\
+         mag_device = \"ak09916\"\npressure_device = \"ms5837\"\n\
          fluid_density_kg_m3 = {density}\nsurface_pressure_kpa = {surface_kpa}\n",
         sysfs_root.display(),
     );

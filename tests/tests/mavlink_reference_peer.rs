@@ -42,12 +42,12 @@ fn hw_config(namespace: &str, port: u16, output: &str) -> String {
     cfg
 }
 
-fn peer(port: u16, seconds: f64, override_time: f64) -> Child {
+fn peer(port: u16, seconds: f64, params: &[&str]) -> Child {
     Command::new(python::venv_python())
         .arg(system_tests::workspace().join("tests/python/ardusub_peer.py"))
         .args(["--port", &port.to_string()])
         .args(["--seconds", &seconds.to_string()])
-        .args(["--override-time", &override_time.to_string()])
+        .args(params.iter().flat_map(|p| ["--param", p]))
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -70,12 +70,13 @@ fn peer_report(child: Child) -> Value {
 
 /// Runs thrusterd and thruster-hw (`output`) against the peer for `seconds` and asks the
 /// daemon to estimate once it has samples: its pulses are the thrust that goes out, when
-/// `expect_pulses`; otherwise the daemon is to refuse, its status naming RC_OVERRIDE_TIME.
+/// `expect_pulses`; otherwise the daemon is to refuse, its status saying the driver holds
+/// the outputs neutral. `params`: the peer's parameters, `NAME=VALUE`.
 /// Returns the peer's report, the daemon's supply voltage, samples, and that status text.
 fn session(
     name: &str,
     output: &str,
-    override_time: f64,
+    params: &[&str],
     seconds: f64,
     expect_pulses: bool,
 ) -> (Value, f64, u64, String) {
@@ -90,7 +91,7 @@ fn session(
         world.dir.path(),
     );
     let mut daemon = world.daemon(&["--thrusters", &THRUSTERS.to_string()]);
-    let child = peer(port, seconds, override_time);
+    let child = peer(port, seconds, params);
     let ready = op
         .wait_status(LONG, |s| s.samples > 200)
         .unwrap_or_else(|| {
@@ -110,7 +111,7 @@ fn session(
         assert!(pulsing.is_some(), "never pulsed\n{}", daemon.log_text());
         String::new()
     } else {
-        op.wait_status(LONG, |s| s.text().contains("RC_OVERRIDE_TIME"))
+        op.wait_status(LONG, |s| s.text().contains("outputs held neutral"))
             .unwrap_or_else(|| panic!("no reason in status\n{}", daemon.log_text()))
             .text()
             .to_string()
@@ -130,7 +131,7 @@ fn f(v: &Value) -> f64 {
 #[test]
 fn motor_tests_heartbeats_and_requests_are_what_pymavlink_reads_and_its_imu_and_battery_reach_the_daemon(
 ) {
-    let (r, voltage, samples, _) = session("pymav", "motor_test", 3.0, 14.0, true);
+    let (r, voltage, samples, _) = session("pymav", "motor_test", &[], 14.0, true);
     println!("{r}");
     assert_eq!(r["bad_data"], 0, "messages pymavlink could not parse: {r}");
     // Our HEARTBEAT: 255/191, an onboard controller (18), autopilot INVALID (8).
@@ -173,21 +174,22 @@ fn motor_tests_heartbeats_and_requests_are_what_pymavlink_reads_and_its_imu_and_
     assert!((voltage - 15.8).abs() < 1e-9, "supply {voltage} V");
 }
 
-/// The RC_OVERRIDE_TIME check against a PARAM_VALUE pymavlink encoded: 0.5 s lets the
-/// daemon's thrust through as RC_CHANNELS_OVERRIDE; ArduSub's default 3 s keeps every override
-/// neutral, and the daemon refuses to estimate with the driver's reason in its status.
+/// The RC override check against PARAM_VALUEs pymavlink encoded: with FS_PILOT_TIMEOUT 0.5
+/// s the daemon's thrust goes out as RC_CHANNELS_OVERRIDE; with ArduSub's default 3 s every
+/// override stays neutral, and the daemon refuses to estimate with the driver's reason in its
+/// status.
 #[test]
-fn rc_override_time_read_from_pymavlink_gates_the_overrides() {
-    for (hold, thrust_expected) in [(0.5, true), (3.0, false)] {
-        let (r, _, _, text) = session("pymavrc", "rc_override", hold, 12.0, thrust_expected);
+fn the_pilot_input_failsafe_read_from_pymavlink_gates_the_overrides() {
+    for (timeout, thrust_expected) in [
+        ("FS_PILOT_TIMEOUT=0.5", true),
+        ("FS_PILOT_TIMEOUT=3", false),
+    ] {
+        let (r, _, _, text) = session("pymavrc", "rc_override", &[timeout], 12.0, thrust_expected);
         assert_eq!(r["bad_data"], 0, "{r}");
         let asked = r["param_requests"].as_array().unwrap();
-        assert!(
-            asked
-                .iter()
-                .any(|a| a[0] == "RC_OVERRIDE_TIME" && a[1] == -1),
-            "{r}"
-        );
+        for p in ["FS_PILOT_INPUT", "FS_PILOT_TIMEOUT", "RC_OVERRIDE_TIME"] {
+            assert!(asked.iter().any(|a| a[0] == p && a[1] == -1), "{p}: {r}");
+        }
         let overrides = r["overrides"].as_array().unwrap();
         assert!(overrides.len() > 20, "{} overrides", overrides.len());
         let moved = overrides
@@ -199,11 +201,11 @@ fn rc_override_time_read_from_pymavlink_gates_the_overrides() {
             assert!(unused.iter().all(|c| c == 65535), "unused channels: {o}");
         }
         if thrust_expected {
-            assert!(moved > 10, "RC_OVERRIDE_TIME {hold}: {moved} with thrust");
+            assert!(moved > 10, "{timeout}: {moved} with thrust");
         } else {
-            assert_eq!(moved, 0, "RC_OVERRIDE_TIME {hold}: thrust went out");
+            assert_eq!(moved, 0, "{timeout}: thrust went out");
             assert!(
-                text.contains("outputs held neutral: RC_OVERRIDE_TIME = 3 s"),
+                text.contains("outputs held neutral: FS_PILOT_TIMEOUT = 3 s"),
                 "{text}"
             );
         }

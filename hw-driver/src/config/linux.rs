@@ -43,6 +43,9 @@ ranged!(
     " kPa"
 );
 
+/// 4096 steps of the PCA9685's 25 MHz oscillator times (prescale 15 + 1): the default period.
+pub const PCA9685_EXACT_PERIOD_NS: u64 = 2_621_440;
+
 /// `[linux]`. Every key optional; defaults documented per key and in
 /// config/thruster-hw.toml.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -53,9 +56,14 @@ pub struct LinuxConfig {
     pub sysfs_root: PathBuf,
     /// The PWM chip N of `<root>/class/pwm/pwmchipN`. Default 0.
     pub pwm_chip: u32,
-    /// PWM period, ns (2.1 ms ..= 100 ms). Default 2500000 (400 Hz, the fastest a Blue
-    /// Robotics ESC accepts: a new pulse width reaches the ESC within 2.5 ms). Use 20000000
-    /// (50 Hz) for ESCs or servos that want the classic servo rate.
+    /// PWM period, ns (2.1 ms ..= 100 ms). Default 2621440 (381.5 Hz, under the 400 Hz a Blue
+    /// Robotics ESC accepts: a new pulse width reaches the ESC within 2.7 ms), a period a
+    /// PCA9685 makes exactly: its 25 MHz clock / 4096 steps / (prescale 15 + 1). Older
+    /// `pwm-pca9685` drivers round the prescale and scale the duty against the *requested*
+    /// period (`duty = DIV_ROUND_UP(4096 * duty_ns, period_ns)`), so 2500000 (400 Hz) gave a
+    /// real period of 2457600 ns and every pulse 1.7 % short: 1500 us came out 1475 us, a
+    /// deadband's width off neutral (docs/hardware.md). Use 20000000 (50 Hz) for ESCs or
+    /// servos that want the classic servo rate.
     #[serde(deserialize_with = "de_period_ns")]
     pub pwm_period_ns: u64,
     /// How long to wait for `pwmM/` to appear (and become writable) after `export`, ms.
@@ -108,7 +116,7 @@ impl Default for LinuxConfig {
         LinuxConfig {
             sysfs_root: PathBuf::from("/sys"),
             pwm_chip: 0,
-            pwm_period_ns: 2_500_000,
+            pwm_period_ns: PCA9685_EXACT_PERIOD_NS,
             export_timeout_ms: 2000,
             rate_hz: 200.0,
             gyro_device: "iio:device0".to_string(),
@@ -148,4 +156,45 @@ fn de_axes<'de, D: Deserializer<'de>>(d: D) -> Result<AxisMap, D::Error> {
 
 fn de_axes_opt<'de, D: Deserializer<'de>>(d: D) -> Result<Option<AxisMap>, D::Error> {
     de_axes(d).map(Some)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pulse an older `pwm-pca9685` (its `.apply`: prescale rounded from the requested
+    /// period, duty scaled against the requested period) puts out for `duty_ns`, ns.
+    fn pca9685_pulse_ns(period_ns: u64, duty_ns: u64) -> f64 {
+        const OSC_HZ: u64 = 25_000_000;
+        const STEPS: u64 = 4096;
+        // DIV_ROUND_CLOSEST_ULL(25 * period, 4096 * 1000) - 1
+        let prescale = (25 * period_ns + STEPS * 1000 / 2) / (STEPS * 1000) - 1;
+        // DIV_ROUND_UP_ULL(4096 * duty, period)
+        let counts = (STEPS * duty_ns).div_ceil(period_ns);
+        counts as f64 * (prescale + 1) as f64 * 1e9 / OSC_HZ as f64
+    }
+
+    #[test]
+    fn the_default_period_puts_out_the_pulses_asked_for_on_a_pca9685() {
+        let default = LinuxConfig::default().pwm_period_ns;
+        for us in [1100, 1500, 1900] {
+            let asked = us * 1000;
+            let got = pca9685_pulse_ns(default, asked);
+            // One step is 640 ns at prescale 15; rounding up costs less than that.
+            assert!(
+                (got - asked as f64).abs() < 640.0,
+                "{us} us came out {got} ns"
+            );
+            // The old default, 400 Hz: 1.7 % short, 25 us at neutral.
+            let old = pca9685_pulse_ns(2_500_000, asked);
+            assert!(
+                asked as f64 - old > 0.015 * asked as f64,
+                "{us} us: {old} ns"
+            );
+        }
+        assert!(
+            1e9 / default as f64 <= 400.0,
+            "faster than a Blue Robotics ESC takes"
+        );
+    }
 }

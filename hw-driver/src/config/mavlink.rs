@@ -75,8 +75,8 @@ ranged!(
     " ms"
 );
 ranged!(de_read_timeout_ms, "read_timeout_ms", u64, 1, 1000, " ms");
-// ArduSub's RC_OVERRIDE_TIME is 0-120 s; a hold shorter than a resend period would lapse
-// between our messages.
+// ArduSub's FS_PILOT_TIMEOUT is 0.1-3 s; a hold shorter than a resend period would fire the
+// failsafe between our messages.
 ranged!(
     de_max_override_hold_s,
     "max_override_hold_s",
@@ -121,7 +121,8 @@ pub enum OutputMode {
     #[default]
     MotorTest,
     /// RC_CHANNELS_OVERRIDE; needs SERVOn_FUNCTION = RCINn passthrough on each thruster
-    /// output (set by you; this driver changes no parameter). Channels 1..=8.
+    /// output (set by you; this driver changes no parameter). Channels 1..=6 (the ones
+    /// ArduSub's pilot-input failsafe takes back to neutral).
     RcOverride,
 }
 
@@ -173,10 +174,11 @@ pub struct MavlinkConfig {
     /// "motor_test" (default) or "rc_override".
     pub output: OutputMode,
     /// `rc_override` only: the longest the autopilot may keep our last override after we
-    /// stop (its `RC_OVERRIDE_TIME`, read at link-up), s (0.25..=120). Default 1.0. Until the
-    /// autopilot says a value in (0, this], overrides carry neutral only and `driver_status`
-    /// says why: a SIGKILL leaves the thrusters at our last pulses for that long, and -1 (never
-    /// lapse) forever. ArduSub's own default, 3 s, is refused by this default.
+    /// stop, s (0.25..=120; ArduSub's `FS_PILOT_TIMEOUT` is 0.1-3). Default 1.0. ArduSub
+    /// keeps driving an override until its pilot-input failsafe neutralises the channels, so
+    /// until the autopilot says `FS_PILOT_INPUT` != 0 and `FS_PILOT_TIMEOUT` <= this (and
+    /// `RC_OVERRIDE_TIME` != 0), overrides carry neutral only and `driver_status` says why.
+    /// ArduSub's default timeout, 3 s, is refused by this default.
     #[serde(deserialize_with = "de_max_override_hold_s")]
     pub max_override_hold_s: f64,
     /// Resend period of the thrust messages while nothing changes, ms (10..=250). Default
@@ -248,8 +250,9 @@ impl MavlinkConfig {
     pub fn max_channel(&self) -> u32 {
         match self.output {
             OutputMode::MotorTest => 16,
-            // Without MAVLink 2 extensions (not compiled in) RC_CHANNELS_OVERRIDE has 8.
-            OutputMode::RcOverride => 8,
+            // ArduSub's pilot-input failsafe, what takes an override we leave back to
+            // neutral, resets the six RCMAP channels only (1-6 by default; `override_hold`).
+            OutputMode::RcOverride => 6,
         }
     }
 }

@@ -26,7 +26,7 @@ pub struct ThrusterConfig {
     pub name: Option<String>,
     /// Output channel, numbered as the backend names its outputs: MAVLink `motor_test`:
     /// the board output (1-based, as labelled: MAIN OUT n / Navigator PWM n); MAVLink
-    /// `rc_override`: the RC input channel 1..=8 passed through to the output; Linux: the
+    /// `rc_override`: the RC input channel 1..=6 passed through to the output; Linux: the
     /// sysfs PWM index `M` of `pwmchipN/pwmM` (0-based). Required.
     pub channel: u32,
     /// Shortest pulse ever sent, us. Default 1100.

@@ -6,8 +6,8 @@
 //! SIGABRT systemd sends a hung driver (`WatchdogSec`), the OOM killer. sysfs PWM keeps its
 //! last duty when its writer dies, so the ESCs would hold the last command until a
 //! restarted driver sets neutral, or for good when systemd gives up restarting it.
-//! ArduSub ends its outputs itself (`motor_test` after its timeout, an RC override after
-//! `RC_OVERRIDE_TIME`): nothing is sent there.
+//! ArduSub ends its outputs itself (`motor_test` 500 ms after the last test, an RC override
+//! through its pilot-input failsafe after `FS_PILOT_TIMEOUT`): nothing is sent there.
 
 use crate::backend::linux::LinuxBackend;
 use crate::backend::BackendError;
@@ -33,7 +33,7 @@ fn mavlink_note(cfg: &MavlinkConfig) -> String {
             cfg.motor_test_timeout_ms
         ),
         OutputMode::RcOverride => {
-            "RC override: ArduSub drops it after its RC_OVERRIDE_TIME (3 s by default)".to_string()
+            "RC override: ArduSub's pilot-input failsafe takes it to neutral after FS_PILOT_TIMEOUT (3 s by default)".to_string()
         }
     };
     format!("mavlink: nothing written, the autopilot ends the outputs itself ({how})")

@@ -3,8 +3,8 @@
 //! RAW_IMU, ATTITUDE and SCALED_PRESSURE2 at the requested intervals, handles DO_MOTOR_TEST
 //! like ArduSub (param1 is the 0-based motor index, FAILED when disarmed or for a motor the
 //! frame does not have; 500 ms without one ends motor-test mode with a disarm, counted as
-//! a lapse), answers PARAM_REQUEST_READ by name from its parameters (`RC_OVERRIDE_TIME` 3 s,
-//! ArduSub's default), sends SYS_STATUS with the battery's voltage and current with each
+//! a lapse), answers PARAM_REQUEST_READ by name from its parameters (ArduSub's defaults for
+//! `FS_PILOT_INPUT` 2, `FS_PILOT_TIMEOUT` 3 s, `RC_OVERRIDE_TIME` 3 s), sends SYS_STATUS with the battery's voltage and current with each
 //! HEARTBEAT (ArduSub streams it by default, SR0_EXT_STAT), and records everything it receives with the CLOCK_MONOTONIC time of
 //! reception. Bounded: the thread ends after `MAX_LIFETIME`.
 
@@ -85,7 +85,11 @@ impl Default for ApState {
             motor_test_mode: false,
             last_motor_test_ns: 0,
             lapses: 0,
-            params: HashMap::from([("RC_OVERRIDE_TIME".to_string(), 3.0)]),
+            params: HashMap::from([
+                ("FS_PILOT_INPUT".to_string(), 2.0),
+                ("FS_PILOT_TIMEOUT".to_string(), 3.0),
+                ("RC_OVERRIDE_TIME".to_string(), 3.0),
+            ]),
             param_requests: Vec::new(),
         }
     }

@@ -3,7 +3,7 @@
 //! attribute write with its CLOCK_MONOTONIC time, plus IIO devices whose raw values the
 //! test sets:
 //! - iio:device0 "icm20602": anglvel and accel, shared scales;
-//! - iio:device1 "ak09915": magn (gauss after scale);
+//! - iio:device1 "ak09916": magn (gauss after scale);
 //! - iio:device2 "ms5837": in_pressure_input (kPa).
 
 use std::collections::HashMap;
@@ -64,7 +64,7 @@ impl FakeSysfs {
         }
         fs::write(imu.join("in_anglvel_scale"), format!("{GYRO_SCALE}\n")).unwrap();
         fs::write(imu.join("in_accel_scale"), format!("{ACCEL_SCALE}\n")).unwrap();
-        let mag = iio_dev(root, 1, "ak09915");
+        let mag = iio_dev(root, 1, "ak09916");
         for axis in ["x", "y", "z"] {
             fs::write(mag.join(format!("in_magn_{axis}_raw")), "0\n").unwrap();
         }

@@ -24,8 +24,10 @@
 //! - DO_MOTOR_TEST param1 is ArduSub's 0-based motor index: `channel - 1` (see
 //!   [`ardusub_motor_index`]).
 //! - Our HEARTBEAT every `heartbeat_ms`, from the start.
-//! - RC override mode: the autopilot's `RC_OVERRIDE_TIME` is read at each link-up; until it
-//!   is known and short, overrides carry neutral only ([`super::override_hold`]).
+//! - RC override mode: the autopilot's pilot-input failsafe (`FS_PILOT_INPUT`,
+//!   `FS_PILOT_TIMEOUT`) and `RC_OVERRIDE_TIME` are read at each link-up; until they say our
+//!   last override is taken back to neutral soon after we stop, overrides carry neutral only
+//!   ([`super::override_hold`]).
 //! - Supply: the newest voltage (and current) of SYS_STATUS or BATTERY_STATUS monitor 0
 //!   ([`super::battery`]), reported while younger than [`SUPPLY_STALE_NS`]; ArduSub streams
 //!   both at its default rates (SR0_EXT_STAT), so no interval is requested.
@@ -295,7 +297,7 @@ impl Conversation {
     /// receive thread (`io`), and the rest (dozens of streams a GCS link carries) are dropped
     /// there so the loop is woken only for something it uses. Kept beside `on_message`: a
     /// message handled there and missing here is never seen (SYS_STATUS, BATTERY_STATUS and
-    /// PARAM_VALUE were, found by the process test of RC_OVERRIDE_TIME).
+    /// PARAM_VALUE were, found by the process test of the override check).
     pub fn takes(msg: &MavMessage) -> bool {
         matches!(
             msg,
@@ -350,17 +352,18 @@ impl Conversation {
             }
             MavMessage::COMMAND_ACK(ack) => self.on_ack(t_ns, ack),
             MavMessage::PARAM_VALUE(v) => {
-                if let Some(value) = self.override_hold.on_value(v) {
+                if let Some((name, value)) = self.override_hold.on_value(v) {
+                    info!("autopilot {name} = {value}");
                     match self.override_hold.verdict() {
                         Ok(()) => info!(
-                            "autopilot {}: {value} s, overrides carry thrust",
-                            super::override_hold::PARAM
+                            "the autopilot neutralises an override we leave: overrides carry \
+                             thrust"
                         ),
                         Err(why) => warn!(
                             max_override_hold_s = self.cfg.max_override_hold_s,
-                            "RC overrides held neutral: {why} (the autopilot keeps driving an \
-                             override that long after our last one: after a crash of ours, \
-                             our last thrust)"
+                            "RC overrides held neutral: {why} (ArduSub keeps driving the last \
+                             override until its pilot-input failsafe: after a crash of ours, \
+                             our last thrust; docs/hardware.md)"
                         ),
                     }
                     self.thrust_dirty = true;
@@ -595,9 +598,8 @@ impl Conversation {
         }
         self.service_commands(now_ns);
         if let Some((sys, comp)) = self.target {
-            if let Some(ask) = self.override_hold.request(now_ns, sys, comp) {
-                self.outgoing.push(ask);
-            }
+            self.override_hold
+                .requests(now_ns, sys, comp, &mut self.outgoing);
         }
         let resend_due = self
             .last_thrust_ns

@@ -54,7 +54,13 @@ pub const MAX_MAG_UT: f64 = 1000.0;
 /// its own by [`plausible_mag`]: a bad compass must not cost the gyro and accelerometer.
 pub fn implausible(imu: &ImuReading) -> Option<&'static str> {
     let over = |v: &[f64; 3], max: f64| v.iter().any(|x| !x.is_finite() || x.abs() > max);
-    if over(&imu.accel, MAX_ACCEL_MSS) {
+    // ArduPilot sends SCALED_IMU2 when a second IMU *or compass* exists, with the missing
+    // IMU's acceleration and rate left at zero (`GCS_MAVLINK::send_scaled_imu`): on a board
+    // with one IMU and two compasses (a Navigator) the default `imu_message` gives exact
+    // zeros. An accelerometer in the water never reads exactly 0 on every axis (it feels g).
+    if imu.accel == [0.0; 3] {
+        Some("no acceleration at all (an IMU instance the autopilot does not have)")
+    } else if over(&imu.accel, MAX_ACCEL_MSS) {
         Some("acceleration beyond 3 g")
     } else if over(&imu.gyro, MAX_GYRO_RADPS) {
         Some("angular rate beyond 2000 deg/s")
@@ -83,6 +89,9 @@ mod tests {
         // RAW_IMU from an autopilot that sends ADC counts: 1 g = 4096 counts.
         let counts = scaled_imu([0, 0, -4096], [0, 0, 0], [0, 0, 0]);
         assert_eq!(implausible(&counts), Some("acceleration beyond 3 g"));
+        // SCALED_IMU2 of a board with one IMU and a second compass: zeros and a field.
+        let absent = scaled_imu([0, 0, 0], [0, 0, 0], [200, 0, 400]);
+        assert!(implausible(&absent).unwrap().contains("does not have"));
         // Every i16 mrad/s is within 2000 deg/s; only other sources can exceed it.
         assert_eq!(
             implausible(&scaled_imu([0, 0, -1000], [0, 0, i16::MAX], [0; 3])),

@@ -367,14 +367,21 @@ fn overrides(out: Vec<MavMessage>) -> Vec<RC_CHANNELS_OVERRIDE_DATA> {
         .collect()
 }
 
-fn override_time(v: f32) -> MavMessage {
+fn param(name: &str, v: f32) -> MavMessage {
     MavMessage::PARAM_VALUE(mavlink::dialects::ardupilotmega::PARAM_VALUE_DATA {
         param_value: v,
         param_count: 900,
         param_index: 31,
-        param_id: "RC_OVERRIDE_TIME".into(),
+        param_id: name.into(),
         param_type: mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_REAL32,
     })
+}
+
+/// The autopilot's answers: its pilot-input failsafe's action and timeout, RC_OVERRIDE_TIME.
+fn failsafe(s: &mut Conversation, t: u64, input: f32, timeout: f32) {
+    s.on_message(t, &hdr(1, 1), &param("FS_PILOT_INPUT", input));
+    s.on_message(t, &hdr(1, 1), &param("FS_PILOT_TIMEOUT", timeout));
+    s.on_message(t, &hdr(1, 1), &param("RC_OVERRIDE_TIME", 3.0));
 }
 
 #[test]
@@ -385,7 +392,7 @@ fn rc_override_sets_our_channels_and_ignores_the_rest() {
     };
     let mut s = Conversation::new(cfg, specs(), 0);
     s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
-    s.on_message(2, &hdr(1, 1), &override_time(0.5));
+    failsafe(&mut s, 2, 2.0, 0.5);
     s.set_outputs(&[Pwm(1600), Pwm(1400)]);
     s.service(2);
     let rc = overrides(s.drain_outgoing());
@@ -399,10 +406,11 @@ fn rc_override_sets_our_channels_and_ignores_the_rest() {
     assert_eq!((r.target_system, r.target_component), (1, 1));
 }
 
-/// RC_OVERRIDE_TIME is asked for at link-up; overrides carry neutral until it is known and
-/// short, and again when a re-read finds it long; a new link asks again.
+/// The pilot-input failsafe and RC_OVERRIDE_TIME are asked for at link-up; overrides carry
+/// neutral until they are known and say our last override is taken back soon, and again when
+/// a re-read finds otherwise; a new link asks again.
 #[test]
-fn rc_overrides_carry_thrust_only_while_the_autopilots_hold_is_known_and_short() {
+fn rc_overrides_carry_thrust_only_while_the_autopilot_would_take_a_left_one_back_soon() {
     let cfg = MavlinkConfig {
         output: OutputMode::RcOverride,
         ..MavlinkConfig::default()
@@ -412,38 +420,51 @@ fn rc_overrides_carry_thrust_only_while_the_autopilots_hold_is_known_and_short()
     s.set_outputs(&[Pwm(1600), Pwm(1400)]);
     s.service(2);
     let out = s.drain_outgoing();
-    let asked = out
+    let asked: Vec<String> = out
         .iter()
-        .filter(|m| matches!(m, MavMessage::PARAM_REQUEST_READ(r) if r.param_id.to_str().unwrap().starts_with("RC_OVERRIDE_TIME")))
-        .count();
-    assert_eq!(asked, 1, "{out:?}");
+        .filter_map(|m| match m {
+            MavMessage::PARAM_REQUEST_READ(r) => Some(
+                r.param_id
+                    .to_str()
+                    .unwrap()
+                    .trim_end_matches('\0')
+                    .to_string(),
+            ),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        asked,
+        ["FS_PILOT_INPUT", "FS_PILOT_TIMEOUT", "RC_OVERRIDE_TIME"],
+        "{out:?}"
+    );
     let rc = overrides(out);
     assert_eq!(
         (rc[0].chan1_raw, rc[0].chan4_raw),
         (1500, 1510),
-        "thrust before the hold is known"
+        "thrust before the failsafe is known"
     );
     assert!(s.held().unwrap().contains("waiting"), "{:?}", s.held());
-    // ArduSub's default: refused.
-    s.on_message(3, &hdr(1, 1), &override_time(3.0));
+    // ArduSub's defaults: the failsafe 3 s after our last override. Refused.
+    failsafe(&mut s, 3, 2.0, 3.0);
     s.service(4);
     let rc = overrides(s.drain_outgoing());
     assert_eq!((rc[0].chan1_raw, rc[0].chan4_raw), (1500, 1510));
     assert!(s.held().unwrap().contains("outlive us 3 s"));
     // Set short from the ground station, seen at the re-read: thrust.
-    s.on_message(5, &hdr(1, 1), &override_time(0.5));
+    s.on_message(5, &hdr(1, 1), &param("FS_PILOT_TIMEOUT", 0.5));
     s.service(6);
     let rc = overrides(s.drain_outgoing());
     assert_eq!((rc[0].chan1_raw, rc[0].chan4_raw), (1600, 1400));
     assert_eq!(s.held(), None);
-    // Never lapsing: neutral at once.
-    s.on_message(7, &hdr(1, 1), &override_time(-1.0));
+    // The failsafe turned off: nothing would take a left override back. Neutral at once.
+    s.on_message(7, &hdr(1, 1), &param("FS_PILOT_INPUT", 0.0));
     s.service(8);
     let rc = overrides(s.drain_outgoing());
     assert_eq!((rc[0].chan1_raw, rc[0].chan4_raw), (1500, 1510));
-    assert!(s.held().unwrap().contains("forever"));
+    assert!(s.held().unwrap().contains("nothing neutralises"));
     // A lost link forgets it; the next link-up asks again.
-    s.on_message(9, &hdr(1, 1), &override_time(0.5));
+    s.on_message(9, &hdr(1, 1), &param("FS_PILOT_INPUT", 2.0));
     s.on_disconnect("test");
     assert_eq!(s.held(), None, "no link: the link state says it");
     s.on_message(10, &hdr(1, 1), &ap_heartbeat(true));
