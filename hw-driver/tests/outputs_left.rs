@@ -125,3 +125,73 @@ fn a_killed_driver_leaves_its_last_pulse_until_thruster_hw_neutral() {
         );
     }
 }
+
+/// A pressure read that hangs (a conversion that never ends, an I2C bus held) costs the
+/// depth only: it is read on its own thread, so the samples keep coming at the IMU's rate,
+/// the commands keep reaching the outputs, and the depth comes back with the sensor. Read in
+/// the loop, as before the audit against the kernel's drivers, it stopped the samples and the
+/// stall guard took the thrusters neutral.
+#[test]
+fn a_pressure_read_that_hangs_costs_the_depth_only() {
+    let mut h = Harness::<Linux>::start(100, "");
+    h.drive_to(&[1.0; 4], FULL);
+    let raw =
+        h.fx.0
+            .root()
+            .join("bus/iio/devices/iio:device2/in_pressure_input");
+    let fifo = raw.with_extension("fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    fs::rename(&fifo, &raw).unwrap();
+    // A second of commands at full thrust while the pressure read hangs.
+    let t0 = Instant::now();
+    let (mut samples, mut without_depth) = (0, 0);
+    while t0.elapsed() < Duration::from_secs(1) {
+        let (s, _) = h.daemon.answer(&[1.0; 4]);
+        samples += 1;
+        if !s.has_depth() {
+            without_depth += 1;
+        }
+        assert_eq!(
+            h.fx.pulses().as_deref(),
+            Some(&FULL[..]),
+            "outputs left FULL"
+        );
+    }
+    eprintln!("pressure read hung: {samples} samples in 1 s, {without_depth} without depth");
+    // 100 Hz: about 100 samples; the depth goes stale 0.5 s after the last read.
+    assert!(
+        samples >= 80,
+        "{samples} samples in 1 s with the pressure read hung"
+    );
+    assert!(
+        (20..=70).contains(&without_depth),
+        "{without_depth} of {samples} samples without depth"
+    );
+    let log = h.proc.log();
+    assert!(
+        !log.contains("has not run for"),
+        "the stall guard fired\n{log}"
+    );
+    // The sensor answers again: depth is back.
+    let mut writer = fs::OpenOptions::new().write(true).open(&raw).unwrap();
+    let plain = raw.with_extension("plain");
+    fs::write(&plain, format!("{}\n", common::fake_sysfs::SURFACE_KPA)).unwrap();
+    fs::rename(&plain, &raw).unwrap();
+    writer
+        .write_all(format!("{}\n", common::fake_sysfs::SURFACE_KPA).as_bytes())
+        .unwrap();
+    drop(writer);
+    let end = Instant::now() + Duration::from_secs(2);
+    loop {
+        let (s, _) = h.daemon.answer(&[1.0; 4]);
+        if s.has_depth() {
+            break;
+        }
+        assert!(Instant::now() < end, "no depth after the sensor came back");
+    }
+    h.finish();
+}

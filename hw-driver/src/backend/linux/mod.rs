@@ -1,11 +1,14 @@
 //! The Linux backend: ESCs on sysfs PWM channels, IMU (and optionally pressure) from IIO.
 //!
-//! Local hardware, no receive thread: the loop calls [`Backend::read_sensors`] at the
-//! deadline this backend gives (one sample per `1 / rate_hz`), and every output change is
-//! one `duty_cycle` write. The sysfs root is configurable so the tests run on fake trees.
+//! Local hardware: the loop calls [`Backend::read_sensors`] at the deadline this backend
+//! gives (one sample per `1 / rate_hz`: the gyro and accelerometer), and every output change
+//! is one `duty_cycle` write. The magnetometer, pressure and supply, whose reads take
+//! milliseconds, are read on a thread of their own ([`slow_sensors`]). The sysfs root is
+//! configurable so the tests run on fake trees.
 
 pub mod iio;
 pub mod pwm;
+pub mod slow_sensors;
 pub mod stall_guard;
 pub mod sysfs;
 
@@ -13,6 +16,7 @@ use std::time::Duration;
 
 use self::iio::{find_device, Channel, Pressure, Vector3};
 use self::pwm::PwmChannel;
+use self::slow_sensors::{Latest, SlowChannels, SlowSensors};
 use self::stall_guard::StallGuard;
 use thruster_protocol::ImuReading;
 
@@ -29,24 +33,22 @@ pub const G: f64 = 9.80665;
 /// Gauss -> microtesla.
 const UT_PER_GAUSS: f64 = 100.0;
 
-/// Consecutive failed sensor reads tolerated (skipped samples) before the backend fails.
-/// I2C sensors return an occasional EIO; a sensor that is gone fails within this many
+/// Consecutive failed IMU reads tolerated (skipped samples) before the backend fails.
+/// I2C sensors return an occasional EIO; an IMU that is gone fails within this many
 /// periods (0.1 s at 200 Hz), and the daemon's stale-IMU fault sees the gap meanwhile.
 pub const MAX_READ_FAILURES: u32 = 20;
 
-/// How often the supply voltage channel is read, ns: a battery moves slowly, and the
-/// driver reports it every 100 ms.
-const SUPPLY_PERIOD_NS: u64 = 100_000_000;
+/// How long `start` waits for the slow sensors' first values: a few conversions.
+const FIRST_SLOW_READ: Duration = Duration::from_millis(200);
+
 /// A supply reading older than this is reported unknown, ns (reads have been failing).
 const SUPPLY_STALE_NS: u64 = 1_000_000_000;
 
-/// The IIO channels of the samples.
+/// The IIO channels the loop reads for each sample.
 #[derive(Debug)]
 struct Sensors {
     gyro: Vector3,
     accel: Vector3,
-    mag: Option<Vector3>,
-    pressure: Option<Pressure>,
     imu_axes: AxisMap,
     mag_axes: AxisMap,
 }
@@ -62,12 +64,10 @@ pub struct LinuxBackend {
     next_due_ns: u64,
     read_failures: u32,
     read_log: LogLimiter,
-    /// The supply's ADC channel, when configured.
-    supply_channel: Option<Channel>,
-    /// The last good supply reading (V) and when; the next read is due at `next_supply_ns`.
-    supply: Option<(u64, f64)>,
-    next_supply_ns: u64,
-    supply_log: LogLimiter,
+    /// The magnetometer, pressure and supply, read on their own thread (started in `start`).
+    slow: Option<SlowSensors>,
+    /// Their newest values as the loop last took them.
+    slow_latest: Latest,
     stopped: bool,
     /// The longest the loop may stop calling in before a thread of its own takes the
     /// outputs neutral (`stall_guard`); None: no guard (the in-process tests).
@@ -90,10 +90,8 @@ impl LinuxBackend {
             next_due_ns: 0,
             read_failures: 0,
             read_log: LogLimiter::default(),
-            supply_channel: None,
-            supply: None,
-            next_supply_ns: 0,
-            supply_log: LogLimiter::default(),
+            slow: None,
+            slow_latest: Latest::default(),
             stopped: false,
             stall_limit: None,
             guard: None,
@@ -130,32 +128,6 @@ impl LinuxBackend {
             }
         }
         taken
-    }
-
-    /// Reads the supply voltage when due. A failed read is logged and leaves the last good
-    /// value to go stale: a flaky ADC must not end the driver.
-    fn poll_supply(&mut self, now_ns: u64) {
-        let Some(ch) = &self.supply_channel else {
-            return;
-        };
-        if now_ns < self.next_supply_ns {
-            return;
-        }
-        self.next_supply_ns = now_ns + SUPPLY_PERIOD_NS;
-        // IIO voltages are millivolts after scale; the gain undoes the divider.
-        match ch.read().map(|mv| mv / 1000.0 * self.cfg.supply_gain) {
-            Ok(v) if v.is_finite() && v >= 0.0 => self.supply = Some((now_ns, v)),
-            Ok(v) => {
-                if let Some(suppressed) = self.supply_log.allow() {
-                    tracing::warn!(suppressed, "supply voltage {v} V is not plausible, ignored");
-                }
-            }
-            Err(e) => {
-                if let Some(suppressed) = self.supply_log.allow() {
-                    tracing::warn!(suppressed, "supply voltage read failed: {e}");
-                }
-            }
-        }
     }
 
     fn chip_dir(&self) -> std::path::PathBuf {
@@ -197,7 +169,8 @@ impl LinuxBackend {
         Ok(())
     }
 
-    fn open_sensors(&self) -> Result<Sensors, BackendError> {
+    /// Opens every channel: a wrong device name fails here, before any output is touched.
+    fn open_sensors(&self) -> Result<(Sensors, SlowChannels), BackendError> {
         let root = &self.cfg.sysfs_root;
         let gyro_dev = find_device(root, &self.cfg.gyro_device)?;
         let accel_dev = find_device(root, self.cfg.accel_device())?;
@@ -209,14 +182,29 @@ impl LinuxBackend {
             Some(spec) => Some(Pressure::open(&find_device(root, spec)?)?),
             None => None,
         };
-        Ok(Sensors {
+        // A configured supply channel that is not there is a configuration error, like a
+        // missing IMU: said at start, not hidden behind an unknown voltage forever.
+        let supply = match &self.cfg.supply_device {
+            Some(spec) => Some(Channel::open_voltage(
+                &find_device(root, spec)?,
+                self.cfg.supply_channel,
+            )?),
+            None => None,
+        };
+        let sensors = Sensors {
             gyro: Vector3::open(&gyro_dev, "anglvel")?,
             accel: Vector3::open(&accel_dev, "accel")?,
-            mag,
-            pressure,
             imu_axes: self.cfg.imu_axes,
             mag_axes: self.cfg.mag_axes(),
-        })
+        };
+        Ok((
+            sensors,
+            SlowChannels {
+                mag,
+                pressure,
+                supply,
+            },
+        ))
     }
 
     fn read(&self, sensors: &Sensors) -> Result<ImuReading, BackendError> {
@@ -224,18 +212,16 @@ impl LinuxBackend {
         let t_ns = monotonic_ns();
         let gyro = sensors.imu_axes.apply(sensors.gyro.read()?);
         let accel = sensors.imu_axes.apply(sensors.accel.read()?);
-        let mag = match &sensors.mag {
-            Some(m) => Some(sensors.mag_axes.apply(m.read()?).map(|g| g * UT_PER_GAUSS)),
-            None => None,
-        };
-        let depth = match &sensors.pressure {
-            Some(p) => Some(depth_m(
-                p.read_kpa()?,
+        let slow = &self.slow_latest;
+        let mag = Latest::fresh(slow.mag, t_ns, slow_sensors::STALE_NS)
+            .map(|m| sensors.mag_axes.apply(m).map(|g| g * UT_PER_GAUSS));
+        let depth = Latest::fresh(slow.pressure_kpa, t_ns, slow_sensors::STALE_NS).map(|kpa| {
+            depth_m(
+                kpa,
                 self.cfg.surface_pressure_kpa,
                 self.cfg.fluid_density_kg_m3,
-            )),
-            None => None,
-        };
+            )
+        });
         Ok(ImuReading {
             seq: 0,
             t_ns,
@@ -259,15 +245,23 @@ impl Backend for LinuxBackend {
 
     fn start(&mut self, _waker: Waker, now_ns: u64) -> Result<(), BackendError> {
         // Sensors first: a wrong device name fails before any output is touched.
-        self.sensors = Some(self.open_sensors()?);
-        // A configured supply channel that is not there is a configuration error, like a
-        // missing IMU: said at start, not hidden behind an unknown voltage forever.
-        if let Some(spec) = &self.cfg.supply_device {
-            let dev = find_device(&self.cfg.sysfs_root, spec)?;
-            self.supply_channel = Some(Channel::open_voltage(&dev, self.cfg.supply_channel)?);
-        }
-        self.next_supply_ns = now_ns;
+        let (sensors, slow) = self.open_sensors()?;
+        self.sensors = Some(sensors);
         let chip = self.chip_dir();
+        let mut slow = SlowSensors::start(slow).map_err(|e| BackendError::Content {
+            path: self.cfg.sysfs_root.clone(),
+            reason: format!("cannot start the slow sensors' thread: {e}"),
+        })?;
+        // The first samples carry the magnetometer and depth when the sensors answer within
+        // a read's time; a slower one joins later (its value is attached once it comes).
+        if !slow.wait_first(FIRST_SLOW_READ) {
+            tracing::warn!(
+                "a magnetometer, pressure or supply read took over {FIRST_SLOW_READ:?}: the \
+                 first samples go out without it"
+            );
+        }
+        self.slow_latest = slow.latest();
+        self.slow = Some(slow);
         let timeout = Duration::from_millis(self.cfg.export_timeout_ms);
         for o in &self.outputs {
             let ch =
@@ -305,7 +299,9 @@ impl Backend for LinuxBackend {
         // Before the reads: a read that hangs leaves this heartbeat to age. Nothing is
         // written again here: after a long stall the loop's watchdog first decides on neutral.
         self.beat();
-        self.poll_supply(now_ns);
+        if let Some(slow) = &mut self.slow {
+            self.slow_latest = slow.latest();
+        }
         let Some(sensors) = &self.sensors else {
             return Ok(None);
         };
@@ -386,12 +382,13 @@ impl Backend for LinuxBackend {
     }
 
     fn supply(&self, now_ns: u64) -> Supply {
-        match self.supply {
-            Some((t, v)) if now_ns.saturating_sub(t) <= SUPPLY_STALE_NS => Supply {
-                voltage_v: Some(v),
-                current_a: None,
-            },
-            _ => Supply::default(),
+        // The ADC's volts times the divider's ratio; an implausible value is unknown.
+        let v = Latest::fresh(self.slow_latest.supply_adc_v, now_ns, SUPPLY_STALE_NS)
+            .map(|v| v * self.cfg.supply_gain)
+            .filter(|v| v.is_finite() && *v >= 0.0);
+        Supply {
+            voltage_v: v,
+            current_a: None,
         }
     }
 
