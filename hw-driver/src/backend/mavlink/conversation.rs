@@ -13,7 +13,7 @@
 //!   `depth_timeout_ms`.
 //! - Thrust: the current pulses go out at once when they change and every `resend_ms`
 //!   otherwise, as DO_MOTOR_TEST per thruster (only while the autopilot reports armed:
-//!   ArduSub refuses motor tests when disarmed and announces each refusal) or as one
+//!   ArduSub refuses motor tests when disarmed, with a STATUSTEXT at most every 2 s) or as one
 //!   RC_CHANNELS_OVERRIDE. Motor tests start with the first non-neutral pulse, not at
 //!   link-up: the first one puts ArduSub into motor-test mode, which bypasses the pilot and
 //!   which ArduSub leaves only by disarming 500 ms after the last one (docs/hardware.md).
@@ -30,7 +30,8 @@
 //!   ([`super::override_hold`]).
 //! - Supply: the newest voltage (and current) of SYS_STATUS or BATTERY_STATUS monitor 0
 //!   ([`super::battery`]), reported while younger than [`SUPPLY_STALE_NS`]; ArduSub streams
-//!   both at its default rates (SR0_EXT_STAT), so no interval is requested.
+//!   both at its default rates (SYS_STATUS in SR0_EXT_STAT, BATTERY_STATUS in SR0_EXTRA3), so
+//!   no interval is requested.
 
 use std::collections::VecDeque;
 
@@ -428,7 +429,9 @@ impl Conversation {
                 info!("autopilot armed: thrust commands take effect");
             } else {
                 warn!("autopilot disarmed: thrust commands have no effect until it is armed");
-                // Disarming also ends what our motor tests started.
+                // Not motor-test mode itself: ArduSub leaves it 500 ms after the last
+                // DO_MOTOR_TEST (a refused one too), so we stop sending them now and the next
+                // thrust after arming starts them again.
                 self.engaged = false;
             }
             self.armed = Some(armed);
