@@ -413,6 +413,48 @@ fn an_unreachable_autopilot_is_an_error_naming_the_address() {
     assert_namespace_clean(&ns);
 }
 
+/// A ground station that connects after us and sends REQUEST_DATA_STREAM resets ArduPilot's
+/// message intervals (SCALED_IMU2 to 2 Hz on ArduSub): the driver sees the IMU starve and
+/// asks for its rate again, and the samples come back at 100 Hz.
+#[test]
+fn an_imu_rate_reset_by_a_ground_station_is_asked_for_again() {
+    let _s = serial();
+    let h = Harness::<Mavlink>::start(100, "");
+    h.daemon.try_sample(TIMEOUT).expect("samples");
+    let before = h.fx.0.with(|s| s.interval_requests().len());
+    // What initialise_message_intervals_for_stream does to SCALED_IMU2 (id 116).
+    h.fx.0.with(|s| s.intervals.insert(116, 500_000));
+    let t0 = Instant::now();
+    loop {
+        let (back, asked) = h.fx.0.with(|s| {
+            (
+                s.intervals.get(&116) == Some(&10_000),
+                s.interval_requests().len(),
+            )
+        });
+        if back && asked > before {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(8),
+            "the IMU rate was not asked for again"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    eprintln!("IMU rate asked for again {:?} after the reset", t0.elapsed());
+    // 100 Hz again: at least 50 samples in the next second (2 Hz would give 2).
+    let end = Instant::now() + Duration::from_secs(1);
+    let mut n = 0;
+    while Instant::now() < end {
+        if h.daemon.try_sample(Duration::from_millis(50)).is_some() {
+            n += 1;
+        }
+    }
+    assert!(n >= 50, "{n} samples in 1 s after the rate was asked for again");
+    let (proc, _) = h.finish();
+    assert!(proc.log().contains("asking again"), "{}", proc.log());
+}
+
 /// A configuration that cannot be used exits 2 (the unit does not restart it); the
 /// unreachable autopilot above, a failure of the run, exits 1 (the unit restarts it).
 #[test]

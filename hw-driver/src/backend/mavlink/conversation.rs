@@ -47,6 +47,7 @@ use tracing::{debug, info, warn};
 use super::battery::{self, SupplyReading};
 use super::convert::{depth_from_hpa, implausible, plausible_mag, scaled_imu};
 use super::override_hold::OverrideHold;
+use super::rate_watch::RateWatch;
 use crate::backend::{LinkState, OutputSpec, Supply};
 
 /// A supply reading older than this is not reported, ns (ArduSub sends SYS_STATUS at 1-2 Hz).
@@ -118,6 +119,8 @@ pub struct Conversation {
     supply: Option<(u64, SupplyReading)>,
     /// How long the autopilot keeps an override (asked only in `rc_override` mode).
     override_hold: OverrideHold,
+    /// The IMU stream's rate, for a ground station that reset it ([`super::rate_watch`]).
+    imu_rate: RateWatch,
     readings: VecDeque<ImuReading>,
     pwm: Vec<Pwm>,
     thrust_dirty: bool,
@@ -128,6 +131,7 @@ pub struct Conversation {
     refusal_log: LogLimiter,
     text_log: LogLimiter,
     implausible_log: LogLimiter,
+    rate_log: LogLimiter,
 }
 
 impl Conversation {
@@ -138,6 +142,7 @@ impl Conversation {
         let target = (cfg.target_system != 0 && cfg.target_component != 0)
             .then_some((cfg.target_system, cfg.target_component));
         let override_hold = OverrideHold::new(cfg.max_override_hold_s);
+        let cfg_imu_rate_hz = cfg.imu_rate_hz;
         Conversation {
             cfg,
             outputs,
@@ -153,6 +158,7 @@ impl Conversation {
             depth: None,
             supply: None,
             override_hold,
+            imu_rate: RateWatch::new(cfg_imu_rate_hz),
             readings: VecDeque::new(),
             pwm,
             thrust_dirty: true,
@@ -163,6 +169,7 @@ impl Conversation {
             refusal_log: LogLimiter::default(),
             text_log: LogLimiter::new(20, std::time::Duration::from_secs(10)),
             implausible_log: LogLimiter::default(),
+            rate_log: LogLimiter::default(),
         }
     }
 
@@ -231,6 +238,7 @@ impl Conversation {
         self.armed = None;
         self.engaged = false;
         self.override_hold.link_lost();
+        self.imu_rate.stop();
     }
 
     /// We armed the vehicle (so we disarm it on exit).
@@ -288,7 +296,13 @@ impl Conversation {
         if let Some(sent) = self.commands.front().and_then(|c| c.sent_ns) {
             d = d.min(sent + self.cfg.command_timeout_ms * MS);
         }
-        if let Some(t) = self.override_hold.next_deadline_ns() {
+        for t in [
+            self.override_hold.next_deadline_ns(),
+            self.imu_rate.next_deadline_ns(),
+        ]
+        .into_iter()
+        .flatten()
+        {
             d = d.min(t);
         }
         d
@@ -442,6 +456,7 @@ impl Conversation {
             info!(previous = %self.link, "link to the autopilot up; requesting message rates");
             self.link = LinkState::Up;
             self.queue_setup();
+            self.imu_rate.restart(t_ns);
             if self.cfg.output == OutputMode::RcOverride {
                 self.override_hold.link_up(t_ns);
             }
@@ -450,6 +465,20 @@ impl Conversation {
 
     fn queue_setup(&mut self) {
         self.commands.clear();
+        self.queue_rates();
+        if self.cfg.arm && self.armed != Some(true) {
+            self.commands.push_back(Pending {
+                label: "arm".to_string(),
+                command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                attempts: 0,
+                sent_ns: None,
+            });
+        }
+    }
+
+    /// SET_MESSAGE_INTERVAL for the IMU, ATTITUDE and pressure messages.
+    fn queue_rates(&mut self) {
         let imu_id = match self.cfg.imu_message {
             ImuMessage::ScaledImu2 => SCALED_IMU2_DATA::ID,
             ImuMessage::ScaledImu => SCALED_IMU_DATA::ID,
@@ -476,15 +505,6 @@ impl Conversation {
                 });
             }
         }
-        if self.cfg.arm && self.armed != Some(true) {
-            self.commands.push_back(Pending {
-                label: "arm".to_string(),
-                command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                params: [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-                attempts: 0,
-                sent_ns: None,
-            });
-        }
     }
 
     fn on_imu(&mut self, t_ns: u64, mut imu: ImuReading) {
@@ -492,6 +512,7 @@ impl Conversation {
             self.counters.dropped_link_down += 1;
             return;
         }
+        self.imu_rate.counted();
         if let Some(why) = implausible(&imu) {
             self.counters.imu_implausible += 1;
             if let Some(suppressed) = self.implausible_log.allow() {
@@ -598,6 +619,23 @@ impl Conversation {
                 mavlink_version: 3,
             }));
             self.next_heartbeat_ns = now_ns + self.cfg.heartbeat_ms * MS;
+        }
+        // Judged only with no request out: the rates being asked for are not yet in force,
+        // so the window starts once the last request is answered or given up.
+        if !self.commands.is_empty() {
+            self.imu_rate.restart(now_ns);
+        } else {
+            if let Some(hz) = self.imu_rate.starved(now_ns) {
+                if let Some(suppressed) = self.rate_log.allow() {
+                    warn!(
+                        suppressed,
+                        "IMU messages at {hz:.1} Hz, {} asked for (a ground station's \
+                         REQUEST_DATA_STREAM resets the rates): asking again",
+                        self.cfg.imu_rate_hz
+                    );
+                }
+                self.queue_rates();
+            }
         }
         self.service_commands(now_ns);
         if let Some((sys, comp)) = self.target {

@@ -15,6 +15,7 @@ pub mod conversation;
 pub mod convert;
 pub mod io;
 pub mod override_hold;
+pub mod rate_watch;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, TryRecvError};

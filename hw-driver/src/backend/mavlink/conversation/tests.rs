@@ -185,13 +185,55 @@ fn unacknowledged_requests_are_retried_then_given_up() {
     s.on_message(0, &hdr(1, 1), &ap_heartbeat(false));
     let mut confirmations = Vec::new();
     let mut t = 0;
-    for _ in 0..6 {
+    for _ in 0..5 {
         s.service(t);
         confirmations.extend(commands(&s.drain_outgoing()).iter().map(|c| c.confirmation));
         t += timeout;
     }
     assert_eq!(confirmations, [0, 1, 2]);
     assert_eq!(s.counters().commands_unacked, 1);
+    // No IMU message in the 2 s after giving up: the rate is asked for again (`rate_watch`).
+    s.service(t);
+    let again = commands(&s.drain_outgoing());
+    assert_eq!(
+        again
+            .iter()
+            .map(|c| (c.param1, c.confirmation))
+            .collect::<Vec<_>>(),
+        [(116.0, 0)]
+    );
+}
+
+/// A ground station's REQUEST_DATA_STREAM drops the IMU to 2 Hz: after a 2 s window under
+/// half the rate asked for, the rates are asked for again; at the rate asked for, never.
+#[test]
+fn an_imu_stream_a_ground_station_slowed_is_asked_for_again() {
+    let mut s = up(true);
+    let ms = |k: u64| 10 + k * MS;
+    // 100 Hz for 4 s: nothing asked.
+    for k in 0..400 {
+        s.on_message(ms(k * 10), &hdr(1, 1), &ap_heartbeat(true));
+        s.on_message(ms(k * 10), &hdr(1, 1), &imu2([0, 0, -1000], [0; 3]));
+        s.service(ms(k * 10));
+    }
+    assert!(
+        commands(&s.drain_outgoing()).is_empty(),
+        "asked again at 100 Hz"
+    );
+    // 2 Hz from then on: within the next two windows the IMU rate is asked for again.
+    let mut asked = Vec::new();
+    for k in 0..10 {
+        let t = ms(4000 + k * 500);
+        s.on_message(t, &hdr(1, 1), &ap_heartbeat(true));
+        s.on_message(t, &hdr(1, 1), &imu2([0, 0, -1000], [0; 3]));
+        s.service(t);
+        asked.extend(
+            commands(&s.drain_outgoing())
+                .iter()
+                .map(|c| (c.param1, c.param2)),
+        );
+    }
+    assert_eq!(asked.first(), Some(&(116.0, 10_000.0)), "{asked:?}");
 }
 
 #[test]
