@@ -441,7 +441,10 @@ fn an_imu_rate_reset_by_a_ground_station_is_asked_for_again() {
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    eprintln!("IMU rate asked for again {:?} after the reset", t0.elapsed());
+    eprintln!(
+        "IMU rate asked for again {:?} after the reset",
+        t0.elapsed()
+    );
     // 100 Hz again: at least 50 samples in the next second (2 Hz would give 2).
     let end = Instant::now() + Duration::from_secs(1);
     let mut n = 0;
@@ -450,7 +453,10 @@ fn an_imu_rate_reset_by_a_ground_station_is_asked_for_again() {
             n += 1;
         }
     }
-    assert!(n >= 50, "{n} samples in 1 s after the rate was asked for again");
+    assert!(
+        n >= 50,
+        "{n} samples in 1 s after the rate was asked for again"
+    );
     let (proc, _) = h.finish();
     assert!(proc.log().contains("asking again"), "{}", proc.log());
 }
