@@ -350,15 +350,21 @@ impl Loop {
         self.report(backend, now)
     }
 
-    /// The driver's own status on `driver_status` (see [`status`]).
-    fn publish_status(&mut self, backend: &dyn Backend, now: u64) -> Result<(), DriverError> {
+    /// The driver's own status on `driver_status` (see [`status`]). `held`: the backend's
+    /// [`Backend::held`] this round.
+    fn publish_status(
+        &mut self,
+        backend: &dyn Backend,
+        held: Option<&str>,
+        now: u64,
+    ) -> Result<(), DriverError> {
         let core = self.controller.state(now);
-        let (link, armed, held) = (backend.link(), backend.armed(), backend.held());
+        let (link, armed) = (backend.link(), backend.armed());
         let supply = backend.supply(now);
         let device = status::Device {
             link: &link,
             armed,
-            held: held.as_deref(),
+            held,
             supply,
         };
         if let Some(msg) = self
@@ -400,10 +406,11 @@ impl Loop {
     }
 
     fn report(&mut self, backend: &dyn Backend, now: u64) -> Result<(), DriverError> {
-        self.publish_status(backend, now)?;
+        // Asked once a round: a held backend says why in a new String.
+        let held = backend.held();
+        self.publish_status(backend, held.as_deref(), now)?;
         let state = self.controller.state(now);
         // What reaches the water: the backend's link and armed state win over the core's.
-        let held = backend.held();
         let moves = backend.armed() && held.is_none();
         let reported = status::output_state(state, &backend.link(), moves);
         let described = status::describe(state, reported, held.as_deref());

@@ -381,6 +381,11 @@ impl Backend for LinuxBackend {
         LinkState::Local
     }
 
+    fn stats(&self) -> Vec<(&'static str, u64)> {
+        let failed = self.slow.as_ref().map_or(0, SlowSensors::failures);
+        vec![("slow_read_failures", failed)]
+    }
+
     fn supply(&self, now_ns: u64) -> Supply {
         // The ADC's volts times the divider's ratio; an implausible value is unknown.
         let v = Latest::fresh(self.slow_latest.supply_adc_v, now_ns, SUPPLY_STALE_NS)

@@ -142,7 +142,7 @@ impl Conversation {
         let target = (cfg.target_system != 0 && cfg.target_component != 0)
             .then_some((cfg.target_system, cfg.target_component));
         let override_hold = OverrideHold::new(cfg.max_override_hold_s);
-        let cfg_imu_rate_hz = cfg.imu_rate_hz;
+        let imu_rate = RateWatch::new(cfg.imu_rate_hz);
         Conversation {
             cfg,
             outputs,
@@ -158,7 +158,7 @@ impl Conversation {
             depth: None,
             supply: None,
             override_hold,
-            imu_rate: RateWatch::new(cfg_imu_rate_hz),
+            imu_rate,
             readings: VecDeque::new(),
             pwm,
             thrust_dirty: true,
