@@ -234,9 +234,16 @@ fn imu_samples_in_si_units<F: Fixture>() {
         depth_m: 2.5,
     };
     h.fx.set_imu(&imu);
-    // Let a sample with the new values through, then check a run of them.
+    // Let a sample with the new values through (and the depth, which a MAVLink driver takes
+    // once the autopilot named its water barometer), then check a run of them.
     std::thread::sleep(Duration::from_millis(100));
-    let first = h.daemon.fresh_sample();
+    let until = std::time::Instant::now() + Duration::from_secs(3);
+    let first = loop {
+        let s = h.daemon.fresh_sample();
+        if s.has_depth() || std::time::Instant::now() > until {
+            break s;
+        }
+    };
     let t0 = monotonic_ns();
     let mut samples = vec![first];
     while samples.len() < 50 {

@@ -306,6 +306,121 @@ fn the_supply_voltage_comes_from_an_optional_iio_channel_through_the_divider() {
     assert_eq!(b.supply(t0).voltage_v, None);
 }
 
+/// The raw files of `kind` on iio:device0, as numbers.
+fn raw3(fake: &FakeSysfs, kind: &str) -> [f64; 3] {
+    let dir = fake.root().join("bus/iio/devices/iio:device0");
+    ["x", "y", "z"].map(|axis| {
+        std::fs::read_to_string(dir.join(format!("in_{kind}_{axis}_raw")))
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    })
+}
+
+#[test]
+fn a_chip_the_device_tree_mounts_rotated_reads_in_body_axes_through_the_kernels_matrix() {
+    let fake = FakeSysfs::new(true);
+    let (gyro, accel) = ([0.1, -0.2, 0.3], [0.5, -0.3, -9.81]);
+    fake.set_imu(gyro, accel, [0.0; 3], 0.0);
+    // The chip turned 90 deg about the board's z on the board: board = M chip, so the chip
+    // reads chip = M^T board. inv_mpu6050 shows M per channel type, the device tree's
+    // strings verbatim.
+    let m = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+    let dir = fake.root().join("bus/iio/devices/iio:device0");
+    for kind in ["anglvel", "accel"] {
+        let board = raw3(&fake, kind);
+        let chip: [f64; 3] = std::array::from_fn(|j| (0..3).map(|i| m[i][j] * board[i]).sum());
+        for (axis, v) in ["x", "y", "z"].iter().zip(chip) {
+            std::fs::write(dir.join(format!("in_{kind}_{axis}_raw")), format!("{v}\n")).unwrap();
+        }
+        std::fs::write(
+            dir.join(format!("in_{kind}_mount_matrix")),
+            "0, -1, 0; 1, 0, 0; 0, 0, 1\n",
+        )
+        .unwrap();
+    }
+    let close =
+        |got: [f64; 3], want: [f64; 3], tol: f64| (0..3).all(|k| (got[k] - want[k]).abs() <= tol);
+    let read = || {
+        let mut b = LinuxBackend::new(config(&fake), outputs());
+        let t0 = monotonic_ns();
+        b.start(Waker::noop(), t0).unwrap();
+        b.read_sensors(t0).unwrap().unwrap()
+    };
+    let r = read();
+    assert!(close(r.gyro, gyro, 1e-4), "{:?}", r.gyro);
+    assert!(close(r.accel, accel, 6e-4), "{:?}", r.accel);
+    // Without the kernel's matrix the same chip reads its own axes: x and y swapped.
+    for kind in ["anglvel", "accel"] {
+        std::fs::remove_file(dir.join(format!("in_{kind}_mount_matrix"))).unwrap();
+    }
+    let r = read();
+    assert!(!close(r.accel, accel, 0.1), "{:?}", r.accel);
+    assert!(close(r.accel, [0.3, 0.5, -9.81], 6e-4), "{:?}", r.accel);
+    // A matrix that is not a rotation stops the start, naming the file.
+    std::fs::write(dir.join("in_mount_matrix"), "1, 0, 0; 0, 1, 0; 0, 0, 2\n").unwrap();
+    let mut b = LinuxBackend::new(config(&fake), outputs());
+    let err = b
+        .start(Waker::noop(), monotonic_ns())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("in_mount_matrix") && err.contains("not a rotation"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_bar30_read_with_the_2_bar_formula_is_refused_at_start_and_multiplied_when_configured() {
+    use thruster_hw::config::PressureFormula;
+    let fake = FakeSysfs::new(true);
+    let p = fake
+        .root()
+        .join("bus/iio/devices/iio:device2/in_pressure_input");
+    // What mainline `ms5637` reports for a Bar30 at 3 m: 1/20 of the pressure, as
+    // "%d.%06u" kPa.
+    let kpa_at = |depth_m: f64| SURFACE_KPA + depth_m * 997.0 * 9.80665 / 1000.0;
+    std::fs::write(&p, format!("{:.6}\n", kpa_at(3.0) / 20.0)).unwrap();
+    let mut b = LinuxBackend::new(config(&fake), outputs());
+    let err = b
+        .start(Waker::noop(), monotonic_ns())
+        .unwrap_err()
+        .to_string();
+    for says in [
+        "iio:device2",
+        "below 30 kPa",
+        "pressure_formula = \"bar30_read_as_02ba\"",
+    ] {
+        assert!(err.contains(says), "{says}: {err}");
+    }
+    assert!(fake.pulse_us(0).is_none(), "no output touched");
+    drop(b);
+    let cfg = LinuxConfig {
+        pressure_formula: PressureFormula::Bar30ReadAs02ba,
+        ..config(&fake)
+    };
+    let mut b = LinuxBackend::new(cfg, outputs());
+    let t0 = monotonic_ns();
+    b.start(Waker::noop(), t0).unwrap();
+    let depth = b.read_sensors(t0).unwrap().unwrap().depth.unwrap();
+    assert!((depth - 3.0).abs() < 1e-4, "{depth}");
+    // A pressure gone implausible later costs the depth only, counted.
+    std::fs::write(&p, "0.000000\n").unwrap();
+    let gone = Instant::now();
+    let mut t = t0;
+    loop {
+        t += 10_000_000;
+        std::thread::sleep(Duration::from_millis(10));
+        match b.read_sensors(t.max(monotonic_ns())).unwrap() {
+            Some(r) if r.depth.is_none() => break,
+            _ => assert!(gone.elapsed() < Duration::from_secs(3), "depth kept"),
+        }
+    }
+    let refused = b.stats().into_iter().find(|(k, _)| *k == "depth_refused");
+    assert!(matches!(refused, Some((_, n)) if n >= 1), "{refused:?}");
+}
+
 #[test]
 fn configured_axes_and_no_optional_sensors() {
     let fake = FakeSysfs::new(true);

@@ -8,7 +8,7 @@ mod common;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use common::fake_autopilot::{FakeAutopilot, AP_COMP, AP_SYS};
+use common::fake_autopilot::{FakeAutopilot, AP_COMP, AP_SYS, CUBE_BAROS};
 use common::*;
 use mavlink::dialects::ardupilotmega::{
     MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
@@ -395,6 +395,78 @@ fn the_autopilots_battery_reaches_driver_status() {
         .wait_status(Duration::from_secs(8), |m| m.supply_voltage_v.is_nan());
     assert!(st.supply_current_a.is_nan(), "{st:?}");
     h.finish();
+}
+
+/// On a Cube the Bar30 is the third barometer, which ArduSub reports in no message, and the
+/// second is the tube's air: SCALED_PRESSURE2 says about 0 m at any depth, and a depth hold on
+/// it dives. The driver reads the barometers' device ids and publishes no depth, saying why;
+/// named in the config, SCALED_PRESSURE2 is refused once the autopilot says it is air.
+#[test]
+fn the_tubes_air_barometer_on_a_cube_is_never_taken_for_depth() {
+    let _s = serial();
+    for section in ["", "pressure_message = \"scaled_pressure2\""] {
+        let h = Harness::<Mavlink>::start_with(100, "", section, |fx| {
+            fx.0.with(|s| {
+                *s = std::mem::take(s).baros(CUBE_BAROS);
+                // The vehicle at 2.5 m: only the unreported third barometer feels it.
+                s.press_hpa = (1013.25 + 2.5 * 997.0 * 9.80665 / 100.0) as f32;
+            })
+        });
+        h.daemon.try_sample(TIMEOUT).expect("samples");
+        // The ids come within a second of link-up; from then on, 1.5 s of samples.
+        std::thread::sleep(Duration::from_secs(1));
+        h.daemon.fresh_sample();
+        let t0 = Instant::now();
+        let mut n = 0;
+        while t0.elapsed() < Duration::from_millis(1500) {
+            let s = h.daemon.try_sample(TIMEOUT).expect("samples stopped");
+            assert!(
+                !s.has_depth(),
+                "{section:?}: depth {} m from the air",
+                s.depth
+            );
+            n += 1;
+        }
+        assert!(n > 100, "{n} samples");
+        let asked = h.fx.0.with(|s| s.param_requests.clone());
+        assert!(asked.iter().any(|(_, p)| p == "BARO3_DEVID"), "{asked:?}");
+        let (proc, _) = h.finish();
+        let log = proc.log();
+        let says = if section.is_empty() {
+            "no depth: the water sensor (MS5837-30BA) is barometer 3, which ArduSub reports in no message"
+        } else {
+            "no depth: SCALED_PRESSURE2 is barometer 2, an air barometer (MS5611)"
+        };
+        assert!(log.contains(says), "{section:?}: {log}");
+    }
+}
+
+/// With bit 6 of BATT_OPTIONS ArduPilot reports a resting estimate (V + I R) in SYS_STATUS,
+/// not the voltage at the ESCs: the driver reports the voltage unknown (the current still
+/// known) and says which bit to clear.
+#[test]
+fn a_resting_voltage_estimate_is_not_reported_as_the_escs() {
+    let _s = serial();
+    let h = Harness::<Mavlink>::start_with(100, "", "", |fx| {
+        fx.0.with(|s| s.params.insert("BATT_OPTIONS".to_string(), 64.0));
+    });
+    h.daemon.try_sample(TIMEOUT).expect("samples");
+    let st = h
+        .daemon
+        .wait_status(TIMEOUT, |m| m.supply_current_a.is_finite());
+    // The driver asks for BATT_OPTIONS at link-up: after a few statuses it is known.
+    std::thread::sleep(Duration::from_secs(2));
+    let st2 = h
+        .daemon
+        .wait_status(TIMEOUT, |m| m.supply_current_a.is_finite());
+    assert!((st2.supply_current_a - 12.5).abs() < 1e-9, "{st2:?}");
+    assert!(st2.supply_voltage_v.is_nan(), "{st:?} then {st2:?}");
+    let (proc, _) = h.finish();
+    assert!(
+        proc.log().contains("BATT_OPTIONS = 64: bit 6"),
+        "{}",
+        proc.log()
+    );
 }
 
 #[test]

@@ -11,7 +11,9 @@ PARAM_VALUE for a PARAM_REQUEST_READ of a parameter it has, nothing otherwise. A
 --seconds it prints one JSON object with what it received and exits.
 
 usage: ardusub_peer.py --port PORT --seconds S [--param NAME=VALUE ...]
-(parameters default to ArduSub's: FS_PILOT_INPUT 2, FS_PILOT_TIMEOUT 3, RC_OVERRIDE_TIME 3)
+(parameters default to ArduSub's: FS_PILOT_INPUT 2, FS_PILOT_TIMEOUT 3, RC_OVERRIDE_TIME 3;
+and a Navigator's barometers: BARO1_DEVID a BMP280, BARO2_DEVID the Bar30, BARO3_DEVID none,
+sent as ArduPilot sends an INT32 parameter: its value as a float, type INT32)
 """
 
 import argparse
@@ -40,7 +42,16 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, required=True)
     ap.add_argument("--param", action="append", default=[])
     args = ap.parse_args()
-    params = {"FS_PILOT_INPUT": 2.0, "FS_PILOT_TIMEOUT": 3.0, "RC_OVERRIDE_TIME": 3.0}
+    params = {
+        "FS_PILOT_INPUT": 2.0,
+        "FS_PILOT_TIMEOUT": 3.0,
+        "RC_OVERRIDE_TIME": 3.0,
+        # AP_HAL device ids: bus type 1 (I2C), address 0x76, device type 0x03 (BMP280) and
+        # 0x12 (MS5837-30BA) in bits 16-23.
+        "BARO1_DEVID": float(0x037601),
+        "BARO2_DEVID": float(0x127601),
+        "BARO3_DEVID": 0.0,
+    }
     for p in args.param:
         name, value = p.split("=", 1)
         params[name] = float(value)
@@ -105,9 +116,9 @@ def main() -> int:
                 name = msg.param_id
                 seen["param_requests"].append([name, msg.param_index])
                 if name in params:
+                    ptype = m.MAV_PARAM_TYPE_INT32 if name.endswith("_DEVID") else m.MAV_PARAM_TYPE_REAL32
                     conn.mav.param_value_send(
-                        name.encode(), params[name], m.MAV_PARAM_TYPE_REAL32,
-                        len(params), 0,
+                        name.encode(), params[name], ptype, len(params), 0,
                     )
         now = time.monotonic()
         if now >= next_hb:

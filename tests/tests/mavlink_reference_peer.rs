@@ -140,15 +140,29 @@ fn motor_tests_heartbeats_and_requests_are_what_pymavlink_reads_and_its_imu_and_
         serde_json::json!([[255, 191, 18, 8]]),
         "{r}"
     );
-    // Message rates: SCALED_IMU2 100 Hz, ATTITUDE 50 Hz, SCALED_PRESSURE2 20 Hz.
+    // Message rates: SCALED_IMU2 100 Hz, ATTITUDE 50 Hz, SCALED_PRESSURE2 20 Hz (the Bar30's,
+    // from the barometer ids pymavlink sent).
     let iv = &r["intervals"];
     assert_eq!(
         (f(&iv["116"]), f(&iv["30"]), f(&iv["137"])),
         (10_000.0, 20_000.0, 50_000.0),
         "{r}"
     );
-    // No parameter is asked for in motor-test mode.
-    assert_eq!(r["param_requests"], serde_json::json!([]), "{r}");
+    // In motor-test mode only the barometers' ids are asked for (SCALED_PRESSURE2's rate
+    // above was asked once pymavlink's BARO2_DEVID said it is the Bar30).
+    let names: Vec<&str> = r["param_requests"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|a| a[0].as_str())
+        .collect();
+    assert!(
+        names
+            .iter()
+            .all(|n| ["BARO1_DEVID", "BARO2_DEVID", "BARO3_DEVID"].contains(n))
+            && names.contains(&"BARO2_DEVID"),
+        "{r}"
+    );
     // The daemon's pulses as DO_MOTOR_TEST: motors 0-4 (0-based), PWM throttle type (1),
     // board order (2), addressed to the peer (1/1), pulses within the ESC's range and some
     // away from neutral.

@@ -46,6 +46,19 @@ ranged!(
 /// 4096 steps of the PCA9685's 25 MHz oscillator times (prescale 15 + 1): the default period.
 pub const PCA9685_EXACT_PERIOD_NS: u64 = 2_621_440;
 
+/// What the pressure sensor's kernel driver computes, and what the driver does about it
+/// (`backend::linux::water_pressure`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PressureFormula {
+    /// The driver's pressure is right as it is (a Bar02 under `ms5637`, a Keller, ...).
+    #[default]
+    AsReported,
+    /// A Bar30 (MS5837-30BA) bound to the mainline `ms5637` driver as "ms5837": computed
+    /// with the 2-bar part's formula, it reads 1/20 of the pressure; multiplied by 20.
+    Bar30ReadAs02ba,
+}
+
 /// `[linux]`. Every key optional; defaults documented per key and in
 /// config/thruster-hw.toml.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -84,6 +97,11 @@ pub struct LinuxConfig {
     /// IIO device with `in_pressure_input` or `in_pressure_raw` (kPa after scale), for
     /// depth. Default: none (no depth in the samples).
     pub pressure_device: Option<String>,
+    /// "as_reported" (default) or "bar30_read_as_02ba": a Bar30 (MS5837-30BA) under the
+    /// mainline `ms5637` driver, which has no 30-bar formula and reads 1/20 of the pressure
+    /// (docs/hardware.md). A pressure under 30 kPa is never used for depth: the driver
+    /// refuses to start on one, naming this key.
+    pub pressure_formula: PressureFormula,
     /// IIO device whose `in_voltage<supply_channel>` measures the thrusters' supply (an ADC
     /// behind a voltage divider, e.g. a Navigator's ADS1115): "iio:deviceN" or its name.
     /// Default: none (the supply voltage is reported unknown).
@@ -123,6 +141,7 @@ impl Default for LinuxConfig {
             accel_device: None,
             mag_device: None,
             pressure_device: None,
+            pressure_formula: PressureFormula::AsReported,
             supply_device: None,
             supply_channel: 0,
             supply_gain: 1.0,

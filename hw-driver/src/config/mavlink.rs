@@ -100,6 +100,21 @@ pub enum ImuMessage {
     RawImu,
 }
 
+/// Which MAVLink message carries the depth sensor's pressure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PressureMessage {
+    /// The first water-pressure sensor among the autopilot's barometers (`BARO1_DEVID`..
+    /// `BARO3_DEVID`): SCALED_PRESSURE for instance 0, SCALED_PRESSURE2 for 1; none (said)
+    /// for instance 2, which ArduSub does not report, or without one.
+    #[default]
+    Auto,
+    /// SCALED_PRESSURE (barometer 1), unless the autopilot says it is an air barometer.
+    ScaledPressure,
+    /// SCALED_PRESSURE2 (barometer 2), unless the autopilot says it is an air barometer.
+    ScaledPressure2,
+}
+
 /// Where the angular rate comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -165,8 +180,13 @@ pub struct MavlinkConfig {
     /// Requested ATTITUDE rate, Hz (0 = not requested). Default 50.
     #[serde(deserialize_with = "de_attitude_rate_hz")]
     pub attitude_rate_hz: f64,
-    /// Requested SCALED_PRESSURE2 (the Bar30 depth sensor) rate, Hz (0 = no depth).
-    /// Default 20.
+    /// Where the depth sensor's pressure comes from: "auto" (default: the barometer the
+    /// autopilot's device ids say is in the water; no depth until they came, and none, said,
+    /// when it is barometer 3, which ArduSub reports in no message), "scaled_pressure" or
+    /// "scaled_pressure2" (used unless the autopilot says that barometer is in the air: an
+    /// air barometer's depth is about 0 m at any depth). docs/hardware.md.
+    pub pressure_message: PressureMessage,
+    /// Requested rate of the depth's pressure message, Hz (0 = no depth). Default 20.
     #[serde(deserialize_with = "de_pressure_rate_hz")]
     pub pressure_rate_hz: f64,
     /// "imu" (default) or "attitude".
@@ -228,6 +248,7 @@ impl Default for MavlinkConfig {
             imu_message: ImuMessage::ScaledImu2,
             imu_rate_hz: 100.0,
             attitude_rate_hz: 50.0,
+            pressure_message: PressureMessage::Auto,
             pressure_rate_hz: 20.0,
             gyro_source: GyroSource::Imu,
             output: OutputMode::MotorTest,

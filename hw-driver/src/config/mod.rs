@@ -17,9 +17,9 @@ use serde::Deserialize;
 use thruster_protocol::services::DEFAULT_ROOT_BASE;
 use thruster_protocol::MAX_THRUSTERS;
 
-pub use linux::LinuxConfig;
+pub use linux::{LinuxConfig, PressureFormula};
 pub use load::{parse_toml, read_text, LoadError};
-pub use mavlink::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
+pub use mavlink::{GyroSource, ImuMessage, MavlinkConfig, OutputMode, PressureMessage};
 pub use thruster::{ThrusterConfig, PULSE_LIMITS_US};
 
 use ranged::ranged;

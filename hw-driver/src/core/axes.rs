@@ -54,6 +54,19 @@ impl AxisMap {
         Ok(AxisMap { index, sign })
     }
 
+    /// The map as a matrix: row i has `sign[i]` in column `index[i]`.
+    pub fn matrix(&self) -> [[f64; 3]; 3] {
+        std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                if j == self.index[i] {
+                    self.sign[i]
+                } else {
+                    0.0
+                }
+            })
+        })
+    }
+
     /// Body-frame vector from a sensor-frame vector.
     pub fn apply(&self, v: [f64; 3]) -> [f64; 3] {
         std::array::from_fn(|i| self.sign[i] * v[self.index[i]])

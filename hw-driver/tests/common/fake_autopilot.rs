@@ -1,10 +1,13 @@
 //! A fake ArduSub on loopback UDP, written with the `mavlink` crate: sends HEARTBEATs
 //! (1 Hz, armed or not), ACKs MAV_CMD_SET_MESSAGE_INTERVAL and streams SCALED_IMU2,
-//! RAW_IMU, ATTITUDE and SCALED_PRESSURE2 at the requested intervals, handles DO_MOTOR_TEST
+//! RAW_IMU, ATTITUDE, SCALED_PRESSURE and SCALED_PRESSURE2 at the requested intervals (the
+//! two pressures also at ArduSub's default 2 Hz: its RAW_SENS stream; the water's pressure
+//! in the water barometer's message, the tube's air in the other), handles DO_MOTOR_TEST
 //! like ArduSub (param1 is the 0-based motor index, FAILED when disarmed or for a motor the
 //! frame does not have; 500 ms without one ends motor-test mode with a disarm, counted as
 //! a lapse), answers PARAM_REQUEST_READ by name from its parameters (ArduSub's defaults for
-//! `FS_PILOT_INPUT` 2, `FS_PILOT_TIMEOUT` 3 s, `RC_OVERRIDE_TIME` 3 s), sends SYS_STATUS with the battery's voltage and current with each
+//! `FS_PILOT_INPUT` 2, `FS_PILOT_TIMEOUT` 3 s, `RC_OVERRIDE_TIME` 3 s; a Navigator's
+//! barometers, `BARO1_DEVID`..`BARO3_DEVID`: BMP280, Bar30, none), sends SYS_STATUS with the battery's voltage and current with each
 //! HEARTBEAT (ArduSub streams it by default, SR0_EXT_STAT), and records everything it receives with the CLOCK_MONOTONIC time of
 //! reception. Bounded: the thread ends after `MAX_LIFETIME`.
 
@@ -27,6 +30,20 @@ pub const MOTORS: u32 = 8;
 /// ArduSub's motor-test timeout (`Sub::verify_motor_test`).
 pub const MOTOR_TEST_TIMEOUT_NS: u64 = 500_000_000;
 
+/// The tube's air, hPa: what an onboard barometer reads at any depth.
+pub const AIR_HPA: f32 = 1013.25;
+
+/// A barometer's device id as ArduPilot's `make_bus_id` builds it.
+pub fn devid(bus_type: u32, address: u32, devtype: u32) -> f32 {
+    (bus_type | address << 8 | devtype << 16) as f32
+}
+
+/// Barometers 1-3 of a Navigator: a BMP280 onboard (I2C 0x76), the Bar30 (I2C 0x76, type
+/// 0x12), none. The water's is instance 1.
+pub const NAVIGATOR_BAROS: [(u32, u32, u32); 3] = [(1, 0x76, 0x03), (1, 0x76, 0x12), (0, 0, 0)];
+/// A Cube's: two MS5611 on SPI, the Bar30 third (ArduSub reports it in no message).
+pub const CUBE_BAROS: [(u32, u32, u32); 3] = [(2, 1, 0x0b), (2, 3, 0x0b), (1, 0x76, 0x12)];
+
 /// What the fake does and what it saw.
 #[derive(Debug, Clone)]
 pub struct ApState {
@@ -42,6 +59,9 @@ pub struct ApState {
     pub gyro: [i16; 3],
     pub mag: [i16; 3],
     pub press_hpa: f32,
+    /// The barometer instance in the water (its message carries `press_hpa`; the others
+    /// [`AIR_HPA`]). Set with [`ApState::baros`].
+    pub water_baro: usize,
     /// SYS_STATUS's battery: voltage, mV (u16::MAX: none), current, cA (-1: none).
     pub battery_mv: u16,
     pub battery_ca: i16,
@@ -75,9 +95,11 @@ impl Default for ApState {
             gyro: [0; 3],
             mag: [0; 3],
             press_hpa: 1013.25,
+            water_baro: 1,
             battery_mv: 15_800,
             battery_ca: 1_250,
-            intervals: HashMap::new(),
+            // ArduSub's RAW_SENS stream at its default 2 Hz.
+            intervals: HashMap::from([(29, 500_000), (137, 500_000)]),
             heartbeats: Vec::new(),
             commands: Vec::new(),
             overrides: Vec::new(),
@@ -89,13 +111,33 @@ impl Default for ApState {
                 ("FS_PILOT_INPUT".to_string(), 2.0),
                 ("FS_PILOT_TIMEOUT".to_string(), 3.0),
                 ("RC_OVERRIDE_TIME".to_string(), 3.0),
+                ("BATT_OPTIONS".to_string(), 0.0),
             ]),
             param_requests: Vec::new(),
         }
+        .baros(NAVIGATOR_BAROS)
     }
 }
 
 impl ApState {
+    /// These barometers (bus type, address, device type; bus type 0: none): their device ids
+    /// as parameters, and the first water sensor's message carries the water's pressure.
+    pub fn baros(mut self, layout: [(u32, u32, u32); 3]) -> Self {
+        for (i, (bus, address, devtype)) in layout.into_iter().enumerate() {
+            let id = if bus == 0 {
+                0.0
+            } else {
+                devid(bus, address, devtype)
+            };
+            self.params.insert(format!("BARO{}_DEVID", i + 1), id);
+        }
+        self.water_baro = layout
+            .iter()
+            .position(|&(bus, _, t)| bus != 0 && matches!(t, 0x09 | 0x12 | 0x18))
+            .unwrap_or(3);
+        self
+    }
+
     /// DO_MOTOR_TEST commands received.
     pub fn motor_tests(&self) -> Vec<(u64, COMMAND_LONG_DATA)> {
         self.commands
@@ -222,6 +264,7 @@ fn run(
     // out as soon as someone talks to us, then every second. A client talks first.
     let mut peer_seen = client;
     let mut next_stream: HashMap<u32, u64> = HashMap::new();
+    let mut streamed_at: HashMap<u32, u64> = HashMap::new();
     let send = |m: &MavMessage| {
         let _ = conn.send(&header(), m);
     };
@@ -324,6 +367,10 @@ fn run(
             next_hb = now + 1_000_000_000;
         }
         for (&id, &interval_us) in &s.intervals {
+            // A new interval is in force at once, as ArduPilot reschedules the message.
+            if streamed_at.insert(id, interval_us) != Some(interval_us) {
+                next_stream.insert(id, now);
+            }
             let due = next_stream.entry(id).or_insert(now);
             if now < *due {
                 continue;
@@ -365,9 +412,23 @@ fn run(
                     yawspeed: f32::from(s.gyro[2]) / 1000.0,
                     ..ATTITUDE_DATA::DEFAULT
                 }),
+                29 => MavMessage::SCALED_PRESSURE(SCALED_PRESSURE_DATA {
+                    time_boot_ms: boot_ms,
+                    press_abs: if s.water_baro == 0 {
+                        s.press_hpa
+                    } else {
+                        AIR_HPA
+                    },
+                    press_diff: 0.0,
+                    temperature: 2000,
+                }),
                 137 => MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
                     time_boot_ms: boot_ms,
-                    press_abs: s.press_hpa,
+                    press_abs: if s.water_baro == 1 {
+                        s.press_hpa
+                    } else {
+                        AIR_HPA
+                    },
                     press_diff: 0.0,
                     temperature: 2000,
                 }),
@@ -393,6 +454,7 @@ impl ApState {
             gyro: self.gyro,
             mag: self.mag,
             press_hpa: self.press_hpa,
+            water_baro: self.water_baro,
             battery_mv: self.battery_mv,
             battery_ca: self.battery_ca,
             intervals: self.intervals.clone(),

@@ -7,14 +7,17 @@
 //! configurable so the tests run on fake trees.
 
 pub mod iio;
+pub mod mount_matrix;
 pub mod pwm;
 pub mod slow_sensors;
 pub mod stall_guard;
 pub mod sysfs;
+pub mod water_pressure;
 
 use std::time::Duration;
 
 use self::iio::{find_device, Channel, Pressure, Vector3};
+use self::mount_matrix::MountMatrix;
 use self::pwm::PwmChannel;
 use self::slow_sensors::{Latest, SlowChannels, SlowSensors};
 use self::stall_guard::StallGuard;
@@ -26,9 +29,6 @@ use crate::config::LinuxConfig;
 use crate::core::axes::AxisMap;
 use crate::core::pwm::Pwm;
 use thruster_driver_kit::LogLimiter;
-
-/// Standard gravity, m/s^2, for pressure -> depth.
-pub const G: f64 = 9.80665;
 
 /// Gauss -> microtesla.
 const UT_PER_GAUSS: f64 = 100.0;
@@ -44,13 +44,15 @@ const FIRST_SLOW_READ: Duration = Duration::from_millis(200);
 /// A supply reading older than this is reported unknown, ns (reads have been failing).
 const SUPPLY_STALE_NS: u64 = 1_000_000_000;
 
-/// The IIO channels the loop reads for each sample.
+/// The IIO channels the loop reads for each sample, each with its body axes from the chip's:
+/// the kernel's mounting matrix (chip to board), then `imu_axes` (board to body).
 #[derive(Debug)]
 struct Sensors {
     gyro: Vector3,
     accel: Vector3,
-    imu_axes: AxisMap,
-    mag_axes: AxisMap,
+    gyro_to_body: MountMatrix,
+    accel_to_body: MountMatrix,
+    mag_to_body: MountMatrix,
 }
 
 /// See the module docs.
@@ -64,6 +66,9 @@ pub struct LinuxBackend {
     next_due_ns: u64,
     read_failures: u32,
     read_log: LogLimiter,
+    /// Samples sent without depth because the pressure was implausible, and their log.
+    depth_refused: u64,
+    depth_log: LogLimiter,
     /// The magnetometer, pressure and supply, read on their own thread (started in `start`).
     slow: Option<SlowSensors>,
     /// Their newest values as the loop last took them.
@@ -90,6 +95,8 @@ impl LinuxBackend {
             next_due_ns: 0,
             read_failures: 0,
             read_log: LogLimiter::default(),
+            depth_refused: 0,
+            depth_log: LogLimiter::default(),
             slow: None,
             slow_latest: Latest::default(),
             stopped: false,
@@ -174,9 +181,26 @@ impl LinuxBackend {
         let root = &self.cfg.sysfs_root;
         let gyro_dev = find_device(root, &self.cfg.gyro_device)?;
         let accel_dev = find_device(root, self.cfg.accel_device())?;
-        let mag = match &self.cfg.mag_device {
-            Some(spec) => Some(Vector3::open(&find_device(root, spec)?, "magn")?),
-            None => None,
+        let to_body = |device: &std::path::Path, kind: &str, axes: AxisMap| {
+            MountMatrix::read(device, kind).map(|m| {
+                let body = MountMatrix(axes.matrix()).after(&m);
+                if m != MountMatrix::IDENTITY {
+                    tracing::info!(
+                        device = %device.display(),
+                        kernel_mount_matrix = ?m.0,
+                        "{kind}: the kernel's mounting matrix applied before imu_axes"
+                    );
+                }
+                body
+            })
+        };
+        let (mag, mag_to_body) = match &self.cfg.mag_device {
+            Some(spec) => {
+                let dev = find_device(root, spec)?;
+                let to_body = to_body(&dev, "magn", self.cfg.mag_axes())?;
+                (Some(Vector3::open(&dev, "magn")?), to_body)
+            }
+            None => (None, MountMatrix::IDENTITY),
         };
         let pressure = match &self.cfg.pressure_device {
             Some(spec) => Some(Pressure::open(&find_device(root, spec)?)?),
@@ -194,8 +218,9 @@ impl LinuxBackend {
         let sensors = Sensors {
             gyro: Vector3::open(&gyro_dev, "anglvel")?,
             accel: Vector3::open(&accel_dev, "accel")?,
-            imu_axes: self.cfg.imu_axes,
-            mag_axes: self.cfg.mag_axes(),
+            gyro_to_body: to_body(&gyro_dev, "anglvel", self.cfg.imu_axes)?,
+            accel_to_body: to_body(&accel_dev, "accel", self.cfg.imu_axes)?,
+            mag_to_body,
         };
         Ok((
             sensors,
@@ -207,21 +232,36 @@ impl LinuxBackend {
         ))
     }
 
+    /// The depth to attach to a sample read at `t_ns`: the newest pressure if fresh and
+    /// plausible ([`water_pressure`]), else none (a refusal is counted and said).
+    fn depth_at(&mut self, t_ns: u64) -> Option<f64> {
+        let formula = self.cfg.pressure_formula;
+        let kpa = Latest::fresh(self.slow_latest.pressure_kpa, t_ns, slow_sensors::STALE_NS)
+            .map(|reported| water_pressure::corrected_kpa(reported, formula))?;
+        if let Some(why) = water_pressure::implausible(kpa, formula) {
+            self.depth_refused += 1;
+            if let Some(suppressed) = self.depth_log.allow() {
+                tracing::warn!(suppressed, "no depth: {why}");
+            }
+            return None;
+        }
+        Some(water_pressure::depth_m(
+            kpa,
+            self.cfg.surface_pressure_kpa,
+            self.cfg.fluid_density_kg_m3,
+        ))
+    }
+
     fn read(&self, sensors: &Sensors) -> Result<ImuReading, BackendError> {
         // Stamped before the first (gyro) read: the gyro is what the controller reacts to.
         let t_ns = monotonic_ns();
-        let gyro = sensors.imu_axes.apply(sensors.gyro.read()?);
-        let accel = sensors.imu_axes.apply(sensors.accel.read()?);
+        let gyro = sensors.gyro_to_body.apply(sensors.gyro.read()?);
+        let accel = sensors.accel_to_body.apply(sensors.accel.read()?);
         let slow = &self.slow_latest;
         let mag = Latest::fresh(slow.mag, t_ns, slow_sensors::STALE_NS)
-            .map(|m| sensors.mag_axes.apply(m).map(|g| g * UT_PER_GAUSS));
-        let depth = Latest::fresh(slow.pressure_kpa, t_ns, slow_sensors::STALE_NS).map(|kpa| {
-            depth_m(
-                kpa,
-                self.cfg.surface_pressure_kpa,
-                self.cfg.fluid_density_kg_m3,
-            )
-        });
+            .map(|m| sensors.mag_to_body.apply(m).map(|g| g * UT_PER_GAUSS));
+        // Depth is attached by `read_sensors` (`depth_at`), which counts refusals.
+        let depth = None;
         Ok(ImuReading {
             seq: 0,
             t_ns,
@@ -231,11 +271,6 @@ impl LinuxBackend {
             depth,
         })
     }
-}
-
-/// Depth below the surface, m, from absolute pressure (kPa).
-pub fn depth_m(pressure_kpa: f64, surface_kpa: f64, density_kg_m3: f64) -> f64 {
-    (pressure_kpa - surface_kpa) * 1000.0 / (density_kg_m3 * G)
 }
 
 impl Backend for LinuxBackend {
@@ -262,6 +297,19 @@ impl Backend for LinuxBackend {
         }
         self.slow_latest = slow.latest();
         self.slow = Some(slow);
+        // A pressure no water has is a configuration error (the wrong formula for the part),
+        // said at start, before any output is touched; later ones only cost the depth.
+        if let Some((_, reported)) = self.slow_latest.pressure_kpa {
+            let formula = self.cfg.pressure_formula;
+            let kpa = water_pressure::corrected_kpa(reported, formula);
+            if let Some(reason) = water_pressure::implausible(kpa, formula) {
+                let spec = self.cfg.pressure_device.clone().unwrap_or_default();
+                return Err(BackendError::Content {
+                    path: find_device(&self.cfg.sysfs_root, &spec)?,
+                    reason: format!("pressure_device {spec:?}: {reason}"),
+                });
+            }
+        }
         let timeout = Duration::from_millis(self.cfg.export_timeout_ms);
         for o in &self.outputs {
             let ch =
@@ -308,7 +356,10 @@ impl Backend for LinuxBackend {
         if now_ns < self.next_due_ns {
             return Ok(None);
         }
-        let result = self.read(sensors);
+        let result = self.read(sensors).map(|r| ImuReading {
+            depth: self.depth_at(r.t_ns),
+            ..r
+        });
         self.next_due_ns += self.period_ns;
         if self.next_due_ns <= now_ns {
             // Fell behind (the process was descheduled): restart the grid from now rather
@@ -383,7 +434,10 @@ impl Backend for LinuxBackend {
 
     fn stats(&self) -> Vec<(&'static str, u64)> {
         let failed = self.slow.as_ref().map_or(0, SlowSensors::failures);
-        vec![("slow_read_failures", failed)]
+        vec![
+            ("slow_read_failures", failed),
+            ("depth_refused", self.depth_refused),
+        ]
     }
 
     fn supply(&self, now_ns: u64) -> Supply {
@@ -412,18 +466,5 @@ impl Drop for LinuxBackend {
         if !self.stopped && !self.channels.is_empty() {
             let _ = self.neutral(0);
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn depth_from_pressure() {
-        // 10 m of fresh water is about 97.8 kPa above the surface.
-        let p = 101.325 + 10.0 * 997.0 * G / 1000.0;
-        assert!((depth_m(p, 101.325, 997.0) - 10.0).abs() < 1e-9);
-        assert!(depth_m(101.325, 101.325, 997.0).abs() < 1e-12);
     }
 }

@@ -7,8 +7,33 @@
 //! way) and `current_battery` (cA, -1 = unknown). ArduSub without a battery monitor
 //! (`BATT_MONITOR = 0`) reports 0 V: taken as unknown, since no ESC runs at 0 V. Only
 //! monitor 0 of BATTERY_STATUS is read: the one that powers the thrusters on a BlueROV2.
+//!
+//! What the numbers are (ArduPilot `GCS_MAVLINK::send_battery_status`, `AP_BattMonitor::
+//! gcs_voltage`):
+//! - Both messages carry `gcs_voltage()`: with bit 6 of `BATT_OPTIONS` ("send resistance
+//!   compensated voltage to GCS") that is a resting estimate, V + I R, not the voltage at the
+//!   ESCs: under load volts higher, exactly the sag thrust follows. The driver reads
+//!   `BATT_OPTIONS` and, with bit 6 set, reports the voltage unknown and says which bit to
+//!   clear.
+//! - A monitor with cell voltages puts cells 11-14 in `voltages_ext`, which the `mavlink`
+//!   crate's BATTERY_STATUS does not decode: the sum of `voltages` would miss them on a pack
+//!   of more than 10 cells. SYS_STATUS's pack voltage is used whenever it is fresh; the cells
+//!   only when SYS_STATUS carries none.
 
-use mavlink::dialects::ardupilotmega::{BATTERY_STATUS_DATA, SYS_STATUS_DATA};
+use mavlink::dialects::ardupilotmega::{
+    MavMessage, BATTERY_STATUS_DATA, PARAM_VALUE_DATA, SYS_STATUS_DATA,
+};
+
+use super::params::ParamReader;
+use crate::backend::Supply;
+
+/// A supply reading older than this is not reported, ns (ArduSub sends SYS_STATUS at 1-2 Hz).
+pub const SUPPLY_STALE_NS: u64 = 5_000_000_000;
+
+/// The first battery monitor's options.
+pub const BATT_OPTIONS: &str = "BATT_OPTIONS";
+/// `AP_BattMonitor_Params::Options::GCS_Resting_Voltage`.
+pub const GCS_RESTING_VOLTAGE: u32 = 1 << 6;
 
 /// A supply reading in SI units: volts, and amps when reported.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,6 +75,103 @@ pub fn from_battery_status(b: &BATTERY_STATUS_DATA) -> Option<SupplyReading> {
         voltage_v: f64::from(mv) / 1000.0,
         current_a: current(b.current_battery),
     })
+}
+
+/// Which message a reading came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Source {
+    SysStatus,
+    BatteryStatus,
+}
+
+/// The supply as the autopilot reports it, and whether its voltage is the one at the ESCs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SupplyTracker {
+    latest: Option<(u64, SupplyReading, Source)>,
+    /// SYS_STATUS's last reading with a voltage, ns (it wins over BATTERY_STATUS while fresh).
+    sys_status_ns: Option<u64>,
+    options: ParamReader<1>,
+}
+
+impl Default for SupplyTracker {
+    fn default() -> Self {
+        SupplyTracker {
+            latest: None,
+            sys_status_ns: None,
+            options: ParamReader::new([BATT_OPTIONS]),
+        }
+    }
+}
+
+impl SupplyTracker {
+    /// The link came up at `now_ns`: `BATT_OPTIONS` asked for.
+    pub fn link_up(&mut self, now_ns: u64) {
+        self.options.link_up(now_ns);
+    }
+
+    /// The link is gone.
+    pub fn link_lost(&mut self) {
+        self.options.link_lost();
+    }
+
+    /// The next time [`SupplyTracker::requests`] has messages.
+    pub fn next_deadline_ns(&self) -> Option<u64> {
+        self.options.next_deadline_ns()
+    }
+
+    /// The PARAM_REQUEST_READ due at `now_ns`.
+    pub fn requests(&mut self, now_ns: u64, sys: u8, comp: u8, out: &mut Vec<MavMessage>) {
+        self.options.requests(now_ns, sys, comp, out);
+    }
+
+    /// A PARAM_VALUE: the name and value when it changed what we know.
+    pub fn on_value(&mut self, v: &PARAM_VALUE_DATA) -> Option<(&'static str, f32)> {
+        self.options.on_value(v)
+    }
+
+    /// Why the reported voltage is not the one at the ESCs, if it is not.
+    pub fn not_the_esc_voltage(&self) -> Option<String> {
+        let [Some(options)] = self.options.known() else {
+            return None;
+        };
+        let bits = options.max(0.0) as u32;
+        (bits & GCS_RESTING_VOLTAGE != 0).then(|| {
+            format!(
+                "{BATT_OPTIONS} = {bits}: bit 6 makes the autopilot report a resting estimate                  (V + I R), not the voltage at the ESCs; clear it"
+            )
+        })
+    }
+
+    pub fn on_sys_status(&mut self, t_ns: u64, s: &SYS_STATUS_DATA) {
+        if let Some(r) = from_sys_status(s) {
+            self.latest = Some((t_ns, r, Source::SysStatus));
+            self.sys_status_ns = Some(t_ns);
+        }
+    }
+
+    pub fn on_battery_status(&mut self, t_ns: u64, b: &BATTERY_STATUS_DATA) {
+        let sys_status_fresh = self
+            .sys_status_ns
+            .is_some_and(|t| t_ns.saturating_sub(t) <= SUPPLY_STALE_NS);
+        if sys_status_fresh {
+            return;
+        }
+        if let Some(r) = from_battery_status(b) {
+            self.latest = Some((t_ns, r, Source::BatteryStatus));
+        }
+    }
+
+    /// The supply as last reported, if younger than [`SUPPLY_STALE_NS`] at `now_ns`; the
+    /// voltage unknown while it is a resting estimate.
+    pub fn supply(&self, now_ns: u64) -> Supply {
+        match self.latest {
+            Some((t, r, _)) if now_ns.saturating_sub(t) <= SUPPLY_STALE_NS => Supply {
+                voltage_v: self.not_the_esc_voltage().is_none().then_some(r.voltage_v),
+                current_a: r.current_a,
+            },
+            _ => Supply::default(),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -96,5 +218,52 @@ mod tests {
         b.id = 0;
         b.voltages = [u16::MAX; 10];
         assert!(from_battery_status(&b).is_none());
+    }
+
+    #[test]
+    fn sys_status_wins_over_cells_and_a_resting_estimate_is_not_the_esc_voltage() {
+        use crate::backend::mavlink::params::tests::value;
+        let mut t = SupplyTracker::default();
+        // A 12-cell pack with cell monitoring: cells 11-14 are in voltages_ext, which the
+        // crate does not decode; the 10 cells sum to 41 V, SYS_STATUS says 49.2 V.
+        let mut cells = [4_100; 10];
+        cells[9] = 4_100;
+        let b = BATTERY_STATUS_DATA {
+            voltages: cells,
+            current_battery: 2_000,
+            id: 0,
+            ..BATTERY_STATUS_DATA::default()
+        };
+        let s = SYS_STATUS_DATA {
+            voltage_battery: 49_200,
+            current_battery: 2_000,
+            ..SYS_STATUS_DATA::default()
+        };
+        t.on_battery_status(1, &b);
+        assert_eq!(
+            t.supply(1).voltage_v,
+            Some(41.0),
+            "cells alone: the best there is"
+        );
+        t.on_sys_status(2, &s);
+        t.on_battery_status(3, &b);
+        assert_eq!(t.supply(3).voltage_v, Some(49.2));
+        // SYS_STATUS gone for longer than the stale time: the cells again.
+        t.on_battery_status(3 + SUPPLY_STALE_NS + 1, &b);
+        assert_eq!(t.supply(3 + SUPPLY_STALE_NS + 1).voltage_v, Some(41.0));
+        // BATT_OPTIONS bit 6: the voltage is V + I R; unknown, the current still reported.
+        t.link_up(0);
+        t.on_sys_status(10, &s);
+        assert_eq!(
+            t.on_value(&value(BATT_OPTIONS, 64.0 + 2.0)),
+            Some((BATT_OPTIONS, 66.0))
+        );
+        let why = t.not_the_esc_voltage().unwrap();
+        assert!(why.contains("= 66") && why.contains("bit 6"), "{why}");
+        assert_eq!(t.supply(10).voltage_v, None);
+        assert_eq!(t.supply(10).current_a, Some(20.0));
+        t.on_value(&value(BATT_OPTIONS, 2.0));
+        assert_eq!(t.supply(10).voltage_v, Some(49.2));
+        assert_eq!(t.supply(10 + SUPPLY_STALE_NS + 1), Supply::default());
     }
 }

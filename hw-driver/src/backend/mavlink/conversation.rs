@@ -5,7 +5,7 @@
 //!   `target_system`/`target_component` name it. The link is up while its HEARTBEATs keep
 //!   coming; after `link_timeout_ms` without one it is down and no reading is produced.
 //! - Set-up, each time the link comes up: MAV_CMD_SET_MESSAGE_INTERVAL for the IMU,
-//!   ATTITUDE and SCALED_PRESSURE2 messages (then MAV_CMD_COMPONENT_ARM_DISARM when `arm`),
+//!   ATTITUDE and depth's pressure messages (then MAV_CMD_COMPONENT_ARM_DISARM when `arm`),
 //!   one COMMAND_LONG at a time, because a COMMAND_ACK names the command but not the
 //!   message id; each is retried `command_retries` times without an ACK.
 //! - Readings: one per IMU message from the autopilot, stamped with its receive time, with
@@ -28,6 +28,8 @@
 //!   `FS_PILOT_TIMEOUT`) and `RC_OVERRIDE_TIME` are read at each link-up; until they say our
 //!   last override is taken back to neutral soon after we stop, overrides carry neutral only
 //!   ([`super::override_hold`]).
+//! - Depth: only from the pressure message of the barometer the autopilot's device ids say is
+//!   in the water ([`super::water_baro`], read at each link-up); none, said, until then.
 //! - Supply: the newest voltage (and current) of SYS_STATUS or BATTERY_STATUS monitor 0
 //!   ([`super::battery`]), reported while younger than [`SUPPLY_STALE_NS`]; ArduSub streams
 //!   both at its default rates (SYS_STATUS in SR0_EXT_STAT, BATTERY_STATUS in SR0_EXTRA3), so
@@ -37,21 +39,22 @@ use std::collections::VecDeque;
 
 use mavlink::dialects::ardupilotmega::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType,
-    MotorTestOrder, MotorTestThrottleType, ATTITUDE_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA,
-    HEARTBEAT_DATA, RAW_IMU_DATA, RC_CHANNELS_OVERRIDE_DATA, SCALED_IMU2_DATA, SCALED_IMU_DATA,
-    SCALED_PRESSURE2_DATA,
+    ATTITUDE_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, RAW_IMU_DATA,
+    RC_CHANNELS_OVERRIDE_DATA, SCALED_IMU2_DATA, SCALED_IMU_DATA, SCALED_PRESSURE2_DATA,
+    SCALED_PRESSURE_DATA,
 };
 use mavlink::{MavHeader, MessageData};
 use tracing::{debug, info, warn};
 
-use super::battery::{self, SupplyReading};
-use super::convert::{depth_from_hpa, implausible, plausible_mag, scaled_imu};
+use super::battery::SupplyTracker;
+use super::convert::{attitude_rates, depth_from_hpa, implausible, imu_reading, plausible_mag};
+use super::motor_test::motor_test;
 use super::override_hold::OverrideHold;
 use super::rate_watch::RateWatch;
+use super::water_baro::WaterBaro;
 use crate::backend::{LinkState, OutputSpec, Supply};
 
-/// A supply reading older than this is not reported, ns (ArduSub sends SYS_STATUS at 1-2 Hz).
-pub const SUPPLY_STALE_NS: u64 = 5_000_000_000;
+pub use super::battery::SUPPLY_STALE_NS;
 use crate::config::{GyroSource, ImuMessage, MavlinkConfig, OutputMode};
 use crate::core::pwm::Pwm;
 use thruster_driver_kit::LogLimiter;
@@ -115,12 +118,16 @@ pub struct Conversation {
     commands: VecDeque<Pending>,
     attitude: Option<(u64, [f64; 3])>,
     depth: Option<(u64, f64)>,
-    /// The newest supply reading and when it came.
-    supply: Option<(u64, SupplyReading)>,
+    /// The supply's newest reading, and whether its voltage is the ESCs' ([`super::battery`]).
+    supply: SupplyTracker,
     /// How long the autopilot keeps an override (asked only in `rc_override` mode).
     override_hold: OverrideHold,
     /// The IMU stream's rate, for a ground station that reset it ([`super::rate_watch`]).
     imu_rate: RateWatch,
+    /// Which barometer is in the water, and the verdict as last computed: the instance whose
+    /// pressure message gives depth, or why none does.
+    water_baro: WaterBaro,
+    depth_instance: Result<usize, String>,
     readings: VecDeque<ImuReading>,
     pwm: Vec<Pwm>,
     thrust_dirty: bool,
@@ -143,6 +150,8 @@ impl Conversation {
             .then_some((cfg.target_system, cfg.target_component));
         let override_hold = OverrideHold::new(cfg.max_override_hold_s);
         let imu_rate = RateWatch::new(cfg.imu_rate_hz);
+        let water_baro = WaterBaro::new(cfg.pressure_message);
+        let depth_instance = water_baro.verdict();
         Conversation {
             cfg,
             outputs,
@@ -156,9 +165,11 @@ impl Conversation {
             commands: VecDeque::new(),
             attitude: None,
             depth: None,
-            supply: None,
+            supply: SupplyTracker::default(),
             override_hold,
             imu_rate,
+            water_baro,
+            depth_instance,
             readings: VecDeque::new(),
             pwm,
             thrust_dirty: true,
@@ -239,6 +250,9 @@ impl Conversation {
         self.engaged = false;
         self.override_hold.link_lost();
         self.imu_rate.stop();
+        self.water_baro.link_lost();
+        self.depth_instance = self.water_baro.verdict();
+        self.supply.link_lost();
     }
 
     /// We armed the vehicle (so we disarm it on exit).
@@ -299,6 +313,8 @@ impl Conversation {
         for t in [
             self.override_hold.next_deadline_ns(),
             self.imu_rate.next_deadline_ns(),
+            self.water_baro.next_deadline_ns(),
+            self.supply.next_deadline_ns(),
         ]
         .into_iter()
         .flatten()
@@ -322,6 +338,7 @@ impl Conversation {
                 | MavMessage::SCALED_IMU2(_)
                 | MavMessage::RAW_IMU(_)
                 | MavMessage::ATTITUDE(_)
+                | MavMessage::SCALED_PRESSURE(_)
                 | MavMessage::SCALED_PRESSURE2(_)
                 | MavMessage::STATUSTEXT(_)
                 | MavMessage::SYS_STATUS(_)
@@ -342,31 +359,24 @@ impl Conversation {
         if !from_target {
             return;
         }
-        let imu = match (msg, self.cfg.imu_message) {
-            (MavMessage::SCALED_IMU2(d), ImuMessage::ScaledImu2) => Some(imu2(d)),
-            (MavMessage::SCALED_IMU(d), ImuMessage::ScaledImu) => Some(imu1(d)),
-            (MavMessage::RAW_IMU(d), ImuMessage::RawImu) => Some(raw(d)),
-            _ => None,
-        };
-        if let Some(imu) = imu {
+        if let Some(imu) = imu_reading(msg, self.cfg.imu_message) {
             self.on_imu(t_ns, imu);
             return;
         }
         match msg {
             MavMessage::ATTITUDE(a) => self.attitude = Some((t_ns, attitude_rates(a))),
-            MavMessage::SCALED_PRESSURE2(p) => self.on_pressure(t_ns, p),
-            MavMessage::SYS_STATUS(st) => {
-                if let Some(r) = battery::from_sys_status(st) {
-                    self.supply = Some((t_ns, r));
-                }
-            }
-            MavMessage::BATTERY_STATUS(b) => {
-                if let Some(r) = battery::from_battery_status(b) {
-                    self.supply = Some((t_ns, r));
-                }
-            }
+            MavMessage::SCALED_PRESSURE(p) => self.on_pressure(t_ns, 0, p.press_abs),
+            MavMessage::SCALED_PRESSURE2(p) => self.on_pressure(t_ns, 1, p.press_abs),
+            MavMessage::SYS_STATUS(st) => self.supply.on_sys_status(t_ns, st),
+            MavMessage::BATTERY_STATUS(b) => self.supply.on_battery_status(t_ns, b),
             MavMessage::COMMAND_ACK(ack) => self.on_ack(t_ns, ack),
             MavMessage::PARAM_VALUE(v) => {
+                self.on_baro_param(v);
+                if self.supply.on_value(v).is_some() {
+                    if let Some(why) = self.supply.not_the_esc_voltage() {
+                        warn!("supply voltage reported unknown: {why} (docs/hardware.md)");
+                    }
+                }
                 if let Some((name, value)) = self.override_hold.on_value(v) {
                     info!("autopilot {name} = {value}");
                     match self.override_hold.verdict() {
@@ -460,6 +470,38 @@ impl Conversation {
             if self.cfg.output == OutputMode::RcOverride {
                 self.override_hold.link_up(t_ns);
             }
+            self.water_baro.link_up(t_ns);
+            self.supply.link_up(t_ns);
+        }
+    }
+
+    /// A PARAM_VALUE that may name a barometer: the depth's source decided again, its rate
+    /// asked for when it changed to a message.
+    fn on_baro_param(&mut self, v: &mavlink::dialects::ardupilotmega::PARAM_VALUE_DATA) {
+        let Some((name, value)) = self.water_baro.on_value(v) else {
+            return;
+        };
+        info!("autopilot {name} = {value}");
+        let verdict = self.water_baro.verdict();
+        if verdict == self.depth_instance {
+            return;
+        }
+        match &verdict {
+            Ok(i) => info!(
+                barometer = i + 1,
+                "depth from {}",
+                if *i == 0 {
+                    "SCALED_PRESSURE"
+                } else {
+                    "SCALED_PRESSURE2"
+                }
+            ),
+            Err(why) => warn!("no depth: {why} (docs/hardware.md)"),
+        }
+        self.depth_instance = verdict;
+        self.depth = None;
+        if self.depth_instance.is_ok() {
+            self.queue_pressure_rate();
         }
     }
 
@@ -484,26 +526,38 @@ impl Conversation {
             ImuMessage::ScaledImu => SCALED_IMU_DATA::ID,
             ImuMessage::RawImu => RAW_IMU_DATA::ID,
         };
-        let rates = [
-            ("IMU", imu_id, self.cfg.imu_rate_hz),
-            ("ATTITUDE", ATTITUDE_DATA::ID, self.cfg.attitude_rate_hz),
-            (
+        self.queue_rate("IMU", imu_id, self.cfg.imu_rate_hz);
+        self.queue_rate("ATTITUDE", ATTITUDE_DATA::ID, self.cfg.attitude_rate_hz);
+        self.queue_pressure_rate();
+    }
+
+    /// SET_MESSAGE_INTERVAL for the depth's pressure message, once it is known.
+    fn queue_pressure_rate(&mut self) {
+        match self.depth_instance {
+            Ok(0) => self.queue_rate(
+                "SCALED_PRESSURE",
+                SCALED_PRESSURE_DATA::ID,
+                self.cfg.pressure_rate_hz,
+            ),
+            Ok(_) => self.queue_rate(
                 "SCALED_PRESSURE2",
                 SCALED_PRESSURE2_DATA::ID,
                 self.cfg.pressure_rate_hz,
             ),
-        ];
-        for (name, id, hz) in rates {
-            if hz > 0.0 {
-                let interval_us = (1e6 / hz).round() as f32;
-                self.commands.push_back(Pending {
-                    label: format!("{name} (id {id}) every {interval_us} us"),
-                    command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
-                    params: [id as f32, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
-                    attempts: 0,
-                    sent_ns: None,
-                });
-            }
+            Err(_) => {}
+        }
+    }
+
+    fn queue_rate(&mut self, name: &str, id: u32, hz: f64) {
+        if hz > 0.0 {
+            let interval_us = (1e6 / hz).round() as f32;
+            self.commands.push_back(Pending {
+                label: format!("{name} (id {id}) every {interval_us} us"),
+                command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                params: [id as f32, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+                attempts: 0,
+                sent_ns: None,
+            });
         }
     }
 
@@ -554,20 +608,18 @@ impl Conversation {
         self.counters.readings += 1;
     }
 
-    /// The supply as last reported, if younger than [`SUPPLY_STALE_NS`] at `now_ns`.
+    /// The supply as last reported, if fresh at `now_ns` ([`SupplyTracker::supply`]).
     pub fn supply(&self, now_ns: u64) -> Supply {
-        match self.supply {
-            Some((t, r)) if now_ns.saturating_sub(t) <= SUPPLY_STALE_NS => Supply {
-                voltage_v: Some(r.voltage_v),
-                current_a: r.current_a,
-            },
-            _ => Supply::default(),
-        }
+        self.supply.supply(now_ns)
     }
 
-    fn on_pressure(&mut self, t_ns: u64, p: &SCALED_PRESSURE2_DATA) {
+    /// The pressure of barometer `instance`, hPa: depth if it is the water's.
+    fn on_pressure(&mut self, t_ns: u64, instance: usize, press_abs_hpa: f32) {
+        if self.depth_instance != Ok(instance) {
+            return;
+        }
         let d = depth_from_hpa(
-            f64::from(p.press_abs),
+            f64::from(press_abs_hpa),
             self.cfg.surface_pressure_hpa,
             self.cfg.fluid_density_kg_m3,
         );
@@ -641,6 +693,9 @@ impl Conversation {
         if let Some((sys, comp)) = self.target {
             self.override_hold
                 .requests(now_ns, sys, comp, &mut self.outgoing);
+            self.water_baro
+                .requests(now_ns, sys, comp, &mut self.outgoing);
+            self.supply.requests(now_ns, sys, comp, &mut self.outgoing);
         }
         let resend_due = self
             .last_thrust_ns
@@ -810,68 +865,6 @@ impl Conversation {
             }
         }
     }
-}
-
-/// DO_MOTOR_TEST param1 for the thruster on `channel` (config: 1-based, ArduSub's motor n,
-/// i.e. the output whose `SERVOn_FUNCTION` is "Motor n", MAIN OUT n by default).
-///
-/// ArduSub's `Sub::handle_do_motor_test` passes param1 unchanged to
-/// `AP_MotorsMatrix::output_test_num(output_channel, pwm)`, which indexes
-/// `motor_enabled[output_channel]` and calls `rc_write(output_channel, pwm)`, and
-/// `SRV_Channels::get_motor_function` maps that "zero-based motor channel" to k_motor1 +
-/// channel: param1 = 0 is motor 1. Sending the 1-based channel drove motor n + 1 and had
-/// the last motor of a frame refused. Source lines: docs/hardware.md.
-pub fn ardusub_motor_index(channel: u32) -> f32 {
-    channel.saturating_sub(1) as f32
-}
-
-/// One DO_MOTOR_TEST: `channel` is the 1-based motor (board output), the pulse in us.
-pub fn motor_test(sys: u8, comp: u8, channel: u32, pwm: Pwm, timeout_s: f32) -> MavMessage {
-    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        param1: ardusub_motor_index(channel),
-        param2: MotorTestThrottleType::MOTOR_TEST_THROTTLE_PWM as u32 as f32,
-        param3: f32::from(pwm.us()),
-        param4: timeout_s,
-        param5: 0.0,
-        param6: MotorTestOrder::MOTOR_TEST_ORDER_BOARD as u32 as f32,
-        param7: 0.0,
-        command: MavCmd::MAV_CMD_DO_MOTOR_TEST,
-        target_system: sys,
-        target_component: comp,
-        confirmation: 0,
-    })
-}
-
-fn imu2(d: &SCALED_IMU2_DATA) -> ImuReading {
-    scaled_imu(
-        [d.xacc, d.yacc, d.zacc],
-        [d.xgyro, d.ygyro, d.zgyro],
-        [d.xmag, d.ymag, d.zmag],
-    )
-}
-
-fn imu1(d: &SCALED_IMU_DATA) -> ImuReading {
-    scaled_imu(
-        [d.xacc, d.yacc, d.zacc],
-        [d.xgyro, d.ygyro, d.zgyro],
-        [d.xmag, d.ymag, d.zmag],
-    )
-}
-
-fn raw(d: &RAW_IMU_DATA) -> ImuReading {
-    scaled_imu(
-        [d.xacc, d.yacc, d.zacc],
-        [d.xgyro, d.ygyro, d.zgyro],
-        [d.xmag, d.ymag, d.zmag],
-    )
-}
-
-fn attitude_rates(a: &ATTITUDE_DATA) -> [f64; 3] {
-    [
-        f64::from(a.rollspeed),
-        f64::from(a.pitchspeed),
-        f64::from(a.yawspeed),
-    ]
 }
 
 #[cfg(test)]

@@ -7,9 +7,13 @@
 //! is specific force: level at rest reads z = -1000 mG, i.e. -9.80665 m/s^2, exactly the
 //! protocol's convention. No sign flips are needed.
 //!
-//! SCALED_PRESSURE2 (the Bar30 on ArduSub's second barometer): `press_abs` in hPa.
+//! SCALED_PRESSURE / SCALED_PRESSURE2 (barometers 1 and 2; which is the water's: `water_baro`):
+//! `press_abs` in hPa.
 
+use mavlink::dialects::ardupilotmega::{MavMessage, ATTITUDE_DATA};
 use thruster_protocol::ImuReading;
+
+use crate::config::ImuMessage;
 
 /// ArduPilot's GRAVITY_MSS, m/s^2 per g.
 pub const GRAVITY_MSS: f64 = 9.80665;
@@ -77,6 +81,38 @@ pub fn plausible_mag(mag: Option<[f64; 3]>) -> Option<[f64; 3]> {
 /// Depth below the surface, m, from absolute pressure in hPa.
 pub fn depth_from_hpa(press_abs_hpa: f64, surface_hpa: f64, density_kg_m3: f64) -> f64 {
     (press_abs_hpa - surface_hpa) * 100.0 / (density_kg_m3 * GRAVITY_MSS)
+}
+
+/// The reading in `msg` if it is the configured IMU message.
+pub fn imu_reading(msg: &MavMessage, which: ImuMessage) -> Option<ImuReading> {
+    match (msg, which) {
+        (MavMessage::SCALED_IMU2(d), ImuMessage::ScaledImu2) => Some(scaled_imu(
+            [d.xacc, d.yacc, d.zacc],
+            [d.xgyro, d.ygyro, d.zgyro],
+            [d.xmag, d.ymag, d.zmag],
+        )),
+        (MavMessage::SCALED_IMU(d), ImuMessage::ScaledImu) => Some(scaled_imu(
+            [d.xacc, d.yacc, d.zacc],
+            [d.xgyro, d.ygyro, d.zgyro],
+            [d.xmag, d.ymag, d.zmag],
+        )),
+        // ArduPilot fills RAW_IMU with the same scaled values as SCALED_IMU.
+        (MavMessage::RAW_IMU(d), ImuMessage::RawImu) => Some(scaled_imu(
+            [d.xacc, d.yacc, d.zacc],
+            [d.xgyro, d.ygyro, d.zgyro],
+            [d.xmag, d.ymag, d.zmag],
+        )),
+        _ => None,
+    }
+}
+
+/// ATTITUDE's body rates, rad/s.
+pub fn attitude_rates(a: &ATTITUDE_DATA) -> [f64; 3] {
+    [
+        f64::from(a.rollspeed),
+        f64::from(a.pitchspeed),
+        f64::from(a.yawspeed),
+    ]
 }
 
 #[cfg(test)]

@@ -14,8 +14,11 @@ pub mod battery;
 pub mod conversation;
 pub mod convert;
 pub mod io;
+pub mod motor_test;
 pub mod override_hold;
+pub mod params;
 pub mod rate_watch;
+pub mod water_baro;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, TryRecvError};

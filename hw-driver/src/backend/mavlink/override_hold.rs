@@ -14,11 +14,12 @@
 //! ignore overrides); until then only neutral overrides go out and the driver reports its
 //! outputs held, with the reason. The config keeps thrusters to channels 1-6.
 //!
-//! The values are asked for (PARAM_REQUEST_READ by name) at each link-up, every [`RETRY_NS`]
-//! until all three came, every [`REREAD_NS`] after (a parameter changed from the ground
-//! station while we run is seen within that). The driver changes no parameter.
+//! The values are read by a [`ParamReader`]: at each link-up, every second until all three
+//! came, every 10 s after. The driver changes no parameter.
 
-use mavlink::dialects::ardupilotmega::{MavMessage, PARAM_REQUEST_READ_DATA, PARAM_VALUE_DATA};
+use mavlink::dialects::ardupilotmega::{MavMessage, PARAM_VALUE_DATA};
+
+use super::params::ParamReader;
 
 /// ArduSub's pilot-input failsafe action (0 disabled, 1 warn, 2 disarm; ArduSub/Parameters.cpp).
 pub const FS_PILOT_INPUT: &str = "FS_PILOT_INPUT";
@@ -28,94 +29,54 @@ pub const FS_PILOT_TIMEOUT: &str = "FS_PILOT_TIMEOUT";
 pub const RC_OVERRIDE_TIME: &str = "RC_OVERRIDE_TIME";
 /// The parameters read, in this order.
 pub const PARAMS: [&str; 3] = [FS_PILOT_INPUT, FS_PILOT_TIMEOUT, RC_OVERRIDE_TIME];
-/// How often the values are asked for while one is unknown, ns.
-pub const RETRY_NS: u64 = 1_000_000_000;
-/// How often known values are read again, ns.
-pub const REREAD_NS: u64 = 10_000_000_000;
 
 /// The autopilot's settings that bound our last override, as far as we know them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OverrideHold {
     /// The longest `FS_PILOT_TIMEOUT` accepted, s (`max_override_hold_s`).
     max_s: f64,
-    /// The values of [`PARAMS`] since the last link-up.
-    known: [Option<f32>; 3],
-    /// When the next requests go out; None while there is no link.
-    next_request_ns: Option<u64>,
+    params: ParamReader<3>,
 }
 
 impl OverrideHold {
     pub fn new(max_s: f64) -> Self {
         OverrideHold {
             max_s,
-            known: [None; 3],
-            next_request_ns: None,
+            params: ParamReader::new(PARAMS),
         }
     }
 
-    /// The link came up at `now_ns`: ask at once, and forget what an earlier link said (the
-    /// autopilot may have rebooted with other parameters).
+    /// The link came up at `now_ns`: ask at once, forget what an earlier link said.
     pub fn link_up(&mut self, now_ns: u64) {
-        self.known = [None; 3];
-        self.next_request_ns = Some(now_ns);
+        self.params.link_up(now_ns);
     }
 
     /// The link is gone: nothing to ask.
     pub fn link_lost(&mut self) {
-        self.known = [None; 3];
-        self.next_request_ns = None;
+        self.params.link_lost();
     }
 
     /// The next time [`OverrideHold::requests`] has messages.
     pub fn next_deadline_ns(&self) -> Option<u64> {
-        self.next_request_ns
+        self.params.next_deadline_ns()
     }
 
-    /// The PARAM_REQUEST_READs due at `now_ns` for the autopilot `(sys, comp)`: one per
-    /// parameter, or none.
+    /// The PARAM_REQUEST_READs due at `now_ns` for the autopilot `(sys, comp)`.
     pub fn requests(&mut self, now_ns: u64, sys: u8, comp: u8, out: &mut Vec<MavMessage>) {
-        let Some(due) = self.next_request_ns.filter(|t| now_ns >= *t) else {
-            return;
-        };
-        let period = if self.known.iter().all(Option::is_some) {
-            REREAD_NS
-        } else {
-            RETRY_NS
-        };
-        self.next_request_ns = Some(due.max(now_ns) + period);
-        out.extend(PARAMS.iter().map(|name| {
-            MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
-                // -1: by name.
-                param_index: -1,
-                target_system: sys,
-                target_component: comp,
-                param_id: (*name).into(),
-            })
-        }));
+        self.params.requests(now_ns, sys, comp, out);
     }
 
-    /// A PARAM_VALUE from the autopilot: taken when it is one of ours. Returns the name and
-    /// value when it changed what we know (for the log).
+    /// A PARAM_VALUE from the autopilot: the name and value when it changed what we know.
     pub fn on_value(&mut self, v: &PARAM_VALUE_DATA) -> Option<(&'static str, f32)> {
-        // Without a link nothing was asked for.
-        self.next_request_ns?;
-        let name = v.param_id.to_str().unwrap_or("").trim_end_matches('\0');
-        let i = PARAMS.iter().position(|p| *p == name)?;
-        let changed = self.known[i] != Some(v.param_value);
-        self.known[i] = Some(v.param_value);
-        changed.then_some((PARAMS[i], v.param_value))
+        self.params.on_value(v)
     }
 
     /// Ok when overrides may carry thrust; else why only neutral ones go out, short enough
     /// for `driver_status`'s text (128 bytes with its prefix).
     pub fn verdict(&self) -> Result<(), String> {
         let max = self.max_s;
-        let [Some(input), Some(timeout), Some(override_s)] = self.known else {
-            let missing = PARAMS
-                .iter()
-                .zip(self.known)
-                .find(|(_, v)| v.is_none())
-                .map_or("", |(n, _)| *n);
+        let [Some(input), Some(timeout), Some(override_s)] = self.params.known() else {
+            let missing = self.params.first_missing().unwrap_or("");
             return Err(format!("waiting for the autopilot's {missing}"));
         };
         if !input.is_finite() || input == 0.0 {
@@ -141,17 +102,8 @@ impl OverrideHold {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mavlink::dialects::ardupilotmega::MavParamType;
-
-    fn value(name: &str, v: f32) -> PARAM_VALUE_DATA {
-        PARAM_VALUE_DATA {
-            param_value: v,
-            param_count: 1000,
-            param_index: 12,
-            param_id: name.into(),
-            param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
-        }
-    }
+    use crate::backend::mavlink::params::tests::{asked, value};
+    use crate::backend::mavlink::params::{REREAD_NS, RETRY_NS};
 
     fn with(input: f32, timeout: f32, override_s: f32) -> OverrideHold {
         let mut h = OverrideHold::new(1.0);
@@ -225,46 +177,24 @@ mod tests {
     }
 
     #[test]
-    fn asked_at_link_up_every_second_until_known_then_every_ten() {
+    fn its_three_parameters_are_asked_for_at_link_up() {
         let mut h = OverrideHold::new(1.0);
         let mut out = Vec::new();
         h.requests(0, 1, 1, &mut out);
         assert!(out.is_empty(), "asked without a link");
         h.link_up(5);
         h.requests(5, 1, 2, &mut out);
-        let names: Vec<String> = out
-            .iter()
-            .map(|m| match m {
-                MavMessage::PARAM_REQUEST_READ(r) => {
-                    assert_eq!(
-                        (r.param_index, r.target_system, r.target_component),
-                        (-1, 1, 2)
-                    );
-                    r.param_id
-                        .to_str()
-                        .unwrap()
-                        .trim_end_matches('\0')
-                        .to_string()
-                }
-                other => panic!("{other:?}"),
-            })
-            .collect();
-        assert_eq!(names, PARAMS);
+        assert_eq!(asked(&out, 1, 2), PARAMS);
+        assert_eq!(h.next_deadline_ns(), Some(5 + RETRY_NS));
+        for (name, v) in [
+            (FS_PILOT_INPUT, 2.0),
+            (FS_PILOT_TIMEOUT, 0.5),
+            (RC_OVERRIDE_TIME, 3.0),
+        ] {
+            h.on_value(&value(name, v));
+        }
         out.clear();
-        h.requests(5 + RETRY_NS - 1, 1, 2, &mut out);
-        assert!(out.is_empty());
         h.requests(5 + RETRY_NS, 1, 2, &mut out);
-        assert_eq!(out.len(), 3);
-        assert_eq!(
-            h.on_value(&value(FS_PILOT_INPUT, 2.0)),
-            Some((FS_PILOT_INPUT, 2.0))
-        );
-        assert_eq!(h.on_value(&value(FS_PILOT_INPUT, 2.0)), None, "unchanged");
-        h.on_value(&value(FS_PILOT_TIMEOUT, 0.5));
-        h.on_value(&value(RC_OVERRIDE_TIME, 3.0));
-        out.clear();
-        h.requests(5 + 2 * RETRY_NS, 1, 2, &mut out);
-        assert_eq!(out.len(), 3, "the ones due");
-        assert_eq!(h.next_deadline_ns(), Some(5 + 2 * RETRY_NS + REREAD_NS));
+        assert_eq!(h.next_deadline_ns(), Some(5 + RETRY_NS + REREAD_NS));
     }
 }

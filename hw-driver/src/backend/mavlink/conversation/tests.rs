@@ -1,4 +1,5 @@
 use super::*;
+use crate::backend::mavlink::motor_test::ardusub_motor_index;
 
 const AP: (u8, u8) = (1, 1);
 
@@ -67,10 +68,55 @@ fn commands(out: &[MavMessage]) -> Vec<COMMAND_LONG_DATA> {
         .collect()
 }
 
+fn param(name: &str, v: f32) -> MavMessage {
+    MavMessage::PARAM_VALUE(mavlink::dialects::ardupilotmega::PARAM_VALUE_DATA {
+        param_value: v,
+        param_count: 900,
+        param_index: 31,
+        param_id: name.into(),
+        param_type: mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_REAL32,
+    })
+}
+
+/// A device id as ArduPilot's `make_bus_id` builds it.
+fn devid(bus_type: u32, address: u32, devtype: u32) -> f32 {
+    (bus_type | address << 8 | devtype << 16) as f32
+}
+
+/// A Navigator's barometers: its BMP280 onboard (I2C 0x76), the Bar30 second.
+const NAVIGATOR: [(u32, u32, u32); 3] = [(1, 0x76, 0x03), (1, 0x76, 0x12), (0, 0, 0)];
+/// A Cube's: two MS5611 on SPI, the Bar30 third.
+const CUBE: [(u32, u32, u32); 3] = [(2, 1, 0x0b), (2, 3, 0x0b), (1, 0x76, 0x12)];
+
+/// The autopilot tells its barometers' device ids.
+fn baros(s: &mut Conversation, t: u64, ids: [(u32, u32, u32); 3]) {
+    for (i, (bus, address, devtype)) in ids.into_iter().enumerate() {
+        let name = format!("BARO{}_DEVID", i + 1);
+        s.on_message(t, &hdr(1, 1), &param(&name, devid(bus, address, devtype)));
+    }
+}
+
+/// The names asked for with PARAM_REQUEST_READ in `out`.
+fn asked(out: &[MavMessage]) -> Vec<String> {
+    out.iter()
+        .filter_map(|m| match m {
+            MavMessage::PARAM_REQUEST_READ(r) => Some(
+                r.param_id
+                    .to_str()
+                    .unwrap()
+                    .trim_end_matches('\0')
+                    .to_string(),
+            ),
+            _ => None,
+        })
+        .collect()
+}
+
 /// A conversation with the link up (armed as given) and the set-up requests acknowledged.
 fn up(armed: bool) -> Conversation {
     let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
     s.on_message(1, &hdr(AP.0, AP.1), &ap_heartbeat(armed));
+    baros(&mut s, 1, NAVIGATOR);
     s.service(1);
     for _ in 0..3 {
         s.on_message(
@@ -138,7 +184,8 @@ fn finds_the_autopilot_and_requests_rates_one_at_a_time() {
         (c[0].target_system, c[0].target_component, c[0].confirmation),
         (1, 1, 0)
     );
-    // The ACK sends the next at once: ATTITUDE at 50 Hz, then SCALED_PRESSURE2 at 20 Hz.
+    // The ACK sends the next at once: ATTITUDE at 50 Hz, then, once the barometers are
+    // known, SCALED_PRESSURE2 at 20 Hz.
     s.on_message(
         4,
         &hdr(1, 1),
@@ -157,6 +204,9 @@ fn finds_the_autopilot_and_requests_rates_one_at_a_time() {
             MavResult::MAV_RESULT_DENIED,
         ),
     );
+    assert!(commands(&s.drain_outgoing()).is_empty(), "depth not known");
+    baros(&mut s, 5, NAVIGATOR);
+    s.service(5);
     let c = commands(&s.drain_outgoing());
     assert_eq!((c[0].param1, c[0].param2), (137.0, 50_000.0));
     s.on_message(
@@ -260,27 +310,28 @@ fn the_supply_comes_from_the_autopilots_battery_reports_and_goes_stale() {
     s.on_message(300, &hdr(7, 1), &sys(12_000, -1));
     s.on_message(300, &hdr(AP.0, AP.1), &sys(u16::MAX, -1));
     assert_eq!(s.supply(400).voltage_v, Some(15.6));
-    // BATTERY_STATUS of monitor 0 counts too.
+    // BATTERY_STATUS of monitor 0 counts once SYS_STATUS has said nothing for the stale
+    // time (while it is fresh, its pack voltage wins: `battery::SupplyTracker`).
     let mut cells = [u16::MAX; 10];
     cells[0] = 14_900;
-    s.on_message(
-        500,
-        &hdr(AP.0, AP.1),
-        &MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
-            voltages: cells,
-            current_battery: -1,
-            ..BATTERY_STATUS_DATA::default()
-        }),
-    );
+    let status = MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
+        voltages: cells,
+        current_battery: -1,
+        ..BATTERY_STATUS_DATA::default()
+    });
+    s.on_message(500, &hdr(AP.0, AP.1), &status);
+    assert_eq!(s.supply(600).voltage_v, Some(15.6));
+    let later = 100 + SUPPLY_STALE_NS + 1;
+    s.on_message(later, &hdr(AP.0, AP.1), &status);
     assert_eq!(
-        s.supply(600),
+        s.supply(later),
         Supply {
             voltage_v: Some(14.9),
             current_a: None
         }
     );
     // Older than SUPPLY_STALE_NS: unknown.
-    assert_eq!(s.supply(500 + SUPPLY_STALE_NS + 1), Supply::default());
+    assert_eq!(s.supply(later + SUPPLY_STALE_NS + 1), Supply::default());
 }
 
 #[test]
@@ -290,6 +341,7 @@ fn imu_messages_become_si_readings_with_fresh_depth_only_while_up() {
     s.on_message(1, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
     assert_eq!(s.take_reading(), None);
     s.on_message(2, &hdr(1, 1), &ap_heartbeat(false));
+    baros(&mut s, 2, NAVIGATOR);
     assert_eq!(
         s.counters().dropped_link_down,
         0,
@@ -409,16 +461,6 @@ fn overrides(out: Vec<MavMessage>) -> Vec<RC_CHANNELS_OVERRIDE_DATA> {
         .collect()
 }
 
-fn param(name: &str, v: f32) -> MavMessage {
-    MavMessage::PARAM_VALUE(mavlink::dialects::ardupilotmega::PARAM_VALUE_DATA {
-        param_value: v,
-        param_count: 900,
-        param_index: 31,
-        param_id: name.into(),
-        param_type: mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_REAL32,
-    })
-}
-
 /// The autopilot's answers: its pilot-input failsafe's action and timeout, RC_OVERRIDE_TIME.
 fn failsafe(s: &mut Conversation, t: u64, input: f32, timeout: f32) {
     s.on_message(t, &hdr(1, 1), &param("FS_PILOT_INPUT", input));
@@ -462,22 +504,17 @@ fn rc_overrides_carry_thrust_only_while_the_autopilot_would_take_a_left_one_back
     s.set_outputs(&[Pwm(1600), Pwm(1400)]);
     s.service(2);
     let out = s.drain_outgoing();
-    let asked: Vec<String> = out
-        .iter()
-        .filter_map(|m| match m {
-            MavMessage::PARAM_REQUEST_READ(r) => Some(
-                r.param_id
-                    .to_str()
-                    .unwrap()
-                    .trim_end_matches('\0')
-                    .to_string(),
-            ),
-            _ => None,
-        })
-        .collect();
     assert_eq!(
-        asked,
-        ["FS_PILOT_INPUT", "FS_PILOT_TIMEOUT", "RC_OVERRIDE_TIME"],
+        asked(&out),
+        [
+            "FS_PILOT_INPUT",
+            "FS_PILOT_TIMEOUT",
+            "RC_OVERRIDE_TIME",
+            "BARO1_DEVID",
+            "BARO2_DEVID",
+            "BARO3_DEVID",
+            "BATT_OPTIONS"
+        ],
         "{out:?}"
     );
     let rc = overrides(out);
@@ -512,23 +549,70 @@ fn rc_overrides_carry_thrust_only_while_the_autopilot_would_take_a_left_one_back
     s.on_message(10, &hdr(1, 1), &ap_heartbeat(true));
     assert!(s.held().unwrap().contains("waiting"));
     s.service(11);
-    assert!(s
-        .drain_outgoing()
-        .iter()
-        .any(|m| matches!(m, MavMessage::PARAM_REQUEST_READ(_))));
+    assert!(asked(&s.drain_outgoing()).contains(&"FS_PILOT_INPUT".to_string()));
 }
 
-/// Motor tests never ask: the parameter does not concern them.
+/// Motor tests never ask for the failsafe: it does not concern them. The barometers and the
+/// battery monitor's options are asked for in every mode.
 #[test]
 fn motor_tests_do_not_ask_for_the_override_hold() {
     let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
     s.on_message(1, &hdr(1, 1), &ap_heartbeat(true));
     s.service(2);
-    assert!(!s
-        .drain_outgoing()
-        .iter()
-        .any(|m| matches!(m, MavMessage::PARAM_REQUEST_READ(_))));
+    assert_eq!(
+        asked(&s.drain_outgoing()),
+        ["BARO1_DEVID", "BARO2_DEVID", "BARO3_DEVID", "BATT_OPTIONS"]
+    );
     assert_eq!(s.held(), None);
+}
+
+/// Depth only from the barometer the autopilot says is in the water: SCALED_PRESSURE2 on a
+/// Navigator; on a Cube the second barometer is the tube's air (depth about 0 at any depth)
+/// and the Bar30 is the third, which ArduSub reports in no message: no depth.
+#[test]
+fn depth_comes_only_from_the_barometer_in_the_water() {
+    let p2m = 1013.25 + 2.0 * 997.0 * 9.80665 / 100.0;
+    let pressures = |s: &mut Conversation, t: u64| {
+        s.on_message(
+            t,
+            &hdr(1, 1),
+            &MavMessage::SCALED_PRESSURE(SCALED_PRESSURE_DATA {
+                press_abs: 1013.0,
+                ..SCALED_PRESSURE_DATA::DEFAULT
+            }),
+        );
+        s.on_message(
+            t,
+            &hdr(1, 1),
+            &MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
+                press_abs: p2m as f32,
+                ..SCALED_PRESSURE2_DATA::DEFAULT
+            }),
+        );
+        s.on_message(t + 1, &hdr(1, 1), &imu2([0, 0, -1000], [0, 0, 0]));
+        s.take_reading().unwrap().depth
+    };
+    for (ids, want) in [(NAVIGATOR, Some(2.0)), (CUBE, None)] {
+        let mut s = Conversation::new(MavlinkConfig::default(), specs(), 0);
+        s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+        assert_eq!(pressures(&mut s, 10), None, "before the ids came");
+        baros(&mut s, 20, ids);
+        let depth = pressures(&mut s, 30);
+        assert_eq!(depth.is_some(), want.is_some(), "{ids:?}: {depth:?}");
+        if let (Some(d), Some(w)) = (depth, want) {
+            assert!((d - w).abs() < 1e-3, "{d}");
+        }
+    }
+    // Named, SCALED_PRESSURE2 is used until the autopilot says it is an air barometer.
+    let cfg = MavlinkConfig {
+        pressure_message: crate::config::PressureMessage::ScaledPressure2,
+        ..MavlinkConfig::default()
+    };
+    let mut s = Conversation::new(cfg, specs(), 0);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(false));
+    assert!(pressures(&mut s, 10).is_some(), "unverified, used");
+    baros(&mut s, 20, CUBE);
+    assert_eq!(pressures(&mut s, 30), None);
 }
 
 #[test]
