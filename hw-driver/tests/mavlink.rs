@@ -469,6 +469,61 @@ fn a_resting_voltage_estimate_is_not_reported_as_the_escs() {
     );
 }
 
+/// In `rc_override` mode a ground station's joystick overrides the same channels (ArduSub turns
+/// its MANUAL_CONTROL into overrides of channels 1-8): the driver sees another sender's values
+/// in RC_CHANNELS, stops its overrides (the pilot has the vehicle) and says why on
+/// `driver_status`; without the joystick the daemon's thrust goes out.
+#[test]
+fn a_ground_stations_joystick_on_our_rc_channels_stops_our_overrides() {
+    let _s = serial();
+    for joystick in [false, true] {
+        let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {
+            fx.0.with(|s| {
+                s.params.insert("FS_PILOT_TIMEOUT".into(), 0.5);
+                s.joystick = joystick.then_some([1500; 8]);
+            });
+        });
+        h.daemon.try_sample(TIMEOUT).expect("samples");
+        h.daemon.hold(&A, Duration::from_millis(1500));
+        let asked = h.fx.0.with(|s| s.interval_requests());
+        assert!(
+            asked
+                .iter()
+                .any(|(_, c)| c.param1 == 65.0 && c.param2 == 100_000.0),
+            "RC_CHANNELS not asked for: {asked:?}"
+        );
+        if joystick {
+            let st = h
+                .daemon
+                .wait_status(TIMEOUT, |m| m.text().contains("another sender"));
+            assert_eq!(st.output_state(), Ok(OutputState::Disarmed), "{st:?}");
+            let n = h.fx.0.with(|s| s.overrides.len());
+            h.daemon.hold(&A, Duration::from_millis(500));
+            assert_eq!(h.fx.0.with(|s| s.overrides.len()), n, "overrides went on");
+            let (proc, _) = h.finish();
+            assert!(
+                proc.log().contains("disable its joystick"),
+                "{}",
+                proc.log()
+            );
+        } else {
+            let moved = h.fx.0.with(|s| {
+                s.overrides
+                    .iter()
+                    .filter(|(_, _, o)| o.chan1_raw != NEUTRAL[0])
+                    .count()
+            });
+            assert!(moved > 5, "{moved} overrides with thrust");
+            assert!(h
+                .daemon
+                .statuses()
+                .iter()
+                .all(|m| !m.text().contains("another sender")));
+            h.finish();
+        }
+    }
+}
+
 #[test]
 fn an_unreachable_autopilot_is_an_error_naming_the_address() {
     let _s = serial();

@@ -12,8 +12,8 @@ PARAM_VALUE for a PARAM_REQUEST_READ of a parameter it has, nothing otherwise. A
 
 usage: ardusub_peer.py --port PORT --seconds S [--param NAME=VALUE ...]
 (parameters default to ArduSub's: FS_PILOT_INPUT 2, FS_PILOT_TIMEOUT 3, RC_OVERRIDE_TIME 3;
-and a Navigator's barometers: BARO1_DEVID a BMP280, BARO2_DEVID the Bar30, BARO3_DEVID none,
-sent as ArduPilot sends an INT32 parameter: its value as a float, type INT32)
+a Navigator's barometers: BARO1_DEVID a BMP280, BARO2_DEVID the Bar30, BARO3_DEVID none, sent
+as ArduPilot sends an INT32 parameter: its value as a float, type INT32; BATT_OPTIONS 0)
 """
 
 import argparse
@@ -51,6 +51,7 @@ def main() -> int:
         "BARO1_DEVID": float(0x037601),
         "BARO2_DEVID": float(0x127601),
         "BARO3_DEVID": 0.0,
+        "BATT_OPTIONS": 0.0,
     }
     for p in args.param:
         name, value = p.split("=", 1)
@@ -65,6 +66,7 @@ def main() -> int:
     start = time.monotonic()
     next_hb = start
     streams = {}  # message id -> [interval s, next due]
+    rc_in = [1500] * 8  # RC channels 1-8 in force, reported in RC_CHANNELS
     seen = {
         "bad_data": 0,
         "types": {},
@@ -74,6 +76,7 @@ def main() -> int:
         "overrides": [],
         "param_requests": [],
         "imu_sent": 0,
+        "rc_channels_sent": 0,
         "other_commands": [],
     }
 
@@ -108,10 +111,11 @@ def main() -> int:
                     seen["other_commands"].append(msg.command)
                     conn.mav.command_ack_send(msg.command, m.MAV_RESULT_UNSUPPORTED)
             elif kind == "RC_CHANNELS_OVERRIDE":
-                seen["overrides"].append(
-                    [msg.chan1_raw, msg.chan2_raw, msg.chan3_raw, msg.chan4_raw,
-                     msg.chan5_raw, msg.chan6_raw, msg.chan7_raw, msg.chan8_raw]
-                )
+                values = [msg.chan1_raw, msg.chan2_raw, msg.chan3_raw, msg.chan4_raw,
+                          msg.chan5_raw, msg.chan6_raw, msg.chan7_raw, msg.chan8_raw]
+                seen["overrides"].append(values)
+                # What ArduSub applies: the newest override per channel (65535: ignore).
+                rc_in[:] = [v if v != 65535 else old for v, old in zip(values, rc_in)]
             elif kind == "PARAM_REQUEST_READ":
                 name = msg.param_id
                 seen["param_requests"].append([name, msg.param_index])
@@ -142,6 +146,9 @@ def main() -> int:
                 seen["imu_sent"] += 1
             elif mid == m.MAVLINK_MSG_ID_ATTITUDE:
                 conn.mav.attitude_send(boot_ms(), 0.0, 0.0, 0.0, *[g / 1000 for g in GYRO])
+            elif mid == m.MAVLINK_MSG_ID_RC_CHANNELS:
+                conn.mav.rc_channels_send(boot_ms(), 16, *rc_in, *([0] * 10), 255)
+                seen["rc_channels_sent"] += 1
             elif mid == m.MAVLINK_MSG_ID_SCALED_PRESSURE2:
                 conn.mav.scaled_pressure2_send(boot_ms(), PRESS_HPA, 0.0, 2000)
     json.dump(seen, sys.stdout)

@@ -148,8 +148,9 @@ fn motor_tests_heartbeats_and_requests_are_what_pymavlink_reads_and_its_imu_and_
         (10_000.0, 20_000.0, 50_000.0),
         "{r}"
     );
-    // In motor-test mode only the barometers' ids are asked for (SCALED_PRESSURE2's rate
-    // above was asked once pymavlink's BARO2_DEVID said it is the Bar30).
+    // In motor-test mode only the barometers' ids and the battery monitor's options are
+    // asked for (SCALED_PRESSURE2's rate above was asked once pymavlink's BARO2_DEVID said it
+    // is the Bar30).
     let names: Vec<&str> = r["param_requests"]
         .as_array()
         .unwrap()
@@ -159,7 +160,7 @@ fn motor_tests_heartbeats_and_requests_are_what_pymavlink_reads_and_its_imu_and_
     assert!(
         names
             .iter()
-            .all(|n| ["BARO1_DEVID", "BARO2_DEVID", "BARO3_DEVID"].contains(n))
+            .all(|n| ["BARO1_DEVID", "BARO2_DEVID", "BARO3_DEVID", "BATT_OPTIONS"].contains(n))
             && names.contains(&"BARO2_DEVID"),
         "{r}"
     );
@@ -206,6 +207,10 @@ fn the_pilot_input_failsafe_read_from_pymavlink_gates_the_overrides() {
         }
         let overrides = r["overrides"].as_array().unwrap();
         assert!(overrides.len() > 20, "{} overrides", overrides.len());
+        // pymavlink's RC_CHANNELS (what it applied: our overrides) were asked for at 10 Hz
+        // and read as ours: no fight was called (the thrust below went on).
+        assert_eq!(f(&r["intervals"]["65"]), 100_000.0, "{r}");
+        assert!(f(&r["rc_channels_sent"]) > 20.0, "{r}");
         let moved = overrides
             .iter()
             .filter(|o| (0..THRUSTERS).any(|i| f(&o[i]) != 1500.0))

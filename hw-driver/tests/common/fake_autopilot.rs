@@ -78,6 +78,12 @@ pub struct ApState {
     pub last_motor_test_ns: u64,
     /// Motor-test timeouts (each disarmed the fake, as on ArduSub).
     pub lapses: u64,
+    /// RC channels 1-8 in force (`radio_in`): the newest override per channel, streamed as
+    /// RC_CHANNELS (id 65) when asked for.
+    pub rc_in: [u16; 8],
+    /// A ground station's joystick: these values overwrite `rc_in` every round, as ArduSub's
+    /// MANUAL_CONTROL handling overrides channels 1-8 on every message.
+    pub joystick: Option<[u16; 8]>,
     /// Parameters answered by name (PARAM_VALUE, REAL32).
     pub params: HashMap<String, f32>,
     /// PARAM_REQUEST_READ received: the name asked for.
@@ -107,6 +113,8 @@ impl Default for ApState {
             motor_test_mode: false,
             last_motor_test_ns: 0,
             lapses: 0,
+            rc_in: [1500; 8],
+            joystick: None,
             params: HashMap::from([
                 ("FS_PILOT_INPUT".to_string(), 2.0),
                 ("FS_PILOT_TIMEOUT".to_string(), 3.0),
@@ -275,7 +283,25 @@ fn run(
             let mut s = state.lock().unwrap();
             match msg {
                 MavMessage::HEARTBEAT(hb) => s.heartbeats.push((t, h, hb)),
-                MavMessage::RC_CHANNELS_OVERRIDE(o) => s.overrides.push((t, h, o)),
+                MavMessage::RC_CHANNELS_OVERRIDE(o) => {
+                    let values = [
+                        o.chan1_raw,
+                        o.chan2_raw,
+                        o.chan3_raw,
+                        o.chan4_raw,
+                        o.chan5_raw,
+                        o.chan6_raw,
+                        o.chan7_raw,
+                        o.chan8_raw,
+                    ];
+                    // UINT16_MAX: "ignore this channel" (GCS_MAVLINK::handle_rc_channels_override).
+                    for (slot, v) in s.rc_in.iter_mut().zip(values) {
+                        if v != u16::MAX {
+                            *slot = v;
+                        }
+                    }
+                    s.overrides.push((t, h, o))
+                }
                 MavMessage::PARAM_REQUEST_READ(r) => {
                     let name = r.param_id.to_str().unwrap_or("").trim_end_matches('\0');
                     s.param_requests.push((t, name.to_string()));
@@ -412,6 +438,28 @@ fn run(
                     yawspeed: f32::from(s.gyro[2]) / 1000.0,
                     ..ATTITUDE_DATA::DEFAULT
                 }),
+                65 => {
+                    let rc = {
+                        let mut st = state.lock().unwrap();
+                        if let Some(j) = st.joystick {
+                            st.rc_in = j;
+                        }
+                        st.rc_in
+                    };
+                    MavMessage::RC_CHANNELS(RC_CHANNELS_DATA {
+                        time_boot_ms: boot_ms,
+                        chancount: 16,
+                        chan1_raw: rc[0],
+                        chan2_raw: rc[1],
+                        chan3_raw: rc[2],
+                        chan4_raw: rc[3],
+                        chan5_raw: rc[4],
+                        chan6_raw: rc[5],
+                        chan7_raw: rc[6],
+                        chan8_raw: rc[7],
+                        ..RC_CHANNELS_DATA::DEFAULT
+                    })
+                }
                 29 => MavMessage::SCALED_PRESSURE(SCALED_PRESSURE_DATA {
                     time_boot_ms: boot_ms,
                     press_abs: if s.water_baro == 0 {
@@ -465,6 +513,8 @@ impl ApState {
             motor_test_mode: self.motor_test_mode,
             last_motor_test_ns: self.last_motor_test_ns,
             lapses: self.lapses,
+            rc_in: self.rc_in,
+            joystick: self.joystick,
             params: HashMap::new(),
             param_requests: Vec::new(),
         }

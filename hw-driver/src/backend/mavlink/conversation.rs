@@ -40,7 +40,7 @@ use std::collections::VecDeque;
 use mavlink::dialects::ardupilotmega::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity, MavState, MavType,
     ATTITUDE_DATA, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, RAW_IMU_DATA,
-    RC_CHANNELS_OVERRIDE_DATA, SCALED_IMU2_DATA, SCALED_IMU_DATA, SCALED_PRESSURE2_DATA,
+    RC_CHANNELS_DATA, SCALED_IMU2_DATA, SCALED_IMU_DATA, SCALED_PRESSURE2_DATA,
     SCALED_PRESSURE_DATA,
 };
 use mavlink::{MavHeader, MessageData};
@@ -51,6 +51,7 @@ use super::convert::{attitude_rates, depth_from_hpa, implausible, imu_reading, p
 use super::motor_test::motor_test;
 use super::override_hold::OverrideHold;
 use super::rate_watch::RateWatch;
+use super::rc_override::{self, OverrideWatch, RC_CHANNELS_HZ};
 use super::water_baro::WaterBaro;
 use crate::backend::{LinkState, OutputSpec, Supply};
 
@@ -65,8 +66,7 @@ const MS: u64 = 1_000_000;
 /// Readings kept when the loop does not collect them (bounded: stale readings are useless).
 const MAX_PENDING_READINGS: usize = 64;
 
-/// "Ignore this channel" in RC_CHANNELS_OVERRIDE (0 would release it to the radio).
-pub const RC_IGNORE: u16 = u16::MAX;
+pub use super::rc_override::RC_IGNORE;
 
 /// A COMMAND_LONG waiting for its ACK.
 #[derive(Debug, Clone)]
@@ -122,6 +122,8 @@ pub struct Conversation {
     supply: SupplyTracker,
     /// How long the autopilot keeps an override (asked only in `rc_override` mode).
     override_hold: OverrideHold,
+    /// Whether the autopilot applies our overrides or another sender's (`rc_override` mode).
+    override_watch: OverrideWatch,
     /// The IMU stream's rate, for a ground station that reset it ([`super::rate_watch`]).
     imu_rate: RateWatch,
     /// Which barometer is in the water, and the verdict as last computed: the instance whose
@@ -167,6 +169,7 @@ impl Conversation {
             depth: None,
             supply: SupplyTracker::default(),
             override_hold,
+            override_watch: OverrideWatch::default(),
             imu_rate,
             water_baro,
             depth_instance,
@@ -224,7 +227,10 @@ impl Conversation {
     pub fn held(&self) -> Option<String> {
         match self.cfg.output {
             OutputMode::RcOverride if self.link == LinkState::Up => {
-                self.override_hold.verdict().err()
+                match self.override_watch.fight() {
+                    Some(why) => Some(why.to_string()),
+                    None => self.override_hold.verdict().err(),
+                }
             }
             _ => None,
         }
@@ -249,6 +255,7 @@ impl Conversation {
         self.armed = None;
         self.engaged = false;
         self.override_hold.link_lost();
+        self.override_watch.link_lost();
         self.imu_rate.stop();
         self.water_baro.link_lost();
         self.depth_instance = self.water_baro.verdict();
@@ -344,6 +351,7 @@ impl Conversation {
                 | MavMessage::SYS_STATUS(_)
                 | MavMessage::BATTERY_STATUS(_)
                 | MavMessage::PARAM_VALUE(_)
+                | MavMessage::RC_CHANNELS(_)
         )
     }
 
@@ -370,6 +378,7 @@ impl Conversation {
             MavMessage::SYS_STATUS(st) => self.supply.on_sys_status(t_ns, st),
             MavMessage::BATTERY_STATUS(b) => self.supply.on_battery_status(t_ns, b),
             MavMessage::COMMAND_ACK(ack) => self.on_ack(t_ns, ack),
+            MavMessage::RC_CHANNELS(rc) => self.on_rc_channels(t_ns, rc),
             MavMessage::PARAM_VALUE(v) => {
                 self.on_baro_param(v);
                 if self.supply.on_value(v).is_some() {
@@ -475,6 +484,20 @@ impl Conversation {
         }
     }
 
+    /// What the autopilot applies on the RC channels: another sender on ours stops ours.
+    fn on_rc_channels(&mut self, t_ns: u64, rc: &RC_CHANNELS_DATA) {
+        if self.cfg.output != OutputMode::RcOverride || self.override_watch.fight().is_some() {
+            return;
+        }
+        self.override_watch.on_report(t_ns, rc);
+        if let Some(why) = self.override_watch.fight() {
+            warn!(
+                "{why} (a ground station's MANUAL_CONTROL overrides RC channels 1-8; disable \
+                 its joystick and restart this driver; docs/hardware.md)"
+            );
+        }
+    }
+
     /// A PARAM_VALUE that may name a barometer: the depth's source decided again, its rate
     /// asked for when it changed to a message.
     fn on_baro_param(&mut self, v: &mavlink::dialects::ardupilotmega::PARAM_VALUE_DATA) {
@@ -529,6 +552,9 @@ impl Conversation {
         self.queue_rate("IMU", imu_id, self.cfg.imu_rate_hz);
         self.queue_rate("ATTITUDE", ATTITUDE_DATA::ID, self.cfg.attitude_rate_hz);
         self.queue_pressure_rate();
+        if self.cfg.output == OutputMode::RcOverride {
+            self.queue_rate("RC_CHANNELS", RC_CHANNELS_DATA::ID, RC_CHANNELS_HZ);
+        }
     }
 
     /// SET_MESSAGE_INTERVAL for the depth's pressure message, once it is known.
@@ -808,33 +834,22 @@ impl Conversation {
                 }
             }
             OutputMode::RcOverride => {
-                let mut ch = [RC_IGNORE; 8];
+                // Another sender on our channels (a pilot's joystick): nothing of ours.
+                if self.override_watch.fight().is_some() {
+                    return;
+                }
                 // Thrust only once the autopilot's hold after our last message is known to
                 // be short: until then the outputs get neutral.
-                let cleared = self.override_hold.verdict().is_ok();
-                for (o, p) in self.outputs.iter().zip(&self.pwm) {
-                    let p = if cleared { p } else { &o.neutral };
-                    let slot = (o.channel as usize)
-                        .checked_sub(1)
-                        .and_then(|i| ch.get_mut(i));
-                    if let Some(slot) = slot {
-                        *slot = p.us();
-                    }
-                }
-                self.outgoing.push(MavMessage::RC_CHANNELS_OVERRIDE(
-                    RC_CHANNELS_OVERRIDE_DATA {
-                        chan1_raw: ch[0],
-                        chan2_raw: ch[1],
-                        chan3_raw: ch[2],
-                        chan4_raw: ch[3],
-                        chan5_raw: ch[4],
-                        chan6_raw: ch[5],
-                        chan7_raw: ch[6],
-                        chan8_raw: ch[7],
-                        target_system: sys,
-                        target_component: comp,
-                    },
-                ));
+                let neutral: Vec<Pwm>;
+                let pwm = if self.override_hold.verdict().is_ok() {
+                    &self.pwm
+                } else {
+                    neutral = self.outputs.iter().map(|o| o.neutral).collect();
+                    &neutral
+                };
+                let (msg, values) = rc_override::message(&self.outputs, pwm, sys, comp);
+                self.outgoing.push(msg);
+                self.override_watch.sent(now_ns, values);
                 self.counters.thrust_sent += 1;
             }
         }

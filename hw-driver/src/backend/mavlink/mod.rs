@@ -18,6 +18,7 @@ pub mod motor_test;
 pub mod override_hold;
 pub mod params;
 pub mod rate_watch;
+pub mod rc_override;
 pub mod water_baro;
 
 use std::sync::atomic::{AtomicBool, Ordering};

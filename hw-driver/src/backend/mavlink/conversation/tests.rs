@@ -452,7 +452,9 @@ fn motor_tests_only_while_armed_at_once_on_change_and_resent() {
     );
 }
 
-fn overrides(out: Vec<MavMessage>) -> Vec<RC_CHANNELS_OVERRIDE_DATA> {
+fn overrides(
+    out: Vec<MavMessage>,
+) -> Vec<mavlink::dialects::ardupilotmega::RC_CHANNELS_OVERRIDE_DATA> {
     out.into_iter()
         .filter_map(|m| match m {
             MavMessage::RC_CHANNELS_OVERRIDE(r) => Some(r),
@@ -754,4 +756,68 @@ fn implausible_imu_readings_are_dropped_and_counted() {
     assert!((r.accel[2] + 9.80665).abs() < 1e-9);
     assert_eq!(r.mag, None, "an implausible magnetometer is dropped alone");
     assert_eq!(s.counters().mag_implausible, 1);
+}
+
+/// A ground station's joystick overrides RC channels 1-8 too (ArduSub turns its
+/// MANUAL_CONTROL into overrides): once RC_CHANNELS shows another sender's values on our
+/// channels for three settled reports, our overrides stop and `held` says why, until the link
+/// restarts.
+#[test]
+fn another_sender_on_our_rc_channels_stops_our_overrides() {
+    use mavlink::dialects::ardupilotmega::RC_CHANNELS_DATA;
+    let cfg = MavlinkConfig {
+        output: OutputMode::RcOverride,
+        ..MavlinkConfig::default()
+    };
+    let mut s = Conversation::new(cfg, specs(), 0);
+    s.on_message(1, &hdr(1, 1), &ap_heartbeat(true));
+    failsafe(&mut s, 2, 2.0, 0.5);
+    s.service(2);
+    // RC_CHANNELS asked for at 10 Hz in this mode, after the IMU and ATTITUDE.
+    let mut asked = Vec::new();
+    for t in 3..8 {
+        asked.extend(
+            commands(&s.drain_outgoing())
+                .iter()
+                .map(|c| (c.param1, c.param2)),
+        );
+        s.on_message(
+            t,
+            &hdr(1, 1),
+            &ack(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                MavResult::MAV_RESULT_ACCEPTED,
+            ),
+        );
+    }
+    assert!(asked.contains(&(65.0, 100_000.0)), "{asked:?}");
+    let applied = |ch1: u16, ch4: u16| {
+        MavMessage::RC_CHANNELS(RC_CHANNELS_DATA {
+            chan1_raw: ch1,
+            chan4_raw: ch4,
+            chancount: 8,
+            ..RC_CHANNELS_DATA::default()
+        })
+    };
+    s.set_outputs(&[Pwm(1600), Pwm(1400)]);
+    s.service(10 * MS);
+    assert_eq!(overrides(s.drain_outgoing()).len(), 1);
+    // Ours applied: nothing happens.
+    for k in 0..5 {
+        s.on_message(300 * MS + k * 100 * MS, &hdr(1, 1), &applied(1600, 1400));
+    }
+    assert_eq!(s.held(), None);
+    // The joystick's idle stick on every channel, three reports in a row.
+    for k in 0..3 {
+        s.on_message(800 * MS + k * 100 * MS, &hdr(1, 1), &applied(1500, 1500));
+    }
+    let why = s.held().expect("a fight");
+    assert!(why.contains("another sender overrides"), "{why}");
+    s.service(1_200 * MS);
+    assert!(overrides(s.drain_outgoing()).is_empty(), "ours stopped");
+    // A new link judges again.
+    s.on_disconnect("test");
+    s.on_message(2 * 1_000 * MS, &hdr(1, 1), &ap_heartbeat(true));
+    failsafe(&mut s, 2 * 1_000 * MS, 2.0, 0.5);
+    assert_eq!(s.held(), None);
 }
