@@ -324,8 +324,9 @@ fn rc_override_sets_the_configured_channels_only() {
 
 /// ArduSub keeps driving our last override until its pilot-input failsafe takes the channels
 /// back to neutral, FS_PILOT_TIMEOUT (3 s by default) after it, or never with FS_PILOT_INPUT
-/// 0. Until the autopilot says a short one, the driver asks, sends neutral overrides only, and
-/// reports its outputs held with the reason, while the vehicle is armed and the link up.
+/// 0; and it takes back only the RCMAP channels, each to its trim. Until the autopilot says
+/// all is well, the driver asks, sends neutral overrides only, and reports its outputs held
+/// with the reason, while the vehicle is armed and the link up.
 #[test]
 fn rc_overrides_stay_neutral_while_the_autopilot_would_keep_a_left_one_long() {
     let _s = serial();
@@ -339,6 +340,13 @@ fn rc_overrides_stay_neutral_while_the_autopilot_would_keep_a_left_one_long() {
             "FS_PILOT_INPUT",
             0.0,
             "FS_PILOT_INPUT = 0: nothing neutralises our last override",
+        ),
+        // The failsafe neutralises the RCMAP channels only, each at its trim.
+        ("RCMAP_PITCH", 7.0, "channel 1 is not an RCMAP channel"),
+        (
+            "RC2_TRIM",
+            1550.0,
+            "RC2_TRIM = 1550: the failsafe leaves channel 2 there, not at",
         ),
     ] {
         let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {

@@ -52,6 +52,14 @@ def main() -> int:
         "BARO2_DEVID": float(0x127601),
         "BARO3_DEVID": 0.0,
         "BATT_OPTIONS": 0.0,
+        # ArduSub's RCMAP (roll 2, pitch 1, throttle 3, yaw 4, forward 5, lateral 6) and trims.
+        "RCMAP_ROLL": 2.0,
+        "RCMAP_PITCH": 1.0,
+        "RCMAP_THROTTLE": 3.0,
+        "RCMAP_YAW": 4.0,
+        "RCMAP_FORWARD": 5.0,
+        "RCMAP_LATERAL": 6.0,
+        **{f"RC{n}_TRIM": 1500.0 for n in range(1, 9)},
     }
     for p in args.param:
         name, value = p.split("=", 1)

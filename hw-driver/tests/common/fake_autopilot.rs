@@ -6,7 +6,8 @@
 //! like ArduSub (param1 is the 0-based motor index, FAILED when disarmed or for a motor the
 //! frame does not have; 500 ms without one ends motor-test mode with a disarm, counted as
 //! a lapse), answers PARAM_REQUEST_READ by name from its parameters (ArduSub's defaults for
-//! `FS_PILOT_INPUT` 2, `FS_PILOT_TIMEOUT` 3 s, `RC_OVERRIDE_TIME` 3 s; a Navigator's
+//! `FS_PILOT_INPUT` 2, `FS_PILOT_TIMEOUT` 3 s, `RC_OVERRIDE_TIME` 3 s, RCMAP and `RCn_TRIM`
+//! 1500; a Navigator's
 //! barometers, `BARO1_DEVID`..`BARO3_DEVID`: BMP280, Bar30, none), sends SYS_STATUS with the battery's voltage and current with each
 //! HEARTBEAT (ArduSub streams it by default, SR0_EXT_STAT), and records everything it receives with the CLOCK_MONOTONIC time of
 //! reception. Bounded: the thread ends after `MAX_LIFETIME`.
@@ -120,7 +121,23 @@ impl Default for ApState {
                 ("FS_PILOT_TIMEOUT".to_string(), 3.0),
                 ("RC_OVERRIDE_TIME".to_string(), 3.0),
                 ("BATT_OPTIONS".to_string(), 0.0),
-            ]),
+            ])
+            .into_iter()
+            // ArduSub's RCMAP (Parameters.h: roll 2, pitch 1; throttle 3, yaw 4, forward 5,
+            // lateral 6) and RCn_TRIM (1500).
+            .chain(
+                [
+                    ("ROLL", 2.0),
+                    ("PITCH", 1.0),
+                    ("THROTTLE", 3.0),
+                    ("YAW", 4.0),
+                ]
+                .into_iter()
+                .chain([("FORWARD", 5.0), ("LATERAL", 6.0)])
+                .map(|(axis, ch)| (format!("RCMAP_{axis}"), ch)),
+            )
+            .chain((1..=8).map(|n| (format!("RC{n}_TRIM"), 1500.0)))
+            .collect(),
             param_requests: Vec::new(),
         }
         .baros(NAVIGATOR_BAROS)

@@ -32,8 +32,8 @@
 //!   in the water ([`super::water_baro`], read at each link-up); none, said, until then.
 //! - Supply: the newest voltage (and current) of SYS_STATUS or BATTERY_STATUS monitor 0
 //!   ([`super::battery`]), reported while younger than [`SUPPLY_STALE_NS`]; ArduSub streams
-//!   both at its default rates (SYS_STATUS in SR0_EXT_STAT, BATTERY_STATUS in SR0_EXTRA3), so
-//!   no interval is requested.
+//!   both at its default rates (SYS_STATUS in EXT_STAT, BATTERY_STATUS in EXTRA3: `SRn_*`
+//!   before ArduPilot 4.7, `MAVn_*` since), so no interval is requested.
 
 use std::collections::VecDeque;
 
@@ -150,7 +150,7 @@ impl Conversation {
         let pwm = outputs.iter().map(|o| o.neutral).collect();
         let target = (cfg.target_system != 0 && cfg.target_component != 0)
             .then_some((cfg.target_system, cfg.target_component));
-        let override_hold = OverrideHold::new(cfg.max_override_hold_s);
+        let override_hold = OverrideHold::new(cfg.max_override_hold_s, outputs.clone());
         let imu_rate = RateWatch::new(cfg.imu_rate_hz);
         let water_baro = WaterBaro::new(cfg.pressure_message);
         let depth_instance = water_baro.verdict();

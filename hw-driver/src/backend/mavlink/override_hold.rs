@@ -8,18 +8,23 @@
 //! a SIGKILL, a watchdog abort or the OOM killer (nothing of ours runs then) is ArduSub's
 //! pilot-input failsafe: after `FS_PILOT_TIMEOUT` s without pilot input (our overrides count
 //! as input), with `FS_PILOT_INPUT` not 0, it sets the six RCMAP channels (1-6 by default) to
-//! neutral (`set_neutral_controls`, ArduSub/failsafe.cpp) and, with 2 (the default), disarms.
-//! So thrust goes out only once the autopilot has said `FS_PILOT_INPUT` != 0,
-//! `FS_PILOT_TIMEOUT` <= `max_override_hold_s`, and `RC_OVERRIDE_TIME` != 0 (0 makes ArduSub
-//! ignore overrides); until then only neutral overrides go out and the driver reports its
-//! outputs held, with the reason. The config keeps thrusters to channels 1-6.
+//! neutral (`set_neutral_controls`, ArduSub/joystick.cpp) and, with 2 (the default), disarms.
+//! "Neutral" there is each channel's own trim (`set_radio_in(get_radio_trim())`), and "the six
+//! channels" are the ones `RCMAP_ROLL`, `_PITCH`, `_THROTTLE`, `_YAW`, `_FORWARD` and
+//! `_LATERAL` name (ArduSub's defaults 2, 1, 3, 4, 5, 6). So thrust goes out only once the
+//! autopilot has said `FS_PILOT_INPUT` != 0, `FS_PILOT_TIMEOUT` <= `max_override_hold_s`,
+//! `RC_OVERRIDE_TIME` != 0 (0 makes ArduSub ignore overrides), that every thruster's channel is
+//! an RCMAP channel, and that its `RCn_TRIM` is the thruster's neutral; until then only neutral
+//! overrides go out and the driver reports its outputs held, with the reason. The config keeps
+//! thrusters to channels 1-6.
 //!
-//! The values are read by a [`ParamReader`]: at each link-up, every second until all three
-//! came, every 10 s after. The driver changes no parameter.
+//! The values are read by a [`ParamReader`]: at each link-up, every second until all came,
+//! every 10 s after. The driver changes no parameter.
 
 use mavlink::dialects::ardupilotmega::{MavMessage, PARAM_VALUE_DATA};
 
 use super::params::ParamReader;
+use crate::backend::OutputSpec;
 
 /// ArduSub's pilot-input failsafe action (0 disabled, 1 warn, 2 disarm; ArduSub/Parameters.cpp).
 pub const FS_PILOT_INPUT: &str = "FS_PILOT_INPUT";
@@ -27,21 +32,47 @@ pub const FS_PILOT_INPUT: &str = "FS_PILOT_INPUT";
 pub const FS_PILOT_TIMEOUT: &str = "FS_PILOT_TIMEOUT";
 /// How long an override is used (0 disables overrides, -1 never times out; RC_Channels_VarInfo.h).
 pub const RC_OVERRIDE_TIME: &str = "RC_OVERRIDE_TIME";
-/// The parameters read, in this order.
-pub const PARAMS: [&str; 3] = [FS_PILOT_INPUT, FS_PILOT_TIMEOUT, RC_OVERRIDE_TIME];
+/// The parameters read, in this order: the failsafe, the six RCMAP channels, the trims of
+/// channels 1-6.
+pub const PARAMS: [&str; 15] = [
+    FS_PILOT_INPUT,
+    FS_PILOT_TIMEOUT,
+    RC_OVERRIDE_TIME,
+    "RCMAP_ROLL",
+    "RCMAP_PITCH",
+    "RCMAP_THROTTLE",
+    "RCMAP_YAW",
+    "RCMAP_FORWARD",
+    "RCMAP_LATERAL",
+    "RC1_TRIM",
+    "RC2_TRIM",
+    "RC3_TRIM",
+    "RC4_TRIM",
+    "RC5_TRIM",
+    "RC6_TRIM",
+];
+const RCMAP: std::ops::Range<usize> = 3..9;
+const TRIMS: std::ops::Range<usize> = 9..15;
+
+/// How far a channel's trim (where the failsafe leaves it) may be from the thruster's neutral,
+/// us: well inside an ESC's dead band (+-25 us on a Blue Robotics ESC).
+pub const TRIM_TOLERANCE_US: f32 = 10.0;
 
 /// The autopilot's settings that bound our last override, as far as we know them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OverrideHold {
     /// The longest `FS_PILOT_TIMEOUT` accepted, s (`max_override_hold_s`).
     max_s: f64,
-    params: ParamReader<3>,
+    /// Our thrusters' channels and neutrals.
+    outputs: Vec<OutputSpec>,
+    params: ParamReader<15>,
 }
 
 impl OverrideHold {
-    pub fn new(max_s: f64) -> Self {
+    pub fn new(max_s: f64, outputs: Vec<OutputSpec>) -> Self {
         OverrideHold {
             max_s,
+            outputs,
             params: ParamReader::new(PARAMS),
         }
     }
@@ -75,9 +106,13 @@ impl OverrideHold {
     /// for `driver_status`'s text (128 bytes with its prefix).
     pub fn verdict(&self) -> Result<(), String> {
         let max = self.max_s;
-        let [Some(input), Some(timeout), Some(override_s)] = self.params.known() else {
+        let known = self.params.known();
+        let waiting = || {
             let missing = self.params.first_missing().unwrap_or("");
-            return Err(format!("waiting for the autopilot's {missing}"));
+            Err(format!("waiting for the autopilot's {missing}"))
+        };
+        let (Some(input), Some(timeout), Some(override_s)) = (known[0], known[1], known[2]) else {
+            return waiting();
         };
         if !input.is_finite() || input == 0.0 {
             return Err(format!(
@@ -95,6 +130,28 @@ impl OverrideHold {
                 "{RC_OVERRIDE_TIME} = 0: the autopilot ignores overrides"
             ));
         }
+        if !self.params.all_known() {
+            return waiting();
+        }
+        let mapped: Vec<f32> = RCMAP.map(|i| known[i].unwrap_or(0.0)).collect();
+        for o in &self.outputs {
+            let ch = o.channel as f32;
+            if !mapped.contains(&ch) {
+                return Err(format!(
+                    "channel {ch} is not an RCMAP channel ({mapped:?}): the failsafe leaves it"
+                ));
+            }
+            let trim = (o.channel as usize)
+                .checked_sub(1)
+                .and_then(|i| known.get(TRIMS.start + i).copied().flatten())
+                .unwrap_or(f32::NAN);
+            let neutral = f32::from(o.neutral.us());
+            if trim.is_nan() || (trim - neutral).abs() > TRIM_TOLERANCE_US {
+                return Err(format!(
+                    "RC{ch}_TRIM = {trim}: the failsafe leaves channel {ch} there, not at {neutral}"
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -105,18 +162,83 @@ mod tests {
     use crate::backend::mavlink::params::tests::{asked, value};
     use crate::backend::mavlink::params::{REREAD_NS, RETRY_NS};
 
+    /// Thrusters on channels 1 and 5, neutral 1500.
+    fn outputs() -> Vec<OutputSpec> {
+        [1, 5]
+            .map(|channel| OutputSpec {
+                channel,
+                neutral: crate::core::pwm::Pwm(1500),
+            })
+            .to_vec()
+    }
+
+    /// ArduSub's RCMAP (roll 2, pitch 1, throttle 3, yaw 4, forward 5, lateral 6) and trims
+    /// (1500).
+    fn ardusub_mapping(h: &mut OverrideHold) {
+        for (name, v) in PARAMS[RCMAP].iter().zip([2.0, 1.0, 3.0, 4.0, 5.0, 6.0]) {
+            h.on_value(&value(name, v));
+        }
+        for name in &PARAMS[TRIMS] {
+            h.on_value(&value(name, 1500.0));
+        }
+    }
+
     fn with(input: f32, timeout: f32, override_s: f32) -> OverrideHold {
-        let mut h = OverrideHold::new(1.0);
+        let mut h = OverrideHold::new(1.0, outputs());
         h.link_up(0);
         h.on_value(&value(FS_PILOT_INPUT, input));
         h.on_value(&value(FS_PILOT_TIMEOUT, timeout));
         h.on_value(&value(RC_OVERRIDE_TIME, override_s));
+        ardusub_mapping(&mut h);
         h
+    }
+
+    /// The failsafe neutralises the RCMAP channels, each at its trim: a thruster on another
+    /// channel, or a trim off its neutral, keeps our last override or a thrust after we stop.
+    #[test]
+    fn thrust_only_where_the_failsafe_takes_the_channel_to_the_thrusters_neutral() {
+        assert_eq!(with(2.0, 0.5, 3.0).verdict(), Ok(()));
+        let mut h = with(2.0, 0.5, 3.0);
+        h.on_value(&value("RCMAP_FORWARD", 7.0));
+        let why = h.verdict().unwrap_err();
+        assert!(
+            why.starts_with("channel 5 is not an RCMAP channel"),
+            "{why}"
+        );
+        assert!(why.len() <= 100, "{} bytes: {why}", why.len());
+        let mut h = with(2.0, 0.5, 3.0);
+        h.on_value(&value("RC1_TRIM", 1550.0));
+        let why = h.verdict().unwrap_err();
+        assert_eq!(
+            why,
+            "RC1_TRIM = 1550: the failsafe leaves channel 1 there, not at 1500"
+        );
+        h.on_value(&value("RC1_TRIM", 1508.0));
+        assert_eq!(h.verdict(), Ok(()), "within the tolerance");
+        // A trim of a channel we do not use does not matter.
+        h.on_value(&value("RC2_TRIM", 1700.0));
+        assert_eq!(h.verdict(), Ok(()));
+        // The failsafe's own parameters are judged before the mapping has come.
+        let mut h = OverrideHold::new(1.0, outputs());
+        h.link_up(0);
+        for (name, v) in [
+            (FS_PILOT_INPUT, 2.0),
+            (FS_PILOT_TIMEOUT, 3.0),
+            (RC_OVERRIDE_TIME, 3.0),
+        ] {
+            h.on_value(&value(name, v));
+        }
+        assert!(h.verdict().unwrap_err().contains("outlive us"));
+        h.on_value(&value(FS_PILOT_TIMEOUT, 0.5));
+        assert_eq!(
+            h.verdict().unwrap_err(),
+            "waiting for the autopilot's RCMAP_ROLL"
+        );
     }
 
     #[test]
     fn thrust_only_with_the_failsafe_on_and_short_and_overrides_taken() {
-        let mut h = OverrideHold::new(1.0);
+        let mut h = OverrideHold::new(1.0, outputs());
         assert!(h.verdict().unwrap_err().contains("waiting"));
         h.link_up(0);
         h.on_value(&value(FS_PILOT_INPUT, 2.0));
@@ -177,8 +299,8 @@ mod tests {
     }
 
     #[test]
-    fn its_three_parameters_are_asked_for_at_link_up() {
-        let mut h = OverrideHold::new(1.0);
+    fn its_parameters_are_asked_for_at_link_up() {
+        let mut h = OverrideHold::new(1.0, outputs());
         let mut out = Vec::new();
         h.requests(0, 1, 1, &mut out);
         assert!(out.is_empty(), "asked without a link");
@@ -193,6 +315,8 @@ mod tests {
         ] {
             h.on_value(&value(name, v));
         }
+        ardusub_mapping(&mut h);
+        assert_eq!(h.verdict(), Ok(()));
         out.clear();
         h.requests(5 + RETRY_NS, 1, 2, &mut out);
         assert_eq!(h.next_deadline_ns(), Some(5 + RETRY_NS + REREAD_NS));

@@ -463,11 +463,25 @@ fn overrides(
         .collect()
 }
 
-/// The autopilot's answers: its pilot-input failsafe's action and timeout, RC_OVERRIDE_TIME.
+/// The autopilot's answers: its pilot-input failsafe's action and timeout, RC_OVERRIDE_TIME,
+/// and ArduSub's default RCMAP (2, 1, 3, 4, 5, 6) and trims (1500).
 fn failsafe(s: &mut Conversation, t: u64, input: f32, timeout: f32) {
     s.on_message(t, &hdr(1, 1), &param("FS_PILOT_INPUT", input));
     s.on_message(t, &hdr(1, 1), &param("FS_PILOT_TIMEOUT", timeout));
     s.on_message(t, &hdr(1, 1), &param("RC_OVERRIDE_TIME", 3.0));
+    for (axis, ch) in [
+        ("ROLL", 2.0),
+        ("PITCH", 1.0),
+        ("THROTTLE", 3.0),
+        ("YAW", 4.0),
+        ("FORWARD", 5.0),
+        ("LATERAL", 6.0),
+    ] {
+        s.on_message(t, &hdr(1, 1), &param(&format!("RCMAP_{axis}"), ch));
+    }
+    for n in 1..=6 {
+        s.on_message(t, &hdr(1, 1), &param(&format!("RC{n}_TRIM"), 1500.0));
+    }
 }
 
 #[test]
@@ -512,6 +526,18 @@ fn rc_overrides_carry_thrust_only_while_the_autopilot_would_take_a_left_one_back
             "FS_PILOT_INPUT",
             "FS_PILOT_TIMEOUT",
             "RC_OVERRIDE_TIME",
+            "RCMAP_ROLL",
+            "RCMAP_PITCH",
+            "RCMAP_THROTTLE",
+            "RCMAP_YAW",
+            "RCMAP_FORWARD",
+            "RCMAP_LATERAL",
+            "RC1_TRIM",
+            "RC2_TRIM",
+            "RC3_TRIM",
+            "RC4_TRIM",
+            "RC5_TRIM",
+            "RC6_TRIM",
             "BARO1_DEVID",
             "BARO2_DEVID",
             "BARO3_DEVID",
