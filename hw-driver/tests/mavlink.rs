@@ -348,6 +348,12 @@ fn rc_overrides_stay_neutral_while_the_autopilot_would_keep_a_left_one_long() {
             1550.0,
             "RC2_TRIM = 1550: the failsafe leaves channel 2 there, not at",
         ),
+        // A stock frame's Motor 3 on output 3: our overrides would be pilot sticks.
+        (
+            "SERVO3_FUNCTION",
+            35.0,
+            "SERVO3_FUNCTION = 35 (a motor): ArduSub mixes our overrides as pilot sticks",
+        ),
     ] {
         let mut h = Harness::<Mavlink>::start_with(100, "", "output = \"rc_override\"", |fx| {
             fx.0.with(|s| {

@@ -60,6 +60,8 @@ def main() -> int:
         "RCMAP_FORWARD": 5.0,
         "RCMAP_LATERAL": 6.0,
         **{f"RC{n}_TRIM": 1500.0 for n in range(1, 9)},
+        # Outputs set up for RC override: output n passes RC input n through (RCINn = 50 + n).
+        **{f"SERVO{n}_FUNCTION": float(50 + n if n <= 8 else 0) for n in range(1, 17)},
     }
     for p in args.param:
         name, value = p.split("=", 1)

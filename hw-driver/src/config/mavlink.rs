@@ -136,7 +136,8 @@ pub enum OutputMode {
     #[default]
     MotorTest,
     /// RC_CHANNELS_OVERRIDE; needs SERVOn_FUNCTION = RCINn passthrough on each thruster
-    /// output (set by you; this driver changes no parameter). Channels 1..=6 (the ones
+    /// output and no motor output (set by you; this driver changes no parameter, it reads
+    /// them and holds its overrides neutral until they are so). Channels 1..=6 (the ones
     /// ArduSub's pilot-input failsafe takes back to neutral).
     RcOverride,
 }

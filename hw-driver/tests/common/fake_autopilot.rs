@@ -7,7 +7,7 @@
 //! frame does not have; 500 ms without one ends motor-test mode with a disarm, counted as
 //! a lapse), answers PARAM_REQUEST_READ by name from its parameters (ArduSub's defaults for
 //! `FS_PILOT_INPUT` 2, `FS_PILOT_TIMEOUT` 3 s, `RC_OVERRIDE_TIME` 3 s, RCMAP and `RCn_TRIM`
-//! 1500; a Navigator's
+//! 1500; outputs 1-8 RCINn passthrough; a Navigator's
 //! barometers, `BARO1_DEVID`..`BARO3_DEVID`: BMP280, Bar30, none), sends SYS_STATUS with the battery's voltage and current with each
 //! HEARTBEAT (ArduSub streams it by default, SR0_EXT_STAT), and records everything it receives with the CLOCK_MONOTONIC time of
 //! reception. Bounded: the thread ends after `MAX_LIFETIME`.
@@ -137,6 +137,11 @@ impl Default for ApState {
                 .map(|(axis, ch)| (format!("RCMAP_{axis}"), ch)),
             )
             .chain((1..=8).map(|n| (format!("RC{n}_TRIM"), 1500.0)))
+            // Outputs set up for `rc_override`: output n passes RC input n through.
+            .chain((1..=16).map(|n| {
+                let f = if n <= 8 { 50.0 + n as f32 } else { 0.0 };
+                (format!("SERVO{n}_FUNCTION"), f)
+            }))
             .collect(),
             param_requests: Vec::new(),
         }

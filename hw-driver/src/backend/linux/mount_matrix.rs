@@ -6,7 +6,7 @@
 //! apply this rotation matrix to samples". The device-tree binding
 //! (`bindings/iio/mount-matrix.txt`) gives the multiplication, `x' = mxx x + myx y + mzx z`
 //! with the property's first three strings `mxx, myx, mzx`, so each `;`-separated group of the
-//! sysfs text is one row and board = M chip. The kernel prints the strings of the device tree
+//! sysfs text is one row and board = M chip (as GNOME's iio-sensor-proxy applies it). The kernel prints the strings of the device tree
 //! verbatim (`iio_show_mount_matrix`: "%s, %s, %s; %s, %s, %s; %s, %s, %s\n"), so decimals
 //! such as 0.866 occur; without a matrix in the device tree it prints the identity.
 //!

@@ -14,9 +14,13 @@
 //! `_LATERAL` name (ArduSub's defaults 2, 1, 3, 4, 5, 6). So thrust goes out only once the
 //! autopilot has said `FS_PILOT_INPUT` != 0, `FS_PILOT_TIMEOUT` <= `max_override_hold_s`,
 //! `RC_OVERRIDE_TIME` != 0 (0 makes ArduSub ignore overrides), that every thruster's channel is
-//! an RCMAP channel, and that its `RCn_TRIM` is the thruster's neutral; until then only neutral
-//! overrides go out and the driver reports its outputs held, with the reason. The config keeps
-//! thrusters to channels 1-6.
+//! an RCMAP channel, and that its `RCn_TRIM` is the thruster's neutral. And the overrides must
+//! reach the ESCs as they are: some output's `SERVOm_FUNCTION` must be RCINn passthrough (51 +
+//! n - 1) for each thruster's channel n, and no output may be a motor (33-40, 82-85, 160-179):
+//! ArduSub's mixer would take our overrides on channels 1-6, the RCMAP channels, as pilot sticks
+//! and drive its motors from them. Until all of that is known to hold only neutral overrides
+//! go out and the driver reports its outputs held, with the reason. The config keeps thrusters
+//! to channels 1-6.
 //!
 //! The values are read by a [`ParamReader`]: at each link-up, every second until all came,
 //! every 10 s after. The driver changes no parameter.
@@ -33,8 +37,8 @@ pub const FS_PILOT_TIMEOUT: &str = "FS_PILOT_TIMEOUT";
 /// How long an override is used (0 disables overrides, -1 never times out; RC_Channels_VarInfo.h).
 pub const RC_OVERRIDE_TIME: &str = "RC_OVERRIDE_TIME";
 /// The parameters read, in this order: the failsafe, the six RCMAP channels, the trims of
-/// channels 1-6.
-pub const PARAMS: [&str; 15] = [
+/// channels 1-6, the functions of outputs 1-16.
+pub const PARAMS: [&str; 31] = [
     FS_PILOT_INPUT,
     FS_PILOT_TIMEOUT,
     RC_OVERRIDE_TIME,
@@ -50,9 +54,37 @@ pub const PARAMS: [&str; 15] = [
     "RC4_TRIM",
     "RC5_TRIM",
     "RC6_TRIM",
+    "SERVO1_FUNCTION",
+    "SERVO2_FUNCTION",
+    "SERVO3_FUNCTION",
+    "SERVO4_FUNCTION",
+    "SERVO5_FUNCTION",
+    "SERVO6_FUNCTION",
+    "SERVO7_FUNCTION",
+    "SERVO8_FUNCTION",
+    "SERVO9_FUNCTION",
+    "SERVO10_FUNCTION",
+    "SERVO11_FUNCTION",
+    "SERVO12_FUNCTION",
+    "SERVO13_FUNCTION",
+    "SERVO14_FUNCTION",
+    "SERVO15_FUNCTION",
+    "SERVO16_FUNCTION",
 ];
 const RCMAP: std::ops::Range<usize> = 3..9;
 const TRIMS: std::ops::Range<usize> = 9..15;
+const FUNCTIONS: std::ops::Range<usize> = 15..31;
+
+/// `SRV_Channel::k_rcin1`: output function "RC input 1 passed through"; RCINn is this + n - 1.
+pub const RCIN1: f32 = 51.0;
+
+/// Whether an output function is one of ArduPilot's motors (`k_motor1..8` 33-40, `k_motor9..12`
+/// 82-85, `k_motor13..32` 160-179).
+fn is_motor(function: f32) -> bool {
+    [33.0..=40.0, 82.0..=85.0, 160.0..=179.0]
+        .iter()
+        .any(|r| r.contains(&function))
+}
 
 /// How far a channel's trim (where the failsafe leaves it) may be from the thruster's neutral,
 /// us: well inside an ESC's dead band (+-25 us on a Blue Robotics ESC).
@@ -65,7 +97,7 @@ pub struct OverrideHold {
     max_s: f64,
     /// Our thrusters' channels and neutrals.
     outputs: Vec<OutputSpec>,
-    params: ParamReader<15>,
+    params: ParamReader<31>,
 }
 
 impl OverrideHold {
@@ -152,6 +184,22 @@ impl OverrideHold {
                 ));
             }
         }
+        let functions: Vec<f32> = FUNCTIONS.map(|i| known[i].unwrap_or(0.0)).collect();
+        if let Some((k, f)) = functions.iter().enumerate().find(|(_, f)| is_motor(**f)) {
+            return Err(format!(
+                "SERVO{}_FUNCTION = {f} (a motor): ArduSub mixes our overrides as pilot sticks",
+                k + 1
+            ));
+        }
+        for o in &self.outputs {
+            let rcin = RCIN1 + o.channel as f32 - 1.0;
+            if !functions.contains(&rcin) {
+                return Err(format!(
+                    "no SERVOn_FUNCTION = {rcin} (RCIN{} passthrough): channel {} drives nothing",
+                    o.channel, o.channel
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -180,6 +228,11 @@ mod tests {
         }
         for name in &PARAMS[TRIMS] {
             h.on_value(&value(name, 1500.0));
+        }
+        // Outputs 1 and 2 pass RC inputs 1 and 5 through; the rest unused.
+        for (k, name) in PARAMS[FUNCTIONS].iter().enumerate() {
+            let f = [RCIN1, RCIN1 + 4.0].get(k).copied().unwrap_or(0.0);
+            h.on_value(&value(name, f));
         }
     }
 
@@ -218,6 +271,22 @@ mod tests {
         // A trim of a channel we do not use does not matter.
         h.on_value(&value("RC2_TRIM", 1700.0));
         assert_eq!(h.verdict(), Ok(()));
+        // A stock BlueROV2 frame (outputs 1-8 Motor 1-8): our overrides would be pilot sticks.
+        let mut h = with(2.0, 0.5, 3.0);
+        h.on_value(&value("SERVO3_FUNCTION", 35.0));
+        assert_eq!(
+            h.verdict().unwrap_err(),
+            "SERVO3_FUNCTION = 35 (a motor): ArduSub mixes our overrides as pilot sticks"
+        );
+        // Channel 5 passed through nowhere.
+        let mut h = with(2.0, 0.5, 3.0);
+        h.on_value(&value("SERVO2_FUNCTION", 0.0));
+        let why = h.verdict().unwrap_err();
+        assert_eq!(
+            why,
+            "no SERVOn_FUNCTION = 55 (RCIN5 passthrough): channel 5 drives nothing"
+        );
+        assert!(!is_motor(RCIN1) && is_motor(40.0) && is_motor(82.0) && is_motor(179.0));
         // The failsafe's own parameters are judged before the mapping has come.
         let mut h = OverrideHold::new(1.0, outputs());
         h.link_up(0);

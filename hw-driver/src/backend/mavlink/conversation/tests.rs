@@ -482,6 +482,11 @@ fn failsafe(s: &mut Conversation, t: u64, input: f32, timeout: f32) {
     for n in 1..=6 {
         s.on_message(t, &hdr(1, 1), &param(&format!("RC{n}_TRIM"), 1500.0));
     }
+    // Outputs n pass RC input n through (RCINn = 50 + n).
+    for n in 1..=16 {
+        let f = if n <= 8 { 50.0 + n as f32 } else { 0.0 };
+        s.on_message(t, &hdr(1, 1), &param(&format!("SERVO{n}_FUNCTION"), f));
+    }
 }
 
 #[test]
@@ -538,6 +543,22 @@ fn rc_overrides_carry_thrust_only_while_the_autopilot_would_take_a_left_one_back
             "RC4_TRIM",
             "RC5_TRIM",
             "RC6_TRIM",
+            "SERVO1_FUNCTION",
+            "SERVO2_FUNCTION",
+            "SERVO3_FUNCTION",
+            "SERVO4_FUNCTION",
+            "SERVO5_FUNCTION",
+            "SERVO6_FUNCTION",
+            "SERVO7_FUNCTION",
+            "SERVO8_FUNCTION",
+            "SERVO9_FUNCTION",
+            "SERVO10_FUNCTION",
+            "SERVO11_FUNCTION",
+            "SERVO12_FUNCTION",
+            "SERVO13_FUNCTION",
+            "SERVO14_FUNCTION",
+            "SERVO15_FUNCTION",
+            "SERVO16_FUNCTION",
             "BARO1_DEVID",
             "BARO2_DEVID",
             "BARO3_DEVID",
