@@ -29,3 +29,14 @@ pub fn config(
     );
     cfg
 }
+
+/// thruster-hw run with `cfg` (written to the world's `thruster-hw.toml`), left running.
+pub fn spawn(world: &crate::World, cfg: &str) -> crate::Proc {
+    let path = world.path("thruster-hw.toml");
+    std::fs::write(&path, cfg).expect("thruster-hw.toml written");
+    crate::Proc::spawn(
+        "thruster-hw",
+        &["run", "--config", path.to_str().expect("a UTF-8 path")],
+        world.dir.path(),
+    )
+}

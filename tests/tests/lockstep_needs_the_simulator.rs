@@ -15,7 +15,7 @@ mod inotify;
 use std::time::{Duration, Instant};
 
 use fake_sysfs::FakeSysfs;
-use system_tests::{state, Operator, Proc, World};
+use system_tests::{state, Operator, World};
 use thruster_protocol::services::Inbox;
 use thruster_protocol::{DaemonState, RequestKind, ThrustCommand};
 
@@ -35,14 +35,8 @@ fn a_daemon_in_lockstep_will_not_drive_real_thrusters() {
         fake_sysfs::DENSITY,
         fake_sysfs::SURFACE_KPA,
     );
-    let hw_cfg = world.path("thruster-hw.toml");
-    std::fs::write(&hw_cfg, cfg).unwrap();
     let thrust: Inbox<ThrustCommand> = Inbox::create(world.node(), world.ipc()).unwrap();
-    let mut hw = Proc::spawn(
-        "thruster-hw",
-        &["run", "--config", hw_cfg.to_str().unwrap()],
-        world.dir.path(),
-    );
+    let mut hw = system_tests::linux_driver::spawn(&world, &cfg);
     let mut daemon = world.daemon(&["--thrusters", "5", "--lockstep"]);
     let blocked = op
         .wait_status(LONG, |s| s.text().contains("runs in lockstep"))

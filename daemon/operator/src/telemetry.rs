@@ -208,7 +208,13 @@ pub fn held_text(t: &TelemetryMsg) -> String {
             state_name(t.state)
         );
     }
-    let depth = if t.has(TelemetryMsg::HOLD_DEPTH) {
+    let depth = if t.has(TelemetryMsg::HOLD_DEPTH) && !t.has(TelemetryMsg::HAS_DEPTH) {
+        // The controller holds only a depth it measures: said, not claimed.
+        format!(
+            "depth {:.2} m asked but not held: the samples carry no depth",
+            t.setpoint_depth
+        )
+    } else if t.has(TelemetryMsg::HOLD_DEPTH) {
         format!("depth {:.2} m", t.setpoint_depth)
     } else {
         "depth free".to_string()
@@ -225,6 +231,9 @@ pub fn setpoint_line(t: &TelemetryMsg) -> String {
     );
     if t.has(TelemetryMsg::HOLD_DEPTH) {
         let _ = write!(s, ", depth {:.2} m", t.setpoint_depth);
+        if !t.has(TelemetryMsg::HAS_DEPTH) {
+            s.push_str(" (no depth measured: not held)");
+        }
     } else {
         s.push_str(", depth free");
     }
@@ -268,6 +277,15 @@ mod tests {
         let mut free = holding();
         free.flags &= !TelemetryMsg::HOLD_DEPTH;
         assert!(held_text(&free).ends_with(", depth free"));
+        // No depth measured (a driver without a sensor, or one that refused its sensor).
+        let mut blind = holding();
+        blind.flags &= !TelemetryMsg::HAS_DEPTH;
+        assert!(
+            held_text(&blind)
+                .ends_with("depth 2.00 m asked but not held: the samples carry no depth"),
+            "{}",
+            held_text(&blind)
+        );
         let mut idle = holding();
         idle.flags = 0;
         idle.set_state(DaemonState::Idle);
@@ -378,5 +396,8 @@ mod tests {
             setpoint_line(&t),
             "[   12.345 s] setpoint roll +0.0 pitch +10.0 yaw +45.0 deg, depth 2.00 m"
         );
+        let mut blind = t;
+        blind.flags &= !TelemetryMsg::HAS_DEPTH;
+        assert!(setpoint_line(&blind).ends_with("depth 2.00 m (no depth measured: not held)"));
     }
 }

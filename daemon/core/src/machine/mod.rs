@@ -19,6 +19,7 @@
 
 mod checkpoint;
 mod config;
+mod depth_watch;
 mod estimation;
 mod hold_watch;
 mod models;

@@ -8,6 +8,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thruster_protocol::MAX_THRUSTERS;
 
 use super::config::{MachineSetup, ReconfigPolicy};
+use super::depth_watch::DepthWatch;
 use super::estimation::ESTIMATION;
 use super::estimation::{ClosedStep, EstimationRun, IdleRest, Motion, PulseStep, MIN_REST_SAMPLES};
 use super::hold_watch::{actuated_error_deg, HoldLost, HoldWatch, Settling, HELD_CLEARS_S};
@@ -106,6 +107,9 @@ pub struct Machine {
     /// Why the driver's outputs cannot be used (see `driver_watch`), while they cannot: the
     /// machine stays in Fault, neutral, and does not recover on good IMU samples alone.
     output_block: Option<String>,
+    /// Whether a depth asked for is measured (the status says when it is not).
+    #[serde(default)]
+    depth_watch: DepthWatch,
     /// The supply voltage and the referral of commands to the reference voltage: every
     /// command inside the machine is referred, only the outgoing one is carried to the
     /// present voltage (`crate::supply`).
@@ -189,6 +193,7 @@ impl Machine {
             text_says_no_imu: false,
             last_desired: [0.0; 6],
             output_block: None,
+            depth_watch: DepthWatch::default(),
             supply: Supply::new(setup.supply.clone()),
             hold_watch: HoldWatch::default(),
             hold_lost_once: false,
@@ -479,6 +484,7 @@ impl Machine {
             None => 0.0,
         };
         self.last_t_ns = Some(s.t_ns);
+        self.depth_watch.on_sample(s.t_ns, s.depth);
         if dt > 0.0 {
             let rate = 1.0 / dt;
             self.imu_rate_hz = if self.imu_rate_hz == 0.0 {
@@ -661,7 +667,14 @@ impl Machine {
             imu_rate_hz: self.imu_rate_hz,
             vehicle_time_ns: self.last_t_ns.unwrap_or(0),
             thrusters: self.n,
-            text: self.text.clone(),
+            // A depth hold nothing measures is said on every state's text.
+            text: match self.depth_watch.note(
+                self.last_t_ns.unwrap_or(0),
+                self.target.as_ref().and_then(|t| t.depth),
+            ) {
+                Some(note) => format!("{}; {note}", self.text),
+                None => self.text.clone(),
+            },
             supply_voltage_v: self.supply.voltage_v(),
             supply: self.supply.state(),
         }
