@@ -3,9 +3,11 @@
 //! The driver changes no parameter; it reads the few whose values decide whether what it
 //! sends or receives is safe to use (the pilot-input failsafe for RC overrides, the
 //! barometers' device ids for depth). Each reader asks for its names (PARAM_REQUEST_READ by
-//! name) at every link-up, every [`RETRY_NS`] until all have come, then every [`REREAD_NS`]
-//! (a parameter changed from a ground station while we run is seen within that), and forgets
-//! them when the link goes (the autopilot may have rebooted with other values).
+//! name) at every link-up, every [`RETRY_NS`] until all have come (at most [`RETRIES`]
+//! times: an autopilot without one of them, a board with one barometer say, answers nothing
+//! for it), then every [`REREAD_NS`] (a parameter changed from a ground station while we run
+//! is seen within that), and forgets them when the link goes (the autopilot may have rebooted
+//! with other values).
 
 use mavlink::dialects::ardupilotmega::{MavMessage, PARAM_REQUEST_READ_DATA, PARAM_VALUE_DATA};
 
@@ -13,6 +15,9 @@ use mavlink::dialects::ardupilotmega::{MavMessage, PARAM_REQUEST_READ_DATA, PARA
 pub const RETRY_NS: u64 = 1_000_000_000;
 /// How often known values are read again, ns.
 pub const REREAD_NS: u64 = 10_000_000_000;
+/// Rounds asked every [`RETRY_NS`] while a value is missing, before the reader falls back to
+/// [`REREAD_NS`].
+pub const RETRIES: u32 = 5;
 
 /// The values of `N` named parameters, as far as the autopilot has told them since the link
 /// came up.
@@ -22,6 +27,8 @@ pub struct ParamReader<const N: usize> {
     known: [Option<f32>; N],
     /// When the next requests go out; None while there is no link.
     next_request_ns: Option<u64>,
+    /// Rounds asked since the link came up.
+    rounds: u32,
 }
 
 impl<const N: usize> ParamReader<N> {
@@ -30,6 +37,7 @@ impl<const N: usize> ParamReader<N> {
             names,
             known: [None; N],
             next_request_ns: None,
+            rounds: 0,
         }
     }
 
@@ -37,6 +45,7 @@ impl<const N: usize> ParamReader<N> {
     pub fn link_up(&mut self, now_ns: u64) {
         self.known = [None; N];
         self.next_request_ns = Some(now_ns);
+        self.rounds = 0;
     }
 
     /// The link is gone: nothing to ask, nothing known.
@@ -56,7 +65,8 @@ impl<const N: usize> ParamReader<N> {
         let Some(due) = self.next_request_ns.filter(|t| now_ns >= *t) else {
             return;
         };
-        let period = if self.all_known() {
+        self.rounds += 1;
+        let period = if self.all_known() || self.rounds >= RETRIES {
             REREAD_NS
         } else {
             RETRY_NS
@@ -171,5 +181,17 @@ pub(crate) mod tests {
         r.link_lost();
         assert_eq!(r.known(), [None, None]);
         assert_eq!(r.next_deadline_ns(), None);
+        // A name the autopilot never answers: asked every second RETRIES times, then with
+        // the re-reads.
+        r.link_up(0);
+        r.on_value(&value("A", 1.0));
+        let mut t = 0;
+        for round in 1..=RETRIES {
+            out.clear();
+            r.requests(t, 1, 2, &mut out);
+            assert_eq!(out.len(), 2, "round {round}");
+            t = r.next_deadline_ns().unwrap();
+        }
+        assert_eq!(t, (u64::from(RETRIES) - 1) * RETRY_NS + REREAD_NS);
     }
 }
