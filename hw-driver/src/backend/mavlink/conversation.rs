@@ -519,6 +519,8 @@ impl Conversation {
                     "SCALED_PRESSURE2"
                 }
             ),
+            // The ids come one by one at link-up: waiting for the next is not news.
+            Err(why) if why.starts_with("waiting") => debug!("no depth yet: {why}"),
             Err(why) => warn!("no depth: {why} (docs/hardware.md)"),
         }
         self.depth_instance = verdict;
