@@ -20,9 +20,7 @@
 //!   of more than 10 cells. SYS_STATUS's pack voltage is used whenever it is fresh; the cells
 //!   only when SYS_STATUS carries none.
 
-use mavlink::dialects::ardupilotmega::{
-    MavMessage, BATTERY_STATUS_DATA, PARAM_VALUE_DATA, SYS_STATUS_DATA,
-};
+use mavlink::dialects::ardupilotmega::{BATTERY_STATUS_DATA, SYS_STATUS_DATA};
 
 use super::params::ParamReader;
 use crate::backend::Supply;
@@ -90,7 +88,8 @@ pub struct SupplyTracker {
     latest: Option<(u64, SupplyReading, Source)>,
     /// SYS_STATUS's last reading with a voltage, ns (it wins over BATTERY_STATUS while fresh).
     sys_status_ns: Option<u64>,
-    options: ParamReader<1>,
+    /// `BATT_OPTIONS`, read at each link-up ([`ParamReader`]).
+    pub options: ParamReader<1>,
 }
 
 impl Default for SupplyTracker {
@@ -104,42 +103,24 @@ impl Default for SupplyTracker {
 }
 
 impl SupplyTracker {
-    /// The link came up at `now_ns`: `BATT_OPTIONS` asked for.
-    pub fn link_up(&mut self, now_ns: u64) {
-        self.options.link_up(now_ns);
+    /// `BATT_OPTIONS` as the autopilot said it, if it did.
+    fn options_bits(&self) -> Option<u32> {
+        self.options.known()[0].map(|v| v.max(0.0) as u32)
     }
 
-    /// The link is gone.
-    pub fn link_lost(&mut self) {
-        self.options.link_lost();
-    }
-
-    /// The next time [`SupplyTracker::requests`] has messages.
-    pub fn next_deadline_ns(&self) -> Option<u64> {
-        self.options.next_deadline_ns()
-    }
-
-    /// The PARAM_REQUEST_READ due at `now_ns`.
-    pub fn requests(&mut self, now_ns: u64, sys: u8, comp: u8, out: &mut Vec<MavMessage>) {
-        self.options.requests(now_ns, sys, comp, out);
-    }
-
-    /// A PARAM_VALUE: the name and value when it changed what we know.
-    pub fn on_value(&mut self, v: &PARAM_VALUE_DATA) -> Option<(&'static str, f32)> {
-        self.options.on_value(v)
+    /// The reported voltage is a resting estimate, not the one at the ESCs.
+    fn resting_estimate(&self) -> bool {
+        self.options_bits()
+            .is_some_and(|bits| bits & GCS_RESTING_VOLTAGE != 0)
     }
 
     /// Why the reported voltage is not the one at the ESCs, if it is not.
     pub fn not_the_esc_voltage(&self) -> Option<String> {
-        let [Some(options)] = self.options.known() else {
-            return None;
-        };
-        let bits = options.max(0.0) as u32;
-        (bits & GCS_RESTING_VOLTAGE != 0).then(|| {
-            format!(
-                "{BATT_OPTIONS} = {bits}: bit 6 makes the autopilot report a resting estimate                  (V + I R), not the voltage at the ESCs; clear it"
-            )
-        })
+        let bits = self.options_bits().filter(|_| self.resting_estimate())?;
+        Some(format!(
+            "{BATT_OPTIONS} = {bits}: bit 6 makes the autopilot report a resting estimate \
+             (V + I R), not the voltage at the ESCs; clear it"
+        ))
     }
 
     pub fn on_sys_status(&mut self, t_ns: u64, s: &SYS_STATUS_DATA) {
@@ -166,7 +147,7 @@ impl SupplyTracker {
     pub fn supply(&self, now_ns: u64) -> Supply {
         match self.latest {
             Some((t, r, _)) if now_ns.saturating_sub(t) <= SUPPLY_STALE_NS => Supply {
-                voltage_v: self.not_the_esc_voltage().is_none().then_some(r.voltage_v),
+                voltage_v: (!self.resting_estimate()).then_some(r.voltage_v),
                 current_a: r.current_a,
             },
             _ => Supply::default(),
@@ -252,17 +233,17 @@ mod tests {
         t.on_battery_status(3 + SUPPLY_STALE_NS + 1, &b);
         assert_eq!(t.supply(3 + SUPPLY_STALE_NS + 1).voltage_v, Some(41.0));
         // BATT_OPTIONS bit 6: the voltage is V + I R; unknown, the current still reported.
-        t.link_up(0);
+        t.options.link_up(0);
         t.on_sys_status(10, &s);
         assert_eq!(
-            t.on_value(&value(BATT_OPTIONS, 64.0 + 2.0)),
+            t.options.on_value(&value(BATT_OPTIONS, 64.0 + 2.0)),
             Some((BATT_OPTIONS, 66.0))
         );
         let why = t.not_the_esc_voltage().unwrap();
         assert!(why.contains("= 66") && why.contains("bit 6"), "{why}");
         assert_eq!(t.supply(10).voltage_v, None);
         assert_eq!(t.supply(10).current_a, Some(20.0));
-        t.on_value(&value(BATT_OPTIONS, 2.0));
+        t.options.on_value(&value(BATT_OPTIONS, 2.0));
         assert_eq!(t.supply(10).voltage_v, Some(49.2));
         assert_eq!(t.supply(10 + SUPPLY_STALE_NS + 1), Supply::default());
     }

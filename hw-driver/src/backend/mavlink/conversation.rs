@@ -254,12 +254,12 @@ impl Conversation {
         self.commands.clear();
         self.armed = None;
         self.engaged = false;
-        self.override_hold.link_lost();
+        self.override_hold.params.link_lost();
         self.override_watch.link_lost();
         self.imu_rate.stop();
-        self.water_baro.link_lost();
+        self.water_baro.params.link_lost();
         self.depth_instance = self.water_baro.verdict();
-        self.supply.link_lost();
+        self.supply.options.link_lost();
     }
 
     /// We armed the vehicle (so we disarm it on exit).
@@ -318,10 +318,10 @@ impl Conversation {
             d = d.min(sent + self.cfg.command_timeout_ms * MS);
         }
         for t in [
-            self.override_hold.next_deadline_ns(),
+            self.override_hold.params.next_deadline_ns(),
             self.imu_rate.next_deadline_ns(),
-            self.water_baro.next_deadline_ns(),
-            self.supply.next_deadline_ns(),
+            self.water_baro.params.next_deadline_ns(),
+            self.supply.options.next_deadline_ns(),
         ]
         .into_iter()
         .flatten()
@@ -381,12 +381,12 @@ impl Conversation {
             MavMessage::RC_CHANNELS(rc) => self.on_rc_channels(t_ns, rc),
             MavMessage::PARAM_VALUE(v) => {
                 self.on_baro_param(v);
-                if self.supply.on_value(v).is_some() {
+                if self.supply.options.on_value(v).is_some() {
                     if let Some(why) = self.supply.not_the_esc_voltage() {
                         warn!("supply voltage reported unknown: {why} (docs/hardware.md)");
                     }
                 }
-                if let Some((name, value)) = self.override_hold.on_value(v) {
+                if let Some((name, value)) = self.override_hold.params.on_value(v) {
                     info!("autopilot {name} = {value}");
                     match self.override_hold.verdict() {
                         Ok(()) => info!(
@@ -477,10 +477,10 @@ impl Conversation {
             self.queue_setup();
             self.imu_rate.restart(t_ns);
             if self.cfg.output == OutputMode::RcOverride {
-                self.override_hold.link_up(t_ns);
+                self.override_hold.params.link_up(t_ns);
             }
-            self.water_baro.link_up(t_ns);
-            self.supply.link_up(t_ns);
+            self.water_baro.params.link_up(t_ns);
+            self.supply.options.link_up(t_ns);
         }
     }
 
@@ -501,7 +501,7 @@ impl Conversation {
     /// A PARAM_VALUE that may name a barometer: the depth's source decided again, its rate
     /// asked for when it changed to a message.
     fn on_baro_param(&mut self, v: &mavlink::dialects::ardupilotmega::PARAM_VALUE_DATA) {
-        let Some((name, value)) = self.water_baro.on_value(v) else {
+        let Some((name, value)) = self.water_baro.params.on_value(v) else {
             return;
         };
         info!("autopilot {name} = {value}");
@@ -720,10 +720,14 @@ impl Conversation {
         self.service_commands(now_ns);
         if let Some((sys, comp)) = self.target {
             self.override_hold
+                .params
                 .requests(now_ns, sys, comp, &mut self.outgoing);
             self.water_baro
+                .params
                 .requests(now_ns, sys, comp, &mut self.outgoing);
-            self.supply.requests(now_ns, sys, comp, &mut self.outgoing);
+            self.supply
+                .options
+                .requests(now_ns, sys, comp, &mut self.outgoing);
         }
         let resend_due = self
             .last_thrust_ns
@@ -842,14 +846,9 @@ impl Conversation {
                 }
                 // Thrust only once the autopilot's hold after our last message is known to
                 // be short: until then the outputs get neutral.
-                let neutral: Vec<Pwm>;
-                let pwm = if self.override_hold.verdict().is_ok() {
-                    &self.pwm
-                } else {
-                    neutral = self.outputs.iter().map(|o| o.neutral).collect();
-                    &neutral
-                };
-                let (msg, values) = rc_override::message(&self.outputs, pwm, sys, comp);
+                let thrust = self.override_hold.verdict().is_ok();
+                let (msg, values) =
+                    rc_override::message(&self.outputs, &self.pwm, thrust, sys, comp);
                 self.outgoing.push(msg);
                 self.override_watch.sent(now_ns, values);
                 self.counters.thrust_sent += 1;

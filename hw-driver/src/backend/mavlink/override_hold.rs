@@ -25,8 +25,6 @@
 //! The values are read by a [`ParamReader`]: at each link-up, every second until all came,
 //! every 10 s after. The driver changes no parameter.
 
-use mavlink::dialects::ardupilotmega::{MavMessage, PARAM_VALUE_DATA};
-
 use super::params::ParamReader;
 use crate::backend::OutputSpec;
 
@@ -97,7 +95,8 @@ pub struct OverrideHold {
     max_s: f64,
     /// Our thrusters' channels and neutrals.
     outputs: Vec<OutputSpec>,
-    params: ParamReader<31>,
+    /// The autopilot parameters this judges, read at each link-up ([`ParamReader`]).
+    pub params: ParamReader<31>,
 }
 
 impl OverrideHold {
@@ -108,32 +107,6 @@ impl OverrideHold {
             params: ParamReader::new(PARAMS),
         }
     }
-
-    /// The link came up at `now_ns`: ask at once, forget what an earlier link said.
-    pub fn link_up(&mut self, now_ns: u64) {
-        self.params.link_up(now_ns);
-    }
-
-    /// The link is gone: nothing to ask.
-    pub fn link_lost(&mut self) {
-        self.params.link_lost();
-    }
-
-    /// The next time [`OverrideHold::requests`] has messages.
-    pub fn next_deadline_ns(&self) -> Option<u64> {
-        self.params.next_deadline_ns()
-    }
-
-    /// The PARAM_REQUEST_READs due at `now_ns` for the autopilot `(sys, comp)`.
-    pub fn requests(&mut self, now_ns: u64, sys: u8, comp: u8, out: &mut Vec<MavMessage>) {
-        self.params.requests(now_ns, sys, comp, out);
-    }
-
-    /// A PARAM_VALUE from the autopilot: the name and value when it changed what we know.
-    pub fn on_value(&mut self, v: &PARAM_VALUE_DATA) -> Option<(&'static str, f32)> {
-        self.params.on_value(v)
-    }
-
     /// Ok when overrides may carry thrust; else why only neutral ones go out, short enough
     /// for `driver_status`'s text (128 bytes with its prefix).
     pub fn verdict(&self) -> Result<(), String> {
@@ -165,7 +138,7 @@ impl OverrideHold {
         if !self.params.all_known() {
             return waiting();
         }
-        let mapped: Vec<f32> = RCMAP.map(|i| known[i].unwrap_or(0.0)).collect();
+        let mapped: [f32; 6] = std::array::from_fn(|k| known[RCMAP.start + k].unwrap_or(0.0));
         for o in &self.outputs {
             let ch = o.channel as f32;
             if !mapped.contains(&ch) {
@@ -184,7 +157,8 @@ impl OverrideHold {
                 ));
             }
         }
-        let functions: Vec<f32> = FUNCTIONS.map(|i| known[i].unwrap_or(0.0)).collect();
+        let functions: [f32; 16] =
+            std::array::from_fn(|k| known[FUNCTIONS.start + k].unwrap_or(0.0));
         if let Some((k, f)) = functions.iter().enumerate().find(|(_, f)| is_motor(**f)) {
             return Err(format!(
                 "SERVO{}_FUNCTION = {f} (a motor): ArduSub mixes our overrides as pilot sticks",
@@ -224,24 +198,24 @@ mod tests {
     /// (1500).
     fn ardusub_mapping(h: &mut OverrideHold) {
         for (name, v) in PARAMS[RCMAP].iter().zip([2.0, 1.0, 3.0, 4.0, 5.0, 6.0]) {
-            h.on_value(&value(name, v));
+            h.params.on_value(&value(name, v));
         }
         for name in &PARAMS[TRIMS] {
-            h.on_value(&value(name, 1500.0));
+            h.params.on_value(&value(name, 1500.0));
         }
         // Outputs 1 and 2 pass RC inputs 1 and 5 through; the rest unused.
         for (k, name) in PARAMS[FUNCTIONS].iter().enumerate() {
             let f = [RCIN1, RCIN1 + 4.0].get(k).copied().unwrap_or(0.0);
-            h.on_value(&value(name, f));
+            h.params.on_value(&value(name, f));
         }
     }
 
     fn with(input: f32, timeout: f32, override_s: f32) -> OverrideHold {
         let mut h = OverrideHold::new(1.0, outputs());
-        h.link_up(0);
-        h.on_value(&value(FS_PILOT_INPUT, input));
-        h.on_value(&value(FS_PILOT_TIMEOUT, timeout));
-        h.on_value(&value(RC_OVERRIDE_TIME, override_s));
+        h.params.link_up(0);
+        h.params.on_value(&value(FS_PILOT_INPUT, input));
+        h.params.on_value(&value(FS_PILOT_TIMEOUT, timeout));
+        h.params.on_value(&value(RC_OVERRIDE_TIME, override_s));
         ardusub_mapping(&mut h);
         h
     }
@@ -252,7 +226,7 @@ mod tests {
     fn thrust_only_where_the_failsafe_takes_the_channel_to_the_thrusters_neutral() {
         assert_eq!(with(2.0, 0.5, 3.0).verdict(), Ok(()));
         let mut h = with(2.0, 0.5, 3.0);
-        h.on_value(&value("RCMAP_FORWARD", 7.0));
+        h.params.on_value(&value("RCMAP_FORWARD", 7.0));
         let why = h.verdict().unwrap_err();
         assert!(
             why.starts_with("channel 5 is not an RCMAP channel"),
@@ -260,27 +234,27 @@ mod tests {
         );
         assert!(why.len() <= 100, "{} bytes: {why}", why.len());
         let mut h = with(2.0, 0.5, 3.0);
-        h.on_value(&value("RC1_TRIM", 1550.0));
+        h.params.on_value(&value("RC1_TRIM", 1550.0));
         let why = h.verdict().unwrap_err();
         assert_eq!(
             why,
             "RC1_TRIM = 1550: the failsafe leaves channel 1 there, not at 1500"
         );
-        h.on_value(&value("RC1_TRIM", 1508.0));
+        h.params.on_value(&value("RC1_TRIM", 1508.0));
         assert_eq!(h.verdict(), Ok(()), "within the tolerance");
         // A trim of a channel we do not use does not matter.
-        h.on_value(&value("RC2_TRIM", 1700.0));
+        h.params.on_value(&value("RC2_TRIM", 1700.0));
         assert_eq!(h.verdict(), Ok(()));
         // A stock BlueROV2 frame (outputs 1-8 Motor 1-8): our overrides would be pilot sticks.
         let mut h = with(2.0, 0.5, 3.0);
-        h.on_value(&value("SERVO3_FUNCTION", 35.0));
+        h.params.on_value(&value("SERVO3_FUNCTION", 35.0));
         assert_eq!(
             h.verdict().unwrap_err(),
             "SERVO3_FUNCTION = 35 (a motor): ArduSub mixes our overrides as pilot sticks"
         );
         // Channel 5 passed through nowhere.
         let mut h = with(2.0, 0.5, 3.0);
-        h.on_value(&value("SERVO2_FUNCTION", 0.0));
+        h.params.on_value(&value("SERVO2_FUNCTION", 0.0));
         let why = h.verdict().unwrap_err();
         assert_eq!(
             why,
@@ -289,16 +263,16 @@ mod tests {
         assert!(!is_motor(RCIN1) && is_motor(40.0) && is_motor(82.0) && is_motor(179.0));
         // The failsafe's own parameters are judged before the mapping has come.
         let mut h = OverrideHold::new(1.0, outputs());
-        h.link_up(0);
+        h.params.link_up(0);
         for (name, v) in [
             (FS_PILOT_INPUT, 2.0),
             (FS_PILOT_TIMEOUT, 3.0),
             (RC_OVERRIDE_TIME, 3.0),
         ] {
-            h.on_value(&value(name, v));
+            h.params.on_value(&value(name, v));
         }
         assert!(h.verdict().unwrap_err().contains("outlive us"));
-        h.on_value(&value(FS_PILOT_TIMEOUT, 0.5));
+        h.params.on_value(&value(FS_PILOT_TIMEOUT, 0.5));
         assert_eq!(
             h.verdict().unwrap_err(),
             "waiting for the autopilot's RCMAP_ROLL"
@@ -309,8 +283,8 @@ mod tests {
     fn thrust_only_with_the_failsafe_on_and_short_and_overrides_taken() {
         let mut h = OverrideHold::new(1.0, outputs());
         assert!(h.verdict().unwrap_err().contains("waiting"));
-        h.link_up(0);
-        h.on_value(&value(FS_PILOT_INPUT, 2.0));
+        h.params.link_up(0);
+        h.params.on_value(&value(FS_PILOT_INPUT, 2.0));
         assert_eq!(
             h.verdict().unwrap_err(),
             "waiting for the autopilot's FS_PILOT_TIMEOUT"
@@ -355,13 +329,13 @@ mod tests {
         }
         // Another parameter's value changes nothing; a lost link forgets and stops asking.
         let mut h = with(2.0, 0.5, 3.0);
-        assert_eq!(h.on_value(&value("FS_PILOT_TIMEOUX", 9.0)), None);
+        assert_eq!(h.params.on_value(&value("FS_PILOT_TIMEOUX", 9.0)), None);
         assert!(h.verdict().is_ok());
-        h.link_lost();
+        h.params.link_lost();
         assert!(h.verdict().is_err());
-        assert_eq!(h.next_deadline_ns(), None);
+        assert_eq!(h.params.next_deadline_ns(), None);
         assert_eq!(
-            h.on_value(&value(FS_PILOT_INPUT, 2.0)),
+            h.params.on_value(&value(FS_PILOT_INPUT, 2.0)),
             None,
             "taken without a link"
         );
@@ -371,23 +345,23 @@ mod tests {
     fn its_parameters_are_asked_for_at_link_up() {
         let mut h = OverrideHold::new(1.0, outputs());
         let mut out = Vec::new();
-        h.requests(0, 1, 1, &mut out);
+        h.params.requests(0, 1, 1, &mut out);
         assert!(out.is_empty(), "asked without a link");
-        h.link_up(5);
-        h.requests(5, 1, 2, &mut out);
+        h.params.link_up(5);
+        h.params.requests(5, 1, 2, &mut out);
         assert_eq!(asked(&out, 1, 2), PARAMS);
-        assert_eq!(h.next_deadline_ns(), Some(5 + RETRY_NS));
+        assert_eq!(h.params.next_deadline_ns(), Some(5 + RETRY_NS));
         for (name, v) in [
             (FS_PILOT_INPUT, 2.0),
             (FS_PILOT_TIMEOUT, 0.5),
             (RC_OVERRIDE_TIME, 3.0),
         ] {
-            h.on_value(&value(name, v));
+            h.params.on_value(&value(name, v));
         }
         ardusub_mapping(&mut h);
         assert_eq!(h.verdict(), Ok(()));
         out.clear();
-        h.requests(5 + RETRY_NS, 1, 2, &mut out);
-        assert_eq!(h.next_deadline_ns(), Some(5 + RETRY_NS + REREAD_NS));
+        h.params.requests(5 + RETRY_NS, 1, 2, &mut out);
+        assert_eq!(h.params.next_deadline_ns(), Some(5 + RETRY_NS + REREAD_NS));
     }
 }

@@ -34,11 +34,18 @@ pub const FIGHT_REPORTS: u32 = 3;
 /// A pulse is ours when the report is within this of it, us (ArduSub reports what it got).
 const TOLERANCE_US: u16 = 2;
 
-/// The override carrying `pwm` on each output's channel (1-based; channels 1..=8), the rest
-/// ignored: the message and the eight values.
-pub fn message(outputs: &[OutputSpec], pwm: &[Pwm], sys: u8, comp: u8) -> (MavMessage, [u16; 8]) {
+/// The override carrying `pwm` (or, unless `thrust`, each output's neutral) on each output's
+/// channel (1-based; channels 1..=8), the rest ignored: the message and the eight values.
+pub fn message(
+    outputs: &[OutputSpec],
+    pwm: &[Pwm],
+    thrust: bool,
+    sys: u8,
+    comp: u8,
+) -> (MavMessage, [u16; 8]) {
     let mut ch = [RC_IGNORE; 8];
     for (o, p) in outputs.iter().zip(pwm) {
+        let p = if thrust { p } else { &o.neutral };
         let slot = (o.channel as usize)
             .checked_sub(1)
             .and_then(|i| ch.get_mut(i));
@@ -159,7 +166,9 @@ mod tests {
                 neutral: Pwm(1500),
             },
         ];
-        let (msg, ch) = message(&outputs, &[Pwm(1600), Pwm(1400)], 1, 2);
+        let (_, held) = message(&outputs, &[Pwm(1600), Pwm(1400)], false, 1, 2);
+        assert_eq!((held[0], held[5]), (1500, 1500), "neutral unless thrust");
+        let (msg, ch) = message(&outputs, &[Pwm(1600), Pwm(1400)], true, 1, 2);
         assert_eq!(
             ch,
             [1600, RC_IGNORE, RC_IGNORE, RC_IGNORE, RC_IGNORE, 1400, RC_IGNORE, RC_IGNORE]

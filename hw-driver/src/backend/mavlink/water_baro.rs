@@ -20,8 +20,6 @@
 //! and type 0x0B at I2C 0x76 (an old Bar30, or an onboard MS5611 on I2C) is "unknown": used
 //! when named, not chosen on its own.
 
-use mavlink::dialects::ardupilotmega::{MavMessage, PARAM_VALUE_DATA};
-
 use super::params::ParamReader;
 use crate::config::PressureMessage;
 
@@ -109,7 +107,8 @@ fn message_of(instance: usize) -> Option<&'static str> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct WaterBaro {
     want: PressureMessage,
-    params: ParamReader<3>,
+    /// The autopilot parameters this judges, read at each link-up ([`ParamReader`]).
+    pub params: ParamReader<3>,
 }
 
 impl WaterBaro {
@@ -119,32 +118,6 @@ impl WaterBaro {
             params: ParamReader::new(PARAMS),
         }
     }
-
-    /// The link came up at `now_ns`: ask at once, forget an earlier boot's barometers.
-    pub fn link_up(&mut self, now_ns: u64) {
-        self.params.link_up(now_ns);
-    }
-
-    /// The link is gone.
-    pub fn link_lost(&mut self) {
-        self.params.link_lost();
-    }
-
-    /// The next time [`WaterBaro::requests`] has messages.
-    pub fn next_deadline_ns(&self) -> Option<u64> {
-        self.params.next_deadline_ns()
-    }
-
-    /// The PARAM_REQUEST_READs due at `now_ns` for the autopilot `(sys, comp)`.
-    pub fn requests(&mut self, now_ns: u64, sys: u8, comp: u8, out: &mut Vec<MavMessage>) {
-        self.params.requests(now_ns, sys, comp, out);
-    }
-
-    /// A PARAM_VALUE: the name and value when it changed what we know.
-    pub fn on_value(&mut self, v: &PARAM_VALUE_DATA) -> Option<(&'static str, f32)> {
-        self.params.on_value(v)
-    }
-
     /// What barometer `i` is, if its id has come. ArduPilot sends an INT32 parameter as its
     /// value cast to float; device ids are under 2^24, exact in an f32.
     fn kind_of(&self, i: usize) -> Option<BaroKind> {
@@ -212,10 +185,10 @@ mod tests {
 
     fn told(want: PressureMessage, ids: [Option<f32>; 3]) -> WaterBaro {
         let mut w = WaterBaro::new(want);
-        w.link_up(0);
+        w.params.link_up(0);
         for (name, id) in PARAMS.iter().zip(ids) {
             if let Some(id) = id {
-                w.on_value(&value(name, id));
+                w.params.on_value(&value(name, id));
             }
         }
         w
@@ -310,12 +283,12 @@ mod tests {
     fn the_three_ids_are_asked_for_at_link_up() {
         let mut w = WaterBaro::new(PressureMessage::Auto);
         let mut out = Vec::new();
-        w.requests(0, 1, 1, &mut out);
+        w.params.requests(0, 1, 1, &mut out);
         assert!(out.is_empty());
-        w.link_up(7);
-        w.requests(7, 1, 1, &mut out);
+        w.params.link_up(7);
+        w.params.requests(7, 1, 1, &mut out);
         assert_eq!(asked(&out, 1, 1), PARAMS);
-        w.link_lost();
+        w.params.link_lost();
         assert!(w.verdict().is_err());
     }
 }

@@ -525,47 +525,14 @@ fn rc_overrides_carry_thrust_only_while_the_autopilot_would_take_a_left_one_back
     s.set_outputs(&[Pwm(1600), Pwm(1400)]);
     s.service(2);
     let out = s.drain_outgoing();
-    assert_eq!(
-        asked(&out),
-        [
-            "FS_PILOT_INPUT",
-            "FS_PILOT_TIMEOUT",
-            "RC_OVERRIDE_TIME",
-            "RCMAP_ROLL",
-            "RCMAP_PITCH",
-            "RCMAP_THROTTLE",
-            "RCMAP_YAW",
-            "RCMAP_FORWARD",
-            "RCMAP_LATERAL",
-            "RC1_TRIM",
-            "RC2_TRIM",
-            "RC3_TRIM",
-            "RC4_TRIM",
-            "RC5_TRIM",
-            "RC6_TRIM",
-            "SERVO1_FUNCTION",
-            "SERVO2_FUNCTION",
-            "SERVO3_FUNCTION",
-            "SERVO4_FUNCTION",
-            "SERVO5_FUNCTION",
-            "SERVO6_FUNCTION",
-            "SERVO7_FUNCTION",
-            "SERVO8_FUNCTION",
-            "SERVO9_FUNCTION",
-            "SERVO10_FUNCTION",
-            "SERVO11_FUNCTION",
-            "SERVO12_FUNCTION",
-            "SERVO13_FUNCTION",
-            "SERVO14_FUNCTION",
-            "SERVO15_FUNCTION",
-            "SERVO16_FUNCTION",
-            "BARO1_DEVID",
-            "BARO2_DEVID",
-            "BARO3_DEVID",
-            "BATT_OPTIONS"
-        ],
-        "{out:?}"
-    );
+    // Every reader's names, in the order the conversation serves them: the override check's
+    // (rc_override mode only), the barometers', the battery monitor's.
+    let readers = crate::backend::mavlink::override_hold::PARAMS
+        .iter()
+        .chain(&crate::backend::mavlink::water_baro::PARAMS)
+        .chain(&[crate::backend::mavlink::battery::BATT_OPTIONS]);
+    assert_eq!(asked(&out), readers.copied().collect::<Vec<_>>(), "{out:?}");
+    assert_eq!(asked(&out).len(), 35);
     let rc = overrides(out);
     assert_eq!(
         (rc[0].chan1_raw, rc[0].chan4_raw),
