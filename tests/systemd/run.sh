@@ -135,6 +135,15 @@ say "systemd up ($state)"
 
 
 prop() { inside "systemctl show -P $2 $1"; }
+# journal_says IDENTIFIER PATTERN [SINCE]: the journal has a line of that program matching
+# PATTERN (since SINCE, a "date +%s.%N" inside the container, if given) within 5 s. By identifier, not -u: journald attributes a line to a unit through
+# /proc/<pid>/cgroup, gone when the process has already exited (systemd issue #2913), so the
+# last lines of a process that exits (a bad configuration, a summary at stop, ExecStopPost)
+# may lack the unit; the identifier comes with the stdout stream itself.
+journal_says() {
+    inside "for i in 1 2 3 4 5; do journalctl -t $1 ${3:+--since @$3} --no-pager -o cat \
+            | grep -q '$2' && exit 0; sleep 1; done; exit 1"
+}
 as_operator() { inside "runuser -u alice -- thrusterctl --namespace $NS --ipc-root $IPC $1"; }
 
 # --- install exactly as the README says ------------------------------------------------------
@@ -412,7 +421,7 @@ inside "journalctl -u thruster-hw --no-pager | grep -q 'Watchdog timeout'" \
     || fail "driver watchdog: no 'Watchdog timeout' for thruster-hw in the journal"
 duties=$(inside "cat $FAKE_SYSFS/class/pwm/pwmchip0/pwm*/duty_cycle | sort -u")
 [ "$duties" = 1500000 ] || fail "driver watchdog: ExecStopPost left the duties at $duties, not neutral"
-inside "journalctl -u thruster-hw --no-pager -o cat | grep -q 'pwm5: neutral (1500 us)'" \
+journal_says thruster-hw 'pwm5: neutral (1500 us)' \
     || fail "driver watchdog: no 'pwm5: neutral' from ExecStopPost in the journal"
 wait_imu_back "after the driver's restart"
 imu_ok "$(now)" "" "after the driver's restart"
@@ -482,7 +491,7 @@ say "journald stalled ${stalled_s} s (queue of $QLEN): $CALLS abort calls (count
 inside "systemctl stop thruster-bridge"
 [ "$(prop thruster-bridge Result)" = success ] \
     || fail "bridge: stopped with $(prop thruster-bridge Result)"
-inside "journalctl -u thruster-bridge --no-pager -o cat | grep -q 'live view logged'" \
+journal_says thruster-bridge 'live view logged' \
     || fail "bridge: no summary in its journal at stop"
 
 # A configuration that cannot be used: exit 2, and RestartPreventExitStatus=2 keeps systemd
@@ -495,22 +504,18 @@ sleep 3
 bad="$(prop thruster-bridge ActiveState) $(prop thruster-bridge Result) $(prop thruster-bridge ExecMainStatus) $(prop thruster-bridge NRestarts)"
 [ "$bad" = "failed exit-code 2 $NR_B" ] \
     || fail "bad config: the bridge is '$bad', want 'failed exit-code 2 $NR_B' (state result status restarts)"
-# By identifier, not -u: journald attributes a line to a unit through /proc/<pid>/cgroup,
-# which is gone when the process has already exited (systemd issue #2913), and this one
-# exits within milliseconds; the identifier comes with the stdout stream itself.
-inside "for i in 1 2 3 4 5; do journalctl -t thruster-bridge --no-pager -o cat -n 40 \
-        | grep -q 'unknown field .bogus_key.' && exit 0; sleep 1; done; exit 1" \
+journal_says thruster-bridge 'unknown field .bogus_key.' \
     || fail "bad config: the journal does not name the unknown key"
 inside "mv /etc/thrusterd/thruster-bridge.toml.good /etc/thrusterd/thruster-bridge.toml && systemctl reset-failed thruster-bridge"
 say "bad config: the bridge exits 2 naming the key, failed at once, not restarted"
 
 # systemctl stop -> neutral and model saved.
+T_STOP=$(inside "date +%s.%N")
 inside "systemctl stop thrusterd"
 [ "$(prop thrusterd ActiveState)" = inactive ] && [ "$(prop thrusterd Result)" = success ] \
     || fail "stop: thrusterd is $(prop thrusterd ActiveState)/$(prop thrusterd Result) after stop"
-log=$(inside "journalctl -u thrusterd --no-pager -o cat -n 40")
-echo "$log" | grep -q 'shutting down: thrusters neutral' || fail "stop: no neutral shutdown in the log"
-echo "$log" | grep -q 'model saved' || fail "stop: the model was not saved at stop"
+journal_says thrusterd 'shutting down: thrusters neutral' "$T_STOP" || fail "stop: no neutral shutdown in the log"
+journal_says thrusterd 'model saved' "$T_STOP" || fail "stop: the model was not saved at stop"
 inside "systemctl stop thruster-hw"
 [ "$(prop thruster-hw Result)" = success ] || fail "stop: thruster-hw stopped with $(prop thruster-hw Result)"
 say "stop: thrusters neutral, model saved, both units stopped cleanly"
