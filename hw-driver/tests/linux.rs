@@ -540,3 +540,64 @@ fn the_stall_guard_takes_a_silent_loops_outputs_neutral_and_gives_a_slow_one_its
     std::thread::sleep(limit * 2);
     assert_eq!(pulses(&fake), (Some(1500), Some(1510)));
 }
+
+/// The fake holds writes to the kernel's rules (drivers/pwm/core.c: `export_store`,
+/// `__pwm_apply`, the attribute stores), so a driver order the kernel refuses fails every
+/// test that runs it. Each write waits for the fake to see it: it reads the file after the
+/// event, and two quick writes to one file would read as the second twice.
+#[test]
+fn the_fake_kernel_refuses_what_the_kernel_refuses() {
+    let fake = FakeSysfs::new(true);
+    fake.expect_refusals();
+    let chip = fake.chip();
+    let ch = chip.join("pwm2");
+    let steps: [(std::path::PathBuf, &str); 11] = [
+        (chip.join("export"), "16"),
+        (chip.join("export"), "2"),
+        (chip.join("export"), "2"),
+        (ch.join("duty_cycle"), "1000"),
+        (ch.join("period"), "2000"),
+        (ch.join("duty_cycle"), "3000"),
+        (ch.join("duty_cycle"), "1000"),
+        (ch.join("period"), "500"),
+        (ch.join("enable"), "2"),
+        (ch.join("polarity"), "reversed"),
+        (ch.join("enable"), "1"),
+    ];
+    for (i, (path, value)) in steps.iter().enumerate() {
+        if i == 3 {
+            // The export's channel appears a moment later.
+            let end = Instant::now() + Duration::from_secs(2);
+            while !ch.join("enable").exists() && Instant::now() < end {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
+        std::fs::write(path, format!("{value}\n")).unwrap();
+        let seen = writes_after(&fake, i + 1).len();
+        assert_eq!(seen, i + 1, "the fake saw write {i} ({value})");
+    }
+    let refusals = fake.refusals();
+    let starts: Vec<&str> = refusals
+        .iter()
+        .map(|r| r.split(':').next().unwrap())
+        .collect();
+    assert_eq!(
+        starts,
+        [
+            "export = 16",
+            "export = 2",
+            "pwm2/duty_cycle = 1000",
+            "pwm2/duty_cycle = 3000",
+            "pwm2/period = 500",
+            "pwm2/enable = \"2\"",
+            "pwm2/polarity = \"reversed\"",
+        ],
+        "{refusals:#?}"
+    );
+    assert!(refusals[0].contains("ENODEV") && refusals[1].contains("EBUSY"));
+    assert!(
+        refusals[4].contains("duty 1000 ns of period 500 ns"),
+        "{}",
+        refusals[4]
+    );
+}

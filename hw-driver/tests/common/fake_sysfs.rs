@@ -1,7 +1,10 @@
 //! A fake sysfs tree in a temp dir: a PWM chip whose "kernel" (a thread watching the tree
 //! with inotify) creates `pwmM/` when `M` is written to `export` and records every
 //! attribute write with its CLOCK_MONOTONIC time, plus IIO devices whose raw values the
-//! test sets:
+//! test sets. Files on a tmpfs accept any write, so the fake holds each write to the rules
+//! the kernel's `drivers/pwm/core.c` applies (`export_store`, `__pwm_apply`, the attribute
+//! stores) and records what the kernel would have refused; a test that ends with such a
+//! write fails when the fake is dropped, unless it said it expects them. The IIO devices:
 //! - iio:device0 "icm20602": anglvel and accel, shared scales;
 //! - iio:device1 "ak09916": magn (gauss after scale);
 //! - iio:device2 "ms5837": in_pressure_input (kPa).
@@ -37,6 +40,10 @@ pub struct Write {
 pub struct FakeSysfs {
     dir: tempfile::TempDir,
     log: Arc<Mutex<Vec<Write>>>,
+    /// Writes the kernel would have refused, each with the errno and why.
+    refusals: Arc<Mutex<Vec<String>>>,
+    /// A test that provokes refusals on purpose says so; otherwise any fails it at drop.
+    refusals_expected: AtomicBool,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
 }
@@ -72,18 +79,27 @@ impl FakeSysfs {
         let p = iio_dev(root, 2, "ms5837");
         fs::write(p.join("in_pressure_input"), format!("{SURFACE_KPA}\n")).unwrap();
         let log = Arc::new(Mutex::new(Vec::new()));
+        let refusals = Arc::new(Mutex::new(Vec::new()));
         let stop = Arc::new(AtomicBool::new(false));
         let thread = kernel.then(|| {
             // Watching before returning: a driver started right after must not write
             // `export` before anyone listens.
             let ino = Inotify::new();
             let chip_wd = ino.watch_writes(&chip);
-            let (log, stop, chip) = (log.clone(), stop.clone(), chip.clone());
-            std::thread::spawn(move || kernel_thread(ino, chip_wd, &chip, &log, &stop))
+            let kernel = Kernel {
+                chip: chip.clone(),
+                log: log.clone(),
+                refusals: refusals.clone(),
+                channels: HashMap::new(),
+            };
+            let stop = stop.clone();
+            std::thread::spawn(move || kernel.run(ino, chip_wd, &stop))
         });
         let fake = FakeSysfs {
             dir,
             log,
+            refusals,
+            refusals_expected: AtomicBool::new(false),
             stop,
             thread,
         };
@@ -102,6 +118,16 @@ impl FakeSysfs {
     /// Every write so far.
     pub fn writes(&self) -> Vec<Write> {
         self.log.lock().unwrap().clone()
+    }
+
+    /// The writes the kernel would have refused so far ("pwm0/period = 1000: EINVAL, ...").
+    pub fn refusals(&self) -> Vec<String> {
+        self.refusals.lock().unwrap().clone()
+    }
+
+    /// This test provokes writes the kernel refuses: they do not fail it at drop.
+    pub fn expect_refusals(&self) {
+        self.refusals_expected.store(true, Ordering::Relaxed);
     }
 
     /// Forgets the writes seen so far (a test's own set-up writes, e.g. [`Self::pre_export`],
@@ -162,6 +188,13 @@ impl Drop for FakeSysfs {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+        let refusals = self.refusals();
+        if !refusals.is_empty()
+            && !self.refusals_expected.load(Ordering::Relaxed)
+            && !std::thread::panicking()
+        {
+            panic!("writes a kernel would have refused: {refusals:?}");
+        }
     }
 }
 
@@ -172,70 +205,146 @@ fn iio_dev(root: &Path, n: u32, name: &str) -> PathBuf {
     d
 }
 
-fn kernel_thread(
-    ino: Inotify,
-    chip_wd: i32,
-    chip: &Path,
-    log: &Mutex<Vec<Write>>,
-    stop: &AtomicBool,
-) {
-    let mut channels: HashMap<i32, u32> = HashMap::new();
-    let end = Instant::now() + MAX_LIFETIME;
-    while !stop.load(Ordering::Relaxed) && Instant::now() < end {
-        // Channels exported by the test itself (`pre_export`) are watched from the next
-        // round on (tests wait a little before starting the driver).
-        for m in 0..16 {
-            let d = chip.join(format!("pwm{m}"));
-            if d.is_dir() && !channels.values().any(|&c| c == m) {
-                channels.insert(ino.watch_writes(&d), m);
+/// One exported channel's state as the kernel keeps it (`struct pwm_state`).
+#[derive(Debug, Clone, Copy)]
+struct ChannelState {
+    period: u64,
+    duty: u64,
+}
+
+/// The fake kernel: the chip's channels, what it saw written, and what it would refuse.
+struct Kernel {
+    chip: PathBuf,
+    log: Arc<Mutex<Vec<Write>>>,
+    refusals: Arc<Mutex<Vec<String>>>,
+    /// Watch descriptor -> channel index and its state.
+    channels: HashMap<i32, (u32, ChannelState)>,
+}
+
+/// What `npwm` says: the kernel refuses an export at or above it (ENODEV).
+const NPWM: u32 = 16;
+
+impl Kernel {
+    fn run(mut self, ino: Inotify, chip_wd: i32, stop: &AtomicBool) {
+        let end = Instant::now() + MAX_LIFETIME;
+        while !stop.load(Ordering::Relaxed) && Instant::now() < end {
+            // Channels exported by the test itself (`pre_export`) are watched from the next
+            // round on (tests wait a little before starting the driver), with the state
+            // their files hold.
+            for m in 0..NPWM {
+                let d = self.chip.join(format!("pwm{m}"));
+                if d.is_dir() && !self.channels.values().any(|&(c, _)| c == m) {
+                    let read = |a: &str| {
+                        fs::read_to_string(d.join(a))
+                            .ok()
+                            .and_then(|v| v.trim().parse().ok())
+                            .unwrap_or(0)
+                    };
+                    let state = ChannelState {
+                        period: read("period"),
+                        duty: read("duty_cycle"),
+                    };
+                    self.channels.insert(ino.watch_writes(&d), (m, state));
+                }
+            }
+            for ev in ino.read(Duration::from_millis(20)) {
+                let t_ns = monotonic_ns();
+                if ev.wd == chip_wd {
+                    if ev.name == "export" {
+                        self.export(&ino, t_ns);
+                    }
+                } else if self.channels.contains_key(&ev.wd) {
+                    self.attribute(ev.wd, &ev.name, t_ns);
+                }
             }
         }
-        for ev in ino.read(Duration::from_millis(20)) {
-            let t_ns = monotonic_ns();
-            if ev.wd == chip_wd {
-                if ev.name != "export" {
-                    continue;
-                }
-                let value = fs::read_to_string(chip.join("export")).unwrap_or_default();
-                let value = value.trim().to_string();
-                log.lock().unwrap().push(Write {
-                    t_ns,
-                    channel: None,
-                    attr: "export".into(),
-                    value: value.clone(),
-                });
-                let Ok(m) = value.parse::<u32>() else {
-                    continue;
+    }
+
+    fn refuse(&self, what: String) {
+        self.refusals.lock().unwrap().push(what);
+    }
+
+    /// `export_store`: a number below npwm, not exported yet; the channel appears.
+    fn export(&mut self, ino: &Inotify, t_ns: u64) {
+        let value = fs::read_to_string(self.chip.join("export")).unwrap_or_default();
+        let value = value.trim().to_string();
+        self.log.lock().unwrap().push(Write {
+            t_ns,
+            channel: None,
+            attr: "export".into(),
+            value: value.clone(),
+        });
+        let Ok(m) = value.parse::<u32>() else {
+            return self.refuse(format!("export = {value:?}: EINVAL, not a number"));
+        };
+        if m >= NPWM {
+            return self.refuse(format!("export = {m}: ENODEV, npwm is {NPWM}"));
+        }
+        let dir = self.chip.join(format!("pwm{m}"));
+        if dir.exists() {
+            return self.refuse(format!("export = {m}: EBUSY, pwm{m} is exported already"));
+        }
+        // Built under another name, watched, then renamed: the driver sees the channel
+        // only when all attributes exist and every write is observed. A fresh channel's
+        // period is 0 here, as a driver without `get_state` leaves it; the PCA9685's reads
+        // its prescaler, so writing the period first is right on both.
+        let staging = self.chip.join(format!(".pwm{m}.new"));
+        fs::create_dir_all(&staging).unwrap();
+        for (attr, v) in [
+            ("period", "0"),
+            ("duty_cycle", "0"),
+            ("enable", "0"),
+            ("polarity", "normal"),
+        ] {
+            fs::write(staging.join(attr), format!("{v}\n")).unwrap();
+        }
+        let wd = ino.watch_writes(&staging);
+        fs::rename(&staging, &dir).unwrap();
+        let state = ChannelState { period: 0, duty: 0 };
+        self.channels.insert(wd, (m, state));
+    }
+
+    /// The attribute stores: each applies the channel's whole state, and `__pwm_apply`
+    /// refuses a period of 0 or a duty longer than the period (EINVAL); `enable` takes 0
+    /// or 1, `polarity` "normal" or "inversed". A refused write leaves the state as it
+    /// was (the file here keeps what was written: only the refusal is recorded).
+    fn attribute(&mut self, wd: i32, attr: &str, t_ns: u64) {
+        let (m, state) = self.channels[&wd];
+        let path = self.chip.join(format!("pwm{m}")).join(attr);
+        let value = fs::read_to_string(&path).unwrap_or_default();
+        let value = value.trim().to_string();
+        self.log.lock().unwrap().push(Write {
+            t_ns,
+            channel: Some(m),
+            attr: attr.to_string(),
+            value: value.clone(),
+        });
+        let mut next = state;
+        match attr {
+            "period" | "duty_cycle" => {
+                let Ok(v) = value.parse::<u64>() else {
+                    return self.refuse(format!("pwm{m}/{attr} = {value:?}: EINVAL"));
                 };
-                let dir = chip.join(format!("pwm{m}"));
-                if dir.exists() {
-                    continue;
+                if attr == "period" {
+                    next.period = v;
+                } else {
+                    next.duty = v;
                 }
-                // Built under another name, watched, then renamed: the driver sees the
-                // channel only when all attributes exist and every write is observed.
-                let staging = chip.join(format!(".pwm{m}.new"));
-                fs::create_dir_all(&staging).unwrap();
-                for (attr, v) in [
-                    ("period", "0"),
-                    ("duty_cycle", "0"),
-                    ("enable", "0"),
-                    ("polarity", "normal"),
-                ] {
-                    fs::write(staging.join(attr), format!("{v}\n")).unwrap();
-                }
-                let wd = ino.watch_writes(&staging);
-                fs::rename(&staging, &dir).unwrap();
-                channels.insert(wd, m);
-            } else if let Some(&m) = channels.get(&ev.wd) {
-                let path = chip.join(format!("pwm{m}")).join(&ev.name);
-                let value = fs::read_to_string(&path).unwrap_or_default();
-                log.lock().unwrap().push(Write {
-                    t_ns,
-                    channel: Some(m),
-                    attr: ev.name.clone(),
-                    value: value.trim().to_string(),
-                });
             }
+            "enable" if !matches!(value.as_str(), "0" | "1") => {
+                return self.refuse(format!("pwm{m}/enable = {value:?}: EINVAL"));
+            }
+            "polarity" if !matches!(value.as_str(), "normal" | "inversed") => {
+                return self.refuse(format!("pwm{m}/polarity = {value:?}: EINVAL"));
+            }
+            _ => {}
         }
+        if next.period == 0 || next.duty > next.period {
+            return self.refuse(format!(
+                "pwm{m}/{attr} = {value}: EINVAL, the state would be duty {} ns of period {} ns",
+                next.duty, next.period
+            ));
+        }
+        self.channels.insert(wd, (m, next));
     }
 }
