@@ -382,6 +382,25 @@ fn bench(c: &mut Criterion) {
         c.bench_with_input(BenchmarkId::new("dynamic_job_copy", n), &n, |b, _| {
             b.iter(|| black_box(Box::new(dynamic.clone())))
         });
+        // What opening a refinement window under control costs the control thread
+        // (`adaptation::refinement::open_window`): a new dynamic estimator (its excitation
+        // plan, the segmented fits' slots) set to closed loop.
+        c.bench_with_input(
+            BenchmarkId::new("closed_loop_window_open", n),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    let mut est = Estimator::new(
+                        EstimatorConfig::default(),
+                        n,
+                        NoiseLevels::isotropic(1e-3, 1e-2),
+                    )
+                    .with_rest_specific_force(REST_FORCE);
+                    est.begin_closed_loop();
+                    black_box(est)
+                })
+            },
+        );
         // The same with every column but thruster 0's carried over (an identification after a
         // known change): three more Gram solves per group, and the contradiction check.
         let mut se = nalgebra::DMatrix::from_element(6, n, 0.05);
