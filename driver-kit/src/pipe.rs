@@ -119,6 +119,7 @@ where
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 tracing::error!("{e:#}");
+                crate::systemd::report_failure(&format!("{e:#}"));
                 let error: &(dyn std::error::Error + 'static) = e.as_ref();
                 if is_bad_config(error) {
                     ExitCode::from(EXIT_CONFIG)

@@ -78,6 +78,85 @@ impl Notifier {
     pub fn dropped(&self) -> u64 {
         self.dropped
     }
+
+    /// sd_notify_barrier(3): sends BARRIER=1 with the write end of a pipe, which the manager
+    /// closes once it has processed every message sent before it, and waits at most
+    /// `timeout` for that. True if the manager got there. For a process about to exit:
+    /// without it, the manager may reap the process before it reads its last STATUS=, and
+    /// then drops that message (it no longer knows whose it was).
+    pub fn barrier(&self, timeout: Duration) -> std::io::Result<bool> {
+        use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+        let mut fds = [0i32; 2];
+        // SAFETY: pipe2 fills two descriptors on success, owned right below.
+        if unsafe { libc::pipe2(fds.as_mut_ptr(), libc::O_CLOEXEC) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        // SAFETY: fresh descriptors nobody else owns.
+        let (read, write) = unsafe { (OwnedFd::from_raw_fd(fds[0]), OwnedFd::from_raw_fd(fds[1])) };
+        send_with_fd(self.socket.as_raw_fd(), b"BARRIER=1\n", write.as_raw_fd())?;
+        drop(write);
+        let mut pfd = libc::pollfd {
+            fd: read.as_raw_fd(),
+            events: 0, // POLLHUP is reported whatever is asked for
+            revents: 0,
+        };
+        // Clamped: at least 1 ms, at most a minute.
+        let ms = timeout.as_millis().clamp(1, 60_000) as i32;
+        // SAFETY: one valid pollfd.
+        let n = unsafe { libc::poll(&mut pfd, 1, ms) };
+        Ok(n == 1 && pfd.revents & libc::POLLHUP != 0)
+    }
+}
+
+/// sendmsg(2) of `data` with one descriptor (SCM_RIGHTS).
+fn send_with_fd(socket: i32, data: &[u8], fd: i32) -> std::io::Result<()> {
+    let mut iov = libc::iovec {
+        iov_base: data.as_ptr() as *mut libc::c_void,
+        iov_len: data.len(),
+    };
+    // A u64 buffer: aligned for cmsghdr; CMSG_SPACE of one int is 24 bytes on Linux.
+    let mut control = [0u64; 4];
+    // SAFETY: msghdr is plain data; every pointer set below outlives the call, and the
+    // control buffer holds CMSG_SPACE(sizeof(int)) bytes (checked).
+    unsafe {
+        let space = libc::CMSG_SPACE(std::mem::size_of::<i32>() as u32) as usize;
+        assert!(space <= std::mem::size_of_val(&control));
+        let mut msg: libc::msghdr = std::mem::zeroed();
+        msg.msg_iov = &mut iov;
+        msg.msg_iovlen = 1;
+        msg.msg_control = control.as_mut_ptr() as *mut libc::c_void;
+        msg.msg_controllen = space as _;
+        let cmsg = libc::CMSG_FIRSTHDR(&msg);
+        (*cmsg).cmsg_level = libc::SOL_SOCKET;
+        (*cmsg).cmsg_type = libc::SCM_RIGHTS;
+        (*cmsg).cmsg_len = libc::CMSG_LEN(std::mem::size_of::<i32>() as u32) as _;
+        std::ptr::write_unaligned(libc::CMSG_DATA(cmsg) as *mut i32, fd);
+        if libc::sendmsg(socket, &msg, libc::MSG_NOSIGNAL) < 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    Ok(())
+}
+
+/// A process that is about to exit on a failure tells systemd why: `STATUS=failed: <why>`,
+/// then a barrier (at most 1 s) so that the manager has it before it reaps the process.
+/// systemd keeps a unit's status text until its next start, so `systemctl status` shows
+/// the reason of a unit that failed at once, whose own log lines journald may not be able to
+/// attribute to the unit any more (systemd issue #2913; `journalctl -u` then misses them).
+/// A no-op outside systemd.
+pub fn report_failure(why: &str) {
+    let Some(addr) = std::env::var("NOTIFY_SOCKET")
+        .ok()
+        .filter(|a| !a.is_empty())
+    else {
+        return;
+    };
+    let Ok(mut notifier) = Notifier::connect(&addr) else {
+        return;
+    };
+    if notifier.send(&message(&NotifyState::Status(&format!("failed: {why}")))) {
+        let _ = notifier.barrier(Duration::from_secs(1));
+    }
 }
 
 /// A non-blocking datagram socket connected to `addr` (a path, or `@name`: abstract).
@@ -215,6 +294,61 @@ mod tests {
         let mut buf = [0u8; 64];
         let got = manager.recv(&mut buf).unwrap();
         assert_eq!(&buf[..got], b"WATCHDOG=1\n");
+    }
+
+    /// The barrier waits for the manager to close the descriptor it was sent, and no longer
+    /// than its timeout for a manager that does not.
+    #[test]
+    fn the_barrier_returns_once_the_manager_closed_its_descriptor() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("notify");
+        let manager = UnixDatagram::bind(&path).unwrap();
+        let n = Notifier::connect(path.to_str().unwrap()).unwrap();
+        let answering = std::thread::spawn(move || {
+            let (text, fd) = recv_with_fd(&manager);
+            std::thread::sleep(Duration::from_millis(50));
+            drop(fd);
+            (text, manager)
+        });
+        let start = Instant::now();
+        assert!(n.barrier(Duration::from_secs(5)).unwrap());
+        let (text, manager) = answering.join().unwrap();
+        assert_eq!(text, "BARRIER=1\n");
+        assert!(start.elapsed() >= Duration::from_millis(50));
+        // A manager that keeps the descriptor: false after the timeout.
+        let start = Instant::now();
+        let kept = std::thread::spawn(move || recv_with_fd(&manager));
+        assert!(!n.barrier(Duration::from_millis(100)).unwrap());
+        assert!(start.elapsed() >= Duration::from_millis(100));
+        drop(kept.join().unwrap());
+    }
+
+    /// recvmsg(2) of one message and the descriptor it carries.
+    fn recv_with_fd(socket: &UnixDatagram) -> (String, std::os::fd::OwnedFd) {
+        use std::os::fd::{AsRawFd, FromRawFd};
+        let mut buf = [0u8; 64];
+        let mut iov = libc::iovec {
+            iov_base: buf.as_mut_ptr() as *mut libc::c_void,
+            iov_len: buf.len(),
+        };
+        let mut control = [0u64; 4];
+        // SAFETY: as in send_with_fd; the kernel fills at most msg_controllen bytes.
+        unsafe {
+            let mut msg: libc::msghdr = std::mem::zeroed();
+            msg.msg_iov = &mut iov;
+            msg.msg_iovlen = 1;
+            msg.msg_control = control.as_mut_ptr() as *mut libc::c_void;
+            msg.msg_controllen = std::mem::size_of_val(&control) as _;
+            let got = libc::recvmsg(socket.as_raw_fd(), &mut msg, 0);
+            assert!(got > 0, "{}", std::io::Error::last_os_error());
+            let cmsg = libc::CMSG_FIRSTHDR(&msg);
+            assert!(!cmsg.is_null() && (*cmsg).cmsg_type == libc::SCM_RIGHTS);
+            let fd = std::ptr::read_unaligned(libc::CMSG_DATA(cmsg) as *const i32);
+            (
+                String::from_utf8_lossy(&buf[..got as usize]).into_owned(),
+                std::os::fd::OwnedFd::from_raw_fd(fd),
+            )
+        }
     }
 
     #[test]

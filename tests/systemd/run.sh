@@ -506,8 +506,13 @@ bad="$(prop thruster-bridge ActiveState) $(prop thruster-bridge Result) $(prop t
     || fail "bad config: the bridge is '$bad', want 'failed exit-code 2 $NR_B' (state result status restarts)"
 journal_says thruster-bridge 'unknown field .bogus_key.' \
     || fail "bad config: the journal does not name the unknown key"
+# And `systemctl status` says why without the journal: STATUS= sent behind a barrier before
+# the exit (driver-kit `report_failure`), kept by systemd until the unit's next start.
+st=$(prop thruster-bridge StatusText)
+echo "$st" | grep -q '^failed: .*unknown field .bogus_key.' \
+    || fail "bad config: the unit's status text is '$st', not the reason"
 inside "mv /etc/thrusterd/thruster-bridge.toml.good /etc/thrusterd/thruster-bridge.toml && systemctl reset-failed thruster-bridge"
-say "bad config: the bridge exits 2 naming the key, failed at once, not restarted"
+say "bad config: the bridge exits 2 naming the key in the journal and its status text ($st), failed at once, not restarted"
 
 # systemctl stop -> neutral and model saved.
 T_STOP=$(inside "date +%s.%N")

@@ -59,6 +59,8 @@ fn main() -> ExitCode {
         // (what anyhow's Debug form, the default for `main -> Result`, prints).
         Err(e) => {
             eprintln!("thrusterd: {e:#}");
+            // Under systemd, also the unit's status text: `systemctl status` shows why.
+            thruster_driver_kit::systemd::report_failure(&format!("{e:#}"));
             let config = e
                 .chain()
                 .any(|c| c.is::<thrusterd_core::config::ConfigError>());
