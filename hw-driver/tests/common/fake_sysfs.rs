@@ -311,14 +311,29 @@ impl Kernel {
     fn attribute(&mut self, wd: i32, attr: &str, t_ns: u64) {
         let (m, state) = self.channels[&wd];
         let path = self.chip.join(format!("pwm{m}")).join(attr);
-        let value = fs::read_to_string(&path).unwrap_or_default();
-        let value = value.trim().to_string();
+        // Read after the event: the writer's next write may have truncated the file and not
+        // yet written it (a sysfs store is atomic; a tmpfs rewrite is not). Empty is that
+        // moment, never a value: read again briefly, and judge nothing if it stays empty.
+        let mut value = String::new();
+        for _ in 0..20 {
+            value = fs::read_to_string(&path)
+                .unwrap_or_default()
+                .trim()
+                .to_string();
+            if !value.is_empty() {
+                break;
+            }
+            std::thread::sleep(Duration::from_micros(250));
+        }
         self.log.lock().unwrap().push(Write {
             t_ns,
             channel: Some(m),
             attr: attr.to_string(),
             value: value.clone(),
         });
+        if value.is_empty() {
+            return;
+        }
         let mut next = state;
         match attr {
             "period" | "duty_cycle" => {
