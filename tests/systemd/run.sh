@@ -524,4 +524,18 @@ journal_says thrusterd 'model saved' "$T_STOP" || fail "stop: the model was not 
 inside "systemctl stop thruster-hw"
 [ "$(prop thruster-hw Result)" = success ] || fail "stop: thruster-hw stopped with $(prop thruster-hw Result)"
 say "stop: thrusters neutral, model saved, both units stopped cleanly"
+
+# The daemon's own bad configuration: exit 2, not restarted, and the reason in the unit's
+# status text (thrusterd's main reports it as the drivers' driver_main does).
+inside "cp /etc/thrusterd/thrusterd.toml /etc/thrusterd/thrusterd.toml.good \
+    && echo 'bogus_daemon_key = 1' >> /etc/thrusterd/thrusterd.toml"
+inside "systemctl start thrusterd" 2>/dev/null && fail "bad daemon config: thrusterd's start succeeded"
+sleep 2
+bad="$(prop thrusterd ActiveState) $(prop thrusterd Result) $(prop thrusterd ExecMainStatus)"
+[ "$bad" = "failed exit-code 2" ] || fail "bad daemon config: thrusterd is '$bad', want 'failed exit-code 2'"
+st=$(prop thrusterd StatusText)
+echo "$st" | grep -q '^failed: .*bogus_daemon_key' \
+    || fail "bad daemon config: thrusterd's status text is '$st', not the reason"
+inside "mv /etc/thrusterd/thrusterd.toml.good /etc/thrusterd/thrusterd.toml && systemctl reset-failed thrusterd"
+say "bad daemon config: thrusterd exits 2, its status text says why ($st)"
 say "all checks passed"
