@@ -145,10 +145,7 @@ fn send_with_fd(socket: i32, data: &[u8], fd: i32) -> std::io::Result<()> {
 /// attribute to the unit any more (systemd issue #2913; `journalctl -u` then misses them).
 /// A no-op outside systemd.
 pub fn report_failure(why: &str) {
-    let Some(addr) = std::env::var("NOTIFY_SOCKET")
-        .ok()
-        .filter(|a| !a.is_empty())
-    else {
+    let Some(addr) = notify_socket() else {
         return;
     };
     let Ok(mut notifier) = Notifier::connect(&addr) else {
@@ -157,6 +154,13 @@ pub fn report_failure(why: &str) {
     if notifier.send(&message(&NotifyState::Status(&format!("failed: {why}")))) {
         let _ = notifier.barrier(Duration::from_secs(1));
     }
+}
+
+/// `$NOTIFY_SOCKET`, set and not empty: started by systemd for a notify unit.
+fn notify_socket() -> Option<String> {
+    std::env::var("NOTIFY_SOCKET")
+        .ok()
+        .filter(|a| !a.is_empty())
 }
 
 /// A non-blocking datagram socket connected to `addr` (a path, or `@name`: abstract).
@@ -191,16 +195,13 @@ impl Default for Systemd {
 impl Systemd {
     /// Reads WATCHDOG_USEC (for this process only, as sd_watchdog_enabled(3) checks).
     pub fn new() -> Self {
-        let notifier = std::env::var("NOTIFY_SOCKET")
-            .ok()
-            .filter(|a| !a.is_empty())
-            .and_then(|addr| match Notifier::connect(&addr) {
-                Ok(n) => Some(n),
-                Err(e) => {
-                    warn!("systemd's NOTIFY_SOCKET {addr}: cannot connect: {e}");
-                    None
-                }
-            });
+        let notifier = notify_socket().and_then(|addr| match Notifier::connect(&addr) {
+            Ok(n) => Some(n),
+            Err(e) => {
+                warn!("systemd's NOTIFY_SOCKET {addr}: cannot connect: {e}");
+                None
+            }
+        });
         Systemd {
             watchdog: sd_notify::watchdog_enabled().map(|d| d / 2),
             last_ping: Instant::now(),

@@ -136,10 +136,11 @@ say "systemd up ($state)"
 
 prop() { inside "systemctl show -P $2 $1"; }
 # journal_says IDENTIFIER PATTERN [SINCE]: the journal has a line of that program matching
-# PATTERN (since SINCE, a "date +%s.%N" inside the container, if given) within 5 s. By identifier, not -u: journald attributes a line to a unit through
-# /proc/<pid>/cgroup, gone when the process has already exited (systemd issue #2913), so the
-# last lines of a process that exits (a bad configuration, a summary at stop, ExecStopPost)
-# may lack the unit; the identifier comes with the stdout stream itself.
+# PATTERN (since SINCE, a "date +%s.%N" inside the container, if given) within 5 s. By
+# identifier, not -u: journald attributes a line to a unit through /proc/<pid>/cgroup, gone
+# when the process has already exited (systemd issue #2913), so the last lines of a process
+# that exits (a bad configuration, a summary at stop, ExecStopPost) may lack the unit; the
+# identifier comes with the stdout stream itself.
 journal_says() {
     inside "for i in 1 2 3 4 5; do journalctl -t $1 ${3:+--since @$3} --no-pager -o cat \
             | grep -q '$2' && exit 0; sleep 1; done; exit 1"

@@ -204,7 +204,6 @@ fn orthogonal(n: usize) -> Vec<Vec<f64>> {
     out
 }
 
-/// Each Hadamard row (first n columns) as +r, -r, -r, +r.
 /// The fewest leading patterns of `cycle` that span all `n` thrusters (`confounded` empty,
 /// which is the patterns' Gram matrix at full rank), or the whole cycle. Found by adding the
 /// patterns one at a time to an orthonormal basis (Gram-Schmidt, twice for round-off), not
@@ -235,6 +234,7 @@ fn first_spanning(cycle: &[Vec<f64>], n: usize) -> usize {
     cycle.len()
 }
 
+/// Each Hadamard row (first n columns) as +r, -r, -r, +r.
 fn doublet_pairs(n: usize) -> Vec<Vec<f64>> {
     let h = hadamard(n.next_power_of_two().max(2));
     let mut out = Vec::with_capacity(4 * h.len());
