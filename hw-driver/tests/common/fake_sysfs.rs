@@ -307,7 +307,11 @@ impl Kernel {
     /// The attribute stores: each applies the channel's whole state, and `__pwm_apply`
     /// refuses a period of 0 or a duty longer than the period (EINVAL); `enable` takes 0
     /// or 1, `polarity` "normal" or "inversed". A refused write leaves the state as it
-    /// was (the file here keeps what was written: only the refusal is recorded).
+    /// was (the file here keeps what was written: only the refusal is recorded). These are
+    /// the rules of the kernels the audit read (6.8). Kernels since `pwm_state_valid`
+    /// (2025) accept any period and duty while the channel is disabled, so for a disabled
+    /// channel the fake is the stricter of the two, and a driver order it accepts is
+    /// accepted by both.
     fn attribute(&mut self, wd: i32, attr: &str, t_ns: u64) {
         let (m, state) = self.channels[&wd];
         let path = self.chip.join(format!("pwm{m}")).join(attr);
