@@ -27,6 +27,7 @@ use thrusterd_core::estimator::dynamic::regressors::{terms, TERMS};
 use thrusterd_core::estimator::linalg::sym_pinv;
 
 use super::design::Excitation;
+use super::worst_seed::WorstOf;
 
 /// IMU rate of every run, Hz (the daemon's tests and the demo's).
 pub const RATE_HZ: f64 = 200.0;
@@ -292,6 +293,34 @@ pub fn bound_with(
     lag_unknown: bool,
     terms_unknown: bool,
 ) -> Option<Bound> {
+    let c = covariance_with(s, b, sigma, lag_unknown, terms_unknown)?;
+    let rel = |g: usize| c.rel[g].trace().max(0.0).sqrt();
+    Some(Bound {
+        rel_err: [rel(0), rel(1)],
+        lag_sd_s: c.lag_sd_s,
+    })
+}
+
+/// The Cramer-Rao covariance of B's rows, group by group, relative to the group's norm: the
+/// 3N x 3N covariance of the rotation (acceleration) rows stacked row after row, over
+/// |B_rot|^2 (|B_acc|^2). Its trace is the squared relative bound; its eigenvalues give the
+/// error's whole distribution (`worst_seed`).
+pub struct Covariance {
+    pub rel: [DMatrix<f64>; 2],
+    /// The lag's own 1-sigma, s, when it is a nuisance (0 when known).
+    pub lag_sd_s: f64,
+}
+
+/// The covariance behind [`bound_with`]. Per row a the information of b_a is M_bb / sigma^2
+/// (the rows share the regressors, so their blocks are independent but for the lag, which is
+/// common to all six: eliminating it adds w_a w_b' / schur between any two rows).
+pub fn covariance_with(
+    s: &Snapshot,
+    b: &DMatrix<f64>,
+    sigma: (f64, f64),
+    lag_unknown: bool,
+    terms_unknown: bool,
+) -> Option<Covariance> {
     let known = &[!terms_unknown; TERMS];
     let n = b.ncols();
     let sig = [sigma.0, sigma.1];
@@ -319,15 +348,17 @@ pub fn bound_with(
         m_dd.push(red.view((n, n), (n, n)).into_owned());
     }
     // Per row a: A_a^-1 = sigma^2 M_bb^-1, c_a = M_bd b_a / sigma^2.
-    let mut trace = [0.0; 2];
+    let mut cov = [DMatrix::zeros(3 * n, 3 * n), DMatrix::zeros(3 * n, 3 * n)];
     let mut j_tt = 0.0;
     let mut ws: Vec<DVector<f64>> = Vec::with_capacity(6);
     let mut cw = 0.0;
     for row in 0..6 {
-        let g = row / 3;
+        let (g, r) = (row / 3, row % 3);
         let s2 = sig[g] * sig[g];
         let b_a = DVector::from_iterator(n, b.row(row).iter().copied());
-        trace[g] += s2 * inv_bb[g].trace();
+        cov[g]
+            .view_mut((r * n, r * n), (n, n))
+            .copy_from(&(&inv_bb[g] * s2));
         let c = &m_bd[g] * &b_a / s2;
         j_tt += (b_a.transpose() * &m_dd[g] * &b_a)[0] / s2;
         let w = &inv_bb[g] * &c * s2;
@@ -339,22 +370,58 @@ pub fn bound_with(
         if schur.is_nan() || schur <= 0.0 {
             return None;
         }
-        for (row, w) in ws.iter().enumerate() {
-            trace[row / 3] += w.norm_squared() / schur;
+        for g in 0..2 {
+            let w = DVector::from_iterator(
+                3 * n,
+                ws[3 * g..3 * g + 3].iter().flat_map(|w| w.iter().copied()),
+            );
+            cov[g].ger(1.0 / schur, &w, &w, 1.0);
         }
     }
-    let rel = |g: usize| {
-        let norm = b.rows(3 * g, 3).norm();
-        trace[g].max(0.0).sqrt() / norm
-    };
-    Some(Bound {
-        rel_err: [rel(0), rel(1)],
+    for (g, c) in cov.iter_mut().enumerate() {
+        *c /= b.rows(3 * g, 3).norm_squared();
+    }
+    Some(Covariance {
+        rel: cov,
         lag_sd_s: if lag_unknown {
             (1.0 / schur).sqrt()
         } else {
             0.0
         },
     })
+}
+
+/// How the error over seeds is read against a target: its RMS (the bound itself), or the
+/// median of the worst of several seeds ([`WorstOf`]).
+#[derive(Clone, Copy)]
+pub enum Spread<'a> {
+    Rms,
+    Worst(&'a WorstOf),
+}
+
+impl Spread<'_> {
+    /// Group `g`'s error figure at one snapshot, and the bound there.
+    pub fn at(
+        &self,
+        s: &Snapshot,
+        b: &DMatrix<f64>,
+        sigma: (f64, f64),
+        lag_unknown: bool,
+        terms_unknown: bool,
+        g: usize,
+    ) -> Option<(f64, Bound)> {
+        let c = covariance_with(s, b, sigma, lag_unknown, terms_unknown)?;
+        let rel = |g: usize| c.rel[g].trace().max(0.0).sqrt();
+        let bound = Bound {
+            rel_err: [rel(0), rel(1)],
+            lag_sd_s: c.lag_sd_s,
+        };
+        let figure = match self {
+            Spread::Rms => bound.rel_err[g],
+            Spread::Worst(w) => w.of(&c.rel[g]),
+        };
+        Some((figure, bound))
+    }
 }
 
 /// The first snapshot at which the bound of group `g` reaches `target` (the bound never rises
@@ -366,27 +433,39 @@ pub fn first_reaching(
     g: usize,
     target: f64,
 ) -> Option<(usize, Bound)> {
-    first_reaching_with(tr, sigma, lag_unknown, true, g, target)
+    first_reaching_with(tr, sigma, lag_unknown, true, Spread::Rms, g, target)
+        .map(|(i, b, _)| (i, b))
 }
 
-/// [`first_reaching`] with the terms known or not (see [`bound_with`]).
+/// [`first_reaching`] with the terms known or not (see [`bound_with`]) and the error read as
+/// `spread`; also the figure reached.
 pub fn first_reaching_with(
     tr: &Trajectory,
     sigma: (f64, f64),
     lag_unknown: bool,
     terms_unknown: bool,
+    spread: Spread,
     g: usize,
     target: f64,
-) -> Option<(usize, Bound)> {
-    let at = |i: usize| bound_with(&tr.snapshots[i], &tr.b, sigma, lag_unknown, terms_unknown);
-    let ok = |i: usize| at(i).is_some_and(|b| b.rel_err[g] <= target);
+) -> Option<(usize, Bound, f64)> {
+    let at = |i: usize| {
+        spread.at(
+            &tr.snapshots[i],
+            &tr.b,
+            sigma,
+            lag_unknown,
+            terms_unknown,
+            g,
+        )
+    };
+    let ok = |i: usize| at(i).is_some_and(|(f, _)| f <= target);
     let last = tr.snapshots.len().checked_sub(1)?;
     if !ok(last) {
         return None;
     }
     let (mut lo, mut hi) = (0usize, last);
     if ok(0) {
-        return at(0).map(|b| (0, b));
+        return at(0).map(|(f, b)| (0, b, f));
     }
     while hi - lo > 1 {
         let mid = (lo + hi) / 2;
@@ -396,5 +475,5 @@ pub fn first_reaching_with(
             lo = mid;
         }
     }
-    at(hi).map(|b| (hi, b))
+    at(hi).map(|(f, b)| (hi, b, f))
 }

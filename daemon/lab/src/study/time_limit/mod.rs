@@ -12,6 +12,7 @@ pub mod check;
 pub mod design;
 pub mod fisher;
 pub mod real;
+pub mod worst_seed;
 
 use std::path::PathBuf;
 
@@ -21,15 +22,17 @@ use serde::Serialize;
 use thruster_sim::{NoisePreset, Vehicle};
 
 use self::design::{candidates, Excitation};
-use self::fisher::{first_reaching, preset_sigma, simulate, Trajectory};
+use self::fisher::{first_reaching_with, preset_sigma, simulate, Spread, Trajectory};
+use self::worst_seed::WorstOf;
 
 /// Longest excitation considered, s.
 pub const T_MAX_S: f64 = 12.0;
 /// Time resolution of the search, s.
 pub const SNAP_S: f64 = 0.05;
-/// The estimator's noise-free error on both groups (docs/study.md: 0.013-0.016 on every
-/// vehicle), for the cases that count it.
-pub const NOISE_FREE_ERR: f64 = 0.015;
+/// The estimator's noise-free error on both groups, for the cases that count it: with the one
+/// column fitted to the thrust's shape (`estimator.shaped_thrust`, the default since
+/// 2026-12-03) 0.001-0.005 on the check's excitations (0.013-0.016 before).
+pub const NOISE_FREE_ERR: f64 = 0.005;
 
 #[derive(Args, Debug)]
 pub struct TimeLimitArgs {
@@ -63,6 +66,9 @@ pub struct Case {
     /// estimator's noise-free error, its linear model of a thruster weaker in reverse), so the
     /// bound must reach sqrt(target^2 - floor^2).
     pub floor: f64,
+    /// None: the target against the RMS error over seeds (the bound itself). Some(k): against
+    /// the worst of k seeds (its median, [`worst_seed`]), as issue 30 asks of seeds 1-10.
+    pub worst_of: Option<u32>,
 }
 
 impl Case {
@@ -74,7 +80,7 @@ impl Case {
     }
     fn what(&self) -> String {
         format!(
-            "{} {} <= {}{}{}",
+            "{} {} <= {}{}{}{}",
             self.noise,
             ["err_rot", "err_acc"][self.group],
             self.target,
@@ -83,7 +89,9 @@ impl Case {
                 format!(", {} floor", self.floor)
             } else {
                 String::new()
-            }
+            },
+            self.worst_of
+                .map_or(String::new(), |k| format!(", worst of {k}"))
         )
     }
 
@@ -104,6 +112,7 @@ pub fn cases() -> Vec<Case> {
             tilt_budget_deg: tilt,
             lag_unknown,
             floor,
+            worst_of: None,
         };
         out.push(c("realistic", 0, 0.02, true, 0.0));
         out.push(c("realistic", 0, 0.02, true, NOISE_FREE_ERR));
@@ -112,9 +121,29 @@ pub fn cases() -> Vec<Case> {
         out.push(c("paper", 0, 0.06, true, 0.0));
         out.push(c("paper", 0, 0.06, false, 0.0));
         out.push(c("paper", 0, 0.06, false, NOISE_FREE_ERR));
+        if tilt == 30.0 {
+            // What the targets ask of every seed of ten, with and without the floor.
+            for floor in [0.0, NOISE_FREE_ERR] {
+                for case in [
+                    c("realistic", 0, 0.02, true, floor),
+                    c("realistic", 1, 0.03, true, floor),
+                    c("paper", 0, 0.06, false, floor),
+                ] {
+                    out.push(Case {
+                        worst_of: Some(WORST_OF),
+                        ..case
+                    });
+                }
+            }
+        }
     }
     out
 }
+
+/// The seeds issue 30's targets are measured over.
+pub const WORST_OF: u32 = 10;
+/// The draws' seed of [`WorstOf`] (one result).
+const DRAW_SEED: u64 = 1;
 
 /// Where one excitation reaches a case's target.
 #[derive(Debug, Clone, Serialize)]
@@ -126,6 +155,8 @@ pub struct Reach {
     pub tilt_deg: f64,
     /// The bound there (rotation, acceleration).
     pub bound: [f64; 2],
+    /// The figure reached: the bound of the case's group, or the median of its worst seed.
+    pub figure: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -138,20 +169,31 @@ pub struct CaseResult {
     pub default: Reach,
 }
 
-fn reach(tr: &Trajectory, ex: &Excitation, case: &Case) -> Reach {
+fn reach(tr: &Trajectory, ex: &Excitation, case: &Case, worst: Option<&WorstOf>) -> Reach {
     let sigma = preset_sigma(case.preset());
-    match first_reaching(tr, sigma, case.lag_unknown, case.group, case.bound_target()) {
-        Some((i, b)) => Reach {
+    let spread = worst.map_or(Spread::Rms, Spread::Worst);
+    match first_reaching_with(
+        tr,
+        sigma,
+        case.lag_unknown,
+        true,
+        spread,
+        case.group,
+        case.bound_target(),
+    ) {
+        Some((i, b, figure)) => Reach {
             excitation: ex.label(),
             t_s: Some(tr.snapshots[i].t_s),
             tilt_deg: tr.snapshots[i].max_tilt_deg,
             bound: b.rel_err,
+            figure,
         },
         None => Reach {
             excitation: ex.label(),
             t_s: None,
             tilt_deg: tr.snapshots.last().map_or(0.0, |s| s.max_tilt_deg),
             bound: [f64::NAN; 2],
+            figure: f64::NAN,
         },
     }
 }
@@ -161,10 +203,14 @@ pub fn limits(name: &str, v: &Vehicle, cases: &[Case]) -> Vec<CaseResult> {
     let n = v.thrusters.len();
     let mut best: Vec<Option<Reach>> = vec![None; cases.len()];
     let mut default: Vec<Option<Reach>> = vec![None; cases.len()];
+    let worst: Vec<Option<WorstOf>> = cases
+        .iter()
+        .map(|c| c.worst_of.map(|k| WorstOf::new(k, 3 * n, DRAW_SEED)))
+        .collect();
     for (k, ex) in candidates(n).iter().enumerate() {
         let tr = simulate(v, ex, T_MAX_S, SNAP_S);
         for (c, case) in cases.iter().enumerate() {
-            let r = reach(&tr, ex, case);
+            let r = reach(&tr, ex, case, worst[c].as_ref());
             if k == 0 {
                 default[c] = Some(r.clone());
             }
@@ -224,14 +270,15 @@ pub fn forms(name: &str, v: &Vehicle, cases: &[Case]) -> Vec<FormRow> {
             preset_sigma(case.preset()),
             lag_unknown,
             terms_unknown,
+            Spread::Rms,
             case.group,
             case.bound_target(),
         )
-        .map(|(i, _)| tr.snapshots[i].t_s)
+        .map(|(i, _, _)| tr.snapshots[i].t_s)
     };
     cases
         .iter()
-        .filter(|c| c.tilt_budget_deg == 30.0 && c.floor == 0.0)
+        .filter(|c| c.tilt_budget_deg == 30.0 && c.floor == 0.0 && c.worst_of.is_none())
         .map(|c| FormRow {
             vehicle: name.to_string(),
             case: *c,

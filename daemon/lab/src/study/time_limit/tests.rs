@@ -1,7 +1,8 @@
 use nalgebra::DMatrix;
 
 use super::design::Excitation;
-use super::fisher::{bound, simulate};
+use super::fisher::{bound, simulate, Spread};
+use super::worst_seed::WorstOf;
 use super::*;
 
 fn amour5() -> Vehicle {
@@ -76,7 +77,8 @@ fn the_schur_complement_matches_the_closed_form() {
 }
 
 /// Noise-free, the real estimator recovers B on the bound's best excitation for AMOUR-5 at
-/// the realistic IMU (found by the search), to 0.02 on both groups.
+/// the realistic IMU (found by the search), to [`NOISE_FREE_ERR`] on both groups (the one
+/// column fitted to the thrust's shape, as the machine does: 1.5 % without it).
 #[test]
 fn noise_free_the_estimator_recovers_b_on_the_designed_excitation() {
     let v = amour5();
@@ -87,6 +89,7 @@ fn noise_free_the_estimator_recovers_b_on_the_designed_excitation() {
         tilt_budget_deg: 30.0,
         lag_unknown: true,
         floor: 0.0,
+        worst_of: None,
     };
     let r = limits("amour5", &v, &[case]).remove(0);
     let best = r.best.expect("reachable within the budget");
@@ -95,11 +98,64 @@ fn noise_free_the_estimator_recovers_b_on_the_designed_excitation() {
     let at = ex.whole(t.max(1.0));
     let p = real::run(&v, &ex, NoisePreset::None, 1, &[at]);
     assert!(
-        p[0].err_rot <= 0.02 && p[0].err_acc <= 0.02,
+        p[0].err_rot <= NOISE_FREE_ERR && p[0].err_acc <= NOISE_FREE_ERR,
         "{}: {:?}",
         best.excitation,
         p[0]
     );
     // And the search beat or matched the default.
     assert!(t <= r.default.t_s.unwrap_or(f64::INFINITY) + 1e-9);
+}
+
+/// The worst of ten seeds against a closed form: one dimension of variance s^2, |e| within q
+/// with probability 2 Phi(q / s) - 1, so the median of the worst of ten is s Phi^-1((1 +
+/// 0.5^0.1) / 2) = 1.832 s. Another draw set agrees within 1 %.
+#[test]
+fn the_worst_of_ten_matches_the_gaussian_quantile() {
+    let s = 0.01;
+    let cov = DMatrix::from_element(1, 1, s * s);
+    let w = WorstOf::new(10, 1, 1);
+    let q = w.of(&cov);
+    assert!((q / s - 1.832).abs() < 0.03, "{} sigma", q / s);
+    let other = WorstOf::new(10, 1, 2).of(&cov);
+    assert!((other / q - 1.0).abs() < 0.01, "{other} vs {q}");
+    // One seed's median of |e|: Phi^-1(0.75) = 0.674 s.
+    let one = WorstOf::new(1, 1, 1).of(&cov);
+    assert!((one / s - 0.674).abs() < 0.02, "{} sigma", one / s);
+}
+
+/// On AMOUR-5's bound the worst of ten sits above the RMS and at most at one dimension's
+/// 1.832x (the error spread over 15 columns is narrower than one Gaussian's; where one
+/// direction is barely identified it comes near that), and the every-seed limit is later than
+/// the RMS limit.
+#[test]
+fn the_worst_of_ten_is_above_the_rms_and_its_limit_later() {
+    let v = amour5();
+    let ex = Excitation::default_for(v.thrusters.len());
+    let tr = simulate(&v, &ex, 3.5, 0.25);
+    let w = WorstOf::new(10, 3 * v.thrusters.len(), 1);
+    let sigma = (0.002, 0.03);
+    let mut seen = 0;
+    for s in &tr.snapshots {
+        let Some(c) = fisher::covariance_with(s, &tr.b, sigma, true, true) else {
+            continue;
+        };
+        seen += 1;
+        for g in 0..2 {
+            let rms = c.rel[g].trace().sqrt();
+            let ratio = w.of(&c.rel[g]) / rms;
+            assert!(
+                (1.1..=1.84).contains(&ratio),
+                "{} s group {g}: {ratio}",
+                s.t_s
+            );
+        }
+    }
+    assert!(seen >= 8, "{seen} snapshots identifiable");
+    let time = |spread| {
+        fisher::first_reaching_with(&tr, sigma, true, true, spread, 0, 0.02)
+            .map(|(i, _, _)| tr.snapshots[i].t_s)
+    };
+    let (rms, worst) = (time(Spread::Rms).unwrap(), time(Spread::Worst(&w)).unwrap());
+    assert!(worst > rms, "every seed {worst} s, RMS {rms} s");
 }
