@@ -159,3 +159,39 @@ fn the_worst_of_ten_is_above_the_rms_and_its_limit_later() {
     let (rms, worst) = (time(Spread::Rms).unwrap(), time(Spread::Worst(&w)).unwrap());
     assert!(worst > rms, "every seed {worst} s, RMS {rms} s");
 }
+
+/// Issue 30's open-loop targets asked of every seed of ten are beyond AMOUR-5's limit, which
+/// is what its clause for such a target rests on (docs/study.md, "Every seed of ten"): the
+/// realistic IMU's 0.02 / 0.03 need more than 2.0 s of excitation and the paper's 0.06 more
+/// than 5.0 s on every candidate within 30 deg, while the RMS reaches the realistic targets
+/// within 2.0 s (measured 2.30 / 2.35 / 5.95 s against 1.95 / 1.95 / 4.75 s).
+#[test]
+fn issue_30s_targets_for_every_seed_are_beyond_amour5s_limit() {
+    let v = amour5();
+    let case = |noise, group, target, lag_unknown, worst_of| Case {
+        noise,
+        group,
+        target,
+        tilt_budget_deg: 30.0,
+        lag_unknown,
+        floor: 0.0,
+        worst_of,
+    };
+    let cases = [
+        case("realistic", 0, 0.02, true, Some(WORST_OF)),
+        case("realistic", 1, 0.03, true, Some(WORST_OF)),
+        case("paper", 0, 0.06, false, Some(WORST_OF)),
+        case("realistic", 0, 0.02, true, None),
+        case("realistic", 1, 0.03, true, None),
+    ];
+    let r = limits("amour5", &v, &cases);
+    let t = |i: usize| r[i].best.as_ref().and_then(|b| b.t_s).unwrap();
+    assert!(
+        t(0) > 2.0 && t(1) > 2.0,
+        "every seed: {} / {} s",
+        t(0),
+        t(1)
+    );
+    assert!(t(2) > 5.0, "every seed, paper: {} s", t(2));
+    assert!(t(3) <= 2.0 && t(4) <= 2.0, "RMS: {} / {} s", t(3), t(4));
+}
