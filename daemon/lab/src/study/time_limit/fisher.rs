@@ -293,12 +293,7 @@ pub fn bound_with(
     lag_unknown: bool,
     terms_unknown: bool,
 ) -> Option<Bound> {
-    let c = covariance_with(s, b, sigma, lag_unknown, terms_unknown)?;
-    let rel = |g: usize| c.rel[g].trace().max(0.0).sqrt();
-    Some(Bound {
-        rel_err: [rel(0), rel(1)],
-        lag_sd_s: c.lag_sd_s,
-    })
+    covariance_with(s, b, sigma, lag_unknown, terms_unknown).map(|c| c.bound())
 }
 
 /// The Cramer-Rao covariance of B's rows, group by group, relative to the group's norm: the
@@ -309,6 +304,17 @@ pub struct Covariance {
     pub rel: [DMatrix<f64>; 2],
     /// The lag's own 1-sigma, s, when it is a nuisance (0 when known).
     pub lag_sd_s: f64,
+}
+
+impl Covariance {
+    /// The bound: the square root of each group's trace.
+    pub fn bound(&self) -> Bound {
+        let rel = |g: usize| self.rel[g].trace().max(0.0).sqrt();
+        Bound {
+            rel_err: [rel(0), rel(1)],
+            lag_sd_s: self.lag_sd_s,
+        }
+    }
 }
 
 /// The covariance behind [`bound_with`]. Per row a the information of b_a is M_bb / sigma^2
@@ -411,11 +417,7 @@ impl Spread<'_> {
         g: usize,
     ) -> Option<(f64, Bound)> {
         let c = covariance_with(s, b, sigma, lag_unknown, terms_unknown)?;
-        let rel = |g: usize| c.rel[g].trace().max(0.0).sqrt();
-        let bound = Bound {
-            rel_err: [rel(0), rel(1)],
-            lag_sd_s: c.lag_sd_s,
-        };
+        let bound = c.bound();
         let figure = match self {
             Spread::Rms => bound.rel_err[g],
             Spread::Worst(w) => w.of(&c.rel[g]),

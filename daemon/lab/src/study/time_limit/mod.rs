@@ -62,9 +62,8 @@ pub struct Case {
     /// The lag a nuisance (true) or known (false: what the estimator does at the paper's noise,
     /// where it keeps the configured lag).
     pub lag_unknown: bool,
-    /// An error no data removes, added in quadrature (0: the bound alone; 0.015: the
-    /// estimator's noise-free error, its linear model of a thruster weaker in reverse), so the
-    /// bound must reach sqrt(target^2 - floor^2).
+    /// An error no data removes, added in quadrature (0: the bound alone; [`NOISE_FREE_ERR`]:
+    /// the estimator's noise-free error), so the bound must reach sqrt(target^2 - floor^2).
     pub floor: f64,
     /// None: the target against the RMS error over seeds (the bound itself). Some(k): against
     /// the worst of k seeds (its median, [`worst_seed`]), as issue 30 asks of seeds 1-10.
