@@ -296,6 +296,20 @@ fn bench(c: &mut Criterion) {
             &n,
             |b, _| b.iter(|| black_box(learning.estimate())),
         );
+        // What the job a run stops in adds there in still water: the velocity's drift
+        // searched (`run/velocity_drift_search.rs`, ~120 refits), and where the log supports
+        // one, the estimate made again on the corrected log (its lag searched again).
+        c.bench_with_input(
+            BenchmarkId::new("dynamic_estimate_stopping_searching_velocity_drift", n),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    let mut e = learning.estimate();
+                    assert!(learning.search_velocity_drift(&mut e));
+                    black_box(e)
+                })
+            },
+        );
         // The lag per thruster (`estimator::dynamic::thruster_lags`): the default above pays
         // its pre-test (2 N refits) whatever the vehicle; not searched at all (one lag,
         // `learn_thruster_lags = false`); and searched to the end (pair sweep, Newton steps,

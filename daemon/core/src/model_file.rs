@@ -300,6 +300,7 @@ mod tests {
             prior_disagreement: [0.5, 0.7],
             navigation_rel_err: [0.0; 2],
             start_velocity_ned_mps: None,
+            velocity_drift_ned_mps2: None,
             imu_position: Some(ImuPosition {
                 position_m: nalgebra::Vector3::new(0.15, 0.05, -0.1),
                 cov: nalgebra::Matrix3::identity() * 1e-6,

@@ -145,6 +145,8 @@ impl SolveJob {
             // velocity at the start searched (~120 refits): only here, as the draws below.
             if matches!(self.work, Work::Pulse) {
                 self.est.search_start_velocity(&mut estimate);
+                // In still water, the dead-reckoned velocity's drift taken out the same way.
+                self.est.search_velocity_drift(&mut estimate);
             }
             self.est.check_configured_lag(&mut estimate);
             // The open loop's model has the navigation's errors counted in its bound: drawn

@@ -844,8 +844,15 @@ fn a_bound_within_reach_is_waited_for() {
     };
     for seed in 1..=3 {
         let run = |reach: f64| {
+            // 0 turns both reaches off: the slow lags' own (`slow_lag_reach_rel_err`) would
+            // wait here too (0.15 s).
             let cfg = EstimatorConfig {
                 reach_rel_err: reach,
+                slow_lag_reach_rel_err: if reach > 0.0 {
+                    EstimatorConfig::dynamic().slow_lag_reach_rel_err
+                } else {
+                    0.0
+                },
                 ..EstimatorConfig::dynamic()
             };
             estimate_on(
@@ -913,8 +920,12 @@ fn a_bound_just_out_of_reach_is_waited_for_too() {
 /// and its acceleration rows 0.037 off under a bound of 0.029 (1.26x; bare 0.02 and within
 /// its bound): one of the two runs of issue 29's realistic lag table (seeds 1-5) still over
 /// 0.03 (`LAG_SHAPED=1|0 LAG_NOISE=realistic LAG_SEEDS=10 ... lag_sweep`: over 0.03 in 4 of
-/// 120 runs against 9 bare, all on eight_vectored at 0.15-0.2 s; docs/study.md). Asserted:
-/// the wait, the bound, and the error within 0.03 or, past it, within 1.5x the bound.
+/// 120 runs against 9 bare, all on eight_vectored at 0.15-0.2 s; docs/study.md). Since the
+/// slow lags wait for their own reach (`slow_lag_reach_rel_err`, 0.025) and the stopping job
+/// takes the velocity's drift out (`velocity_drift_search_mps2`), seed 4 stops at 6.03 s
+/// 0.009 / 0.021 off under 0.021 / 0.024 and the table has none of 120 over 0.03 (docs/study.md,
+/// "The velocity's drift searched, and a reach for slow thrusters"). Asserted: the wait, the
+/// bound, and the error within 0.03.
 #[test]
 fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
     let sensors = SensorConfig {
@@ -941,14 +952,12 @@ fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
             o.bound[1]
         );
         println!("{msg}");
-        // Past the first cycle (3.23 s) and the next doublet pair, within the pulse limit.
-        assert!(o.seconds > 4.0 && o.seconds < 6.0, "{msg}");
+        // Past the first cycle (3.23 s) and the next doublet pair, within the pulse limit
+        // (80 pulses, 8.0 s).
+        assert!(o.seconds > 4.0 && o.seconds < 7.0, "{msg}");
         assert!(o.bound[0] <= 0.03 && o.bound[1] <= 0.03, "{msg}");
         assert!(o.terms.spin_up_sd_ln < 0.02, "{msg}");
-        for (err, bound) in [(o.err_rot, o.bound[0]), (o.err_acc, o.bound[1])] {
-            assert!(err <= 0.03 || err <= 1.5 * bound, "{msg}");
-        }
-        assert!(o.err_rot <= 0.03 && o.err_acc <= 0.04, "{msg}");
+        assert!(o.err_rot <= 0.03 && o.err_acc <= 0.03, "{msg}");
     }
 }
 
@@ -1277,8 +1286,8 @@ fn noise_free_reverse_ratio_and_dead_band_the_daemon_was_not_told() {
 /// reverse 0.6 0.019 / 0.022, 0.93x | 0.025 / 0.029, 1.09x (covered now); reverse 0.95 0.019 /
 /// 0.021, 0.96x | 0.019 / 0.037, 1.35x (worse: the configured ratio is wrong); dead band 0
 /// 0.016 / 0.018, 0.76x | 0.015 / 0.034, 1.22x; dead band 0.1 0.014 / 0.016, 0.71x | 0.015 /
-/// 0.027, 0.95x; lag 0.05 s 0.004 / 0.010, 0.46x | 0.004 / 0.012, 0.54x; lag 0.15 s 0.009 /
-/// 0.022, 0.77x | 0.007 / 0.022, 0.83x. On the bare command, as measured before: matched 0.025 / 0.022, 1.20x | 0.024 / 0.034,
+/// 0.027, 0.95x; lag 0.05 s 0.004 / 0.010, 0.46x | 0.004 / 0.012, 0.54x; lag 0.15 s 0.013 /
+/// 0.022, 0.94x | 0.015 / 0.026, 1.07x (since the slow lags' reach and the drift's search). On the bare command, as measured before: matched 0.025 / 0.022, 1.20x | 0.024 / 0.034,
 /// 1.19x; reverse 0.6 0.040 / 0.031, 1.91x | 0.040 / 0.049, 1.77x (the bound never covers
 /// it: 0 of 5 seeds on either vehicle); reverse 0.95 0.008 / 0.015, 0.66x | 0.017 / 0.027,
 /// 0.97x; dead band 0 0.018 / 0.016, 0.87x | 0.017 / 0.029, 1.00x; dead band 0.1 0.028 /
@@ -1298,8 +1307,15 @@ fn with_a_realistic_imu_thrusters_the_daemon_was_not_told_about() {
         (4, "eight_vectored", 0.0153, 0.0266, 0.95),
         (5, "amour5", 0.0036, 0.0095, 0.46),
         (5, "eight_vectored", 0.0040, 0.0118, 0.54),
-        (6, "amour5", 0.0089, 0.0221, 0.77),
-        (6, "eight_vectored", 0.0069, 0.0222, 0.83),
+        // Measured again with the slow lags' reach and the velocity's drift taken out (both
+        // on since 2026-12-07): seeds 1-5 wait one doublet pair more at 0.15 s and their
+        // worst is higher (0.0089 / 0.0221, 0.77x | 0.0069 / 0.0222, 0.83x before: seed 4 of
+        // eight_vectored 0.0063 / 0.0198 -> 0.0148 / 0.0259), while over 40 seeds at 0.15 s
+        // the RMS error fell 0.0109 / 0.0198 -> 0.0073 / 0.0148 | 0.0107 / 0.0231 -> 0.0084 /
+        // 0.0180 and the runs over 0.03 went 1 -> 0 | 7 -> 0 (docs/study.md, "The velocity's
+        // drift searched, and a reach for slow thrusters").
+        (6, "amour5", 0.0130, 0.0224, 0.94),
+        (6, "eight_vectored", 0.0148, 0.0259, 1.07),
     ];
     for (case, name, rot, acc, ratio) in measured {
         let (what, m) = MISMATCHES[case];

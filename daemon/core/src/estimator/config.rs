@@ -95,6 +95,14 @@ pub struct EstimatorConfig {
     /// said to be, and not under control (re-estimations ran 17-21 s instead of 12); elsewhere
     /// the run stops at the targets (docs/study.md).
     pub reach_rel_err: f64,
+    /// The bound worth waiting for where the learned lag is slow (at least
+    /// [`SLOW_LAG_S`](crate::estimator::SLOW_LAG_S)), in the same rule as `reach_rel_err` and
+    /// besides it: a run goes on while either reach says so, so no run stops sooner than under
+    /// `reach_rel_err` alone (0: off). Why: with slow thrusters the acceleration rows' bound
+    /// is 1.13-1.29x short (the gyro's noise reaches them through the learned lag and the
+    /// navigation's velocity), so a 1-sigma stop at 0.03 leaves seeds over it
+    /// (docs/study.md, "The slow lags' tail").
+    pub slow_lag_reach_rel_err: f64,
     /// Full excitation cycles before the automatic stop may fire (>= 1: every thruster seen in
     /// both directions).
     pub min_cycles: usize,
@@ -372,6 +380,15 @@ pub struct EstimatorConfig {
     /// "The lags searched again after the tow"), the swell's flights and still water as
     /// before or better.
     pub start_velocity_search_mps: f64,
+    /// The stopping open loop's model, in still water at a gyro quiet enough to learn the lag,
+    /// made again with the dead-reckoned velocity's drift taken out: a horizontal ramp fixed
+    /// in the world from the run's start, its rate searched up to this (m/s^2) and kept where
+    /// the log supports it ([`VELOCITY_DRIFT_EVIDENCE`](crate::estimator::VELOCITY_DRIFT_EVIDENCE));
+    /// 0: off; at most 1. Why: a tilt of a milliradian left after the rest leaks gravity into
+    /// the velocity the damping acts on, and on AMOUR-5's slow thrusters it moved the lag
+    /// learned by 4 ms and the model to 0.038 off (docs/study.md, "The velocity's drift
+    /// searched").
+    pub velocity_drift_search_mps2: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -388,6 +405,7 @@ impl Default for EstimatorConfig {
             target_rel_err: 0.06,
             target_rel_err_acc: Some(0.07),
             reach_rel_err: 0.03,
+            slow_lag_reach_rel_err: 0.025,
             min_cycles: 1,
             stop_once_spanned: false,
             max_pulses: 80,
@@ -437,6 +455,7 @@ impl Default for EstimatorConfig {
             second_amplitude: 1.0,
             navigation_error_draws: 16,
             start_velocity_search_mps: 1.5,
+            velocity_drift_search_mps2: 0.04,
         }
     }
 }
@@ -495,7 +514,7 @@ impl EstimatorConfig {
 
     /// (key under `[estimator]`, value, allowed range) of every number; the config file's
     /// checker locates a failing one in the file.
-    pub fn checks(&self) -> [(&'static str, f64, Range); 40] {
+    pub fn checks(&self) -> [(&'static str, f64, Range); 42] {
         [
             ("k_sigma", self.k_sigma, Range::above(0.0)),
             (
@@ -514,6 +533,11 @@ impl EstimatorConfig {
             ("target_rel_err", self.target_rel_err, Range::above(0.0)),
             ("target_rel_err_acc", self.acc_target(), Range::above(0.0)),
             ("reach_rel_err", self.reach_rel_err, Range::at_least(0.0)),
+            (
+                "slow_lag_reach_rel_err",
+                self.slow_lag_reach_rel_err,
+                Range::at_least(0.0),
+            ),
             ("min_cycles", self.min_cycles as f64, Range::at_least(1.0)),
             ("max_pulses", self.max_pulses as f64, Range::at_least(1.0)),
             (
@@ -586,6 +610,11 @@ impl EstimatorConfig {
                 "start_velocity_search_mps",
                 self.start_velocity_search_mps,
                 Range::closed(0.0, 5.0),
+            ),
+            (
+                "velocity_drift_search_mps2",
+                self.velocity_drift_search_mps2,
+                Range::closed(0.0, 1.0),
             ),
             (
                 "second_amplitude",

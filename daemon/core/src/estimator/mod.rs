@@ -48,6 +48,23 @@ pub const MOVING_WATER_REFIT_RADPS: f64 = 0.0025;
 /// parameters searched, so a chi-square of 2 degrees of freedom at about 1 in 20000.
 pub const START_VELOCITY_EVIDENCE: f64 = 10.0;
 
+/// The learned lag (s) from which `EstimatorConfig::slow_lag_reach_rel_err` applies: between
+/// the default 0.1 s, where the 0.03 reach serves, and the lag table's slow rows (0.15 and
+/// 0.2 s), where the acceleration rows' bound is short (docs/study.md).
+pub const SLOW_LAG_S: f64 = 0.13;
+
+/// ln of the likelihood ratio a velocity drift must win by before the stopping open loop's
+/// model is made again without it (`EstimatorConfig::velocity_drift_search_mps2`,
+/// `dynamic::velocity_drift`). Not the start velocity's 10: the log's 200 Hz residuals are
+/// not independent, so a ratio scored as if they were runs high, and where the pulses barely
+/// move the vehicle sideways a drift soaks up what the fit leaves. Measured at a realistic
+/// IMU, seeds 1-10, every vehicle file (docs/study.md, "The velocity's drift searched"):
+/// four_up's and six_dof's spurious rates of 0.02-0.03 m/s^2 (the navigation's true drift
+/// there 0.002) came with ratios of 12-17 and made their models worse; the slow thrusters'
+/// true drifts of 0.004-0.009 m/s^2 that moved the lag came with 25-259. At 20 the kept
+/// drifts are those, and the models over 0.02 of 130 are 38 against 40 at 10.
+pub const VELOCITY_DRIFT_EVIDENCE: f64 = 20.0;
+
 pub use analysis::{RankReport, ThrusterDiagnosis};
 pub use config::{EstimatorConfig, Method};
 pub use dof::{Dof, DofMask};

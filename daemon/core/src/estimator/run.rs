@@ -37,6 +37,7 @@ mod fits;
 mod navigation_bound;
 mod start_velocity_search;
 mod stop;
+mod velocity_drift_search;
 
 /// A residual-based noise estimate is trusted once it rests on this many degrees of freedom.
 const MIN_RESIDUAL_DOF: u64 = 10;

@@ -115,6 +115,12 @@ pub struct DynamicTerms {
     /// None where not searched or not kept.
     #[serde(default)]
     pub start_velocity_ned_mps: Option<[f64; 3]>,
+    /// The rate the navigation's velocity ran away from the truth over the run (NED, m/s^2;
+    /// [`velocity_drift`](super::velocity_drift)): the stopping open loop's model is made
+    /// again with it taken out where the log supports it
+    /// (`EstimatorConfig::velocity_drift_search_mps2`). None where not searched or not kept.
+    #[serde(default)]
+    pub velocity_drift_ned_mps2: Option<[f64; 3]>,
     /// The thrust curve the commands went out through when the model was learned (thrust ~
     /// command^p, learned under control: `supply::Supply::set_learned_exponent`), so B is per
     /// unit of the linearized command; None: the commands as the machine computed them.
@@ -175,6 +181,7 @@ impl DynamicTerms {
             prior_disagreement: [0.0; 2],
             navigation_rel_err: [0.0; 2],
             start_velocity_ned_mps: None,
+            velocity_drift_ned_mps2: None,
             imu_position: None,
             unexplained_rate_radps: 0.0,
             lag_gap_without_states: None,

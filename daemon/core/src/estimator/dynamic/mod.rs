@@ -32,6 +32,7 @@ pub mod thrust_curve;
 pub mod thrust_shape;
 pub mod thruster_lags;
 mod variance;
+pub mod velocity_drift;
 
 pub use dynamic_terms::{DynamicTerms, MAX_CURVE_NAMED_REL_ERR};
 pub use thrust_shape::MAX_THRUST_ASYMMETRY;
@@ -818,6 +819,7 @@ impl DynamicRun {
                 navigation_rel_err: [0.0; 2],
                 // Searched by the moving-water refit (`start_velocity`), not per fit.
                 start_velocity_ned_mps: None,
+                velocity_drift_ned_mps2: None,
             },
             split: self.split.then_some((split_b, split_se)),
             disturbance,

@@ -63,17 +63,34 @@ pub fn search_start_velocity(
     let score_at = |v: &Vector3<f64>| -> Option<f64> {
         profile_score(&with_start_velocity(run, v)?.refit(lags)?).filter(|s| s.is_finite())
     };
+    let (best, s0, s) = horizontal_grid_search(max_mps, score_at)?;
+    let rows = run.samples() as f64;
+    Some(StartVelocity {
+        velocity_ned_mps: best,
+        log_likelihood_ratio: (0.5 * rows * (s0 - s)).max(0.0),
+    })
+}
+
+/// The horizontal vector within `max` (norm) that `score_at` scores lowest: a grid of 9 x 9
+/// steps of `max / 4` about zero, then twice a 5 x 5 grid a quarter the step about the best
+/// point (about 120 scores). The best vector, the score at zero and the best score; None
+/// without a score at zero. Shared by the start velocity's search and the velocity drift's
+/// ([`super::velocity_drift`]).
+pub(super) fn horizontal_grid_search(
+    max: f64,
+    score_at: impl Fn(&Vector3<f64>) -> Option<f64>,
+) -> Option<(Vector3<f64>, f64, f64)> {
     let zero = Vector3::zeros();
     let s0 = score_at(&zero)?;
     let mut best = (zero, s0);
-    let mut step = max_mps / COARSE_HALF as f64;
+    let mut step = max / COARSE_HALF as f64;
     let mut half = COARSE_HALF;
     for _ in 0..=FINE_PASSES {
         let centre = best.0;
         for i in -half..=half {
             for j in -half..=half {
                 let v = centre + Vector3::new(i as f64 * step, j as f64 * step, 0.0);
-                if (i == 0 && j == 0) || v.xy().norm() > max_mps * (1.0 + 1e-9) {
+                if (i == 0 && j == 0) || v.xy().norm() > max * (1.0 + 1e-9) {
                     continue;
                 }
                 if let Some(s) = score_at(&v) {
@@ -86,9 +103,5 @@ pub fn search_start_velocity(
         step /= REFINE;
         half = FINE_HALF;
     }
-    let rows = run.samples() as f64;
-    Some(StartVelocity {
-        velocity_ned_mps: best.0,
-        log_likelihood_ratio: (0.5 * rows * (s0 - best.1)).max(0.0),
-    })
+    Some((best.0, s0, best.1))
 }

@@ -24,10 +24,10 @@ impl Estimator {
             && !(open_loop && self.short_of_reach_mid_cycle(reducible_rot, reducible_acc))
             && !(open_loop
                 && Self::waits_within_reach(e)
-                && self.better_within_reach(&[
-                    (reducible_rot, lag_share[0]),
-                    (reducible_acc, lag_share[1]),
-                ]))
+                && self.better_within_reach(
+                    &[(reducible_rot, lag_share[0]), (reducible_acc, lag_share[1])],
+                    self.reaches(e),
+                ))
         {
             StopDecision::Converged {
                 rel_err_rot: e.rel_err_rot,
@@ -79,8 +79,31 @@ impl Estimator {
     /// 4.5-4.9 %, which is most of a 5-6 % bound, and 4 pulses later to 2.1-2.2 %, by 44
     /// pulses to 0.9-1.1 %; projected as 1/sqrt(pulses) the bound missed 3 % and the run
     /// stopped up to 0.055 / 0.081 off (docs/study.md, "eight_vectored at 0.2 s").
-    pub(super) fn better_within_reach(&self, bounds: &[(f64, f64)]) -> bool {
-        let reach = self.cfg.reach_rel_err;
+    pub(super) fn better_within_reach(&self, bounds: &[(f64, f64)], reaches: [f64; 2]) -> bool {
+        reaches
+            .iter()
+            .any(|&reach| self.better_within(bounds, reach))
+    }
+
+    /// The reaches the open loop's stop waits for with estimate `e`: `reach_rel_err`, and
+    /// `slow_lag_reach_rel_err` where the lag `e` learned is slow
+    /// ([`SLOW_LAG_S`](crate::estimator::SLOW_LAG_S); 0 where
+    /// not).
+    fn reaches(&self, e: &Estimate) -> [f64; 2] {
+        let slow = self.learns_lag()
+            && e.dynamics
+                .as_ref()
+                .is_some_and(|d| d.spin_up_s >= crate::estimator::SLOW_LAG_S);
+        let slow_reach = if slow {
+            self.cfg.slow_lag_reach_rel_err
+        } else {
+            0.0
+        };
+        [self.cfg.reach_rel_err, slow_reach]
+    }
+
+    /// [`Self::better_within_reach`] for one reach.
+    fn better_within(&self, bounds: &[(f64, f64)], reach: f64) -> bool {
         if reach <= 0.0 || self.pulses == 0 || self.pulses >= self.cfg.max_pulses {
             return false;
         }

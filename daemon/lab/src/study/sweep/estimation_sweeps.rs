@@ -297,6 +297,14 @@ pub(super) fn lag_sweep() {
                 if let Ok(r) = std::env::var("LAG_REACH") {
                     cfg.reach_rel_err = r.parse().unwrap();
                 }
+                if let Ok(r) = std::env::var("LAG_SLOW_REACH") {
+                    // `slow_lag_reach_rel_err`.
+                    cfg.slow_lag_reach_rel_err = r.parse().unwrap();
+                }
+                if let Ok(r) = std::env::var("LAG_DRIFT") {
+                    // The velocity drift's search (`velocity_drift_search_mps2`), m/s^2.
+                    cfg.velocity_drift_search_mps2 = r.parse().unwrap();
+                }
                 if let Ok(f) = std::env::var("LAG_FLOOR") {
                     cfg.model_error_floor = f.parse().unwrap();
                 }
@@ -431,10 +439,13 @@ pub(super) fn lag_sweep() {
                     )
                 });
                 let refused = if o.refused { " REFUSED" } else { "" };
-                let curve = o
+                let mut curve = o
                     .terms
                     .command_exponent
                     .map_or(String::new(), |p| format!(" curve ^{p:.3}"));
+                if let Some(r) = o.terms.velocity_drift_ned_mps2 {
+                    curve += &format!(" drift [{:.4} {:.4}] m/s^2", r[0], r[1]);
+                }
                 println!(
                 "{name} tau {tau:.3} seed {seed}: learned {:.4} {:?} (sd_ln {:.4}, z {:+.2}, per-thruster lnLR {:.1}) err_rot {:.4} err_acc {:.4} bound {:.4} / {:.4} in {:.2} s (wall {:.1} s){curve}{refused}{check} groups z {:.2} gap {:.4}",
                 o.spin_up_s,
