@@ -58,11 +58,12 @@ pub const SLOW_LAG_S: f64 = 0.13;
 /// `dynamic::velocity_drift`). Not the start velocity's 10: the log's 200 Hz residuals are
 /// not independent, so a ratio scored as if they were runs high, and where the pulses barely
 /// move the vehicle sideways a drift soaks up what the fit leaves. Measured at a realistic
-/// IMU, seeds 1-10, every vehicle file (docs/study.md, "The velocity's drift searched"):
-/// four_up's and six_dof's spurious rates of 0.02-0.03 m/s^2 (the navigation's true drift
-/// there 0.002) came with ratios of 12-17 and made their models worse; the slow thrusters'
-/// true drifts of 0.004-0.009 m/s^2 that moved the lag came with 25-259. At 20 the kept
-/// drifts are those, and the models over 0.02 of 130 are 38 against 40 at 10.
+/// IMU, seeds 1-10, every vehicle file (docs/study.md, "The velocity's drift searched, and a
+/// reach for slow thrusters"): four_up's and six_dof's spurious rates of 0.02-0.03 m/s^2
+/// (the navigation's true drift there 0.002) came with ratios of 12-17 and made their models
+/// worse; the slow thrusters' true drifts of 0.004-0.009 m/s^2 that moved the lag came with
+/// 25-259. At 20 the kept drifts are those, and the models over 0.02 of 130 are 38 against
+/// 40 at 10.
 pub const VELOCITY_DRIFT_EVIDENCE: f64 = 20.0;
 
 pub use analysis::{RankReport, ThrusterDiagnosis};

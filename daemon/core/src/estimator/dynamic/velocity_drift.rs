@@ -5,7 +5,7 @@
 //! the world, and the velocity the damping and Coriolis terms act on walks away from the truth
 //! as a ramp from the run's start. Measured on AMOUR-5 at a 0.2 s lag and a realistic IMU,
 //! seed 5 of the lag table at a reach of 0.025 (docs/study.md, "The velocity's drift
-//! searched"): 0.022 m/s RMS off, a ramp of 0.006 m/s^2 per horizontal axis, 0.005 m/s RMS left
+//! searched, and a reach for slow thrusters"): 0.022 m/s RMS off, a ramp of 0.006 m/s^2 per horizontal axis, 0.005 m/s RMS left
 //! once the ramp is taken out; the lag learned 0.1936 s (0.1977 s on the true velocity) and the
 //! model 0.038 off under a bound of 0.046, where a perfect DVL made it 0.013.
 //!
