@@ -6,7 +6,7 @@
 //! (`estimator.velocity_drift_search_mps2`, `estimator::dynamic::velocity_drift`).
 //! docs/study.md, "The velocity's drift searched, and a reach for slow thrusters".
 
-use thruster_inprocess::estimation::{estimate_on, with_lag, Ideal, Outcome};
+use thruster_inprocess::estimation::{estimate_observed, estimate_on, with_lag, Ideal, Outcome};
 use thruster_sim::{NoisePreset, SensorConfig};
 use thrusterd_core::estimator::EstimatorConfig;
 
@@ -128,4 +128,40 @@ fn noise_free_the_search_moves_no_model() {
         assert!(with.err_rot <= 0.02 && with.err_acc <= 0.02, "{msg}");
         assert!((with.spin_up_s - 0.2).abs() <= 0.002, "{msg}");
     }
+}
+
+/// The operator is told: a model made again without a drift says so in the status, since no
+/// sensor showed the drift and it moved the model (AMOUR-5 at 0.2 s, seed 5: 0.0087 m/s^2).
+#[test]
+fn the_status_says_a_drift_was_taken_out() {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Realistic,
+        ..SensorConfig::default()
+    };
+    let mut said: Vec<String> = Vec::new();
+    let o = estimate_observed(
+        with_lag("amour5", 0.2),
+        sensors,
+        5,
+        EstimatorConfig::dynamic(),
+        Ideal::default(),
+        &mut |m, _| {
+            let text = m.status().text;
+            if said.last() != Some(&text) {
+                said.push(text);
+            }
+        },
+    );
+    let drift = o
+        .terms
+        .velocity_drift_ned_mps2
+        .unwrap_or_else(|| panic!("{}", line(&o)));
+    let rate = format!("{:.4}", drift[0].hypot(drift[1]));
+    assert!(
+        said.iter().any(|t| t.starts_with("converged")
+            && t.contains(&format!("velocity drift {rate} m/s^2 taken out"))
+            && t.len() <= 128),
+        "{said:#?}"
+    );
 }

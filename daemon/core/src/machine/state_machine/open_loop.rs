@@ -379,8 +379,17 @@ impl Machine {
                     .as_ref()
                     .and_then(|d| d.start_velocity_ned_mps)
                     .map(|v| v[0].hypot(v[1]));
+                // The stopping job took the dead-reckoned velocity's drift out
+                // (`Estimator::search_velocity_drift`): said, since it moved the model.
+                let drift = candidate
+                    .dynamics
+                    .as_ref()
+                    .and_then(|d| d.velocity_drift_ned_mps2)
+                    .map(|r| r[0].hypot(r[1]));
                 if let Some(speed) = towed {
                     format!("converged after {pulses} pulses (error bound rot {rot:.3}, acc {acc:.3}), moving {speed:.2} m/s at the start")
+                } else if let Some(rate) = drift {
+                    format!("converged after {pulses} pulses (error bound rot {rot:.3}, acc {acc:.3}), velocity drift {rate:.4} m/s^2 taken out")
                 } else if navigation > 0.0 {
                     format!("converged after {pulses} pulses (error bound rot {rot:.3}, acc {acc:.3} with navigation {navigation:.3})")
                 } else {
