@@ -69,7 +69,7 @@ impl Estimator {
     }
 
     /// Whether one of `bounds` (relative, 1 sigma, each with the share the learned lag's
-    /// uncertainty adds to it) is above `reach_rel_err` and would come within
+    /// uncertainty adds to it) is above one of `reaches` (0: none) and would come within
     /// [`REACH_SLACK`] of it by `max_pulses`: its statistical part falling as 1/sqrt(pulses),
     /// the lag's share as 1/pulses, the model-error floor (which no data removes) not at all.
     ///
@@ -87,8 +87,9 @@ impl Estimator {
 
     /// The reaches the open loop's stop waits for with estimate `e`: `reach_rel_err`, and
     /// `slow_lag_reach_rel_err` where the lag `e` learned is slow
-    /// ([`SLOW_LAG_S`](crate::estimator::SLOW_LAG_S); 0 where
-    /// not).
+    /// ([`SLOW_LAG_S`](crate::estimator::SLOW_LAG_S); 0 where not). Why a second reach and
+    /// not a lower one: no run may stop sooner than under `reach_rel_err` alone (a lower
+    /// reach projected out of reach stops at once: the rule's cliff).
     fn reaches(&self, e: &Estimate) -> [f64; 2] {
         let slow = self.learns_lag()
             && e.dynamics
