@@ -150,6 +150,18 @@ impl DynamicTerms {
         let j = regressors::TERM_NAMES.iter().position(|n| *n == name)?;
         Some((self.coefficients[(row, j)], self.std_err[(row, j)]))
     }
+
+    /// The `n` thrusters' lags this fit was made at (one per thruster where it learned them,
+    /// else the common lag), s: what a refit of the same log takes to be the same fit.
+    pub fn fitted_lags(&self, n: usize) -> Vec<f64> {
+        let lags = super::spin_state::lags_for_fit(
+            n,
+            self.spin_up_s,
+            None,
+            Some(&self.spin_up_per_thruster_s),
+        );
+        lags[..n].to_vec()
+    }
 }
 
 #[cfg(test)]

@@ -57,29 +57,33 @@ pub fn search_start_velocity(
     lags: &[f64],
     max_mps: f64,
 ) -> Option<StartVelocity> {
-    if !(max_mps.is_finite() && max_mps > 0.0) {
-        return None;
-    }
-    let score_at = |v: &Vector3<f64>| -> Option<f64> {
-        profile_score(&with_start_velocity(run, v)?.refit(lags)?).filter(|s| s.is_finite())
-    };
-    let (best, s0, s) = horizontal_grid_search(max_mps, score_at)?;
-    let rows = run.samples() as f64;
+    let (velocity_ned_mps, log_likelihood_ratio) =
+        best_horizontal(run, lags, max_mps, with_start_velocity)?;
     Some(StartVelocity {
-        velocity_ned_mps: best,
-        log_likelihood_ratio: (0.5 * rows * (s0 - s)).max(0.0),
+        velocity_ned_mps,
+        log_likelihood_ratio,
     })
 }
 
-/// The horizontal vector within `max` (norm) that `score_at` scores lowest: a grid of 9 x 9
-/// steps of `max / 4` about zero, then twice a 5 x 5 grid a quarter the step about the best
-/// point (about 120 scores). The best vector, the score at zero and the best score; None
-/// without a score at zero. Shared by the start velocity's search and the velocity drift's
+/// The horizontal vector within `max` (norm) at which `moved(run, v)` refitted at `lags`
+/// has the lowest profile score, and the ln likelihood ratio of that fit against the fit at
+/// zero (the log's rows over two times the scores' difference; >= 0): a grid of 9 x 9 steps
+/// of `max / 4` about zero, then twice a 5 x 5 grid a quarter the step about the best point
+/// (about 120 refits). None without a log, a finite positive `max` or a score at zero.
+/// Shared by the start velocity's search and the velocity drift's
 /// ([`super::velocity_drift`]).
-pub(super) fn horizontal_grid_search(
+pub(super) fn best_horizontal(
+    run: &DynamicRun,
+    lags: &[f64],
     max: f64,
-    score_at: impl Fn(&Vector3<f64>) -> Option<f64>,
-) -> Option<(Vector3<f64>, f64, f64)> {
+    moved: impl Fn(&DynamicRun, &Vector3<f64>) -> Option<DynamicRun>,
+) -> Option<(Vector3<f64>, f64)> {
+    if !(max.is_finite() && max > 0.0) {
+        return None;
+    }
+    let score_at = |v: &Vector3<f64>| -> Option<f64> {
+        profile_score(&moved(run, v)?.refit(lags)?).filter(|s| s.is_finite())
+    };
     let zero = Vector3::zeros();
     let s0 = score_at(&zero)?;
     let mut best = (zero, s0);
@@ -103,5 +107,6 @@ pub(super) fn horizontal_grid_search(
         step /= REFINE;
         half = FINE_HALF;
     }
-    Some((best.0, s0, best.1))
+    let rows = run.samples() as f64;
+    Some((best.0, (0.5 * rows * (s0 - best.1)).max(0.0)))
 }

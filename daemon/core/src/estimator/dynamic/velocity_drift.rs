@@ -16,8 +16,7 @@
 
 use nalgebra::Vector3;
 
-use super::lag_search::profile_score;
-use super::start_velocity::horizontal_grid_search;
+use super::start_velocity::best_horizontal;
 use super::DynamicRun;
 
 /// The drift rate the log supports best.
@@ -51,16 +50,10 @@ pub fn search_velocity_drift(
     lags: &[f64],
     max_mps2: f64,
 ) -> Option<VelocityDrift> {
-    if !(max_mps2.is_finite() && max_mps2 > 0.0) {
-        return None;
-    }
-    let score_at = |r: &Vector3<f64>| -> Option<f64> {
-        profile_score(&without_drift(run, r)?.refit(lags)?).filter(|s| s.is_finite())
-    };
-    let (best, s0, s) = horizontal_grid_search(max_mps2, score_at)?;
-    let rows = run.samples() as f64;
+    let (rate_ned_mps2, log_likelihood_ratio) =
+        best_horizontal(run, lags, max_mps2, without_drift)?;
     Some(VelocityDrift {
-        rate_ned_mps2: best,
-        log_likelihood_ratio: (0.5 * rows * (s0 - s)).max(0.0),
+        rate_ned_mps2,
+        log_likelihood_ratio,
     })
 }

@@ -5,7 +5,6 @@
 // The estimator's fields and helpers are the parent's: these are its methods, by job.
 use super::*;
 use crate::estimator::dynamic::navigation_error::{navigation_variance, NavigationNoise};
-use crate::estimator::dynamic::spin_state::lags_for_fit;
 
 /// The draws' seed: fixed, so the same run gives the same bound on every machine.
 const DRAW_SEED: u64 = 0x6e61_765f_6572_7221;
@@ -37,12 +36,7 @@ impl Estimator {
         if estimate.effectiveness.shape() != (6, n) {
             return;
         }
-        let lags = lags_for_fit(
-            n,
-            terms.spin_up_s,
-            None,
-            Some(&terms.spin_up_per_thruster_s),
-        );
+        let lags = terms.fitted_lags(n);
         let rest = self.rest_sigma();
         let gyro_sd = rms3(&self.noise.gyro_white_sigma);
         let rest_samples = self.noise.samples.max(1) as f64;
@@ -54,7 +48,7 @@ impl Estimator {
             gravity: gravity_from(&self.noise.accel_baseline),
         };
         let fit = |r: &DynamicRun| {
-            let refit = r.refit(&lags[..n])?;
+            let refit = r.refit(&lags)?;
             Some(
                 refit
                     .solve(&rest, 0.0, self.cfg.term_prior_sd, self.prior.as_ref())

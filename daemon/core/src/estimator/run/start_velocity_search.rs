@@ -39,13 +39,7 @@ impl Estimator {
         // one more thing fitted, and its own uncertainty is not counted. Measured without
         // this: in the faintest swell a start velocity the log liked moved eight_vectored's
         // acceleration rows 0.063 -> 0.068 off and their bound 0.045 -> 0.034 (1.99x).
-        if again.std_err.shape() == estimate.std_err.shape() {
-            again
-                .std_err
-                .zip_apply(&estimate.std_err, |k, w| *k = k.max(w));
-        }
-        again.rel_err_rot = again.rel_err_rot.max(estimate.rel_err_rot);
-        again.rel_err_acc = again.rel_err_acc.max(estimate.rel_err_acc);
+        again.keep_bound_no_tighter_than(estimate);
         *estimate = again;
     }
 
@@ -66,13 +60,7 @@ impl Estimator {
             return (moving, None);
         };
         let n = self.thrusters();
-        let lags = crate::estimator::dynamic::spin_state::lags_for_fit(
-            n,
-            terms.spin_up_s,
-            None,
-            Some(&terms.spin_up_per_thruster_s),
-        );
-        let found = start_velocity::search_start_velocity(&moving, &lags[..n], max)
+        let found = start_velocity::search_start_velocity(&moving, &terms.fitted_lags(n), max)
             .filter(|f| f.log_likelihood_ratio > crate::estimator::START_VELOCITY_EVIDENCE);
         let Some(found) = found else {
             return (moving, None);

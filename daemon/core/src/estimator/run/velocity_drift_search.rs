@@ -37,13 +37,7 @@ impl Estimator {
             return false;
         }
         let n = self.thrusters();
-        let lags = crate::estimator::dynamic::spin_state::lags_for_fit(
-            n,
-            terms.spin_up_s,
-            None,
-            Some(&terms.spin_up_per_thruster_s),
-        );
-        let found = velocity_drift::search_velocity_drift(run, &lags[..n], max)
+        let found = velocity_drift::search_velocity_drift(run, &terms.fitted_lags(n), max)
             .filter(|f| f.log_likelihood_ratio > crate::estimator::VELOCITY_DRIFT_EVIDENCE);
         let Some(found) = found else {
             return true;
@@ -58,13 +52,7 @@ impl Estimator {
         let mut again = searching.dynamic_estimate();
         // Its bound no tighter than the model's without the search: the drift is one more
         // thing fitted, and its own uncertainty is not counted.
-        if again.std_err.shape() == estimate.std_err.shape() {
-            again
-                .std_err
-                .zip_apply(&estimate.std_err, |k, w| *k = k.max(w));
-        }
-        again.rel_err_rot = again.rel_err_rot.max(estimate.rel_err_rot);
-        again.rel_err_acc = again.rel_err_acc.max(estimate.rel_err_acc);
+        again.keep_bound_no_tighter_than(estimate);
         if let Some(d) = again.dynamics.as_mut() {
             d.velocity_drift_ned_mps2 = Some(found.rate_ned_mps2.into());
         }
