@@ -777,6 +777,20 @@ fn add_inherited_lag_error(
     }
 }
 
+impl Estimate {
+    /// Widens this estimate's bound (the standard errors, where the shapes agree, and both
+    /// relative bounds) to be no tighter than `other`'s: a model made again with one more
+    /// thing fitted (disturbance states, a start velocity, a velocity drift) does not count
+    /// that thing's own uncertainty.
+    pub(super) fn keep_bound_no_tighter_than(&mut self, other: &Estimate) {
+        if self.std_err.shape() == other.std_err.shape() {
+            self.std_err.zip_apply(&other.std_err, |k, w| *k = k.max(w));
+        }
+        self.rel_err_rot = self.rel_err_rot.max(other.rel_err_rot);
+        self.rel_err_acc = self.rel_err_acc.max(other.rel_err_acc);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::projected_bound;
