@@ -125,8 +125,12 @@ fn an_imu_off_the_centre_is_found_refused_and_then_used_from_the_drawings() {
 /// 0.0105 / 0.0136 under 0.0207 / 0.0259; seeds 1-10 0.0070-0.0242 / 0.0076-0.0201, the
 /// rotation rows within their bound on 7 of 10 (seeds 2, 5, 8 at 1.05-1.16x), the acceleration
 /// rows on all (docs/study.md, "The shape on by default, test by test"). The excitation still
-/// tilts the vehicle 63.6 deg (the budget is 30). Errors and tilt bounded at 1.5x the figures,
-/// and seed 1 within its bounds.
+/// tilts the vehicle 63.6 deg (the budget is 30). Since the learned lag's reach
+/// (`estimator.learned_lag_reach_rel_err`, 2026-12-07) four of the ten seeds wait a doublet
+/// pair more (4.24 -> 4.64 s): seeds 1-10 0.0070-0.0235 / 0.0099-0.0201, RMS 0.0168 / 0.0160 ->
+/// 0.0152 / 0.0146, outside their bound 3 -> 1 of 10; seed 1 itself 0.0105 / 0.0136 -> 0.0161 /
+/// 0.0129 under 0.0204 / 0.0231. Errors and tilt bounded at 1.5x the figures, and seed 1
+/// within its bounds.
 #[test]
 fn thrusters_weak_in_reverse_the_daemon_was_not_told_about() {
     let v = demo(&[
@@ -144,10 +148,7 @@ fn thrusters_weak_in_reverse_the_daemon_was_not_told_about() {
         f("bound_rot"),
         f("bound_acc")
     );
-    assert!(
-        rot < 0.016 && acc < 0.021,
-        "errors {rot:.4} / {acc:.4}: {v}"
-    );
+    assert!(rot < 0.024 && acc < 0.02, "errors {rot:.4} / {acc:.4}: {v}");
     assert!(tilt < 95.0, "tilted {tilt:.1} deg while excited");
     assert!(
         rot <= f("bound_rot") && acc <= f("bound_acc"),

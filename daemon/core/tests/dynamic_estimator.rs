@@ -817,12 +817,35 @@ fn a_rest_that_saw_the_current_push_the_vehicle_starts_over() {
         );
         assert_within_its_bound(&o, &format!("seed {seed}"));
     }
-    // Still water does not start over (4.62 s on this seed, as before; a restart costs the
-    // noise measurement's second again).
-    let still = run(NoisePreset::Realistic, 1, WaterPreset::Still);
+    // Still water does not start over (a restart costs the noise measurement's second
+    // again): noise-free 4.22 s. At a realistic IMU the learned lag's reach
+    // (`learned_lag_reach_rel_err`, 0.025) waits on, 7.42 s on this seed, so the rest is
+    // checked with it off: 4.62 s, as before it.
+    let still = run(NoisePreset::None, 1, WaterPreset::Still);
+    assert!(
+        still.seconds < 4.9,
+        "still water started over: {:.2} s",
+        still.seconds
+    );
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::Realistic,
+        ..SensorConfig::default()
+    };
+    let ideal = Ideal {
+        allow_refusal: true,
+        idle_s: Some(0.05),
+        ..Ideal::default()
+    };
+    let cfg = EstimatorConfig {
+        learned_lag_reach_rel_err: 0.0,
+        ..EstimatorConfig::dynamic()
+    };
+    let still = estimate_ideal("eight_vectored", sensors, 1, cfg, ideal);
+    println!("still water, realistic: {:.2} s", still.seconds);
     assert!(
         still.seconds < 5.0,
-        "still water waited: {:.2} s",
+        "still water started over: {:.2} s",
         still.seconds
     );
 }
@@ -844,12 +867,12 @@ fn a_bound_within_reach_is_waited_for() {
     };
     for seed in 1..=3 {
         let run = |reach: f64| {
-            // 0 turns both reaches off: the slow lags' own (`slow_lag_reach_rel_err`) would
-            // wait here too (0.15 s).
+            // 0 turns both reaches off: the learned lag's own (`learned_lag_reach_rel_err`)
+            // would wait here too.
             let cfg = EstimatorConfig {
                 reach_rel_err: reach,
-                slow_lag_reach_rel_err: if reach > 0.0 {
-                    EstimatorConfig::dynamic().slow_lag_reach_rel_err
+                learned_lag_reach_rel_err: if reach > 0.0 {
+                    EstimatorConfig::dynamic().learned_lag_reach_rel_err
                 } else {
                     0.0
                 },
@@ -893,7 +916,10 @@ fn a_bound_within_reach_is_waited_for() {
 /// and 9, stopped after 2.03 / 2.43 s with acceleration rows 0.037 / 0.032 off under bounds of
 /// 0.051 / 0.048. Within `REACH_SLACK` (1.2) of the reach they go on: 2.83 / 3.23 s, 0.015 /
 /// 0.019 off, under 0.029 / 0.028 (`TTM_NOISE=realistic TTM_SEEDS=10 TTM_VEHICLES=four_up ...
-/// ttm_sweep`; docs/study.md, "The reach rule's cliff").
+/// ttm_sweep`; docs/study.md, "The reach rule's cliff"). Since the learned lag's own reach
+/// (`learned_lag_reach_rel_err`, 0.025) they wait on to 4.03 / 4.43 s, 0.0027 / 0.0147 and
+/// 0.0013 / 0.0147 off under 0.021 / 0.024 (docs/study.md, "A second reach at every learned
+/// lag").
 #[test]
 fn a_bound_just_out_of_reach_is_waited_for_too() {
     for seed in [8, 9] {
@@ -903,7 +929,7 @@ fn a_bound_just_out_of_reach_is_waited_for_too() {
             o.seconds, o.err_rot, o.err_acc, o.bound[0], o.bound[1]
         );
         println!("{msg}");
-        assert!(o.seconds >= 2.8 && o.seconds <= 4.0, "{msg}");
+        assert!(o.seconds >= 2.8 && o.seconds <= 4.6, "{msg}");
         assert!(o.err_rot <= 0.02 && o.err_acc <= 0.025, "{msg}");
         assert!(o.bound[1] <= 0.03, "{msg}");
         assert_within_its_bound(&o, &format!("seed {seed}"));
@@ -921,7 +947,7 @@ fn a_bound_just_out_of_reach_is_waited_for_too() {
 /// its bound): one of the two runs of issue 29's realistic lag table (seeds 1-5) still over
 /// 0.03 (`LAG_SHAPED=1|0 LAG_NOISE=realistic LAG_SEEDS=10 ... lag_sweep`: over 0.03 in 4 of
 /// 120 runs against 9 bare, all on eight_vectored at 0.15-0.2 s; docs/study.md). Since the
-/// slow lags wait for their own reach (`slow_lag_reach_rel_err`, 0.025) and the stopping job
+/// slow lags wait for their own reach (`learned_lag_reach_rel_err`, 0.025, then at 0.13 s or more) and the stopping job
 /// takes the velocity's drift out (`velocity_drift_search_mps2`), seed 4 stops at 6.03 s
 /// 0.009 / 0.021 off under 0.021 / 0.024 and the table has none of 120 over 0.03 (docs/study.md,
 /// "The velocity's drift searched, and a reach for slow thrusters"). Asserted: the wait, the
@@ -1054,11 +1080,13 @@ fn thrusters_of_two_makes_get_a_lag_each() {
         assert!(o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1], "{msg}");
         assert!(o.seconds < 5.0, "{msg}");
     }
-    // One make: one lag, to the digit the fit it always was.
+    // One make: one lag, to the digit the fit it always was. The per-thruster lags' evidence
+    // far under the 100 they need: 2.05 since the learned lag's reach runs this seed longer
+    // (it was under 1).
     let o = estimate("eight_vectored", NoisePreset::Realistic, 2);
     assert!(o.terms.spin_up_per_thruster_s.is_empty(), "{:?}", o.terms);
     assert!(
-        o.terms.thruster_lag_evidence <= 1.0,
+        o.terms.thruster_lag_evidence <= 10.0,
         "{}",
         o.terms.thruster_lag_evidence
     );

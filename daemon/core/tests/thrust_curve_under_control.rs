@@ -268,7 +268,7 @@ struct Flight {
 }
 
 fn fly(confirm_min_s: Option<f64>) -> Flight {
-    let mut run = Run::new("eight_vectored_lag80ms_curve", NoisePreset::Realistic, 10);
+    let mut run = Run::new("eight_vectored_lag80ms_curve", NoisePreset::Realistic, 18);
     if let Some(s) = confirm_min_s {
         run.with_setup(|c| c.identification.curve_confirm_min_s = s);
     }
@@ -323,6 +323,14 @@ fn fly(confirm_min_s: Option<f64>) -> Flight {
     }
 }
 
+/// Seed 18 (realistic, 90 s of pitch steps, `LH_CURVE_CONFIRM=0|8 LH_NOISE=realistic
+/// LH_VEHICLES=eight_vectored_lag80ms_curve LH_WATER=still LH_SEEDS=1,...,20 LH_MINUTES=1.5
+/// LH_TRACE=1 ... lost_hold_soak`). The test flew seed 10 until 2026-12-07: 1.61x its bound at
+/// ^1.378 with the short confirmation. Since the open loop waits for the learned lag's reach
+/// (`estimator.learned_lag_reach_rel_err`) its first model is better, and no seed of 20 ends
+/// beyond 1.2x with the short one (worst 0.92x, mean rot 0.042; shipped 0.81x, 0.031).
+/// Seed 18 is the widest the short one still leaves: ^1.436 (4.3 % low), 0.094 off, 0.92x;
+/// shipped ^1.485, 0.022, 0.23x.
 #[test]
 fn the_curve_confirmation_runs_long_enough_to_name_the_rest() {
     let shipped = fly(None);
@@ -336,21 +344,21 @@ fn the_curve_confirmation_runs_long_enough_to_name_the_rest() {
         short.coverage,
         short.confirmations_s
     );
-    // Without the longer confirmation the case is what the test is for: the curve 8 % low
-    // and the model beyond its bound. Otherwise the check below could not fail.
+    // Without the longer confirmation the case is what the test is for: the curve 4 % low
+    // and the model near its bound. Otherwise the checks below could not fail.
     assert!(
-        (short.exponent / 1.5 - 1.0).abs() > 0.05,
+        (short.exponent / 1.5 - 1.0).abs() > 0.035,
         "{}",
         short.exponent
     );
-    assert!(short.coverage > 1.2, "{}", short.coverage);
-    // Shipped: the curve within 2 % and the model within its bound.
+    assert!(short.coverage > 0.7, "{}", short.coverage);
+    // Shipped: the curve within 2 % and the model well within its bound.
     assert!(
         (shipped.exponent / 1.5 - 1.0).abs() < 0.02,
         "{}",
         shipped.exponent
     );
-    assert!(shipped.coverage < 1.0, "{}", shipped.coverage);
+    assert!(shipped.coverage < 0.5, "{}", shipped.coverage);
     // The identifications on a learned curve ran at least the confirmation's 8 s, and the
     // short ones did not.
     assert!(

@@ -95,19 +95,21 @@ pub struct EstimatorConfig {
     /// said to be, and not under control (re-estimations ran 17-21 s instead of 12); elsewhere
     /// the run stops at the targets (docs/study.md).
     pub reach_rel_err: f64,
-    /// The bound worth waiting for where the learned lag is slow (at least
-    /// [`SLOW_LAG_S`](crate::estimator::SLOW_LAG_S)), in the same rule as `reach_rel_err` and
-    /// besides it: a run goes on while either reach says so, so no run stops sooner than under
-    /// `reach_rel_err` alone (0: off). Why: with slow thrusters the acceleration rows' bound
-    /// is 1.13-1.29x short (the gyro's noise reaches them through the learned lag and the
-    /// navigation's velocity), so a 1-sigma stop at 0.03 leaves seeds over it
-    /// (docs/study.md, "The slow lags' tail"). Default 0.025: with the velocity's drift taken
-    /// out (`velocity_drift_search_mps2`), issue 29's lag table at a realistic IMU went from 4
-    /// to 0 of 120 runs over 0.03 and, over 40 seeds at 0.15-0.2 s, from 15 to 0 of 160, for
-    /// 0.4-1.2 vehicle-s more on slow lags; alone it made AMOUR-5's longer runs drift (1 -> 4
-    /// of 40 at 0.2 s; docs/study.md, "The velocity's drift searched, and a reach for slow
-    /// thrusters").
-    pub slow_lag_reach_rel_err: f64,
+    /// The bound worth waiting for where the run learns its lag, in the same rule as
+    /// `reach_rel_err` and besides it: a run goes on while either reach says so, so no run
+    /// stops sooner than under `reach_rel_err` alone (0: off). Why: where the lag is learned
+    /// the acceleration rows' bound runs 1.1-1.3x short (the gyro's noise reaches them through
+    /// the learned lag and the navigation's velocity), so a 1-sigma stop at 0.03 leaves seeds
+    /// over it (docs/study.md, "The slow lags' tail"). Default 0.025: with the velocity's
+    /// drift taken out (`velocity_drift_search_mps2`), issue 29's lag table at a realistic IMU
+    /// went from 4 to 0 of 120 runs over 0.03 and, over 40 seeds at 0.15-0.2 s, from 15 to 0
+    /// of 160 (then only at lags of 0.13 s or more), for 0.4-1.2 vehicle-s more on slow
+    /// lags; at every learned lag, eight_vectored at its 0.1 s through the processes went from
+    /// 1 to 0 of 30 seeds over 0.03 for about 1.2 vehicle-s more (AMOUR-5 unchanged);
+    /// without the drift's search it made AMOUR-5's longer runs drift (1 -> 4 of 40 at 0.2 s;
+    /// docs/study.md, "The velocity's drift searched, and a reach for slow thrusters", and
+    /// "A second reach at every learned lag").
+    pub learned_lag_reach_rel_err: f64,
     /// Full excitation cycles before the automatic stop may fire (>= 1: every thruster seen in
     /// both directions).
     pub min_cycles: usize,
@@ -412,7 +414,7 @@ impl Default for EstimatorConfig {
             target_rel_err: 0.06,
             target_rel_err_acc: Some(0.07),
             reach_rel_err: 0.03,
-            slow_lag_reach_rel_err: 0.025,
+            learned_lag_reach_rel_err: 0.025,
             min_cycles: 1,
             stop_once_spanned: false,
             max_pulses: 80,
@@ -541,8 +543,8 @@ impl EstimatorConfig {
             ("target_rel_err_acc", self.acc_target(), Range::above(0.0)),
             ("reach_rel_err", self.reach_rel_err, Range::at_least(0.0)),
             (
-                "slow_lag_reach_rel_err",
-                self.slow_lag_reach_rel_err,
+                "learned_lag_reach_rel_err",
+                self.learned_lag_reach_rel_err,
                 Range::at_least(0.0),
             ),
             ("min_cycles", self.min_cycles as f64, Range::at_least(1.0)),

@@ -48,11 +48,6 @@ pub const MOVING_WATER_REFIT_RADPS: f64 = 0.0025;
 /// parameters searched, so a chi-square of 2 degrees of freedom at about 1 in 20000.
 pub const START_VELOCITY_EVIDENCE: f64 = 10.0;
 
-/// The learned lag (s) from which `EstimatorConfig::slow_lag_reach_rel_err` applies: between
-/// the default 0.1 s, where the 0.03 reach serves, and the lag table's slow rows (0.15 and
-/// 0.2 s), where the acceleration rows' bound is short (docs/study.md).
-pub const SLOW_LAG_S: f64 = 0.13;
-
 /// ln of the likelihood ratio a velocity drift must win by before the stopping open loop's
 /// model is made again without it (`EstimatorConfig::velocity_drift_search_mps2`,
 /// `dynamic::velocity_drift`). Not the start velocity's 10: the log's 200 Hz residuals are

@@ -26,7 +26,7 @@ impl Estimator {
                 && Self::waits_within_reach(e)
                 && self.better_within_reach(
                     &[(reducible_rot, lag_share[0]), (reducible_acc, lag_share[1])],
-                    self.reaches(e),
+                    self.reaches(),
                 ))
         {
             StopDecision::Converged {
@@ -85,22 +85,17 @@ impl Estimator {
             .any(|&reach| self.better_within(bounds, reach))
     }
 
-    /// The reaches the open loop's stop waits for with estimate `e`: `reach_rel_err`, and
-    /// `slow_lag_reach_rel_err` where the lag `e` learned is slow
-    /// ([`SLOW_LAG_S`](crate::estimator::SLOW_LAG_S); 0 where not). Why a second reach and
-    /// not a lower one: no run may stop sooner than under `reach_rel_err` alone (a lower
-    /// reach projected out of reach stops at once: the rule's cliff).
-    fn reaches(&self, e: &Estimate) -> [f64; 2] {
-        let slow = self.learns_lag()
-            && e.dynamics
-                .as_ref()
-                .is_some_and(|d| d.spin_up_s >= crate::estimator::SLOW_LAG_S);
-        let slow_reach = if slow {
-            self.cfg.slow_lag_reach_rel_err
+    /// The reaches the open loop's stop waits for: `reach_rel_err`, and
+    /// `learned_lag_reach_rel_err` where this run learns its lag (0 where not). Why a second
+    /// reach and not a lower one: no run may stop sooner than under `reach_rel_err` alone (a
+    /// lower reach projected out of reach stops at once: the rule's cliff).
+    fn reaches(&self) -> [f64; 2] {
+        let learned_lag_reach = if self.learns_lag() {
+            self.cfg.learned_lag_reach_rel_err
         } else {
             0.0
         };
-        [self.cfg.reach_rel_err, slow_reach]
+        [self.cfg.reach_rel_err, learned_lag_reach]
     }
 
     /// [`Self::better_within_reach`] for one reach.

@@ -297,9 +297,9 @@ pub(super) fn lag_sweep() {
                 if let Ok(r) = std::env::var("LAG_REACH") {
                     cfg.reach_rel_err = r.parse().unwrap();
                 }
-                if let Ok(r) = std::env::var("LAG_SLOW_REACH") {
-                    // `slow_lag_reach_rel_err`.
-                    cfg.slow_lag_reach_rel_err = r.parse().unwrap();
+                if let Ok(r) = std::env::var("LAG_LEARNED_REACH") {
+                    // `learned_lag_reach_rel_err`.
+                    cfg.learned_lag_reach_rel_err = r.parse().unwrap();
                 }
                 if let Ok(r) = std::env::var("LAG_DRIFT") {
                     // The velocity drift's search (`velocity_drift_search_mps2`), m/s^2.
