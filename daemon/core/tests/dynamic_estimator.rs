@@ -1155,6 +1155,43 @@ fn thruster_lags_a_fifth_apart_are_found() {
     assert!(o.err_rot <= o.bound[0] && o.err_acc <= o.bound[1], "{msg}");
 }
 
+/// Issue 29 item 4, the lags of two makes on a vehicle still rising: eight_vectored_lag100_120ms
+/// (2 N buoyant) asked for its model at its release, noise-free, as the demo asks. Its four
+/// vertical thrusters' lags came out 6-8 % short (0.0935 / 0.1107 s) and the model 0.060 /
+/// 0.032 off (through the processes 0.059 / 0.031), where the true lags fit the same log
+/// 0.0005 / 0.0010 off and score 3289 units of ln likelihood better: the Newton steps floor
+/// the curvature at a hundredth of the largest and stalled in a direction along which the
+/// score falls all the way to the truth. Where they stall each eigen-direction is now
+/// searched alone: 0.0012 / 0.0013, every lag within 0.2 ms (`LAG_IDLE_S=0.05
+/// LAG_VEHICLES=eight_vectored_lag100_120ms LAG_TAUS=0 LAG_NOISE=none LAG_SEEDS=1 ...
+/// lag_sweep`; docs/study.md, "The lags of two makes on a rising vehicle").
+#[test]
+fn the_lags_of_two_makes_are_found_on_a_vehicle_still_rising() {
+    let sensors = SensorConfig {
+        rate_hz: 200.0,
+        noise: NoisePreset::None,
+        ..SensorConfig::default()
+    };
+    let v = vehicle("eight_vectored_lag100_120ms");
+    let truth: Vec<f64> = v.thrusters.iter().map(|t| t.time_constant_s).collect();
+    let ideal = Ideal {
+        idle_s: Some(0.05),
+        ..Ideal::default()
+    };
+    let o = estimate_on(v, sensors, 1, EstimatorConfig::dynamic(), ideal);
+    let lags = &o.terms.spin_up_per_thruster_s;
+    let msg = format!(
+        "lags {lags:?} (true {truth:?}), {:.4} / {:.4} under {:.4} / {:.4}",
+        o.err_rot, o.err_acc, o.bound[0], o.bound[1]
+    );
+    println!("{msg}");
+    assert_eq!(lags.len(), truth.len(), "{msg}");
+    for (l, t) in lags.iter().zip(&truth) {
+        assert!((l - t).abs() <= 0.001, "{msg}");
+    }
+    assert!(o.err_rot <= 0.005 && o.err_acc <= 0.005, "{msg}");
+}
+
 /// Issue 29 item 4: the per-thruster lags' search ends at a lower floor. The score floors each
 /// output's residual variance at 1e-4 of its group's largest at the common lag (else,
 /// noise-free, the rows the common lag already fits held the search); at the lags found that

@@ -18,6 +18,7 @@ use thrusterd_core::estimator::EstimatorConfig;
 use crate::estimation::{estimate_observed, Ideal, Outcome};
 
 mod nav_bootstrap;
+mod output_scan;
 mod rate_noise;
 mod response;
 mod tow_scan;
@@ -218,6 +219,9 @@ pub fn probe(
     };
     if std::env::var_os("LAG_PROBE_ERR").is_some() {
         print_errors(&run, &truth);
+    }
+    if std::env::var_os("LAG_PROBE_OUTPUTS").is_some() {
+        output_scan::print_output_scan(&run, &outcome);
     }
     if let Ok(spec) = std::env::var("LAG_PROBE_SMOOTH") {
         print_smoothed(&run, &spec, &truth, weights);

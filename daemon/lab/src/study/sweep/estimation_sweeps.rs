@@ -235,7 +235,8 @@ pub(super) fn coefficient_error_by_vehicle() {
 /// output true plus the paper's accelerometer noise; "-" none), with LAG_PROBE_ROWS
 /// (rot|acc) the lag's profile scored on that group of rows alone; LAG_PROBE_ERR (the
 /// navigation's errors), LAG_PROBE_FIT (each variant's log fitted at the learned lags, its
-/// errors against the truth), LAG_PROBE_SHIFT (each sample under the command that many
+/// errors against the truth), LAG_PROBE_OUTPUTS (each output's ln residual variance at the
+/// common lag, the lags per thruster learned and LAG_PROBE_LAGS), LAG_PROBE_SHIFT (each sample under the command that many
 /// samples later), LAG_PROBE_RNOISE (noise on the true rate of r), LAG_PROBE_SMOOTH,
 /// LAG_PROBE_LEAK, LAG_PROBE_SIM and LAG_PROBE_DECAY (remedies tried on the log; see the probe's
 /// `response` module). LAG_WATER, LAG_WAVE_SCALE, LAG_WAVE_PHASE, LAG_IDLE_S and LAG_TETHER fly
