@@ -1161,8 +1161,8 @@ fn thruster_lags_a_fifth_apart_are_found() {
 /// 0.032 off (through the processes 0.059 / 0.031), where the true lags fit the same log
 /// 0.0005 / 0.0010 off and score 3289 units of ln likelihood better: the Newton steps floor
 /// the curvature at a hundredth of the largest and stalled in a direction along which the
-/// score falls all the way to the truth. Where they stall each eigen-direction is now
-/// searched alone: 0.0012 / 0.0013, every lag within 0.2 ms (`LAG_IDLE_S=0.05
+/// score falls all the way to the truth. Where they stall each eigen-direction the step held
+/// back is now searched alone: 0.0025 / 0.0022, every lag within 0.4 ms (`LAG_IDLE_S=0.05
 /// LAG_VEHICLES=eight_vectored_lag100_120ms LAG_TAUS=0 LAG_NOISE=none LAG_SEEDS=1 ...
 /// lag_sweep`; docs/study.md, "The lags of two makes on a rising vehicle").
 #[test]

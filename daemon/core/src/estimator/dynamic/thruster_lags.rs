@@ -77,6 +77,11 @@ const FINE_H: f64 = 0.01;
 /// The largest Newton step in any ln(lag) (a factor 2).
 const MAX_STEP: f64 = 0.693;
 
+/// The Newton step's floor on the local form's curvature, a share of its largest: a flat or
+/// curved-down direction moves by the gradient, not to infinity. The directions under it are
+/// the ones searched alone where the steps stall.
+const CURVATURE_FLOOR: f64 = 1e-2;
+
 /// The per-thruster search's outcome, kept or not.
 #[derive(Debug, Clone)]
 pub struct ThrusterLagSearch {
@@ -293,8 +298,13 @@ pub fn search_thruster_lags(
     let descend_each = |best: &mut Best, grad: &DVector<f64>, hessian: &DMatrix<f64>| {
         let h = stage.get().h;
         let eig = hessian.clone().symmetric_eigen();
+        let top = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let mut improved = false;
         for k in 0..n {
+            // Only the directions the step's floor held back: the others it took in full.
+            if eig.eigenvalues[k] >= top * CURVATURE_FLOOR {
+                continue;
+            }
             let v = eig.eigenvectors.column(k).into_owned();
             let slope = v.dot(grad);
             if !slope.is_finite() || slope == 0.0 {
@@ -463,7 +473,7 @@ fn newton_step(hessian: &DMatrix<f64>, grad: &DVector<f64>) -> Option<DVector<f6
     if top <= 0.0 {
         return None;
     }
-    let floor = top * 1e-2;
+    let floor = top * CURVATURE_FLOOR;
     let g = eig.eigenvectors.transpose() * grad;
     let scaled = DVector::from_fn(g.len(), |k, _| -g[k] / eig.eigenvalues[k].max(floor));
     let mut dx = &eig.eigenvectors * scaled;
