@@ -749,6 +749,18 @@ fn estimate_in_water(
     water: WaterPreset,
     idle_s: f64,
 ) -> Outcome {
+    estimate_in_water_with(name, noise, seed, water, idle_s, EstimatorConfig::dynamic())
+}
+
+/// [`estimate_in_water`] with the estimator configured `cfg`.
+fn estimate_in_water_with(
+    name: &str,
+    noise: NoisePreset,
+    seed: u64,
+    water: WaterPreset,
+    idle_s: f64,
+    cfg: EstimatorConfig,
+) -> Outcome {
     let sensors = SensorConfig {
         rate_hz: 200.0,
         noise,
@@ -760,7 +772,7 @@ fn estimate_in_water(
         idle_s: Some(idle_s),
         ..Ideal::default()
     };
-    estimate_ideal(name, sensors, seed, EstimatorConfig::dynamic(), ideal)
+    estimate_ideal(name, sensors, seed, cfg, ideal)
 }
 
 /// Both row groups' errors within 1.5 times the daemon's own bound (issue 32 item 4).
@@ -827,21 +839,18 @@ fn a_rest_that_saw_the_current_push_the_vehicle_starts_over() {
         "still water started over: {:.2} s",
         still.seconds
     );
-    let sensors = SensorConfig {
-        rate_hz: 200.0,
-        noise: NoisePreset::Realistic,
-        ..SensorConfig::default()
-    };
-    let ideal = Ideal {
-        allow_refusal: true,
-        idle_s: Some(0.05),
-        ..Ideal::default()
-    };
     let cfg = EstimatorConfig {
         learned_lag_reach_rel_err: 0.0,
         ..EstimatorConfig::dynamic()
     };
-    let still = estimate_ideal("eight_vectored", sensors, 1, cfg, ideal);
+    let still = estimate_in_water_with(
+        "eight_vectored",
+        NoisePreset::Realistic,
+        1,
+        WaterPreset::Still,
+        0.05,
+        cfg,
+    );
     println!("still water, realistic: {:.2} s", still.seconds);
     assert!(
         still.seconds < 5.0,
@@ -947,11 +956,11 @@ fn a_bound_just_out_of_reach_is_waited_for_too() {
 /// its bound): one of the two runs of issue 29's realistic lag table (seeds 1-5) still over
 /// 0.03 (`LAG_SHAPED=1|0 LAG_NOISE=realistic LAG_SEEDS=10 ... lag_sweep`: over 0.03 in 4 of
 /// 120 runs against 9 bare, all on eight_vectored at 0.15-0.2 s; docs/study.md). Since the
-/// slow lags wait for their own reach (`learned_lag_reach_rel_err`, 0.025, then at 0.13 s or more) and the stopping job
-/// takes the velocity's drift out (`velocity_drift_search_mps2`), seed 4 stops at 6.03 s
-/// 0.009 / 0.021 off under 0.021 / 0.024 and the table has none of 120 over 0.03 (docs/study.md,
-/// "The velocity's drift searched, and a reach for slow thrusters"). Asserted: the wait, the
-/// bound, and the error within 0.03.
+/// slow lags wait for their own reach (`learned_lag_reach_rel_err`, 0.025, then at 0.13 s or
+/// more) and the stopping job takes the velocity's drift out (`velocity_drift_search_mps2`),
+/// seed 4 stops at 6.03 s 0.009 / 0.021 off under 0.021 / 0.024 and the table has none of 120
+/// over 0.03 (docs/study.md, "The velocity's drift searched, and a reach for slow thrusters").
+/// Asserted: the wait, the bound, and the error within 0.03.
 #[test]
 fn a_lag_still_uncertain_after_the_first_cycle_is_waited_for() {
     let sensors = SensorConfig {

@@ -20,7 +20,7 @@
 
 use std::cell::Cell;
 
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector, Dyn, SymmetricEigen, Vector3};
 
 use super::lag_search::{LagFit, LagRange, ThrusterLag, STEP};
 use super::DynamicRun;
@@ -294,12 +294,14 @@ pub fn search_thruster_lags(
     // (noise-free, the vehicle still rising) stopped with its four vertical lags 6-8 % short
     // (0.0935 / 0.1107 s), where the score falls all the way to the true 0.1 / 0.12 s along
     // that one direction, 3289 units of ln likelihood better (docs/study.md, "The lags of two
-    // makes on a rising vehicle"). True when a direction improved.
+    // makes on a rising vehicle").
+    // (improved, moved at all), as the line search says.
     let descend_each = |best: &mut Best, grad: &DVector<f64>, hessian: &DMatrix<f64>| {
+        let (mut improved, mut moved) = (false, false);
+        let Some((eig, top)) = curvature(hessian, grad) else {
+            return Some((improved, moved));
+        };
         let h = stage.get().h;
-        let eig = hessian.clone().symmetric_eigen();
-        let top = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        let mut improved = false;
         for k in 0..n {
             // Only the directions the step's floor held back: the others it took in full.
             if eig.eigenvalues[k] >= top * CURVATURE_FLOOR {
@@ -307,14 +309,15 @@ pub fn search_thruster_lags(
             }
             let v = eig.eigenvectors.column(k).into_owned();
             let slope = v.dot(grad);
-            if !slope.is_finite() || slope == 0.0 {
+            if slope == 0.0 {
                 continue;
             }
             let dir = v * -slope.signum();
             let dx = &dir * (h / dir.amax().max(1e-12));
-            improved |= line_search(best, &dx)?.0;
+            let (i, m) = line_search(best, &dx)?;
+            (improved, moved) = (improved || i, moved || m);
         }
-        Some(improved)
+        Some((improved, moved))
     };
     // Then Newton steps on all of them from where the sweeps left them; the last Hessian is
     // the lags' joint information.
@@ -349,13 +352,15 @@ pub fn search_thruster_lags(
                 break;
             }
             rescued = true;
-            let before = best.lags.clone();
-            if !descend_each(best, &grad, &hessian)? {
-                if best.lags != before {
-                    // Moved a little: the form where the lags now are, for the covariance.
-                    hessian = local_form(best)?.1;
+            match descend_each(best, &grad, &hessian)? {
+                (true, _) => {}
+                (false, moved) => {
+                    if moved {
+                        // Moved a little: the form where the lags now are, for the covariance.
+                        hessian = local_form(best)?.1;
+                    }
+                    break;
                 }
-                break;
             }
         }
         Some(hessian)
@@ -465,14 +470,7 @@ fn spread_apart(lags: &[f64]) -> bool {
 /// largest (a flat or curved-down direction moves by the gradient, not to infinity) and every
 /// component clamped to [`MAX_STEP`]. None when H is not finite.
 fn newton_step(hessian: &DMatrix<f64>, grad: &DVector<f64>) -> Option<DVector<f64>> {
-    if !hessian.iter().chain(grad.iter()).all(|v| v.is_finite()) {
-        return None;
-    }
-    let eig = hessian.clone().symmetric_eigen();
-    let top = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    if top <= 0.0 {
-        return None;
-    }
+    let (eig, top) = curvature(hessian, grad)?;
     let floor = top * CURVATURE_FLOOR;
     let g = eig.eigenvectors.transpose() * grad;
     let scaled = DVector::from_fn(g.len(), |k, _| -g[k] / eig.eigenvalues[k].max(floor));
@@ -482,6 +480,21 @@ fn newton_step(hessian: &DMatrix<f64>, grad: &DVector<f64>) -> Option<DVector<f6
         dx *= MAX_STEP / largest;
     }
     Some(dx)
+}
+
+/// The local form's eigen-decomposition and its largest curvature (by magnitude); None where
+/// the form or the gradient is not finite (an eigen-decomposition of NaN need not end) or the
+/// form is zero.
+fn curvature(
+    hessian: &DMatrix<f64>,
+    grad: &DVector<f64>,
+) -> Option<(SymmetricEigen<f64, Dyn>, f64)> {
+    if !hessian.iter().chain(grad.iter()).all(|v| v.is_finite()) {
+        return None;
+    }
+    let eig = hessian.clone().symmetric_eigen();
+    let top = eig.eigenvalues.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    (top > 0.0).then_some((eig, top))
 }
 
 /// The inverse of the profile's Hessian where it is positive definite; None otherwise (a
